@@ -1,0 +1,220 @@
+"""Reading and writing sequences: Hopkins155 ``*_truth.mat`` files and the project's ``.npz``.
+
+Both readers detect the format from the file's first bytes, not its extension, and turn
+every failure into a :class:`~laav.SequenceError` that names the file and the problem.
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from ._sequence import Sequence, SequenceError
+
+__all__ = ["load_sequence", "save_sequence", "find_truth_files"]
+
+_MAT_MAGIC = b"MATLAB 5.0 MAT-file"
+_HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+_ZIP_MAGIC = b"PK\x03\x04"
+
+
+def _name_from_path(path: Path) -> str:
+    stem = path.stem
+    return stem[: -len("_truth")] if stem.endswith("_truth") else stem
+
+
+def _resolve(path: str | os.PathLike) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise SequenceError(f"{p}: no such file or folder")
+    if p.is_dir():
+        found = sorted(p.glob("*_truth.mat"))
+        if not found:
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() in (".mat", ".npz"))
+        if len(found) != 1:
+            what = "no" if not found else f"{len(found)}"
+            raise SequenceError(
+                f"{p}: folder holds {what} sequence files; expected exactly one *_truth.mat"
+            )
+        p = found[0]
+    return p
+
+
+def load_sequence(path: str | os.PathLike) -> Sequence:
+    """Read a sequence from a Hopkins155 ``*_truth.mat``, a ``.npz``, or a folder holding one.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A MATLAB v5 file with the Hopkins155 variables (``y``: (3, P, F) homogeneous pixel
+        coordinates, ``s``: (P, 1) 1-based labels, ``width``, ``height``), a ``.npz`` with
+        ``points`` (F, P, 2) and optionally ``labels`` (P,), ``width``, ``height``, or a
+        folder containing exactly one such file.
+
+    Returns
+    -------
+    Sequence
+
+    Raises
+    ------
+    SequenceError
+        When the file is missing, of another format, corrupt, lacks a variable, or its
+        arrays have the wrong shape or values. The message names the file.
+    """
+    p = _resolve(path)
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(128)
+    except OSError as exc:
+        raise SequenceError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    if not head:
+        raise SequenceError(f"{p}: file is empty")
+    if head.startswith(_ZIP_MAGIC):
+        return _load_npz(p)
+    if head.startswith(_MAT_MAGIC):
+        return _load_mat(p)
+    if head[:512].find(_HDF5_MAGIC) >= 0 or head.startswith(b"MATLAB 7.3"):
+        raise SequenceError(f"{p}: MATLAB v7.3 (HDF5) files are not supported; save with -v7")
+    raise SequenceError(
+        f"{p}: not a MATLAB v5 .mat or NumPy .npz file (unrecognised content)"
+    )
+
+
+def _scalar(value, what: str, p: Path) -> int:
+    arr = np.asarray(value)
+    if arr.size != 1:
+        raise SequenceError(f"{p}: variable '{what}' should be a single number, got {arr.shape}")
+    try:
+        return int(arr.ravel()[0])
+    except (TypeError, ValueError):
+        raise SequenceError(f"{p}: variable '{what}' is not a number") from None
+
+
+def _load_mat(p: Path) -> Sequence:
+    import scipy.io
+
+    try:
+        mat = scipy.io.loadmat(str(p))
+    except Exception as exc:  # scipy raises many types for damaged files
+        raise SequenceError(f"{p}: truncated or corrupt MAT file ({type(exc).__name__}: {exc})") from None
+    if "y" not in mat:
+        raise SequenceError(f"{p}: missing variable 'y' (homogeneous pixel coordinates, 3 x P x F)")
+    y = np.asarray(mat["y"])
+    if not np.issubdtype(y.dtype, np.number):
+        raise SequenceError(f"{p}: variable 'y' is not numeric (dtype {y.dtype})")
+    if y.ndim == 2 and y.shape[0] in (2, 3):  # a single frame saved without the last axis
+        raise SequenceError(f"{p}: variable 'y' has one frame only (shape {y.shape}); needs 3 x P x F")
+    if y.ndim != 3 or y.shape[0] not in (2, 3):
+        raise SequenceError(f"{p}: variable 'y' must have shape 3 x P x F, got {y.shape}")
+    y = y.astype(np.float64)
+    if y.shape[0] == 3:
+        w = y[2]
+        if np.isfinite(w).all() and np.any(np.abs(w) < 1e-12):
+            raise SequenceError(f"{p}: variable 'y' has a zero homogeneous coordinate")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = y[:2] / w
+    else:
+        xy = y
+    points = np.transpose(xy, (2, 1, 0))  # (F, P, 2)
+    labels = None
+    if "s" in mat:
+        s = np.asarray(mat["s"])
+        if not np.issubdtype(s.dtype, np.number):
+            raise SequenceError(f"{p}: variable 's' (labels) is not numeric")
+        s = s.astype(np.float64).ravel()
+        if s.size and np.isfinite(s).all() and s.min() < 1:
+            raise SequenceError(f"{p}: variable 's' must hold 1-based labels, found {s.min():g}")
+        labels = s - 1
+    image_size = None
+    if "width" in mat and "height" in mat:
+        image_size = (_scalar(mat["width"], "width", p), _scalar(mat["height"], "height", p))
+    return Sequence(
+        points=points, labels=labels, name=_name_from_path(p), image_size=image_size, source=str(p)
+    )
+
+
+def _load_npz(p: Path) -> Sequence:
+    try:
+        with np.load(p, allow_pickle=False) as data:
+            files = set(data.files)
+            if "points" not in files:
+                raise SequenceError(f"{p}: missing array 'points' (frames x points x 2)")
+            points = data["points"]
+            labels = data["labels"] if "labels" in files else None
+            image_size = None
+            if "width" in files and "height" in files:
+                image_size = (
+                    _scalar(data["width"], "width", p),
+                    _scalar(data["height"], "height", p),
+                )
+            name = str(data["name"]) if "name" in files else _name_from_path(p)
+    except SequenceError:
+        raise
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
+        raise SequenceError(f"{p}: truncated or corrupt NPZ file ({type(exc).__name__}: {exc})") from None
+    return Sequence(points=points, labels=labels, name=name, image_size=image_size, source=str(p))
+
+
+def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
+    """Write ``seq`` to ``path`` as ``.npz`` or Hopkins-style MATLAB v5 ``.mat`` (by extension).
+
+    Coordinates are written as float64, so ``load_sequence(save_sequence(seq, p))`` gives
+    back identical arrays. The ``.mat`` file carries ``x``, ``y``, ``K``, ``s`` (1-based,
+    only with labels), ``points``, ``frames``, ``width`` and ``height`` like Hopkins155.
+
+    Returns
+    -------
+    Path
+        The path written.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix == ".npz":
+        arrays = {"points": seq.points, "name": np.array(seq.name)}
+        if seq.labels is not None:
+            arrays["labels"] = seq.labels
+        if seq.image_size is not None:
+            arrays["width"] = np.array(seq.image_size[0])
+            arrays["height"] = np.array(seq.image_size[1])
+        with open(p, "wb") as fh:  # np.savez on an open handle keeps the exact name
+            np.savez_compressed(fh, **arrays)
+        return p
+    if suffix == ".mat":
+        import scipy.io
+
+        F, P, _ = seq.points.shape
+        y = np.ones((3, P, F))
+        y[:2] = np.transpose(seq.points, (2, 1, 0))
+        if seq.image_size is not None:
+            width, height = seq.image_size
+        else:
+            xmin, xmax, ymin, ymax = seq.extent()
+            width, height = int(np.ceil(max(xmax, 1.0))), int(np.ceil(max(ymax, 1.0)))
+        K = np.array([[width / 2.0, 0.0, width / 2.0], [0.0, height / 2.0, height / 2.0], [0, 0, 1]])
+        x = np.linalg.solve(K, y.reshape(3, -1)).reshape(3, P, F)
+        out = {
+            "x": x,
+            "y": y,
+            "K": K,
+            "points": np.array([[P]], dtype=np.uint16),
+            "frames": np.array([[F]], dtype=np.uint16),
+            "width": np.array([[width]], dtype=np.uint16),
+            "height": np.array([[height]], dtype=np.uint16),
+        }
+        if seq.labels is not None:
+            dtype = np.uint8 if seq.labels.max() < 255 else np.uint16
+            out["s"] = (seq.labels + 1).astype(dtype).reshape(-1, 1)
+        scipy.io.savemat(str(p), out, do_compression=False, format="5")
+        return p
+    raise SequenceError(f"{p}: unknown extension {p.suffix!r}; use .npz or .mat")
+
+
+def find_truth_files(root: str | os.PathLike) -> list[Path]:
+    """All ``<seq>/<seq>_truth.mat`` files under a Hopkins155-style folder, sorted by name."""
+    root = Path(root)
+    if not root.is_dir():
+        raise SequenceError(f"{root}: not a folder")
+    return sorted(root.glob("*/*_truth.mat"), key=lambda q: q.parent.name)
