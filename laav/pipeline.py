@@ -1,0 +1,241 @@
+"""The whole LAAV pipeline: :func:`segment`, the staged :class:`Pipeline`, and :class:`LAAV`.
+
+Randomness: one integer ``seed`` is split by :class:`numpy.random.SeedSequence` into one
+independent stream per random stage (atoms, fine-to-coarse, voting), and every run of a
+stage starts a fresh generator from its stream. A stage's output therefore depends only
+on its inputs, its parameters and the seed, which is what lets :class:`Pipeline` rerun
+only the stages downstream of a change and still equal a fresh :func:`segment`.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._sequence import Sequence
+from .atoms import Atoms, build_atoms, trajectory_distances
+from .coarse import Coarse, merge_models
+from .graph import AtomGraph, atom_graph
+from .multicut import Multicut, solve_multicut
+from .params import STAGES, LaavParams, stages_affected
+from .voting import Voting, random_voting
+
+__all__ = ["LaavResult", "segment", "Pipeline", "LAAV"]
+
+
+@dataclass(frozen=True, eq=False)
+class LaavResult:
+    """Everything LAAV computed for one sequence.
+
+    Attributes
+    ----------
+    labels : ndarray of shape (P,), int64
+        Final motion of every point.
+    atoms, graph, multicut, coarse, voting
+        The stage results, in pipeline order.
+    timings : dict of str -> float
+        Seconds spent in each stage of the run that produced this result (0 for a stage
+        reused from an earlier run).
+    params : LaavParams
+    n_motions : int
+    seed : int
+    """
+
+    labels: np.ndarray
+    atoms: Atoms
+    graph: AtomGraph
+    multicut: Multicut
+    coarse: Coarse
+    voting: Voting
+    timings: dict = field(default_factory=dict)
+    params: LaavParams = field(default_factory=LaavParams)
+    n_motions: int = 2
+    seed: int = 0
+
+    def stage_labels(self) -> dict:
+        """Point labels after each stage (-1 where a stage leaves a point unlabelled).
+
+        Keys: ``"fine"`` (fine model), ``"coarse"`` (motion from atoms), ``"final"``.
+        """
+        return {
+            "fine": self.coarse.fine_point_labels,
+            "coarse": self.coarse.point_labels,
+            "final": self.labels,
+        }
+
+
+def _stage_rngs(seed: int):
+    children = np.random.SeedSequence(seed).spawn(3)
+    return {"atoms": children[0], "coarse": children[1], "voting": children[2]}
+
+
+def _check_inputs(seq, n_motions):
+    if not isinstance(seq, Sequence):
+        seq = Sequence(np.asarray(seq, dtype=np.float64))
+    if not isinstance(n_motions, (int, np.integer)) or isinstance(n_motions, bool):
+        raise ValueError(f"n_motions must be an integer, got {n_motions!r}")
+    if n_motions < 1:
+        raise ValueError(f"n_motions must be >= 1, got {n_motions}")
+    if n_motions > seq.n_points:
+        raise ValueError(f"n_motions ({n_motions}) exceeds the number of points ({seq.n_points})")
+    return seq, int(n_motions)
+
+
+class Pipeline:
+    """LAAV staged for live recomputation.
+
+    Parameters
+    ----------
+    seq : Sequence or ndarray of shape (F, P, 2)
+    n_motions : int
+        C.
+    params : LaavParams, optional
+    seed : int
+
+    Attributes
+    ----------
+    result : LaavResult
+        The latest result.
+
+    Examples
+    --------
+    >>> pipe = Pipeline(seq, 2)                     # doctest: +SKIP
+    >>> res = pipe.update(lam=5.0)                  # reuses atoms, graph and multicut
+    """
+
+    def __init__(self, seq, n_motions: int, params: LaavParams | None = None, seed: int = 0):
+        self.seq, self.n_motions = _check_inputs(seq, n_motions)
+        self.params = LaavParams() if params is None else params
+        self.params.n_fine(self.n_motions)
+        self.seed = int(seed)
+        self._lock = threading.Lock()
+        self._distances = None
+        self._stages: dict = {}
+        self.result = self._run("atoms")
+
+    def _rng(self, stage: str) -> np.random.Generator:
+        return np.random.default_rng(_stage_rngs(self.seed)[stage])
+
+    def _run(self, start: str) -> LaavResult:
+        p, seq, C = self.params, self.seq, self.n_motions
+        timings = dict.fromkeys(STAGES, 0.0)
+        todo = STAGES[STAGES.index(start):]
+        st = self._stages
+        if self._distances is None:
+            t = time.perf_counter()
+            self._distances = trajectory_distances(seq.points)
+            timings["atoms"] += time.perf_counter() - t
+        for stage in todo:
+            t = time.perf_counter()
+            if stage == "atoms":
+                st["atoms"] = build_atoms(seq, p, self._rng("atoms"), self._distances)
+            elif stage == "graph":
+                st["graph"] = atom_graph(seq, st["atoms"], p, self._distances)
+            elif stage == "multicut":
+                st["multicut"] = solve_multicut(st["graph"], p.n_fine(C))
+            elif stage == "coarse":
+                st["coarse"] = merge_models(seq, st["atoms"], st["multicut"], C, p,
+                                            self._rng("coarse"))
+            elif stage == "voting":
+                init = st["coarse"].point_labels
+                if C == 1 or not (init >= 0).any():
+                    init = None  # no atom formed: plain Random Voting
+                st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init)
+            timings[stage] += time.perf_counter() - t
+        return LaavResult(
+            labels=st["voting"].labels, atoms=st["atoms"], graph=st["graph"],
+            multicut=st["multicut"], coarse=st["coarse"], voting=st["voting"],
+            timings=timings, params=p, n_motions=C, seed=self.seed,
+        )
+
+    def update(self, **changed) -> LaavResult:
+        """Change parameters (any :class:`LaavParams` field, ``seed`` or ``n_motions``)
+        and recompute only the stages downstream of the change.
+
+        Returns
+        -------
+        LaavResult
+            Equal to a fresh :func:`segment` with the same inputs.
+
+        Raises
+        ------
+        ValueError
+            For invalid values; the pipeline then keeps its previous state and result.
+        """
+        with self._lock:
+            seed = int(changed.pop("seed", self.seed))
+            C = changed.pop("n_motions", self.n_motions)
+            new_params = self.params.replace(**changed) if changed else self.params
+            _, C = _check_inputs(self.seq, C)
+            new_params.n_fine(C)
+            diff = {k for k, v in new_params.to_dict().items() if v != getattr(self.params, k)}
+            starts = [stages_affected(diff)] if diff else []
+            if C != self.n_motions:
+                starts.append("multicut")
+            if seed != self.seed:
+                starts.append("atoms")
+            starts = [s for s in starts if s is not None]
+            start = min(starts, key=STAGES.index) if starts else None
+            old = (self.params, self.n_motions, self.seed)
+            self.params, self.n_motions, self.seed = new_params, C, seed
+            if start is None:
+                return self.result
+            try:
+                self.result = self._run(start)
+            except Exception:
+                self.params, self.n_motions, self.seed = old
+                raise
+            return self.result
+
+
+def segment(seq, n_motions: int, params: LaavParams | None = None, seed: int = 0) -> LaavResult:
+    """Segment trajectories into ``n_motions`` motions with LAAV.
+
+    Parameters
+    ----------
+    seq : Sequence or ndarray of shape (F, P, 2)
+    n_motions : int
+        C, the number of motions.
+    params : LaavParams, optional
+    seed : int
+        Same seed, same labels.
+
+    Returns
+    -------
+    LaavResult
+    """
+    return Pipeline(seq, n_motions, params, seed).result
+
+
+class LAAV:
+    """scikit-learn style estimator for LAAV.
+
+    Parameters
+    ----------
+    n_motions : int
+    seed : int
+    **params
+        Any :class:`LaavParams` field.
+
+    Attributes
+    ----------
+    labels_ : ndarray of shape (P,)
+    result_ : LaavResult
+    """
+
+    def __init__(self, n_motions: int, seed: int = 0, **params):
+        self.n_motions = n_motions
+        self.seed = seed
+        self.params = LaavParams().replace(**params)
+
+    def fit(self, points, y=None):
+        self.result_ = segment(np.asarray(points) if not isinstance(points, Sequence) else points,
+                               self.n_motions, self.params, self.seed)
+        self.labels_ = self.result_.labels
+        return self
+
+    def fit_predict(self, points, y=None) -> np.ndarray:
+        return self.fit(points).labels_

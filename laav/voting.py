@@ -1,0 +1,362 @@
+"""Random Voting (Jung, Ju & Kim, CVPR 2014), vectorised, with LAAV's informed start.
+
+Each iteration draws one frame pair shared by all groups; every group fits a fundamental
+matrix to ``m`` of its points by the normalised 8-point algorithm (all groups in one
+batched call); every point receives, from each group's matrix, the vote
+``exp(-lambda d)`` for that group and ``1 - exp(-lambda d)`` for every other group, where
+``d`` is its Sampson distance (px^2); labels become the argmax of the vote histogram,
+which then decays by the forgetting factor ``alpha``.
+
+Choices where the RV paper is vague (each measured on Hopkins155, see
+``benchmarks/README.md``):
+
+* **Sampling.** The ``m`` points of a group are drawn without replacement with
+  probability proportional to their current vote margin for the group (weighted
+  reservoir keys ``log(u) / w``), so confident members dominate but the sample stays
+  spread; a group with fewer than ``m`` members samples from all points.
+* **Frame pairs.** The two frames are at least ``max(1, F // 3)`` apart, so that motions
+  are separated by a useful baseline.
+* **Convergence.** A trial has converged when no label changed for ``rv_patience``
+  consecutive iterations; plain RV resets its votes once at iteration 15.
+* **No converged trial.** The labellings of all trials are combined into a
+  co-association affinity and split by spectral clustering.
+* **Refinement** (``rv_refine``). After voting, every motion fits robust
+  (iteratively reweighted) fundamental matrices on its own points over a fixed set of
+  well separated frame pairs and each point moves to the motion with the smallest mean
+  Sampson distance; repeated until stable (at most 5 rounds). This uses every frame
+  rather than one pair at a time and removes the residual label noise of voting.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._sequence import Sequence
+from .geometry import fit_fundamental, sampson_distance
+from .params import LaavParams
+
+__all__ = ["Voting", "random_voting", "vote", "refine_labels", "frame_pairs", "RandomVoting"]
+
+_RESET_AT = 15
+
+
+@dataclass(frozen=True, eq=False)
+class Voting:
+    """Result of Random Voting.
+
+    Attributes
+    ----------
+    labels : ndarray of shape (P,), int64
+        Final motion label of every point, in ``0 .. C-1``.
+    votes : ndarray of shape (P, C)
+        Vote histogram of the returned trial at its end.
+    changed : ndarray of shape (T,), int64
+        Number of labels changed at each iteration of the returned trial.
+    margin : ndarray of shape (T,)
+        Mean normalised vote margin (best minus second best over their sum) per iteration.
+    n_iterations : int
+        Iterations summed over all trials run.
+    n_trials : int
+        Trials run.
+    converged : bool
+        Whether the returned trial met the convergence test.
+    trial_iterations : tuple of int
+        Iterations of each trial.
+    initialised : bool
+        True when started from given labels (LAAV fine-tuning), False for plain RV.
+    refined : int
+        Points whose label the final refinement changed.
+    """
+
+    labels: np.ndarray
+    votes: np.ndarray
+    changed: np.ndarray
+    margin: np.ndarray
+    n_iterations: int
+    n_trials: int
+    converged: bool
+    trial_iterations: tuple = field(default=())
+    initialised: bool = False
+    refined: int = 0
+
+
+def frame_pairs(n_frames: int, n_pairs: int, rng: np.random.Generator | None = None) -> np.ndarray:
+    """Frame pairs ``(l, r)`` at least ``max(1, F // 3)`` frames apart.
+
+    With ``rng`` the pairs are drawn at random (with replacement); without it they are a
+    deterministic spread: the first frame against the last and evenly spaced pairs between.
+
+    Returns
+    -------
+    pairs : ndarray of shape (n_pairs, 2), int64
+    """
+    F = n_frames
+    gap = max(1, F // 3)
+    if rng is None:
+        left = np.round(np.linspace(0, F - 1 - gap, n_pairs)).astype(np.int64)
+        right = np.minimum(left + gap, F - 1)
+        if n_pairs > 1:  # the widest baseline is always among them
+            left[0], right[0] = 0, F - 1
+        return np.stack([left, right], axis=1)
+    left = rng.integers(0, F - gap, size=n_pairs)
+    right = left + gap + np.floor(rng.random(n_pairs) * (F - gap - left)).astype(np.int64)
+    pairs = np.stack([left, np.minimum(right, F - 1)], axis=1)
+    flip = rng.random(n_pairs) < 0.5
+    pairs[flip] = pairs[flip][:, ::-1]
+    return pairs.astype(np.int64)
+
+
+def _sample_groups(labels, votes, C, m, rng):
+    """Indices (C, m) of the points each group fits its fundamental matrix to."""
+    P = labels.shape[0]
+    member = labels[None, :] == np.arange(C)[:, None]  # (C, P)
+    vt = votes.T  # (C, P)
+    if C > 1:
+        other = np.where(np.eye(C, dtype=bool)[:, :, None], -np.inf, vt[None, :, :]).max(axis=1)
+        w = vt - other
+    else:
+        w = vt.copy()
+    w = np.maximum(w, 0.0)
+    w = w / (w.max(axis=1, keepdims=True) + 1e-12) + 0.05  # floor keeps every member drawable
+    small = member.sum(axis=1) < m
+    w = np.where(member, w, 0.0)
+    w[small] = 1.0
+    u = rng.random((C, P))
+    keys = np.where(w > 0, np.log(u) / np.maximum(w, 1e-12), -np.inf)
+    return np.argpartition(-keys, m - 1, axis=1)[:, :m]
+
+
+def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: float,
+         m: int, rng: np.random.Generator) -> np.ndarray:
+    """One voting step: fit one F per group on frame pair ``pair``; return the votes (P, C)."""
+    C = votes.shape[1]
+    idx = _sample_groups(labels, votes, C, m, rng)
+    x1 = points[pair[0]]
+    x2 = points[pair[1]]
+    F = fit_fundamental(x1[idx], x2[idx])  # (C, 3, 3)
+    d = sampson_distance(F, x1[None], x2[None])  # (C, P)
+    v = np.exp(-lam * d)
+    # own group gets v, every other group 1 - v
+    total_other = (1.0 - v).sum(axis=0)  # (P,)
+    return (v - (1.0 - v) + total_other[None, :]).T
+
+
+def _run_trial(points, C, params, rng, labels0, votes0, reset):
+    F = points.shape[0]
+    gap = max(1, F // 3)
+    labels = labels0.copy()
+    votes = votes0.copy()
+    changed, margins = [], []
+    still = 0
+    converged = False
+    lam, alpha, m = params.rv_lambda, params.rv_alpha, params.rv_sample_size
+    it = 0
+    for it in range(1, params.rv_max_iter + 1):
+        left = int(rng.integers(0, F - gap))
+        right = int(rng.integers(left + gap, F))
+        pair = (left, right) if rng.random() < 0.5 else (right, left)
+        votes += vote(points, labels, votes, pair, lam, m, rng)
+        new = votes.argmax(axis=1)
+        n_changed = int((new != labels).sum())
+        labels = new
+        votes *= alpha
+        srt = np.sort(votes, axis=1)
+        if C > 1:
+            margins.append(float(np.mean((srt[:, -1] - srt[:, -2]) / (np.abs(srt).sum(1) + 1e-12))))
+        else:
+            margins.append(1.0)
+        changed.append(n_changed)
+        if reset and it == _RESET_AT:
+            votes[:] = 0.0
+            still = 0
+            continue
+        still = still + 1 if n_changed == 0 else 0
+        if still >= params.rv_patience and (not reset or it > _RESET_AT):
+            converged = True
+            break
+    return labels, votes, np.array(changed, dtype=np.int64), np.array(margins), it, converged
+
+
+def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                  n_pairs: int = 12, rounds: int = 5) -> tuple[np.ndarray, int]:
+    """Reassign points to the motion whose fundamental matrices explain them best.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (P,)
+    n_motions : int
+    n_pairs : int
+        Frame pairs (a deterministic spread) over which distances are averaged.
+    rounds : int
+        Most reassignment rounds.
+
+    Returns
+    -------
+    labels : ndarray of shape (P,)
+    n_changed : int
+        Points whose label differs from the input.
+    """
+    F, P, _ = points.shape
+    C = n_motions
+    pairs = frame_pairs(F, n_pairs)
+    x1 = points[pairs[:, 0]]  # (K, P, 2)
+    x2 = points[pairs[:, 1]]
+    start = labels.copy()
+    cur = labels.copy()
+    for _ in range(rounds):
+        counts = np.bincount(cur, minlength=C)
+        if np.any(counts < 8):
+            break
+        D = np.empty((C, P))
+        for g in range(C):
+            mem = np.flatnonzero(cur == g)
+            w = np.ones((pairs.shape[0], mem.size))
+            for _irls in range(3):
+                Fm = fit_fundamental(x1[:, mem], x2[:, mem], w)  # (K, 3, 3)
+                dm = sampson_distance(Fm, x1[:, mem], x2[:, mem])  # (K, n)
+                scale = np.median(dm, axis=1, keepdims=True) * 4.0 + 1e-6
+                w = 1.0 / (1.0 + dm / scale)
+            d = sampson_distance(Fm, x1, x2)  # (K, P)
+            D[g] = np.mean(np.minimum(d, 1e4), axis=0)
+        new = D.argmin(axis=0)
+        if np.array_equal(new, cur):
+            break
+        cur = new
+    return cur, int((cur != start).sum())
+
+
+def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams | None = None,
+                  seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
+                  weights: np.ndarray | None = None) -> Voting:
+    """Segment trajectories into ``n_motions`` rigid motions by Random Voting.
+
+    Parameters
+    ----------
+    seq : Sequence or ndarray of shape (F, P, 2)
+    n_motions : int
+        C, the number of motions.
+    params : LaavParams, optional
+        Uses the ``rv_*`` fields. Defaults to ``LaavParams()``.
+    seed : int or numpy.random.Generator
+        Same seed, same labels.
+    init_labels : ndarray of shape (P,), optional
+        Start labels (LAAV fine-tuning); ``-1`` marks unlabelled points, which start at
+        random. None gives plain RV from a random partition.
+    weights : ndarray of shape (P,), optional
+        Initial votes of each point for its start label (default ``rv_label_weight`` for
+        labelled points, 0 otherwise). Only with ``init_labels``.
+
+    Returns
+    -------
+    Voting
+    """
+    points = seq.points if isinstance(seq, Sequence) else np.asarray(seq, dtype=np.float64)
+    if points.ndim != 3 or points.shape[2] != 2:
+        raise ValueError(f"points must have shape (F, P, 2), got {points.shape}")
+    F, P, _ = points.shape
+    if not isinstance(n_motions, (int, np.integer)) or n_motions < 1:
+        raise ValueError(f"n_motions must be a positive integer, got {n_motions!r}")
+    C = int(n_motions)
+    if C > P:
+        raise ValueError(f"cannot split {P} points into {C} motions")
+    params = LaavParams() if params is None else params
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    if C == 1 or F < 2:
+        lab = np.zeros(P, dtype=np.int64)
+        return Voting(lab, np.ones((P, 1)), np.zeros(0, np.int64), np.zeros(0), 0, 0, True,
+                      (), init_labels is not None, 0)
+
+    if init_labels is not None:
+        init = np.asarray(init_labels, dtype=np.int64)
+        if init.shape != (P,):
+            raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
+        if init.max() >= C:
+            raise ValueError(f"init_labels has label {init.max()} but n_motions is {C}")
+        known = init >= 0
+        if weights is None:
+            w = np.where(known, params.rv_label_weight, 0.0)
+        else:
+            w = np.asarray(weights, dtype=np.float64)
+            if w.shape != (P,):
+                raise ValueError(f"weights must have shape ({P},), got {w.shape}")
+        labels0 = np.where(known, init, rng.integers(0, C, P))
+        votes0 = np.zeros((P, C))
+        votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
+        labels, votes, changed, margin, its, conv = _run_trial(
+            points, C, params, rng, labels0, votes0, reset=False)
+        trials = [(labels, votes, changed, margin, its, conv)]
+        best = trials[0]
+    else:
+        trials = []
+        best = None
+        for _ in range(params.rv_trials):
+            labels0 = rng.integers(0, C, P)
+            res = _run_trial(points, C, params, rng, labels0, np.zeros((P, C)), reset=True)
+            trials.append(res)
+            if res[5]:
+                best = res
+                break
+        if best is None:
+            best = _consensus(trials, C, rng)
+
+    labels, votes, changed, margin, _its, conv = best
+    refined = 0
+    if params.rv_refine:
+        labels, refined = refine_labels(points, labels, C)
+    return Voting(
+        labels=np.asarray(labels, dtype=np.int64),
+        votes=votes,
+        changed=changed,
+        margin=margin,
+        n_iterations=int(sum(t[4] for t in trials)),
+        n_trials=len(trials),
+        converged=bool(conv),
+        trial_iterations=tuple(int(t[4]) for t in trials),
+        initialised=init_labels is not None,
+        refined=refined,
+    )
+
+
+def _consensus(trials, C, rng):
+    """Combine the labellings of unconverged trials by spectral clustering."""
+    from sklearn.cluster import SpectralClustering
+
+    labs = np.stack([t[0] for t in trials])  # (T, P)
+    A = (labs[:, :, None] == labs[:, None, :]).mean(axis=0)
+    sc = SpectralClustering(n_clusters=C, affinity="precomputed", assign_labels="cluster_qr",
+                            random_state=int(rng.integers(2**31 - 1)))
+    labels = sc.fit_predict(A + 1e-6).astype(np.int64)
+    last = trials[-1]
+    return labels, last[1], last[2], last[3], last[4], False
+
+
+class RandomVoting:
+    """scikit-learn style wrapper of :func:`random_voting` (plain RV).
+
+    Parameters
+    ----------
+    n_motions : int
+    seed : int
+    **params
+        Any ``rv_*`` field of :class:`LaavParams` (e.g. ``rv_alpha=0.95``).
+
+    Examples
+    --------
+    >>> labels = RandomVoting(2, seed=0).fit_predict(points)  # doctest: +SKIP
+    """
+
+    def __init__(self, n_motions: int, seed: int = 0, **params):
+        self.n_motions = n_motions
+        self.seed = seed
+        self.params = LaavParams().replace(**params)
+
+    def fit(self, points, y=None):
+        self.result_ = random_voting(np.asarray(points), self.n_motions, self.params, self.seed)
+        self.labels_ = self.result_.labels
+        return self
+
+    def fit_predict(self, points, y=None) -> np.ndarray:
+        return self.fit(points).labels_
