@@ -1,0 +1,232 @@
+"""The ``laav`` command: segment one sequence, run the Hopkins155 benchmark, redo a report.
+
+::
+
+    laav segment FILE [--motions C] [--method laav|rv] [--seed S] [--out labels.csv]
+    laav bench --data DIR [--methods laav,rv] [--seeds N] [--noise 0,0.5,1,2] [--only GLOB]
+               [--jobs N] [--scheduler tcp://HOST:PORT] [--out DIR]
+    laav report DIR
+    laav --version
+
+``--param key=value`` (repeatable, ``segment`` and ``bench``) sets any field of
+:class:`laav.LaavParams`, e.g. ``--param rv_max_iter=50 --param lam=3``.
+
+Exit codes: 0 success, 1 some benchmark runs failed, 2 bad input (unreadable sequence,
+bad option, missing number of motions), 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+from pathlib import Path
+
+__all__ = ["main", "build_parser"]
+
+
+class _UsageError(Exception):
+    pass
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return v
+
+
+def _int(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def _param_help() -> str:
+    return ("set a LaavParams field, e.g. --param rv_max_iter=50 (repeatable; numbers, "
+            "true/false and none are converted)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="laav",
+        description="Motion segmentation of tracked trajectories by Locally Affine Atom Voting.",
+    )
+    parser.add_argument("--version", action="version", version=f"laav {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    seg = sub.add_parser(
+        "segment", help="segment one sequence and write its labels",
+        description="Segment the trajectories of one sequence (Hopkins155 *_truth.mat, .npz, or "
+                    "a folder holding one) and write the labels as CSV (point,label). With "
+                    "ground truth in the file, also print the misclassification rate.")
+    seg.add_argument("file", metavar="FILE", help="sequence file (.mat / .npz) or its folder")
+    seg.add_argument("--motions", "-C", type=_positive_int, metavar="C",
+                     help="number of motions (default: from the file's ground truth)")
+    seg.add_argument("--method", choices=("laav", "rv"), default="laav",
+                     help="LAAV (default) or plain Random Voting")
+    seg.add_argument("--seed", type=_int, default=0, metavar="S", help="random seed (default 0)")
+    seg.add_argument("--out", "-o", metavar="CSV",
+                     help="labels file to write (default: <sequence name>_labels.csv)")
+    seg.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                     help=_param_help())
+
+    bench = sub.add_parser(
+        "bench", help="run the benchmark over a Hopkins155-style folder",
+        description="Run every sequence x method x seed x noise level of a Hopkins155-style "
+                    "folder (<seq>/<seq>_truth.mat), append one row per run to OUT/runs.csv, "
+                    "and write OUT/report.md with figures. Rerunning with the same --out "
+                    "skips runs already in runs.csv.")
+    bench.add_argument("--data", required=True, metavar="DIR", help="Hopkins155-style folder")
+    bench.add_argument("--methods", default="laav,rv",
+                       help="comma-separated methods among laav, rv (default laav,rv)")
+    bench.add_argument("--seeds", type=_positive_int, default=1, metavar="N",
+                       help="seeds 0..N-1 per sequence, method and noise level (default 1)")
+    bench.add_argument("--noise", default="0", metavar="LIST",
+                       help="comma-separated pixel noise levels sigma (default 0), e.g. 0,0.5,1,2")
+    bench.add_argument("--only", action="append", default=[], metavar="GLOB",
+                       help="only sequences whose name matches the glob (repeatable, or "
+                            "comma-separated)")
+    bench.add_argument("--jobs", "-j", type=_int, default=None, metavar="N",
+                       help="worker processes (default: all cores; negative as in joblib)")
+    bench.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run on a Dask distributed cluster, e.g. tcp://10.0.0.5:8786")
+    bench.add_argument("--out", "-o", default="bench-out", metavar="DIR",
+                       help="output folder (default bench-out)")
+    bench.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                       help=_param_help())
+    bench.add_argument("--no-report", action="store_true",
+                       help="only write runs.csv (make the report later with `laav report`)")
+    bench.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+
+    rep = sub.add_parser("report", help="(re)write report.md and figures from a runs.csv",
+                         description="Write DIR/report.md and its figures from DIR/runs.csv.")
+    rep.add_argument("dir", metavar="DIR", help="bench output folder holding runs.csv")
+    return parser
+
+
+def _cmd_segment(args) -> int:
+    from . import SequenceError, load_sequence, misclassification_rate, random_voting, segment
+    from .bench import params_from_assignments
+
+    params = params_from_assignments(args.param)
+    try:
+        seq = load_sequence(args.file)
+    except SequenceError as exc:
+        raise _UsageError(str(exc)) from None
+    C = args.motions if args.motions is not None else seq.n_motions
+    if C is None:
+        raise _UsageError(f"{args.file}: no ground-truth labels in the file; give the number "
+                          "of motions with --motions C")
+    try:
+        if args.method == "laav":
+            labels = segment(seq, C, params, args.seed).labels
+        else:
+            labels = random_voting(seq, C, params, args.seed).labels
+    except ValueError as exc:
+        raise _UsageError(f"{args.file}: {exc}") from None
+    out = Path(args.out) if args.out else Path(f"{seq.name}_labels.csv")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with open(out, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(("point", "label"))
+            w.writerows((i, int(v)) for i, v in enumerate(labels))
+    except OSError as exc:
+        raise _UsageError(f"{out}: cannot write labels ({exc.strerror or exc})") from None
+    print(f"labels: {out}")
+    if seq.labels is not None:
+        err = 100.0 * misclassification_rate(seq.labels, labels)
+        print(f"misclassification: {err:.2f} % ({seq.name}, {seq.n_points} points, "
+              f"{C} motions, {args.method}, seed {args.seed})")
+    return 0
+
+
+def _split(values) -> list[str]:
+    out = []
+    for v in values:
+        out += [s.strip() for s in v.split(",") if s.strip()]
+    return out
+
+
+def _cmd_bench(args) -> int:
+    from .bench import params_from_assignments, parse_noise, run_bench
+
+    params = params_from_assignments(args.param)
+    noise = parse_noise(args.noise)
+    methods = _split([args.methods])
+    summary = run_bench(
+        data=args.data, out=args.out, methods=methods, seeds=args.seeds, noise=noise,
+        only=_split(args.only) or None, jobs=args.jobs, scheduler=args.scheduler,
+        params=params, progress=not args.quiet, report=not args.no_report,
+    )
+    err = sys.stderr
+    if summary.interrupted:
+        print(f"interrupted: {summary.completed} new runs kept in {summary.runs_csv}; "
+              "rerun the same command to resume", file=err)
+        return 130
+    print(f"{summary.completed} runs done, {summary.already_done} already in "
+          f"{summary.runs_csv}, {len(summary.failed)} failed", file=err)
+    if summary.failed:
+        print(f"failed runs are listed in {summary.out / 'failures.log'}; a rerun retries them",
+              file=err)
+    print(f"runs: {summary.runs_csv}")
+    if summary.report is not None:
+        print(f"report: {summary.report}")
+        _print_table1(summary.report)
+    return 1 if summary.failed else 0
+
+
+def _print_table1(report: Path) -> None:
+    lines = report.read_text().splitlines()
+    try:
+        start = next(i for i, ln in enumerate(lines) if ln.startswith("## Table 1"))
+    except StopIteration:
+        return
+    block = []
+    for ln in lines[start + 2:]:
+        if not ln.startswith("|"):
+            break
+        block.append(ln)
+    print("\n".join([lines[start][3:], *block]))
+
+
+def _cmd_report(args) -> int:
+    from .bench import RUNS_CSV
+    from .report import write_report
+
+    d = Path(args.dir)
+    if not (d / RUNS_CSV).is_file():
+        raise _UsageError(f"{d}: no {RUNS_CSV} here (run `laav bench --out {d}` first)")
+    path = write_report(d)
+    print(f"report: {path}")
+    _print_table1(path)
+    return 0
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``laav`` console script; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from .bench import BenchError
+
+    commands = {"segment": _cmd_segment, "bench": _cmd_bench, "report": _cmd_report}
+    try:
+        return commands[args.command](args)
+    except (_UsageError, BenchError) as exc:
+        print(f"laav {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
