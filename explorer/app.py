@@ -1,0 +1,794 @@
+"""The explorer page: widgets -> :class:`~explorer.state.ExplorerState`, results -> views.
+
+One :class:`Explorer` per browser session (``pn.serve`` is given a function), so tabs are
+independent. Threads: widget callbacks run on the document's thread; results arrive from
+the state's worker thread and are applied on the document's thread through
+``doc.add_next_tick_callback`` (raw bokeh models must not be edited from other threads),
+all views in one go under ``pn.io.hold``. Without a server document (tests, benchmarks,
+notebooks) results are applied directly, under a lock.
+"""
+
+from __future__ import annotations
+
+import io
+import tempfile
+import threading
+import time
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+import panel as pn
+from bokeh.models import (
+    ColorBar,
+    ColumnDataSource,
+    FactorRange,
+    HoverTool,
+    Legend,
+    LinearColorMapper,
+    LogAxis,
+    Range1d,
+)
+from bokeh.palettes import Blues256, RdBu11
+from bokeh.plotting import figure
+
+import laav
+from laav import LaavParams
+
+from . import export
+from . import views as V
+from .state import ExplorerState
+
+__all__ = ["Explorer", "PARAM_SLIDERS"]
+
+#: Parameter sliders: LaavParams field -> (label, type, start, end, step).
+PARAM_SLIDERS = {
+    "r1": ("R1 — inner atom radius (px)", float, 2.0, 100.0, 1.0),
+    "r2": ("R2 — outer atom radius (px)", float, 4.0, 160.0, 1.0),
+    "lam": ("λ — epipolar voting strength (1/px²)", float, 0.1, 10.0, 0.1),
+    "fine_models": ("2C — fine models of the multicut", int, 1, 12, 1),
+    "rv_alpha": ("RV α — forgetting factor", float, 0.5, 1.0, 0.01),
+    "rv_max_iter": ("RV iteration cap", int, 10, 500, 10),
+}
+
+_TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
+_EMPTY_PTS = {"x": [], "y": [], "color": [], "label": [], "index": []}
+
+
+def _card(title: str, *objs, **kw) -> pn.Card:
+    return pn.Card(*objs, title=title, collapsible=False, margin=(6, 6), **kw)
+
+
+def _image_figure(title: str, frame_width: int, extent, **kw):
+    """A bokeh figure in pixel coordinates with the y axis pointing down."""
+    x0, x1, y0, y1 = extent
+    fh = int(round(frame_width * (y1 - y0) / max(x1 - x0, 1e-9)))
+    fig = figure(title=title, frame_width=frame_width, frame_height=max(fh, 80), tools=_TOOLS,
+                 x_range=Range1d(x0, x1), y_range=Range1d(y1, y0), match_aspect=True,
+                 toolbar_location="above", **kw)
+    fig.xaxis.axis_label = "x (px)"
+    fig.yaxis.axis_label = "y (px, pointing down)"
+    fig.title.text_font_size = "11pt"
+    return fig
+
+
+class Explorer:
+    """The LAAV explorer for one sequence (one per browser session).
+
+    Parameters
+    ----------
+    seq : laav.Sequence
+    n_motions : int, optional
+        C; required when ``seq`` has no ground truth.
+    params : laav.LaavParams, optional
+    seed : int
+    viser : bool
+        Start a viser server for the 3-D view (one per explorer, on a free port).
+    viser_host : str
+        Interface the viser server binds.
+    iframe_host : str, optional
+        Host name the browser uses to reach the viser server (default: ``viser_host``,
+        or the page's own host when built inside a server session).
+    pipeline : Future or laav.Pipeline, optional
+        A warm pipeline for exactly these settings (see :class:`ExplorerState`).
+
+    Examples
+    --------
+    >>> Explorer.from_file("cars1_truth.mat")        # doctest: +SKIP  (displays in Jupyter)
+    """
+
+    def __init__(self, seq: laav.Sequence, n_motions: int | None = None,
+                 params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
+                 viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None):
+        self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False)
+        self._defaults = LaavParams()
+        self._suppress = 0
+        self._apply_lock = threading.RLock()
+        self._applied = threading.Condition()
+        self.applied_generation = 0
+        self.applied_plain_key = None
+        self.result: laav.LaavResult | None = None
+        self.sequence: laav.Sequence = seq
+        self._style = None
+        self._shown_key = None
+        self._plain: laav.Voting | None = None
+        self._seq_shown: laav.Sequence | None = None
+        self.viser = None
+        if viser:
+            try:
+                from .viser_view import ViserView
+                self.viser = ViserView(host=viser_host, on_frame=self._frame_from_viser)
+            except Exception as exc:  # the 2-D views still work without it
+                self._viser_error = f"the 3-D view could not start: {exc}"
+        self._iframe_host = iframe_host or (viser_host if viser_host not in ("0.0.0.0", "::") else None)
+        self._build_widgets()
+        self._build_figures()
+        self._build_layout()
+        self.state.on_result = self._on_result
+        self.state.on_error = self._on_error
+        self.state.on_busy = self._on_busy
+        self.state.on_plain_rv = self._on_plain_rv
+        self.state.start()
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_file(cls, path, n_motions: int | None = None, **kw) -> Explorer:
+        """Explorer for a Hopkins ``*_truth.mat`` or ``.npz`` file (see :func:`laav.load_sequence`)."""
+        return cls(laav.load_sequence(path), n_motions, **kw)
+
+    @classmethod
+    def demo(cls, **kw) -> Explorer:
+        """Explorer for the bundled demo sequence."""
+        from .demo import demo_sequence
+        return cls(demo_sequence(), **kw)
+
+    # ------------------------------------------------------------------ widgets
+    def _build_widgets(self) -> None:
+        seq, st = self.sequence, self.state.target
+        p = st.params
+        self.w_frame = pn.widgets.Player(name="frame", start=0, end=max(seq.n_frames - 1, 1), value=0,
+                                         loop_policy="loop", interval=250, width=290,
+                                         show_loop_controls=False, value_align="start",
+                                         scale_buttons=0.8)
+        self.w_color = pn.widgets.Select(name="Colour points by", options=list(V.COLOR_MODES),
+                                         value="ground truth" if seq.labels is not None
+                                         else "final (after Random Voting)", width=290)
+        self._layer_names = ["trails (last 5 frames)", "atom circles (R1 solid, R2 dashed)",
+                             "features in no atom (×)", "misclassified (red ring)"]
+        self.w_layers = pn.widgets.CheckBoxGroup(options=self._layer_names, value=list(self._layer_names),
+                                                 inline=False)
+        self.w_params: dict = {}
+        for name, (label, typ, lo, hi, step) in PARAM_SLIDERS.items():
+            default = getattr(self._defaults, name)
+            if name == "fine_models":
+                value = p.n_fine(st.n_motions)
+                hi = max(hi, 4 * st.n_motions)
+                w = pn.widgets.EditableIntSlider(name=label, start=lo, end=hi, step=step, value=value,
+                                                 width=290)
+            elif typ is int:
+                w = pn.widgets.EditableIntSlider(name=label, start=lo, end=max(hi, 2 * default),
+                                                 step=step, value=int(getattr(p, name)), width=290)
+            else:
+                w = pn.widgets.EditableFloatSlider(name=label, start=lo, end=max(hi, 2.0 * default)
+                                                   if name != "rv_alpha" else hi, step=step,
+                                                   value=float(getattr(p, name)), width=290)
+            w.param.watch(self._on_param, "value")
+            self.w_params[name] = w
+        self.w_seed = pn.widgets.EditableIntSlider(name="seed (random stages)", start=0, end=99,
+                                                   value=st.seed, width=290)
+        self.w_seed.param.watch(self._on_param, "value")
+        self.w_motions = pn.widgets.IntInput(name="C — number of motions", start=1, value=st.n_motions,
+                                             width=140)
+        self.w_motions.param.watch(self._on_param, "value")
+        self.w_upload = pn.widgets.FileInput(accept=".mat,.npz", multiple=False, width=290)
+        self.w_upload.param.watch(self._on_upload, "value")
+        self.w_reset = pn.widgets.Button(name="Reset parameters to defaults", button_type="warning",
+                                         width=290)
+        self.w_reset.on_click(self._on_reset)
+        self.w_dl_csv = pn.widgets.FileDownload(callback=self._export_csv, filename="labels.csv",
+                                                label="Labels (CSV)", button_type="primary",
+                                                embed=False, width=290)
+        self.w_dl_json = pn.widgets.FileDownload(callback=self._export_json, filename="params.json",
+                                                 label="Parameters (JSON)", button_type="primary",
+                                                 embed=False, width=290)
+        self.w_dl_png = pn.widgets.FileDownload(callback=self._export_png, filename="views.png",
+                                                label="Views (PNG)", button_type="primary",
+                                                embed=False, width=290)
+        self.w_step = pn.widgets.IntSlider(name="GAEC contraction step (rightmost = final fine models)",
+                                           start=0, end=1, value=1, width=560)
+        self.w_pair_j = pn.widgets.Select(name="fine model j", options=["f1"], width=110)
+        self.w_pair_k = pn.widgets.Select(name="fine model k", options=["f1"], width=110)
+        self.w_frame.param.watch(self._on_frame, "value")
+        self.w_color.param.watch(self._on_color, "value")
+        self.w_layers.param.watch(self._on_layers, "value")
+        self.w_step.param.watch(self._on_step, "value")
+        self.w_pair_j.param.watch(self._on_pair, "value")
+        self.w_pair_k.param.watch(self._on_pair, "value")
+
+    # ------------------------------------------------------------------ figures
+    def _build_figures(self) -> None:
+        ext = self.sequence.extent()
+        # 1 frame view
+        self.src_points = ColumnDataSource(dict(_EMPTY_PTS))
+        self.src_trails = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": [], "alpha": []})
+        self.src_atoms = ColumnDataSource({"x": [], "y": [], "r1": [], "r2": [], "color": [], "atom": []})
+        self.src_unassigned = ColumnDataSource({"x": [], "y": []})
+        self.src_errors = ColumnDataSource({"x": [], "y": []})
+        f = self.fig_frame = _image_figure("Points at frame 0", 470, ext)
+        self.r_trails = f.segment("x0", "y0", "x1", "y1", source=self.src_trails, line_color="color",
+                                  line_alpha="alpha", line_width=1.5)
+        self.r_r2 = f.circle("x", "y", radius="r2", source=self.src_atoms, fill_alpha=0, line_color="color",
+                             line_alpha=0.35, line_dash="dashed", line_width=1, legend_label="atom R2")
+        self.r_r1 = f.circle("x", "y", radius="r1", source=self.src_atoms, fill_alpha=0.06,
+                             fill_color="color", line_color="color", line_alpha=0.7, line_width=1.2,
+                             legend_label="atom R1")
+        self.r_points = f.scatter("x", "y", source=self.src_points, size=6, fill_color="color",
+                                  line_color="color", legend_field="label")
+        self.r_unassigned = f.scatter("x", "y", source=self.src_unassigned, marker="x", size=9,
+                                      line_color="black", line_width=2, legend_label="in no atom")
+        self.r_errors = f.scatter("x", "y", source=self.src_errors, marker="circle", size=14,
+                                  fill_alpha=0, line_color=V.ERROR_RED, line_width=2,
+                                  legend_label="misclassified")
+        f.add_tools(HoverTool(renderers=[self.r_points], tooltips=[("point", "@index"), ("", "@label")]))
+        self._move_legend(f)
+
+        # 2 multicut graph
+        self.cost_mapper = LinearColorMapper(palette=list(RdBu11), low=-1, high=1)
+        g = self.fig_graph = _image_figure("Atom graph at frame 0", 470, ext)
+        empty_e = {"x0": [], "y0": [], "x1": [], "y1": [], "cost": [], "error": [], "a": [], "b": []}
+        self.src_joined = ColumnDataSource(dict(empty_e))
+        self.src_cut = ColumnDataSource(dict(empty_e))
+        self.src_step = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": []})
+        self.src_nodes = ColumnDataSource({"x": [], "y": [], "color": [], "cluster": [], "atom": [],
+                                           "members": [], "size": []})
+        g.segment("x0", "y0", "x1", "y1", source=self.src_step, line_color="#222222", line_alpha=0.35,
+                  line_width=10, legend_label="contracted at this step")
+        g.segment("x0", "y0", "x1", "y1", source=self.src_joined, line_width=2.5,
+                  line_color={"field": "cost", "transform": self.cost_mapper}, legend_label="edge kept")
+        g.segment("x0", "y0", "x1", "y1", source=self.src_cut, line_width=1.8, line_dash="dashed",
+                  line_color={"field": "cost", "transform": self.cost_mapper}, legend_label="edge cut")
+        r_nodes = g.scatter("x", "y", source=self.src_nodes, size="size", fill_color="color",
+                            line_color="black", line_width=0.8, legend_label="atom (colour = cluster)")
+        g.add_tools(HoverTool(renderers=[r_nodes], tooltips=[("atom", "@atom"), ("cluster", "@cluster"),
+                                                             ("features", "@members")]))
+        g.add_layout(ColorBar(color_mapper=self.cost_mapper, title="edge cost: + join (blue), − cut (red)",
+                              orientation="horizontal", height=8, title_text_font_size="9pt",
+                              padding=4), "below")
+        self._move_legend(g)
+
+        # 3 coarse merges
+        self.z_mapper = LinearColorMapper(palette=list(Blues256[::-1]), low=0, high=1)
+        self.src_z = ColumnDataSource({"x": [], "y": [], "z": [], "text": [], "text_color": [], "d": [],
+                                       "j": [], "k": []})
+        z = self.fig_z = figure(title="Affinity Z of fine-model pairs", width=360, height=340,
+                                x_range=FactorRange(factors=["f1"]), y_range=FactorRange(factors=["f1"]),
+                                tools="hover", toolbar_location=None,
+                                tooltips=[("pair", "f@j, f@k"), ("Z", "@text"), ("epipolar distance", "@d")])
+        z.rect("x", "y", 1, 1, source=self.src_z, fill_color={"field": "z", "transform": self.z_mapper},
+               line_color="white")
+        z.text("x", "y", text="text", source=self.src_z, text_align="center", text_baseline="middle",
+               text_font_size="9pt", text_color="text_color")
+        z.xaxis.major_label_orientation = 0.8
+        z.xaxis.axis_label = "fine model → motion it joined"
+        z.yaxis.axis_label = "fine model → motion"
+        z.grid.visible = False
+        z.add_layout(ColorBar(color_mapper=self.z_mapper, width=8, padding=2), "right")
+        self.z_pane_title = z.title
+        empty_p = {"x": [], "y": [], "color": [], "model": []}
+        self.src_epi_l = ColumnDataSource(dict(empty_p))
+        self.src_epi_r = ColumnDataSource(dict(empty_p))
+        self.src_epi_lines = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": []})
+        self.fig_epi_l = _image_figure("frame l", 250, ext)
+        self.fig_epi_r = _image_figure("frame r with epipolar lines", 250, ext)
+        self.fig_epi_r.x_range = self.fig_epi_l.x_range
+        self.fig_epi_r.y_range = self.fig_epi_l.y_range
+        for fig, src in ((self.fig_epi_l, self.src_epi_l), (self.fig_epi_r, self.src_epi_r)):
+            fig.scatter("x", "y", source=src, size=5, fill_color="color", line_color="color",
+                        legend_field="model")
+            fig.legend.label_text_font_size = "8pt"
+            fig.legend.location = "top_left"
+            fig.legend.background_fill_alpha = 0.6
+            fig.title.text_font_size = "10pt"
+        self.fig_epi_r.segment("x0", "y0", "x1", "y1", source=self.src_epi_lines, line_color="color",
+                               line_alpha=0.55, line_width=1)
+
+        # 4 RV convergence
+        empty_rv = {"iteration": [], "changed": [], "changed_plot": [], "margin": []}
+        self.src_rv_laav = ColumnDataSource(dict(empty_rv))
+        self.src_rv_plain = ColumnDataSource(dict(empty_rv))
+        self.fig_rv_changed = figure(title="Labels changed per iteration", width=520, height=260,
+                                     y_axis_type="log", tools=_TOOLS, toolbar_location="above")
+        self.fig_rv_margin = figure(title="Mean vote margin per iteration", width=520, height=260,
+                                    tools=_TOOLS, toolbar_location="above")
+        for fig, col, ylab in ((self.fig_rv_changed, "changed_plot", "points whose label changed"),
+                               (self.fig_rv_margin, "margin", "(best − 2nd best) / sum of votes")):
+            fig.line("iteration", col, source=self.src_rv_laav, line_width=2.5, color="#1f77b4",
+                     legend_label="LAAV fine-tuning")
+            fig.line("iteration", col, source=self.src_rv_plain, line_width=2, color="#ff7f0e",
+                     line_dash="dashed", legend_label="plain RV (random start)")
+            fig.xaxis.axis_label = "Random Voting iteration"
+            fig.yaxis.axis_label = ylab
+            fig.legend.location = "top_right" if col == "changed_plot" else "bottom_right"
+            fig.legend.background_fill_alpha = 0.7
+            fig.title.text_font_size = "11pt"
+        assert isinstance(self.fig_rv_changed.yaxis[0], LogAxis)
+
+    @staticmethod
+    def _move_legend(fig) -> None:
+        leg = fig.legend[0]
+        fig.renderers  # noqa: B018 (legend already built)
+        fig.center = [c for c in fig.center if not isinstance(c, Legend)]
+        leg.location = "top_left"
+        leg.label_text_font_size = "9pt"
+        leg.spacing = 0
+        leg.padding = 4
+        leg.click_policy = "hide"
+        fig.add_layout(leg, "right")
+
+    # ------------------------------------------------------------------ layout
+    def _build_layout(self) -> None:
+        seq = self.sequence
+        self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
+                                   margin=(4, 6))
+        self.note = pn.pane.Alert("", alert_type="info", visible=False, sizing_mode="stretch_width",
+                                  margin=(4, 6))
+        self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6))
+        self.status = pn.pane.Markdown("Computing the first result…", margin=(4, 6))
+        self.seq_info = pn.pane.Markdown(self._seq_text(seq), width=290, margin=(0, 10))
+        self.numbers = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
+        self.graph_caption = pn.pane.Markdown("", width=560, margin=(0, 10))
+        self.merge_md = pn.pane.Markdown("", width=300, margin=(0, 10))
+        self.epi_caption = pn.pane.Markdown("", width=560, margin=(0, 10))
+        self.rv_md = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
+        self.frame_caption = pn.pane.Markdown("", width=600, margin=(0, 10))
+        if self.viser is not None:
+            self.viser_pane = pn.pane.HTML(self._iframe_html(), width=600, height=520, margin=0)
+        else:
+            msg = getattr(self, "_viser_error", "the 3-D view is switched off")
+            self.viser_pane = pn.pane.Markdown(f"*{msg}*", width=600, height=80)
+        self.sidebar = [
+            pn.pane.Markdown("### Sequence", margin=(0, 10)), self.seq_info,
+            pn.pane.Markdown("Open another sequence (Hopkins `*_truth.mat` or `.npz`):", margin=(0, 10)),
+            self.w_upload, self.w_motions,
+            pn.pane.Markdown("### View", margin=(0, 10)), self.w_frame, self.w_color, self.w_layers,
+            pn.pane.Markdown("### Parameters", margin=(0, 10)),
+            *self.w_params.values(), self.w_seed, self.w_reset,
+            pn.pane.Markdown("### Export", margin=(0, 10)), self.w_dl_csv, self.w_dl_json, self.w_dl_png,
+        ]
+        self.v_frame = _card("1 · Frame view: points, trails and atoms",
+                             pn.pane.Bokeh(self.fig_frame), self.frame_caption)
+        self.v_viser = _card("6 · 3-D space-time view (viser): trajectories along the frame axis",
+                             self.viser_pane)
+        self.v_graph = _card("2 · Multicut graph of atoms (GAEC replay)", pn.pane.Bokeh(self.fig_graph),
+                             self.w_step, self.graph_caption)
+        self.v_coarse = _card(
+            "3 · Fine models merged into motions",
+            pn.Row(pn.pane.Bokeh(self.fig_z), pn.Column(self.merge_md, pn.Row(self.w_pair_j, self.w_pair_k))),
+            pn.Row(pn.pane.Bokeh(self.fig_epi_l), pn.pane.Bokeh(self.fig_epi_r)), self.epi_caption)
+        self.v_rv = _card("4 · Random Voting convergence: LAAV fine-tuning vs plain RV",
+                          pn.Row(pn.pane.Bokeh(self.fig_rv_changed), pn.pane.Bokeh(self.fig_rv_margin)),
+                          self.rv_md)
+        self.v_numbers = _card("5 · Numbers: every stage against the ground truth", self.numbers,
+                               sizing_mode="stretch_width")
+        self.main = [
+            pn.Row(self.spinner, self.status), self.alert, self.note,
+            pn.Row(self.v_frame, self.v_viser), self.v_numbers,
+            pn.Row(self.v_graph, self.v_coarse), self.v_rv,
+        ]
+
+    def _iframe_html(self) -> str:
+        host = self._iframe_host
+        if host is None:
+            hdr = (pn.state.headers or {}).get("Host", "") if pn.state.curdoc else ""
+            host = hdr.rsplit(":", 1)[0] if hdr else "127.0.0.1"
+        return (f'<iframe src="http://{host}:{self.viser.port}/" title="LAAV 3-D view (viser)" '
+                f'style="width:600px;height:520px;border:1px solid #ccc;border-radius:4px"></iframe>')
+
+    @staticmethod
+    def _seq_text(seq: laav.Sequence) -> str:
+        gt = f"{seq.n_motions} motions in the ground truth" if seq.labels is not None else \
+            "**no ground truth** (set C below)"
+        return f"**{seq.name}**: {seq.n_points} points, {seq.n_frames} frames, {gt}."
+
+    def template(self, title: str = "LAAV explorer") -> pn.template.BootstrapTemplate:
+        """The page (a BootstrapTemplate: loads all its resources from the server)."""
+        return pn.template.BootstrapTemplate(
+            title=f"{title} — Locally Affine Atom Voting, stage by stage", sidebar=self.sidebar,
+            main=self.main, sidebar_width=330, header_background="#2c4a66")
+
+    def panel(self) -> pn.viewable.Viewable:
+        """The whole explorer as one panel layout (for notebooks)."""
+        return pn.Row(pn.Column(*self.sidebar, width=320), pn.Column(*self.main))
+
+    def _repr_mimebundle_(self, include=None, exclude=None):
+        return self.panel()._repr_mimebundle_(include, exclude)
+
+    def servable(self, title: str = "LAAV explorer"):
+        return self.template(title).servable()
+
+    # ------------------------------------------------------------------ threading
+    def _doc(self):
+        return self.fig_frame.document
+
+    def _schedule(self, fn, *args) -> None:
+        """Run ``fn(*args)`` on the document's thread (or now, under a lock, without a server)."""
+        doc = self._doc()
+        if doc is not None and doc.session_context is not None:
+            try:
+                doc.add_next_tick_callback(partial(self._locked, fn, *args))
+                return
+            except Exception:  # the session is gone
+                return
+        self._locked(fn, *args)
+
+    def _locked(self, fn, *args) -> None:
+        with self._apply_lock:
+            try:
+                fn(*args)
+            except Exception:
+                import traceback
+                traceback.print_exc()
+
+    def _hold(self):
+        return pn.io.hold(self._doc())
+
+    # state hooks (worker threads)
+    def _on_result(self, result, seq, settings, gen) -> None:
+        self._schedule(self._apply_result, result, seq, settings, gen)
+
+    def _on_error(self, message: str) -> None:
+        self._schedule(self._show_error, message)
+
+    def _on_busy(self, busy: bool) -> None:
+        self._schedule(self._show_busy, busy)
+
+    def _on_plain_rv(self, voting, key) -> None:
+        self._schedule(self._apply_plain_rv, voting, key)
+
+    def _frame_from_viser(self, frame: int) -> None:
+        self._schedule(setattr, self.w_frame, "value", int(frame))
+
+    # ------------------------------------------------------------------ applying results
+    def _apply_result(self, result, seq, settings, gen) -> None:
+        if gen < self.applied_generation:
+            return
+        t0 = time.perf_counter()
+        new_seq = seq is not self._seq_shown
+        self._suppress += 1
+        try:
+            with self._hold():
+                if new_seq:
+                    self._set_sequence_widgets(seq, settings)
+                self.result, self.sequence = result, seq
+                self._style = V.point_style(seq, result, V.COLOR_MODES[self.w_color.value])
+                K = len(result.multicut.contractions)
+                at_end = self.w_step.value >= self.w_step.end
+                self.w_step.end = K + 1
+                if at_end or self.w_step.value > K + 1:
+                    self.w_step.value = K + 1
+                n = int(np.asarray(result.coarse.fine_to_coarse).size)
+                opts = [f"f{j + 1}" for j in range(max(n, 1))]
+                if list(self.w_pair_j.options) != opts:
+                    self.w_pair_j.options, self.w_pair_k.options = opts, opts
+                    self.w_pair_j.value, self.w_pair_k.value = opts[0], opts[min(1, len(opts) - 1)]
+                self._draw_frame()
+                self._draw_graph()
+                self._draw_coarse()
+                self._draw_epipolar()
+                self._draw_rv(result.voting, self.state.plain_rv())
+                num = V.stage_numbers(seq, result)
+                self.numbers.object = V.numbers_markdown(num)
+                self.alert.visible = self.state.error is not None
+                notes = [n for n in (self._style["note"],) if n]
+                if seq.labels is None:
+                    notes.append(f"{seq.name} has no ground truth: errors cannot be scored; C = "
+                                 f"{settings.n_motions} is taken from the C box.")
+                self.note.object = "  \n".join(notes)
+                self.note.visible = bool(notes)
+                ef = num["error_final"]
+                err = "" if ef is None else f" — final error **{100 * ef:.1f} %**"
+                self.status.object = (f"Showing {seq.name} with R1 = {settings.params.r1:g}, "
+                                      f"R2 = {settings.params.r2:g}, λ = {settings.params.lam:g}, "
+                                      f"2C = {result.multicut.n_models}, seed {settings.seed}{err} "
+                                      f"(computed in {1000 * self.state.compute_seconds:.0f} ms).")
+            if self.viser is not None:
+                if new_seq:
+                    self.viser.set_result(seq, result, self._style["color"], self.w_frame.value)
+                else:
+                    self.viser._seq = seq
+                    self.viser._result = result
+                    self.viser.set_colors(self._style["color"])
+            self._seq_shown = seq
+        finally:
+            self._suppress -= 1
+        self.apply_seconds = time.perf_counter() - t0
+        with self._applied:
+            self.applied_generation = gen
+            self._applied.notify_all()
+
+    def _set_sequence_widgets(self, seq, settings) -> None:
+        x0, x1, y0, y1 = seq.extent()
+        for fig in (self.fig_frame, self.fig_graph, self.fig_epi_l):
+            fig.x_range.start, fig.x_range.end = x0, x1
+            fig.y_range.start, fig.y_range.end = y1, y0
+            fw = fig.frame_width
+            fig.frame_height = max(int(round(fw * (y1 - y0) / max(x1 - x0, 1e-9))), 80)
+        self.fig_epi_r.frame_height = self.fig_epi_l.frame_height
+        self.w_frame.end = max(seq.n_frames - 1, 1)
+        if self.w_frame.value > seq.n_frames - 1:
+            self.w_frame.value = 0
+        self.w_motions.value = settings.n_motions
+        fm = self.w_params["fine_models"]
+        fm.end = max(fm.end, 4 * settings.n_motions)
+        self.seq_info.object = self._seq_text(seq)
+        for w, ext in ((self.w_dl_csv, "labels.csv"), (self.w_dl_json, "params.json"),
+                       (self.w_dl_png, "views.png")):
+            w.filename = f"{seq.name}_{ext}"
+        if seq.labels is None and self.w_color.value in ("ground truth", "errors"):
+            self.w_color.value = "final (after Random Voting)"
+        elif seq.labels is not None and self._seq_shown is not None and self.sequence.labels is None:
+            self.w_color.value = "ground truth"
+        self._sync_param_widgets(settings)
+
+    def _sync_param_widgets(self, settings) -> None:
+        """After a load, show the settings actually used (never after a slider move: the
+        widgets may already be ahead of the result being applied)."""
+        p = settings.params
+        for name, w in self.w_params.items():
+            v = p.n_fine(settings.n_motions) if name == "fine_models" else getattr(p, name)
+            if self.state.error is None and w.value != v:
+                w.value = v
+        if self.state.error is None and self.w_seed.value != settings.seed:
+            self.w_seed.value = settings.seed
+
+    def _draw_frame(self) -> None:
+        res, seq = self.result, self.sequence
+        if res is None:
+            return
+        f = int(self.w_frame.value)
+        d = V.frame_sources(seq, res, f, self._style)
+        self.src_points.data = d["points"]
+        self.src_trails.data = d["trails"]
+        self.src_atoms.data = d["atoms"]
+        self.src_unassigned.data = d["unassigned"]
+        self.src_errors.data = d["errors"]
+        self.fig_frame.title.text = (f"{seq.name} · frame {f} of {seq.n_frames - 1} · coloured by "
+                                     f"{self.w_color.value}")
+        self.frame_caption.object = (
+            f"{res.atoms.n_atoms} atoms (R1 = {res.atoms.r1:g} px solid, R2 = {res.atoms.r2:g} px dashed, "
+            f"drawn at their seeds); {np.asarray(res.atoms.unassigned).size} features in no atom (×); "
+            f"{int(self._style['misclassified'].sum())} points misclassified (red ring). "
+            "Click legend entries to hide them.")
+
+    def _draw_graph(self) -> None:
+        res = self.result
+        if res is None:
+            return
+        f, step = int(self.w_frame.value), int(self.w_step.value)
+        d = V.graph_sources(res, f, step)
+        lim = V.cost_limit(res)
+        self.cost_mapper.low, self.cost_mapper.high = -lim, lim
+        self.src_nodes.data = d["nodes"]
+        self.src_joined.data = d["joined"]
+        self.src_cut.data = d["cut"]
+        self.src_step.data = d["step_edge"]
+        self.fig_graph.title.text = (f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges at frame {f} · "
+                                     f"{len(np.unique(d['nodes']['cluster']))} clusters")
+        self.graph_caption.object = V.replay_caption(res, step)
+
+    def _draw_coarse(self) -> None:
+        res, seq = self.result, self.sequence
+        data, factors = V.z_sources(res, seq)
+        self.fig_z.x_range.factors = factors or ["–"]
+        self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
+        self.src_z.data = data
+        self.fig_z.title.text = f"Affinity Z (λ = {res.params.lam:g}): {len(factors)} fine models"
+        self.merge_md.object = ("**Which fine model joined which motion** (spectral clustering of Z):\n\n"
+                                + V.merge_table(seq, res))
+
+    def _pair(self) -> tuple[int, int]:
+        def idx(w):
+            try:
+                return int(str(w.value)[1:]) - 1
+            except ValueError:
+                return 0
+        return idx(self.w_pair_j), idx(self.w_pair_k)
+
+    def _draw_epipolar(self) -> None:
+        res, seq = self.result, self.sequence
+        j, k = self._pair()
+        d = V.epipolar_sources(seq, res, j, k)
+        self.src_epi_l.data = d["left"]
+        self.src_epi_r.data = d["right"]
+        self.src_epi_lines.data = d["lines"]
+        fl, fr = d["frames"]
+        self.fig_epi_l.title.text = f"frame l = {fl}: f{j + 1} and f{k + 1}"
+        self.fig_epi_r.title.text = f"frame r = {fr}: epipolar lines of F(f{j + 1}, f{k + 1})"
+        if not d["ok"]:
+            self.epi_caption.object = "No fundamental matrix for this pair (too few points)."
+            return
+        f2c = np.asarray(res.coarse.fine_to_coarse)
+        same = "the same motion" if f2c[j] == f2c[k] else "different motions"
+        self.epi_caption.object = (
+            f"F is fitted on all points of f{j + 1} and f{k + 1} between frames {fl} and {fr}. Lines through "
+            f"the frame-r points mean one rigid motion explains both models. Mean distance of the drawn "
+            f"points to their lines: **{d['residual']:.1f} px**; mean epipolar distance used for Z: "
+            f"{d['distance']:.1f} px². The two models were merged into {same}.")
+
+    def _draw_rv(self, laav_voting, plain) -> None:
+        self.src_rv_laav.data = V.rv_sources(laav_voting)
+        self.src_rv_plain.data = V.rv_sources(plain)
+        self._plain = plain
+        self.rv_md.object = V.rv_summary(laav_voting, plain)
+
+    def _apply_plain_rv(self, voting, key) -> None:
+        if self.result is None or key != self.state.plain_rv_key():
+            return
+        with self._hold():
+            self._draw_rv(self.result.voting, voting)
+        with self._applied:
+            self.applied_plain_key = key
+            self._applied.notify_all()
+
+    def _show_error(self, message: str) -> None:
+        self.alert.object = f"**Cannot use these settings:** {message}"
+        self.alert.visible = True
+
+    def _show_busy(self, busy: bool) -> None:
+        self.spinner.value = bool(busy)
+        if busy and self.result is not None:
+            self.status.object = "Recomputing… (the views keep the last result until the new one is ready)"
+
+    # ------------------------------------------------------------------ widget callbacks
+    def _widget_params(self) -> dict:
+        out = {}
+        C = int(self.w_motions.value or 1)
+        for name, w in self.w_params.items():
+            v = w.value
+            if name == "fine_models":
+                v = None if int(v) == 2 * C and self._defaults.fine_models is None else int(v)
+            elif isinstance(getattr(self._defaults, name), float):
+                v = float(v)
+            else:
+                v = int(v)
+            out[name] = v
+        return out
+
+    def _on_param(self, event=None) -> None:
+        if self._suppress:
+            return
+        if event is not None and event.obj is self.w_motions:
+            fm = self.w_params["fine_models"]
+            old = event.old if isinstance(event.old, int) else None
+            if old is not None and fm.value == 2 * old:
+                self._suppress += 1
+                fm.end = max(fm.end, 4 * int(event.new or 1))
+                fm.value = 2 * int(event.new or 1)
+                self._suppress -= 1
+        self.state.request(params=self._widget_params(), seed=int(self.w_seed.value),
+                           n_motions=int(self.w_motions.value) if self.w_motions.value is not None else None)
+
+    def _on_reset(self, event=None) -> None:
+        d = self._defaults
+        self._suppress += 1
+        try:
+            C = int(self.w_motions.value or 1)
+            for name, w in self.w_params.items():
+                w.value = d.n_fine(C) if name == "fine_models" else getattr(d, name)
+            self.w_seed.value = 0
+        finally:
+            self._suppress -= 1
+        self._on_param()
+
+    def _on_frame(self, event=None) -> None:
+        if self.result is None or self._suppress:
+            return
+        with self._hold():
+            self._draw_frame()
+            self._draw_graph()
+        if self.viser is not None:
+            self.viser.set_frame(int(self.w_frame.value))
+
+    def _on_color(self, event=None) -> None:
+        if self.result is None:
+            return
+        self._style = V.point_style(self.sequence, self.result, V.COLOR_MODES[self.w_color.value])
+        with self._hold():
+            self._draw_frame()
+            self.note.object = self._style["note"]
+            self.note.visible = bool(self._style["note"])
+        if self.viser is not None:
+            self.viser.set_colors(self._style["color"])
+
+    def _on_layers(self, event=None) -> None:
+        on = set(self.w_layers.value)
+        names = self._layer_names
+        self.r_trails.visible = names[0] in on
+        self.r_r1.visible = self.r_r2.visible = names[1] in on
+        self.r_unassigned.visible = names[2] in on
+        self.r_errors.visible = names[3] in on
+
+    def _on_step(self, event=None) -> None:
+        if self.result is None or self._suppress:
+            return
+        with self._hold():
+            self._draw_graph()
+
+    def _on_pair(self, event=None) -> None:
+        if self.result is None or self._suppress:
+            return
+        with self._hold():
+            self._draw_epipolar()
+
+    def _on_upload(self, event=None) -> None:
+        data, name = self.w_upload.value, self.w_upload.filename or "upload"
+        if not data:
+            return
+        self.load_bytes(data, name)
+
+    def load_bytes(self, data: bytes, filename: str) -> bool:
+        """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure."""
+        base = Path(filename).name or "upload"
+        suffix = Path(base).suffix.lower()
+        if suffix not in (".mat", ".npz"):
+            self._on_error(f"{base}: expected a Hopkins155 *_truth.mat or a .npz sequence file")
+            return False
+        try:
+            with tempfile.TemporaryDirectory(prefix="laav-explore-") as d:
+                p = Path(d) / base
+                p.write_bytes(data)
+                try:
+                    seq = laav.load_sequence(p)
+                except laav.SequenceError as exc:
+                    self.state.report(str(exc).replace(str(p), base)
+                                      + " — still showing the last valid result")
+                    return False
+        except Exception as exc:  # never let an upload kill the session
+            self.state.report(f"{base}: could not be read ({type(exc).__name__}: {exc})")
+            return False
+        return self.state.load(seq, None if seq.labels is not None else int(self.w_motions.value)) is not None
+
+    # ------------------------------------------------------------------ exports
+    def _need_result(self):
+        if self.result is None:
+            raise RuntimeError("no result yet")
+        return self.sequence, self.result
+
+    def _export_csv(self):
+        seq, res = self._need_result()
+        return io.StringIO(export.labels_csv(seq, res))
+
+    def _export_json(self):
+        seq, res = self._need_result()
+        return io.StringIO(export.params_json(seq, res))
+
+    def _export_png(self):
+        seq, res = self._need_result()
+        return io.BytesIO(export.views_png(seq, res, int(self.w_frame.value),
+                                           V.COLOR_MODES[self.w_color.value], int(self.w_step.value),
+                                           self._plain))
+
+    # ------------------------------------------------------------------ testing / teardown
+    def wait(self, timeout: float = 60.0, plain_rv: bool = False) -> bool:
+        """Block until the newest request's result (or error) is on the views."""
+        deadline = time.monotonic() + timeout
+        if not self.state.wait(timeout):
+            return False
+        with self._applied:
+            while self.applied_generation < self.state.published_generation:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._applied.wait(left)
+            if plain_rv:
+                while self.applied_plain_key != self.state.plain_rv_key():
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        return False
+                    self._applied.wait(left)
+        return True
+
+    def close(self) -> None:
+        self.state.close()
+        if self.viser is not None:
+            self.viser.close()

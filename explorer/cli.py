@@ -1,0 +1,167 @@
+"""``laav-explore [FILE] [--motions C] [--port N] [--host H] [--no-browser]``.
+
+Serves the explorer page (panel) with its embedded 3-D view (viser, one server per browser
+tab on a free port) from one process, prints the URL and opens the browser. Exit codes:
+0 after Ctrl-C, 2 for bad arguments or an unreadable FILE (a message, never a traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import socket
+import sys
+import threading
+import webbrowser
+from concurrent.futures import Future
+
+import laav
+
+__all__ = ["main", "build_parser", "app_factory", "DEFAULT_PORT"]
+
+DEFAULT_PORT = 5006
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="laav-explore",
+        description="Explore every stage of LAAV motion segmentation live in the browser.",
+        epilog="Without FILE the bundled demo sequence is shown. A FILE without ground-truth labels "
+               "needs --motions.")
+    p.add_argument("file", nargs="?", metavar="FILE",
+                   help="Hopkins155 *_truth.mat, a .npz with points (F, P, 2) [and labels], or a folder "
+                        "holding one *_truth.mat")
+    p.add_argument("--motions", "-C", type=int, metavar="C",
+                   help="number of motions C (default: from the ground truth)")
+    p.add_argument("--port", type=int, metavar="N",
+                   help=f"port of the page (default {DEFAULT_PORT}, or a free one if it is taken)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="interface to bind (default 127.0.0.1: this machine only)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random stages (default 0)")
+    p.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    return p
+
+
+def _port_free(host: str, port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind((host if host not in ("", "0.0.0.0") else "0.0.0.0", port))
+        except OSError:
+            return False
+    return True
+
+
+def _free_port(host: str) -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host if host not in ("", "0.0.0.0") else "0.0.0.0", 0))
+        return int(s.getsockname()[1])
+
+
+def _warm_pipeline(seq, n_motions, seed) -> Future:
+    """Compute the default result while the server starts (claimed by the first tab)."""
+    fut: Future = Future()
+
+    def run():
+        try:
+            fut.set_result(laav.Pipeline(seq, n_motions, laav.LaavParams(), seed))
+        except BaseException as exc:  # noqa: BLE001 - handed to the session
+            fut.set_exception(exc)
+
+    threading.Thread(target=run, name="laav-explore-warmup", daemon=True).start()
+    return fut
+
+
+def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
+                warm: Future | None = None, created: list | None = None, viser: bool = True):
+    """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
+
+    ``created`` (optional list) receives every Explorer built (tests and benchmarks use it).
+    """
+    warm_box = [warm]
+    lock = threading.Lock()
+
+    def make_app():
+        import panel as pn
+
+        from .app import Explorer
+
+        with lock:
+            pipe, warm_box[0] = warm_box[0], None
+        ex = Explorer(seq, n_motions, seed=seed, viser=viser, viser_host=host,
+                      iframe_host=None if host in ("0.0.0.0", "", "::") else host, pipeline=pipe)
+        if created is not None:
+            created.append(ex)
+        pn.state.on_session_destroyed(lambda ctx: ex.close())
+        return ex.template(f"LAAV explorer: {seq.name}")
+
+    return make_app
+
+
+def _fail(parser: argparse.ArgumentParser, msg: str) -> int:
+    parser.print_usage(sys.stderr)
+    print(f"laav-explore: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse already printed the message
+        return int(exc.code or 0)
+    if args.port is not None and not 0 <= args.port <= 65535:
+        return _fail(parser, f"--port must be between 0 and 65535, got {args.port}")
+    if args.motions is not None and args.motions < 1:
+        return _fail(parser, f"--motions must be at least 1, got {args.motions}")
+    try:
+        if args.file is None:
+            from .demo import demo_sequence
+            seq = demo_sequence()
+        else:
+            seq = laav.load_sequence(args.file)
+    except (laav.SequenceError, FileNotFoundError) as exc:
+        return _fail(parser, str(exc))
+    if args.motions is None and seq.labels is None:
+        return _fail(parser, f"{args.file or seq.name} has no ground-truth labels, so the number of "
+                             "motions is unknown: pass --motions C")
+    C = args.motions if args.motions is not None else seq.n_motions
+    if C > seq.n_points:
+        return _fail(parser, f"--motions {C} exceeds the {seq.n_points} points of {seq.name}")
+    if args.port is None:
+        port = DEFAULT_PORT if _port_free(args.host, DEFAULT_PORT) else _free_port(args.host)
+    else:
+        port = args.port if args.port else _free_port(args.host)
+        if not _port_free(args.host, port):
+            return _fail(parser, f"port {port} on {args.host} is already in use; pick another with --port")
+
+    warm = _warm_pipeline(seq, C, args.seed)
+    import panel as pn
+
+    if args.host in ("0.0.0.0", "", "::"):
+        origins = ["*"]
+    else:
+        origins = [f"{args.host}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
+    try:
+        server = pn.serve({"/": app_factory(seq, C, args.seed, args.host, warm)}, port=port,
+                          address=args.host, websocket_origin=origins, show=False, start=False,
+                          title=f"LAAV explorer: {seq.name}", verbose=False)
+    except OSError as exc:
+        return _fail(parser, f"cannot listen on {args.host}:{port}: {exc}")
+    shown = "localhost" if args.host in ("0.0.0.0", "", "::") else args.host
+    url = f"http://{shown}:{port}/"
+    print(f"laav-explore: {seq.name} ({seq.n_points} points, {seq.n_frames} frames, C = {C}) at {url}",
+          flush=True)
+    print("laav-explore: press Ctrl-C to stop", flush=True)
+    server.start()
+    if not args.no_browser:
+        server.io_loop.add_callback(lambda: webbrowser.open(url))
+    try:
+        server.io_loop.start()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""Exports: labels CSV, parameters JSON, and a PNG of the views drawn server-side with matplotlib."""
+
+from __future__ import annotations
+
+import io
+import json
+
+import numpy as np
+
+import laav
+
+from . import views as V
+
+__all__ = ["labels_csv", "params_json", "views_png"]
+
+
+def labels_csv(seq: laav.Sequence, result: laav.LaavResult) -> str:
+    return V.labels_table(seq, result)
+
+
+def params_json(seq: laav.Sequence, result: laav.LaavResult) -> str:
+    """The parameters, seed and C of ``result`` (loadable with ``LaavParams(**d["params"])``)."""
+    d = {"sequence": seq.name, "n_motions": int(result.n_motions), "seed": int(result.seed),
+         "params": result.params.to_dict()}
+    return json.dumps(d, indent=2) + "\n"
+
+
+def views_png(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: str,
+              step: int | None = None, plain: laav.Voting | None = None, dpi: int = 100) -> bytes:
+    """A 2x2 PNG: frame view, multicut graph, affinity Z, RV convergence."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle
+
+    style = V.point_style(seq, result, mode)
+    fs = V.frame_sources(seq, result, frame, style)
+    x0, x1, y0, y1 = seq.extent()
+    fig = Figure(figsize=(13, 10), dpi=dpi, layout="constrained")
+    FigureCanvasAgg(fig)
+    axs = fig.subplots(2, 2)
+    mode_name = {v: k for k, v in V.COLOR_MODES.items()}.get(mode, mode)
+
+    ax = axs[0, 0]
+    t = fs["trails"]
+    if len(t["x0"]):
+        segs = np.stack([np.c_[t["x0"], t["y0"]], np.c_[t["x1"], t["y1"]]], axis=1)
+        ax.add_collection(LineCollection(segs, colors=list(t["color"]), linewidths=0.8, alpha=0.5))
+    a = fs["atoms"]
+    for x, y, r1, r2 in zip(a["x"], a["y"], a["r1"], a["r2"]):
+        ax.add_patch(Circle((x, y), r1, fill=False, lw=0.5, alpha=0.5, color="0.3"))
+        ax.add_patch(Circle((x, y), r2, fill=False, lw=0.4, alpha=0.25, ls="--", color="0.3"))
+    p = fs["points"]
+    ax.scatter(p["x"], p["y"], c=list(p["color"]), s=14, edgecolors="none")
+    u = fs["unassigned"]
+    ax.scatter(u["x"], u["y"], marker="x", c="k", s=22, lw=1, label="in no atom")
+    e = fs["errors"]
+    ax.scatter(e["x"], e["y"], facecolors="none", edgecolors=V.ERROR_RED, s=70, lw=1.5,
+               label="misclassified")
+    ax.set(xlim=(x0, x1), ylim=(y1, y0), aspect="equal", xlabel="x (px)", ylabel="y (px, down)",
+           title=f"{seq.name}: frame {frame}, coloured by {mode_name}")
+    ax.legend(loc="upper right", fontsize=8)
+
+    ax = axs[0, 1]
+    K = len(result.multicut.contractions)
+    step = K + 1 if step is None else step
+    g = V.graph_sources(result, frame, step)
+    lim = V.cost_limit(result)
+    from matplotlib import colormaps
+    cmap = colormaps["RdBu"]
+    for key, ls, lw in (("joined", "-", 1.6), ("cut", "--", 1.0)):
+        d = g[key]
+        if len(d["x0"]):
+            segs = np.stack([np.c_[d["x0"], d["y0"]], np.c_[d["x1"], d["y1"]]], axis=1)
+            cols = cmap(np.clip((np.asarray(d["cost"]) + lim) / (2 * lim), 0, 1))
+            ax.add_collection(LineCollection(segs, colors=cols, linewidths=lw, linestyles=ls))
+    n = g["nodes"]
+    ax.scatter(n["x"], n["y"], c=list(n["color"]), s=np.asarray(n["size"]) ** 2 / 2.5,
+               edgecolors="k", linewidths=0.5, zorder=3)
+    ax.set(xlim=(x0, x1), ylim=(y1, y0), aspect="equal", xlabel="x (px)", ylabel="y (px, down)",
+           title=f"Multicut graph of {result.atoms.n_atoms} atoms (dashed = cut; blue join, red cut)")
+
+    ax = axs[1, 0]
+    Z = np.asarray(result.coarse.affinity)
+    _, factors = V.z_sources(result, seq)
+    im = ax.imshow(Z, cmap="Blues", vmin=0, vmax=1)
+    for (i, j), v in np.ndenumerate(Z):
+        ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=8,
+                color="white" if v > 0.55 else "black")
+    ax.set_xticks(range(len(factors)), factors, rotation=45)
+    ax.set_yticks(range(len(factors)), factors)
+    ax.set_title("Affinity Z between fine models (fN→Mk: fine model N joined motion k)")
+    fig.colorbar(im, ax=ax, shrink=0.8)
+
+    ax = axs[1, 1]
+    for vt, name, ls in ((result.voting, "LAAV fine-tuning", "-"), (plain, "plain RV", "--")):
+        r = V.rv_sources(vt)
+        if len(r["iteration"]):
+            ax.semilogy(r["iteration"], r["changed_plot"], ls, label=f"{name}: labels changed")
+    ax.set(xlabel="iteration", ylabel="labels changed (0 drawn at 0.5)",
+           title="Random Voting convergence")
+    ax.legend(fontsize=8)
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return buf.getvalue()

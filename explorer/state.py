@@ -1,0 +1,326 @@
+"""Per-session state of the explorer: the sequence, its :class:`laav.Pipeline`, a worker thread.
+
+No GUI imports here. The app sets :attr:`ExplorerState.on_result` and friends; they are
+called **from worker threads**, so the app must hop to its document thread itself.
+
+Live recomputation
+------------------
+Every request (a parameter change, a new sequence) validates the settings at once with
+:class:`laav.LaavParams` (an invalid combination is reported immediately and changes
+nothing), then bumps a *generation counter* and queues a job on a single worker thread.
+A job whose generation is no longer the newest when it starts is skipped, and a result
+whose generation is no longer the newest when it finishes is dropped, so a burst of
+slider moves computes at most the one in flight plus the newest one, and the views only
+ever receive whole results of the newest request.
+
+Plain Random Voting from a random start (the comparison shown beside LAAV's fine-tuning)
+runs on a second worker thread, once per sequence/seed/RV settings, and is cached.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+import traceback
+from collections import OrderedDict
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+
+import laav
+from laav import LaavParams, LaavResult, Pipeline, Sequence
+
+__all__ = ["ExplorerState", "Settings", "RV_FIELDS"]
+
+#: The parameters plain Random Voting depends on (its cache key).
+RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_"))
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """What the user asked for: parameters, seed and number of motions C."""
+
+    params: LaavParams
+    seed: int
+    n_motions: int
+
+    def update_kwargs(self) -> dict:
+        """Keyword arguments for :meth:`laav.Pipeline.update` (the full settings: the
+        pipeline works out itself which stages they touch)."""
+        return {**self.params.to_dict(), "seed": self.seed, "n_motions": self.n_motions}
+
+
+def check_settings(seq: Sequence, settings: Settings) -> None:
+    """Raise ValueError with a readable message when ``settings`` cannot run on ``seq``."""
+    C = settings.n_motions
+    if not isinstance(C, int) or C < 1:
+        raise ValueError(f"the number of motions C must be a positive integer, got {C!r}")
+    if C > seq.n_points:
+        raise ValueError(f"C = {C} motions is more than the {seq.n_points} points of the sequence")
+    settings.params.n_fine(C)  # 2C >= C
+
+
+class ExplorerState:
+    """One explorer session's data and computation.
+
+    Parameters
+    ----------
+    seq : laav.Sequence
+    n_motions : int, optional
+        C; defaults to the ground truth's number of motions.
+    params : laav.LaavParams, optional
+    seed : int
+    pipeline : Future or Pipeline, optional
+        A pipeline for exactly these settings computed elsewhere (the CLI warms one up
+        while the server starts); used for the first result instead of building one.
+    autostart : bool
+        Queue the first computation at once (else call :meth:`start`).
+
+    Attributes
+    ----------
+    result : LaavResult or None
+        The last good result (None until the first computation finishes).
+    sequence : laav.Sequence
+        The sequence ``result`` belongs to.
+    settings : Settings
+        The settings of ``result``.
+    error : str or None
+        The last problem reported (None after a good result).
+    busy : bool
+        True while a request is queued or computing.
+    """
+
+    def __init__(self, seq: Sequence, n_motions: int | None = None, params: LaavParams | None = None,
+                 seed: int = 0, pipeline: Future | Pipeline | None = None, autostart: bool = True):
+        if n_motions is None:
+            if seq.n_motions is None:
+                raise ValueError(f"{seq.name} has no ground truth: the number of motions C is needed")
+            n_motions = seq.n_motions
+        target = Settings(LaavParams() if params is None else params, int(seed), int(n_motions))
+        check_settings(seq, target)
+        self.on_result: Callable[[LaavResult, Sequence, Settings, int], None] | None = None
+        self.on_error: Callable[[str], None] | None = None
+        self.on_busy: Callable[[bool], None] | None = None
+        self.on_plain_rv: Callable[[laav.Voting, tuple], None] | None = None
+        self.sequence = seq
+        self.settings = target
+        self.result: LaavResult | None = None
+        self.error: str | None = None
+        self.compute_seconds = 0.0
+        self._target = target
+        self._target_seq = seq
+        self._pipe: Pipeline | None = None
+        self._lock = threading.Lock()
+        self._gen = 0
+        self._published = 0
+        self._pending = 0
+        self._idle = threading.Condition(self._lock)
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-pipeline")
+        self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-plain-rv")
+        self._rv_cache: OrderedDict = OrderedDict()
+        self._rv_key = None
+        self._closed = False
+        self._first = pipeline
+        self._started = False
+        if autostart:
+            self.start()
+
+    def start(self) -> None:
+        """Queue the first computation (call after setting the ``on_*`` hooks)."""
+        if not self._started:
+            self._started = True
+            self._submit("load", self._target_seq, self._target, self._first)
+            self._first = None
+
+    # ------------------------------------------------------------------ requests
+    @property
+    def target(self) -> Settings:
+        """The settings most recently requested (valid ones only)."""
+        return self._target
+
+    @property
+    def generation(self) -> int:
+        return self._gen
+
+    @property
+    def published_generation(self) -> int:
+        return self._published
+
+    @property
+    def busy(self) -> bool:
+        return self._pending > 0
+
+    def request(self, params: dict | None = None, seed: int | None = None,
+                n_motions: int | None = None) -> int | None:
+        """Ask for new settings. ``params`` holds :class:`LaavParams` fields (the full set
+        or a few). Returns the request's generation, or None when the settings are invalid
+        (then :attr:`error` says why, ``on_error`` was called and nothing else changed)."""
+        base = self._target
+        try:
+            new = Settings(
+                base.params.replace(**params) if params else base.params,
+                base.seed if seed is None else int(seed),
+                base.n_motions if n_motions is None else n_motions,
+            )
+            check_settings(self._target_seq, new)
+        except ValueError as exc:
+            self._report(str(exc))
+            return None
+        if new == base and self._pending == 0 and self.result is not None and self.error is None:
+            return self._gen  # nothing to do
+        return self._submit("update", self._target_seq, new)
+
+    def load(self, seq: Sequence, n_motions: int | None = None) -> int | None:
+        """Switch to another sequence (C from its ground truth unless given)."""
+        C = n_motions if n_motions is not None else seq.n_motions
+        if C is None:
+            self._report(f"{seq.name} has no ground-truth labels: set the number of motions C first")
+            return None
+        new = dataclasses.replace(self._target, n_motions=int(C))
+        try:
+            check_settings(seq, new)
+        except ValueError as exc:
+            self._report(f"cannot segment {seq.name}: {exc}")
+            return None
+        return self._submit("load", seq, new)
+
+    def report(self, message: str) -> None:
+        """Show a problem found outside the state (e.g. an unreadable upload)."""
+        self._report(message)
+
+    def _report(self, message: str) -> None:
+        self.error = message
+        if self.on_error is not None:
+            self.on_error(message)
+
+    def _submit(self, kind: str, seq: Sequence, target: Settings, pipeline=None) -> int:
+        with self._lock:
+            self._gen += 1
+            gen = self._gen
+            self._target, self._target_seq = target, seq
+            self._pending += 1
+        self._notify_busy()
+        self._worker.submit(self._job, gen, kind, seq, target, pipeline)
+        return gen
+
+    def _notify_busy(self):
+        if self.on_busy is not None:
+            try:
+                self.on_busy(self._pending > 0)
+            except Exception:  # a GUI hook must never kill the worker
+                traceback.print_exc()
+
+    # ------------------------------------------------------------------ worker
+    def _job(self, gen: int, kind: str, seq: Sequence, target: Settings, pipeline) -> None:
+        try:
+            if gen != self._gen:
+                return  # superseded before it started
+            t0 = time.perf_counter()
+            try:
+                if kind == "load" or self._pipe is None or self._pipe.seq is not seq:
+                    if isinstance(pipeline, Future):
+                        pipeline = pipeline.result()
+                    pipe = pipeline if pipeline is not None else Pipeline(
+                        seq, target.n_motions, target.params, target.seed)
+                    result = pipe.result
+                else:
+                    pipe = self._pipe
+                    result = pipe.update(**target.update_kwargs())
+            except ValueError as exc:  # includes laav.SequenceError
+                if gen == self._gen:
+                    self._fail(kind, str(exc))
+                return
+            except Exception as exc:  # an algorithm bug must not kill the session
+                traceback.print_exc()
+                if gen == self._gen:
+                    self._fail(kind, f"internal error in the pipeline: {type(exc).__name__}: {exc}")
+                return
+            self._pipe = pipe
+            if gen != self._gen:
+                return  # a newer request came in meanwhile: drop this result
+            self.compute_seconds = time.perf_counter() - t0
+            self.result, self.sequence, self.settings = result, seq, target
+            self.error = None
+            self._published = gen
+            if self.on_result is not None:
+                self.on_result(result, seq, target, gen)
+            self.request_plain_rv()
+        except Exception:
+            traceback.print_exc()
+        finally:
+            with self._lock:
+                self._pending -= 1
+                self._idle.notify_all()
+            self._notify_busy()
+
+    def _fail(self, kind: str, message: str) -> None:
+        with self._lock:
+            # fall back to what is on screen so the next request starts from it
+            if self.result is not None:
+                self._target_seq = self.sequence
+                if kind == "load":
+                    self._target = self.settings
+        self._report(message + (" — still showing the last valid result" if self.result else ""))
+
+    def wait(self, timeout: float = 60.0) -> bool:
+        """Block until no request is queued or computing (and its views were notified)."""
+        deadline = time.monotonic() + timeout
+        with self._idle:
+            while self._pending > 0:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._idle.wait(left)
+        return True
+
+    # ------------------------------------------------------------------ plain RV
+    def plain_rv_key(self) -> tuple:
+        s = self.settings
+        return (id(self.sequence), s.seed, s.n_motions) + tuple(getattr(s.params, f) for f in RV_FIELDS)
+
+    def plain_rv(self) -> laav.Voting | None:
+        """Cached plain RV for the shown sequence/settings, or None if not computed yet."""
+        return self._rv_cache.get(self.plain_rv_key())
+
+    def request_plain_rv(self) -> Future | None:
+        """Compute plain RV (random start) for the shown settings off the UI thread."""
+        key = self.plain_rv_key()
+        self._rv_key = key
+        if key in self._rv_cache:
+            if self.on_plain_rv is not None:
+                self.on_plain_rv(self._rv_cache[key], key)
+            return None
+        if self._closed:
+            return None
+        seq, s = self.sequence, self.settings
+        return self._rv_worker.submit(self._rv_job, key, seq, s)
+
+    def _rv_job(self, key, seq, s: Settings) -> None:
+        if key != self._rv_key:
+            return
+        try:
+            voting = laav.random_voting(seq, s.n_motions, s.params, s.seed)
+        except Exception:
+            traceback.print_exc()
+            return
+        self._rv_cache[key] = voting
+        while len(self._rv_cache) > 16:
+            self._rv_cache.popitem(last=False)
+        if key == self._rv_key and self.on_plain_rv is not None:
+            self.on_plain_rv(voting, key)
+
+    def wait_plain_rv(self, timeout: float = 60.0) -> laav.Voting | None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            v = self.plain_rv()
+            if v is not None:
+                return v
+            time.sleep(0.02)
+        return None
+
+    def close(self) -> None:
+        self._closed = True
+        with self._lock:
+            self._gen += 1  # anything still queued is now stale
+        self._worker.shutdown(wait=False, cancel_futures=True)
+        self._rv_worker.shutdown(wait=False, cancel_futures=True)

@@ -1,0 +1,533 @@
+"""Pure functions from a :class:`laav.LaavResult` (and a sequence) to plot data.
+
+Nothing here imports panel, bokeh or viser, and nothing here runs any part of the
+algorithm: every number drawn comes from the stage dataclasses (or, for scores, from
+:func:`laav.misclassification_rate` / :func:`laav.confusion_matrix`). Each ``*_sources``
+function returns plain dicts of numpy arrays, ready for ``ColumnDataSource.data = ...``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+import laav
+from laav.geometry import epipolar_lines
+
+__all__ = [
+    "COLOR_MODES", "MOTION_COLORS", "FINE_COLORS", "UNLABELLED", "ERROR_RED",
+    "align_labels", "point_style", "frame_sources", "graph_sources", "replay_labels",
+    "replay_caption", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
+    "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
+    "space_time", "cost_limit",
+]
+
+#: Colour-by choices (label shown in the widget -> key).
+COLOR_MODES = {
+    "ground truth": "gt",
+    "atoms": "atoms",
+    "fine models": "fine",
+    "coarse (atoms merged)": "coarse",
+    "final (after Random Voting)": "final",
+    "errors": "errors",
+}
+
+#: One colour per motion (tab10 without its red: red marks errors).
+MOTION_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2",
+                 "#17becf", "#bcbd22", "#7f7f7f", "#393b79")
+#: Fine models and atoms (Category20 without reds).
+FINE_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf",
+               "#bcbd22", "#aec7e8", "#ffbb78", "#98df8a", "#c5b0d5", "#c49c94", "#f7b6d2",
+               "#9edae5", "#dbdb8d", "#7f7f7f", "#393b79")
+UNLABELLED = "#c7c7c7"
+ERROR_RED = "#d62728"
+CORRECT = "#9ecae1"
+
+
+def hex_to_rgb(colors) -> np.ndarray:
+    """``["#rrggbb", ...]`` -> uint8 array of shape (n, 3)."""
+    arr = np.asarray(colors, dtype="U7")
+    if arr.size == 0:
+        return np.zeros((0, 3), np.uint8)
+    raw = np.char.lstrip(arr, "#")
+    ints = np.array([int(h, 16) for h in raw.tolist()], dtype=np.int64)
+    return np.stack([(ints >> 16) & 255, (ints >> 8) & 255, ints & 255], axis=1).astype(np.uint8)
+
+
+def _palette(labels: np.ndarray, palette) -> np.ndarray:
+    pal = np.asarray(palette, dtype="U7")
+    out = np.full(labels.shape, UNLABELLED, dtype="U7")
+    ok = labels >= 0
+    out[ok] = pal[labels[ok] % pal.size]
+    return out
+
+
+def align_labels(pred: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
+    """Rename ``pred``'s labels to agree with ``ref`` as far as possible (for stable colours).
+
+    The best one-to-one matching (on the points labelled in both) maps predicted labels to
+    reference labels; unmatched predicted labels get fresh numbers. ``-1`` stays ``-1``.
+    """
+    pred = np.asarray(pred, dtype=np.int64)
+    if ref is None:
+        return pred.copy()
+    ref = np.asarray(ref, dtype=np.int64)
+    both = (pred >= 0) & (ref >= 0)
+    out = np.full_like(pred, -1)
+    if not both.any():
+        return pred.copy()
+    counts, tv, pv = laav.confusion_matrix(ref[both], pred[both])
+    rows, cols = linear_sum_assignment(-counts)
+    mapping = {int(pv[c]): int(tv[r]) for r, c in zip(rows, cols)}
+    nxt = int(max(ref.max(), pred.max())) + 1
+    for p in np.unique(pred[pred >= 0]).tolist():
+        if p not in mapping:
+            mapping[p] = nxt
+            nxt += 1
+    lab = pred >= 0
+    lut = np.full(int(pred.max()) + 1, -1, dtype=np.int64)
+    for p, t in mapping.items():
+        lut[p] = t
+    out[lab] = lut[pred[lab]]
+    return out
+
+
+def _aligned(seq: laav.Sequence, result: laav.LaavResult) -> dict:
+    """Coarse and final labels renamed to match the ground truth (or each other)."""
+    gt = seq.labels
+    coarse = align_labels(result.coarse.point_labels, gt)
+    final = align_labels(result.labels, gt if gt is not None else coarse)
+    return {"gt": gt, "coarse": coarse, "final": final}
+
+
+def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str) -> dict:
+    """Colour and legend label of every point for a colour-by ``mode`` (see COLOR_MODES).
+
+    Returns
+    -------
+    dict with ``color`` (P,) hex strings, ``label`` (P,) legend strings, ``misclassified``
+    (P,) bool (all False without ground truth), ``note`` (str, empty unless the mode
+    cannot be shown).
+    """
+    P = seq.n_points
+    al = _aligned(seq, result)
+    gt = al["gt"]
+    wrong = np.zeros(P, dtype=bool) if gt is None else al["final"] != gt
+    note = ""
+    if mode in ("gt", "errors") and gt is None:
+        note = "this sequence has no ground truth: showing the final labels"
+        mode = "final"
+    if mode == "gt":
+        lab = gt
+        color = _palette(lab, MOTION_COLORS)
+        label = np.char.add("motion ", (lab + 1).astype("U3"))
+    elif mode == "atoms":
+        owner = np.asarray(result.atoms.owner)
+        # features in an atom's ring only: colour by the first atom that holds them
+        first = owner.copy()
+        for i, m in enumerate(result.atoms.members):
+            sel = m[first[m] < 0]
+            first[sel] = i
+        color = _palette(first, FINE_COLORS)
+        label = np.where(first >= 0, "in an atom (colour = atom)", "in no atom")
+    elif mode == "fine":
+        lab = np.asarray(result.coarse.fine_point_labels)
+        color = _palette(lab, FINE_COLORS)
+        label = np.where(lab >= 0, np.char.add("fine model ", (lab + 1).astype("U3")), "in no atom")
+    elif mode in ("coarse", "final"):
+        lab = al[mode]
+        color = _palette(lab, MOTION_COLORS)
+        label = np.where(lab >= 0, np.char.add("motion ", (lab + 1).astype("U3")), "in no atom")
+    elif mode == "errors":
+        color = np.where(wrong, ERROR_RED, CORRECT).astype("U7")
+        label = np.where(wrong, "misclassified", "correct")
+    else:
+        raise ValueError(f"unknown colour mode {mode!r}")
+    return {"color": np.asarray(color, dtype="U7"), "label": np.asarray(label).astype(str),
+            "misclassified": wrong, "note": note}
+
+
+def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style: dict,
+                  trail: int = 5) -> dict:
+    """Data of the frame view at ``frame``.
+
+    Keys: ``points`` (x, y, color, label, index), ``trails`` (x0, y0, x1, y1, color,
+    alpha: the last ``trail`` frames, fading), ``atoms`` (x, y at the seeds, r1, r2,
+    color, atom), ``unassigned`` (x, y), ``errors`` (x, y: misclassified points).
+    """
+    pts = seq.points
+    F = seq.n_frames
+    f = int(np.clip(frame, 0, F - 1))
+    xy = pts[f]
+    color = style["color"]
+    out = {"points": {"x": xy[:, 0], "y": xy[:, 1], "color": color, "label": style["label"],
+                      "index": np.arange(seq.n_points)}}
+    f0 = max(0, f - trail)
+    if f > f0:
+        seg = pts[f0:f + 1]  # (t+1, P, 2)
+        n = seg.shape[0] - 1
+        age = np.repeat(np.arange(n, 0, -1), seq.n_points)  # n .. 1 frames back
+        out["trails"] = {
+            "x0": seg[:-1, :, 0].ravel(), "y0": seg[:-1, :, 1].ravel(),
+            "x1": seg[1:, :, 0].ravel(), "y1": seg[1:, :, 1].ravel(),
+            "color": np.tile(color, n), "alpha": 0.85 - 0.7 * (age - 1) / max(trail, 1),
+        }
+    else:
+        e = np.zeros(0)
+        out["trails"] = {"x0": e, "y0": e, "x1": e, "y1": e, "color": np.zeros(0, "U7"), "alpha": e}
+    atoms = result.atoms
+    seeds = np.asarray(atoms.seeds, dtype=np.int64)
+    out["atoms"] = {"x": xy[seeds, 0], "y": xy[seeds, 1],
+                    "r1": np.full(seeds.size, float(atoms.r1)),
+                    "r2": np.full(seeds.size, float(atoms.r2)),
+                    "color": color[seeds] if seeds.size else np.zeros(0, "U7"),
+                    "atom": np.arange(seeds.size)}
+    un = np.asarray(atoms.unassigned, dtype=np.int64)
+    out["unassigned"] = {"x": xy[un, 0], "y": xy[un, 1]}
+    bad = np.flatnonzero(style["misclassified"])
+    out["errors"] = {"x": xy[bad, 0], "y": xy[bad, 1]}
+    return out
+
+
+# ---------------------------------------------------------------------- multicut graph
+def replay_labels(result: laav.LaavResult, step: int) -> np.ndarray:
+    """Cluster of each atom after replaying the first ``step`` GAEC contractions.
+
+    ``step`` beyond the number of contractions gives the final fine models
+    (``Multicut.atom_labels``: GAEC, then Kernighan-Lin, then the count brought to 2C).
+    Clusters are numbered by size, largest first.
+    """
+    mc = result.multicut
+    n = result.graph.n_nodes
+    K = len(mc.contractions)
+    if step > K:
+        return np.asarray(mc.atom_labels, dtype=np.int64)
+    parent = np.arange(n)
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for kept, merged in np.asarray(mc.contractions[:step]).tolist():
+        a, b = find(kept), find(merged)
+        if a != b:
+            parent[b] = a
+    roots = np.array([find(i) for i in range(n)], dtype=np.int64)
+    if n == 0:
+        return roots
+    uniq, inv, counts = np.unique(roots, return_inverse=True, return_counts=True)
+    order = np.argsort(-counts, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    return rank[inv.ravel()]
+
+
+def replay_caption(result: laav.LaavResult, step: int) -> str:
+    mc = result.multicut
+    K = len(mc.contractions)
+    n = result.graph.n_nodes
+    if step > K:
+        return (f"**Final fine models:** {mc.n_models} (GAEC, then Kernighan–Lin moves, then merged or "
+                f"split to 2C). Dashed edges are cut. Drag the step slider left to replay GAEC.")
+    if step == 0:
+        return (f"**GAEC step 0 / {K}:** every one of the {n} atoms is its own cluster. GAEC repeatedly "
+                f"joins the two clusters linked by the largest positive total cost.")
+    kept, merged = np.asarray(mc.contractions[step - 1]).tolist()
+    return (f"**GAEC step {step} / {K}:** joined atoms {kept} and {merged} "
+            f"(cost {float(mc.contraction_costs[step - 1]):+.2f}); {n - step} clusters. "
+            f"Dashed edges run between clusters.")
+
+
+def cost_limit(result: laav.LaavResult) -> float:
+    """Symmetric colour-scale limit for edge costs (95th percentile of |cost|)."""
+    c = np.abs(np.asarray(result.graph.costs, dtype=float))
+    if c.size == 0:
+        return 1.0
+    return float(max(np.percentile(c, 95), 1e-6))
+
+
+def graph_sources(result: laav.LaavResult, frame: int, step: int) -> dict:
+    """Data of the multicut graph view at ``frame`` after ``step`` GAEC contractions.
+
+    Keys: ``nodes`` (x, y, color, cluster, atom, size, members), ``joined`` and ``cut``
+    edges (x0, y0, x1, y1, cost, error), ``step_edge`` (the contraction of this step).
+    """
+    g = result.graph
+    pos = np.asarray(g.positions)
+    f = int(np.clip(frame, 0, pos.shape[0] - 1)) if pos.shape[0] else 0
+    xy = pos[f] if pos.size else np.zeros((0, 2))
+    lab = replay_labels(result, step)
+    sizes = np.array([len(m) for m in result.atoms.members], dtype=float)
+    nodes = {"x": xy[:, 0], "y": xy[:, 1], "color": _palette(lab, FINE_COLORS), "cluster": lab + 1,
+             "atom": np.arange(g.n_nodes), "members": sizes.astype(int),
+             "size": 7 + 2.0 * np.sqrt(sizes)}
+    E = np.asarray(g.edges, dtype=np.int64).reshape(-1, 2)
+    K = len(result.multicut.contractions)
+    cut = np.asarray(result.multicut.cut, bool) if step > K else (lab[E[:, 0]] != lab[E[:, 1]])
+
+    def edges(mask):
+        e = E[mask]
+        return {"x0": xy[e[:, 0], 0], "y0": xy[e[:, 0], 1], "x1": xy[e[:, 1], 0], "y1": xy[e[:, 1], 1],
+                "cost": np.asarray(g.costs)[mask], "error": np.asarray(g.errors)[mask],
+                "a": e[:, 0], "b": e[:, 1]}
+
+    out = {"nodes": nodes, "joined": edges(~cut), "cut": edges(cut)}
+    if 0 < step <= K:
+        k, m = np.asarray(result.multicut.contractions[step - 1]).tolist()
+        out["step_edge"] = {"x0": xy[[k], 0], "y0": xy[[k], 1], "x1": xy[[m], 0], "y1": xy[[m], 1]}
+    else:
+        e = np.zeros(0)
+        out["step_edge"] = {"x0": e, "y0": e, "x1": e, "y1": e}
+    return out
+
+
+# ---------------------------------------------------------------------- coarse merges
+def _model_factors(result: laav.LaavResult) -> list:
+    f2c = np.asarray(result.coarse.fine_to_coarse)
+    return [f"f{j + 1}→M{int(m) + 1}" for j, m in enumerate(f2c.tolist())]
+
+
+def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None) -> tuple[dict, list]:
+    """Heat-map cells of the affinity Z (n_fine x n_fine) and the axis factors.
+
+    Factors read ``f3→M1``: fine model 3 merged into motion 1 (motions numbered like the
+    coarse colours when ``seq`` has ground truth)."""
+    Z = np.asarray(result.coarse.affinity, dtype=float)
+    n = Z.shape[0]
+    f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
+    if seq is not None and n:
+        # name motions like the aligned coarse labels
+        coarse_al = _aligned(seq, result)["coarse"]
+        raw = np.asarray(result.coarse.point_labels)
+        ren = {}
+        for m in np.unique(raw[raw >= 0]).tolist():
+            ren[m] = int(np.bincount(coarse_al[raw == m]).argmax())
+        f2c = np.array([ren.get(int(m), int(m)) for m in f2c.tolist()], dtype=np.int64)
+    factors = [f"f{j + 1}→M{int(m) + 1}" for j, m in enumerate(f2c.tolist())]
+    jj, kk = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    jj, kk = jj.ravel(), kk.ravel()
+    fac = np.asarray(factors, dtype=object)
+    data = {"x": fac[kk] if n else np.zeros(0, object), "y": fac[jj] if n else np.zeros(0, object),
+            "z": Z.ravel(), "text": np.array([f"{v:.2f}" for v in Z.ravel()], dtype=object),
+            "text_color": np.where(Z.ravel() > 0.55, "white", "black"),
+            "d": np.asarray(result.coarse.epipolar_distance, float).ravel(),
+            "j": jj + 1, "k": kk + 1}
+    return data, factors
+
+
+def merge_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
+    """Markdown table: each fine model, its atoms and points, and the motion it joined."""
+    f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
+    fine = np.asarray(result.coarse.fine_point_labels)
+    atom_lab = np.asarray(result.multicut.atom_labels)
+    factors = z_sources(result, seq)[1]
+    rows = ["| fine model | atoms | points | merged into |", "|---|---|---|---|"]
+    for j in range(f2c.size):
+        motion = factors[j].split("→")[1]
+        rows.append(f"| f{j + 1} | {int((atom_lab == j).sum())} | {int((fine == j).sum())} | "
+                    f"motion {motion[1:]} |")
+    if f2c.size == 0:
+        rows.append("| – | 0 | 0 | (no atoms formed) |")
+    return "\n".join(rows)
+
+
+def _clip_lines(lines: np.ndarray, extent) -> tuple[np.ndarray, ...]:
+    """End points of the lines ``a x + b y + c = 0`` across the box ``extent``."""
+    x0, x1, y0, y1 = extent
+    a, b, c = lines[:, 0], lines[:, 1], lines[:, 2]
+    steep = np.abs(b) < np.abs(a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # mostly horizontal: intersect x = x0 and x = x1
+        ya = -(a * x0 + c) / b
+        yb = -(a * x1 + c) / b
+        # mostly vertical: intersect y = y0 and y = y1
+        xa = -(b * y0 + c) / a
+        xb = -(b * y1 + c) / a
+    X0 = np.where(steep, xa, x0)
+    Y0 = np.where(steep, y0, ya)
+    X1 = np.where(steep, xb, x1)
+    Y1 = np.where(steep, y1, yb)
+    return X0, Y0, X1, Y1
+
+
+def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int,
+                     max_lines: int = 30, rng_seed: int = 0) -> dict:
+    """Epipolar check of fine models ``j`` and ``k`` on ``Coarse.pair_frames``.
+
+    Keys: ``left`` and ``right`` (x, y, color, model: the two models' points in frame l and
+    frame r), ``lines`` (x0, y0, x1, y1, color: epipolar lines in frame r of up to
+    ``max_lines`` frame-l points, from ``Coarse.pair_fundamentals[j, k]``), ``frames``
+    (l, r), ``distance`` (``Coarse.epipolar_distance[j, k]``), ``residual`` (mean distance
+    in px of the drawn frame-r points to their lines), ``ok`` (False when no F exists).
+    """
+    co = result.coarse
+    n = np.asarray(co.fine_to_coarse).size
+    e = np.zeros(0)
+    empty = {"x": e, "y": e, "color": np.zeros(0, "U7"), "model": np.zeros(0, object)}
+    blank = {"left": empty, "right": empty,
+             "lines": {"x0": e, "y0": e, "x1": e, "y1": e, "color": np.zeros(0, "U7")},
+             "frames": (0, seq.n_frames - 1), "distance": float("nan"), "residual": float("nan"),
+             "ok": False}
+    if not (0 <= j < n and 0 <= k < n):
+        return blank
+    fl, fr = (int(v) for v in np.asarray(co.pair_frames).tolist())
+    blank["frames"] = (fl, fr)
+    fine = np.asarray(co.fine_point_labels)
+    idx = np.flatnonzero((fine == j) | (fine == k))
+    cols = np.where(fine[idx] == j, FINE_COLORS[j % len(FINE_COLORS)],
+                    FINE_COLORS[k % len(FINE_COLORS)]).astype("U7")
+    model = np.where(fine[idx] == j, f"fine model f{j + 1}", f"fine model f{k + 1}").astype(object)
+    pts = seq.points
+    left = {"x": pts[fl, idx, 0], "y": pts[fl, idx, 1], "color": cols, "model": model}
+    right = {"x": pts[fr, idx, 0], "y": pts[fr, idx, 1], "color": cols, "model": model}
+    F = np.asarray(co.pair_fundamentals)[j, k]
+    out = dict(blank, left=left, right=right,
+               distance=float(np.asarray(co.epipolar_distance)[j, k]))
+    if idx.size == 0 or not np.any(F):
+        return out
+    rng = np.random.default_rng(rng_seed)
+    # the same number of lines from each model, so both are checked
+    pick = []
+    for m in (j, k) if j != k else (j,):
+        cand = idx[fine[idx] == m]
+        take = min(cand.size, max_lines // (2 if j != k else 1))
+        pick.append(rng.choice(cand, take, replace=False))
+    sel = np.sort(np.concatenate(pick))
+    lines = epipolar_lines(F, pts[fl, sel])
+    ext = seq.extent()
+    X0, Y0, X1, Y1 = _clip_lines(lines, ext)
+    resid = np.abs(lines[:, 0] * pts[fr, sel, 0] + lines[:, 1] * pts[fr, sel, 1] + lines[:, 2])
+    lc = np.where(fine[sel] == j, FINE_COLORS[j % len(FINE_COLORS)],
+                  FINE_COLORS[k % len(FINE_COLORS)]).astype("U7")
+    out["lines"] = {"x0": X0, "y0": Y0, "x1": X1, "y1": Y1, "color": lc}
+    out["residual"] = float(resid.mean()) if resid.size else float("nan")
+    out["ok"] = True
+    return out
+
+
+# ---------------------------------------------------------------------- RV convergence
+def rv_sources(voting: laav.Voting | None) -> dict:
+    """Per-iteration label changes and vote margin of a :class:`laav.Voting`."""
+    if voting is None:
+        e = np.zeros(0)
+        return {"iteration": e, "changed": e, "changed_plot": e, "margin": e}
+    ch = np.asarray(voting.changed, dtype=float)
+    it = np.arange(1, ch.size + 1)
+    # changes are drawn on a log axis: show 0 as 0.5 (below the "1" tick)
+    return {"iteration": it, "changed": ch, "changed_plot": np.where(ch > 0, ch, 0.5),
+            "margin": np.asarray(voting.margin, dtype=float)}
+
+
+def _rv_line(voting: laav.Voting | None, what: str) -> str:
+    if voting is None:
+        return f"**{what}:** computing…"
+    its = ", ".join(str(int(t)) for t in voting.trial_iterations) or str(voting.n_iterations)
+    conv = "converged" if voting.converged else "**not converged** (hit the iteration cap)"
+    trials = f" over {voting.n_trials} trials (iterations per trial: {its})" if voting.n_trials > 1 else ""
+    extra = f"; the final refinement moved {voting.refined} points" if voting.refined else ""
+    return f"**{what}:** {len(voting.changed)} iterations in the shown trial, {conv}{trials}{extra}."
+
+
+def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None) -> str:
+    return (_rv_line(fine_tuning, "LAAV fine-tuning (RV started from the coarse labels)") + "  \n"
+            + _rv_line(plain, "Plain RV (random start, same sequence and RV settings)"))
+
+
+# ---------------------------------------------------------------------- numbers
+def _many_to_one_error(gt: np.ndarray, pred: np.ndarray) -> float:
+    """Error when each predicted group counts as the true motion most of its points have
+    (over-segmentation is not an error)."""
+    counts, _, _ = laav.confusion_matrix(gt, pred)
+    return 1.0 - counts.max(axis=0).sum() / max(gt.size, 1)
+
+
+def stage_numbers(seq: laav.Sequence, result: laav.LaavResult) -> dict:
+    """Scores and counts of one result.
+
+    ``error_fine`` / ``error_coarse`` are measured on the points inside atoms only
+    (``coverage`` of them); ``error_final`` on all points. Errors are None without
+    ground truth. ``timings_ms`` per stage, ``total_ms``.
+    """
+    gt = seq.labels
+    st = result.stage_labels()
+    covered = np.asarray(st["coarse"]) >= 0
+    out = {
+        "n_points": seq.n_points, "n_frames": seq.n_frames, "n_motions": result.n_motions,
+        "n_atoms": int(result.atoms.n_atoms), "coverage": float(result.atoms.coverage),
+        "n_covered": int(covered.sum()), "n_unassigned": int(np.asarray(result.atoms.unassigned).size),
+        "n_edges": int(result.graph.n_edges), "n_fine": int(result.multicut.n_models),
+        "error_fine": None, "error_coarse": None, "error_final": None,
+        "timings_ms": {k: 1000.0 * float(v) for k, v in result.timings.items()},
+    }
+    out["total_ms"] = float(sum(out["timings_ms"].values()))
+    if gt is not None:
+        if covered.any():
+            out["error_fine"] = _many_to_one_error(gt[covered], np.asarray(st["fine"])[covered])
+            out["error_coarse"] = float(laav.misclassification_rate(gt[covered],
+                                                                    np.asarray(st["coarse"])[covered]))
+        out["error_final"] = float(laav.misclassification_rate(gt, np.asarray(st["final"])))
+    return out
+
+
+def _pct(v) -> str:
+    return "–" if v is None else f"{100 * v:.1f} %"
+
+
+def numbers_markdown(num: dict) -> str:
+    """The numbers view as a Markdown table (one row per stage)."""
+    t = num["timings_ms"]
+    cov = f"{num['n_covered']} of {num['n_points']} points in atoms ({100 * num['coverage']:.0f} %)"
+    rows = [
+        "| stage | result | error vs ground truth | time |",
+        "|---|---|---|---|",
+        f"| 1 atoms | {num['n_atoms']} atoms; {cov} | – | {t.get('atoms', 0):.0f} ms |",
+        f"| 2 atom graph | {num['n_edges']} edges | – | {t.get('graph', 0):.0f} ms |",
+        f"| 3 multicut | {num['n_fine']} fine models | {_pct(num['error_fine'])} "
+        f"(points in atoms; a fine model counts as its majority motion) | {t.get('multicut', 0):.0f} ms |",
+        f"| 4 fine → coarse | {num['n_motions']} motions | {_pct(num['error_coarse'])} (points in atoms) | "
+        f"{t.get('coarse', 0):.0f} ms |",
+        f"| 5 Random Voting | all {num['n_points']} points labelled | **{_pct(num['error_final'])}** "
+        f"(all points) | {t.get('voting', 0):.0f} ms |",
+        f"| total | | | {num['total_ms']:.0f} ms |",
+    ]
+    return "\n".join(rows)
+
+
+def labels_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
+    """CSV text: one row per point with its labels after every stage (1-based, 0 = none)."""
+    st = result.stage_labels()
+    owner = np.asarray(result.atoms.owner)
+    gt = seq.labels
+    lines = ["point,x0,y0,ground_truth,owner_atom,fine_model,coarse_motion,final_motion"]
+    p0 = seq.points[0]
+    for i in range(seq.n_points):
+        g = "" if gt is None else str(int(gt[i]) + 1)
+        lines.append(f"{i},{p0[i, 0]:.3f},{p0[i, 1]:.3f},{g},{int(owner[i]) + 1},"
+                     f"{int(st['fine'][i]) + 1},{int(st['coarse'][i]) + 1},{int(st['final'][i]) + 1}")
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------- 3-D
+def space_time(seq: laav.Sequence, depth: float = 1.0):
+    """Map pixel coordinates and frame numbers to a 3-D box for the viser view.
+
+    Returns a function ``f(xy (..., 2), frame (...)) -> (..., 3) float32`` putting the image
+    centre on the axis, image y up (pixel y points down) and time along +z, with the image's
+    larger side 4 units long and the whole sequence ``4 * depth`` units deep.
+    """
+    x0, x1, y0, y1 = seq.extent()
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    s = 4.0 / max(x1 - x0, y1 - y0, 1e-9)
+    dz = 4.0 * depth / max(seq.n_frames - 1, 1)
+
+    def f(xy, frame):
+        xy = np.asarray(xy, dtype=np.float64)
+        fr = np.broadcast_to(np.asarray(frame, dtype=np.float64), xy.shape[:-1])
+        return np.stack([(xy[..., 0] - cx) * s, -(xy[..., 1] - cy) * s, fr * dz], axis=-1).astype(np.float32)
+
+    f.half_width = (x1 - x0) * s / 2
+    f.half_height = (y1 - y0) * s / 2
+    f.dz = dz
+    return f

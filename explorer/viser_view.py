@@ -1,0 +1,143 @@
+"""The 3-D space-time view: one viser server per explorer session.
+
+Trajectories are line segments in (x, y, frame); atoms are small spheres (a point cloud of
+round points) at their centres in the current frame, joined by the atom-graph edges; the
+current frame is a translucent plane that moves with the frame slider. Every explorer
+session gets its own server on its own free port, so two browser tabs never share a scene.
+viser handles may be edited from any thread.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+import laav
+
+from . import views as V
+
+__all__ = ["ViserView"]
+
+_JOIN = np.array([33, 102, 172], np.uint8)  # blue: positive cost (join)
+_CUT = np.array([214, 39, 40], np.uint8)  # red: negative cost (cut)
+
+
+class ViserView:
+    """A viser server showing one sequence and result.
+
+    Parameters
+    ----------
+    host : str
+        Interface to bind (127.0.0.1 by default; the iframe must be able to reach it).
+    port : int
+        0 for any free port; read :attr:`port` for the one used.
+    on_frame : callable, optional
+        Called with the new frame when the viser-side frame slider moves.
+    """
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 0,
+                 on_frame: Callable[[int], None] | None = None):
+        import contextlib
+        import io
+
+        import viser
+
+        with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner even when quiet
+            self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.server.gui.configure_theme(show_share_button=False, control_layout="collapsible",
+                                        show_logo=False)
+        self.server.scene.set_up_direction("+y")
+        self._on_frame = on_frame
+        self._frame = 0
+        self._seq: laav.Sequence | None = None
+        self._result: laav.LaavResult | None = None
+        self._map = None
+        self._plane = None
+        with self.server.gui.add_folder("LAAV space-time view"):
+            self.server.gui.add_markdown(
+                "Trajectories run along **z = frame**. Spheres: atom centres at the current frame; "
+                "blue/red lines: atom-graph edges (join/cut cost). "
+                "The translucent plane is the current frame."
+            )
+            self._frame_box = self.server.gui.add_number("frame", initial_value=0, min=0, max=1, step=1)
+        self._frame_box.on_update(self._frame_from_viser)
+
+    @property
+    def port(self) -> int:
+        return int(self.server.get_port())
+
+    def _frame_from_viser(self, event) -> None:
+        f = int(self._frame_box.value)
+        if f != self._frame and self._on_frame is not None:
+            self._on_frame(f)
+
+    # ---------------------------------------------------------------- data
+    def set_result(self, seq: laav.Sequence, result: laav.LaavResult, colors: np.ndarray,
+                   frame: int) -> None:
+        """Redraw everything for a new result (``colors``: (P,) hex strings of the points)."""
+        scene = self.server.scene
+        new_seq = seq is not self._seq
+        self._seq, self._result = seq, result
+        if new_seq:
+            self._map = V.space_time(seq)
+            m = self._map
+            w, h = m.half_width, m.half_height
+            verts = np.array([[-w, -h, 0], [w, -h, 0], [w, h, 0], [-w, h, 0]], np.float32)
+            faces = np.array([[0, 1, 2], [0, 2, 3]], np.uint32)
+            self._plane = scene.add_mesh_simple("/frame_plane", verts, faces, color=(120, 120, 120),
+                                                opacity=0.25, side="double", cast_shadow=False,
+                                                receive_shadow=False)
+            self._frame_box.max = max(seq.n_frames - 1, 1)
+            depth = m.dz * (seq.n_frames - 1)
+            self.server.initial_camera.position = (5.5, 3.0, -3.0)
+            self.server.initial_camera.look_at = (0.0, 0.0, depth / 2)
+        self.set_colors(colors)
+        self.set_frame(frame)
+
+    def set_colors(self, colors: np.ndarray) -> None:
+        seq, m = self._seq, self._map
+        if seq is None:
+            return
+        rgb = V.hex_to_rgb(colors)
+        F = seq.n_frames
+        xyz = m(seq.points, np.arange(F)[:, None])  # (F, P, 3)
+        segs = np.stack([xyz[:-1], xyz[1:]], axis=2).reshape(-1, 2, 3)  # ((F-1)*P, 2, 3)
+        cols = np.broadcast_to(np.tile(rgb, (F - 1, 1))[:, None, :], segs.shape).astype(np.uint8)
+        self._colors = rgb
+        self.server.scene.add_line_segments("/trajectories", segs.astype(np.float32), cols,
+                                            thickness=1.5, thickness_units="screen")
+        self._draw_frame_items()
+
+    def set_frame(self, frame: int) -> None:
+        """Move the plane, the current points, the atoms and the graph to ``frame``."""
+        if self._seq is None:
+            return
+        self._frame = int(np.clip(frame, 0, self._seq.n_frames - 1))
+        if int(self._frame_box.value) != self._frame:
+            self._frame_box.value = self._frame
+        self._draw_frame_items()
+
+    def _draw_frame_items(self) -> None:
+        seq, res, m, f = self._seq, self._result, self._map, self._frame
+        scene = self.server.scene
+        self._plane.position = (0.0, 0.0, float(f * m.dz))
+        scene.add_point_cloud("/points", m(seq.points[f], f), self._colors, point_size=0.05,
+                              point_shape="circle", precision="float32")
+        pos = np.asarray(res.graph.positions)
+        if pos.size:
+            centers = m(pos[f], f)
+            scene.add_point_cloud("/atoms", centers, np.full((len(centers), 3), 30, np.uint8),
+                                  point_size=0.09, point_shape="circle", precision="float32")
+            E = np.asarray(res.graph.edges, dtype=np.int64).reshape(-1, 2)
+            if E.size:
+                segs = np.stack([centers[E[:, 0]], centers[E[:, 1]]], axis=1).astype(np.float32)
+                col = np.where((np.asarray(res.graph.costs) >= 0)[:, None], _JOIN, _CUT)
+                scene.add_line_segments("/graph_edges", segs, np.repeat(col[:, None], 2, axis=1),
+                                        thickness=2.0, thickness_units="screen")
+
+    def close(self) -> None:
+        try:
+            self.server.stop()
+        except Exception:
+            pass
