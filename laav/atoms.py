@@ -141,9 +141,10 @@ def _ransac_affine(points, cand, seed_pos, params, rng):
         pairs = others[a]
     samp = np.concatenate([np.full((pairs.shape[0], 1), seed_pos), pairs], axis=1)  # (B, 3)
     X = np.concatenate([src[samp], np.ones(samp.shape + (1,))], axis=-1)  # (B, 3, 3)
-    det = np.linalg.det(X)
-    scale = np.abs(X[..., :2]).max() ** 2 + 1.0
-    ok = np.abs(det) > 1e-3 * scale  # reject (near-)collinear samples
+    e1 = X[:, 1, :2] - X[:, 0, :2]
+    e2 = X[:, 2, :2] - X[:, 0, :2]
+    area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])  # twice the triangle's area
+    ok = area2 > 0.05 * params.r2 ** 2  # reject (near-)collinear samples
     if not ok.any():
         return None
     X = X[ok]

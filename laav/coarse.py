@@ -29,7 +29,7 @@ from .multicut import Multicut
 from .params import LaavParams
 from .voting import frame_pairs
 
-__all__ = ["Coarse", "merge_models", "point_labels_from_atoms"]
+__all__ = ["Coarse", "merge_models", "point_labels_from_atoms", "pooled_voting"]
 
 _PER_ATOM = 6  # features drawn from each atom for one fit
 
@@ -104,6 +104,63 @@ def _motion_distance(points: np.ndarray, groups: list) -> np.ndarray:
     return diff.max(axis=-1) if diff.shape[-1] else np.zeros(diff.shape[:2])
 
 
+def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_motions: int,
+                  params: LaavParams, rng: np.random.Generator, n_trials: int = 8,
+                  max_iter: int = 80, patience: int = 10) -> np.ndarray:
+    """Random Voting in which every fine model votes as one unit.
+
+    Each trial starts from a random assignment of the fine models to ``n_motions``
+    motions. Every iteration draws a frame pair, fits one fundamental matrix per motion
+    to 8 of its features (normalised 8-point), lets every atom feature vote
+    ``exp(-lam d)`` (Sampson distance ``d``), averages the votes over each model's
+    features and moves each model to its best motion; votes decay by ``rv_alpha``.
+    A trial ends when no model moved for ``patience`` iterations.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    fine_labels : ndarray of shape (P,)
+        Fine model of each feature, -1 for features in no atom (they do not vote).
+    n_models, n_motions : int
+    params : LaavParams
+        Uses ``lam`` and ``rv_alpha``.
+    rng : numpy.random.Generator
+    n_trials, max_iter, patience : int
+
+    Returns
+    -------
+    assignments : ndarray of shape (n_trials, n_models), int64
+        The motion of every fine model at the end of each trial.
+    """
+    from .voting import vote
+
+    cov = np.flatnonzero(fine_labels >= 0)
+    pts = points[:, cov]
+    f = fine_labels[cov]
+    F = points.shape[0]
+    gap = max(1, F // 3)
+    onehot = np.zeros((n_models, cov.size))
+    onehot[f, np.arange(cov.size)] = 1.0
+    onehot /= np.maximum(onehot.sum(1, keepdims=True), 1.0)
+    out = np.empty((n_trials, n_models), dtype=np.int64)
+    for t in range(n_trials):
+        ml = rng.permutation(np.arange(n_models) % n_motions)
+        hv = np.zeros((cov.size, n_motions))
+        still = 0
+        for _ in range(max_iter):
+            left = int(rng.integers(0, F - gap))
+            right = int(rng.integers(left + gap, F))
+            hv += vote(pts, ml[f], hv, (left, right), params.lam, 8, rng)
+            new = (onehot @ hv).argmax(1)
+            still = still + 1 if np.array_equal(new, ml) else 0
+            ml = new
+            hv *= params.rv_alpha
+            if still >= patience:
+                break
+        out[t] = ml
+    return out
+
+
 def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n_motions: int,
                  params: LaavParams | None = None,
                  rng: np.random.Generator | None = None) -> Coarse:
@@ -166,8 +223,15 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     else:
         vote = np.zeros(0)
     Mdist = _motion_distance(points, groups) if params.motion_weight > 0 else np.zeros((n, n))
-    Z = np.eye(n)
-    Z[jj, kk] = Z[kk, jj] = vote
+    pairwise = np.eye(n)
+    pairwise[jj, kk] = pairwise[kk, jj] = vote
+    if n > n_motions and params.pooled_trials > 0:
+        assign = pooled_voting(points, fine_pts, n, n_motions, params, rng, params.pooled_trials)
+        coassoc = (assign[:, :, None] == assign[:, None, :]).mean(axis=0)
+    else:
+        coassoc = np.eye(n)
+    w = params.pairwise_weight if params.pooled_trials > 0 else 1.0
+    Z = (1.0 - w) * coassoc + w * pairwise
     Z = Z * np.exp(-params.motion_weight * Mdist)
     np.fill_diagonal(Z, 1.0)
 

@@ -135,8 +135,9 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
         ``dst[f] ~= src @ A[f, :, :2].T + A[f, :, 2]``.
     """
     X = np.hstack([src, np.ones((src.shape[0], 1))])  # (n, 3)
-    pinv = np.linalg.pinv(X)  # (3, n)
-    sol = np.einsum("kn,fnd->fdk", pinv, dst)  # (F, 2, 3)
+    G = X.T @ X
+    G[np.diag_indices(3)] += 1e-12 * (np.trace(G) + 1.0)  # keeps collinear sets solvable
+    sol = np.einsum("kn,fnd->fdk", np.linalg.inv(G) @ X.T, dst)  # (F, 2, 3)
     return sol
 
 

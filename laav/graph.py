@@ -8,8 +8,8 @@ tree of those distances).
 **Forward-backward error.** For an edge (a, b) and a frame pair (l, r), atom a's affine
 map from l to r (``A_a[r] A_a[l]^-1``) carries b's features from l to r, and its inverse
 carries them back from r to l; the error is the mean of the two Euclidean discrepancies
-(px). It is averaged over b's features and over frame pairs ``(f, f + g)`` with
-``g = max(1, F // 3)``, then symmetrised as the larger of a->b and b->a.
+(px). It is averaged over b's features and over 8 evenly spaced frame pairs ``(f, f + g)``
+with ``g = max(1, F // 3)``, then symmetrised as the larger of a->b and b->a.
 
 **Cost.** With ``p = 1 / (1 + (err / s)^2)`` the probability that the atoms move together
 (``s = edge_scale``), the multicut cost is the log-odds minus a cut prior, as in Keuper
@@ -29,6 +29,8 @@ from .atoms import Atoms, trajectory_distances
 from .params import LaavParams
 
 __all__ = ["AtomGraph", "atom_graph", "forward_backward_error"]
+
+_GRAPH_PAIRS = 8  # frame pairs (f, f + g) the forward-backward error is averaged over
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,7 +98,7 @@ def forward_backward_error(points: np.ndarray, atoms: Atoms, edges: np.ndarray) 
     if E == 0:
         return np.zeros(0)
     g = max(1, F // 3)
-    left = np.arange(0, F - g)
+    left = np.unique(np.round(np.linspace(0, F - 1 - g, min(_GRAPH_PAIRS, F - g))).astype(np.int64))
     right = left + g
     H = _homogeneous(atoms.affines)  # (N, F, 3, 3)
     Hinv = np.linalg.inv(H)

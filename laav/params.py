@@ -47,6 +47,11 @@ class LaavParams:
         Random atom quadruples drawn per model pair and frame pair.
     motion_weight : float
         Weight of the motion-difference term in the fine-to-coarse affinity (0 = off).
+    pooled_trials : int
+        Trials of model-level (pooled) epipolar voting whose co-association forms Z
+        (0 = the paper's pairwise votes only).
+    pairwise_weight : float
+        Share of the paper's pairwise four-atom epipolar votes in Z, in [0, 1].
     rv_lambda : float
         Voting strength of Random Voting (1/px^2).
     rv_alpha : float
@@ -58,7 +63,16 @@ class LaavParams:
     rv_sample_size : int
         Points per group used to fit each fundamental matrix (>= 8).
     rv_patience : int
-        A trial has converged when labels stay unchanged this many iterations.
+        A trial has converged when labels stay (nearly) unchanged this many iterations.
+    rv_tolerance : float
+        "Nearly unchanged": at most ``ceil(rv_tolerance * P)`` labels changed in an
+        iteration (0 demands no change at all, which boundary points rarely allow).
+    rv_pairs : int
+        Frame pairs voted on per iteration (their votes are summed before relabelling).
+    rv_consensus : {"best", "coassociation"}
+        How plain RV ends when no trial converged: keep the trial whose labelling the
+        motions' fundamental matrices explain best, or split the co-association of all
+        trials by spectral clustering.
     rv_label_weight : float
         Initial votes given to atom-labelled features when LAAV initialises Random Voting.
     rv_refine : bool
@@ -79,12 +93,17 @@ class LaavParams:
     coarse_frames: int = 7
     coarse_samples: int = 8
     motion_weight: float = 0.0
+    pooled_trials: int = 8
+    pairwise_weight: float = 0.0
     rv_lambda: float = 2.0
     rv_alpha: float = 0.9
     rv_max_iter: int = 150
     rv_trials: int = 10
     rv_sample_size: int = 8
     rv_patience: int = 15
+    rv_tolerance: float = 0.0
+    rv_pairs: int = 1
+    rv_consensus: str = "coassociation"
     rv_label_weight: float = 5.0
     rv_refine: bool = True
 
@@ -122,6 +141,8 @@ class LaavParams:
         need(self.coarse_frames >= 1, "coarse_frames must be >= 1")
         need(self.coarse_samples >= 1, "coarse_samples must be >= 1")
         need(self.motion_weight >= 0, "motion_weight must be >= 0")
+        need(isinstance(self.pooled_trials, int) and self.pooled_trials >= 0, "pooled_trials must be >= 0")
+        need(0 <= self.pairwise_weight <= 1, "pairwise_weight must be in [0, 1]")
         need(self.rv_lambda > 0, f"rv_lambda must be > 0, got {self.rv_lambda}")
         need(0 < self.rv_alpha <= 1, f"rv_alpha must satisfy 0 < alpha <= 1, got {self.rv_alpha}")
         need(self.rv_max_iter >= 1, "rv_max_iter must be >= 1")
@@ -129,6 +150,10 @@ class LaavParams:
         need(self.rv_sample_size >= 8, "rv_sample_size must be >= 8 (8-point algorithm)")
         need(self.rv_patience >= 1, "rv_patience must be >= 1")
         need(self.rv_label_weight >= 0, "rv_label_weight must be >= 0")
+        need(0 <= self.rv_tolerance < 0.5, "rv_tolerance must be in [0, 0.5)")
+        need(isinstance(self.rv_pairs, int) and self.rv_pairs >= 1, "rv_pairs must be an integer >= 1")
+        need(self.rv_consensus in ("best", "coassociation"),
+             f"rv_consensus must be 'best' or 'coassociation', got {self.rv_consensus!r}")
         if problems:
             raise ValueError("invalid LAAV parameters: " + "; ".join(problems))
 
@@ -157,9 +182,11 @@ STAGE_PARAMS: dict[str, frozenset] = {
     "atoms": frozenset({"r1", "r2", "atom_min_size", "affine_threshold", "ransac_hypotheses"}),
     "graph": frozenset({"graph_neighbors", "edge_scale", "cut_prior"}),
     "multicut": frozenset({"fine_models"}),
-    "coarse": frozenset({"lam", "coarse_frames", "coarse_samples", "motion_weight"}),
+    "coarse": frozenset({"lam", "coarse_frames", "coarse_samples", "motion_weight", "pooled_trials",
+                         "pairwise_weight"}),
     "voting": frozenset({"rv_lambda", "rv_alpha", "rv_max_iter", "rv_trials", "rv_sample_size",
-                         "rv_patience", "rv_label_weight", "rv_refine"}),
+                         "rv_patience", "rv_label_weight", "rv_refine", "rv_tolerance", "rv_pairs",
+                         "rv_consensus"}),
 }
 STAGES = ("atoms", "graph", "multicut", "coarse", "voting")
 

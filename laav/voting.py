@@ -37,7 +37,8 @@ from ._sequence import Sequence
 from .geometry import fit_fundamental, sampson_distance
 from .params import LaavParams
 
-__all__ = ["Voting", "random_voting", "vote", "refine_labels", "frame_pairs", "RandomVoting"]
+__all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances", "frame_pairs",
+           "RandomVoting", "labelling_cost"]
 
 _RESET_AT = 15
 
@@ -144,7 +145,7 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
 
 
 def _run_trial(points, C, params, rng, labels0, votes0, reset):
-    F = points.shape[0]
+    F, P, _ = points.shape
     gap = max(1, F // 3)
     labels = labels0.copy()
     votes = votes0.copy()
@@ -152,19 +153,21 @@ def _run_trial(points, C, params, rng, labels0, votes0, reset):
     still = 0
     converged = False
     lam, alpha, m = params.rv_lambda, params.rv_alpha, params.rv_sample_size
+    tol = int(np.ceil(params.rv_tolerance * P))
     it = 0
     for it in range(1, params.rv_max_iter + 1):
-        left = int(rng.integers(0, F - gap))
-        right = int(rng.integers(left + gap, F))
-        pair = (left, right) if rng.random() < 0.5 else (right, left)
-        votes += vote(points, labels, votes, pair, lam, m, rng)
+        for _ in range(params.rv_pairs):
+            left = int(rng.integers(0, F - gap))
+            right = int(rng.integers(left + gap, F))
+            pair = (left, right) if rng.random() < 0.5 else (right, left)
+            votes += vote(points, labels, votes, pair, lam, m, rng)
         new = votes.argmax(axis=1)
         n_changed = int((new != labels).sum())
         labels = new
         votes *= alpha
-        srt = np.sort(votes, axis=1)
         if C > 1:
-            margins.append(float(np.mean((srt[:, -1] - srt[:, -2]) / (np.abs(srt).sum(1) + 1e-12))))
+            top2 = np.partition(votes, C - 2, axis=1)[:, -2:]
+            margins.append(float(np.mean((top2[:, 1] - top2[:, 0]) / (np.abs(votes).sum(1) + 1e-12))))
         else:
             margins.append(1.0)
         changed.append(n_changed)
@@ -172,16 +175,68 @@ def _run_trial(points, C, params, rng, labels0, votes0, reset):
             votes[:] = 0.0
             still = 0
             continue
-        still = still + 1 if n_changed == 0 else 0
+        still = still + 1 if n_changed <= tol else 0
         if still >= params.rv_patience and (not reset or it > _RESET_AT):
             converged = True
             break
     return labels, votes, np.array(changed, dtype=np.int64), np.array(margins), it, converged
 
 
+def labelling_cost(points: np.ndarray, labels: np.ndarray, n_motions: int, n_pairs: int = 8) -> float:
+    """How badly the motions' fundamental matrices explain a labelling (lower is better).
+
+    Mean over points of ``log(1 + d)``, with ``d`` the point's mean Sampson distance (px^2)
+    to its own motion (:func:`motion_distances`); ``inf`` when a motion has < 8 points.
+    """
+    D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], n_pairs))
+    own = D[labels, np.arange(labels.size)]
+    return float(np.mean(np.log1p(own))) if np.isfinite(own).all() else float("inf")
+
+
+def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                     pairs: np.ndarray) -> np.ndarray:
+    """Mean Sampson distance (px^2) of every point to every motion's fundamental matrices.
+
+    Each motion fits one F per frame pair on its own points by iteratively reweighted
+    least squares (weights ``1 / (1 + d / (4 median d))``, three rounds).
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (P,)
+    n_motions : int
+    pairs : ndarray of shape (K, 2)
+
+    Returns
+    -------
+    D : ndarray of shape (C, P); ``inf`` for a motion with fewer than 8 points.
+    """
+    x1 = points[pairs[:, 0]]  # (K, P, 2)
+    x2 = points[pairs[:, 1]]
+    D = np.full((n_motions, points.shape[1]), np.inf)
+    for g in range(n_motions):
+        mem = np.flatnonzero(labels == g)
+        if mem.size < 8:
+            continue
+        w = np.ones((pairs.shape[0], mem.size))
+        for _ in range(3):
+            Fm = fit_fundamental(x1[:, mem], x2[:, mem], w)  # (K, 3, 3)
+            dm = sampson_distance(Fm, x1[:, mem], x2[:, mem])  # (K, n)
+            w = 1.0 / (1.0 + dm / (np.median(dm, axis=1, keepdims=True) * 4.0 + 1e-9))
+        D[g] = np.mean(np.minimum(sampson_distance(Fm, x1, x2), 1e4), axis=0)
+    return D
+
+
 def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                  n_pairs: int = 12, rounds: int = 5) -> tuple[np.ndarray, int]:
-    """Reassign points to the motion whose fundamental matrices explain them best.
+                  n_pairs: int = 12, rounds: int = 3, outlier: float = 6.0) -> tuple[np.ndarray, int]:
+    """Move points that their own motion does not explain to the motion that does.
+
+    A point moves only when its distance to its own motion (:func:`motion_distances`,
+    in units of that motion's median over its members) exceeds ``outlier`` and another
+    motion's normalised distance is smaller. The guard matters: the fundamental matrix
+    of a nearly degenerate motion (a car translating, a small planar patch) is poorly
+    determined and can pass close to other motions' points, so "nearest F" alone moves
+    correct points.
 
     Parameters
     ----------
@@ -189,42 +244,30 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     labels : ndarray of shape (P,)
     n_motions : int
     n_pairs : int
-        Frame pairs (a deterministic spread) over which distances are averaged.
+        Frame pairs (a deterministic spread, see :func:`frame_pairs`).
     rounds : int
-        Most reassignment rounds.
+    outlier : float
 
     Returns
     -------
     labels : ndarray of shape (P,)
     n_changed : int
-        Points whose label differs from the input.
     """
-    F, P, _ = points.shape
-    C = n_motions
-    pairs = frame_pairs(F, n_pairs)
-    x1 = points[pairs[:, 0]]  # (K, P, 2)
-    x2 = points[pairs[:, 1]]
+    pairs = frame_pairs(points.shape[0], n_pairs)
     start = labels.copy()
     cur = labels.copy()
+    idx = np.arange(cur.size)
     for _ in range(rounds):
-        counts = np.bincount(cur, minlength=C)
-        if np.any(counts < 8):
+        D = motion_distances(points, cur, n_motions, pairs)
+        scale = np.array([np.median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
+                          for g in range(n_motions)]) + 1e-9
+        N = D / scale[:, None]
+        own = N[cur, idx]
+        best = N.argmin(axis=0)
+        move = (own > outlier) & (best != cur)
+        if not move.any():
             break
-        D = np.empty((C, P))
-        for g in range(C):
-            mem = np.flatnonzero(cur == g)
-            w = np.ones((pairs.shape[0], mem.size))
-            for _irls in range(3):
-                Fm = fit_fundamental(x1[:, mem], x2[:, mem], w)  # (K, 3, 3)
-                dm = sampson_distance(Fm, x1[:, mem], x2[:, mem])  # (K, n)
-                scale = np.median(dm, axis=1, keepdims=True) * 4.0 + 1e-6
-                w = 1.0 / (1.0 + dm / scale)
-            d = sampson_distance(Fm, x1, x2)  # (K, P)
-            D[g] = np.mean(np.minimum(d, 1e4), axis=0)
-        new = D.argmin(axis=0)
-        if np.array_equal(new, cur):
-            break
-        cur = new
+        cur = np.where(move, best, cur)
     return cur, int((cur != start).sum())
 
 
@@ -300,7 +343,11 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
                 best = res
                 break
         if best is None:
-            best = _consensus(trials, C, rng)
+            if params.rv_consensus == "coassociation":
+                best = _consensus(trials, C, rng)
+            else:
+                costs = [labelling_cost(points, t[0], C) for t in trials]
+                best = trials[int(np.argmin(costs))]
 
     labels, votes, changed, margin, _its, conv = best
     refined = 0
