@@ -207,7 +207,9 @@ def kernighan_lin(n_nodes: int, edges: np.ndarray, costs: np.ndarray, labels: np
     if edges.shape[0]:
         np.add.at(W, (edges[:, 0], edges[:, 1]), costs)
         np.add.at(W, (edges[:, 1], edges[:, 0]), costs)
-    lab = np.asarray(labels, dtype=np.int64).copy()
+    # A start labelling may hold disconnected segments; KL must work on the real ones
+    # (a no-op for GAEC's output, whose segments are connected).
+    lab = _split_disconnected(n_nodes, edges, np.asarray(labels, dtype=np.int64))
     for _ in range(max_rounds):
         improved = False
         # joins: merge the adjacent pair with the largest positive connecting sum
@@ -249,7 +251,13 @@ def kernighan_lin(n_nodes: int, edges: np.ndarray, costs: np.ndarray, labels: np
                 lab[nodes[~new_side]] = a
                 improved = True
         if not improved:
-            break
+            # A move that took out a cut vertex can leave a segment disconnected. Split
+            # such segments (free: no edge joins the parts) and, if any was split, go on
+            # improving: the parts are new segments that moves and joins have not tried.
+            split = _split_disconnected(n_nodes, edges, lab)
+            if np.unique(split).size == np.unique(lab).size:
+                break
+            lab = split
     # a segment must be connected: split disconnected ones into their components
     return _split_disconnected(n_nodes, edges, _relabel(lab))
 
