@@ -101,13 +101,20 @@ class Sequence:
                 raise SequenceError(
                     f"{src}: {lab.shape[0]} labels for {n_points} points (counts must match)"
                 )
-            if not (np.issubdtype(lab.dtype, np.number) or lab.dtype == bool):
+            if np.iscomplexobj(lab) or not (
+                np.issubdtype(lab.dtype, np.number) or lab.dtype == bool
+            ):
                 raise SequenceError(f"{src}: labels must be integers, got dtype {lab.dtype}")
             labf = lab.astype(np.float64)
             if not np.isfinite(labf).all() or np.any(labf != np.round(labf)):
                 raise SequenceError(f"{src}: labels must be whole numbers")
             if np.any(labf < 0):
                 raise SequenceError(f"{src}: labels must be non-negative (0-based)")
+            if labf.max() > n_points - 1:  # also keeps the int64 cast and the check below small
+                raise SequenceError(
+                    f"{src}: label {labf.max():g} is too large for {n_points} points (labels "
+                    f"must be 0..n_motions-1 with every label used)"
+                )
             lab = labf.astype(np.int64)
             present = np.unique(lab)
             n_mot = int(lab.max()) + 1

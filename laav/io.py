@@ -7,7 +7,6 @@ every failure into a :class:`~laav.SequenceError` that names the file and the pr
 from __future__ import annotations
 
 import os
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -89,7 +88,7 @@ def _scalar(value, what: str, p: Path) -> int:
         raise SequenceError(f"{p}: variable '{what}' should be a single number, got {arr.shape}")
     try:
         return int(arr.ravel()[0])
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: inf
         raise SequenceError(f"{p}: variable '{what}' is not a number") from None
 
 
@@ -105,11 +104,16 @@ def _load_mat(p: Path) -> Sequence:
     y = np.asarray(mat["y"])
     if not np.issubdtype(y.dtype, np.number):
         raise SequenceError(f"{p}: variable 'y' is not numeric (dtype {y.dtype})")
+    if np.iscomplexobj(y):
+        raise SequenceError(f"{p}: variable 'y' must be real numbers, got complex values")
     if y.ndim == 2 and y.shape[0] in (2, 3):  # a single frame saved without the last axis
         raise SequenceError(f"{p}: variable 'y' has one frame only (shape {y.shape}); needs 3 x P x F")
     if y.ndim != 3 or y.shape[0] not in (2, 3):
         raise SequenceError(f"{p}: variable 'y' must have shape 3 x P x F, got {y.shape}")
     y = y.astype(np.float64)
+    if not np.isfinite(y).all():  # check before dividing: x / inf would look finite
+        bad = int((~np.isfinite(y)).any(axis=(0, 2)).sum())
+        raise SequenceError(f"{p}: {bad} point(s) have NaN or infinite coordinates")
     if y.shape[0] == 3:
         w = y[2]
         if np.isfinite(w).all() and np.any(np.abs(w) < 1e-12):
@@ -153,7 +157,7 @@ def _load_npz(p: Path) -> Sequence:
             name = str(data["name"]) if "name" in files else _name_from_path(p)
     except SequenceError:
         raise
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
+    except Exception as exc:  # BadZipFile, zlib.error, ValueError, MemoryError, ...
         raise SequenceError(f"{p}: truncated or corrupt NPZ file ({type(exc).__name__}: {exc})") from None
     return Sequence(points=points, labels=labels, name=name, image_size=image_size, source=str(p))
 

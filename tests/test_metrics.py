@@ -1,0 +1,175 @@
+"""The Hopkins155 misclassification rate and the confusion matrix behind it."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from laav import confusion_matrix, misclassification_rate
+from laav.metrics import best_label_map
+
+PROPS = settings(max_examples=200, deadline=None)
+
+
+def _labelings(max_points: int = 40, max_labels: int = 5):
+    """Pairs of equally long label vectors with small label alphabets."""
+    return st.integers(1, max_points).flatmap(
+        lambda n: st.tuples(
+            st.lists(st.integers(0, max_labels - 1), min_size=n, max_size=n),
+            st.lists(st.integers(0, max_labels - 1), min_size=n, max_size=n),
+        )
+    )
+
+
+def _rename(labels, seed: int) -> list[int]:
+    """Apply a random bijection to the label names (arbitrary, non-contiguous integers)."""
+    rng = np.random.default_rng(seed)
+    values = sorted(set(labels))
+    names = rng.choice(np.arange(-1000, 1000), size=len(values), replace=False)
+    mapping = dict(zip(values, names.tolist()))
+    return [mapping[v] for v in labels]
+
+
+def _brute_force_rate(true, pred) -> float:
+    """Best one-to-one matching by trying every injective assignment."""
+    tv, pv = sorted(set(true)), sorted(set(pred))
+    best = 0
+    if len(pv) <= len(tv):
+        for image in itertools.permutations(tv, len(pv)):
+            m = dict(zip(pv, image))
+            best = max(best, sum(m[p] == t for t, p in zip(true, pred)))
+    else:
+        for image in itertools.permutations(pv, len(tv)):
+            m = dict(zip(tv, image))
+            best = max(best, sum(m[t] == p for t, p in zip(true, pred)))
+    return 1.0 - best / len(true)
+
+
+def _same_partition(a, b) -> bool:
+    pairs = set(zip(a, b))
+    return len(pairs) == len(set(a)) == len(set(b))
+
+
+# --------------------------------------------------------------------------- exact cases
+
+
+def test_identical_is_zero():
+    a = [0, 0, 1, 1, 2, 2, 2]
+    assert misclassification_rate(a, a) == 0.0
+    assert misclassification_rate(np.array(a), np.array(a)) == 0.0
+
+
+def test_relabelled_is_zero():
+    assert misclassification_rate([0, 0, 1, 1, 2], [2, 2, 0, 0, 1]) == 0.0
+    assert misclassification_rate([0, 0, 1, 1], [7, 7, -3, -3]) == 0.0
+
+
+@pytest.mark.parametrize(
+    ("true", "pred", "rate"),
+    [
+        ([0, 0, 1, 1], [0, 1, 1, 1], 0.25),
+        ([0, 0, 1, 1], [1, 0, 0, 0], 0.25),
+        ([0, 0, 1, 1], [0, 1, 0, 1], 0.5),
+        ([0, 0, 1, 1], [5, 5, 5, 5], 0.5),  # one predicted group for two true
+        ([0, 0, 0, 0], [0, 1, 2, 3], 0.75),  # every point its own group: 1 - 1/P
+        ([0, 0, 0, 1, 1, 1], [0, 0, 1, 2, 2, 2], 1 / 6),  # 3 predicted vs 2 true
+        ([0, 0, 1, 2, 2, 2], [0, 0, 0, 1, 1, 1], 1 / 6),  # 2 predicted vs 3 true
+        ([0, 0, 1, 1, 2, 2], [0, 0, 0, 0, 0, 0], 4 / 6),
+        # greedy (take the 5 first) would score 8 errors; the optimal matching has 5
+        ([0] * 9 + [1] * 4, [0] * 5 + [1] * 4 + [0] * 4, 5 / 13),
+    ],
+)
+def test_hand_made_cases(true, pred, rate):
+    assert misclassification_rate(true, pred) == pytest.approx(rate, abs=1e-15)
+    assert misclassification_rate(pred, true) == pytest.approx(rate, abs=1e-15)
+
+
+def test_single_point():
+    assert misclassification_rate([3], [9]) == 0.0
+
+
+def test_input_errors():
+    with pytest.raises(ValueError):
+        misclassification_rate([0, 1, 1], [0, 1])
+    with pytest.raises(ValueError):
+        misclassification_rate([[0, 1], [1, 0]], [[0, 1], [1, 0]])
+    with pytest.raises(ValueError):
+        misclassification_rate([], [])
+
+
+def test_confusion_matrix_hand_made():
+    counts, tv, pv = confusion_matrix([0, 0, 0, 1, 1, 1], [4, 4, 9, 2, 2, 2])
+    assert counts.dtype == np.int64
+    assert tv.tolist() == [0, 1]
+    assert pv.tolist() == [2, 4, 9]
+    assert counts.tolist() == [[0, 2, 1], [3, 0, 0]]
+
+
+def test_best_label_map():
+    assert best_label_map([0, 0, 1, 1], [7, 7, 3, 3]) == {7: 0, 3: 1}
+    # the unmatched third predicted group is left out
+    mapping = best_label_map([0, 0, 0, 1, 1, 1], [0, 0, 1, 2, 2, 2])
+    assert mapping == {0: 0, 2: 1}
+
+
+# --------------------------------------------------------------------------- properties
+
+
+@PROPS
+@given(pair=_labelings(), seed=st.integers(0, 2**32 - 1))
+def test_zero_for_identical_and_relabelled(pair, seed):
+    a, _ = pair
+    assert misclassification_rate(a, a) == 0.0
+    assert misclassification_rate(a, _rename(a, seed)) == 0.0
+
+
+@PROPS
+@given(pair=_labelings(), seeds=st.tuples(st.integers(0, 2**32 - 1), st.integers(0, 2**32 - 1)))
+def test_invariant_to_label_names(pair, seeds):
+    a, b = pair
+    r = misclassification_rate(a, b)
+    assert misclassification_rate(_rename(a, seeds[0]), _rename(b, seeds[1])) == r
+
+
+@PROPS
+@given(pair=_labelings())
+def test_symmetric(pair):
+    a, b = pair
+    assert misclassification_rate(a, b) == misclassification_rate(b, a)
+
+
+@PROPS
+@given(pair=_labelings())
+def test_bounds_and_granularity(pair):
+    a, b = pair
+    P = len(a)
+    r = misclassification_rate(a, b)
+    assert 0.0 <= r <= 1.0 - 1.0 / P + 1e-12
+    assert abs(r * P - round(r * P)) < 1e-9  # a whole number of misassigned points
+    assert (r == 0.0) == _same_partition(a, b)
+
+
+@settings(max_examples=150, deadline=None)
+@given(pair=_labelings(max_points=12, max_labels=4))
+def test_matches_brute_force(pair):
+    a, b = pair
+    assert misclassification_rate(a, b) == pytest.approx(_brute_force_rate(a, b), abs=1e-12)
+
+
+@PROPS
+@given(pair=_labelings())
+def test_confusion_matrix_counts(pair):
+    a, b = pair
+    counts, tv, pv = confusion_matrix(a, b)
+    assert counts.sum() == len(a)
+    assert counts.shape == (len(set(a)), len(set(b)))
+    assert tv.tolist() == sorted(set(a)) and pv.tolist() == sorted(set(b))
+    assert counts.sum(axis=1).tolist() == [a.count(v) for v in tv.tolist()]
+    assert counts.sum(axis=0).tolist() == [b.count(v) for v in pv.tolist()]
+    assert (counts >= 0).all()
+    transposed, _, _ = confusion_matrix(b, a)
+    assert np.array_equal(transposed, counts.T)
