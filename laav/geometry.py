@@ -134,11 +134,22 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     A : ndarray of shape (F, 2, 3)
         ``dst[f] ~= src @ A[f, :, :2].T + A[f, :, 2]``.
     """
-    X = np.hstack([src, np.ones((src.shape[0], 1))])  # (n, 3)
+    # Solve in centred, scaled coordinates: the normal equations of raw pixel coordinates
+    # are ill-conditioned (and a ridge scaled by their trace biases the fit), which put
+    # predictions ~0.01 px off least squares for 640-px images and pixels off for
+    # coordinates in the thousands.
+    c = src.mean(axis=0)
+    d = np.sqrt(((src - c) ** 2).sum(-1).mean())
+    s = 1.0 / max(d, 1e-12)
+    X = np.hstack([(src - c) * s, np.ones((src.shape[0], 1))])  # (n, 3)
     G = X.T @ X
     G[np.diag_indices(3)] += 1e-12 * (np.trace(G) + 1.0)  # keeps collinear sets solvable
-    sol = np.einsum("kn,fnd->fdk", np.linalg.inv(G) @ X.T, dst)  # (F, 2, 3)
-    return sol
+    sol = np.einsum("kn,fnd->fdk", np.linalg.inv(G) @ X.T, dst)  # (F, 2, 3), normalised src
+    lin = sol[..., :2] * s
+    out = np.empty_like(sol)
+    out[..., :2] = lin
+    out[..., 2] = sol[..., 2] - lin @ c
+    return out
 
 
 def apply_affine(A: np.ndarray, x: np.ndarray) -> np.ndarray:
