@@ -4,6 +4,8 @@ SHELL := /bin/bash
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
+# Debian's chromium package installs here (the `chromium` target checks it).
+CHROMIUM ?= /usr/bin/chromium
 # sudo only when not already root
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
@@ -24,8 +26,8 @@ explore: venv
 
 # Headless Chromium for the browser tests; installed from Debian only when missing.
 chromium:
-	@if [ -x /usr/bin/chromium ]; then \
-	  echo "chromium: $$(/usr/bin/chromium --version 2>/dev/null || echo present)"; \
+	@if [ -x $(CHROMIUM) ]; then \
+	  echo "chromium: $$($(CHROMIUM) --version 2>/dev/null || echo present)"; \
 	else \
 	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get update && \
 	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y chromium; \
