@@ -6,7 +6,7 @@ package and uses only the public API exported here.
 """
 
 from ._sequence import Sequence, SequenceError
-from .io import find_truth_files, load_sequence, save_sequence
+from .io import find_truth_files, load_sequence, load_sequence_isolated, save_sequence
 from .metrics import confusion_matrix, misclassification_rate
 
 __version__ = "0.1.0"
@@ -15,6 +15,7 @@ __all__ = [
     "Sequence",
     "SequenceError",
     "load_sequence",
+    "load_sequence_isolated",
     "save_sequence",
     "find_truth_files",
     "misclassification_rate",

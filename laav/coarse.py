@@ -32,6 +32,7 @@ from .voting import frame_pairs
 __all__ = ["Coarse", "merge_models", "point_labels_from_atoms", "pooled_voting"]
 
 _PER_ATOM = 6  # features drawn from each atom for one fit
+_POOLED_ALPHA = 0.9  # forgetting factor of pooled voting
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,7 +114,9 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
     motions. Every iteration draws a frame pair, fits one fundamental matrix per motion
     to 8 of its features (normalised 8-point), lets every atom feature vote
     ``exp(-lam d)`` (Sampson distance ``d``), averages the votes over each model's
-    features and moves each model to its best motion; votes decay by ``rv_alpha``.
+    features and moves each model to its best motion; votes decay by 0.9 (RV's usual
+    forgetting factor; a fixed constant so that the coarse stage does not depend on the
+    fine-tuning's ``rv_alpha``).
     A trial ends when no model moved for ``patience`` iterations.
 
     Parameters
@@ -123,7 +126,7 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
         Fine model of each feature, -1 for features in no atom (they do not vote).
     n_models, n_motions : int
     params : LaavParams
-        Uses ``lam`` and ``rv_alpha``.
+        Uses ``lam``.
     rng : numpy.random.Generator
     n_trials, max_iter, patience : int
 
@@ -154,7 +157,7 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
             new = (onehot @ hv).argmax(1)
             still = still + 1 if np.array_equal(new, ml) else 0
             ml = new
-            hv *= params.rv_alpha
+            hv *= _POOLED_ALPHA
             if still >= patience:
                 break
         out[t] = ml

@@ -13,7 +13,7 @@ import numpy as np
 
 from ._sequence import Sequence, SequenceError
 
-__all__ = ["load_sequence", "save_sequence", "find_truth_files"]
+__all__ = ["load_sequence", "load_sequence_isolated", "save_sequence", "find_truth_files"]
 
 _MAT_MAGIC = b"MATLAB 5.0 MAT-file"
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
@@ -222,3 +222,56 @@ def find_truth_files(root: str | os.PathLike) -> list[Path]:
     if not root.is_dir():
         raise SequenceError(f"{root}: not a folder")
     return sorted(root.glob("*/*_truth.mat"), key=lambda q: q.parent.name)
+
+
+def _load_in_child(path: str, conn) -> None:  # pragma: no cover - runs in a child process
+    try:
+        seq = load_sequence(path)
+        conn.send(("ok", (np.asarray(seq.points), None if seq.labels is None else np.asarray(seq.labels),
+                          seq.name, seq.image_size, seq.source)))
+    except SequenceError as exc:
+        conn.send(("error", str(exc)))
+    except BaseException as exc:
+        conn.send(("error", f"{path}: could not be read ({type(exc).__name__}: {exc})"))
+    finally:
+        conn.close()
+
+
+def load_sequence_isolated(path: str | os.PathLike, timeout: float = 60.0) -> Sequence:
+    """:func:`load_sequence` in a child process, for untrusted files (uploads).
+
+    ``scipy.io.loadmat`` can crash the interpreter outright (a segmentation fault) on some
+    damaged MAT files; reading them in a child process turns such a crash into a
+    :class:`~laav.SequenceError` instead of taking the caller (e.g. the explorer's server)
+    down with it.
+
+    Raises
+    ------
+    SequenceError
+        For every malformed file, including one that crashes or hangs the reader.
+    """
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_load_in_child, args=(str(path), child), daemon=True)
+    proc.start()
+    child.close()
+    try:
+        if not parent.poll(timeout):
+            raise SequenceError(f"{path}: reading the file did not finish within {timeout:g} s")
+        status, payload = parent.recv()
+    except EOFError:
+        proc.join(5)
+        raise SequenceError(
+            f"{path}: corrupt file (the reader crashed with exit code {proc.exitcode})"
+        ) from None
+    finally:
+        if proc.is_alive():
+            proc.kill()
+        proc.join(5)
+        parent.close()
+    if status == "error":
+        raise SequenceError(payload)
+    points, labels, name, image_size, source = payload
+    return Sequence(points=points, labels=labels, name=name, image_size=image_size, source=source)

@@ -75,6 +75,9 @@ class LaavParams:
         trials by spectral clustering.
     rv_label_weight : float
         Initial votes given to atom-labelled features when LAAV initialises Random Voting.
+    rv_anchor : float
+        Votes added at every iteration to each atom-labelled feature for its start label
+        (a persistent prior; 0 leaves only the decaying initial votes).
     rv_refine : bool
         After voting, reassign each point to the motion whose fundamental matrices (fitted
         on the motion's points over many frame pairs) explain it best.
@@ -105,6 +108,7 @@ class LaavParams:
     rv_pairs: int = 1
     rv_consensus: str = "coassociation"
     rv_label_weight: float = 5.0
+    rv_anchor: float = 0.0
     rv_refine: bool = True
 
     def __post_init__(self) -> None:
@@ -150,6 +154,7 @@ class LaavParams:
         need(self.rv_sample_size >= 8, "rv_sample_size must be >= 8 (8-point algorithm)")
         need(self.rv_patience >= 1, "rv_patience must be >= 1")
         need(self.rv_label_weight >= 0, "rv_label_weight must be >= 0")
+        need(self.rv_anchor >= 0, "rv_anchor must be >= 0")
         need(0 <= self.rv_tolerance < 0.5, "rv_tolerance must be in [0, 0.5)")
         need(isinstance(self.rv_pairs, int) and self.rv_pairs >= 1, "rv_pairs must be an integer >= 1")
         need(self.rv_consensus in ("best", "coassociation"),
@@ -185,8 +190,8 @@ STAGE_PARAMS: dict[str, frozenset] = {
     "coarse": frozenset({"lam", "coarse_frames", "coarse_samples", "motion_weight", "pooled_trials",
                          "pairwise_weight"}),
     "voting": frozenset({"rv_lambda", "rv_alpha", "rv_max_iter", "rv_trials", "rv_sample_size",
-                         "rv_patience", "rv_label_weight", "rv_refine", "rv_tolerance", "rv_pairs",
-                         "rv_consensus"}),
+                         "rv_patience", "rv_label_weight", "rv_refine", "rv_anchor", "rv_tolerance",
+                         "rv_pairs", "rv_consensus"}),
 }
 STAGES = ("atoms", "graph", "multicut", "coarse", "voting")
 

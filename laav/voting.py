@@ -144,7 +144,7 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
     return (v - (1.0 - v) + total_other[None, :]).T
 
 
-def _run_trial(points, C, params, rng, labels0, votes0, reset):
+def _run_trial(points, C, params, rng, labels0, votes0, reset, anchor=None):
     F, P, _ = points.shape
     gap = max(1, F // 3)
     labels = labels0.copy()
@@ -161,6 +161,8 @@ def _run_trial(points, C, params, rng, labels0, votes0, reset):
             right = int(rng.integers(left + gap, F))
             pair = (left, right) if rng.random() < 0.5 else (right, left)
             votes += vote(points, labels, votes, pair, lam, m, rng)
+        if anchor is not None:
+            votes += anchor
         new = votes.argmax(axis=1)
         n_changed = int((new != labels).sum())
         labels = new
@@ -328,10 +330,22 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         labels0 = np.where(known, init, rng.integers(0, C, P))
         votes0 = np.zeros((P, C))
         votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
-        labels, votes, changed, margin, its, conv = _run_trial(
-            points, C, params, rng, labels0, votes0, reset=False)
-        trials = [(labels, votes, changed, margin, its, conv)]
-        best = trials[0]
+        anchor = None
+        if params.rv_anchor > 0:
+            anchor = np.zeros((P, C))
+            anchor[np.flatnonzero(known), init[known]] = params.rv_anchor
+        first = _run_trial(points, C, params, rng, labels0, votes0, reset=False, anchor=anchor)
+        trials = [first]
+        best = first if first[5] else None
+        # the informed trial did not converge: continue as plain RV (random starts)
+        while best is None and len(trials) < params.rv_trials:
+            res = _run_trial(points, C, params, rng, rng.integers(0, C, P), np.zeros((P, C)),
+                             reset=True)
+            trials.append(res)
+            if res[5]:
+                best = res
+        if best is None:
+            best = _consensus(trials, C, rng) if len(trials) > 1 else first
     else:
         trials = []
         best = None
