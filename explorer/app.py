@@ -14,11 +14,13 @@ import io
 import tempfile
 import threading
 import time
+from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 import panel as pn
+from bokeh.core.properties import value
 from bokeh.models import (
     ColorBar,
     ColumnDataSource,
@@ -63,9 +65,9 @@ def _image_figure(title: str, frame_width: int, extent, **kw):
     """A bokeh figure in pixel coordinates with the y axis pointing down."""
     x0, x1, y0, y1 = extent
     fh = int(round(frame_width * (y1 - y0) / max(x1 - x0, 1e-9)))
+    kw.setdefault("toolbar_location", "right")
     fig = figure(title=title, frame_width=frame_width, frame_height=max(fh, 80), tools=_TOOLS,
-                 x_range=Range1d(x0, x1), y_range=Range1d(y1, y0), match_aspect=True,
-                 toolbar_location="above", **kw)
+                 x_range=Range1d(x0, x1), y_range=Range1d(y1, y0), match_aspect=True, **kw)
     fig.xaxis.axis_label = "x (px)"
     fig.yaxis.axis_label = "y (px, pointing down)"
     fig.title.text_font_size = "11pt"
@@ -101,6 +103,12 @@ class Explorer:
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None):
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False)
+        # Built inside a server session: results go through this document's event loop from the
+        # start (the figures join it only while the page is being built, and a worker thread must
+        # never touch them during that).
+        cur = pn.state.curdoc
+        self._session_doc = cur if cur is not None and cur.session_context is not None else None
+        self._doc_thread = threading.get_ident()  # the session's event-loop thread
         self._defaults = LaavParams()
         self._suppress = 0
         self._apply_lock = threading.RLock()
@@ -146,11 +154,11 @@ class Explorer:
     def _build_widgets(self) -> None:
         seq, st = self.sequence, self.state.target
         p = st.params
-        self.w_frame = pn.widgets.Player(name="frame", start=0, end=max(seq.n_frames - 1, 1), value=0,
+        self.w_frame = pn.widgets.Player(label="frame", start=0, end=max(seq.n_frames - 1, 1), value=0,
                                          loop_policy="loop", interval=250, width=290,
                                          show_loop_controls=False, value_align="start",
                                          scale_buttons=0.8)
-        self.w_color = pn.widgets.Select(name="Colour points by", options=list(V.COLOR_MODES),
+        self.w_color = pn.widgets.Select(label="Colour points by", options=list(V.COLOR_MODES),
                                          value="ground truth" if seq.labels is not None
                                          else "final (after Random Voting)", width=290)
         self._layer_names = ["trails (last 5 frames)", "atom circles (R1 solid, R2 dashed)",
@@ -163,41 +171,41 @@ class Explorer:
             if name == "fine_models":
                 value = p.n_fine(st.n_motions)
                 hi = max(hi, 4 * st.n_motions)
-                w = pn.widgets.EditableIntSlider(name=label, start=lo, end=hi, step=step, value=value,
+                w = pn.widgets.IntSlider(label=label, start=lo, end=hi, step=step, value=value,
                                                  width=290)
             elif typ is int:
-                w = pn.widgets.EditableIntSlider(name=label, start=lo, end=max(hi, 2 * default),
+                w = pn.widgets.IntSlider(label=label, start=lo, end=max(hi, 2 * default),
                                                  step=step, value=int(getattr(p, name)), width=290)
             else:
-                w = pn.widgets.EditableFloatSlider(name=label, start=lo, end=max(hi, 2.0 * default)
+                w = pn.widgets.FloatSlider(label=label, start=lo, end=max(hi, 2.0 * default)
                                                    if name != "rv_alpha" else hi, step=step,
                                                    value=float(getattr(p, name)), width=290)
             w.param.watch(self._on_param, "value")
             self.w_params[name] = w
-        self.w_seed = pn.widgets.EditableIntSlider(name="seed (random stages)", start=0, end=99,
+        self.w_seed = pn.widgets.IntSlider(label="seed (random stages)", start=0, end=99,
                                                    value=st.seed, width=290)
         self.w_seed.param.watch(self._on_param, "value")
-        self.w_motions = pn.widgets.IntInput(name="C — number of motions", start=1, value=st.n_motions,
+        self.w_motions = pn.widgets.IntInput(label="C — number of motions", start=1, value=st.n_motions,
                                              width=140)
         self.w_motions.param.watch(self._on_param, "value")
         self.w_upload = pn.widgets.FileInput(accept=".mat,.npz", multiple=False, width=290)
         self.w_upload.param.watch(self._on_upload, "value")
-        self.w_reset = pn.widgets.Button(name="Reset parameters to defaults", button_type="warning",
+        self.w_reset = pn.widgets.Button(label="Reset parameters to defaults", color="warning",
                                          width=290)
         self.w_reset.on_click(self._on_reset)
         self.w_dl_csv = pn.widgets.FileDownload(callback=self._export_csv, filename="labels.csv",
-                                                label="Labels (CSV)", button_type="primary",
+                                                label="Labels (CSV)", color="primary",
                                                 embed=False, width=290)
         self.w_dl_json = pn.widgets.FileDownload(callback=self._export_json, filename="params.json",
-                                                 label="Parameters (JSON)", button_type="primary",
+                                                 label="Parameters (JSON)", color="primary",
                                                  embed=False, width=290)
         self.w_dl_png = pn.widgets.FileDownload(callback=self._export_png, filename="views.png",
-                                                label="Views (PNG)", button_type="primary",
+                                                label="Views (PNG)", color="primary",
                                                 embed=False, width=290)
-        self.w_step = pn.widgets.IntSlider(name="GAEC contraction step (rightmost = final fine models)",
-                                           start=0, end=1, value=1, width=560)
-        self.w_pair_j = pn.widgets.Select(name="fine model j", options=["f1"], width=110)
-        self.w_pair_k = pn.widgets.Select(name="fine model k", options=["f1"], width=110)
+        self.w_step = pn.widgets.IntSlider(label="GAEC contraction step (rightmost = final fine models)",
+                                           start=0, end=1, value=1, width=540)
+        self.w_pair_j = pn.widgets.Select(label="epipolar check: j", options=["f1"], width=105)
+        self.w_pair_k = pn.widgets.Select(label="and k", options=["f1"], width=105)
         self.w_frame.param.watch(self._on_frame, "value")
         self.w_color.param.watch(self._on_color, "value")
         self.w_layers.param.watch(self._on_layers, "value")
@@ -214,7 +222,7 @@ class Explorer:
         self.src_atoms = ColumnDataSource({"x": [], "y": [], "r1": [], "r2": [], "color": [], "atom": []})
         self.src_unassigned = ColumnDataSource({"x": [], "y": []})
         self.src_errors = ColumnDataSource({"x": [], "y": []})
-        f = self.fig_frame = _image_figure("Points at frame 0", 470, ext)
+        f = self.fig_frame = _image_figure("Points at frame 0", 430, ext)
         self.r_trails = f.segment("x0", "y0", "x1", "y1", source=self.src_trails, line_color="color",
                                   line_alpha="alpha", line_width=1.5)
         self.r_r2 = f.circle("x", "y", radius="r2", source=self.src_atoms, fill_alpha=0, line_color="color",
@@ -231,10 +239,14 @@ class Explorer:
                                   legend_label="misclassified")
         f.add_tools(HoverTool(renderers=[self.r_points], tooltips=[("point", "@index"), ("", "@label")]))
         self._move_legend(f)
+        items = {getattr(it.label, "value", None): it for it in f.legend[0].items}
+        self._item_unassigned = items.get("in no atom")
+        self._item_errors = items.get("misclassified")
 
         # 2 multicut graph
-        self.cost_mapper = LinearColorMapper(palette=list(RdBu11), low=-1, high=1)
-        g = self.fig_graph = _image_figure("Atom graph at frame 0", 470, ext)
+        # RdBu11 runs blue -> red; cost > 0 (join) is blue
+        self.cost_mapper = LinearColorMapper(palette=list(RdBu11)[::-1], low=-1, high=1)
+        g = self.fig_graph = _image_figure("Atom graph at frame 0", 430, ext)
         empty_e = {"x0": [], "y0": [], "x1": [], "y1": [], "cost": [], "error": [], "a": [], "b": []}
         self.src_joined = ColumnDataSource(dict(empty_e))
         self.src_cut = ColumnDataSource(dict(empty_e))
@@ -260,7 +272,7 @@ class Explorer:
         self.z_mapper = LinearColorMapper(palette=list(Blues256[::-1]), low=0, high=1)
         self.src_z = ColumnDataSource({"x": [], "y": [], "z": [], "text": [], "text_color": [], "d": [],
                                        "j": [], "k": []})
-        z = self.fig_z = figure(title="Affinity Z of fine-model pairs", width=360, height=340,
+        z = self.fig_z = figure(title="Affinity Z of fine-model pairs", width=320, height=320,
                                 x_range=FactorRange(factors=["f1"]), y_range=FactorRange(factors=["f1"]),
                                 tools="hover", toolbar_location=None,
                                 tooltips=[("pair", "f@j, f@k"), ("Z", "@text"), ("epipolar distance", "@d")])
@@ -278,8 +290,8 @@ class Explorer:
         self.src_epi_l = ColumnDataSource(dict(empty_p))
         self.src_epi_r = ColumnDataSource(dict(empty_p))
         self.src_epi_lines = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": []})
-        self.fig_epi_l = _image_figure("frame l", 250, ext)
-        self.fig_epi_r = _image_figure("frame r with epipolar lines", 250, ext)
+        self.fig_epi_l = _image_figure("frame l", 200, ext, toolbar_location=None)
+        self.fig_epi_r = _image_figure("frame r with epipolar lines", 200, ext, toolbar_location=None)
         self.fig_epi_r.x_range = self.fig_epi_l.x_range
         self.fig_epi_r.y_range = self.fig_epi_l.y_range
         for fig, src in ((self.fig_epi_l, self.src_epi_l), (self.fig_epi_r, self.src_epi_r)):
@@ -336,13 +348,13 @@ class Explorer:
         self.status = pn.pane.Markdown("Computing the first result…", margin=(4, 6))
         self.seq_info = pn.pane.Markdown(self._seq_text(seq), width=290, margin=(0, 10))
         self.numbers = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
-        self.graph_caption = pn.pane.Markdown("", width=560, margin=(0, 10))
-        self.merge_md = pn.pane.Markdown("", width=300, margin=(0, 10))
-        self.epi_caption = pn.pane.Markdown("", width=560, margin=(0, 10))
+        self.graph_caption = pn.pane.Markdown("", width=540, margin=(0, 10))
+        self.merge_md = pn.pane.Markdown("", width=230, margin=(0, 6))
+        self.epi_caption = pn.pane.Markdown("", width=540, margin=(0, 10))
         self.rv_md = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.frame_caption = pn.pane.Markdown("", width=600, margin=(0, 10))
         if self.viser is not None:
-            self.viser_pane = pn.pane.HTML(self._iframe_html(), width=600, height=520, margin=0)
+            self.viser_pane = pn.pane.HTML(self._iframe_html(), width=560, height=500, margin=0)
         else:
             msg = getattr(self, "_viser_error", "the 3-D view is switched off")
             self.viser_pane = pn.pane.Markdown(f"*{msg}*", width=600, height=80)
@@ -382,7 +394,7 @@ class Explorer:
             hdr = (pn.state.headers or {}).get("Host", "") if pn.state.curdoc else ""
             host = hdr.rsplit(":", 1)[0] if hdr else "127.0.0.1"
         return (f'<iframe src="http://{host}:{self.viser.port}/" title="LAAV 3-D view (viser)" '
-                f'style="width:600px;height:520px;border:1px solid #ccc;border-radius:4px"></iframe>')
+                f'style="width:560px;height:500px;border:1px solid #ccc;border-radius:4px"></iframe>')
 
     @staticmethod
     def _seq_text(seq: laav.Sequence) -> str:
@@ -392,9 +404,12 @@ class Explorer:
 
     def template(self, title: str = "LAAV explorer") -> pn.template.BootstrapTemplate:
         """The page (a BootstrapTemplate: loads all its resources from the server)."""
+        # one root per area: every extra document root costs a full model walk on page load
         return pn.template.BootstrapTemplate(
-            title=f"{title} — Locally Affine Atom Voting, stage by stage", sidebar=self.sidebar,
-            main=self.main, sidebar_width=330, header_background="#2c4a66")
+            title=f"{title} — Locally Affine Atom Voting, stage by stage",
+            sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
+            main=[pn.Column(*self.main, sizing_mode="stretch_width")], sidebar_width=330,
+            header_background="#2c4a66")
 
     def panel(self) -> pn.viewable.Viewable:
         """The whole explorer as one panel layout (for notebooks)."""
@@ -408,12 +423,14 @@ class Explorer:
 
     # ------------------------------------------------------------------ threading
     def _doc(self):
-        return self.fig_frame.document
+        return self._session_doc or self.fig_frame.document
 
-    def _schedule(self, fn, *args) -> None:
+    def _schedule(self, fn, *args, now_if_on_doc_thread: bool = False) -> None:
         """Run ``fn(*args)`` on the document's thread (or now, under a lock, without a server)."""
         doc = self._doc()
-        if doc is not None and doc.session_context is not None:
+        on_doc_thread = self._session_doc is not None and threading.get_ident() == self._doc_thread
+        if doc is not None and doc.session_context is not None and not (now_if_on_doc_thread
+                                                                         and on_doc_thread):
             try:
                 doc.add_next_tick_callback(partial(self._locked, fn, *args))
                 return
@@ -429,8 +446,19 @@ class Explorer:
                 import traceback
                 traceback.print_exc()
 
+    @contextmanager
     def _hold(self):
-        return pn.io.hold(self._doc())
+        """Send all model changes made inside as one batch (bokeh's own document hold; the
+        callers run on the document's thread, under its lock)."""
+        doc = self._doc()
+        if doc is None or doc.session_context is None or doc.callbacks.hold_value is not None:
+            yield
+            return
+        doc.hold("combine")
+        try:
+            yield
+        finally:
+            doc.unhold()
 
     # state hooks (worker threads)
     def _on_result(self, result, seq, settings, gen) -> None:
@@ -552,8 +580,13 @@ class Explorer:
         self.src_atoms.data = d["atoms"]
         self.src_unassigned.data = d["unassigned"]
         self.src_errors.data = d["errors"]
-        self.fig_frame.title.text = (f"{seq.name} · frame {f} of {seq.n_frames - 1} · coloured by "
-                                     f"{self.w_color.value}")
+        self.fig_frame.title.text = f"frame {f} of {seq.n_frames - 1} · colour: {self.w_color.value}"
+        n_un, n_bad = len(d["unassigned"]["x"]), len(d["errors"]["x"])
+        if self._item_unassigned is not None:
+            self._item_unassigned.label = value(f"in no atom: {n_un}")
+        if self._item_errors is not None:
+            self._item_errors.label = value(f"misclassified: {n_bad}" if seq.labels is not None
+                                            else "misclassified: (no truth)")
         self.frame_caption.object = (
             f"{res.atoms.n_atoms} atoms (R1 = {res.atoms.r1:g} px solid, R2 = {res.atoms.r2:g} px dashed, "
             f"drawn at their seeds); {np.asarray(res.atoms.unassigned).size} features in no atom (×); "
@@ -572,7 +605,7 @@ class Explorer:
         self.src_joined.data = d["joined"]
         self.src_cut.data = d["cut"]
         self.src_step.data = d["step_edge"]
-        self.fig_graph.title.text = (f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges at frame {f} · "
+        self.fig_graph.title.text = (f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {f} · "
                                      f"{len(np.unique(d['nodes']['cluster']))} clusters")
         self.graph_caption.object = V.replay_caption(res, step)
 
@@ -603,7 +636,7 @@ class Explorer:
         self.src_epi_lines.data = d["lines"]
         fl, fr = d["frames"]
         self.fig_epi_l.title.text = f"frame l = {fl}: f{j + 1} and f{k + 1}"
-        self.fig_epi_r.title.text = f"frame r = {fr}: epipolar lines of F(f{j + 1}, f{k + 1})"
+        self.fig_epi_r.title.text = f"frame r = {fr}: lines of F(f{j + 1}, f{k + 1})"
         if not d["ok"]:
             self.epi_caption.object = "No fundamental matrix for this pair (too few points)."
             return
@@ -681,6 +714,9 @@ class Explorer:
         self._on_param()
 
     def _on_frame(self, event=None) -> None:
+        self._schedule(self._frame_now, now_if_on_doc_thread=True)
+
+    def _frame_now(self) -> None:
         if self.result is None or self._suppress:
             return
         with self._hold():
@@ -690,6 +726,9 @@ class Explorer:
             self.viser.set_frame(int(self.w_frame.value))
 
     def _on_color(self, event=None) -> None:
+        self._schedule(self._color_now, now_if_on_doc_thread=True)
+
+    def _color_now(self) -> None:
         if self.result is None:
             return
         self._style = V.point_style(self.sequence, self.result, V.COLOR_MODES[self.w_color.value])
@@ -701,6 +740,9 @@ class Explorer:
             self.viser.set_colors(self._style["color"])
 
     def _on_layers(self, event=None) -> None:
+        self._schedule(self._layers_now, now_if_on_doc_thread=True)
+
+    def _layers_now(self) -> None:
         on = set(self.w_layers.value)
         names = self._layer_names
         self.r_trails.visible = names[0] in on
@@ -709,12 +751,18 @@ class Explorer:
         self.r_errors.visible = names[3] in on
 
     def _on_step(self, event=None) -> None:
+        self._schedule(self._step_now, now_if_on_doc_thread=True)
+
+    def _step_now(self) -> None:
         if self.result is None or self._suppress:
             return
         with self._hold():
             self._draw_graph()
 
     def _on_pair(self, event=None) -> None:
+        self._schedule(self._pair_now, now_if_on_doc_thread=True)
+
+    def _pair_now(self) -> None:
         if self.result is None or self._suppress:
             return
         with self._hold():

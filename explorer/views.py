@@ -475,6 +475,12 @@ def _pct(v) -> str:
     return "–" if v is None else f"{100 * v:.1f} %"
 
 
+def _ms(t: dict, stage: str) -> str:
+    """A stage time for display; a stage reused from the previous run (0 s) reads "reused"."""
+    v = float(t.get(stage, 0.0))
+    return "reused" if v == 0 else f"{v:.0f} ms"
+
+
 def numbers_markdown(num: dict) -> str:
     """The numbers view as a Markdown table (one row per stage)."""
     t = num["timings_ms"]
@@ -482,15 +488,15 @@ def numbers_markdown(num: dict) -> str:
     rows = [
         "| stage | result | error vs ground truth | time |",
         "|---|---|---|---|",
-        f"| 1 atoms | {num['n_atoms']} atoms; {cov} | – | {t.get('atoms', 0):.0f} ms |",
-        f"| 2 atom graph | {num['n_edges']} edges | – | {t.get('graph', 0):.0f} ms |",
+        f"| 1 atoms | {num['n_atoms']} atoms; {cov} | – | {_ms(t, 'atoms')} |",
+        f"| 2 atom graph | {num['n_edges']} edges | – | {_ms(t, 'graph')} |",
         f"| 3 multicut | {num['n_fine']} fine models | {_pct(num['error_fine'])} "
-        f"(points in atoms; a fine model counts as its majority motion) | {t.get('multicut', 0):.0f} ms |",
+        f"(points in atoms; a fine model counts as its majority motion) | {_ms(t, 'multicut')} |",
         f"| 4 fine → coarse | {num['n_motions']} motions | {_pct(num['error_coarse'])} (points in atoms) | "
-        f"{t.get('coarse', 0):.0f} ms |",
+        f"{_ms(t, 'coarse')} |",
         f"| 5 Random Voting | all {num['n_points']} points labelled | **{_pct(num['error_final'])}** "
-        f"(all points) | {t.get('voting', 0):.0f} ms |",
-        f"| total | | | {num['total_ms']:.0f} ms |",
+        f"(all points) | {_ms(t, 'voting')} |",
+        f"| total (this update) | | | {num['total_ms']:.0f} ms |",
     ]
     return "\n".join(rows)
 

@@ -45,8 +45,8 @@ class ViserView:
 
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner even when quiet
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
-        self.server.gui.configure_theme(show_share_button=False, control_layout="collapsible",
-                                        show_logo=False)
+        self.server.gui.configure_theme(show_share_button=False, control_layout="floating",
+                                        control_width="small", show_logo=False)
         self.server.scene.set_up_direction("+y")
         self._on_frame = on_frame
         self._frame = 0
@@ -54,13 +54,7 @@ class ViserView:
         self._result: laav.LaavResult | None = None
         self._map = None
         self._plane = None
-        with self.server.gui.add_folder("LAAV space-time view"):
-            self.server.gui.add_markdown(
-                "Trajectories run along **z = frame**. Spheres: atom centres at the current frame; "
-                "blue/red lines: atom-graph edges (join/cut cost). "
-                "The translucent plane is the current frame."
-            )
-            self._frame_box = self.server.gui.add_number("frame", initial_value=0, min=0, max=1, step=1)
+        self._frame_box = self.server.gui.add_number("frame", initial_value=0, min=0, max=1, step=1)
         self._frame_box.on_update(self._frame_from_viser)
 
     @property
@@ -90,7 +84,7 @@ class ViserView:
                                                 receive_shadow=False)
             self._frame_box.max = max(seq.n_frames - 1, 1)
             depth = m.dz * (seq.n_frames - 1)
-            self.server.initial_camera.position = (5.5, 3.0, -3.0)
+            self.server.initial_camera.position = (3.6, 2.2, -1.6)
             self.server.initial_camera.look_at = (0.0, 0.0, depth / 2)
         self.set_colors(colors)
         self.set_frame(frame)

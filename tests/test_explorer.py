@@ -1,0 +1,397 @@
+"""The explorer without a browser: build the app, set widget values, check the views' data.
+
+The app object is built outside a server, so results are applied directly by the worker
+thread; ``Explorer.wait()`` blocks until the newest request's result is on the views.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import laav
+
+pn = pytest.importorskip("panel")
+
+from explorer import Explorer, ExplorerState  # noqa: E402
+from explorer import views as V  # noqa: E402
+from explorer.cli import build_parser, main  # noqa: E402
+from explorer.demo import demo_path, demo_sequence  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _two_motion_sequence(n_frames: int = 12, n_points: int = 120, seed: int = 0) -> laav.Sequence:
+    """Two planar patches under different smooth affine motions (no laav.synthetic needed)."""
+    rng = np.random.default_rng(seed)
+    half = n_points // 2
+    a = rng.uniform([40, 60], [260, 400], (half, 2))
+    b = rng.uniform([360, 60], [600, 400], (n_points - half, 2))
+    t = np.linspace(0, 1, n_frames)[:, None, None]
+    pa = a[None] + t * np.array([60.0, 20.0]) + 0.05 * t * (a[None] - 150)
+    cb = b.mean(0)
+    ang = 0.35 * t[..., 0]
+    c, s = np.cos(ang), np.sin(ang)
+    rel = b[None] - cb
+    pb = np.stack([c * rel[..., 0] - s * rel[..., 1], s * rel[..., 0] + c * rel[..., 1]], -1) + cb
+    pb = pb + t * np.array([-30.0, 40.0])
+    pts = np.concatenate([pa, pb], axis=1) + rng.normal(0, 0.3, (n_frames, n_points, 2))
+    labels = np.r_[np.zeros(half, int), np.ones(n_points - half, int)]
+    return laav.Sequence(pts, labels, name="two_patches", image_size=(640, 480))
+
+
+@pytest.fixture(scope="module")
+def seq() -> laav.Sequence:
+    return _two_motion_sequence()
+
+
+@pytest.fixture
+def ex(seq):
+    e = Explorer(seq, viser=False)
+    assert e.wait(120), "first result did not arrive"
+    yield e
+    e.close()
+
+
+def _data(src, key):
+    return np.asarray(src.data[key], dtype=float).copy()
+
+
+# ---------------------------------------------------------------------------- pure views
+def test_views_are_pure_functions_of_the_result(seq):
+    res = laav.Pipeline(seq, 2).result
+    for mode in V.COLOR_MODES.values():
+        st = V.point_style(seq, res, mode)
+        assert st["color"].shape == (seq.n_points,)
+        assert all(c.startswith("#") and len(c) == 7 for c in st["color"].tolist())
+    fs = V.frame_sources(seq, res, 5, V.point_style(seq, res, "gt"), trail=5)
+    assert len(fs["points"]["x"]) == seq.n_points
+    assert len(fs["trails"]["x0"]) == 5 * seq.n_points
+    assert len(fs["atoms"]["x"]) == res.atoms.n_atoms
+    np.testing.assert_allclose(fs["points"]["x"], seq.points[5, :, 0])
+    # GAEC replay: step 0 = every atom alone; past the end = the final fine models
+    N = res.graph.n_nodes
+    assert len(np.unique(V.replay_labels(res, 0))) == N
+    K = len(res.multicut.contractions)
+    assert len(np.unique(V.replay_labels(res, K))) == N - K
+    np.testing.assert_array_equal(V.replay_labels(res, K + 1), res.multicut.atom_labels)
+    g = V.graph_sources(res, 3, K + 1)
+    assert len(g["joined"]["x0"]) + len(g["cut"]["x0"]) == res.graph.n_edges
+    assert len(g["cut"]["x0"]) == int(np.asarray(res.multicut.cut).sum())
+    z, factors = V.z_sources(res, seq)
+    n = res.multicut.n_models
+    assert len(factors) == n and len(z["z"]) == n * n
+    # a model's own F puts its frame-r points on their epipolar lines
+    e = V.epipolar_sources(seq, res, 0, 0)
+    if e["ok"]:
+        assert e["residual"] < 5.0
+    num = V.stage_numbers(seq, res)
+    assert 0 <= num["error_final"] <= 1 and num["n_atoms"] == res.atoms.n_atoms
+    assert "Random Voting" in V.numbers_markdown(num)
+
+
+def test_align_labels_renames_to_the_reference():
+    ref = np.array([0, 0, 1, 1, 2, 2])
+    pred = np.array([2, 2, 0, 0, 1, -1])
+    np.testing.assert_array_equal(V.align_labels(pred, ref), [0, 0, 1, 1, 2, -1])
+
+
+# ---------------------------------------------------------------------------- live updates
+def test_lambda_change_alters_z_and_not_the_atoms(ex):
+    z0 = _data(ex.src_z, "z")
+    atoms0 = _data(ex.src_atoms, "x")
+    atoms_obj = ex.result.atoms
+    ex.w_params["lam"].value = 7.5
+    assert ex.wait(60)
+    assert ex.result.params.lam == 7.5
+    assert ex.result.atoms is atoms_obj  # atoms reused, not recomputed
+    np.testing.assert_array_equal(_data(ex.src_atoms, "x"), atoms0)
+    assert not np.allclose(_data(ex.src_z, "z"), z0), "Z heat map did not change with lambda"
+    assert "λ = 7.5" in ex.fig_z.title.text
+
+
+def test_radius_change_alters_the_atoms(ex):
+    seeds0 = np.asarray(ex.result.atoms.seeds).copy()
+    r1_0 = _data(ex.src_atoms, "r1")
+    ex.w_params["r1"].value = 12.0
+    assert ex.wait(60)
+    assert ex.result.atoms.r1 == 12.0
+    r1 = _data(ex.src_atoms, "r1")
+    assert np.all(r1 == 12.0) and not np.array_equal(r1, r1_0)
+    assert len(r1) == ex.result.atoms.n_atoms
+    assert (len(seeds0) != ex.result.atoms.n_atoms
+            or not np.array_equal(seeds0, ex.result.atoms.seeds)
+            or ex.result.atoms.r1 != 20.0)
+
+
+def test_frame_change_moves_points_without_recomputing(ex, seq):
+    res = ex.result
+    gen = ex.state.generation
+    x0 = _data(ex.src_points, "x")
+    nodes0 = _data(ex.src_nodes, "x")
+    ex.w_frame.value = seq.n_frames - 1
+    x1 = _data(ex.src_points, "x")
+    assert not np.allclose(x0, x1)
+    np.testing.assert_allclose(x1, seq.points[-1, :, 0])
+    assert not np.allclose(nodes0, _data(ex.src_nodes, "x"))  # graph nodes follow the frame
+    assert ex.result is res and ex.state.generation == gen  # no recomputation
+
+
+def test_colour_by_and_gaec_step(ex):
+    ex.w_color.value = "atoms"
+    c_atoms = list(ex.src_points.data["color"])
+    ex.w_color.value = "errors"
+    assert set(ex.src_points.data["label"]) <= {"correct", "misclassified"}
+    assert list(ex.src_points.data["color"]) != c_atoms
+    ex.w_step.value = 0
+    assert len(ex.src_cut.data["x0"]) == ex.result.graph.n_edges  # nothing contracted yet
+    assert "step 0" in ex.graph_caption.object
+    ex.w_step.value = ex.w_step.end
+    assert "Final fine models" in ex.graph_caption.object
+
+
+def test_invalid_slider_combination_shows_a_message_and_keeps_the_result(ex):
+    res = ex.result
+    z = _data(ex.src_z, "z")
+    ex.w_params["r1"].value = 60.0  # R1 >= R2 (40)
+    assert ex.wait(30)
+    assert ex.alert.visible and "r2 must be larger than r1" in ex.alert.object
+    assert ex.result is res
+    np.testing.assert_array_equal(_data(ex.src_z, "z"), z)
+    ex.w_params["r1"].value = 20.0
+    assert ex.wait(60)
+    assert not ex.alert.visible
+    # 2C < C
+    ex.w_params["fine_models"].value = 1
+    assert ex.wait(30)
+    assert ex.alert.visible and "fine_models" in ex.alert.object
+    ex.w_params["fine_models"].value = 4
+    assert ex.wait(60)
+    assert not ex.alert.visible
+
+
+def test_bad_upload_shows_a_message_and_keeps_the_result(ex):
+    res = ex.result
+    ex.w_upload.filename = "broken_truth.mat"
+    ex.w_upload.value = b"this is not a MATLAB file"
+    assert ex.wait(30)
+    assert ex.alert.visible and "broken_truth.mat" in ex.alert.object
+    assert ex.result is res
+    assert not ex.load_bytes(b"x", "notes.txt")
+    assert ".npz" in ex.alert.object
+    # a well-formed file with a bad array
+    buf = io.BytesIO()
+    np.savez(buf, points=np.zeros((3, 4, 2)))
+    assert not ex.load_bytes(buf.getvalue(), "tiny.npz")
+    assert "tiny.npz" in ex.alert.object and ex.result is res
+
+
+def test_good_upload_replaces_the_sequence(ex, seq):
+    other = _two_motion_sequence(n_frames=9, n_points=100, seed=3)
+    buf = io.BytesIO()
+    np.savez(buf, points=other.points)  # no labels: C comes from the C box (2)
+    assert ex.load_bytes(buf.getvalue(), "unlabelled.npz")
+    assert ex.wait(60)
+    assert ex.sequence.name == "unlabelled" and ex.sequence.n_points == 100
+    assert len(ex.src_points.data["x"]) == 100
+    assert ex.w_frame.end == 8
+    assert ex.note.visible and "no ground truth" in ex.note.object
+    assert ex.w_color.value == "final (after Random Voting)"
+
+
+def test_reset_restores_defaults(ex):
+    ex.w_params["lam"].value = 3.0
+    ex.w_seed.value = 5
+    assert ex.wait(60)
+    ex.w_reset.clicks += 1
+    assert ex.wait(60)
+    d = laav.LaavParams()
+    assert ex.result.params.lam == d.lam and ex.result.seed == 0
+
+
+def test_exports(ex, seq):
+    csv = ex._export_csv().getvalue().splitlines()
+    assert csv[0].startswith("point,") and len(csv) == seq.n_points + 1
+    d = json.loads(ex._export_json().getvalue())
+    assert laav.LaavParams(**d["params"]) == ex.result.params and d["n_motions"] == 2
+    png = ex._export_png().getvalue()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+
+
+def test_plain_rv_comparison_is_cached_and_drawn(ex):
+    assert ex.wait(120, plain_rv=True)
+    assert len(ex.src_rv_plain.data["iteration"]) > 0
+    assert len(ex.src_rv_laav.data["iteration"]) == len(ex.result.voting.changed)
+    v = ex.state.plain_rv()
+    ex.w_params["lam"].value = 2.5  # RV settings unchanged: the cached run is reused
+    assert ex.wait(60, plain_rv=True)
+    assert ex.state.plain_rv() is v
+    assert "Plain RV" in ex.rv_md.object
+
+
+def test_newest_request_supersedes_stale_ones(seq):
+    st = ExplorerState(seq, autostart=False)
+    seen = []
+    st.on_result = lambda res, s, settings, gen: seen.append((gen, res.params.lam))
+    st.start()
+    assert st.wait(60)
+    gens = [st.request(params={"lam": lam}) for lam in (1.0, 1.5, 2.5, 3.5, 4.5, 5.5)]
+    assert st.wait(60)
+    assert seen[-1] == (gens[-1], 5.5)
+    assert st.result.params.lam == 5.5
+    assert len(seen) < 1 + len(gens)  # some stale requests were skipped or dropped
+    assert [g for g, _ in seen] == sorted(g for g, _ in seen)
+    st.close()
+
+
+def test_pipeline_errors_never_kill_the_session(seq, monkeypatch):
+    ex = Explorer(seq, viser=False)
+    try:
+        assert ex.wait(60)
+        res = ex.result
+
+        def boom(self, **kw):
+            raise RuntimeError("simulated bug")
+
+        monkeypatch.setattr(laav.Pipeline, "update", boom)
+        ex.w_params["lam"].value = 9.0
+        assert ex.wait(30)
+        assert ex.alert.visible and "simulated bug" in ex.alert.object and ex.result is res
+        monkeypatch.undo()
+        ex.w_params["lam"].value = 8.0
+        assert ex.wait(60)
+        assert ex.result.params.lam == 8.0 and not ex.alert.visible
+    finally:
+        ex.close()
+
+
+def test_two_explorers_are_independent(seq):
+    a, b = Explorer(seq, viser=False), Explorer(seq, viser=False)
+    try:
+        assert a.wait(60) and b.wait(60)
+        zb = _data(b.src_z, "z")
+        a.w_params["lam"].value = 6.0
+        assert a.wait(60)
+        assert b.result.params.lam == laav.LaavParams().lam
+        np.testing.assert_array_equal(_data(b.src_z, "z"), zb)
+    finally:
+        a.close()
+        b.close()
+
+
+def test_viser_view_follows_the_frame(seq):
+    pytest.importorskip("viser")
+    ex = Explorer(seq)
+    try:
+        assert ex.wait(60)
+        assert ex.viser is not None and ex.viser.port > 0
+        assert f":{ex.viser.port}/" in ex.viser_pane.object and "127.0.0.1" in ex.viser_pane.object
+        ex.w_frame.value = 7
+        assert ex.viser._frame == 7
+        assert abs(ex.viser._plane.position[2] - 7 * ex.viser._map.dz) < 1e-5
+        # moving viser's own frame box moves the panel slider
+        ex.viser._frame_box.value = 3
+        deadline = time.monotonic() + 5
+        while ex.w_frame.value != 3 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert ex.w_frame.value == 3
+    finally:
+        ex.close()
+
+
+def test_explorer_from_file_and_demo(tmp_path, seq):
+    p = laav.save_sequence(seq, tmp_path / "seq.npz")
+    ex = Explorer.from_file(p, viser=False)
+    try:
+        assert ex.wait(60) and ex.sequence.n_points == seq.n_points
+        assert ex.panel() is not None and ex.template() is not None
+    finally:
+        ex.close()
+    demo = demo_sequence()
+    assert demo.n_points >= 8
+    if demo_path() is not None:
+        assert demo_path().parent == REPO / "assets"
+
+
+# ---------------------------------------------------------------------------- CLI
+def test_cli_argument_errors_exit_2_with_a_message(tmp_path, capsys):
+    assert main([str(tmp_path / "missing_truth.mat")]) == 2
+    err = capsys.readouterr().err
+    assert "laav-explore: error:" in err and "missing_truth.mat" in err and "Traceback" not in err
+
+    unlabelled = tmp_path / "nolabels.npz"
+    np.savez(unlabelled, points=_two_motion_sequence().points)
+    assert main([str(unlabelled), "--no-browser"]) == 2
+    assert "--motions" in capsys.readouterr().err
+
+    assert main(["--motions", "0"]) == 2
+    assert "--motions" in capsys.readouterr().err
+    assert main(["--port", "70000"]) == 2
+    assert main(["--bogus"]) == 2
+    assert main([str(unlabelled), "--motions", "1000"]) == 2
+    assert "exceeds" in capsys.readouterr().err
+
+
+def test_cli_binds_localhost_by_default(monkeypatch, tmp_path):
+    assert build_parser().parse_args([]).host == "127.0.0.1"
+    seen = {}
+
+    class FakeLoop:
+        def add_callback(self, fn):
+            seen["browser_callback"] = fn
+
+        def start(self):
+            seen["started"] = True
+
+    class FakeServer:
+        io_loop = FakeLoop()
+
+        def start(self):
+            pass
+
+        def stop(self):
+            seen["stopped"] = True
+
+    def fake_serve(panels, **kw):
+        seen.update(kw)
+        return FakeServer()
+
+    monkeypatch.setattr(pn, "serve", fake_serve)
+    p = laav.save_sequence(_two_motion_sequence(), tmp_path / "s.npz")
+    assert main([str(p), "--no-browser", "--port", "0"]) == 0
+    assert seen["address"] == "127.0.0.1"
+    assert all(o.split(":")[0] in ("127.0.0.1", "localhost") for o in seen["websocket_origin"])
+    assert "browser_callback" not in seen and seen["started"] and seen["stopped"]
+
+
+# ---------------------------------------------------------------------------- notebook
+def test_notebook_runs_top_to_bottom():
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    nb = nbformat.read(REPO / "examples" / "explorer_notebook.ipynb", as_version=4)
+    client = nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
+                                     resources={"metadata": {"path": str(REPO)}})
+    client.execute()
+    outs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
+    assert not [o for o in outs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outs if o.output_type == "stream")
+    assert "atoms reused: True" in text and "Z changed: True" in text
+    html = [o for o in outs if o.output_type in ("display_data", "execute_result")
+            and "application/vnd.holoviews_exec.v0+json" in o.get("data", {})]
+    assert html, "the explorer did not display"
+
+
+def test_no_thread_leaks_after_close(seq):
+    before = threading.active_count()
+    ex = Explorer(seq, viser=False)
+    assert ex.wait(60)
+    ex.close()
+    time.sleep(0.5)
+    assert threading.active_count() <= before + 2
