@@ -134,10 +134,11 @@ def test_update_equals_fresh_segment(change):
     fresh = segment(seq, C, LaavParams().replace(**kw), seed=seed)
     assert_same_result(res, fresh)
     assert pipe.result is res
-    # and changing back returns to the original result
-    back = {k: (getattr(LaavParams(), k) if k not in ("seed", "n_motions") else
-                {"seed": 0, "n_motions": 3}[k]) for k in change}
-    assert_same_result(pipe.update(**back), segment(seq, 3, seed=0))
+    if set(change) & {"r1", "seed", "n_motions", "lam"}:
+        # and changing back returns to the original result (a few cases, for time)
+        back = {k: (getattr(LaavParams(), k) if k not in ("seed", "n_motions") else
+                    {"seed": 0, "n_motions": 3}[k]) for k in change}
+        assert_same_result(pipe.update(**back), segment(seq, 3, seed=0))
 
 
 def test_update_reuses_upstream_stages():
