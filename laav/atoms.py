@@ -18,7 +18,10 @@ Choices where the paper is vague (measured on Hopkins155):
   motion to reject a feature of another object.
 * **Minimal samples contain the seed**, so the atom is built around it, and all
   ``ransac_hypotheses`` samples are scored in one batched solve. The best consensus is
-  refitted by least squares and its inliers recomputed once.
+  refitted by least squares and its inliers recomputed until stable, judging fitted
+  features by their *leave-one-out* residual (residual / (1 - leverage)): a feature of
+  another motion far from the others otherwise drags the fit onto itself. An atom is
+  kept only if its final least-squares model holds every member within the threshold.
 """
 
 from __future__ import annotations
@@ -157,17 +160,34 @@ def _ransac_affine(points, cand, seed_pos, params, rng):
     inl = res < params.affine_threshold
     best = int(np.argmax(inl.sum(1) - 1e-6 * res.mean(1)))
     mask = inl[best]
-    for _ in range(2):  # least-squares refit on the consensus, then recompute inliers
-        if mask.sum() < 3:
+    for _ in range(4):  # least-squares refit on the consensus, then recompute inliers
+        if mask.sum() < 4:
             break
-        A1 = fit_affine(src[mask], dst[:, mask])
-        res1 = _rms_residuals(A1, src, dst)
-        new = res1 < params.affine_threshold
-        new[seed_pos] = new[seed_pos] or mask[seed_pos]
+        new = _loo_residuals(src, dst, mask) < params.affine_threshold
         if np.array_equal(new, mask):
             break
         mask = new
     return mask
+
+
+def _loo_residuals(src: np.ndarray, dst: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """RMS residuals under the affine fit on ``mask``, leave-one-out for the fitted points.
+
+    A fitted point's residual is divided by ``1 - h`` (``h`` its leverage), which is its
+    residual under the fit without it: a point of another motion that sits far from the
+    rest (high leverage) pulls the fit through itself and would otherwise look like an
+    inlier.
+    """
+    A = fit_affine(src[mask], dst[:, mask])
+    res = _rms_residuals(A, src, dst)
+    xs = src[mask]
+    c = xs.mean(0)
+    sc = np.sqrt(((xs - c) ** 2).sum(1).mean()) + 1e-12
+    X = np.hstack([(xs - c) / sc, np.ones((xs.shape[0], 1))])
+    G = X.T @ X
+    h = np.einsum("ij,jk,ik->i", X, np.linalg.pinv(G), X)
+    res[mask] = res[mask] / np.maximum(1.0 - h, 1e-3)
+    return res
 
 
 def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
@@ -212,6 +232,8 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
         mem = cand[mask]
         A = fit_affine(points[0, mem], points[:, mem])
         res = _rms_residuals(A, points[0, mem], points[:, mem])
+        if (res >= params.affine_threshold).any() or not mask[seed_pos]:
+            continue  # the final model does not hold all its members: no atom here
         atom = len(members)
         members.append(mem)
         seeds.append(s)

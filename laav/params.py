@@ -86,7 +86,7 @@ class LaavParams:
     r1: float = 20.0
     r2: float = 40.0
     atom_min_size: int = 4
-    affine_threshold: float = 1.5
+    affine_threshold: float = 2.0
     ransac_hypotheses: int = 24
     graph_neighbors: int = 5
     edge_scale: float = 2.0

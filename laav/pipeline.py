@@ -179,14 +179,15 @@ class Pipeline:
                 starts.append("atoms")
             starts = [s for s in starts if s is not None]
             start = min(starts, key=STAGES.index) if starts else None
-            old = (self.params, self.n_motions, self.seed)
+            old = (self.params, self.n_motions, self.seed, dict(self._stages))
             self.params, self.n_motions, self.seed = new_params, C, seed
             if start is None:
                 return self.result
             try:
                 self.result = self._run(start)
             except Exception:
-                self.params, self.n_motions, self.seed = old
+                # roll everything back, cached stage results included
+                self.params, self.n_motions, self.seed, self._stages = old
                 raise
             return self.result
 

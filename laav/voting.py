@@ -302,12 +302,18 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if points.ndim != 3 or points.shape[2] != 2:
         raise ValueError(f"points must have shape (F, P, 2), got {points.shape}")
     F, P, _ = points.shape
-    if not isinstance(n_motions, (int, np.integer)) or n_motions < 1:
+    if not np.isfinite(points).all():
+        raise ValueError("points contain NaN or infinite coordinates")
+    if (not isinstance(n_motions, (int, np.integer)) or isinstance(n_motions, bool)
+            or n_motions < 1):
         raise ValueError(f"n_motions must be a positive integer, got {n_motions!r}")
     C = int(n_motions)
     if C > P:
         raise ValueError(f"cannot split {P} points into {C} motions")
     params = LaavParams() if params is None else params
+    if C > 1 and params.rv_sample_size > P:
+        raise ValueError(f"rv_sample_size ({params.rv_sample_size}) exceeds the number of "
+                         f"points ({P})")
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     if C == 1 or F < 2:
         lab = np.zeros(P, dtype=np.int64)
