@@ -54,6 +54,7 @@ PARAM_SLIDERS = {
 }
 
 _TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
+_RV_TOOLS = "pan,wheel_zoom,reset"
 _EMPTY_PTS = {"x": [], "y": [], "color": [], "label": [], "index": []}
 
 
@@ -66,7 +67,8 @@ def _image_figure(title: str, frame_width: int, extent, **kw):
     x0, x1, y0, y1 = extent
     fh = int(round(frame_width * (y1 - y0) / max(x1 - x0, 1e-9)))
     kw.setdefault("toolbar_location", "right")
-    fig = figure(title=title, frame_width=frame_width, frame_height=max(fh, 80), tools=_TOOLS,
+    kw.setdefault("tools", _TOOLS)
+    fig = figure(title=title, frame_width=frame_width, frame_height=max(fh, 80),
                  x_range=Range1d(x0, x1), y_range=Range1d(y1, y0), match_aspect=True, **kw)
     fig.xaxis.axis_label = "x (px)"
     fig.yaxis.axis_label = "y (px, pointing down)"
@@ -103,12 +105,9 @@ class Explorer:
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None):
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False)
-        # Built inside a server session: results go through this document's event loop from the
-        # start (the figures join it only while the page is being built, and a worker thread must
-        # never touch them during that).
-        cur = pn.state.curdoc
-        self._session_doc = cur if cur is not None and cur.session_context is not None else None
-        self._doc_thread = threading.get_ident()  # the session's event-loop thread
+        self._session_doc = None
+        self._doc_thread = threading.get_ident()
+        self._capture_session()
         self._defaults = LaavParams()
         self._suppress = 0
         self._apply_lock = threading.RLock()
@@ -137,6 +136,21 @@ class Explorer:
         self.state.on_busy = self._on_busy
         self.state.on_plain_rv = self._on_plain_rv
         self.state.start()
+
+    def _capture_session(self) -> None:
+        # Built (or claimed) inside a server session: from now on results go through this
+        # document's event loop (the figures join the document while the page is being built,
+        # and a worker thread must never touch them during that).
+        cur = pn.state.curdoc
+        self._session_doc = cur if cur is not None and cur.session_context is not None else None
+        self._doc_thread = threading.get_ident()  # the session's event-loop thread
+
+    def attach_session(self) -> None:
+        """Adopt the current server session (for an explorer built ahead of time, outside it)."""
+        with self._apply_lock:  # an apply running now finishes first; later ones are scheduled
+            self._capture_session()
+            if self.viser is not None:
+                self.viser_pane.object = self._iframe_html()
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -290,8 +304,9 @@ class Explorer:
         self.src_epi_l = ColumnDataSource(dict(empty_p))
         self.src_epi_r = ColumnDataSource(dict(empty_p))
         self.src_epi_lines = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": []})
-        self.fig_epi_l = _image_figure("frame l", 200, ext, toolbar_location=None)
-        self.fig_epi_r = _image_figure("frame r with epipolar lines", 200, ext, toolbar_location=None)
+        self.fig_epi_l = _image_figure("frame l", 200, ext, toolbar_location=None, tools="")
+        self.fig_epi_r = _image_figure("frame r with epipolar lines", 200, ext, toolbar_location=None,
+                                       tools="")
         self.fig_epi_r.x_range = self.fig_epi_l.x_range
         self.fig_epi_r.y_range = self.fig_epi_l.y_range
         for fig, src in ((self.fig_epi_l, self.src_epi_l), (self.fig_epi_r, self.src_epi_r)):
@@ -309,9 +324,9 @@ class Explorer:
         self.src_rv_laav = ColumnDataSource(dict(empty_rv))
         self.src_rv_plain = ColumnDataSource(dict(empty_rv))
         self.fig_rv_changed = figure(title="Labels changed per iteration", width=520, height=260,
-                                     y_axis_type="log", tools=_TOOLS, toolbar_location="above")
+                                     y_axis_type="log", tools=_RV_TOOLS, toolbar_location="above")
         self.fig_rv_margin = figure(title="Mean vote margin per iteration", width=520, height=260,
-                                    tools=_TOOLS, toolbar_location="above")
+                                    tools=_RV_TOOLS, toolbar_location="above")
         for fig, col, ylab in ((self.fig_rv_changed, "changed_plot", "points whose label changed"),
                                (self.fig_rv_margin, "margin", "(best − 2nd best) / sum of votes")):
             fig.line("iteration", col, source=self.src_rv_laav, line_width=2.5, color="#1f77b4",
@@ -402,14 +417,26 @@ class Explorer:
             "**no ground truth** (set C below)"
         return f"**{seq.name}**: {seq.n_points} points, {seq.n_frames} frames, {gt}."
 
-    def template(self, title: str = "LAAV explorer") -> pn.template.BootstrapTemplate:
-        """The page (a BootstrapTemplate: loads all its resources from the server)."""
+    def template(self, title: str = "LAAV explorer", lazy: bool | None = None):
+        """The page (a BootstrapTemplate: loads all its resources from the server).
+
+        ``lazy`` (default: when served) sends the frame view, 3-D view and numbers first and
+        adds the lower views (graph, coarse merges, RV) once the page has loaded, so the page
+        appears sooner.
+        """
+        n_first = 5  # status, alert, note, frame + 3-D row, numbers
+        if lazy is None:
+            lazy = self._session_doc is not None
+        main = pn.Column(*(self.main[:n_first] if lazy else self.main), sizing_mode="stretch_width")
+        if lazy:
+            rest = self.main[n_first:]
+            pn.state.onload(lambda: main.extend(rest))
+        self.main_column = main
         # one root per area: every extra document root costs a full model walk on page load
         return pn.template.BootstrapTemplate(
             title=f"{title} — Locally Affine Atom Voting, stage by stage",
             sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
-            main=[pn.Column(*self.main, sizing_mode="stretch_width")], sidebar_width=330,
-            header_background="#2c4a66")
+            main=[main], sidebar_width=330, header_background="#2c4a66")
 
     def panel(self) -> pn.viewable.Viewable:
         """The whole explorer as one panel layout (for notebooks)."""

@@ -71,23 +71,54 @@ def _warm_pipeline(seq, n_motions, seed) -> Future:
 
 
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
-                warm: Future | None = None, created: list | None = None, viser: bool = True):
+                warm: Future | None = None, created: list | None = None, viser: bool = True,
+                prebuild: bool = False):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
+    ``warm``: a pipeline future for the first tab. ``prebuild``: build the first tab's
+    explorer now, in a background thread, while the server starts and the browser opens.
     ``created`` (optional list) receives every Explorer built (tests and benchmarks use it).
     """
-    warm_box = [warm]
+    iframe_host = None if host in ("0.0.0.0", "", "::") else host
+    spare: list = []
     lock = threading.Lock()
+
+    def build(pipe=None):
+        from .app import Explorer
+
+        return Explorer(seq, n_motions, seed=seed, viser=viser, viser_host=host,
+                        iframe_host=iframe_host, pipeline=pipe)
+
+    if prebuild:
+        fut: Future = Future()
+
+        def run():
+            try:
+                fut.set_result(build(warm))
+            except BaseException as exc:  # noqa: BLE001 - the session builds its own then
+                fut.set_exception(exc)
+
+        threading.Thread(target=run, name="laav-explore-prebuild", daemon=True).start()
+        spare.append(fut)
+        warm = None
+
+    warm_left = [warm]
 
     def make_app():
         import panel as pn
 
-        from .app import Explorer
-
         with lock:
-            pipe, warm_box[0] = warm_box[0], None
-        ex = Explorer(seq, n_motions, seed=seed, viser=viser, viser_host=host,
-                      iframe_host=None if host in ("0.0.0.0", "", "::") else host, pipeline=pipe)
+            pre = spare.pop() if spare else None
+            pipe, warm_left[0] = warm_left[0], None
+        ex = None
+        if pre is not None:
+            try:
+                ex = pre.result(timeout=60)
+                ex.attach_session()
+            except Exception:  # build a fresh one below
+                ex = None
+        if ex is None:
+            ex = build(pipe)
         if created is not None:
             created.append(ex)
         pn.state.on_session_destroyed(lambda ctx: ex.close())
@@ -141,9 +172,9 @@ def main(argv: list[str] | None = None) -> int:
     else:
         origins = [f"{args.host}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
     try:
-        server = pn.serve({"/": app_factory(seq, C, args.seed, args.host, warm)}, port=port,
-                          address=args.host, websocket_origin=origins, show=False, start=False,
-                          title=f"LAAV explorer: {seq.name}", verbose=False)
+        factory = app_factory(seq, C, args.seed, args.host, warm, prebuild=True)
+        server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
+                          show=False, start=False, title=f"LAAV explorer: {seq.name}", verbose=False)
     except OSError as exc:
         return _fail(parser, f"cannot listen on {args.host}:{port}: {exc}")
     shown = "localhost" if args.host in ("0.0.0.0", "", "::") else args.host

@@ -200,7 +200,11 @@ class ExplorerState:
             self._target, self._target_seq = target, seq
             self._pending += 1
         self._notify_busy()
-        self._worker.submit(self._job, gen, kind, seq, target, pipeline)
+        try:
+            self._worker.submit(self._job, gen, kind, seq, target, pipeline)
+        except RuntimeError:  # closed
+            with self._lock:
+                self._pending -= 1
         return gen
 
     def _notify_busy(self):
@@ -293,7 +297,10 @@ class ExplorerState:
         if self._closed:
             return None
         seq, s = self.sequence, self.settings
-        return self._rv_worker.submit(self._rv_job, key, seq, s)
+        try:
+            return self._rv_worker.submit(self._rv_job, key, seq, s)
+        except RuntimeError:  # closed, or the interpreter is shutting down
+            return None
 
     def _rv_job(self, key, seq, s: Settings) -> None:
         if key != self._rv_key:

@@ -1,0 +1,170 @@
+"""The explorer in headless Chromium (Debian's /usr/bin/chromium, never a downloaded one).
+
+Serves the app with ``pn.serve(threaded=True)`` on a free port, loads it with Playwright,
+fails on any request that leaves 127.0.0.1/localhost, moves the λ slider in the page,
+checks that the views changed (in the server's explorer and in the browser's bokeh models:
+titles are drawn on a canvas), that an impossible R1 shows a message, that a second tab is
+independent, and saves screenshots (``$LAAV_EXPLORER_SHOTS`` or pytest's tmp dir).
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+CHROMIUM = Path("/usr/bin/chromium")
+if not CHROMIUM.exists():
+    pytest.skip("Debian's chromium is not installed (apt-get install -y chromium)", allow_module_level=True)
+sync_api = pytest.importorskip("playwright.sync_api")
+pn = pytest.importorskip("panel")
+
+import laav  # noqa: E402
+from explorer.cli import app_factory  # noqa: E402
+
+ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+LOCAL = ("http://127.0.0.1", "ws://127.0.0.1", "http://localhost", "ws://localhost", "data:", "blob:",
+         "about:")
+
+JS_SOURCES = """() => {
+  const out = {};
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.type === 'ColumnDataSource' && m.data.z !== undefined) out.z = Array.from(m.data.z);
+    if (m.type === 'ColumnDataSource' && m.data.index !== undefined) out.points = m.data.index.length;
+    if (m.type === 'ColumnDataSource' && m.data.r1 !== undefined) out.r1 = Array.from(m.data.r1);
+    if (m.type === 'Title' && m.text.startsWith('Affinity Z')) out.ztitle = m.text;
+  }
+  return out;
+}"""
+
+JS_SET_SLIDER = """([prefix, value]) => {
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.type === 'Slider' && typeof m.title === 'string' && m.title.startsWith(prefix)) {
+      m.value = value; m.value_throttled = value; return m.title;
+    }
+  }
+  return null;
+}"""
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait_listening(port: int, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            socket.create_connection(("127.0.0.1", port), 0.2).close()
+            return
+        except OSError:
+            time.sleep(0.05)
+    raise TimeoutError(f"nothing listens on port {port}")
+
+
+def _sequence() -> laav.Sequence:
+    from explorer.demo import demo_path, demo_sequence
+
+    p = demo_path()
+    return laav.load_sequence(p) if p else demo_sequence()
+
+
+def _wait_for(pred, timeout: float, what: str):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        v = pred()
+        if v:
+            return v
+        time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_explorer_in_chromium(tmp_path):
+    shots = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
+    shots.mkdir(parents=True, exist_ok=True)
+    seq = _sequence()
+    created: list = []
+    port = _free_port()
+    server = pn.serve({"/": app_factory(seq, None, created=created)}, port=port, address="127.0.0.1",
+                      websocket_origin=[f"127.0.0.1:{port}"], show=False, threaded=True, verbose=False)
+    outside: list[str] = []
+    sockets: list[str] = []
+    try:
+        _wait_listening(port)
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
+            try:
+                context = browser.new_context(viewport={"width": 1600, "height": 1000})
+
+                def route(r):
+                    url = r.request.url
+                    if url.startswith(LOCAL):
+                        r.continue_()
+                    else:
+                        outside.append(url)
+                        r.abort()
+
+                context.route("**/*", route)
+                page = context.new_page()
+                page.on("websocket", lambda ws: sockets.append(ws.url))
+                t0 = time.monotonic()
+                page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+                page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+                ex = _wait_for(lambda: created[0] if created else None, 10, "the session's explorer")
+                assert ex.wait(60), "the first result did not arrive"
+                page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=20000)
+                load_s = time.monotonic() - t0
+                before = page.evaluate(JS_SOURCES)
+                assert before["points"] == seq.n_points
+                page.screenshot(path=str(shots / "explorer_loaded.png"))
+
+                # move λ in the page: the server recomputes and the browser's Z changes
+                lam0 = ex.result.params.lam
+                atoms0 = ex.result.atoms
+                target = round(lam0 * 2 + 0.5, 1)
+                assert page.evaluate(JS_SET_SLIDER, ["λ", target]) is not None
+                _wait_for(lambda: ex.result.params.lam == target and ex.wait(1), 60, "the λ result")
+                assert ex.result.atoms is atoms0
+                _wait_for(lambda: f"λ = {target:g}" in page.evaluate(JS_SOURCES).get("ztitle", ""), 20,
+                          "the Z title in the browser")
+                after = page.evaluate(JS_SOURCES)
+                assert after["z"] != before["z"], "Z did not change in the browser"
+                assert after["r1"] == before["r1"], "atoms changed with λ"
+
+                # an impossible R1 shows a message in the page and keeps the result
+                res = ex.result
+                assert page.evaluate(JS_SET_SLIDER, ["R1", 90.0]) is not None
+                page.get_by_text("Cannot use these settings").first.wait_for(timeout=20000)
+                assert ex.result is res
+
+                # the 3-D view is served by this process on 127.0.0.1 and connects
+                assert ex.viser is not None
+                _wait_for(lambda: any(f":{ex.viser.port}" in u for u in sockets), 30, "viser's websocket")
+                time.sleep(1.5)
+                page.screenshot(path=str(shots / "explorer_after_lambda.png"))
+
+                # a second tab gets its own explorer, unaffected by the first
+                page2 = context.new_page()
+                page2.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+                ex2 = _wait_for(lambda: created[1] if len(created) > 1 else None, 30, "a second session")
+                assert ex2 is not ex and ex2.viser.port != ex.viser.port
+                assert ex2.wait(60)
+                assert ex2.result.params.lam == laav.LaavParams().lam
+                assert ex2.result.params.r1 == laav.LaavParams().r1
+                page2.close()
+            finally:
+                browser.close()
+    finally:
+        server.stop()
+        for e in created:
+            e.close()
+    assert not outside, f"requests left 127.0.0.1: {outside}"
+    print(f"page with first result in {load_s:.1f} s; screenshots in {shots}")
