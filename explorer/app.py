@@ -217,7 +217,7 @@ class Explorer:
                                                 label="Views (PNG)", color="primary",
                                                 embed=False, width=290)
         self.w_step = pn.widgets.IntSlider(label="GAEC contraction step (rightmost = final fine models)",
-                                           start=0, end=1, value=1, width=540)
+                                           start=0, end=1, value=1, width=520)
         self.w_pair_j = pn.widgets.Select(label="epipolar check: j", options=["f1"], width=105)
         self.w_pair_k = pn.widgets.Select(label="and k", options=["f1"], width=105)
         self.w_frame.param.watch(self._on_frame, "value")
@@ -236,7 +236,7 @@ class Explorer:
         self.src_atoms = ColumnDataSource({"x": [], "y": [], "r1": [], "r2": [], "color": [], "atom": []})
         self.src_unassigned = ColumnDataSource({"x": [], "y": []})
         self.src_errors = ColumnDataSource({"x": [], "y": []})
-        f = self.fig_frame = _image_figure("Points at frame 0", 430, ext)
+        f = self.fig_frame = _image_figure("Points at frame 0", 410, ext)
         self.r_trails = f.segment("x0", "y0", "x1", "y1", source=self.src_trails, line_color="color",
                                   line_alpha="alpha", line_width=1.5)
         self.r_r2 = f.circle("x", "y", radius="r2", source=self.src_atoms, fill_alpha=0, line_color="color",
@@ -246,8 +246,8 @@ class Explorer:
                              legend_label="atom R1")
         self.r_points = f.scatter("x", "y", source=self.src_points, size=6, fill_color="color",
                                   line_color="color", legend_field="label")
-        self.r_unassigned = f.scatter("x", "y", source=self.src_unassigned, marker="x", size=9,
-                                      line_color="black", line_width=2, legend_label="in no atom")
+        self.r_unassigned = f.scatter("x", "y", source=self.src_unassigned, marker="x", size=7,
+                                      line_color="black", line_width=1.5, legend_label="in no atom")
         self.r_errors = f.scatter("x", "y", source=self.src_errors, marker="circle", size=14,
                                   fill_alpha=0, line_color=V.ERROR_RED, line_width=2,
                                   legend_label="misclassified")
@@ -260,7 +260,7 @@ class Explorer:
         # 2 multicut graph
         # RdBu11 runs blue -> red; cost > 0 (join) is blue
         self.cost_mapper = LinearColorMapper(palette=list(RdBu11)[::-1], low=-1, high=1)
-        g = self.fig_graph = _image_figure("Atom graph at frame 0", 430, ext)
+        g = self.fig_graph = _image_figure("Atom graph at frame 0", 410, ext)
         empty_e = {"x0": [], "y0": [], "x1": [], "y1": [], "cost": [], "error": [], "a": [], "b": []}
         self.src_joined = ColumnDataSource(dict(empty_e))
         self.src_cut = ColumnDataSource(dict(empty_e))
@@ -269,10 +269,11 @@ class Explorer:
                                            "members": [], "size": []})
         g.segment("x0", "y0", "x1", "y1", source=self.src_step, line_color="#222222", line_alpha=0.35,
                   line_width=10, legend_label="contracted at this step")
-        g.segment("x0", "y0", "x1", "y1", source=self.src_joined, line_width=2.5,
-                  line_color={"field": "cost", "transform": self.cost_mapper}, legend_label="edge kept")
+        by_cost = {"field": "cost", "transform": self.cost_mapper}
+        g.segment("x0", "y0", "x1", "y1", source=self.src_joined, line_width=2.5, line_color=by_cost,
+                  legend_label="kept edge (solid)")
         g.segment("x0", "y0", "x1", "y1", source=self.src_cut, line_width=1.8, line_dash="dashed",
-                  line_color={"field": "cost", "transform": self.cost_mapper}, legend_label="edge cut")
+                  line_color=by_cost, legend_label="cut edge (dashed)")
         r_nodes = g.scatter("x", "y", source=self.src_nodes, size="size", fill_color="color",
                             line_color="black", line_width=0.8, legend_label="atom (colour = cluster)")
         g.add_tools(HoverTool(renderers=[r_nodes], tooltips=[("atom", "@atom"), ("cluster", "@cluster"),
@@ -304,17 +305,21 @@ class Explorer:
         self.src_epi_l = ColumnDataSource(dict(empty_p))
         self.src_epi_r = ColumnDataSource(dict(empty_p))
         self.src_epi_lines = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": []})
-        self.fig_epi_l = _image_figure("frame l", 200, ext, toolbar_location=None, tools="")
-        self.fig_epi_r = _image_figure("frame r with epipolar lines", 200, ext, toolbar_location=None,
+        self.fig_epi_l = _image_figure("frame l", 230, ext, toolbar_location=None, tools="")
+        self.fig_epi_r = _image_figure("frame r with epipolar lines", 230, ext, toolbar_location=None,
                                        tools="")
         self.fig_epi_r.x_range = self.fig_epi_l.x_range
         self.fig_epi_r.y_range = self.fig_epi_l.y_range
         for fig, src in ((self.fig_epi_l, self.src_epi_l), (self.fig_epi_r, self.src_epi_r)):
             fig.scatter("x", "y", source=src, size=5, fill_color="color", line_color="color",
                         legend_field="model")
-            fig.legend.label_text_font_size = "8pt"
-            fig.legend.location = "top_left"
-            fig.legend.background_fill_alpha = 0.6
+            leg = fig.legend[0]
+            fig.center = [c for c in fig.center if not isinstance(c, Legend)]
+            leg.orientation = "horizontal"
+            leg.label_text_font_size = "8pt"
+            leg.padding = 2
+            leg.margin = 2
+            fig.add_layout(leg, "below")
             fig.title.text_font_size = "10pt"
         self.fig_epi_r.segment("x0", "y0", "x1", "y1", source=self.src_epi_lines, line_color="color",
                                line_alpha=0.55, line_width=1)
@@ -323,11 +328,11 @@ class Explorer:
         empty_rv = {"iteration": [], "changed": [], "changed_plot": [], "margin": []}
         self.src_rv_laav = ColumnDataSource(dict(empty_rv))
         self.src_rv_plain = ColumnDataSource(dict(empty_rv))
-        self.fig_rv_changed = figure(title="Labels changed per iteration", width=520, height=260,
+        self.fig_rv_changed = figure(title="Labels changed per iteration", width=520, height=235,
                                      y_axis_type="log", tools=_RV_TOOLS, toolbar_location="above")
-        self.fig_rv_margin = figure(title="Mean vote margin per iteration", width=520, height=260,
+        self.fig_rv_margin = figure(title="Mean vote margin per iteration", width=520, height=235,
                                     tools=_RV_TOOLS, toolbar_location="above")
-        for fig, col, ylab in ((self.fig_rv_changed, "changed_plot", "points whose label changed"),
+        for fig, col, ylab in ((self.fig_rv_changed, "changed_plot", "labels changed (0 drawn as ½)"),
                                (self.fig_rv_margin, "margin", "(best − 2nd best) / sum of votes")):
             fig.line("iteration", col, source=self.src_rv_laav, line_width=2.5, color="#1f77b4",
                      legend_label="LAAV fine-tuning")
@@ -363,13 +368,13 @@ class Explorer:
         self.status = pn.pane.Markdown("Computing the first result…", margin=(4, 6))
         self.seq_info = pn.pane.Markdown(self._seq_text(seq), width=290, margin=(0, 10))
         self.numbers = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
-        self.graph_caption = pn.pane.Markdown("", width=540, margin=(0, 10))
-        self.merge_md = pn.pane.Markdown("", width=230, margin=(0, 6))
-        self.epi_caption = pn.pane.Markdown("", width=540, margin=(0, 10))
-        self.rv_md = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
+        self.graph_caption = pn.pane.Markdown("", width=520, margin=(0, 10))
+        self.merge_md = pn.pane.Markdown("", width=250, margin=(0, 6))
+        self.epi_caption = pn.pane.Markdown("", width=500, margin=(0, 10))
+        self.rv_md = pn.pane.Markdown("", width=520, margin=(0, 10))
         self.frame_caption = pn.pane.Markdown("", width=600, margin=(0, 10))
         if self.viser is not None:
-            self.viser_pane = pn.pane.HTML(self._iframe_html(), width=560, height=500, margin=0)
+            self.viser_pane = pn.pane.HTML(self._iframe_html(), width=550, height=480, margin=0)
         else:
             msg = getattr(self, "_viser_error", "the 3-D view is switched off")
             self.viser_pane = pn.pane.Markdown(f"*{msg}*", width=600, height=80)
@@ -389,18 +394,21 @@ class Explorer:
         self.v_graph = _card("2 · Multicut graph of atoms (GAEC replay)", pn.pane.Bokeh(self.fig_graph),
                              self.w_step, self.graph_caption)
         self.v_coarse = _card(
-            "3 · Fine models merged into motions",
-            pn.Row(pn.pane.Bokeh(self.fig_z), pn.Column(self.merge_md, pn.Row(self.w_pair_j, self.w_pair_k))),
-            pn.Row(pn.pane.Bokeh(self.fig_epi_l), pn.pane.Bokeh(self.fig_epi_r)), self.epi_caption)
+            "3 · Fine models merged into motions (fine-to-coarse)",
+            pn.Row(pn.pane.Bokeh(self.fig_z), self.merge_md,
+                   pn.Column(pn.Row(self.w_pair_j, self.w_pair_k),
+                             pn.Row(pn.pane.Bokeh(self.fig_epi_l), pn.pane.Bokeh(self.fig_epi_r)),
+                             self.epi_caption)),
+            sizing_mode="stretch_width")
         self.v_rv = _card("4 · Random Voting convergence: LAAV fine-tuning vs plain RV",
-                          pn.Row(pn.pane.Bokeh(self.fig_rv_changed), pn.pane.Bokeh(self.fig_rv_margin)),
+                          pn.pane.Bokeh(self.fig_rv_changed), pn.pane.Bokeh(self.fig_rv_margin),
                           self.rv_md)
         self.v_numbers = _card("5 · Numbers: every stage against the ground truth", self.numbers,
                                sizing_mode="stretch_width")
         self.main = [
             pn.Row(self.spinner, self.status), self.alert, self.note,
             pn.Row(self.v_frame, self.v_viser), self.v_numbers,
-            pn.Row(self.v_graph, self.v_coarse), self.v_rv,
+            pn.Row(self.v_graph, self.v_rv), self.v_coarse,
         ]
 
     def _iframe_html(self) -> str:
@@ -409,7 +417,7 @@ class Explorer:
             hdr = (pn.state.headers or {}).get("Host", "") if pn.state.curdoc else ""
             host = hdr.rsplit(":", 1)[0] if hdr else "127.0.0.1"
         return (f'<iframe src="http://{host}:{self.viser.port}/" title="LAAV 3-D view (viser)" '
-                f'style="width:560px;height:500px;border:1px solid #ccc;border-radius:4px"></iframe>')
+                f'style="width:550px;height:480px;border:1px solid #ccc;border-radius:4px"></iframe>')
 
     @staticmethod
     def _seq_text(seq: laav.Sequence) -> str:
@@ -670,10 +678,11 @@ class Explorer:
         f2c = np.asarray(res.coarse.fine_to_coarse)
         same = "the same motion" if f2c[j] == f2c[k] else "different motions"
         self.epi_caption.object = (
-            f"F is fitted on all points of f{j + 1} and f{k + 1} between frames {fl} and {fr}. Lines through "
-            f"the frame-r points mean one rigid motion explains both models. Mean distance of the drawn "
-            f"points to their lines: **{d['residual']:.1f} px**; mean epipolar distance used for Z: "
-            f"{d['distance']:.1f} px². The two models were merged into {same}.")
+            f"One F is fitted on all points of f{j + 1} and f{k + 1} between frames {fl} and {fr}; each "
+            f"frame-l point gives a line in frame r. If one rigid motion explains both models, their "
+            f"frame-r points lie on their lines. Mean distance to the lines: f{j + 1} "
+            f"**{d['residual_j']:.1f} px**, f{k + 1} **{d['residual_k']:.1f} px** (mean epipolar distance "
+            f"behind Z: {d['distance']:.1f} px²). Spectral clustering put them in {same}.")
 
     def _draw_rv(self, laav_voting, plain) -> None:
         self.src_rv_laav.data = V.rv_sources(laav_voting)

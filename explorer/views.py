@@ -160,8 +160,10 @@ def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style
     f = int(np.clip(frame, 0, F - 1))
     xy = pts[f]
     color = style["color"]
-    out = {"points": {"x": xy[:, 0], "y": xy[:, 1], "color": color, "label": style["label"],
-                      "index": np.arange(seq.n_points)}}
+    # points in label order, so the legend lists "motion 1, motion 2, ..." in order
+    order = np.argsort(style["label"], kind="stable")
+    out = {"points": {"x": xy[order, 0], "y": xy[order, 1], "color": color[order],
+                      "label": style["label"][order], "index": order}}
     f0 = max(0, f - trail)
     if f > f0:
         seg = pts[f0:f + 1]  # (t+1, P, 2)
@@ -360,7 +362,8 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     frame r), ``lines`` (x0, y0, x1, y1, color: epipolar lines in frame r of up to
     ``max_lines`` frame-l points, from ``Coarse.pair_fundamentals[j, k]``), ``frames``
     (l, r), ``distance`` (``Coarse.epipolar_distance[j, k]``), ``residual`` (mean distance
-    in px of the drawn frame-r points to their lines), ``ok`` (False when no F exists).
+    in px of the drawn frame-r points to their lines; ``residual_j`` / ``residual_k`` per
+    model), ``ok`` (False when no F exists).
     """
     co = result.coarse
     n = np.asarray(co.fine_to_coarse).size
@@ -369,6 +372,7 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     blank = {"left": empty, "right": empty,
              "lines": {"x0": e, "y0": e, "x1": e, "y1": e, "color": np.zeros(0, "U7")},
              "frames": (0, seq.n_frames - 1), "distance": float("nan"), "residual": float("nan"),
+             "residual_j": float("nan"), "residual_k": float("nan"),
              "ok": False}
     if not (0 <= j < n and 0 <= k < n):
         return blank
@@ -403,6 +407,9 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
                   FINE_COLORS[k % len(FINE_COLORS)]).astype("U7")
     out["lines"] = {"x0": X0, "y0": Y0, "x1": X1, "y1": Y1, "color": lc}
     out["residual"] = float(resid.mean()) if resid.size else float("nan")
+    in_j = fine[sel] == j
+    out["residual_j"] = float(resid[in_j].mean()) if in_j.any() else float("nan")
+    out["residual_k"] = float(resid[~in_j].mean()) if (~in_j).any() else out["residual_j"]
     out["ok"] = True
     return out
 
@@ -423,11 +430,17 @@ def rv_sources(voting: laav.Voting | None) -> dict:
 def _rv_line(voting: laav.Voting | None, what: str) -> str:
     if voting is None:
         return f"**{what}:** computing…"
-    its = ", ".join(str(int(t)) for t in voting.trial_iterations) or str(voting.n_iterations)
+    per = [int(t) for t in voting.trial_iterations]
     conv = "converged" if voting.converged else "**not converged** (hit the iteration cap)"
-    trials = f" over {voting.n_trials} trials (iterations per trial: {its})" if voting.n_trials > 1 else ""
-    extra = f"; the final refinement moved {voting.refined} points" if voting.refined else ""
-    return f"**{what}:** {len(voting.changed)} iterations in the shown trial, {conv}{trials}{extra}."
+    trials = ""
+    if voting.n_trials > 1:
+        if per and len(set(per)) == 1:
+            trials = f"; {voting.n_trials} trials of {per[0]} iterations each"
+        else:
+            shown = ", ".join(map(str, per[:6])) + (", …" if len(per) > 6 else "")
+            trials = f"; {voting.n_trials} trials ({shown} iterations)"
+    extra = f"; refinement then moved {voting.refined} points" if voting.refined else ""
+    return f"**{what}:** {len(voting.changed)} iterations, {conv}{trials}{extra}."
 
 
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None) -> str:

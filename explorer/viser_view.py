@@ -84,7 +84,7 @@ class ViserView:
                                                 receive_shadow=False)
             self._frame_box.max = max(seq.n_frames - 1, 1)
             depth = m.dz * (seq.n_frames - 1)
-            self.server.initial_camera.position = (3.6, 2.2, -1.6)
+            self.server.initial_camera.position = (2.6, 2.0, -2.6)
             self.server.initial_camera.look_at = (0.0, 0.0, depth / 2)
         self.set_colors(colors)
         self.set_frame(frame)
