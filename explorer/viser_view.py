@@ -94,6 +94,11 @@ class ViserView:
         if seq is None:
             return
         rgb = V.hex_to_rgb(colors)
+        if getattr(self, "_traj_key", None) is not None and self._traj_key[0] is seq \
+                and np.array_equal(self._traj_key[1], rgb):
+            self._draw_frame_items()  # same trajectories and colours: only atoms/edges may change
+            return
+        self._traj_key = (seq, rgb)
         F = seq.n_frames
         xyz = m(seq.points, np.arange(F)[:, None])  # (F, P, 3)
         segs = np.stack([xyz[:-1], xyz[1:]], axis=2).reshape(-1, 2, 3)  # ((F-1)*P, 2, 3)
