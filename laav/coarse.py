@@ -111,13 +111,14 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
     """Random Voting in which every fine model votes as one unit.
 
     Each trial starts from a random assignment of the fine models to ``n_motions``
-    motions. Every iteration draws a frame pair, fits one fundamental matrix per motion
-    to 8 of its features (normalised 8-point), lets every atom feature vote
+    motions; all trials run at once (batched fits). Every iteration draws a frame pair,
+    fits one fundamental matrix per motion to 8 of its features (normalised 8-point),
+    lets every atom feature vote
     ``exp(-lam d)`` (Sampson distance ``d``), averages the votes over each model's
     features and moves each model to its best motion; votes decay by 0.9 (RV's usual
     forgetting factor; a fixed constant so that the coarse stage does not depend on the
     fine-tuning's ``rv_alpha``).
-    A trial ends when no model moved for ``patience`` iterations.
+    Voting stops when, in every trial, no model moved for ``patience`` iterations.
 
     Parameters
     ----------
@@ -145,22 +146,21 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
     onehot = np.zeros((n_models, cov.size))
     onehot[f, np.arange(cov.size)] = 1.0
     onehot /= np.maximum(onehot.sum(1, keepdims=True), 1.0)
-    out = np.empty((n_trials, n_models), dtype=np.int64)
-    for t in range(n_trials):
-        ml = rng.permutation(np.arange(n_models) % n_motions)
-        hv = np.zeros((cov.size, n_motions))
-        still = 0
-        for _ in range(max_iter):
-            left = int(rng.integers(0, F - gap))
-            right = int(rng.integers(left + gap, F))
-            hv += vote(pts, ml[f], hv, (left, right), params.lam, 8, rng)
-            new = (onehot @ hv).argmax(1)
-            still = still + 1 if np.array_equal(new, ml) else 0
-            ml = new
-            hv *= _POOLED_ALPHA
-            if still >= patience:
-                break
-        out[t] = ml
+    # all trials advance together: one batched fit of n_trials x n_motions matrices
+    ml = np.stack([rng.permutation(np.arange(n_models) % n_motions) for _ in range(n_trials)])
+    hv = np.zeros((n_trials, cov.size, n_motions))
+    still = np.zeros(n_trials, dtype=np.int64)
+    for _ in range(max_iter):
+        left = int(rng.integers(0, F - gap))
+        right = int(rng.integers(left + gap, F))
+        hv += vote(pts, ml[:, f], hv, (left, right), params.lam, 8, rng)
+        new = np.einsum("np,tpc->tnc", onehot, hv).argmax(-1)
+        still = np.where((new == ml).all(axis=1), still + 1, 0)
+        ml = new
+        hv *= _POOLED_ALPHA
+        if (still >= patience).all():
+            break
+    out = ml
     return out
 
 

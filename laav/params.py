@@ -78,6 +78,9 @@ class LaavParams:
     rv_anchor : float
         Votes added at every iteration to each atom-labelled feature for its start label
         (a persistent prior; 0 leaves only the decaying initial votes).
+    rv_atom_pooling : float
+        In LAAV's fine-tuning, share (0..1) of an atom feature's votes replaced at every
+        iteration by the mean votes of its atoms (atoms vote as units; 0 = off).
     rv_refine : bool
         After voting, reassign each point to the motion whose fundamental matrices (fitted
         on the motion's points over many frame pairs) explain it best.
@@ -109,6 +112,7 @@ class LaavParams:
     rv_consensus: str = "coassociation"
     rv_label_weight: float = 5.0
     rv_anchor: float = 0.0
+    rv_atom_pooling: float = 0.0
     rv_refine: bool = True
 
     def __post_init__(self) -> None:
@@ -155,6 +159,7 @@ class LaavParams:
         need(self.rv_patience >= 1, "rv_patience must be >= 1")
         need(self.rv_label_weight >= 0, "rv_label_weight must be >= 0")
         need(self.rv_anchor >= 0, "rv_anchor must be >= 0")
+        need(0 <= self.rv_atom_pooling <= 1, "rv_atom_pooling must be in [0, 1]")
         need(0 <= self.rv_tolerance < 0.5, "rv_tolerance must be in [0, 0.5)")
         need(isinstance(self.rv_pairs, int) and self.rv_pairs >= 1, "rv_pairs must be an integer >= 1")
         need(self.rv_consensus in ("best", "coassociation"),
@@ -189,9 +194,8 @@ STAGE_PARAMS: dict[str, frozenset] = {
     "multicut": frozenset({"fine_models"}),
     "coarse": frozenset({"lam", "coarse_frames", "coarse_samples", "motion_weight", "pooled_trials",
                          "pairwise_weight"}),
-    "voting": frozenset({"rv_lambda", "rv_alpha", "rv_max_iter", "rv_trials", "rv_sample_size",
-                         "rv_patience", "rv_label_weight", "rv_refine", "rv_anchor", "rv_tolerance",
-                         "rv_pairs", "rv_consensus"}),
+    # every Random Voting setting is named rv_*
+    "voting": frozenset(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_")),
 }
 STAGES = ("atoms", "graph", "multicut", "coarse", "voting")
 

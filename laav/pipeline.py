@@ -143,7 +143,8 @@ class Pipeline:
                 init = st["coarse"].point_labels
                 if C == 1 or not (init >= 0).any():
                     init = None  # no atom formed: plain Random Voting
-                st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init)
+                st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
+                                             membership=st["atoms"].membership())
             timings[stage] += time.perf_counter() - t
         return LaavResult(
             labels=st["voting"].labels, atoms=st["atoms"], graph=st["graph"],

@@ -110,41 +110,76 @@ def frame_pairs(n_frames: int, n_pairs: int, rng: np.random.Generator | None = N
 
 
 def _sample_groups(labels, votes, C, m, rng):
-    """Indices (C, m) of the points each group fits its fundamental matrix to."""
-    P = labels.shape[0]
-    member = labels[None, :] == np.arange(C)[:, None]  # (C, P)
-    vt = votes.T  # (C, P)
+    """Indices (..., C, m) of the points each group fits its fundamental matrix to.
+
+    ``labels`` (..., P) and ``votes`` (..., P, C) may carry leading batch axes (trials).
+    """
+    member = labels[..., None, :] == np.arange(C)[:, None]  # (..., C, P)
+    vt = np.swapaxes(votes, -1, -2)  # (..., C, P)
     if C > 1:
-        other = np.where(np.eye(C, dtype=bool)[:, :, None], -np.inf, vt[None, :, :]).max(axis=1)
-        w = vt - other
+        srt = np.sort(vt, axis=-2)
+        top, second = srt[..., -1:, :], srt[..., -2:-1, :]
+        is_top = np.arange(C)[:, None] == np.argmax(vt, axis=-2)[..., None, :]
+        w = vt - np.where(is_top, second, top)  # margin over the best other group
     else:
         w = vt.copy()
     w = np.maximum(w, 0.0)
-    w = w / (w.max(axis=1, keepdims=True) + 1e-12) + 0.05  # floor keeps every member drawable
-    small = member.sum(axis=1) < m
+    w = w / (w.max(axis=-1, keepdims=True) + 1e-12) + 0.05  # floor keeps every member drawable
+    small = member.sum(axis=-1) < m
     w = np.where(member, w, 0.0)
-    w[small] = 1.0
-    u = rng.random((C, P))
+    w = np.where(small[..., None], 1.0, w)
+    u = rng.random(w.shape)
     keys = np.where(w > 0, np.log(u) / np.maximum(w, 1e-12), -np.inf)
-    return np.argpartition(-keys, m - 1, axis=1)[:, :m]
+    return np.argpartition(-keys, m - 1, axis=-1)[..., :m]
 
 
 def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: float,
          m: int, rng: np.random.Generator) -> np.ndarray:
-    """One voting step: fit one F per group on frame pair ``pair``; return the votes (P, C)."""
-    C = votes.shape[1]
-    idx = _sample_groups(labels, votes, C, m, rng)
+    """One voting step on frame pair ``pair``: one F per group, the votes of every point.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (..., P)
+    votes : ndarray of shape (..., P, C)
+        Current histogram (guides which points are sampled).
+    pair : (int, int)
+    lam : float
+    m : int
+        Points per fit.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray of shape (..., P, C)
+        ``exp(-lam d)`` for the point's vote for a group, ``1 - exp(-lam d)`` from every
+        other group's matrix.
+    """
+    C = votes.shape[-1]
+    idx = _sample_groups(labels, votes, C, m, rng)  # (..., C, m)
     x1 = points[pair[0]]
     x2 = points[pair[1]]
-    F = fit_fundamental(x1[idx], x2[idx])  # (C, 3, 3)
-    d = sampson_distance(F, x1[None], x2[None])  # (C, P)
+    F = fit_fundamental(x1[idx], x2[idx])  # (..., C, 3, 3)
+    d = sampson_distance(F, x1, x2)  # (..., C, P)
     v = np.exp(-lam * d)
-    # own group gets v, every other group 1 - v
-    total_other = (1.0 - v).sum(axis=0)  # (P,)
-    return (v - (1.0 - v) + total_other[None, :]).T
+    total_other = (1.0 - v).sum(axis=-2, keepdims=True)  # (..., 1, P)
+    return np.swapaxes(v - (1.0 - v) + total_other, -1, -2)
 
 
-def _run_trial(points, C, params, rng, labels0, votes0, reset, anchor=None):
+def _pooling_matrix(membership: np.ndarray, beta: float) -> np.ndarray | None:
+    """(P, P) matrix blending each atom feature's votes with its atoms' mean votes."""
+    if membership is None or beta <= 0 or membership.shape[0] == 0:
+        return None
+    M = membership.astype(np.float64)  # (N, P)
+    atom_mean = M / np.maximum(M.sum(1, keepdims=True), 1.0)  # (N, P): mean over members
+    per_point = M.T / np.maximum(M.sum(0)[:, None], 1.0)  # (P, N): mean over a point's atoms
+    covered = M.sum(0) > 0
+    B = beta * (per_point @ atom_mean)
+    B[np.diag_indices_from(B)] += np.where(covered, 1.0 - beta, 1.0)
+    return B
+
+
+def _run_trial(points, C, params, rng, labels0, votes0, reset, anchor=None, pool=None):
     F, P, _ = points.shape
     gap = max(1, F // 3)
     labels = labels0.copy()
@@ -163,6 +198,8 @@ def _run_trial(points, C, params, rng, labels0, votes0, reset, anchor=None):
             votes += vote(points, labels, votes, pair, lam, m, rng)
         if anchor is not None:
             votes += anchor
+        if pool is not None:
+            votes = pool @ votes
         new = votes.argmax(axis=1)
         n_changed = int((new != labels).sum())
         labels = new
@@ -275,7 +312,7 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
 
 def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams | None = None,
                   seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
-                  weights: np.ndarray | None = None) -> Voting:
+                  weights: np.ndarray | None = None, membership: np.ndarray | None = None) -> Voting:
     """Segment trajectories into ``n_motions`` rigid motions by Random Voting.
 
     Parameters
@@ -293,6 +330,10 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     weights : ndarray of shape (P,), optional
         Initial votes of each point for its start label (default ``rv_label_weight`` for
         labelled points, 0 otherwise). Only with ``init_labels``.
+    membership : ndarray of shape (N, P), bool, optional
+        Atom membership (LAAV). With ``rv_atom_pooling > 0`` every atom feature's votes
+        are blended, after each iteration, with the mean votes of the atoms holding it, so
+        atoms vote as units and boundary features stop flipping.
 
     Returns
     -------
@@ -315,6 +356,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         raise ValueError(f"rv_sample_size ({params.rv_sample_size}) exceeds the number of "
                          f"points ({P})")
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    pool = _pooling_matrix(membership, params.rv_atom_pooling)
+    if pool is not None and pool.shape[0] != P:
+        raise ValueError(f"membership must have {P} columns, got {pool.shape[0]}")
     if C == 1 or F < 2:
         lab = np.zeros(P, dtype=np.int64)
         return Voting(lab, np.ones((P, 1)), np.zeros(0, np.int64), np.zeros(0), 0, 0, True,
@@ -340,13 +384,14 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         if params.rv_anchor > 0:
             anchor = np.zeros((P, C))
             anchor[np.flatnonzero(known), init[known]] = params.rv_anchor
-        first = _run_trial(points, C, params, rng, labels0, votes0, reset=False, anchor=anchor)
+        first = _run_trial(points, C, params, rng, labels0, votes0, reset=False, anchor=anchor,
+                           pool=pool)
         trials = [first]
         best = first if first[5] else None
         # the informed trial did not converge: continue as plain RV (random starts)
         while best is None and len(trials) < params.rv_trials:
             res = _run_trial(points, C, params, rng, rng.integers(0, C, P), np.zeros((P, C)),
-                             reset=True)
+                             reset=True, pool=pool)
             trials.append(res)
             if res[5]:
                 best = res
