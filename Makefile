@@ -37,7 +37,11 @@ test: venv chromium
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/python -m pytest -q
 
-# TODO bench: run the Hopkins155 benchmark once it is wired up, e.g. `$(VENV)/bin/laav bench`
+# The paper's table and figures on Hopkins155 (set HOPKINS155 to its folder).
+HOPKINS155 ?= ../shared/data/hopkins155
+bench: venv
+	$(VENV)/bin/laav bench --data $(HOPKINS155) --methods laav,rv --seeds 5 --noise 0,0.5,1,2 --out bench-out
+	$(VENV)/bin/python benchmarks/speed.py --data $(HOPKINS155)
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info .pytest_cache .ruff_cache .hypothesis

@@ -13,7 +13,7 @@ class LaavParams:
     """Every tunable of the LAAV pipeline and of Random Voting.
 
     Distances are in pixels of the input coordinates. Defaults were chosen on Hopkins155
-    (see ``benchmarks/README.md`` for the sweeps that chose them).
+    (see ``benchmarks/TUNING.md`` for the sweeps that chose them).
 
     Parameters
     ----------

@@ -8,7 +8,7 @@ batched call); every point receives, from each group's matrix, the vote
 which then decays by the forgetting factor ``alpha``.
 
 Choices where the RV paper is vague (each measured on Hopkins155, see
-``benchmarks/README.md``):
+``benchmarks/TUNING.md``):
 
 * **Sampling.** The ``m`` points of a group are drawn without replacement with
   probability proportional to their current vote margin for the group (weighted
