@@ -173,3 +173,8 @@ class Sequence:
         return (
             f"Sequence(name={self.name!r}, frames={self.n_frames}, points={self.n_points}, {mot})"
         )
+
+
+def as_points(seq: Sequence | np.ndarray) -> np.ndarray:
+    """The (F, P, 2) float64 coordinates of a :class:`Sequence` or of an array."""
+    return seq.points if isinstance(seq, Sequence) else np.asarray(seq, dtype=np.float64)

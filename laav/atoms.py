@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._sequence import Sequence
+from ._sequence import Sequence, as_points
 from .geometry import apply_affine, fit_affine
 from .params import LaavParams
 
@@ -209,7 +209,7 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
     -------
     Atoms
     """
-    points = seq.points if isinstance(seq, Sequence) else np.asarray(seq, dtype=np.float64)
+    points = as_points(seq)
     params = LaavParams() if params is None else params
     rng = np.random.default_rng(0) if rng is None else rng
     F, P, _ = points.shape

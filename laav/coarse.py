@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._sequence import Sequence
+from ._sequence import Sequence, as_points
 from .atoms import Atoms
 from .geometry import fit_fundamental, sampson_distance
 from .multicut import Multicut
@@ -184,7 +184,7 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     -------
     Coarse
     """
-    points = seq.points if isinstance(seq, Sequence) else np.asarray(seq, dtype=np.float64)
+    points = as_points(seq)
     params = LaavParams() if params is None else params
     rng = np.random.default_rng(0) if rng is None else rng
     F, P, _ = points.shape

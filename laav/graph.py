@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse.csgraph import minimum_spanning_tree
 
-from ._sequence import Sequence
+from ._sequence import Sequence, as_points
 from .atoms import Atoms, trajectory_distances
 from .params import LaavParams
 
@@ -151,7 +151,7 @@ def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | No
     -------
     AtomGraph
     """
-    points = seq.points if isinstance(seq, Sequence) else np.asarray(seq, dtype=np.float64)
+    points = as_points(seq)
     params = LaavParams() if params is None else params
     N = atoms.n_atoms
     positions = atoms.centers(points)

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._sequence import Sequence
+from ._sequence import Sequence, as_points
 from .geometry import fit_fundamental, sampson_distance
 from .params import LaavParams
 
@@ -339,7 +339,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     -------
     Voting
     """
-    points = seq.points if isinstance(seq, Sequence) else np.asarray(seq, dtype=np.float64)
+    points = as_points(seq)
     if points.ndim != 3 or points.shape[2] != 2:
         raise ValueError(f"points must have shape (F, P, 2), got {points.shape}")
     F, P, _ = points.shape
