@@ -822,7 +822,10 @@ class Explorer:
                 p = Path(d) / base
                 p.write_bytes(data)
                 try:
-                    seq = laav.load_sequence(p)
+                    # MAT files are parsed in a child process: scipy's reader can crash the
+                    # interpreter on some damaged files, and an upload must never do that
+                    load = laav.load_sequence_isolated if suffix == ".mat" else laav.load_sequence
+                    seq = load(p)
                 except laav.SequenceError as exc:
                     self.state.report(str(exc).replace(str(p), base)
                                       + " — still showing the last valid result")
