@@ -51,7 +51,10 @@ class LaavParams:
         Trials of model-level (pooled) epipolar voting whose co-association forms Z
         (0 = the paper's pairwise votes only).
     pairwise_weight : float
-        Share of the paper's pairwise four-atom epipolar votes in Z, in [0, 1].
+        Share of the paper's pairwise four-atom epipolar votes in Z, in [0, 1]. Either
+        term alone measured the same on Hopkins155 (1.78 % vs 1.80 %, seed 0); the blend
+        keeps Z continuous in ``lam`` (the co-association alone moves in steps of
+        1/``pooled_trials``, so a λ change often left it unchanged in the explorer).
     rv_lambda : float
         Voting strength of Random Voting (1/px^2).
     rv_alpha : float
@@ -100,7 +103,7 @@ class LaavParams:
     coarse_samples: int = 8
     motion_weight: float = 0.0
     pooled_trials: int = 8
-    pairwise_weight: float = 0.0
+    pairwise_weight: float = 0.25
     rv_lambda: float = 2.0
     rv_alpha: float = 0.9
     rv_max_iter: int = 150
