@@ -95,6 +95,9 @@ class Explorer:
         or the page's own host when built inside a server session).
     pipeline : Future or laav.Pipeline, optional
         A warm pipeline for exactly these settings (see :class:`ExplorerState`).
+    start : bool
+        Start computing at once; else call ``explorer.state.start()`` (the server does so
+        once the page is on screen, so the first page is not slowed down by the pipeline).
 
     Examples
     --------
@@ -103,7 +106,8 @@ class Explorer:
 
     def __init__(self, seq: laav.Sequence, n_motions: int | None = None,
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
-                 viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None):
+                 viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
+                 start: bool = True):
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False)
         self._session_doc = None
         self._doc_thread = threading.get_ident()
@@ -135,7 +139,8 @@ class Explorer:
         self.state.on_error = self._on_error
         self.state.on_busy = self._on_busy
         self.state.on_plain_rv = self._on_plain_rv
-        self.state.start()
+        if start:
+            self.state.start()
 
     def _capture_session(self) -> None:
         # Built (or claimed) inside a server session: from now on results go through this
@@ -808,7 +813,13 @@ class Explorer:
         data, name = self.w_upload.value, self.w_upload.filename or "upload"
         if not data:
             return
-        self.load_bytes(data, name)
+        if self._session_doc is None:
+            self.load_bytes(data, name)
+            return
+        # reading (a MAT file is parsed in a child process) must not block the page
+        self.status.object = f"Reading {Path(name).name}…"
+        threading.Thread(target=self.load_bytes, args=(data, name), name="laav-explore-upload",
+                         daemon=True).start()
 
     def load_bytes(self, data: bytes, filename: str) -> bool:
         """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure."""

@@ -56,60 +56,45 @@ def _free_port(host: str) -> int:
         return int(s.getsockname()[1])
 
 
-def _warm_pipeline(seq, n_motions, seed) -> Future:
-    """Compute the default result while the server starts (claimed by the first tab)."""
-    fut: Future = Future()
-
-    def run():
-        try:
-            fut.set_result(laav.Pipeline(seq, n_motions, laav.LaavParams(), seed))
-        except BaseException as exc:  # noqa: BLE001 - handed to the session
-            fut.set_exception(exc)
-
-    threading.Thread(target=run, name="laav-explore-warmup", daemon=True).start()
-    return fut
-
-
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
-                warm: Future | None = None, created: list | None = None, viser: bool = True,
-                prebuild: bool = False):
+                created: list | None = None, viser: bool = True, prebuild: bool = False):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
-    ``warm``: a pipeline future for the first tab. ``prebuild``: build the first tab's
-    explorer now, in a background thread, while the server starts and the browser opens.
-    ``created`` (optional list) receives every Explorer built (tests and benchmarks use it).
+    Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
+    or after 3 s at the latest), so the first page does not wait behind the computation.
+    ``prebuild`` builds the first tab's explorer now, in a background thread, while the
+    server starts and the browser opens. ``created`` (optional list) receives every
+    Explorer built (tests and benchmarks use it).
     """
     iframe_host = None if host in ("0.0.0.0", "", "::") else host
     spare: list = []
     lock = threading.Lock()
 
-    def build(pipe=None):
+    def build():
         from .app import Explorer
 
         return Explorer(seq, n_motions, seed=seed, viser=viser, viser_host=host,
-                        iframe_host=iframe_host, pipeline=pipe)
+                        iframe_host=iframe_host, start=False)
 
     if prebuild:
         fut: Future = Future()
 
         def run():
             try:
-                fut.set_result(build(warm))
+                import viser  # noqa: F401 - imported here, off the page's critical path
+
+                fut.set_result(build())
             except BaseException as exc:  # noqa: BLE001 - the session builds its own then
                 fut.set_exception(exc)
 
         threading.Thread(target=run, name="laav-explore-prebuild", daemon=True).start()
         spare.append(fut)
-        warm = None
-
-    warm_left = [warm]
 
     def make_app():
         import panel as pn
 
         with lock:
             pre = spare.pop() if spare else None
-            pipe, warm_left[0] = warm_left[0], None
         ex = None
         if pre is not None:
             try:
@@ -118,10 +103,14 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
             except Exception:  # build a fresh one below
                 ex = None
         if ex is None:
-            ex = build(pipe)
+            ex = build()
         if created is not None:
             created.append(ex)
         pn.state.on_session_destroyed(lambda ctx: ex.close())
+        pn.state.onload(ex.state.start)
+        doc = pn.state.curdoc
+        if doc is not None:
+            doc.add_timeout_callback(ex.state.start, 3000)  # no document_ready (e.g. a script client)
         return ex.template(f"LAAV explorer: {seq.name}")
 
     return make_app
@@ -164,7 +153,6 @@ def main(argv: list[str] | None = None) -> int:
         if not _port_free(args.host, port):
             return _fail(parser, f"port {port} on {args.host} is already in use; pick another with --port")
 
-    warm = _warm_pipeline(seq, C, args.seed)
     import panel as pn
 
     if args.host in ("0.0.0.0", "", "::"):
@@ -172,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         origins = [f"{args.host}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
     try:
-        factory = app_factory(seq, C, args.seed, args.host, warm, prebuild=True)
+        factory = app_factory(seq, C, args.seed, args.host, prebuild=True)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {seq.name}", verbose=False)
     except OSError as exc:

@@ -128,9 +128,11 @@ class ExplorerState:
     def start(self) -> None:
         """Queue the first computation (call after setting the ``on_*`` hooks)."""
         if not self._started:
-            self._started = True
             self._submit("load", self._target_seq, self._target, self._first)
             self._first = None
+            with self._idle:
+                self._started = True
+                self._idle.notify_all()
 
     # ------------------------------------------------------------------ requests
     @property
@@ -267,10 +269,11 @@ class ExplorerState:
         self._report(message + (" — still showing the last valid result" if self.result else ""))
 
     def wait(self, timeout: float = 60.0) -> bool:
-        """Block until no request is queued or computing (and its views were notified)."""
+        """Block until no request is queued or computing (and its views were notified);
+        before :meth:`start`, until the first computation has started and finished."""
         deadline = time.monotonic() + timeout
         with self._idle:
-            while self._pending > 0:
+            while self._pending > 0 or not self._started:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False
