@@ -110,6 +110,7 @@ def test_explorer_in_chromium(tmp_path):
                       websocket_origin=[f"127.0.0.1:{port}"], show=False, threaded=True, verbose=False)
     outside: list[str] = []
     sockets: list[str] = []
+    js_errors: list[str] = []
     try:
         _wait_listening(port)
         with sync_api.sync_playwright() as p:
@@ -128,6 +129,8 @@ def test_explorer_in_chromium(tmp_path):
                 context.route("**/*", route)
                 page = context.new_page()
                 page.on("websocket", lambda ws: sockets.append(ws.url))
+                page.on("pageerror", lambda e: js_errors.append(str(e)))
+                page.on("console", lambda m: js_errors.append(m.text) if m.type == "error" else None)
                 t0 = time.monotonic()
                 page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
                 page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
@@ -181,4 +184,5 @@ def test_explorer_in_chromium(tmp_path):
         for e in created:
             e.close()
     assert not outside, f"requests left 127.0.0.1: {outside}"
+    assert not js_errors, f"JavaScript errors in the page: {js_errors[:5]}"
     print(f"page with first result in {load_s:.1f} s; screenshots in {shots}")
