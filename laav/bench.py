@@ -602,6 +602,8 @@ def run_bench(
     noise = parse_noise(noise)
     params = LaavParams() if params is None else params
 
+    items = {s.name: s for s in discover(data, only, say)}  # inputs first, then the output
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     runs_csv = out / RUNS_CSV
@@ -610,7 +612,6 @@ def run_bench(
     existing = read_runs(runs_csv, repair=True) if runs_csv.is_file() else []
     _check_meta(out, params)
 
-    items = {s.name: s for s in discover(data, only, say)}
     planned = plan_runs(list(items.values()), methods, seeds, noise)
     done = {run_key(r) for r in existing}
     todo = [k for k in planned if k not in done]

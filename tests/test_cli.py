@@ -1,54 +1,165 @@
-"""The `laav` command line: segment, and its errors."""
+"""The ``laav`` command line: ``segment``, ``--version``, errors and exit codes."""
 
 from __future__ import annotations
 
 import csv
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 import laav
 from laav.cli import main
-from laav.synthetic import make_sequence
+
+SMALL = ["--param", "rv_max_iter=30", "--param", "rv_trials=2"]
 
 
-@pytest.fixture(scope="module")
-def seq():
-    return make_sequence(n_objects=1, n_frames=12, n_points=120, rng=11, name="cli_seq")
+def _rigid_scene(n_motions: int = 2, n_per: int = 30, n_frames: int = 10, seed: int = 0):
+    """Fallback scene: rigid point clouds moving independently before a pinhole camera."""
+    rng = np.random.default_rng(seed)
+    tracks = []
+    for k in range(n_motions):
+        X = rng.uniform(-1, 1, (n_per, 3)) + np.array([2.2 * k - 1.1 * (n_motions - 1), 0, 7.0])
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        vel = rng.normal(scale=0.06, size=3)
+        frames = []
+        for f in range(n_frames):
+            a = 0.05 * f
+            K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+            R = np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+            c = X.mean(0)
+            Y = (X - c) @ R.T + c + vel * f
+            frames.append(np.array([320.0, 240.0]) + 500 * Y[:, :2] / Y[:, 2:])
+        tracks.append(np.stack(frames))
+    labels = np.repeat(np.arange(n_motions), n_per)
+    return laav.Sequence(np.concatenate(tracks, axis=1), labels, name="scene")
 
 
-@pytest.mark.parametrize("method", ["laav", "rv"])
-@pytest.mark.parametrize("suffix", [".mat", ".npz"])
-def test_segment_writes_labels_and_prints_the_error(tmp_path, capsys, seq, method, suffix):
-    path = laav.save_sequence(seq, tmp_path / f"cli_seq{suffix}")
-    out = tmp_path / "labels.csv"
-    code = main(["segment", str(path), "--method", method, "--seed", "1", "--out", str(out)])
-    assert code == 0
-    printed = capsys.readouterr().out
-    assert str(out) in printed
-    m = [ln for ln in printed.splitlines() if "misclassification" in ln]
-    assert m, printed
-    with open(out, newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    assert [r["point"] for r in rows] == [str(i) for i in range(seq.n_points)]
-    labels = np.array([int(r["label"]) for r in rows])
-    shown = float(m[0].split(":")[1].split("%")[0])
-    assert shown == pytest.approx(100 * laav.misclassification_rate(seq.labels, labels), abs=0.01)
+def make_scene(n_motions: int = 2, seed: int = 0, name: str = "scene") -> laav.Sequence:
+    """A small labelled sequence: laav.synthetic.make_sequence when available."""
+    try:
+        from laav.synthetic import make_sequence
+    except ImportError:
+        seq = _rigid_scene(n_motions, seed=seed)
+        return laav.Sequence(seq.points, seq.labels, name=name)
+    return make_sequence(n_motions - 1, n_frames=10, n_points=30 * n_motions, rng=seed, name=name)
 
 
-def test_segment_bad_file_exits_2_naming_the_file(tmp_path, capsys):
+def _labels_csv(path):
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["point", "label"]
+    return np.array([[int(a), int(b)] for a, b in rows[1:]])
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"laav {laav.__version__}"
+
+
+@pytest.mark.parametrize("ext,method", [(".mat", "laav"), (".npz", "rv")])
+def test_segment_writes_labels_and_error(tmp_path, capsys, ext, method):
+    seq = make_scene(2, seed=1)
+    path = laav.save_sequence(seq, tmp_path / f"scene{ext}")
+    out = tmp_path / "sub" / "labels.csv"
+    rc = main(["segment", str(path), "--method", method, "--seed", "3", "--out", str(out), *SMALL])
+    assert rc == 0
+    stdout = capsys.readouterr().out
+    assert f"labels: {out}" in stdout
+    lab = _labels_csv(out)
+    assert lab.shape == (seq.n_points, 2)
+    np.testing.assert_array_equal(lab[:, 0], np.arange(seq.n_points))
+    assert set(lab[:, 1]) <= {0, 1}
+    err = 100 * laav.misclassification_rate(seq.labels, lab[:, 1])
+    assert f"misclassification: {err:.2f} %" in stdout
+
+
+def test_segment_is_reproducible_and_matches_api(tmp_path, capsys):
+    seq = make_scene(2, seed=2)
+    path = laav.save_sequence(seq, tmp_path / "scene.npz")
+    params = laav.LaavParams(rv_max_iter=30, rv_trials=2)
+    expected = laav.segment(laav.load_sequence(path), 2, params, 5).labels
+    for i in range(2):
+        assert main(["segment", str(path), "--seed", "5", "-o", str(tmp_path / f"l{i}.csv"), *SMALL]) == 0
+        np.testing.assert_array_equal(_labels_csv(tmp_path / f"l{i}.csv")[:, 1], expected)
+
+
+def test_segment_default_output_name(tmp_path, capsys, monkeypatch):
+    seq = make_scene(2, seed=0, name="mine")
+    path = laav.save_sequence(seq, tmp_path / "mine.npz")
+    monkeypatch.chdir(tmp_path)
+    assert main(["segment", str(path), *SMALL]) == 0
+    assert (tmp_path / "mine_labels.csv").is_file()
+    assert "labels: mine_labels.csv" in capsys.readouterr().out
+
+
+def test_segment_bad_file_exit_2_names_file(tmp_path, capsys):
     bad = tmp_path / "broken_truth.mat"
-    bad.write_bytes(b"this is not a MAT file")
-    assert main(["segment", str(bad)]) == 2
+    bad.write_bytes(b"this is not a MAT file at all")
+    rc = main(["segment", str(bad)])
+    assert rc == 2
     err = capsys.readouterr().err
-    assert str(bad) in err and "Traceback" not in err
+    assert str(bad) in err and "error" in err
+    assert "Traceback" not in err
 
 
-def test_segment_without_labels_needs_motions(tmp_path, capsys, seq):
-    path = laav.save_sequence(laav.Sequence(seq.points, name="nolabels"), tmp_path / "n.npz")
-    assert main(["segment", str(path)]) == 2
-    assert "--motions" in capsys.readouterr().err
-    out = tmp_path / "l.csv"
-    assert main(["segment", str(path), "--motions", "2", "--out", str(out)]) == 0
-    assert out.is_file()
-    assert "misclassification" not in capsys.readouterr().out
+def test_segment_missing_file_exit_2(tmp_path, capsys):
+    rc = main(["segment", str(tmp_path / "nope.mat")])
+    assert rc == 2
+    assert "nope.mat" in capsys.readouterr().err
+
+
+def test_segment_without_labels_needs_motions(tmp_path, capsys):
+    seq = make_scene(2, seed=0)
+    path = laav.save_sequence(laav.Sequence(seq.points, name="unlabelled"), tmp_path / "u.npz")
+    rc = main(["segment", str(path)])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "--motions" in err and "no ground-truth labels" in err and str(path) in err
+    out = tmp_path / "u.csv"
+    assert main(["segment", str(path), "--motions", "2", "-o", str(out), *SMALL]) == 0
+    stdout = capsys.readouterr().out
+    assert "misclassification" not in stdout
+    assert _labels_csv(out).shape == (seq.n_points, 2)
+
+
+def test_segment_bad_options(tmp_path, capsys):
+    seq = make_scene(2, seed=0)
+    path = laav.save_sequence(seq, tmp_path / "s.npz")
+    assert main(["segment", str(path), "--param", "no_such=1"]) == 2
+    assert "unknown LAAV parameter" in capsys.readouterr().err
+    assert main(["segment", str(path), "--param", "rv_alpha=3"]) == 2
+    assert "rv_alpha" in capsys.readouterr().err
+    assert main(["segment", str(path), "--param", "rv_alpha"]) == 2
+    assert main(["segment", str(path), "--motions", str(seq.n_points + 1)]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["segment", str(path), "--motions", "0"])
+    assert exc.value.code == 2
+
+
+def test_console_process_exit_code_and_no_gui_imports(tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"PK\x03\x04 truncated")
+    proc = subprocess.run([sys.executable, "-m", "laav.cli", "segment", str(bad)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert str(bad) in proc.stderr and "Traceback" not in proc.stderr
+
+    seq = make_scene(2, seed=0)
+    good = laav.save_sequence(seq, tmp_path / "good.npz")
+    code = (
+        "import sys; from laav.cli import main; import laav.bench, laav.report\n"
+        f"rc = main(['segment', {str(good)!r}, '-o', {str(tmp_path / 'l.csv')!r}, "
+        "'--param', 'rv_max_iter=20'])\n"
+        "bad = [m for m in sys.modules if m.split('.')[0] in "
+        "('matplotlib', 'panel', 'viser', 'bokeh')]\n"
+        "print('BAD', bad); sys.exit(rc)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "BAD []" in proc.stdout
