@@ -309,3 +309,20 @@ def test_dask_local_cluster_gives_the_same_rows_as_joblib(data_dir, tmp_path):
 
     # runs.csv is sorted by key at the end of a bench, so the files match row for row
     assert strip(tmp_path / "local" / "runs.csv") == strip(tmp_path / "dask" / "runs.csv")
+
+
+@pytest.mark.slow
+def test_speed_script_writes_its_report(data_dir, tmp_path):
+    import subprocess
+    import sys
+
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "speed.py"
+    out = tmp_path / "speed.md"
+    proc = subprocess.run([sys.executable, str(script), "--data", str(data_dir), "--out", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    text = out.read_text()
+    assert "3 sequences" in text and "one core" in text and "Machine:" in text
+    for label in ("LAAV atoms", "LAAV voting", "LAAV total", "Pipeline.update", "plain Random Voting"):
+        assert label in text
+    assert "dancing" not in proc.stderr and "extra" not in proc.stderr
