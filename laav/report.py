@@ -322,8 +322,13 @@ def _grouped_boxes(ax, data: dict, methods, levels, ylabel: str, title: str) -> 
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(axis="y", alpha=0.3)
+    top = max((max(v) for v in data.values() if v is not None and len(v)), default=1.0)
+    lo = min((min(v) for v in data.values() if v is not None and len(v)), default=0.0)
+    span = (top - min(lo, 0.0)) or 1.0
+    ax.set_ylim(min(lo, 0.0) - 0.03 * span, top + 0.2 * span)  # headroom for the legend
     ax.legend(handles=[Patch(facecolor=_COLORS.get(m, "#888888"), alpha=0.6,
-                             label=method_label(m)) for m in methods], loc="best")
+                             label=method_label(m)) for m in methods],
+              loc="upper center", ncols=max(1, len(methods)))
 
 
 def write_figures(rows, out_dir: str | os.PathLike) -> list[Path]:
@@ -355,7 +360,6 @@ def write_figures(rows, out_dir: str | os.PathLike) -> list[Path]:
     its = {(m, s): [r["iterations"] for r in _select(rows, m, s)] for m in methods for s in levels}
     _grouped_boxes(ax1, its, methods, levels, "voting iterations per run",
                    "Iterations (LAAV fine-tuning vs. plain RV)")
-    ax1.set_ylim(bottom=0)
     cv = _convergence(rows)
     width = 0.8 / max(1, len(methods))
     for j, m in enumerate(methods):
