@@ -472,6 +472,34 @@ def _check_meta(out: Path, params: LaavParams) -> None:
 # --------------------------------------------------------------------------- runner
 
 
+class _OutLock:
+    """An exclusive lock on the output folder, so two benches never write one runs.csv."""
+
+    def __init__(self, out: Path):
+        self.path = out / ".bench.lock"
+        self.fh = None
+
+    def __enter__(self):
+        try:
+            import fcntl
+        except ImportError:  # not POSIX: no lock
+            return self
+        self.fh = open(self.path, "w")
+        try:
+            fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            self.fh.close()
+            self.fh = None
+            raise BenchError(f"{self.path.parent}: another laav bench is writing here; wait for "
+                             "it or use another --out") from None
+        return self
+
+    def __exit__(self, *exc):
+        if self.fh is not None:
+            self.fh.close()  # releases the lock
+        return False
+
+
 @dataclass
 class BenchSummary:
     """What :func:`run_bench` did."""
@@ -606,6 +634,13 @@ def run_bench(
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    with _OutLock(out):
+        return _run_locked(items, out, methods, seeds, noise, jobs, scheduler, params, progress,
+                           report, max_batch, say)
+
+
+def _run_locked(items, out, methods, seeds, noise, jobs, scheduler, params, progress, report,
+                max_batch, say) -> BenchSummary:
     runs_csv = out / RUNS_CSV
     if runs_csv.is_file() and runs_csv.stat().st_size == 0:
         runs_csv.unlink()

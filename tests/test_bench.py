@@ -326,3 +326,34 @@ def test_speed_script_writes_its_report(data_dir, tmp_path):
     for label in ("LAAV atoms", "LAAV voting", "LAAV total", "Pipeline.update", "plain Random Voting"):
         assert label in text
     assert "dancing" not in proc.stderr and "extra" not in proc.stderr
+
+
+def test_interrupt_keeps_finished_runs_and_resume_completes(data_dir, tmp_path, monkeypatch):
+    real = bench.run_one
+    calls = []
+
+    def interrupted_on_7th(*a, **k):
+        calls.append(a[0].name)
+        if len(calls) == 7:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(bench, "run_one", interrupted_on_7th)
+    kw = dict(methods=("rv",), seeds=4, noise=(0.0,), jobs=1, params=SMALL, progress=False,
+              log=lambda m: None, max_batch=2)
+    first = run_bench(data_dir, tmp_path, **kw)
+    assert first.interrupted and first.report is None
+    kept = read_runs(tmp_path / "runs.csv")
+    assert len(kept) == first.completed == 6  # three batches of two finished
+    monkeypatch.setattr(bench, "run_one", real)
+    second = run_bench(data_dir, tmp_path, **kw)
+    assert (second.already_done, second.completed, second.interrupted) == (6, 6, False)
+    assert len(read_runs(tmp_path / "runs.csv")) == 12
+
+
+def test_two_benches_never_share_an_output_folder(data_dir, tmp_path):
+    with bench._OutLock(tmp_path):
+        with pytest.raises(BenchError, match="another laav bench"):
+            run_bench(data_dir, tmp_path, methods=("rv",), seeds=1, noise=(0.0,), jobs=1,
+                      params=SMALL, progress=False, log=lambda m: None)
+    assert not (tmp_path / "runs.csv").exists()
