@@ -33,6 +33,7 @@ from bokeh.models import (
 )
 from bokeh.palettes import Blues256, RdBu11
 from bokeh.plotting import figure
+from panel.io.state import set_curdoc
 
 import laav
 from laav import LaavParams
@@ -154,7 +155,7 @@ class Explorer:
         """Adopt the current server session (for an explorer built ahead of time, outside it)."""
         with self._apply_lock:  # an apply running now finishes first; later ones are scheduled
             self._capture_session()
-            if self.viser is not None:
+            if self.viser is not None and self._iframe_shown:
                 self.viser_pane.object = self._iframe_html()
 
     # ------------------------------------------------------------------ constructors
@@ -379,7 +380,13 @@ class Explorer:
         self.rv_md = pn.pane.Markdown("", width=520, margin=(0, 10))
         self.frame_caption = pn.pane.Markdown("", width=600, margin=(0, 10))
         if self.viser is not None:
-            self.viser_pane = pn.pane.HTML(self._iframe_html(), width=550, height=480, margin=0)
+            # the iframe is set with the first result: the 3-D client's WebGL loop then does not
+            # compete with the first computation (it is costly in software-rendered browsers)
+            self._iframe_shown = False
+            self.viser_pane = pn.pane.HTML(
+                '<div style="width:550px;height:480px;border:1px solid #ccc;border-radius:4px;'
+                'display:flex;align-items:center;justify-content:center;color:#666">'
+                "The 3-D view opens with the first result…</div>", width=550, height=480, margin=0)
         else:
             msg = getattr(self, "_viser_error", "the 3-D view is switched off")
             self.viser_pane = pn.pane.Markdown(f"*{msg}*", width=600, height=80)
@@ -479,7 +486,10 @@ class Explorer:
         self._locked(fn, *args)
 
     def _locked(self, fn, *args) -> None:
-        with self._apply_lock:
+        # panel applies pane changes at once only for the document it is processing
+        # (pn.state.curdoc); otherwise it defers them, and a deferred change could land
+        # outside our batch
+        with self._apply_lock, set_curdoc(self._session_doc):
             try:
                 fn(*args)
             except Exception:
@@ -559,6 +569,9 @@ class Explorer:
                                       f"R2 = {settings.params.r2:g}, λ = {settings.params.lam:g}, "
                                       f"2C = {result.multicut.n_models}, seed {settings.seed}{err} "
                                       f"(computed in {1000 * self.state.compute_seconds:.0f} ms).")
+                if self.viser is not None and not self._iframe_shown:
+                    self._iframe_shown = True
+                    self.viser_pane.object = self._iframe_html()
             if self.viser is not None:
                 if new_seq:
                     self.viser.set_result(seq, result, self._style["color"], self.w_frame.value)

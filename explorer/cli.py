@@ -43,6 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _port_free(host: str, port: int) -> bool:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        # like the server itself: connections of an earlier run in TIME_WAIT do not count
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind((host if host not in ("", "0.0.0.0") else "0.0.0.0", port))
         except OSError:
@@ -113,6 +115,18 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
             doc.add_timeout_callback(ex.state.start, 3000)  # no document_ready (e.g. a script client)
         return ex.template(f"LAAV explorer: {seq.name}")
 
+    def close_unclaimed(timeout: float = 30.0) -> None:
+        """Stop a prebuilt explorer no session took (at server shutdown)."""
+        with lock:
+            left = list(spare)
+            spare.clear()
+        for fut in left:
+            try:
+                fut.result(timeout=timeout).close()
+            except Exception:
+                pass
+
+    make_app.close_unclaimed = close_unclaimed
     return make_app
 
 
@@ -179,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         server.stop()
+        factory.close_unclaimed()
     return 0
 
 
