@@ -72,14 +72,23 @@ def main(argv=None) -> int:
             ex = created[0]
             ex.wait(120, plain_rv=True)
             ex.w_frame.value = args.frame
-            time.sleep(3)
-            for fr in page.frames:  # close viser's "software WebGL" notice (headless only)
-                if fr != page.main_frame:
-                    btn = fr.locator(".mantine-Notification-closeButton")
-                    if btn.count():
-                        btn.first.click()
+            if ex.viser is not None:  # the 3-D client loads with the first result; let it draw
+                deadline = time.monotonic() + 90
+                while time.monotonic() < deadline:
+                    frames = [fr for fr in page.frames if f":{ex.viser.port}" in fr.url]
+                    if frames and frames[0].get_by_text("Connected").count():
+                        break
+                    time.sleep(0.5)
+            # software WebGL (SwiftShader) is slow: give the scene time to fade in, and close
+            # viser's "software WebGL" notice whenever it shows up (headless only)
             page.set_viewport_size({"width": args.width, "height": 2200})
-            time.sleep(3)
+            for _ in range(25):
+                for fr in page.frames:
+                    if fr != page.main_frame:
+                        btn = fr.locator(".mantine-Notification-closeButton")
+                        if btn.count():
+                            btn.first.click()
+                time.sleep(1)
             page.screenshot(path=str(raw))
             browser.close()
     finally:
