@@ -480,12 +480,9 @@ def _fundamental(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _sampson(F: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Sampson distances (n,) in squared pixels of correspondences ``a -> b`` under ``F``."""
-    x1 = np.column_stack([a, np.ones(len(a))])
-    x2 = np.column_stack([b, np.ones(len(b))])
-    fx1 = x1 @ F.T
-    ftx2 = x2 @ F
-    num = (x2 * fx1).sum(axis=1) ** 2
-    return num / (fx1[:, 0] ** 2 + fx1[:, 1] ** 2 + ftx2[:, 0] ** 2 + ftx2[:, 1] ** 2)
+    from .geometry import sampson_distance
+
+    return sampson_distance(F, a, b)
 
 
 def _epipolar_gap(a0, a1, b0, b1) -> float:
