@@ -97,7 +97,7 @@ class Explorer:
     pipeline : Future or laav.Pipeline, optional
         A warm pipeline for exactly these settings (see :class:`ExplorerState`).
     start : bool
-        Start computing at once; else call ``explorer.state.start()`` (the server does so
+        Start computing at once; else call ``explorer.start()`` (the server does so
         once the page is on screen, so the first page is not slowed down by the pipeline).
 
     Examples
@@ -125,13 +125,13 @@ class Explorer:
         self._shown_key = None
         self._plain: laav.Voting | None = None
         self._seq_shown: laav.Sequence | None = None
+        # The 3-D view's server starts with the first computation (``start``), in its own
+        # thread: importing viser and starting its server (~0.4 s) stays off the page's load.
         self.viser = None
-        if viser:
-            try:
-                from .viser_view import ViserView
-                self.viser = ViserView(host=viser_host, on_frame=self._frame_from_viser)
-            except Exception as exc:  # the 2-D views still work without it
-                self._viser_error = f"the 3-D view could not start: {exc}"
+        self._want_viser = bool(viser)
+        self._viser_host = viser_host
+        self._viser_thread: threading.Thread | None = None
+        self._closed = False
         self._iframe_host = iframe_host or (viser_host if viser_host not in ("0.0.0.0", "::") else None)
         self._build_widgets()
         self._build_figures()
@@ -141,7 +141,34 @@ class Explorer:
         self.state.on_busy = self._on_busy
         self.state.on_plain_rv = self._on_plain_rv
         if start:
-            self.state.start()
+            self.start()
+
+    def start(self) -> None:
+        """Start the first computation and, alongside it, the 3-D view's server (idempotent)."""
+        if self._want_viser and self._viser_thread is None:
+            self._viser_thread = threading.Thread(target=self._start_viser, name="laav-explore-viser",
+                                                  daemon=True)
+            self._viser_thread.start()
+        self.state.start()
+
+    def _start_viser(self) -> None:
+        try:
+            from .viser_view import ViserView
+
+            view = ViserView(host=self._viser_host, on_frame=self._frame_from_viser)
+        except Exception as exc:  # the 2-D views still work without it
+            self._viser_error = f"the 3-D view could not start: {exc}"
+            return
+        if self._closed:
+            view.close()
+        else:
+            self.viser = view
+
+    def _wait_viser(self, timeout: float = 30.0) -> None:
+        """Let the 3-D view's server finish starting (it normally has, before the first result)."""
+        t = self._viser_thread
+        if t is not None and t.is_alive():
+            t.join(timeout)
 
     def _capture_session(self) -> None:
         # Built (or claimed) inside a server session: from now on results go through this
@@ -379,7 +406,7 @@ class Explorer:
         self.epi_caption = pn.pane.Markdown("", width=500, margin=(0, 10))
         self.rv_md = pn.pane.Markdown("", width=520, margin=(0, 10))
         self.frame_caption = pn.pane.Markdown("", width=600, margin=(0, 10))
-        if self.viser is not None:
+        if self._want_viser:
             # the iframe is set with the first result: the 3-D client's WebGL loop then does not
             # compete with the first computation (it is costly in software-rendered browsers)
             self._iframe_shown = False
@@ -569,9 +596,11 @@ class Explorer:
                                       f"R2 = {settings.params.r2:g}, λ = {settings.params.lam:g}, "
                                       f"2C = {result.multicut.n_models}, seed {settings.seed}{err} "
                                       f"(computed in {1000 * self.state.compute_seconds:.0f} ms).")
-                if self.viser is not None and not self._iframe_shown:
+                if self._want_viser and not self._iframe_shown:
+                    self._wait_viser()
                     self._iframe_shown = True
-                    self.viser_pane.object = self._iframe_html()
+                    self.viser_pane.object = self._iframe_html() if self.viser is not None else (
+                        f"<p><i>{getattr(self, '_viser_error', 'the 3-D view did not start')}</i></p>")
             if self.viser is not None:
                 if new_seq:
                     self.viser.set_result(seq, result, self._style["color"], self.w_frame.value)
@@ -900,6 +929,8 @@ class Explorer:
         return True
 
     def close(self) -> None:
+        self._closed = True
         self.state.close()
+        self._wait_viser()
         if self.viser is not None:
             self.viser.close()

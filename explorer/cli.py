@@ -83,8 +83,6 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
 
         def run():
             try:
-                import viser  # noqa: F401 - imported here, off the page's critical path
-
                 fut.set_result(build())
             except BaseException as exc:  # noqa: BLE001 - the session builds its own then
                 fut.set_exception(exc)
@@ -109,10 +107,10 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
         if created is not None:
             created.append(ex)
         pn.state.on_session_destroyed(lambda ctx: ex.close())
-        pn.state.onload(ex.state.start)
+        pn.state.onload(ex.start)
         doc = pn.state.curdoc
         if doc is not None:
-            doc.add_timeout_callback(ex.state.start, 3000)  # no document_ready (e.g. a script client)
+            doc.add_timeout_callback(ex.start, 3000)  # no document_ready (e.g. a script client)
         return ex.template(f"LAAV explorer: {seq.name}")
 
     def close_unclaimed(timeout: float = 30.0) -> None:

@@ -9,7 +9,6 @@ function returns plain dicts of numpy arrays, ready for ``ColumnDataSource.data 
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 import laav
 from laav.geometry import epipolar_lines
@@ -76,9 +75,7 @@ def align_labels(pred: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
     out = np.full_like(pred, -1)
     if not both.any():
         return pred.copy()
-    counts, tv, pv = laav.confusion_matrix(ref[both], pred[both])
-    rows, cols = linear_sum_assignment(-counts)
-    mapping = {int(pv[c]): int(tv[r]) for r, c in zip(rows, cols)}
+    mapping = laav.best_label_map(ref[both], pred[both])
     nxt = int(max(ref.max(), pred.max())) + 1
     for p in np.unique(pred[pred >= 0]).tolist():
         if p not in mapping:

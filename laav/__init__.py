@@ -7,7 +7,7 @@ package and uses only the public API exported here.
 
 from ._sequence import Sequence, SequenceError
 from .io import find_truth_files, load_sequence, load_sequence_isolated, save_sequence
-from .metrics import confusion_matrix, misclassification_rate
+from .metrics import best_label_map, confusion_matrix, misclassification_rate
 
 __version__ = "0.1.0"
 
@@ -19,6 +19,7 @@ __all__ = [
     "save_sequence",
     "find_truth_files",
     "misclassification_rate",
+    "best_label_map",
     "confusion_matrix",
 ]
 
