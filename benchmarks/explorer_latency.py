@@ -17,7 +17,9 @@ Prints ONE JSON line on stdout, e.g.::
 Extra keys: the sequence, point count, repeats, and the share of each median spent inside
 ``Pipeline.update`` (``*_pipeline_ms_median``).
 
-Usage: ``python benchmarks/explorer_latency.py [--repeats N] [--sequence NAME] [--no-viser]``
+Also writes them, with date and machine, to ``--out`` (default ``docs/bench/explorer_latency.md``).
+
+Usage: ``python benchmarks/explorer_latency.py [--repeats N] [--sequence NAME] [--no-viser] [--out F]``
 """
 
 from __future__ import annotations
@@ -32,6 +34,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+from _machine import write_json_report  # noqa: E402 - this folder, on sys.path
 
 import laav  # noqa: E402
 
@@ -67,6 +71,8 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--sequence", help="Hopkins155 sequence folder name (default cars1)")
     ap.add_argument("--no-viser", action="store_true", help="leave the 3-D view out")
+    ap.add_argument("--out", default=str(REPO / "docs" / "bench" / "explorer_latency.md"),
+                    help="Markdown report to write (default docs/bench/explorer_latency.md)")
     args = ap.parse_args(argv)
 
     from explorer import Explorer
@@ -112,6 +118,9 @@ def main(argv=None) -> int:
         "viser": not args.no_viser,
     }
     print(json.dumps(out))
+    write_json_report(args.out, "Explorer latency, server-side",
+                      f"{seq.name} ({seq.n_points} points), median of {args.repeats} changes each; "
+                      "targets: lambda <= 150 ms, R1/R2 <= 500 ms, frame <= 50 ms", out)
     return 0
 
 

@@ -35,12 +35,12 @@ import argparse  # noqa: E402
 import csv  # noqa: E402
 import fnmatch  # noqa: E402
 import platform  # noqa: E402
-import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from _machine import cpu_model, git_commit  # noqa: E402 - this folder, on sys.path
 
 import laav  # noqa: E402
 
@@ -56,27 +56,6 @@ def data_dir(arg: str | None) -> Path:
     if os.environ.get("HOPKINS155"):
         return Path(os.environ["HOPKINS155"]).expanduser()
     return REPO.parent / "shared" / "data" / "hopkins155"
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
-
-
-def git_commit() -> str:
-    try:
-        out = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
-                             capture_output=True, text=True, timeout=10)
-        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "--", "laav"],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
-        return out.stdout.strip() + (" (laav/ modified)" if dirty else "") or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
 
 
 def truth_files(root: Path, only: list[str]) -> list[Path]:

@@ -1,0 +1,57 @@
+"""Machine and version facts printed into every benchmark report (shared by the scripts here)."""
+
+from __future__ import annotations
+
+import os
+import platform
+import subprocess
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def cpu_model() -> str:
+    """The CPU's model name from /proc/cpuinfo (else what ``platform`` knows)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def git_commit() -> str:
+    """Short commit of the checkout, marked when ``laav/`` has uncommitted changes."""
+    try:
+        out = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
+                             capture_output=True, text=True, timeout=10)
+        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "--", "laav"],
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+        return out.stdout.strip() + (" (laav/ modified)" if dirty else "") or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def write_json_report(path: str | Path, title: str, what: str, result: dict) -> Path:
+    """Write a short Markdown report: date, machine, software, and the result as JSON."""
+    import json
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lines = [
+        f"# {title} ({time.strftime('%Y-%m-%d %H:%M %Z')})",
+        "",
+        f"- Machine: {cpu_model()}, {os.cpu_count()} logical cores, "
+        f"{platform.system()} {platform.release()} {platform.machine()}",
+        f"- Software: Python {platform.python_version()} (git {git_commit()})",
+        f"- Measured: {what}",
+        "",
+        "```json",
+        json.dumps(result, indent=1),
+        "```",
+        "",
+    ]
+    path.write_text("\n".join(lines))
+    return path
