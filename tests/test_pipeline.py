@@ -162,6 +162,42 @@ def test_update_reuses_upstream_stages():
     assert pipe.update() is r4
 
 
+def test_fine_tuning_is_reused_only_when_its_inputs_are_unchanged(monkeypatch):
+    seq = scene(1, 1)
+    pipe = Pipeline(seq, 2, seed=0)
+    r0 = pipe.result
+    real = pipeline_module.random_voting
+    calls = []
+    monkeypatch.setattr(pipeline_module, "random_voting",
+                        lambda *a, **k: calls.append(1) or real(*a, **k))
+
+    def update(**change):
+        del calls[:]
+        res = pipe.update(**change)
+        return res, len(calls)
+
+    lam = r0.params.lam * 1.01
+    r1, n = update(lam=lam)  # coarse reruns; its labels stay the same here
+    assert r1.coarse is not r0.coarse
+    assert np.array_equal(r1.coarse.point_labels, r0.coarse.point_labels)
+    assert r1.voting is r0.voting and n == 0
+    # the seed feeds the voting's generator, so a seed change reruns it (with everything)
+    r2, n = update(seed=1)
+    assert n == 1 and r2.voting is not r1.voting
+    # an rv_* change reruns it although the coarse labels are the same
+    r3, n = update(rv_alpha=0.85)
+    assert n == 1 and r3.coarse is r2.coarse and r3.voting is not r2.voting
+    # other coarse labels (C = 1 labels everything 0): rerun, and back again
+    r4, n = update(n_motions=1)
+    assert n == 1
+    r5, n = update(n_motions=2)
+    assert n == 1
+    monkeypatch.undo()
+    assert_same_result(r1, segment(seq, 2, LaavParams(lam=lam), seed=0))
+    assert_same_result(r3, segment(seq, 2, LaavParams(lam=lam, rv_alpha=0.85), seed=1))
+    assert_same_result(r5, r3)
+
+
 @pytest.mark.parametrize("change, match", [
     ({"r1": 50.0}, "r2 must be larger than r1"),
     ({"r2": 10.0}, "r2 must be larger than r1"),
