@@ -116,7 +116,9 @@ def _sample_groups(labels, votes, C, m, rng):
     """
     member = labels[..., None, :] == np.arange(C)[:, None]  # (..., C, P)
     vt = np.swapaxes(votes, -1, -2)  # (..., C, P)
-    if C > 1:
+    if C == 2:  # the margin over the other group, as below but without the sort
+        w = vt - vt[..., ::-1, :]
+    elif C > 2:
         srt = np.sort(vt, axis=-2)
         top, second = srt[..., -1:, :], srt[..., -2:-1, :]
         is_top = np.arange(C)[:, None] == np.argmax(vt, axis=-2)[..., None, :]
