@@ -87,6 +87,13 @@ class LaavParams:
     rv_refine : bool
         After voting, reassign each point to the motion whose fundamental matrices (fitted
         on the motion's points over many frame pairs) explain it best.
+    rv_select : {"none", "subspace"}
+        Model selection between candidate labellings by their trajectory-subspace cost
+        (:func:`laav.voting.subspace_cost`). ``"subspace"``: plain RV with no converged
+        trial keeps the trial or co-association labelling of lowest cost, and LAAV's
+        fine-tuning also runs plain RV and keeps whichever of the two results costs
+        less. ``"none"``: co-association only, and the informed trial alone unless it
+        fails to converge.
     """
 
     r1: float = 20.0
@@ -117,6 +124,7 @@ class LaavParams:
     rv_anchor: float = 0.0
     rv_atom_pooling: float = 0.0
     rv_refine: bool = True
+    rv_select: str = "subspace"
 
     def __post_init__(self) -> None:
         problems = []
@@ -165,6 +173,8 @@ class LaavParams:
         need(0 <= self.rv_atom_pooling <= 1, "rv_atom_pooling must be in [0, 1]")
         need(0 <= self.rv_tolerance < 0.5, "rv_tolerance must be in [0, 0.5)")
         need(isinstance(self.rv_pairs, int) and self.rv_pairs >= 1, "rv_pairs must be an integer >= 1")
+        need(self.rv_select in ("none", "subspace"),
+             f"rv_select must be 'none' or 'subspace', got {self.rv_select!r}")
         need(self.rv_consensus in ("best", "coassociation"),
              f"rv_consensus must be 'best' or 'coassociation', got {self.rv_consensus!r}")
         if problems:

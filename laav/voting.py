@@ -38,9 +38,16 @@ from .geometry import fit_fundamental, sampson_distance
 from .params import LaavParams
 
 __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances", "frame_pairs",
-           "RandomVoting", "labelling_cost"]
+           "RandomVoting", "labelling_cost", "subspace_cost"]
 
 _RESET_AT = 15
+#: Rank of the trajectory subspaces of :func:`subspace_cost` (affine camera: 4, plus one
+#: for perspective and tracking noise; 5 measured best of 4..8, see benchmarks/TUNING.md).
+SUBSPACE_RANK = 5
+#: Squared residual scale (px^2) inside the log of :func:`subspace_cost`: 0.1 px, below
+#: Hopkins155's tracking noise, so the cost is close to a mean log residual (measured
+#: against 0.001..16 px^2, see benchmarks/TUNING.md).
+SUBSPACE_SCALE2 = 0.01
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +76,13 @@ class Voting:
         True when started from given labels (LAAV fine-tuning), False for plain RV.
     refined : int
         Points whose label the final refinement changed.
+    selected : str
+        Which candidate labelling was returned: ``"trial"`` (a converged trial),
+        ``"consensus"`` (co-association of unconverged trials), ``"trial k"`` (the k-th
+        unconverged trial, by subspace cost), ``"informed"`` (LAAV's start) or
+        ``"plain"`` (LAAV's fine-tuning replaced by plain RV, by subspace cost).
+    costs : dict of str -> float
+        Subspace cost of each candidate compared (empty without ``rv_select``).
     """
 
     labels: np.ndarray
@@ -81,6 +95,8 @@ class Voting:
     trial_iterations: tuple = field(default=())
     initialised: bool = False
     refined: int = 0
+    selected: str = "trial"
+    costs: dict = field(default_factory=dict)
 
 
 def frame_pairs(n_frames: int, n_pairs: int, rng: np.random.Generator | None = None) -> np.ndarray:
@@ -234,6 +250,46 @@ def labelling_cost(points: np.ndarray, labels: np.ndarray, n_motions: int, n_pai
     return float(np.mean(np.log1p(own))) if np.isfinite(own).all() else float("inf")
 
 
+def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                  rank: int = SUBSPACE_RANK, scale2: float = SUBSPACE_SCALE2) -> float:
+    """How badly low-rank trajectory subspaces explain a labelling (lower is better).
+
+    Under an affine camera the trajectories of one rigid motion, each stacked as a 2F
+    vector, span a linear subspace of dimension at most 4. Every motion's points get
+    their best rank-``rank`` subspace (SVD); a point's residual ``r`` is its distance
+    to that subspace as an RMS over frames (px). The cost is the mean over points of
+    ``log(1 + r^2 / scale2)``. Unlike :func:`labelling_cost` (epipolar), it uses every frame at
+    once and tells a static background from a translating object, which the same
+    fundamental matrix can both satisfy.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (P,)
+    n_motions : int
+    rank : int
+    scale2 : float
+        px^2.
+
+    Returns
+    -------
+    float
+        ``inf`` when a motion has ``rank`` points or fewer.
+    """
+    F, P, _ = points.shape
+    W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)
+    r2 = np.empty(P)
+    for g in range(n_motions):
+        mem = labels == g
+        if mem.sum() <= rank:
+            return float("inf")
+        X = W[:, mem]
+        U = np.linalg.svd(X, full_matrices=False)[0][:, :rank]
+        R = X - U @ (U.T @ X)
+        r2[mem] = (R * R).sum(0) / F
+    return float(np.mean(np.log1p(r2 / scale2)))
+
+
 def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
                      pairs: np.ndarray) -> np.ndarray:
     """Mean Sampson distance (px^2) of every point to every motion's fundamental matrices.
@@ -302,7 +358,8 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         D = motion_distances(points, cur, n_motions, pairs)
         scale = np.array([np.median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
                           for g in range(n_motions)]) + 1e-9
-        N = D / scale[:, None]
+        with np.errstate(invalid="ignore"):  # inf / inf for a motion too small to fit
+            N = np.where(np.isfinite(D), D / scale[:, None], np.inf)
         own = N[cur, idx]
         best = N.argmin(axis=0)
         move = (own > outlier) & (best != cur)
@@ -388,6 +445,11 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
             anchor[np.flatnonzero(known), init[known]] = params.rv_anchor
         first = _run_trial(points, C, params, rng, labels0, votes0, reset=False, anchor=anchor,
                            pool=pool)
+        if params.rv_select == "subspace":
+            # LAAV's start against plain RV: keep the labelling of lower subspace cost
+            plain, trials = _plain_trials(points, C, params, rng, pool)
+            cands = [("informed", first)] + _plain_candidates(plain, trials, "plain")
+            return _select(points, C, params, cands, [first] + trials, initialised=True)
         trials = [first]
         best = first if first[5] else None
         # the informed trial did not converge: continue as plain RV (random starts)
@@ -397,8 +459,16 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
             trials.append(res)
             if res[5]:
                 best = res
+        selected = "informed" if best is first else "trial"
         if best is None:
             best = _consensus(trials, C, rng) if len(trials) > 1 else first
+            selected = "consensus" if len(trials) > 1 else "informed"
+    elif params.rv_select == "subspace":
+        best, trials = _plain_trials(points, C, params, rng)
+        if not best[5]:  # no trial converged: the consensus or one of the trials
+            return _select(points, C, params, _plain_candidates(best, trials, "trial"), trials,
+                           initialised=False)
+        return _finish(points, C, params, best, trials, initialised=False, selected="trial")
     else:
         trials = []
         best = None
@@ -409,16 +479,27 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
             if res[5]:
                 best = res
                 break
+        selected = "trial"
         if best is None:
             if params.rv_consensus == "coassociation":
                 best = _consensus(trials, C, rng)
+                selected = "consensus"
             else:
                 costs = [labelling_cost(points, t[0], C) for t in trials]
-                best = trials[int(np.argmin(costs))]
+                k = int(np.argmin(costs))
+                best, selected = trials[k], f"trial {k}"
 
+    return _finish(points, C, params, best, trials, initialised=init_labels is not None,
+                   selected=selected)
+
+
+def _finish(points, C, params, best, trials, initialised, selected, refined_labels=None,
+            costs=None) -> Voting:
     labels, votes, changed, margin, _its, conv = best
     refined = 0
-    if params.rv_refine:
+    if refined_labels is not None:
+        labels, refined = refined_labels
+    elif params.rv_refine:
         labels, refined = refine_labels(points, labels, C)
     return Voting(
         labels=np.asarray(labels, dtype=np.int64),
@@ -429,9 +510,49 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         n_trials=len(trials),
         converged=bool(conv),
         trial_iterations=tuple(int(t[4]) for t in trials),
-        initialised=init_labels is not None,
+        initialised=initialised,
         refined=refined,
+        selected=selected,
+        costs=dict(costs or {}),
     )
+
+
+def _plain_trials(points, C, params, rng, pool=None):
+    """Plain RV: random starts until a trial converges (at most ``rv_trials``).
+
+    Returns the converged trial, else the co-association consensus of all, and the trials.
+    """
+    P = points.shape[1]
+    trials = []
+    for _ in range(params.rv_trials):
+        res = _run_trial(points, C, params, rng, rng.integers(0, C, P), np.zeros((P, C)),
+                         reset=True, pool=pool)
+        trials.append(res)
+        if res[5]:
+            return res, trials
+    return _consensus(trials, C, rng), trials
+
+
+def _plain_candidates(best, trials, name):
+    """Plain RV's candidate labellings: its converged trial, else the consensus and every trial."""
+    if best[5]:
+        return [(name, best)]
+    return [("consensus", best)] + [(f"trial {k}", t) for k, t in enumerate(trials)]
+
+
+def _select(points, C, params, candidates, trials, initialised) -> Voting:
+    """Refine every candidate labelling and return the one of lowest subspace cost."""
+    best = None
+    costs = {}
+    for name, cand in candidates:
+        lab = refine_labels(points, cand[0], C) if params.rv_refine else (cand[0], 0)
+        cost = subspace_cost(points, lab[0], C)
+        costs[name] = cost
+        if best is None or cost < best[0]:
+            best = (cost, name, cand, lab)
+    _, name, cand, lab = best
+    return _finish(points, C, params, cand, trials, initialised, selected=name,
+                   refined_labels=lab, costs=costs)
 
 
 def _consensus(trials, C, rng):

@@ -102,8 +102,12 @@ def test_traces_consistent(n_objects, scene_seed, init):
     assert res.n_trials == len(res.trial_iterations) >= 1
     assert res.n_iterations == sum(res.trial_iterations)
     assert T in res.trial_iterations
-    if res.converged:
+    if res.selected == "informed":
+        assert T == res.trial_iterations[0]  # LAAV's own start won the selection
+    elif res.converged:
         assert T == res.trial_iterations[-1]  # the returned trial is the converged last one
+    if res.costs:
+        assert res.costs[res.selected] == min(res.costs.values())
     assert res.changed.dtype == np.int64 and np.all(res.changed >= 0)
     assert np.all(res.changed <= seq.n_points)
     assert np.all((res.margin >= 0) & (res.margin <= 1))
@@ -206,3 +210,35 @@ def test_vote_shape_and_range():
     assert np.all(v >= -1e-12) and np.all(v <= C + 1e-12)
     # with the true labels most points vote for their own motion
     assert np.mean(v.argmax(1) == seq.labels) > 0.9
+
+
+def test_subspace_cost_prefers_the_true_partition():
+    from laav.voting import subspace_cost
+
+    seq = scene(2, 0)
+    C = seq.n_motions
+    truth = subspace_cost(seq.points, seq.labels, C)
+    rng = np.random.default_rng(0)
+    mixed = seq.labels.copy()
+    flip = rng.random(seq.n_points) < 0.2
+    mixed[flip] = (mixed[flip] + 1) % C
+    assert np.isfinite(truth) and truth < subspace_cost(seq.points, mixed, C)
+    tiny = np.zeros(seq.n_points, dtype=np.int64)
+    tiny[:3] = 1
+    assert subspace_cost(seq.points, tiny, 2) == np.inf  # a motion of <= rank points
+
+
+def test_fine_tuning_from_a_wrong_start_is_outvoted_by_plain_rv():
+    """LAAV's fine-tuning keeps its start only when that explains the trajectories best."""
+    seq = scene(1, 3)
+    C = seq.n_motions
+    wrong = np.where(np.arange(seq.n_points) < seq.n_points // 2, 0, 1)  # ignores the motions
+    res = random_voting(seq, C, seed=0, init_labels=wrong, weights=np.full(seq.n_points, 50.0))
+    assert res.initialised and "informed" in res.costs and len(res.costs) >= 2
+    assert res.costs[res.selected] == min(res.costs.values())
+    assert misclassification_rate(seq.labels, res.labels) < 0.01
+    # without the selection the start wins: it converges on the wrong partition
+    off = random_voting(seq, C, LaavParams(rv_select="none"), seed=0, init_labels=wrong,
+                        weights=np.full(seq.n_points, 50.0))
+    assert off.costs == {} and off.selected == "informed" and off.converged
+    assert misclassification_rate(seq.labels, off.labels) > 0.1
