@@ -437,7 +437,19 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
             shown = ", ".join(map(str, per[:6])) + (", …" if len(per) > 6 else "")
             trials = f"; {voting.n_trials} trials ({shown} iterations)"
     extra = f"; refinement then moved {voting.refined} points" if voting.refined else ""
-    return f"**{what}:** {len(voting.changed)} iterations, {conv}{trials}{extra}."
+    return f"**{what}:** {len(voting.changed)} iterations, {conv}{trials}{extra}{_selection(voting)}."
+
+
+def _selection(voting: laav.Voting) -> str:
+    """Which candidate labelling the subspace-cost selection kept, and against what."""
+    costs = getattr(voting, "costs", None)
+    if not costs or len(costs) < 2:
+        return ""
+    kept = voting.selected
+    if len(costs) <= 3:
+        others = ", ".join(f"{k} {v:.2f}" for k, v in costs.items() if k != kept)
+        return f"; kept the *{kept}* labelling (subspace cost {costs[kept]:.2f}; {others})"
+    return f"; kept *{kept}* (subspace cost {costs[kept]:.2f}, lowest of {len(costs)} candidates)"
 
 
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None) -> str:
