@@ -154,11 +154,11 @@ def test_point_labels_from_atoms_rules():
 
 
 @pytest.mark.xfail(strict=False, reason=(
-    "accuracy target: end-to-end coarse labels are far from ground truth on clean scenes "
-    "(error > 1 % on covered points in 25 of 32 scene/seed runs, up to 47 %). The "
-    "multicut's own segments are pure in all 32, but _adjust_count merges them down to 2C "
-    "by summed cost and joins atoms of different motions (21 of 32 runs); the merge itself "
-    "also errs on some scenes (test_merge_groups_true_fine_models)"))
+    "accuracy target: end-to-end coarse labels are not yet reliably right on clean scenes "
+    "(measured 2026-11-29: error > 1 % on covered points in 12 of 32 scene/seed runs, up "
+    "to 44 %; the multicut's segments are pure, the errors come from merging them to 2C "
+    "by mean connecting cost and from the fine-to-coarse merge). Non-strict because it "
+    "depends on the seed: 3 of these 4 cases pass"))
 @pytest.mark.parametrize("n_objects, seed", SCENES[::2])
 def test_segment_coarse_labels_match_truth_on_covered_points(n_objects, seed):
     seq = synthetic.make_sequence(n_objects=n_objects, n_frames=20, n_points=300, rng=seed)
