@@ -203,17 +203,24 @@ def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
             "x": x,
             "y": y,
             "K": K,
-            "points": np.array([[P]], dtype=np.uint16),
-            "frames": np.array([[F]], dtype=np.uint16),
-            "width": np.array([[width]], dtype=np.uint16),
-            "height": np.array([[height]], dtype=np.uint16),
+            "points": _mat_uint(P),
+            "frames": _mat_uint(F),
+            "width": _mat_uint(width),
+            "height": _mat_uint(height),
         }
         if seq.labels is not None:
-            dtype = np.uint8 if seq.labels.max() < 255 else np.uint16
+            top = int(seq.labels.max()) + 1
+            dtype = np.uint8 if top <= 255 else (np.uint16 if top <= 65535 else np.uint32)
             out["s"] = (seq.labels + 1).astype(dtype).reshape(-1, 1)
         scipy.io.savemat(str(p), out, do_compression=False, format="5")
         return p
     raise SequenceError(f"{p}: unknown extension {p.suffix!r}; use .npz or .mat")
+
+
+def _mat_uint(value) -> np.ndarray:
+    """A 1x1 unsigned integer as Hopkins155 stores it (uint16), wider only when it must be."""
+    v = int(value)
+    return np.array([[v]], dtype=np.uint16 if v <= 65535 else np.uint32)
 
 
 def find_truth_files(root: str | os.PathLike) -> list[Path]:

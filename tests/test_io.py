@@ -544,3 +544,11 @@ def test_valid_arrays_always_construct(shape, data):
     if seq.labels is not None:
         assert seq.labels.dtype == np.int64
         assert seq.n_motions == n_motions
+
+
+def test_mat_round_trip_of_a_frame_wider_than_uint16(tmp_path):
+    """Hopkins stores sizes as uint16; a panorama 70,000 px wide must still save and load."""
+    seq = _random_sequence(seed=9, motions=2, image_size=(70_000, 480))
+    back = load_sequence(save_sequence(seq, tmp_path / "wide.mat"))
+    assert back.image_size == (70_000, 480)
+    assert np.array_equal(back.points, seq.points) and np.array_equal(back.labels, seq.labels)
