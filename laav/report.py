@@ -243,9 +243,11 @@ def report_from_csv(path: str | os.PathLike) -> str:
     # convergence
     cv = _convergence(rows)
     lines += ["## Convergence of Random Voting (Fig. 3)", "",
-              "Iterations of the voting stage per run (LAAV: fine-tuning from the atom "
-              "labels; RV: summed over all trials from random starts) and the share of runs "
-              "whose returned trial did not converge.", "",
+              "Iterations of the voting stage per run, summed over every trial it ran "
+              "(LAAV: the fine-tuning from the atom labels and, with the default "
+              "`rv_select=subspace`, the plain RV trials it is compared with; RV: all trials "
+              "from random starts), and the share of runs whose returned labelling did not "
+              "come from a converged trial.", "",
               "| Method | σ (px) | Runs | Median iterations | p90 iterations | Not converged (%) |",
               "|---|---:|---:|---:|---:|---:|"]
     for m in methods:
