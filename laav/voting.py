@@ -231,7 +231,10 @@ def _run_trial(points, C, params, rng, labels0, votes0, reset, anchor=None, pool
         n_changed = int((new != labels).sum())
         labels = new
         votes *= alpha
-        if C > 1:
+        if C == 2:  # as below, without the partition
+            spread = np.abs(votes[:, 1] - votes[:, 0])
+            margins.append(float(np.mean(spread / (np.abs(votes).sum(1) + 1e-12))))
+        elif C > 2:
             top2 = np.partition(votes, C - 2, axis=1)[:, -2:]
             margins.append(float(np.mean((top2[:, 1] - top2[:, 0]) / (np.abs(votes).sum(1) + 1e-12))))
         else:
@@ -549,13 +552,24 @@ def _plain_candidates(best, trials, prefix=""):
     return [(prefix + "consensus", best)] + [(f"{prefix}trial {k}", t) for k, t in enumerate(trials)]
 
 
+def _partition_key(labels: np.ndarray) -> bytes:
+    """The same bytes for two labellings that are one partition under renamed labels."""
+    _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
+    order = np.argsort(np.argsort(first))  # labels renamed by first appearance
+    return order[inverse].astype(np.int64).tobytes()
+
+
 def _select(points, C, params, candidates, trials, initialised) -> Voting:
     """Refine every candidate labelling and return the one of lowest subspace cost."""
     best = None
     costs = {}
+    done: dict = {}  # candidates that are the same partition (often) are refined once
     for name, cand in candidates:
-        lab = refine_labels(points, cand[0], C) if params.rv_refine else (cand[0], 0)
-        cost = subspace_cost(points, lab[0], C)
+        key = _partition_key(cand[0])
+        if key not in done:
+            lab = refine_labels(points, cand[0], C) if params.rv_refine else (cand[0], 0)
+            done[key] = (lab, subspace_cost(points, lab[0], C))
+        lab, cost = done[key]
         costs[name] = cost
         if best is None or cost < best[0]:
             best = (cost, name, cand, lab)
