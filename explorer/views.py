@@ -448,8 +448,8 @@ def _selection(voting: laav.Voting) -> str:
     kept = voting.selected
     if len(costs) <= 3:
         others = ", ".join(f"{k} {v:.2f}" for k, v in costs.items() if k != kept)
-        return f"; kept the *{kept}* labelling (subspace cost {costs[kept]:.2f}; {others})"
-    return f"; kept *{kept}* (subspace cost {costs[kept]:.2f}, lowest of {len(costs)} candidates)"
+        return f"; kept the *{kept}* labelling (selection score {costs[kept]:.2f}; {others})"
+    return f"; kept *{kept}* (selection score {costs[kept]:.2f}, lowest of {len(costs)} candidates)"
 
 
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None) -> str:

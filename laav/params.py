@@ -94,6 +94,10 @@ class LaavParams:
         fine-tuning also runs plain RV and keeps whichever of the two results costs
         less. ``"none"``: co-association only, and the informed trial alone unless it
         fails to converge.
+    rv_select_agreement : float
+        Weight (>= 0) of a candidate's mean disagreement (misclassification rate) with
+        the other candidates in the selection score, when there are more than two: the
+        labelling most others agree with is preferred among costs that are close.
     """
 
     r1: float = 20.0
@@ -125,6 +129,7 @@ class LaavParams:
     rv_atom_pooling: float = 0.0
     rv_refine: bool = True
     rv_select: str = "subspace"
+    rv_select_agreement: float = 0.5
 
     def __post_init__(self) -> None:
         problems = []
@@ -173,6 +178,10 @@ class LaavParams:
         need(0 <= self.rv_atom_pooling <= 1, "rv_atom_pooling must be in [0, 1]")
         need(0 <= self.rv_tolerance < 0.5, "rv_tolerance must be in [0, 0.5)")
         need(isinstance(self.rv_pairs, int) and self.rv_pairs >= 1, "rv_pairs must be an integer >= 1")
+        agree = self.rv_select_agreement
+        need(isinstance(agree, (int, float)) and not isinstance(agree, bool)
+             and agree == agree and 0 <= agree < float("inf"),
+             f"rv_select_agreement must be a finite number >= 0, got {agree!r}")
         need(self.rv_select in ("none", "subspace"),
              f"rv_select must be 'none' or 'subspace', got {self.rv_select!r}")
         need(self.rv_consensus in ("best", "coassociation"),

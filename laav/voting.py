@@ -91,7 +91,9 @@ class Voting:
         fine-tuning the plain RV candidates are named ``"plain trial"``, ``"plain
         consensus"``, ``"plain trial k"``.
     costs : dict of str -> float
-        Subspace cost of each candidate compared (empty without ``rv_select``).
+        Selection score of each candidate compared (empty without ``rv_select``): its
+        subspace cost plus ``rv_select_agreement`` times its mean disagreement with the
+        other candidates (when there are more than two).
     """
 
     labels: np.ndarray
@@ -560,20 +562,35 @@ def _partition_key(labels: np.ndarray) -> bytes:
 
 
 def _select(points, C, params, candidates, trials, initialised) -> Voting:
-    """Refine every candidate labelling and return the one of lowest subspace cost."""
-    best = None
-    costs = {}
+    """Refine every candidate labelling and return the one of lowest selection score.
+
+    The score is the candidate's :func:`subspace_cost` plus ``rv_select_agreement`` times
+    its mean disagreement (misclassification rate) with the other candidates, when there
+    are more than two: among many unconverged trials, the labelling the others agree with
+    is the safer pick.
+    """
+    from .metrics import misclassification_rate
+
     done: dict = {}  # candidates that are the same partition (often) are refined once
+    entries = []
     for name, cand in candidates:
         key = _partition_key(cand[0])
         if key not in done:
             lab = refine_labels(points, cand[0], C) if params.rv_refine else (cand[0], 0)
             done[key] = (lab, subspace_cost(points, lab[0], C))
-        lab, cost = done[key]
-        costs[name] = cost
-        if best is None or cost < best[0]:
-            best = (cost, name, cand, lab)
-    _, name, cand, lab = best
+        entries.append((name, cand) + done[key])
+    scores = np.array([e[3] for e in entries])
+    n = len(entries)
+    if n > 2 and params.rv_select_agreement > 0:
+        D = np.zeros((n, n))
+        for i in range(n):
+            for j in range(i + 1, n):
+                D[i, j] = D[j, i] = misclassification_rate(entries[i][2][0], entries[j][2][0])
+        with np.errstate(invalid="ignore"):  # inf cost stays inf
+            scores = scores + params.rv_select_agreement * D.sum(1) / (n - 1)
+    k = int(np.argmin(scores))  # the first of equal scores: LAAV's start, then the consensus
+    name, cand, lab, _ = entries[k]
+    costs = {e[0]: float(v) for e, v in zip(entries, scores)}
     return _finish(points, C, params, cand, trials, initialised, selected=name,
                    refined_labels=lab, costs=costs)
 

@@ -209,6 +209,8 @@ def test_fine_tuning_is_reused_only_when_its_inputs_are_unchanged(monkeypatch):
     ({"n_motions": 2.5}, "n_motions"),
     ({"no_such_param": 1}, "unknown"),
     ({"lam": -1.0, "r1": 5.0}, "lam"),
+    ({"rv_select": "best"}, "rv_select"),
+    ({"rv_select_agreement": -0.5}, "rv_select_agreement"),
 ])
 def test_invalid_update_leaves_pipeline_unchanged(change, match):
     seq = scene(2, 0)

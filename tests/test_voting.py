@@ -242,3 +242,27 @@ def test_fine_tuning_from_a_wrong_start_is_outvoted_by_plain_rv():
                         weights=np.full(seq.n_points, 50.0))
     assert off.costs == {} and off.selected == "informed" and off.converged
     assert misclassification_rate(seq.labels, off.labels) > 0.1
+
+
+def test_selection_prefers_the_labelling_the_other_candidates_agree_with(monkeypatch):
+    """With more than two candidates of near-equal cost, agreement decides."""
+    import laav.voting as V
+
+    seq = scene(1, 3)
+    C = seq.n_motions
+    good = seq.labels.copy()
+    odd = good.copy()
+    odd[:30] = 1 - odd[:30]
+    # the odd labelling gets a slightly lower subspace cost; three copies of the good one
+    # (as renamed trials) disagree with it
+    monkeypatch.setattr(V, "subspace_cost",
+                        lambda p, lab, c: 1.0 if np.array_equal(lab, odd) else 1.01)
+    monkeypatch.setattr(V, "refine_labels", lambda p, lab, c: (lab.copy(), 0))
+    trial = lambda lab: (lab, np.zeros((seq.n_points, C)), np.zeros(1, np.int64),  # noqa: E731
+                         np.zeros(1), 1, False)
+    cands = [("odd", trial(odd)), ("a", trial(good)), ("b", trial(1 - good)), ("c", trial(good))]
+    for weight, expected in ((0.0, "odd"), (0.5, "a")):
+        res = V._select(seq.points, C, LaavParams(rv_select_agreement=weight), cands,
+                        [c for _, c in cands], initialised=False)
+        assert res.selected == expected
+        assert res.costs[expected] == min(res.costs.values())
