@@ -35,9 +35,11 @@ def git_commit() -> str:
 
 
 def write_json_report(path: str | Path, title: str, what: str, result: dict) -> Path:
-    """Write a short Markdown report: date, machine, software, and the result as JSON."""
+    """Print ``result`` as one JSON line on stdout and write it to a short Markdown report
+    (date, machine, software, the result as JSON) at ``path``."""
     import json
 
+    print(json.dumps(result), flush=True)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     lines = [

@@ -25,7 +25,6 @@ Usage: ``python benchmarks/explorer_latency.py [--repeats N] [--sequence NAME] [
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import sys
@@ -117,7 +116,6 @@ def main(argv=None) -> int:
         "repeats": args.repeats,
         "viser": not args.no_viser,
     }
-    print(json.dumps(out))
     write_json_report(args.out, "Explorer latency, server-side",
                       f"{seq.name} ({seq.n_points} points), median of {args.repeats} changes each; "
                       "targets: lambda <= 150 ms, R1/R2 <= 500 ms, frame <= 50 ms", out)

@@ -33,6 +33,10 @@ import sys
 import time
 from pathlib import Path
 
+from _machine import write_json_report  # this folder, on sys.path
+
+from explorer.cli import _free_port  # the CLI's own free-port helper
+
 REPO = Path(__file__).resolve().parents[1]
 CHROMIUM = Path("/usr/bin/chromium")
 ARGS = ["--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking"]
@@ -58,14 +62,8 @@ JS_RESULT = """() => {
 }"""
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def one_run(browser, file: str | None, timeout: float = 60.0) -> dict:
-    port = _free_port()
+    port = _free_port("127.0.0.1")
     cmd = [sys.executable, "-m", "explorer.cli", "--no-browser", "--port", str(port)]
     if file:
         cmd.append(file)
@@ -130,9 +128,6 @@ def main(argv: list[str] | None = None) -> int:
     summary = {f"{k}_median": round(statistics.median(r[k] for r in runs), 2) for k in runs[0]}
     summary.update(repeats=len(runs), cpus=os.cpu_count(), file=args.file or "bundled demo",
                    runs=[{k: round(v, 2) for k, v in r.items()} for r in runs])
-    print(json.dumps(summary))
-    from _machine import write_json_report
-
     write_json_report(args.out, "Explorer start-up, command to usable page in headless Chromium",
                       f"{summary['file']}, median of {len(runs)} fresh starts; target: page ready "
                       "(ready_s) within 5 s of the command", summary)

@@ -441,9 +441,9 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
 
 
 def _selection(voting: laav.Voting) -> str:
-    """Which candidate labelling the subspace-cost selection kept, and against what."""
-    costs = getattr(voting, "costs", None)
-    if not costs or len(costs) < 2:
+    """Which candidate labelling the selection kept, and against what."""
+    costs = voting.costs
+    if len(costs) < 2:
         return ""
     kept = voting.selected
     if len(costs) <= 3:

@@ -203,24 +203,25 @@ def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
             "x": x,
             "y": y,
             "K": K,
-            "points": _mat_uint(P),
-            "frames": _mat_uint(F),
-            "width": _mat_uint(width),
-            "height": _mat_uint(height),
+            "points": np.array([[P]], dtype=_mat_uint(P)),
+            "frames": np.array([[F]], dtype=_mat_uint(F)),
+            "width": np.array([[width]], dtype=_mat_uint(width)),
+            "height": np.array([[height]], dtype=_mat_uint(height)),
         }
         if seq.labels is not None:
             top = int(seq.labels.max()) + 1
-            dtype = np.uint8 if top <= 255 else (np.uint16 if top <= 65535 else np.uint32)
-            out["s"] = (seq.labels + 1).astype(dtype).reshape(-1, 1)
+            out["s"] = (seq.labels + 1).astype(_mat_uint(top, np.uint8)).reshape(-1, 1)
         scipy.io.savemat(str(p), out, do_compression=False, format="5")
         return p
     raise SequenceError(f"{p}: unknown extension {p.suffix!r}; use .npz or .mat")
 
 
-def _mat_uint(value) -> np.ndarray:
-    """A 1x1 unsigned integer as Hopkins155 stores it (uint16), wider only when it must be."""
-    v = int(value)
-    return np.array([[v]], dtype=np.uint16 if v <= 65535 else np.uint32)
+def _mat_uint(largest: int, narrowest=np.uint16) -> type:
+    """The unsigned type Hopkins155 uses (``narrowest``), wider only when ``largest`` needs it."""
+    for dtype in (np.uint8, np.uint16, np.uint32):
+        if np.dtype(dtype).itemsize >= np.dtype(narrowest).itemsize and largest <= np.iinfo(dtype).max:
+            return dtype
+    return np.uint64
 
 
 def find_truth_files(root: str | os.PathLike) -> list[Path]:

@@ -460,9 +460,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         first = _run_trial(points, C, params, rng, labels0, votes0, reset=False, anchor=anchor,
                            pool=pool)
         if params.rv_select == "subspace":
-            # LAAV's start against plain RV: keep the labelling of lower subspace cost
+            # LAAV's start against plain RV: keep the labelling of lower selection score
             plain, trials = _plain_trials(points, C, params, rng, pool)
-            cands = [("informed", first)] + _plain_candidates(plain, trials, "plain ")
+            cands = [("informed", first)] + _plain_candidates(plain, trials, C, rng, "plain ")
             return _select(points, C, params, cands, [first] + trials, initialised=True)
         trials = [first]
         best = first if first[5] else None
@@ -477,23 +477,13 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         if best is None:
             best = _consensus(trials, C, rng) if len(trials) > 1 else first
             selected = "consensus" if len(trials) > 1 else "informed"
-    elif params.rv_select == "subspace":
-        best, trials = _plain_trials(points, C, params, rng)
-        if not best[5]:  # no trial converged: the consensus or one of the trials
-            return _select(points, C, params, _plain_candidates(best, trials), trials,
-                           initialised=False)
-        return _finish(points, C, params, best, trials, initialised=False, selected="trial")
     else:
-        trials = []
-        best = None
-        for _ in range(params.rv_trials):
-            labels0 = rng.integers(0, C, P)
-            res = _run_trial(points, C, params, rng, labels0, np.zeros((P, C)), reset=True)
-            trials.append(res)
-            if res[5]:
-                best = res
-                break
+        best, trials = _plain_trials(points, C, params, rng)
         selected = "trial"
+        if best is None and params.rv_select == "subspace":
+            # no trial converged: the consensus or one of the trials
+            return _select(points, C, params, _plain_candidates(None, trials, C, rng), trials,
+                           initialised=False)
         if best is None:
             if params.rv_consensus == "coassociation":
                 best = _consensus(trials, C, rng)
@@ -534,7 +524,7 @@ def _finish(points, C, params, best, trials, initialised, selected, refined_labe
 def _plain_trials(points, C, params, rng, pool=None):
     """Plain RV: random starts until a trial converges (at most ``rv_trials``).
 
-    Returns the converged trial, else the co-association consensus of all, and the trials.
+    Returns the converged trial (None if none did) and every trial run.
     """
     P = points.shape[1]
     trials = []
@@ -544,14 +534,15 @@ def _plain_trials(points, C, params, rng, pool=None):
         trials.append(res)
         if res[5]:
             return res, trials
-    return _consensus(trials, C, rng), trials
+    return None, trials
 
 
-def _plain_candidates(best, trials, prefix=""):
+def _plain_candidates(converged, trials, C, rng, prefix=""):
     """Plain RV's candidate labellings: its converged trial, else the consensus and every trial."""
-    if best[5]:
-        return [(prefix + "trial", best)]
-    return [(prefix + "consensus", best)] + [(f"{prefix}trial {k}", t) for k, t in enumerate(trials)]
+    if converged is not None:
+        return [(prefix + "trial", converged)]
+    return ([(prefix + "consensus", _consensus(trials, C, rng))]
+            + [(f"{prefix}trial {k}", t) for k, t in enumerate(trials)])
 
 
 def _partition_key(labels: np.ndarray) -> bytes:
