@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._sequence import Sequence, as_points
-from .geometry import fit_affine
+from .geometry import affine_residuals, fit_affine
 from .params import LaavParams
 
 __all__ = ["Atoms", "build_atoms", "trajectory_distances"]
@@ -121,16 +121,8 @@ def trajectory_distances(points: np.ndarray, n_frames: int = _NEIGHBOURHOOD_FRAM
 
 
 def _rms_residuals(A: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """RMS over frames of ``|A_f src - dst_f|``; A (..., F, 2, 3), src (n, 2), dst (F, n, 2).
-
-    The map is written out per coordinate: for the (hypotheses, frames) stacks of RANSAC
-    this is twice as fast as a batched matmul of (n, 2) by (2, 2) blocks (results agree
-    to ~1e-13 px; the summation order differs).
-    """
-    x, y = src[:, 0], src[:, 1]
-    A = A[..., None]  # (..., F, 2, 3, 1): broadcast against the n points
-    ex = A[..., 0, 0, :] * x + A[..., 0, 1, :] * y + A[..., 0, 2, :] - dst[..., 0]  # (..., F, n)
-    ey = A[..., 1, 0, :] * x + A[..., 1, 1, :] * y + A[..., 1, 2, :] - dst[..., 1]
+    """RMS over frames of ``|A_f src - dst_f|``; A (..., F, 2, 3), src (n, 2), dst (F, n, 2)."""
+    ex, ey = affine_residuals(A, src, dst)  # (..., F, n)
     return np.sqrt((ex * ex + ey * ey).mean(axis=-2))
 
 
