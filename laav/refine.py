@@ -1,0 +1,290 @@
+"""Labelling refinement and scoring after voting: epipolar and trajectory-subspace fits.
+
+Random Voting fits one fundamental matrix per motion and frame pair at a time; what it
+returns is noisy near the boundaries between motions. The functions here look at every
+frame at once:
+
+* :func:`motion_distances` / :func:`refine_labels`: robust fundamental matrices per
+  motion over a spread of frame pairs; points their own motion does not explain move.
+* :func:`subspace_cost`: how well rank-5 trajectory subspaces explain a labelling (used
+  to choose between candidate labellings, see :mod:`laav.voting`).
+* :func:`subspace_residuals` / :func:`reassign_labels`: every point goes to the motion
+  whose robust trajectory subspace *and* fundamental matrices explain it best together.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import fit_fundamental, sampson_distance
+
+__all__ = ["labelling_cost", "subspace_cost", "motion_distances", "refine_labels",
+           "subspace_residuals", "reassign_labels", "frame_pairs"]
+
+#: Rank of the trajectory subspaces of :func:`subspace_cost` (affine camera: 4, plus one
+#: for perspective and tracking noise; 5 measured best of 4..8, see benchmarks/TUNING.md).
+SUBSPACE_RANK = 5
+#: Squared residual scale (px^2) inside the log of :func:`subspace_cost`: 0.1 px, below
+#: Hopkins155's tracking noise, so the cost is close to a mean log residual (measured
+#: against 0.001..16 px^2, see benchmarks/TUNING.md).
+SUBSPACE_SCALE2 = 0.01
+#: Rank of the robust trajectory subspaces of :func:`reassign_labels` (the affine
+#: camera's 4; 5 and 6 measured worse there, see benchmarks/TUNING.md).
+REASSIGN_RANK = 4
+#: Weight of the epipolar term against the subspace term in :func:`reassign_labels`
+#: (0.3 / 0.5 / 0.7 / 1.0 measured, 0.5 best, see benchmarks/TUNING.md).
+REASSIGN_EPIPOLAR_WEIGHT = 0.5
+
+
+def frame_pairs(n_frames: int, n_pairs: int, rng: np.random.Generator | None = None) -> np.ndarray:
+    """Frame pairs ``(l, r)`` at least ``max(1, F // 3)`` frames apart.
+
+    With ``rng`` the pairs are drawn at random (with replacement); without it they are a
+    deterministic spread: the first frame against the last and evenly spaced pairs between.
+
+    Returns
+    -------
+    pairs : ndarray of shape (n_pairs, 2), int64
+    """
+    F = n_frames
+    gap = max(1, F // 3)
+    if rng is None:
+        left = np.round(np.linspace(0, F - 1 - gap, n_pairs)).astype(np.int64)
+        right = np.minimum(left + gap, F - 1)
+        if n_pairs > 1:  # the widest baseline is always among them
+            left[0], right[0] = 0, F - 1
+        return np.stack([left, right], axis=1)
+    left = rng.integers(0, F - gap, size=n_pairs)
+    right = left + gap + np.floor(rng.random(n_pairs) * (F - gap - left)).astype(np.int64)
+    pairs = np.stack([left, np.minimum(right, F - 1)], axis=1)
+    flip = rng.random(n_pairs) < 0.5
+    pairs[flip] = pairs[flip][:, ::-1]
+    return pairs.astype(np.int64)
+
+
+def labelling_cost(points: np.ndarray, labels: np.ndarray, n_motions: int, n_pairs: int = 8) -> float:
+    """How badly the motions' fundamental matrices explain a labelling (lower is better).
+
+    Mean over points of ``log(1 + d)``, with ``d`` the point's mean Sampson distance (px^2)
+    to its own motion (:func:`motion_distances`); ``inf`` when a motion has < 8 points.
+    """
+    D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], n_pairs))
+    own = D[labels, np.arange(labels.size)]
+    return float(np.mean(np.log1p(own))) if np.isfinite(own).all() else float("inf")
+
+
+def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                  rank: int = SUBSPACE_RANK, scale2: float = SUBSPACE_SCALE2) -> float:
+    """How badly low-rank trajectory subspaces explain a labelling (lower is better).
+
+    Under an affine camera the trajectories of one rigid motion, each stacked as a 2F
+    vector, span a linear subspace of dimension at most 4. Every motion's points get
+    their best rank-``rank`` subspace (SVD); a point's residual ``r`` is its distance
+    to that subspace as an RMS over frames (px). The cost is the mean over points of
+    ``log(1 + r^2 / scale2)``. Unlike :func:`labelling_cost` (epipolar), it uses every frame at
+    once and tells a static background from a translating object, which the same
+    fundamental matrix can both satisfy.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (P,)
+    n_motions : int
+    rank : int
+    scale2 : float
+        px^2.
+
+    Returns
+    -------
+    float
+        ``inf`` when a motion has ``rank`` points or fewer.
+    """
+    F, P, _ = points.shape
+    W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)
+    r2 = np.empty(P)
+    for g in range(n_motions):
+        mem = labels == g
+        if mem.sum() <= rank:
+            return float("inf")
+        X = W[:, mem]
+        U = np.linalg.svd(X, full_matrices=False)[0][:, :rank]
+        R = X - U @ (U.T @ X)
+        r2[mem] = (R * R).sum(0) / F
+    return float(np.mean(np.log1p(r2 / scale2)))
+
+
+def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                     pairs: np.ndarray) -> np.ndarray:
+    """Mean Sampson distance (px^2) of every point to every motion's fundamental matrices.
+
+    Each motion fits one F per frame pair on its own points by iteratively reweighted
+    least squares (weights ``1 / (1 + d / (4 median d))``, three rounds).
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (P,)
+    n_motions : int
+    pairs : ndarray of shape (K, 2)
+
+    Returns
+    -------
+    D : ndarray of shape (C, P); ``inf`` for a motion with fewer than 8 points.
+    """
+    x1 = points[pairs[:, 0]]  # (K, P, 2)
+    x2 = points[pairs[:, 1]]
+    D = np.full((n_motions, points.shape[1]), np.inf)
+    for g in range(n_motions):
+        mem = np.flatnonzero(labels == g)
+        if mem.size < 8:
+            continue
+        w = np.ones((pairs.shape[0], mem.size))
+        for _ in range(3):
+            Fm = fit_fundamental(x1[:, mem], x2[:, mem], w)  # (K, 3, 3)
+            dm = sampson_distance(Fm, x1[:, mem], x2[:, mem])  # (K, n)
+            w = 1.0 / (1.0 + dm / (np.median(dm, axis=1, keepdims=True) * 4.0 + 1e-9))
+        D[g] = np.mean(np.minimum(sampson_distance(Fm, x1, x2), 1e4), axis=0)
+    return D
+
+
+def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                  n_pairs: int = 12, rounds: int = 3, outlier: float = 6.0) -> tuple[np.ndarray, int]:
+    """Move points that their own motion does not explain to the motion that does.
+
+    A point moves only when its distance to its own motion (:func:`motion_distances`,
+    in units of that motion's median over its members) exceeds ``outlier`` and another
+    motion's normalised distance is smaller. The guard matters: the fundamental matrix
+    of a nearly degenerate motion (a car translating, a small planar patch) is poorly
+    determined and can pass close to other motions' points, so "nearest F" alone moves
+    correct points.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (P,)
+    n_motions : int
+    n_pairs : int
+        Frame pairs (a deterministic spread, see :func:`frame_pairs`).
+    rounds : int
+    outlier : float
+
+    Returns
+    -------
+    labels : ndarray of shape (P,)
+    n_changed : int
+    """
+    pairs = frame_pairs(points.shape[0], n_pairs)
+    start = labels.copy()
+    cur = labels.copy()
+    idx = np.arange(cur.size)
+    for _ in range(rounds):
+        D = motion_distances(points, cur, n_motions, pairs)
+        scale = np.array([np.median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
+                          for g in range(n_motions)]) + 1e-9
+        with np.errstate(invalid="ignore"):  # inf / inf for a motion too small to fit
+            N = np.where(np.isfinite(D), D / scale[:, None], np.inf)
+        own = N[cur, idx]
+        best = N.argmin(axis=0)
+        move = (own > outlier) & (best != cur)
+        if not move.any():
+            break
+        cur = np.where(move, best, cur)
+    return cur, int((cur != start).sum())
+
+
+def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                       rank: int = REASSIGN_RANK, rounds: int = 5) -> np.ndarray | None:
+    """Squared distance (px^2, mean over frames) of every point to every motion's subspace.
+
+    Each motion's trajectories (2F vectors) get a rank-``rank`` linear subspace fitted by
+    iteratively reweighted least squares: ``rounds`` weighted principal-subspace fits,
+    with weights ``1 / (1 + (r / 2 median r)^2)`` from the residuals ``r`` of the
+    previous fit, so the few points wrongly labelled into the motion barely tilt it
+    (an unweighted fit is pulled towards them, and moving points by it is worse than
+    not moving them, see benchmarks/TUNING.md).
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (P,)
+    n_motions : int
+    rank : int
+    rounds : int
+
+    Returns
+    -------
+    R : ndarray of shape (C, P), or None when a motion has ``rank + 1`` points or fewer.
+    """
+    F, P, _ = points.shape
+    W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)
+    R = np.empty((n_motions, P))
+    for g in range(n_motions):
+        X = W[:, labels == g]
+        if X.shape[1] <= rank + 1:
+            return None
+        w = np.ones(X.shape[1])
+        for _ in range(rounds):
+            Xw = X * w
+            U = np.linalg.eigh(Xw @ Xw.T)[1][:, -rank:]  # principal subspace of the weighted points
+            res = X - U @ (U.T @ X)
+            r = np.sqrt(np.einsum("ij,ij->j", res, res) / F)
+            w = 1.0 / (1.0 + (r / (2.0 * np.median(r) + 1e-9)) ** 2)
+        res = W - U @ (U.T @ W)
+        R[g] = np.einsum("ij,ij->j", res, res) / F
+    return R
+
+
+def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                    rank: int = REASSIGN_RANK, epipolar_weight: float = REASSIGN_EPIPOLAR_WEIGHT,
+                    rounds: int = 2, min_size: int = 8) -> tuple[np.ndarray, int]:
+    """Move every point to the motion that its trajectory subspace and epipolar fit favour.
+
+    The score of point ``p`` for motion ``g`` is ``log(r_gp + eps) + epipolar_weight *
+    log(d_gp + eps)``, with ``r`` its squared distance to ``g``'s robust rank-``rank``
+    trajectory subspace (:func:`subspace_residuals`), ``d`` its mean Sampson distance to
+    ``g``'s robust fundamental matrices over 12 frame pairs (:func:`motion_distances`),
+    and ``eps = 1e-4`` px^2; the point takes the motion of lowest score. Repeated
+    ``rounds`` times (or until nothing moves).
+
+    Why both: either alone errs where the other does not. Under perspective the subspace
+    of a rigid motion is not exactly rank 4 and near-degenerate motions (translations,
+    planes) share subspaces; the fundamental matrix of a near-degenerate motion passes
+    close to other motions' points. A point both fits explain is almost always right.
+    Measured on Hopkins155 after voting's selection (5 seeds): LAAV 0.92 % -> 0.53 %,
+    plain RV 1.09 % -> 0.72 %; subspace alone, or rank 5, or iterating to convergence
+    were each worse (benchmarks/TUNING.md).
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (P,)
+    n_motions : int
+    rank : int
+    epipolar_weight : float
+    rounds : int
+    min_size : int
+        A round that would leave a motion with fewer points is not taken.
+
+    Returns
+    -------
+    labels : ndarray of shape (P,)
+    n_changed : int
+    """
+    start = np.asarray(labels, dtype=np.int64)
+    cur = start
+    if n_motions < 2:
+        return cur.copy(), 0
+    pairs = frame_pairs(points.shape[0], 12)
+    for _ in range(rounds):
+        R = subspace_residuals(points, cur, n_motions, rank)
+        if R is None:
+            break
+        D = motion_distances(points, cur, n_motions, pairs)
+        if not np.isfinite(D).all():
+            break
+        score = np.log(R + 1e-4) + epipolar_weight * np.log(D + 1e-4)
+        new = score.argmin(axis=0)
+        if (new == cur).all() or np.bincount(new, minlength=n_motions).min() < min_size:
+            break
+        cur = new
+    return cur.copy(), int((cur != start).sum())

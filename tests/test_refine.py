@@ -1,0 +1,100 @@
+"""Label refinement after voting (laav.refine): the joint subspace + epipolar reassignment."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from laav import LaavParams, load_sequence, misclassification_rate, random_voting, segment
+from laav.refine import reassign_labels, subspace_residuals
+
+synthetic = pytest.importorskip("laav.synthetic")
+
+
+@pytest.fixture(scope="module")
+def three_motions():
+    return synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=3)
+
+
+def _flip(labels, C, share, seed):
+    rng = np.random.default_rng(seed)
+    bad = labels.copy()
+    flip = rng.choice(labels.size, int(share * labels.size), replace=False)
+    bad[flip] = (bad[flip] + rng.integers(1, C, flip.size)) % C
+    return bad, flip
+
+
+def test_reassign_keeps_the_truth(three_motions):
+    seq = three_motions
+    lab, moved = reassign_labels(seq.points, seq.labels, seq.n_motions)
+    assert moved == 0 and np.array_equal(lab, seq.labels)
+
+
+@pytest.mark.parametrize("share", [0.1, 0.3])
+def test_reassign_repairs_scattered_wrong_labels(three_motions, share):
+    seq = three_motions
+    C = seq.n_motions
+    bad, flip = _flip(seq.labels, C, share, seed=1)
+    lab, moved = reassign_labels(seq.points, bad, C)
+    assert misclassification_rate(seq.labels, lab) < 0.01
+    assert moved == int((lab != bad).sum()) >= 0.9 * flip.size
+    assert set(np.unique(lab)) == set(range(C))  # the names are kept, not permuted
+
+
+def test_reassign_leaves_labels_it_cannot_fit(three_motions):
+    seq = three_motions
+    tiny = np.zeros(seq.n_points, dtype=np.int64)
+    tiny[:4] = 1  # motion 1 has 4 points: no rank-4 subspace (needs > 5)
+    lab, moved = reassign_labels(seq.points, tiny, 2)
+    assert moved == 0 and np.array_equal(lab, tiny)
+    assert subspace_residuals(seq.points, tiny, 2) is None
+    one, moved = reassign_labels(seq.points, np.zeros(seq.n_points, np.int64), 1)
+    assert moved == 0 and (one == 0).all()
+
+
+def test_subspace_residuals_are_small_for_own_motion_only(three_motions):
+    seq = three_motions
+    R = subspace_residuals(seq.points, seq.labels, seq.n_motions)
+    assert R.shape == (seq.n_motions, seq.n_points)
+    own = R[seq.labels, np.arange(seq.n_points)]
+    other = np.where(np.arange(seq.n_motions)[:, None] == seq.labels, np.inf, R).min(0)
+    assert np.median(own) < 0.05 * np.median(other)
+
+
+def test_voting_reports_the_reassignment(three_motions):
+    seq = three_motions
+    C = seq.n_motions
+    bad, _ = _flip(seq.labels, C, 0.3, seed=2)
+    # one iteration of voting from a poor start cannot fix it; the reassignment does
+    p = LaavParams(rv_max_iter=1, rv_select="none", rv_refine=False)
+    off = random_voting(seq, C, p.replace(rv_reassign=False), seed=0, init_labels=bad)
+    on = random_voting(seq, C, p, seed=0, init_labels=bad)
+    assert off.reassigned == 0 and on.reassigned > 0
+    assert misclassification_rate(seq.labels, on.labels) < misclassification_rate(seq.labels, off.labels)
+    assert misclassification_rate(seq.labels, on.labels) < 0.01
+
+
+# LAAV seed 0 without / with the reassignment, measured 2026-11-29 (%): the sequences where
+# voting alone leaves the same points wrong at every seed
+HOPKINS_CASES = {"2RT3RCT_B_g12": (2.27, 0.0), "arm": (2.60, 0.0), "2RT3RCR_g23": (4.62, 0.97),
+                 "cars10_g23": (9.43, 3.14)}
+
+
+@pytest.mark.hopkins
+@pytest.mark.parametrize("name", sorted(HOPKINS_CASES))
+def test_reassignment_repairs_laav_on_hopkins(hopkins_root, name):
+    seq = load_sequence(hopkins_root / name)
+    C = seq.n_motions
+    off = segment(seq, C, LaavParams(rv_reassign=False), seed=0)
+    on = segment(seq, C, seed=0)
+    e_off = misclassification_rate(seq.labels, off.labels)
+    e_on = misclassification_rate(seq.labels, on.labels)
+    assert on.voting.reassigned > 0 and off.voting.reassigned == 0
+    assert e_on <= 0.5 * e_off, (e_on, e_off)
+    assert e_on <= HOPKINS_CASES[name][1] / 100 + 0.01, e_on
+
+
+@pytest.mark.parametrize("bad_value", [1, "yes", None])
+def test_reassign_flag_is_validated(bad_value):
+    with pytest.raises(ValueError, match="rv_reassign must be True or False"):
+        LaavParams(rv_reassign=bad_value)
