@@ -84,13 +84,19 @@ class LaavParams:
     rv_atom_pooling : float
         In LAAV's fine-tuning, share (0..1) of an atom feature's votes replaced at every
         iteration by the mean votes of its atoms (atoms vote as units; 0 = off).
+    rv_batch : int
+        Voting trials run side by side in one batched numpy call (LAAV's informed trial
+        with plain RV's random starts). Speed only: each trial keeps its own frame pairs,
+        samples and convergence test, and the trial kept is the same as if they ran one
+        after another; but the random stream, hence a seed's labels, depends on it.
     rv_refine : bool
         After voting, reassign each point to the motion whose fundamental matrices (fitted
         on the motion's points over many frame pairs) explain it best.
     rv_reassign : bool
-        Last of all, move every point to the motion whose robust rank-4 trajectory
-        subspace and fundamental matrices explain it best together
-        (:func:`laav.refine.reassign_labels`; Hopkins155, 5 seeds: LAAV 0.92 % -> 0.53 %).
+        After the refinement, move every point to the motion whose robust rank-4
+        trajectory subspace and fundamental matrices explain it best together
+        (:func:`laav.refine.reassign_labels`). With model selection, every candidate
+        labelling is polished so before it is scored.
     rv_select : {"none", "subspace"}
         Model selection between candidate labellings by their trajectory-subspace cost
         (:func:`laav.voting.subspace_cost`). ``"subspace"``: plain RV with no converged
@@ -102,6 +108,7 @@ class LaavParams:
         Weight (>= 0) of a candidate's mean disagreement (misclassification rate) with
         the other candidates in the selection score, when there are more than two: the
         labelling most others agree with is preferred among costs that are close.
+        2.0 measured best of 0.5-6 once candidates are reassigned (benchmarks/TUNING.md).
     """
 
     r1: float = 20.0
@@ -131,10 +138,11 @@ class LaavParams:
     rv_label_weight: float = 5.0
     rv_anchor: float = 0.0
     rv_atom_pooling: float = 0.0
+    rv_batch: int = 2
     rv_refine: bool = True
     rv_reassign: bool = True
     rv_select: str = "subspace"
-    rv_select_agreement: float = 0.5
+    rv_select_agreement: float = 2.0
 
     def __post_init__(self) -> None:
         problems = []
@@ -187,6 +195,8 @@ class LaavParams:
         need(0 <= self.rv_atom_pooling <= 1, "rv_atom_pooling must be in [0, 1]")
         need(0 <= self.rv_tolerance < 0.5, "rv_tolerance must be in [0, 0.5)")
         need(isinstance(self.rv_pairs, int) and self.rv_pairs >= 1, "rv_pairs must be an integer >= 1")
+        need(isinstance(self.rv_batch, int) and not isinstance(self.rv_batch, bool)
+             and self.rv_batch >= 1, f"rv_batch must be an integer >= 1, got {self.rv_batch!r}")
         agree = self.rv_select_agreement
         need(isinstance(agree, (int, float)) and not isinstance(agree, bool)
              and agree == agree and 0 <= agree < float("inf"),

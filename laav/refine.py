@@ -138,11 +138,12 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
         mem = np.flatnonzero(labels == g)
         if mem.size < 8:
             continue
-        w = np.ones((pairs.shape[0], mem.size))
-        for _ in range(3):
-            Fm = fit_fundamental(x1[:, mem], x2[:, mem], w)  # (K, 3, 3)
-            dm = sampson_distance(Fm, x1[:, mem], x2[:, mem])  # (K, n)
+        m1, m2 = x1[:, mem], x2[:, mem]
+        Fm = fit_fundamental(m1, m2)  # (K, 3, 3)
+        for _ in range(2):
+            dm = sampson_distance(Fm, m1, m2)  # (K, n)
             w = 1.0 / (1.0 + dm / (np.median(dm, axis=1, keepdims=True) * 4.0 + 1e-9))
+            Fm = fit_fundamental(m1, m2, w)
         D[g] = np.mean(np.minimum(sampson_distance(Fm, x1, x2), 1e4), axis=0)
     return D
 
@@ -217,20 +218,21 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
     """
     F, P, _ = points.shape
     W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)
+    norm2 = np.einsum("ij,ij->j", W, W)  # |x|^2 per point; residual^2 = |x|^2 - |U^T x|^2
     R = np.empty((n_motions, P))
     for g in range(n_motions):
-        X = W[:, labels == g]
+        mem = labels == g
+        X, xn2 = W[:, mem], norm2[mem]
         if X.shape[1] <= rank + 1:
             return None
-        w = np.ones(X.shape[1])
+        w2 = np.ones(X.shape[1])  # squared IRLS weights
         for _ in range(rounds):
-            Xw = X * w
-            U = np.linalg.eigh(Xw @ Xw.T)[1][:, -rank:]  # principal subspace of the weighted points
-            res = X - U @ (U.T @ X)
-            r = np.sqrt(np.einsum("ij,ij->j", res, res) / F)
-            w = 1.0 / (1.0 + (r / (2.0 * np.median(r) + 1e-9)) ** 2)
-        res = W - U @ (U.T @ W)
-        R[g] = np.einsum("ij,ij->j", res, res) / F
+            U = np.linalg.eigh((X * w2) @ X.T)[1][:, -rank:]  # principal subspace, weighted
+            proj = U.T @ X
+            r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F)
+            w2 = (1.0 / (1.0 + (r / (2.0 * np.median(r) + 1e-9)) ** 2)) ** 2
+        proj = U.T @ W
+        R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F
     return R
 
 

@@ -74,10 +74,11 @@ def test_voting_reports_the_reassignment(three_motions):
     assert misclassification_rate(seq.labels, on.labels) < 0.01
 
 
-# LAAV seed 0 without / with the reassignment, measured 2026-11-29 (%): the sequences where
-# voting alone leaves the same points wrong at every seed
-HOPKINS_CASES = {"2RT3RCT_B_g12": (2.27, 0.0), "arm": (2.60, 0.0), "2RT3RCR_g23": (4.62, 0.97),
-                 "cars10_g23": (9.43, 3.14)}
+# LAAV seed 0 without / with the reassignment, measured 2026-11-29 (%): sequences where
+# voting alone leaves the same points wrong at every seed (seeds 1 and 2 give the same
+# pairs on the first three, and 3.41 / 0.97, 4.38 / 0.97 on 2RT3RCR_g23)
+HOPKINS_CASES = {"2RT3RCT_B_g12": (2.27, 0.0), "arm": (2.60, 0.0), "2RT3RCR_g23": (4.38, 1.22),
+                 "cars10_g23": (10.06, 4.40)}
 
 
 @pytest.mark.hopkins
