@@ -436,7 +436,10 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
         else:
             shown = ", ".join(map(str, per[:6])) + (", …" if len(per) > 6 else "")
             trials = f"; {voting.n_trials} trials ({shown} iterations)"
-    extra = f"; refinement then moved {voting.refined} points" if voting.refined else ""
+    moved = [f"refinement {voting.refined}"] if voting.refined else []
+    if voting.reassigned:
+        moved.append(f"joint reassignment {voting.reassigned}")
+    extra = f"; points moved by {' and '.join(moved)}" if moved else ""
     return f"**{what}:** {len(voting.changed)} iterations, {conv}{trials}{extra}{_selection(voting)}."
 
 

@@ -252,9 +252,10 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     of a rigid motion is not exactly rank 4 and near-degenerate motions (translations,
     planes) share subspaces; the fundamental matrix of a near-degenerate motion passes
     close to other motions' points. A point both fits explain is almost always right.
-    Measured on Hopkins155 after voting's selection (5 seeds): LAAV 0.92 % -> 0.53 %,
-    plain RV 1.09 % -> 0.72 %; subspace alone, or rank 5, or iterating to convergence
-    were each worse (benchmarks/TUNING.md).
+    Measured on Hopkins155 as the last step of voting, seeds 0-1 (tuning) / 2-4 (held
+    out): LAAV 0.84 -> 0.49 % / 0.98 -> 0.56 %, plain RV 1.00 -> 0.66 % / 1.15 -> 0.77 %;
+    the subspace alone, unweighted fits, ranks 5 and 6, and other weights were each
+    worse (benchmarks/TUNING.md).
 
     Parameters
     ----------

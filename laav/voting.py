@@ -22,23 +22,29 @@ Choices where the RV paper is vague (each measured on Hopkins155, see
   co-association affinity and split by spectral clustering.
 * **Refinement** (``rv_refine``). After voting, every motion fits robust
   (iteratively reweighted) fundamental matrices on its own points over a fixed set of
-  well separated frame pairs and each point moves to the motion with the smallest mean
-  Sampson distance; repeated until stable (at most 5 rounds). This uses every frame
-  rather than one pair at a time and removes the residual label noise of voting.
-* **Model selection** (``rv_select="subspace"``, default). Voting can converge on, or
-  end at, a wrong partition, and the epipolar fit cannot tell (a static background and
-  a translating object satisfy one fundamental matrix). Candidate labellings are
-  therefore compared by :func:`subspace_cost`, the fit of every motion's trajectories
-  by a rank-5 subspace over all frames: plain RV with no converged trial keeps the
-  cheapest of the consensus and its trials; LAAV's fine-tuning runs plain RV besides
-  the informed trial and keeps the cheapest of all. On Hopkins155 this took LAAV from
-  1.59 % to about 1 % mean error (``benchmarks/TUNING.md``).
-* **Joint reassignment** (``rv_reassign``, default on). Last, the returned labelling goes
-  through :func:`laav.refine.reassign_labels`: every point moves to the motion whose
-  robust rank-4 trajectory subspace and fundamental matrices explain it best together.
-  It runs once, after selection (also running it on every candidate before selection
-  measured worse for LAAV: 0.62 % against 0.49 % on seeds 0 and 1). On Hopkins155
-  (5 seeds) it took LAAV from 0.92 % to 0.53 % and plain RV from 1.09 % to 0.72 %.
+  well separated frame pairs, and points their own motion does not explain move to the
+  motion with the smallest mean Sampson distance (at most 3 rounds). This uses every
+  frame rather than one pair at a time and removes the residual label noise of voting.
+* **Joint reassignment** (``rv_reassign``). Then every point moves to the motion whose
+  robust rank-4 trajectory subspace *and* fundamental matrices explain it best together
+  (:func:`laav.refine.reassign_labels`). Hopkins155, seeds 0-1 (tuning) / 2-4 (held
+  out): LAAV 0.84 -> 0.49 % / 0.98 -> 0.56 %, plain RV 1.00 -> 0.66 % / 1.15 -> 0.77 %.
+* **Model selection** (``rv_select="subspace"``). Voting can converge on, or end at, a
+  wrong partition, and the epipolar fit cannot tell (a static background and a
+  translating object satisfy one fundamental matrix). Candidate labellings are compared
+  after refinement by :func:`subspace_cost` (rank-5 trajectory subspaces over all
+  frames) plus ``rv_select_agreement`` times their mean disagreement with the other
+  candidates after reassignment. Plain RV with no converged trial chooses among the
+  consensus and its trials; LAAV's fine-tuning runs plain RV beside the informed trial
+  and chooses among all, with two more plain RV runs when the informed and plain
+  results disagree on more than 5 % of the points (agreement needs a third voice).
+* **Trials side by side** (``rv_batch``). The informed trial and plain RV's trials run
+  in lockstep, one batched numpy call per iteration for all of them; the plain trial
+  kept is the first in start order to converge, exactly as if they ran one after
+  another. Speed only (about a sixth off LAAV's median time against ``rv_batch=1``,
+  benchmarks/TUNING.md), but the random stream depends on it.
+
+All figures and rejected variants: ``benchmarks/TUNING.md``.
 """
 
 from __future__ import annotations

@@ -407,3 +407,24 @@ def test_no_thread_leaks_after_close(seq):
     ex.close()
     time.sleep(0.5)
     assert threading.active_count() <= before + 2
+
+
+def test_rv_summary_names_the_points_each_polishing_step_moved():
+    from explorer.views import rv_summary
+    from laav.synthetic import make_sequence
+
+    seq = make_sequence(n_objects=2, n_frames=20, n_points=300, rng=3)
+    rng = np.random.default_rng(2)
+    bad = seq.labels.copy()
+    flip = rng.choice(seq.n_points, 90, replace=False)
+    bad[flip] = (bad[flip] + 1) % seq.n_motions
+    p = laav.LaavParams(rv_max_iter=1, rv_select="none")
+    v = laav.random_voting(seq, seq.n_motions, p, seed=0, init_labels=bad)
+    assert v.reassigned > 0
+    text = rv_summary(v, None)
+    assert f"joint reassignment {v.reassigned}" in text
+    if v.refined:
+        assert f"refinement {v.refined}" in text
+    off = laav.random_voting(seq, seq.n_motions, p.replace(rv_reassign=False, rv_refine=False),
+                             seed=0, init_labels=bad)
+    assert "points moved" not in rv_summary(off, None)
