@@ -107,7 +107,9 @@ def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
         if mem.sum() <= rank:
             return float("inf")
         X = W[:, mem]
-        U = np.linalg.svd(X, full_matrices=False)[0][:, :rank]
+        # principal subspace from the 2F x 2F scatter matrix: the SVD's left vectors,
+        # at a third of its cost for a few hundred points
+        U = np.linalg.eigh(X @ X.T)[1][:, ::-1][:, :rank]
         R = X - U @ (U.T @ X)
         r2[mem] = (R * R).sum(0) / F
     return float(np.mean(np.log1p(r2 / scale2)))

@@ -244,7 +244,7 @@ def _margins(votes: np.ndarray) -> np.ndarray:
     else:
         top2 = np.partition(votes, C - 2, axis=-1)[..., -2:]
         spread = top2[..., 1] - top2[..., 0]
-    return np.mean(spread / (np.abs(votes).sum(-1) + 1e-12), axis=-1)
+    return np.add.reduce(spread / (np.abs(votes).sum(-1) + 1e-12), axis=-1) / spread.shape[-1]
 
 
 def _step(points, trials, params, rng, pool):
