@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._sequence import Sequence, as_points
-from .geometry import affine_residuals, fit_affine
+from .geometry import affine_residuals, fit_affine, fit_affine_leverage
 from .params import LaavParams
 
 __all__ = ["Atoms", "build_atoms", "trajectory_distances"]
@@ -178,14 +178,8 @@ def _loo_residuals(src: np.ndarray, dst: np.ndarray, mask: np.ndarray) -> np.nda
     rest (high leverage) pulls the fit through itself and would otherwise look like an
     inlier.
     """
-    A = fit_affine(src[mask], dst[:, mask])
+    A, h = fit_affine_leverage(src[mask], dst[:, mask])
     res = _rms_residuals(A, src, dst)
-    xs = src[mask]
-    c = np.add.reduce(xs, 0) / xs.shape[0]
-    sc = np.sqrt(np.add.reduce(((xs - c) ** 2).sum(1)) / xs.shape[0]) + 1e-12
-    X = np.hstack([(xs - c) / sc, np.ones((xs.shape[0], 1))])
-    G = X.T @ X
-    h = np.einsum("ij,jk,ik->i", X, np.linalg.pinv(G), X)
     res[mask] = res[mask] / np.maximum(1.0 - h, 1e-3)
     return res
 

@@ -13,6 +13,7 @@ __all__ = [
     "fit_fundamental",
     "sampson_distance",
     "fit_affine",
+    "fit_affine_leverage",
     "apply_affine",
     "affine_residuals",
     "epipolar_lines",
@@ -155,6 +156,15 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     A : ndarray of shape (F, 2, 3)
         ``dst[f] ~= src @ A[f, :, :2].T + A[f, :, 2]``.
     """
+    return fit_affine_leverage(src, dst)[0]
+
+
+def fit_affine_leverage(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fit_affine`, and the leverage ``h`` (n,) of every point in the fit.
+
+    ``h`` is the diagonal of the hat matrix of the (shared) design: a point's residual
+    divided by ``1 - h`` is its residual under the fit without it.
+    """
     # Solve in centred, scaled coordinates: the normal equations of raw pixel coordinates
     # are ill-conditioned (and a ridge scaled by their trace biases the fit), which put
     # predictions ~0.01 px off least squares for 640-px images and pixels off for
@@ -163,15 +173,16 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     c = np.add.reduce(src, axis=0) / n  # np.mean bit for bit, less overhead
     d = np.sqrt(np.add.reduce(((src - c) ** 2).sum(-1)) / n)
     s = 1.0 / max(d, 1e-12)
-    X = np.hstack([(src - c) * s, np.ones((src.shape[0], 1))])  # (n, 3)
+    X = np.hstack([(src - c) * s, np.ones((n, 1))])  # (n, 3)
     G = X.T @ X
     G[np.diag_indices(3)] += 1e-12 * (np.trace(G) + 1.0)  # keeps collinear sets solvable
-    sol = np.einsum("kn,fnd->fdk", np.linalg.inv(G) @ X.T, dst)  # (F, 2, 3), normalised src
+    P = np.linalg.inv(G) @ X.T  # (3, n)
+    sol = np.einsum("kn,fnd->fdk", P, dst)  # (F, 2, 3), normalised src
     lin = sol[..., :2] * s
     out = np.empty_like(sol)
     out[..., :2] = lin
     out[..., 2] = sol[..., 2] - lin @ c
-    return out
+    return out, np.einsum("ik,ki->i", X, P)
 
 
 def apply_affine(A: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -146,7 +146,7 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
             dm = sampson_distance(Fm, m1, m2)  # (K, n)
             w = 1.0 / (1.0 + dm / (np.median(dm, axis=1, keepdims=True) * 4.0 + 1e-9))
             Fm = fit_fundamental(m1, m2, w)
-        D[g] = np.mean(np.minimum(sampson_distance(Fm, x1, x2), 1e4), axis=0)
+        D[g] = np.add.reduce(np.minimum(sampson_distance(Fm, x1, x2), 1e4), axis=0) / len(pairs)
     return D
 
 
