@@ -538,8 +538,9 @@ def _select(points, C, params, candidates, trials, initialised) -> Voting:
     is the safer pick. (The cost is taken before the reassignment, which fits rank-4
     subspaces and so makes every candidate's subspace cost alike; the agreement after it,
     where candidates that differ only by boundary points agree. Measured on Hopkins155,
-    10 seeds, against cost and agreement both before or both after: LAAV 0.59 % against
-    0.69 % / 0.59 %, plain RV 0.55 % against 0.61 % / 0.58 %; benchmarks/TUNING.md.)
+    10 seeds, weight 2, against cost and agreement both before or both after: LAAV
+    0.59 % against 0.65 % / 0.59 %, plain RV 0.55 % against 0.64 % / 0.58 %;
+    benchmarks/TUNING.md.)
     """
     from .metrics import misclassification_rate
 
