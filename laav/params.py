@@ -99,11 +99,12 @@ class LaavParams:
         labelling is polished so before it is scored.
     rv_select : {"none", "subspace"}
         Model selection between candidate labellings by their trajectory-subspace cost
-        (:func:`laav.voting.subspace_cost`). ``"subspace"``: plain RV with no converged
-        trial keeps the trial or co-association labelling of lowest cost, and LAAV's
-        fine-tuning also runs plain RV and keeps whichever of the two results costs
-        less. ``"none"``: co-association only, and the informed trial alone unless it
-        fails to converge.
+        (:func:`laav.voting.subspace_cost`) and agreement. ``"subspace"``: plain RV with
+        no converged trial keeps the best of the trials and their co-association
+        labelling; LAAV's fine-tuning also runs plain RV (two more runs when the two
+        results disagree on more than 5 % of the points) and keeps the best of all.
+        ``"none"``: co-association only, and the informed trial alone unless it fails to
+        converge.
     rv_select_agreement : float
         Weight (>= 0) of a candidate's mean disagreement (misclassification rate) with
         the other candidates in the selection score, when there are more than two: the
