@@ -151,7 +151,8 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
 
 
 def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                  n_pairs: int = 12, rounds: int = 3, outlier: float = 6.0) -> tuple[np.ndarray, int]:
+                  n_pairs: int = 12, rounds: int = 3, outlier: float = 6.0,
+                  return_distances: bool = False) -> tuple:
     """Move points that their own motion does not explain to the motion that does.
 
     A point moves only when its distance to its own motion (:func:`motion_distances`,
@@ -175,8 +176,12 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     -------
     labels : ndarray of shape (P,)
     n_changed : int
+    distances : ndarray of shape (C, P) or None
+        Only with ``return_distances``: :func:`motion_distances` of the returned labels
+        (None when the last round moved points), for :func:`reassign_labels` to reuse.
     """
     pairs = frame_pairs(points.shape[0], n_pairs)
+    D = None
     start = labels.copy()
     cur = labels.copy()
     idx = np.arange(cur.size)
@@ -192,6 +197,9 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         if not move.any():
             break
         cur = np.where(move, best, cur)
+        D = None  # computed for the labels before this move
+    if return_distances:
+        return cur, int((cur != start).sum()), D
     return cur, int((cur != start).sum())
 
 
@@ -240,7 +248,8 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
 
 def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
                     rank: int = REASSIGN_RANK, epipolar_weight: float = REASSIGN_EPIPOLAR_WEIGHT,
-                    rounds: int = 2, min_size: int = 8) -> tuple[np.ndarray, int]:
+                    rounds: int = 2, min_size: int = 8,
+                    distances: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Move every point to the motion that its trajectory subspace and epipolar fit favour.
 
     The score of point ``p`` for motion ``g`` is ``log(r_gp + eps) + epipolar_weight *
@@ -269,6 +278,9 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     rounds : int
     min_size : int
         A round that would leave a motion with fewer points is not taken.
+    distances : ndarray of shape (C, P), optional
+        :func:`motion_distances` of ``labels`` over ``frame_pairs(F, 12)``, when already
+        known (from :func:`refine_labels`); saves the first round's fits.
 
     Returns
     -------
@@ -284,7 +296,8 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         R = subspace_residuals(points, cur, n_motions, rank)
         if R is None:
             break
-        D = motion_distances(points, cur, n_motions, pairs)
+        D = distances if distances is not None and cur is start else motion_distances(
+            points, cur, n_motions, pairs)
         if not np.isfinite(D).all():
             break
         score = np.log(R + 1e-4) + epipolar_weight * np.log(D + 1e-4)

@@ -483,10 +483,11 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
 def _polish(points, C, params, labels) -> tuple[np.ndarray, int, int]:
     """Refinement then joint reassignment of a labelling: (labels, n refined, n reassigned)."""
     refined = reassigned = 0
+    D = None
     if params.rv_refine:
-        labels, refined = refine_labels(points, labels, C)
+        labels, refined, D = refine_labels(points, labels, C, return_distances=True)
     if params.rv_reassign:
-        labels, reassigned = reassign_labels(points, labels, C)
+        labels, reassigned = reassign_labels(points, labels, C, distances=D)
     return labels, refined, reassigned
 
 
@@ -551,15 +552,16 @@ def _select(points, C, params, candidates, trials, initialised) -> Voting:
     for name, cand in candidates:
         key = _partition_key(cand[0])
         if key not in done:
-            lab, refined = refine_labels(points, cand[0], C) if params.rv_refine else (cand[0], 0)
-            done[key] = [lab, refined, None, subspace_cost(points, lab, C)]
+            lab, refined, D = (refine_labels(points, cand[0], C, return_distances=True)
+                               if params.rv_refine else (cand[0], 0, None))
+            done[key] = [lab, refined, None, subspace_cost(points, lab, C), D]
         entries.append((name, cand, done[key]))
 
     def reassigned(e):  # polished labelling of an entry (reassigned once, when needed)
         pol = e[2]
         if pol[2] is None:
-            pol[0], pol[2] = (reassign_labels(points, pol[0], C) if params.rv_reassign
-                              else (pol[0], 0))
+            pol[0], pol[2] = (reassign_labels(points, pol[0], C, distances=pol[4])
+                              if params.rv_reassign else (pol[0], 0))
         return pol
 
     scores = np.array([e[2][3] for e in entries])
