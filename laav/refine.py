@@ -79,11 +79,12 @@ def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
 
     Under an affine camera the trajectories of one rigid motion, each stacked as a 2F
     vector, span a linear subspace of dimension at most 4. Every motion's points get
-    their best rank-``rank`` subspace (SVD); a point's residual ``r`` is its distance
-    to that subspace as an RMS over frames (px). The cost is the mean over points of
-    ``log(1 + r^2 / scale2)``. Unlike :func:`labelling_cost` (epipolar), it uses every frame at
-    once and tells a static background from a translating object, which the same
-    fundamental matrix can both satisfy.
+    their best rank-``rank`` subspace (:func:`subspace_residuals` with one, unweighted,
+    round); a point's residual ``r`` is its distance to that subspace as an RMS over
+    frames (px). The cost is the mean over points of ``log(1 + r^2 / scale2)``. Unlike
+    :func:`labelling_cost` (epipolar), it uses every frame at once and tells a static
+    background from a translating object, which the same fundamental matrix can both
+    satisfy.
 
     Parameters
     ----------
@@ -97,22 +98,13 @@ def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
     Returns
     -------
     float
-        ``inf`` when a motion has ``rank`` points or fewer.
+        ``inf`` when a motion has ``rank + 1`` points or fewer.
     """
-    F, P, _ = points.shape
-    W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)
-    r2 = np.empty(P)
-    for g in range(n_motions):
-        mem = labels == g
-        if mem.sum() <= rank:
-            return float("inf")
-        X = W[:, mem]
-        # principal subspace from the 2F x 2F scatter matrix: the SVD's left vectors,
-        # at a third of its cost for a few hundred points
-        U = np.linalg.eigh(X @ X.T)[1][:, ::-1][:, :rank]
-        R = X - U @ (U.T @ X)
-        r2[mem] = (R * R).sum(0) / F
-    return float(np.mean(np.log1p(r2 / scale2)))
+    R = subspace_residuals(points, labels, n_motions, rank, rounds=1)
+    if R is None:
+        return float("inf")
+    own = R[labels, np.arange(labels.size)]
+    return float(np.mean(np.log1p(own / scale2)))
 
 
 def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
@@ -235,12 +227,13 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
         X, xn2 = W[:, mem], norm2[mem]
         if X.shape[1] <= rank + 1:
             return None
-        w2 = np.ones(X.shape[1])  # squared IRLS weights
-        for _ in range(rounds):
-            U = np.linalg.eigh((X * w2) @ X.T)[1][:, -rank:]  # principal subspace, weighted
-            proj = U.T @ X
-            r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F)
-            w2 = (1.0 / (1.0 + (r / (2.0 * np.median(r) + 1e-9)) ** 2)) ** 2
+        Xw = X  # the points, scaled by the squared IRLS weights from the second round on
+        for k in range(rounds):
+            U = np.linalg.eigh(Xw @ X.T)[1][:, -rank:]  # principal subspace, weighted
+            if k + 1 < rounds:
+                proj = U.T @ X
+                r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F)
+                Xw = X * (1.0 / (1.0 + (r / (2.0 * np.median(r) + 1e-9)) ** 2)) ** 2
         proj = U.T @ W
         R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F
     return R

@@ -55,6 +55,7 @@ import numpy as np
 
 from ._sequence import Sequence, as_points
 from .geometry import fit_fundamental, sampson_distance
+from .metrics import misclassification_rate
 from .params import LaavParams
 from .refine import (
     frame_pairs,
@@ -74,11 +75,6 @@ _RESET_AT = 15
 #: that the selection's agreement term can arbitrate (it needs more than two candidates).
 _ARBITRATE_ABOVE = 0.05
 
-
-def _disagree(a: np.ndarray, b: np.ndarray) -> float:
-    from .metrics import misclassification_rate
-
-    return misclassification_rate(a, b)
 
 
 @dataclass(frozen=True, eq=False)
@@ -442,7 +438,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
             first, plain, trials, ended = _run_trials(points, C, params, rng,
                                                       (labels0, votes0, anchor), pool=pool)
             cands = [("informed", first)] + _plain_candidates(plain, ended, C, rng, "plain ")
-            if plain is not None and _disagree(first[0], plain[0]) > _ARBITRATE_ABOVE:
+            if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
                 # LAAV's start and plain RV disagree: two more plain RV runs arbitrate
                 for k in (2, 3):
                     _, conv, more, ended = _run_trials(points, C, params, rng, pool=pool)
@@ -480,22 +476,39 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
                    selected=selected)
 
 
-def _polish(points, C, params, labels) -> tuple[np.ndarray, int, int]:
-    """Refinement then joint reassignment of a labelling: (labels, n refined, n reassigned)."""
-    refined = reassigned = 0
-    D = None
-    if params.rv_refine:
-        labels, refined, D = refine_labels(points, labels, C, return_distances=True)
-    if params.rv_reassign:
-        labels, reassigned = reassign_labels(points, labels, C, distances=D)
-    return labels, refined, reassigned
+class _Polished:
+    """A candidate labelling refined (:func:`refine_labels`) and, on demand, jointly
+    reassigned (:func:`reassign_labels`); its :func:`subspace_cost` is taken after the
+    refinement, before the reassignment (see :func:`_select`)."""
+
+    def __init__(self, points, C, params, labels):
+        self.points, self.C, self.params = points, C, params
+        self.refined, self._distances = 0, None
+        if params.rv_refine:
+            labels, self.refined, self._distances = refine_labels(points, labels, C,
+                                                                  return_distances=True)
+        self.refined_labels = labels
+        self._final = None
+
+    def cost(self) -> float:
+        return subspace_cost(self.points, self.refined_labels, self.C)
+
+    def final(self) -> tuple[np.ndarray, int, int]:
+        """(labels, points moved by the refinement, points moved by the reassignment)."""
+        if self._final is None:
+            labels, moved = self.refined_labels, 0
+            if self.params.rv_reassign:
+                labels, moved = reassign_labels(self.points, labels, self.C,
+                                                distances=self._distances)
+            self._final = (labels, self.refined, moved)
+        return self._final
 
 
 def _finish(points, C, params, best, trials, initialised, selected, polished=None,
             costs=None) -> Voting:
     labels, votes, changed, margin, _its, conv = best
-    labels, refined, reassigned = (_polish(points, C, params, labels) if polished is None
-                                   else polished)
+    labels, refined, reassigned = (_Polished(points, C, params, labels) if polished is None
+                                   else polished).final()
     return Voting(
         labels=np.asarray(labels, dtype=np.int64),
         votes=votes,
@@ -543,39 +556,26 @@ def _select(points, C, params, candidates, trials, initialised) -> Voting:
     0.59 % against 0.65 % / 0.59 %, plain RV 0.55 % against 0.64 % / 0.58 %;
     benchmarks/TUNING.md.)
     """
-    from .metrics import misclassification_rate
-
     n = len(candidates)
-    agree = n > 2 and params.rv_select_agreement > 0
     done: dict = {}  # candidates that are the same partition (often) are polished once
     entries = []
     for name, cand in candidates:
         key = _partition_key(cand[0])
         if key not in done:
-            lab, refined, D = (refine_labels(points, cand[0], C, return_distances=True)
-                               if params.rv_refine else (cand[0], 0, None))
-            done[key] = [lab, refined, None, subspace_cost(points, lab, C), D]
-        entries.append((name, cand, done[key]))
-
-    def reassigned(e):  # polished labelling of an entry (reassigned once, when needed)
-        pol = e[2]
-        if pol[2] is None:
-            pol[0], pol[2] = (reassign_labels(points, pol[0], C, distances=pol[4])
-                              if params.rv_reassign else (pol[0], 0))
-        return pol
-
-    scores = np.array([e[2][3] for e in entries])
-    if agree:
+            pol = _Polished(points, C, params, cand[0])
+            done[key] = (pol, pol.cost())
+        entries.append((name, cand) + done[key])
+    scores = np.array([e[3] for e in entries])
+    if n > 2 and params.rv_select_agreement > 0:
         D = np.zeros((n, n))
         for i in range(n):
             for j in range(i + 1, n):
-                D[i, j] = D[j, i] = misclassification_rate(reassigned(entries[i])[0],
-                                                           reassigned(entries[j])[0])
+                D[i, j] = D[j, i] = misclassification_rate(entries[i][2].final()[0],
+                                                           entries[j][2].final()[0])
         with np.errstate(invalid="ignore"):  # inf cost stays inf
             scores = scores + params.rv_select_agreement * D.sum(1) / (n - 1)
     k = int(np.argmin(scores))  # the first of equal scores: LAAV's start, then the consensus
-    name, cand, _ = entries[k]
-    pol = tuple(reassigned(entries[k])[:3])
+    name, cand, pol, _ = entries[k]
     costs = {e[0]: float(v) for e, v in zip(entries, scores)}
     return _finish(points, C, params, cand, trials, initialised, selected=name,
                    polished=pol, costs=costs)
