@@ -159,7 +159,7 @@ class LaavParams:
                 problems.append(f"{name} must be a number, got {v!r}")
         for name in ("atom_min_size", "ransac_hypotheses", "graph_neighbors", "coarse_frames",
                      "coarse_samples", "rv_max_iter", "rv_trials", "rv_sample_size",
-                     "rv_patience"):
+                     "rv_patience", "rv_batch"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool):
                 problems.append(f"{name} must be an integer, got {v!r}")
@@ -196,8 +196,7 @@ class LaavParams:
         need(0 <= self.rv_atom_pooling <= 1, "rv_atom_pooling must be in [0, 1]")
         need(0 <= self.rv_tolerance < 0.5, "rv_tolerance must be in [0, 0.5)")
         need(isinstance(self.rv_pairs, int) and self.rv_pairs >= 1, "rv_pairs must be an integer >= 1")
-        need(isinstance(self.rv_batch, int) and not isinstance(self.rv_batch, bool)
-             and self.rv_batch >= 1, f"rv_batch must be an integer >= 1, got {self.rv_batch!r}")
+        need(self.rv_batch >= 1, f"rv_batch must be >= 1, got {self.rv_batch}")
         agree = self.rv_select_agreement
         need(isinstance(agree, (int, float)) and not isinstance(agree, bool)
              and agree == agree and 0 <= agree < float("inf"),

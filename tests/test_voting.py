@@ -302,7 +302,9 @@ def test_trials_side_by_side_stay_accurate_and_deterministic(batch):
     assert misclassification_rate(seq.labels, a.labels) < 0.01
 
 
-@pytest.mark.parametrize("bad", [0, 1.5, True])
-def test_rv_batch_is_validated(bad):
-    with pytest.raises(ValueError, match="rv_batch must be an integer >= 1"):
+@pytest.mark.parametrize("bad, message", [(0, "rv_batch must be >= 1"),
+                                          (1.5, "rv_batch must be an integer"),
+                                          (True, "rv_batch must be an integer")])
+def test_rv_batch_is_validated(bad, message):
+    with pytest.raises(ValueError, match=message):
         LaavParams(rv_batch=bad)
