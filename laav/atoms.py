@@ -29,6 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 from ._sequence import Sequence, as_points
 from .geometry import affine_residuals, fit_affine, fit_affine_leverage
@@ -112,12 +113,9 @@ def trajectory_distances(points: np.ndarray, n_frames: int = _NEIGHBOURHOOD_FRAM
     F = points.shape[0]
     frames = np.unique(np.round(np.linspace(0, F - 1, min(n_frames, F))).astype(int))
     D = np.zeros((points.shape[1], points.shape[1]))
-    for f in frames:
-        x = points[f]
-        sq = (x * x).sum(1)
-        d2 = sq[:, None] + sq[None, :] - 2.0 * (x @ x.T)
-        np.maximum(D, d2, out=D)
-    return np.sqrt(np.maximum(D, 0.0))
+    for f in frames:  # scipy's cdist: exact differences, and 2.6x faster than |x|^2 - 2 x.y + |y|^2
+        np.maximum(D, cdist(points[f], points[f], "sqeuclidean"), out=D)
+    return np.sqrt(D, out=D)
 
 
 def _rms_residuals(A: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -127,12 +125,30 @@ def _rms_residuals(A: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarra
     return np.sqrt(np.add.reduce(ex * ex + ey * ey, axis=-2) / ex.shape[-2])
 
 
+def _rms_rows(X, sol, Y, n_frames):
+    """RMS over frames of ``X @ sol - Y``: X (n, 3), sol (..., 3, 2F), Y (n, 2F) -> (..., n)."""
+    r = X @ sol - Y
+    return np.sqrt(np.add.reduce(r * r, axis=-1) / n_frames)
+
+
 def _ransac_affine(points, cand, seed_pos, params, rng):
-    """Inliers (bool over cand) of the best affine consensus containing cand[seed_pos]."""
+    """Inliers (bool over cand) of the best affine consensus containing cand[seed_pos].
+
+    Each hypothesis is the affine map through the seed and two other candidates (all
+    pairs when few, random otherwise; near-collinear triples rejected), scored by its
+    inlier count. The best is refitted by least squares on its consensus, with
+    leave-one-out residuals for the fitted points, until the consensus stops changing.
+    Predictions are matrix products of the homogeneous candidates ``X`` (n, 3) with the
+    maps stacked over frames (3, 2F): a few numpy calls per seed, which is what this
+    Python loop over seeds costs.
+    """
     n = cand.size
+    Fn = points.shape[0]
     src = points[0, cand]
-    dst = points[:, cand]  # (F, n, 2)
-    others = np.delete(np.arange(n), seed_pos)
+    X = np.concatenate([src, np.ones((n, 1))], axis=1)  # (n, 3) homogeneous
+    Y = np.transpose(points[:, cand], (1, 0, 2)).reshape(n, 2 * Fn)  # (n, 2F): x0 y0 x1 y1 ...
+    others = np.arange(n - 1)
+    others[seed_pos:] += 1
     B = params.ransac_hypotheses
     # pairs of other candidates (all pairs when few, random otherwise)
     if others.size * (others.size - 1) // 2 <= B:
@@ -143,45 +159,33 @@ def _ransac_affine(points, cand, seed_pos, params, rng):
         a[:, 1] = (a[:, 0] + 1 + rng.integers(0, others.size - 1, size=B)) % others.size
         pairs = others[a]
     samp = np.concatenate([np.full((pairs.shape[0], 1), seed_pos), pairs], axis=1)  # (B, 3)
-    X = np.concatenate([src[samp], np.ones(samp.shape + (1,))], axis=-1)  # (B, 3, 3)
-    e1 = X[:, 1, :2] - X[:, 0, :2]
-    e2 = X[:, 2, :2] - X[:, 0, :2]
+    S = src[samp]
+    e1 = S[:, 1] - S[:, 0]
+    e2 = S[:, 2] - S[:, 0]
     area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])  # twice the triangle's area
     ok = area2 > 0.05 * params.r2 ** 2  # reject (near-)collinear samples
     if not ok.any():
         return None
-    X = X[ok]
     samp = samp[ok]
-    Y = np.transpose(dst[:, samp], (1, 2, 0, 3)).reshape(samp.shape[0], 3, -1)  # (B, 3, 2F)
-    sol = np.linalg.solve(X, Y)  # (B, 3, 2F)
-    Fn = dst.shape[0]
-    A = sol.reshape(samp.shape[0], 3, Fn, 2).transpose(0, 2, 3, 1)  # (B, F, 2, 3)
-    res = _rms_residuals(A, src, dst)  # (B, n)
+    sol = np.linalg.solve(X[samp], Y[samp])  # (B, 3, 2F)
+    res = _rms_rows(X, sol, Y, Fn)  # (B, n)
     inl = res < params.affine_threshold
     best = int(np.argmax(inl.sum(1) - 1e-6 * (np.add.reduce(res, 1) / n)))
     mask = inl[best]
-    for _ in range(4):  # least-squares refit on the consensus, then recompute inliers
+    for _ in range(4):
         if mask.sum() < 4:
             break
-        new = _loo_residuals(src, dst, mask) < params.affine_threshold
+        A, h = fit_affine_leverage(src[mask], points[:, cand[mask]])
+        r = _rms_rows(X, A.transpose(2, 0, 1).reshape(3, 2 * Fn), Y, Fn)
+        # a fitted point's residual divided by 1 - h (h its leverage) is its residual
+        # under the fit without it: a point of another motion far from the rest (high
+        # leverage) pulls the fit through itself and would otherwise look like an inlier
+        r[mask] = r[mask] / np.maximum(1.0 - h, 1e-3)
+        new = r < params.affine_threshold
         if np.array_equal(new, mask):
             break
         mask = new
     return mask
-
-
-def _loo_residuals(src: np.ndarray, dst: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """RMS residuals under the affine fit on ``mask``, leave-one-out for the fitted points.
-
-    A fitted point's residual is divided by ``1 - h`` (``h`` its leverage), which is its
-    residual under the fit without it: a point of another motion that sits far from the
-    rest (high leverage) pulls the fit through itself and would otherwise look like an
-    inlier.
-    """
-    A, h = fit_affine_leverage(src[mask], dst[:, mask])
-    res = _rms_residuals(A, src, dst)
-    res[mask] = res[mask] / np.maximum(1.0 - h, 1e-3)
-    return res
 
 
 def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
