@@ -112,10 +112,12 @@ def forward_backward_error(points: np.ndarray, atoms: Atoms, edges: np.ndarray) 
         pad[i, : m.size] = m
         mask[i, : m.size] = True
 
+    pl, pr = points[left], points[right]  # (K, P, 2)
+
     def directed(a, b):
         idx = pad[b]  # (E, m)
-        xl = points[left][:, idx]  # (K, E, m, 2)
-        xr = points[right][:, idx]
+        xl = pl[:, idx]  # (K, E, m, 2)
+        xr = pr[:, idx]
         Tf = np.transpose(fwd[a], (1, 0, 2, 3))  # (K, E, 3, 3)
         Tb = np.transpose(bwd[a], (1, 0, 2, 3))
         e = 0.5 * (_transfer_error(Tf, xl, xr) + _transfer_error(Tb, xr, xl))
@@ -162,8 +164,8 @@ def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | No
     if N < 2:
         return AtomGraph(np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0),
                          np.zeros(0, np.int64), positions, N)
-    M = atoms.membership().astype(np.int32)
-    shared = M @ M.T
+    M = atoms.membership().astype(np.float64)  # float: BLAS, 10x faster than int32 (exact)
+    shared = (M @ M.T).astype(np.int64)
     np.fill_diagonal(shared, 0)
     D = trajectory_distances(points) if distances is None else distances
     Ds = D[np.ix_(atoms.seeds, atoms.seeds)].copy()
