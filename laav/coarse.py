@@ -154,7 +154,7 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
         left = int(rng.integers(0, F - gap))
         right = int(rng.integers(left + gap, F))
         hv += vote(pts, ml[:, f], hv, (left, right), params.lam, 8, rng)
-        new = np.einsum("np,tpc->tnc", onehot, hv).argmax(-1)
+        new = (onehot @ hv).argmax(-1)  # (trials, models): each model's mean votes
         still = np.where((new == ml).all(axis=1), still + 1, 0)
         ml = new
         hv *= _POOLED_ALPHA

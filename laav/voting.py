@@ -142,11 +142,11 @@ def _sample_groups(labels, votes, C, m, rng):
     vt = np.ascontiguousarray(np.swapaxes(votes, -1, -2))  # (..., C, P)
     if C == 2:  # the margin over the other group, as below but without the sort
         w = vt - vt[..., ::-1, :]
-    elif C > 2:
-        srt = np.sort(vt, axis=-2)
-        top, second = srt[..., -1:, :], srt[..., -2:-1, :]
+    elif C > 2:  # the margin over the best other group
         is_top = np.arange(C)[:, None] == np.argmax(vt, axis=-2)[..., None, :]
-        w = vt - np.where(is_top, second, top)  # margin over the best other group
+        top = vt.max(axis=-2, keepdims=True)
+        second = np.where(is_top, -np.inf, vt).max(axis=-2, keepdims=True)  # = top on ties
+        w = vt - np.where(is_top, second, top)
     else:
         w = vt.copy()
     np.maximum(w, 0.0, out=w)
