@@ -308,3 +308,45 @@ def test_trials_side_by_side_stay_accurate_and_deterministic(batch):
 def test_rv_batch_is_validated(bad, message):
     with pytest.raises(ValueError, match=message):
         LaavParams(rv_batch=bad)
+
+
+@pytest.mark.parametrize("C", [2, 3, 4])
+def test_groups_draw_distinct_members_favouring_confident_ones(C):
+    from laav.voting import _sample_groups
+
+    rng = np.random.default_rng(0)
+    B, P, m = 2, 60, 8
+    labels = np.tile(np.arange(P) % C, (B, 1))
+    labels[1, :] = 0  # trial 1: every group but 0 is empty (too small to fit)
+    votes = 2.0 * (labels[..., None] == np.arange(C)) + 0.1 * rng.random((B, P, C))
+    votes[0, C, :] = 1.0  # point C (a member of group 0): no margin over the others
+    idx = _sample_groups(labels, votes, C, m, rng)
+    assert idx.shape == (B, C, m)
+    for b in range(B):
+        for c in range(C):
+            assert np.unique(idx[b, c]).size == m  # without replacement
+            if (labels[b] == c).sum() >= m:
+                assert np.all(labels[b, idx[b, c]] == c)  # members only
+    # a group too small to fit draws from every point
+    assert np.any(labels[1, idx[1, 1]] == 0)
+    # weights: margin over the best other group, scaled to [0, 1], + 0.05 floor
+    hits = np.zeros(P)
+    for _ in range(400):
+        np.add.at(hits, _sample_groups(labels, votes, C, m, rng)[0, 0], 1)
+    others = np.flatnonzero(labels[0] == 0)
+    others = others[others != C]
+    assert hits[others].sum() == 400 * m - hits[C]  # members only
+    assert 5 * hits[C] < hits[others].mean()
+
+
+def test_two_motion_fast_paths_match_the_general_formulas():
+    from laav.voting import _margins
+
+    rng = np.random.default_rng(1)
+    votes = rng.normal(size=(3, 50, 2))
+    votes[0, :5, 1] = votes[0, :5, 0]  # ties
+    spread = np.abs(votes[..., 1] - votes[..., 0])
+    ref = (spread / (np.abs(votes).sum(-1) + 1e-12)).mean(-1)
+    assert np.array_equal(_margins(votes), ref)
+    three = np.concatenate([votes, np.full((3, 50, 1), -10.0)], axis=-1)  # third never wins
+    assert np.allclose(_margins(three)[1:], ((spread / (np.abs(three).sum(-1) + 1e-12)).mean(-1))[1:])
