@@ -18,3 +18,17 @@ def test_importing_every_laav_module_loads_no_gui_code():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", f"laav imported GUI/plotting modules: {out.stdout.strip()}"
+
+
+def test_import_laav_defers_the_heavy_imports_that_preload_performs():
+    code = (
+        "import sys, laav\n"
+        "lazy = ('sklearn.cluster', 'scipy.sparse.csgraph', 'scipy.spatial.distance', 'scipy.optimize')\n"
+        "print(','.join(m for m in lazy if m in sys.modules))\n"
+        "laav.preload()\n"
+        "print(','.join(m for m in lazy if m not in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    loaded_by_import, missing_after_preload = out.stdout.split("\n")[:2]
+    assert loaded_by_import == "", f"`import laav` loaded {loaded_by_import}"
+    assert missing_after_preload == "", f"laav.preload() did not load {missing_after_preload}"
