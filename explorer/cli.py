@@ -86,7 +86,6 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                 fut.set_result(build())
             except BaseException as exc:  # noqa: BLE001 - the session builds its own then
                 fut.set_exception(exc)
-            laav.preload()  # the pipeline's first-use imports (~1 s), before the page asks
 
         threading.Thread(target=run, name="laav-explore-prebuild", daemon=True).start()
         spare.append(fut)
