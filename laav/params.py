@@ -153,7 +153,8 @@ class LaavParams:
                 problems.append(msg)
 
         for name in ("r1", "r2", "affine_threshold", "edge_scale", "lam", "rv_lambda",
-                     "rv_alpha", "rv_label_weight", "motion_weight", "cut_prior"):
+                     "rv_alpha", "rv_label_weight", "motion_weight", "cut_prior",
+                     "rv_select_agreement"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or v != v:
                 problems.append(f"{name} must be a number, got {v!r}")
@@ -197,10 +198,8 @@ class LaavParams:
         need(0 <= self.rv_tolerance < 0.5, "rv_tolerance must be in [0, 0.5)")
         need(isinstance(self.rv_pairs, int) and self.rv_pairs >= 1, "rv_pairs must be an integer >= 1")
         need(self.rv_batch >= 1, f"rv_batch must be >= 1, got {self.rv_batch}")
-        agree = self.rv_select_agreement
-        need(isinstance(agree, (int, float)) and not isinstance(agree, bool)
-             and agree == agree and 0 <= agree < float("inf"),
-             f"rv_select_agreement must be a finite number >= 0, got {agree!r}")
+        need(0 <= self.rv_select_agreement < float("inf"),
+             f"rv_select_agreement must be finite and >= 0, got {self.rv_select_agreement}")
         need(self.rv_select in ("none", "subspace"),
              f"rv_select must be 'none' or 'subspace', got {self.rv_select!r}")
         need(self.rv_consensus in ("best", "coassociation"),

@@ -76,7 +76,6 @@ _RESET_AT = 15
 _ARBITRATE_ABOVE = 0.05
 
 
-
 @dataclass(frozen=True, eq=False)
 class Voting:
     """Result of Random Voting.
@@ -556,8 +555,8 @@ def _partition_key(labels: np.ndarray) -> bytes:
 def _select(points, C, params, candidates, trials, initialised) -> Voting:
     """Polish every candidate labelling and return the one of lowest selection score.
 
-    Every candidate is refined (:func:`refine_labels`) and jointly reassigned
-    (:func:`reassign_labels`), as it would be returned. The score is the refined
+    Every candidate is refined (:func:`refine_labels`) and, when the agreement term needs
+    it or it wins, jointly reassigned (:func:`reassign_labels`). The score is the refined
     labelling's :func:`subspace_cost` plus ``rv_select_agreement`` times its mean
     disagreement (misclassification rate) with the other polished candidates, when there
     are more than two: among many unconverged trials, the labelling the others agree with
