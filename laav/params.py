@@ -67,23 +67,8 @@ class LaavParams:
         Points per group used to fit each fundamental matrix (>= 8).
     rv_patience : int
         A trial has converged when labels stay (nearly) unchanged this many iterations.
-    rv_tolerance : float
-        "Nearly unchanged": at most ``ceil(rv_tolerance * P)`` labels changed in an
-        iteration (0 demands no change at all, which boundary points rarely allow).
-    rv_pairs : int
-        Frame pairs voted on per iteration (their votes are summed before relabelling).
-    rv_consensus : {"best", "coassociation"}
-        How plain RV ends when no trial converged: keep the trial whose labelling the
-        motions' fundamental matrices explain best, or split the co-association of all
-        trials by spectral clustering.
     rv_label_weight : float
         Initial votes given to atom-labelled features when LAAV initialises Random Voting.
-    rv_anchor : float
-        Votes added at every iteration to each atom-labelled feature for its start label
-        (a persistent prior; 0 leaves only the decaying initial votes).
-    rv_atom_pooling : float
-        In LAAV's fine-tuning, share (0..1) of an atom feature's votes replaced at every
-        iteration by the mean votes of its atoms (atoms vote as units; 0 = off).
     rv_batch : int
         Voting trials run side by side in one batched numpy call (LAAV's informed trial
         with plain RV's random starts). Speed only: each trial keeps its own frame pairs,
@@ -98,13 +83,14 @@ class LaavParams:
         (:func:`laav.refine.reassign_labels`). With model selection, every candidate
         labelling is polished so before it is scored.
     rv_select : {"none", "subspace"}
-        Model selection between candidate labellings by their trajectory-subspace cost
-        (:func:`laav.voting.subspace_cost`) and agreement. ``"subspace"``: plain RV with
-        no converged trial keeps the best of the trials and their co-association
-        labelling; LAAV's fine-tuning also runs plain RV (two more runs when the two
-        results disagree on more than 5 % of the points) and keeps the best of all.
-        ``"none"``: co-association only, and the informed trial alone unless it fails to
-        converge.
+        ``"subspace"`` (ours): model selection between candidate labellings by their
+        trajectory-subspace cost (:func:`laav.refine.subspace_cost`) and agreement;
+        plain RV with no converged trial keeps the best of the trials and their
+        co-association labelling, and LAAV's fine-tuning also runs plain RV (two more
+        runs when the two results disagree on more than 5 % of the points) and keeps the
+        best of all. ``"none"`` (the LAAV paper): LAAV's fine-tuning is its informed
+        trial alone, converged or not; plain RV with no converged trial ends with the
+        co-association labelling.
     rv_select_agreement : float
         Weight (>= 0) of a candidate's mean disagreement (misclassification rate) with
         the other candidates in the selection score, when there are more than two: the
@@ -133,12 +119,7 @@ class LaavParams:
     rv_trials: int = 10
     rv_sample_size: int = 8
     rv_patience: int = 15
-    rv_tolerance: float = 0.0
-    rv_pairs: int = 1
-    rv_consensus: str = "coassociation"
     rv_label_weight: float = 5.0
-    rv_anchor: float = 0.0
-    rv_atom_pooling: float = 0.0
     rv_batch: int = 2
     rv_refine: bool = True
     rv_reassign: bool = True
@@ -193,19 +174,25 @@ class LaavParams:
         need(self.rv_sample_size >= 8, "rv_sample_size must be >= 8 (8-point algorithm)")
         need(self.rv_patience >= 1, "rv_patience must be >= 1")
         need(self.rv_label_weight >= 0, "rv_label_weight must be >= 0")
-        need(self.rv_anchor >= 0, "rv_anchor must be >= 0")
-        need(0 <= self.rv_atom_pooling <= 1, "rv_atom_pooling must be in [0, 1]")
-        need(0 <= self.rv_tolerance < 0.5, "rv_tolerance must be in [0, 0.5)")
-        need(isinstance(self.rv_pairs, int) and self.rv_pairs >= 1, "rv_pairs must be an integer >= 1")
         need(self.rv_batch >= 1, f"rv_batch must be >= 1, got {self.rv_batch}")
         need(0 <= self.rv_select_agreement < float("inf"),
              f"rv_select_agreement must be finite and >= 0, got {self.rv_select_agreement}")
         need(self.rv_select in ("none", "subspace"),
              f"rv_select must be 'none' or 'subspace', got {self.rv_select!r}")
-        need(self.rv_consensus in ("best", "coassociation"),
-             f"rv_consensus must be 'best' or 'coassociation', got {self.rv_consensus!r}")
         if problems:
             raise ValueError("invalid LAAV parameters: " + "; ".join(problems))
+
+    @classmethod
+    def paper(cls, **changes) -> LaavParams:
+        """Every stage as the LAAV paper writes it (Posner & Hagege), nothing of ours.
+
+        Fine-to-coarse by the paper's pairwise four-atom epipolar votes alone (no pooled
+        voting), and a fine-tuning that is Random Voting started from the coarse labels:
+        one informed trial, no plain RV run, no model selection, no refinement and no
+        joint reassignment. ``changes`` override fields as in :meth:`replace`.
+        """
+        return cls(pooled_trials=0, pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
+                   rv_select="none").replace(**changes)
 
     def replace(self, **changes) -> LaavParams:
         """A copy with some fields changed (validated like the original)."""

@@ -125,10 +125,10 @@ class Pipeline:
         self._voting_memo: tuple | None = None
         self.result = self._run("atoms")
 
-    def _voting_key(self, init, membership) -> tuple:
+    def _voting_key(self, init) -> tuple:
         """Everything the fine-tuning's result depends on (its generator comes from the seed)."""
         rv = tuple((k, v) for k, v in self.params.to_dict().items() if k in STAGE_PARAMS["voting"])
-        return (self.seed, self.n_motions, rv, init, membership)
+        return (self.seed, self.n_motions, rv, init)
 
     def _same_voting_inputs(self, key: tuple) -> bool:
         old = self._voting_memo[0]
@@ -164,13 +164,11 @@ class Pipeline:
                 init = st["coarse"].point_labels
                 if C == 1 or not (init >= 0).any():
                     init = None  # no atom formed: plain Random Voting
-                membership = st["atoms"].membership()
-                key = self._voting_key(init, membership)
+                key = self._voting_key(init)
                 if self._voting_memo is not None and self._same_voting_inputs(key):
                     st["voting"] = self._voting_memo[1]  # same inputs, same result
                 else:
-                    st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
-                                                 membership=membership)
+                    st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init)
                     self._voting_memo = (key, st["voting"])
             timings[stage] += time.perf_counter() - t
         return LaavResult(

@@ -312,7 +312,7 @@ def test_rv_batch_is_validated(bad, message):
 
 @pytest.mark.parametrize("C", [2, 3, 4])
 def test_groups_draw_distinct_members_favouring_confident_ones(C):
-    from laav.voting import _sample_groups
+    from laav.rv import _sample_groups
 
     rng = np.random.default_rng(0)
     B, P, m = 2, 60, 8
@@ -340,7 +340,7 @@ def test_groups_draw_distinct_members_favouring_confident_ones(C):
 
 
 def test_two_motion_fast_paths_match_the_general_formulas():
-    from laav.voting import _margins
+    from laav.rv import _margins
 
     rng = np.random.default_rng(1)
     votes = rng.normal(size=(3, 50, 2))
@@ -350,3 +350,19 @@ def test_two_motion_fast_paths_match_the_general_formulas():
     assert np.array_equal(_margins(votes), ref)
     three = np.concatenate([votes, np.full((3, 50, 1), -10.0)], axis=-1)  # third never wins
     assert np.allclose(_margins(three)[1:], ((spread / (np.abs(three).sum(-1) + 1e-12)).mean(-1))[1:])
+
+
+def test_paper_preset_fine_tunes_with_the_informed_trial_alone():
+    """LaavParams.paper(): Random Voting from the coarse labels, nothing else runs."""
+    seq = scene(1, 0)
+    p = LaavParams.paper()
+    res = segment(seq, seq.n_motions, params=p, seed=0)
+    v = res.voting
+    assert v.initialised and v.selected == "informed"
+    assert v.n_trials == 1 and len(v.trial_iterations) == 1
+    assert v.n_iterations == v.trial_iterations[0] == len(v.changed)
+    assert v.refined == 0 and v.reassigned == 0 and v.costs == {}
+    assert res.coarse.affinity.shape == (4, 4)
+    # the informed start is what it votes from: a start from the truth stays there
+    start = random_voting(seq, seq.n_motions, p, seed=0, init_labels=seq.labels)
+    assert np.array_equal(start.labels, seq.labels) and start.n_trials == 1

@@ -1,0 +1,275 @@
+"""Random Voting (Jung, Ju & Kim, CVPR 2014): the paper's algorithm, vectorised.
+
+Each iteration draws one frame pair; every group fits a fundamental matrix to ``m`` of
+its points by the normalised 8-point algorithm (all groups, and all trials running side
+by side, in one batched call); every point receives, from each group's matrix, the vote
+``exp(-lambda d)`` for that group and ``1 - exp(-lambda d)`` for every other group, where
+``d`` is its Sampson distance (px^2); labels become the argmax of the vote histogram,
+which then decays by the forgetting factor ``alpha``. A trial starts from a random
+partition (plain RV) or from given labels (LAAV's fine-tuning, see
+:func:`laav.voting.random_voting`), and has converged when no label changed for
+``rv_patience`` iterations; plain RV resets its votes once, at iteration 15.
+
+Choices where the RV paper is vague (measured on Hopkins155, ``benchmarks/TUNING.md``):
+
+* **Sampling.** The ``m`` points of a group are drawn without replacement with
+  probability proportional to their current vote margin for the group (weighted
+  reservoir keys ``log(u) / w``), so confident members dominate but the sample stays
+  spread; a group with fewer than ``m`` members samples from all points.
+* **Frame pairs.** The two frames are at least ``max(1, F // 3)`` apart.
+* **No converged trial.** The labellings of all trials are combined into a
+  co-association affinity and split by spectral clustering (:func:`consensus`).
+* **Trials side by side** (``rv_batch``): speed only; the plain trial kept is the first
+  *in start order* to converge, exactly as if the trials ran one after another.
+
+Everything beyond the paper (refinement, joint reassignment, model selection) is in
+:mod:`laav.voting` and :mod:`laav.refine`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import fit_fundamental, sampson_distance
+
+__all__ = ["vote", "run_trials", "consensus", "RESET_AT"]
+
+#: Plain RV resets its votes once, at this iteration (RV paper).
+RESET_AT = 15
+
+
+def _sample_groups(labels, votes, C, m, rng):
+    """Indices (..., C, m) of the points each group fits its fundamental matrix to.
+
+    ``labels`` (..., P) and ``votes`` (..., P, C) may carry leading batch axes (trials).
+    """
+    member = labels[..., None, :] == np.arange(C)[:, None]  # (..., C, P)
+    # contiguous rows: numpy's reductions over P of the strided view were ~20x slower
+    vt = np.ascontiguousarray(np.swapaxes(votes, -1, -2))  # (..., C, P)
+    if C == 2:  # the margin over the other group, as below but without the sort
+        w = vt - vt[..., ::-1, :]
+    elif C > 2:  # the margin over the best other group
+        is_top = np.arange(C)[:, None] == np.argmax(vt, axis=-2)[..., None, :]
+        top = vt.max(axis=-2, keepdims=True)
+        second = np.where(is_top, -np.inf, vt).max(axis=-2, keepdims=True)  # = top on ties
+        w = vt - np.where(is_top, second, top)
+    else:
+        w = vt.copy()
+    np.maximum(w, 0.0, out=w)
+    w /= w.max(axis=-1, keepdims=True) + 1e-12
+    w += 0.05  # the floor keeps every member drawable
+    w = np.where(member, w, 0.0)
+    small = member.sum(axis=-1) < m
+    if small.any():
+        w = np.where(small[..., None], 1.0, w)
+    # weighted sampling without replacement (Efraimidis-Spirakis): the m largest keys
+    # log(u) / w, i.e. the m smallest of -log(u) / w; non-members never drawn
+    u = rng.random(w.shape)
+    neg_keys = np.where(w > 0, -np.log(u) / np.maximum(w, 1e-12), np.inf)
+    return np.argpartition(neg_keys, m - 1, axis=-1)[..., :m]
+
+
+def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: float,
+         m: int, rng: np.random.Generator) -> np.ndarray:
+    """One voting step on frame pair ``pair``: one F per group, the votes of every point.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (..., P)
+    votes : ndarray of shape (..., P, C)
+        Current histogram (guides which points are sampled).
+    pair : (int, int) or ndarray of shape (B, 2)
+        The frame pair, or one pair per trial when ``labels`` is (B, P) (trials voting
+        side by side).
+    lam : float
+    m : int
+        Points per fit.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray of shape (..., P, C)
+        ``exp(-lam d)`` for the point's vote for a group, ``1 - exp(-lam d)`` from every
+        other group's matrix.
+    """
+    C = votes.shape[-1]
+    idx = _sample_groups(labels, votes, C, m, rng)  # (..., C, m)
+    pair = np.asarray(pair)
+    x1 = points[pair[..., 0]]  # (P, 2), or (B, P, 2) with a pair per trial
+    x2 = points[pair[..., 1]]
+    if pair.ndim == 1:
+        F = fit_fundamental(x1[idx], x2[idx])  # (..., C, 3, 3)
+    else:
+        b = np.arange(pair.shape[0])[:, None, None]
+        F = fit_fundamental(x1[b, idx], x2[b, idx])  # (B, C, 3, 3)
+        x1, x2 = x1[:, None], x2[:, None]
+    d = sampson_distance(F, x1, x2)  # (..., C, P)
+    v = np.exp(-lam * d)
+    other = 1.0 - v
+    total_other = np.add.reduce(other, axis=-2, keepdims=True)  # (..., 1, P)
+    v -= other
+    v += total_other
+    return np.swapaxes(v, -1, -2)
+
+
+class _Trial:
+    """Working state of one voting trial (internal; several run side by side)."""
+
+    def __init__(self, labels, votes, reset, kind):
+        self.labels, self.votes = labels, votes
+        self.reset, self.kind = reset, kind
+        self.changed: list = []
+        self.margins: list = []
+        self.it = 0
+        self.still = 0
+        self.converged = False
+        self.done = False
+
+    def result(self) -> tuple:
+        return (self.labels, self.votes, np.array(self.changed, dtype=np.int64),
+                np.array(self.margins), self.it, self.converged)
+
+
+def _margins(votes: np.ndarray) -> np.ndarray:
+    """Mean normalised vote margin per trial; votes (B, P, C) -> (B,)."""
+    C = votes.shape[-1]
+    if C == 1:
+        return np.ones(votes.shape[0])
+    if C == 2:  # as below, without the partition (and the slow reduction over 2 columns)
+        v0, v1 = votes[..., 0], votes[..., 1]
+        spread = np.abs(v1 - v0)
+        return np.add.reduce(spread / (np.abs(v0) + np.abs(v1) + 1e-12), axis=-1) / spread.shape[-1]
+    top2 = np.partition(votes, C - 2, axis=-1)[..., -2:]
+    spread = top2[..., 1] - top2[..., 0]
+    return np.add.reduce(spread / (np.abs(votes).sum(-1) + 1e-12), axis=-1) / spread.shape[-1]
+
+
+def _step(points, trials, params, rng):
+    """One voting iteration of every trial in ``trials``, in one batched call."""
+    F, P, _ = points.shape
+    B = len(trials)
+    gap = max(1, F // 3)
+    labels = np.stack([t.labels for t in trials])  # (B, P)
+    votes = np.stack([t.votes for t in trials])  # (B, P, C)
+    left = rng.integers(0, F - gap, size=B)
+    right = rng.integers(left + gap, F)
+    flip = rng.random(B) < 0.5
+    pairs = np.stack([np.where(flip, right, left), np.where(flip, left, right)], axis=1)
+    votes += vote(points, labels, votes, pairs, params.rv_lambda, params.rv_sample_size, rng)
+    if votes.shape[-1] == 2:  # argmax, without numpy's slow reduction over 2 columns
+        new = (votes[..., 1] > votes[..., 0]).astype(np.intp)
+    else:
+        new = votes.argmax(axis=-1)
+    n_changed = (new != labels).sum(axis=-1)
+    votes *= params.rv_alpha
+    margins = _margins(votes)
+    for b, t in enumerate(trials):
+        t.it += 1
+        t.labels, t.votes = new[b], votes[b]
+        t.changed.append(int(n_changed[b]))
+        t.margins.append(float(margins[b]))
+        if t.reset and t.it == RESET_AT:
+            t.votes = np.zeros_like(t.votes)
+            t.still = 0
+        else:
+            t.still = t.still + 1 if n_changed[b] == 0 else 0
+            if t.still >= params.rv_patience and (not t.reset or t.it > RESET_AT):
+                t.converged = t.done = True
+        if t.it >= params.rv_max_iter:
+            t.done = True
+
+
+def run_trials(points, C, params, rng, informed=None, n_plain=None, plain_after_informed=False):
+    """Run LAAV's informed trial and plain RV's random-start trials, ``rv_batch`` side by side.
+
+    Trials advance in lockstep, one batched numpy call per iteration, each with its own
+    frame pairs, samples, iteration count and convergence test; a trial starts when a slot
+    is free. Plain trials (at most ``n_plain``) start until one converges; the one kept
+    is the first *in start order* to converge, as if the trials ran one after another.
+    The informed trial always runs to its end. With ``plain_after_informed`` plain trials
+    start only once the informed trial has ended unconverged. (Running only one plain
+    trial at a time beside the informed one was measured slower: LAAV's median 123 ms
+    against 112 ms, because first plain trials often end unconverged.)
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    C : int
+    params : LaavParams
+        Uses the ``rv_*`` fields.
+    rng : numpy.random.Generator
+    informed : (labels0, votes0) or None
+        Start labels (P,) and votes (P, C) of LAAV's informed trial.
+    n_plain : int, optional
+        Most plain trials to start (default ``rv_trials``).
+
+    Returns
+    -------
+    first : tuple or None
+        The informed trial's result.
+    converged : tuple or None
+        The first plain trial to converge.
+    trials : list of tuple
+        Every trial run (informed first), including cancelled ones.
+    plain_trials : list of tuple
+        The plain trials that ran to their end (all of them when none converged).
+    """
+    P = points.shape[1]
+    width = params.rv_batch
+    active: list = []
+    if informed is not None:
+        labels0, votes0 = informed
+        active.append(_Trial(labels0.copy(), votes0.copy(), False, "informed"))
+    started = list(active)
+    plain: list = []  # in start order
+    winner = None
+    n_plain = params.rv_trials if n_plain is None else n_plain
+
+    def may_start_plain():
+        if len(plain) >= n_plain or any(t.converged for t in plain):
+            return False  # a later trial could no longer be the one kept
+        if plain_after_informed and informed is not None:
+            return started[0].done and not started[0].converged
+        return True
+
+    while True:
+        while len(active) < width and may_start_plain():
+            t = _Trial(rng.integers(0, C, P), np.zeros((P, C)), True, "plain")
+            active.append(t)
+            started.append(t)
+            plain.append(t)
+        if not active:
+            break
+        _step(points, active, params, rng)
+        active = [t for t in active if not t.done]
+        # the kept plain trial is the first *in start order* to converge, as if the trials
+        # ran one after another: a trial that converges sooner than an earlier one is not
+        # preferred (fast convergence is no sign of a right partition)
+        for t in plain:
+            if not t.done:
+                break
+            if t.converged:
+                winner = t
+                break
+        if winner is not None:  # later plain trials cannot be kept: cancel them
+            active = [t for t in active if t.kind != "plain"]
+            if not any(t.kind == "informed" for t in active):
+                break
+    first = started[0].result() if informed is not None else None
+    plain_ended = [t.result() for t in plain if t.done]
+    return (first, None if winner is None else winner.result(),
+            [t.result() for t in started], plain_ended)
+
+
+def consensus(trials, C, rng):
+    """Combine the labellings of unconverged trials by spectral clustering."""
+    from sklearn.cluster import SpectralClustering
+
+    labs = np.stack([t[0] for t in trials])  # (T, P)
+    A = (labs[:, :, None] == labs[:, None, :]).mean(axis=0)
+    sc = SpectralClustering(n_clusters=C, affinity="precomputed", assign_labels="cluster_qr",
+                            random_state=int(rng.integers(2**31 - 1)))
+    labels = sc.fit_predict(A + 1e-6).astype(np.int64)
+    last = trials[-1]
+    return labels, last[1], last[2], last[3], last[4], False
