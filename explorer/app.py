@@ -10,6 +10,7 @@ notebooks) results are applied directly, under a lock.
 
 from __future__ import annotations
 
+import html
 import io
 import tempfile
 import threading
@@ -416,7 +417,7 @@ class Explorer:
                 "The 3-D view opens with the first result…</div>", width=550, height=480, margin=0)
         else:
             msg = getattr(self, "_viser_error", "the 3-D view is switched off")
-            self.viser_pane = pn.pane.Markdown(f"*{msg}*", width=600, height=80)
+            self.viser_pane = pn.pane.Markdown(f"*{V.md_text(msg)}*", width=600, height=80)
         self.sidebar = [
             pn.pane.Markdown("### Sequence", margin=(0, 10)), self.seq_info,
             pn.pane.Markdown("Open another sequence (Hopkins `*_truth.mat` or `.npz`):", margin=(0, 10)),
@@ -462,7 +463,7 @@ class Explorer:
     def _seq_text(seq: laav.Sequence) -> str:
         gt = f"{seq.n_motions} motions in the ground truth" if seq.labels is not None else \
             "**no ground truth** (set C below)"
-        return f"**{seq.name}**: {seq.n_points} points, {seq.n_frames} frames, {gt}."
+        return f"**{V.md_text(seq.name)}**: {seq.n_points} points, {seq.n_frames} frames, {gt}."
 
     def template(self, title: str = "LAAV explorer", lazy: bool | None = None):
         """The page (a BootstrapTemplate: loads all its resources from the server).
@@ -586,13 +587,13 @@ class Explorer:
                 self.alert.visible = self.state.error is not None
                 notes = [n for n in (self._style["note"],) if n]
                 if seq.labels is None:
-                    notes.append(f"{seq.name} has no ground truth: errors cannot be scored; C = "
+                    notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; C = "
                                  f"{settings.n_motions} is taken from the C box.")
                 self.note.object = "  \n".join(notes)
                 self.note.visible = bool(notes)
                 ef = num["error_final"]
                 err = "" if ef is None else f" — final error **{100 * ef:.1f} %**"
-                self.status.object = (f"Showing {seq.name} with R1 = {settings.params.r1:g}, "
+                self.status.object = (f"Showing {V.md_text(seq.name)} with R1 = {settings.params.r1:g}, "
                                       f"R2 = {settings.params.r2:g}, λ = {settings.params.lam:g}, "
                                       f"2C = {result.multicut.n_models}, seed {settings.seed}{err} "
                                       f"(computed in {1000 * self.state.compute_seconds:.0f} ms).")
@@ -600,7 +601,8 @@ class Explorer:
                     self._wait_viser()
                     self._iframe_shown = True
                     self.viser_pane.object = self._iframe_html() if self.viser is not None else (
-                        f"<p><i>{getattr(self, '_viser_error', 'the 3-D view did not start')}</i></p>")
+                        f"<p><i>{html.escape(getattr(self, '_viser_error', 'the 3-D view did not start'))}"
+                        "</i></p>")
             if self.viser is not None:
                 if new_seq:
                     self.viser.set_result(seq, result, self._style["color"], self.w_frame.value)
@@ -633,7 +635,7 @@ class Explorer:
         self.seq_info.object = self._seq_text(seq)
         for w, ext in ((self.w_dl_csv, "labels.csv"), (self.w_dl_json, "params.json"),
                        (self.w_dl_png, "views.png")):
-            w.filename = f"{seq.name}_{ext}"
+            w.filename = f"{laav.safe_name(seq.name)}_{ext}"
         if seq.labels is None and self.w_color.value in ("ground truth", "errors"):
             self.w_color.value = "final (after Random Voting)"
         elif seq.labels is not None and self._seq_shown is not None and self.sequence.labels is None:
@@ -747,7 +749,7 @@ class Explorer:
             self._applied.notify_all()
 
     def _show_error(self, message: str) -> None:
-        self.alert.object = f"**Cannot use these settings:** {message}"
+        self.alert.object = f"**Cannot use these settings:** {V.md_text(message)}"
         self.alert.visible = True
 
     def _show_busy(self, busy: bool) -> None:
@@ -859,7 +861,7 @@ class Explorer:
             self.load_bytes(data, name)
             return
         # reading (a MAT file is parsed in a child process) must not block the page
-        self.status.object = f"Reading {Path(name).name}…"
+        self.status.object = f"Reading {V.md_text(Path(name).name)}…"
         threading.Thread(target=self.load_bytes, args=(data, name), name="laav-explore-upload",
                          daemon=True).start()
 

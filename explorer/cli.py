@@ -111,7 +111,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
         doc = pn.state.curdoc
         if doc is not None:
             doc.add_timeout_callback(ex.start, 3000)  # no document_ready (e.g. a script client)
-        return ex.template(f"LAAV explorer: {seq.name}")
+        return ex.template(f"LAAV explorer: {laav.safe_name(seq.name)}")  # HTML-safe characters
 
     def close_unclaimed(timeout: float = 30.0) -> None:
         """Stop a prebuilt explorer no session took (at server shutdown)."""
@@ -174,7 +174,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         factory = app_factory(seq, C, args.seed, args.host, prebuild=True)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
-                          show=False, start=False, title=f"LAAV explorer: {seq.name}", verbose=False)
+                          show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
+                          verbose=False)
     except OSError as exc:
         return _fail(parser, f"cannot listen on {args.host}:{port}: {exc}")
     shown = "localhost" if args.host in ("0.0.0.0", "", "::") else args.host

@@ -7,17 +7,34 @@ every failure into a :class:`~laav.SequenceError` that names the file and the pr
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
 
 from ._sequence import Sequence, SequenceError
 
-__all__ = ["load_sequence", "load_sequence_isolated", "save_sequence", "find_truth_files"]
+__all__ = ["load_sequence", "load_sequence_isolated", "save_sequence", "find_truth_files",
+           "safe_name"]
 
 _MAT_MAGIC = b"MATLAB 5.0 MAT-file"
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 _ZIP_MAGIC = b"PK\x03\x04"
+
+
+_UNSAFE = re.compile(r"[^\w.+-]+")
+
+
+def safe_name(text, default: str = "sequence", max_len: int = 100) -> str:
+    """``text`` (e.g. a sequence name read from a file) reduced to a safe file base name.
+
+    Only letters, digits, ``_ . + -`` are kept (every other run of characters, path
+    separators included, becomes ``_``); leading dots and underscores are dropped, so
+    the result is never ``..``, hidden or absolute, and it is at most ``max_len`` long.
+    ``default`` when nothing is left.
+    """
+    name = _UNSAFE.sub("_", str(text)).lstrip("._")[:max_len].rstrip(".")
+    return name or default
 
 
 def _name_from_path(path: Path) -> str:
@@ -154,12 +171,23 @@ def _load_npz(p: Path) -> Sequence:
                     _scalar(data["width"], "width", p),
                     _scalar(data["height"], "height", p),
                 )
-            name = str(data["name"]) if "name" in files else _name_from_path(p)
+            name = _stored_name(data["name"]) if "name" in files else None
     except SequenceError:
         raise
     except Exception as exc:  # BadZipFile, zlib.error, ValueError, MemoryError, ...
         raise SequenceError(f"{p}: truncated or corrupt NPZ file ({type(exc).__name__}: {exc})") from None
-    return Sequence(points=points, labels=labels, name=name, image_size=image_size, source=str(p))
+    return Sequence(points=points, labels=labels, name=name or _name_from_path(p),
+                    image_size=image_size, source=str(p))
+
+
+def _stored_name(value) -> str | None:
+    """The ``name`` stored in a file: one string, control characters dropped, at most 200 long."""
+    arr = np.asarray(value)
+    if arr.size != 1 or arr.dtype.kind not in "US":
+        return None
+    text = arr.ravel()[0]
+    text = text.decode("utf-8", "replace") if isinstance(text, bytes) else str(text)
+    return re.sub(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]", "", text)[:200].strip() or None
 
 
 def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:

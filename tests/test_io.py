@@ -552,3 +552,17 @@ def test_mat_round_trip_of_a_frame_wider_than_uint16(tmp_path):
     back = load_sequence(save_sequence(seq, tmp_path / "wide.mat"))
     assert back.image_size == (70_000, 480)
     assert np.array_equal(back.points, seq.points) and np.array_equal(back.labels, seq.labels)
+
+
+def test_safe_name_and_stored_name(tmp_path):
+    """Names from inside files become safe base names; stored names lose control characters."""
+    for raw, want in [("../../evil/x", "evil_x"), ("/etc/passwd", "etc_passwd"), ("..", "sequence"),
+                      ("", "sequence"), ("cars1", "cars1"), (".bashrc", "bashrc"), ("a\\b c", "a_b_c")]:
+        assert laav.safe_name(raw) == want
+    assert len(laav.safe_name("x" * 1000)) == 100
+    seq = _random_sequence(name="\x1b]0;owned\x07two\nlines" + "y" * 300)
+    back = load_sequence(save_sequence(seq, tmp_path / "n.npz"))
+    assert back.name.startswith("]0;ownedtwolines") and len(back.name) == 200
+    path = tmp_path / "weird.npz"
+    np.savez(path, points=seq.points, name=np.array(["a", "b"]))  # not one string: the file stem
+    assert load_sequence(path).name == "weird"
