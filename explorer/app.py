@@ -868,19 +868,15 @@ class Explorer:
     def load_bytes(self, data: bytes, filename: str) -> bool:
         """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure."""
         base = Path(filename).name or "upload"
-        suffix = Path(base).suffix.lower()
-        if suffix not in (".mat", ".npz"):
-            self._on_error(f"{base}: expected a Hopkins155 *_truth.mat or a .npz sequence file")
-            return False
         try:
             with tempfile.TemporaryDirectory(prefix="laav-explore-") as d:
-                p = Path(d) / base
+                p = Path(d) / laav.safe_name(base, "upload")
                 p.write_bytes(data)
                 try:
-                    # MAT files are parsed in a child process: scipy's reader can crash the
-                    # interpreter on some damaged files, and an upload must never do that
-                    load = laav.load_sequence_isolated if suffix == ".mat" else laav.load_sequence
-                    seq = load(p)
+                    # the format comes from the content, whatever the name says; MAT content
+                    # is parsed in a child process (scipy's reader can crash the interpreter
+                    # on some damaged files, and an upload must never do that)
+                    seq = laav.load_sequence(p, isolated=True)
                 except laav.SequenceError as exc:
                     self.state.report(str(exc).replace(str(p), base)
                                       + " — still showing the last valid result")

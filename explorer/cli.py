@@ -149,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
             from .demo import demo_sequence
             seq = demo_sequence()
         else:
-            seq = laav.load_sequence(args.file)
+            seq = laav.load_sequence(args.file, isolated=True)
     except (laav.SequenceError, FileNotFoundError) as exc:
         return _fail(parser, str(exc))
     if args.motions is None and seq.labels is None:

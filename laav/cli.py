@@ -118,7 +118,7 @@ def _cmd_segment(args) -> int:
 
     params = params_from_assignments(args.param)
     try:
-        seq = load_sequence(args.file)
+        seq = load_sequence(args.file, isolated=True)
     except SequenceError as exc:
         raise _UsageError(str(exc)) from None
     C = args.motions if args.motions is not None else seq.n_motions
