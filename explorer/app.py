@@ -95,6 +95,9 @@ class Explorer:
     iframe_host : str, optional
         Host name the browser uses to reach the viser server (default: ``viser_host``,
         or the page's own host when built inside a server session).
+    page_hosts : list of str, optional
+        Every host name the browser may use for the page; the 3-D view's websocket accepts
+        only these origins (default: 127.0.0.1, localhost and ``viser_host``).
     pipeline : Future or laav.Pipeline, optional
         A warm pipeline for exactly these settings (see :class:`ExplorerState`).
     start : bool
@@ -109,7 +112,7 @@ class Explorer:
     def __init__(self, seq: laav.Sequence, n_motions: int | None = None,
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
-                 start: bool = True):
+                 start: bool = True, page_hosts=None):
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False)
         self._session_doc = None
         self._doc_thread = threading.get_ident()
@@ -131,6 +134,7 @@ class Explorer:
         self.viser = None
         self._want_viser = bool(viser)
         self._viser_host = viser_host
+        self._page_hosts = page_hosts
         self._viser_thread: threading.Thread | None = None
         self._closed = False
         self._iframe_host = iframe_host or (viser_host if viser_host not in ("0.0.0.0", "::") else None)
@@ -156,7 +160,8 @@ class Explorer:
         try:
             from .viser_view import ViserView
 
-            view = ViserView(host=self._viser_host, on_frame=self._frame_from_viser)
+            view = ViserView(host=self._viser_host, on_frame=self._frame_from_viser,
+                             page_hosts=self._page_hosts)
         except Exception as exc:  # the 2-D views still work without it
             self._viser_error = f"the 3-D view could not start: {exc}"
             return

@@ -128,7 +128,13 @@ def test_explorer_in_chromium(tmp_path):
 
                 context.route("**/*", route)
                 page = context.new_page()
-                page.on("websocket", lambda ws: sockets.append(ws.url))
+                received: set[str] = set()
+
+                def on_socket(ws):
+                    sockets.append(ws.url)
+                    ws.on("framereceived", lambda _: received.add(ws.url))
+
+                page.on("websocket", on_socket)
                 page.on("pageerror", lambda e: js_errors.append(str(e)))
                 page.on("console", lambda m: js_errors.append(m.text) if m.type == "error" else None)
                 t0 = time.monotonic()
@@ -164,7 +170,8 @@ def test_explorer_in_chromium(tmp_path):
 
                 # the 3-D view is served by this process on 127.0.0.1 and connects
                 assert ex.viser is not None
-                _wait_for(lambda: any(f":{ex.viser.port}" in u for u in sockets), 30, "viser's websocket")
+                # (its origin check lets its own page in: the scene arrives)
+                _wait_for(lambda: any(f":{ex.viser.port}" in u for u in received), 30, "viser's scene")
                 time.sleep(1.5)
                 page.screenshot(path=str(shots / "explorer_after_lambda.png"))
 
