@@ -119,6 +119,7 @@ class Explorer:
         self._capture_session()
         self._defaults = LaavParams()
         self._suppress = 0
+        self._switching = False  # a new sequence is being read or computed (see _lock_for_upload)
         self._apply_lock = threading.RLock()
         self._applied = threading.Condition()
         self.applied_generation = 0
@@ -635,6 +636,7 @@ class Explorer:
         if self.w_frame.value > seq.n_frames - 1:
             self.w_frame.value = 0
         self.w_motions.value = settings.n_motions
+        self._lock_for_upload(False)
         fm = self.w_params["fine_models"]
         fm.end = max(fm.end, 4 * settings.n_motions)
         self.seq_info.object = self._seq_text(seq)
@@ -753,7 +755,14 @@ class Explorer:
             self.applied_plain_key = key
             self._applied.notify_all()
 
+    def _lock_for_upload(self, locked: bool) -> None:
+        """While another sequence is read and first computed, the C box (which belongs to the
+        sequence) is locked and slider moves keep the C of the sequence being loaded."""
+        self._switching = locked
+        self.w_motions.disabled = locked
+
     def _show_error(self, message: str) -> None:
+        self._lock_for_upload(False)
         self.alert.object = f"**Cannot use these settings:** {V.md_text(message)}"
         self.alert.visible = True
 
@@ -788,8 +797,8 @@ class Explorer:
                 fm.end = max(fm.end, 4 * int(event.new or 1))
                 fm.value = 2 * int(event.new or 1)
                 self._suppress -= 1
-        self.state.request(params=self._widget_params(), seed=int(self.w_seed.value),
-                           n_motions=int(self.w_motions.value) if self.w_motions.value is not None else None)
+        C = None if self._switching or self.w_motions.value is None else int(self.w_motions.value)
+        self.state.request(params=self._widget_params(), seed=int(self.w_seed.value), n_motions=C)
 
     def _on_reset(self, event=None) -> None:
         d = self._defaults
@@ -865,6 +874,7 @@ class Explorer:
         if self._session_doc is None:
             self.load_bytes(data, name)
             return
+        self._lock_for_upload(True)
         # reading (a MAT file is parsed in a child process) must not block the page
         self.status.object = f"Reading {V.md_text(Path(name).name)}…"
         threading.Thread(target=self.load_bytes, args=(data, name), name="laav-explore-upload",
@@ -873,6 +883,14 @@ class Explorer:
     def load_bytes(self, data: bytes, filename: str) -> bool:
         """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure."""
         base = Path(filename).name or "upload"
+        C = int(self.w_motions.value or 1)  # read before locking: the C for a file without labels
+        self._switching = True
+        if not self._load_bytes(data, base, C):
+            self._schedule(self._lock_for_upload, False)
+            return False
+        return True
+
+    def _load_bytes(self, data: bytes, base: str, C: int) -> bool:
         try:
             with tempfile.TemporaryDirectory(prefix="laav-explore-") as d:
                 p = Path(d) / laav.safe_name(base, "upload")
@@ -889,7 +907,7 @@ class Explorer:
         except Exception as exc:  # never let an upload kill the session
             self.state.report(f"{base}: could not be read ({type(exc).__name__}: {exc})")
             return False
-        return self.state.load(seq, None if seq.labels is not None else int(self.w_motions.value)) is not None
+        return self.state.load(seq, None if seq.labels is not None else C) is not None
 
     # ------------------------------------------------------------------ exports
     def _need_result(self):

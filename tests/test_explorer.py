@@ -463,3 +463,25 @@ def test_hostile_stored_name_is_escaped_in_the_views(tmp_path):
         assert not re.search(r"(?<!\\)<", ex.alert.object) and "<img src=x" in _shown(ex.alert)
     finally:
         ex.close()
+
+
+def test_slider_moved_during_an_upload_keeps_the_new_sequences_C():
+    """A slider moved while another sequence loads never computes it with the old C."""
+    ex = Explorer(demo_sequence(), viser=False)  # three motions
+    try:
+        assert ex.wait(60) and ex.result.n_motions == 3
+        other = _two_motion_sequence(seed=5)
+        buf = io.BytesIO()
+        np.savez(buf, points=other.points, labels=other.labels)
+        assert ex.load_bytes(buf.getvalue(), "two.npz")
+        ex.w_params["lam"].value = 2.5  # before the new sequence's first result is shown
+        assert ex.wait(60)
+        assert ex.sequence.n_points == other.n_points
+        assert ex.result.n_motions == 2 and ex.state.target.n_motions == 2
+        assert ex.result.params.lam == 2.5
+        assert ex.w_motions.value == 2 and not ex.w_motions.disabled
+        # a failed upload unlocks the C box too
+        assert not ex.load_bytes(b"garbage", "bad.npz")
+        assert not ex.w_motions.disabled
+    finally:
+        ex.close()
