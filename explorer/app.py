@@ -10,6 +10,7 @@ notebooks) results are applied directly, under a lock.
 
 from __future__ import annotations
 
+import html
 import io
 import tempfile
 import threading
@@ -94,6 +95,9 @@ class Explorer:
     iframe_host : str, optional
         Host name the browser uses to reach the viser server (default: ``viser_host``,
         or the page's own host when built inside a server session).
+    page_hosts : list of str, optional
+        Every host name the browser may use for the page; the 3-D view's websocket accepts
+        only these origins (default: 127.0.0.1, localhost and ``viser_host``).
     pipeline : Future or laav.Pipeline, optional
         A warm pipeline for exactly these settings (see :class:`ExplorerState`).
     start : bool
@@ -108,13 +112,14 @@ class Explorer:
     def __init__(self, seq: laav.Sequence, n_motions: int | None = None,
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
-                 start: bool = True):
+                 start: bool = True, page_hosts=None):
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False)
         self._session_doc = None
         self._doc_thread = threading.get_ident()
         self._capture_session()
         self._defaults = LaavParams()
         self._suppress = 0
+        self._switching = False  # a new sequence is being read or computed (see _lock_for_upload)
         self._apply_lock = threading.RLock()
         self._applied = threading.Condition()
         self.applied_generation = 0
@@ -130,6 +135,7 @@ class Explorer:
         self.viser = None
         self._want_viser = bool(viser)
         self._viser_host = viser_host
+        self._page_hosts = page_hosts
         self._viser_thread: threading.Thread | None = None
         self._closed = False
         self._iframe_host = iframe_host or (viser_host if viser_host not in ("0.0.0.0", "::") else None)
@@ -155,7 +161,8 @@ class Explorer:
         try:
             from .viser_view import ViserView
 
-            view = ViserView(host=self._viser_host, on_frame=self._frame_from_viser)
+            view = ViserView(host=self._viser_host, on_frame=self._frame_from_viser,
+                             page_hosts=self._page_hosts)
         except Exception as exc:  # the 2-D views still work without it
             self._viser_error = f"the 3-D view could not start: {exc}"
             return
@@ -416,7 +423,7 @@ class Explorer:
                 "The 3-D view opens with the first result…</div>", width=550, height=480, margin=0)
         else:
             msg = getattr(self, "_viser_error", "the 3-D view is switched off")
-            self.viser_pane = pn.pane.Markdown(f"*{msg}*", width=600, height=80)
+            self.viser_pane = pn.pane.Markdown(f"*{V.md_text(msg)}*", width=600, height=80)
         self.sidebar = [
             pn.pane.Markdown("### Sequence", margin=(0, 10)), self.seq_info,
             pn.pane.Markdown("Open another sequence (Hopkins `*_truth.mat` or `.npz`):", margin=(0, 10)),
@@ -462,7 +469,7 @@ class Explorer:
     def _seq_text(seq: laav.Sequence) -> str:
         gt = f"{seq.n_motions} motions in the ground truth" if seq.labels is not None else \
             "**no ground truth** (set C below)"
-        return f"**{seq.name}**: {seq.n_points} points, {seq.n_frames} frames, {gt}."
+        return f"**{V.md_text(seq.name)}**: {seq.n_points} points, {seq.n_frames} frames, {gt}."
 
     def template(self, title: str = "LAAV explorer", lazy: bool | None = None):
         """The page (a BootstrapTemplate: loads all its resources from the server).
@@ -586,13 +593,13 @@ class Explorer:
                 self.alert.visible = self.state.error is not None
                 notes = [n for n in (self._style["note"],) if n]
                 if seq.labels is None:
-                    notes.append(f"{seq.name} has no ground truth: errors cannot be scored; C = "
+                    notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; C = "
                                  f"{settings.n_motions} is taken from the C box.")
                 self.note.object = "  \n".join(notes)
                 self.note.visible = bool(notes)
                 ef = num["error_final"]
                 err = "" if ef is None else f" — final error **{100 * ef:.1f} %**"
-                self.status.object = (f"Showing {seq.name} with R1 = {settings.params.r1:g}, "
+                self.status.object = (f"Showing {V.md_text(seq.name)} with R1 = {settings.params.r1:g}, "
                                       f"R2 = {settings.params.r2:g}, λ = {settings.params.lam:g}, "
                                       f"2C = {result.multicut.n_models}, seed {settings.seed}{err} "
                                       f"(computed in {1000 * self.state.compute_seconds:.0f} ms).")
@@ -600,7 +607,8 @@ class Explorer:
                     self._wait_viser()
                     self._iframe_shown = True
                     self.viser_pane.object = self._iframe_html() if self.viser is not None else (
-                        f"<p><i>{getattr(self, '_viser_error', 'the 3-D view did not start')}</i></p>")
+                        f"<p><i>{html.escape(getattr(self, '_viser_error', 'the 3-D view did not start'))}"
+                        "</i></p>")
             if self.viser is not None:
                 if new_seq:
                     self.viser.set_result(seq, result, self._style["color"], self.w_frame.value)
@@ -628,12 +636,13 @@ class Explorer:
         if self.w_frame.value > seq.n_frames - 1:
             self.w_frame.value = 0
         self.w_motions.value = settings.n_motions
+        self._lock_for_upload(False)
         fm = self.w_params["fine_models"]
         fm.end = max(fm.end, 4 * settings.n_motions)
         self.seq_info.object = self._seq_text(seq)
         for w, ext in ((self.w_dl_csv, "labels.csv"), (self.w_dl_json, "params.json"),
                        (self.w_dl_png, "views.png")):
-            w.filename = f"{seq.name}_{ext}"
+            w.filename = f"{laav.safe_name(seq.name)}_{ext}"
         if seq.labels is None and self.w_color.value in ("ground truth", "errors"):
             self.w_color.value = "final (after Random Voting)"
         elif seq.labels is not None and self._seq_shown is not None and self.sequence.labels is None:
@@ -746,8 +755,15 @@ class Explorer:
             self.applied_plain_key = key
             self._applied.notify_all()
 
+    def _lock_for_upload(self, locked: bool) -> None:
+        """While another sequence is read and first computed, the C box (which belongs to the
+        sequence) is locked and slider moves keep the C of the sequence being loaded."""
+        self._switching = locked
+        self.w_motions.disabled = locked
+
     def _show_error(self, message: str) -> None:
-        self.alert.object = f"**Cannot use these settings:** {message}"
+        self._lock_for_upload(False)
+        self.alert.object = f"**Cannot use these settings:** {V.md_text(message)}"
         self.alert.visible = True
 
     def _show_busy(self, busy: bool) -> None:
@@ -781,8 +797,8 @@ class Explorer:
                 fm.end = max(fm.end, 4 * int(event.new or 1))
                 fm.value = 2 * int(event.new or 1)
                 self._suppress -= 1
-        self.state.request(params=self._widget_params(), seed=int(self.w_seed.value),
-                           n_motions=int(self.w_motions.value) if self.w_motions.value is not None else None)
+        C = None if self._switching or self.w_motions.value is None else int(self.w_motions.value)
+        self.state.request(params=self._widget_params(), seed=int(self.w_seed.value), n_motions=C)
 
     def _on_reset(self, event=None) -> None:
         d = self._defaults
@@ -858,27 +874,32 @@ class Explorer:
         if self._session_doc is None:
             self.load_bytes(data, name)
             return
+        self._lock_for_upload(True)
         # reading (a MAT file is parsed in a child process) must not block the page
-        self.status.object = f"Reading {Path(name).name}…"
+        self.status.object = f"Reading {V.md_text(Path(name).name)}…"
         threading.Thread(target=self.load_bytes, args=(data, name), name="laav-explore-upload",
                          daemon=True).start()
 
     def load_bytes(self, data: bytes, filename: str) -> bool:
         """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure."""
         base = Path(filename).name or "upload"
-        suffix = Path(base).suffix.lower()
-        if suffix not in (".mat", ".npz"):
-            self._on_error(f"{base}: expected a Hopkins155 *_truth.mat or a .npz sequence file")
+        C = int(self.w_motions.value or 1)  # read before locking: the C for a file without labels
+        self._switching = True
+        if not self._load_bytes(data, base, C):
+            self._schedule(self._lock_for_upload, False)
             return False
+        return True
+
+    def _load_bytes(self, data: bytes, base: str, C: int) -> bool:
         try:
             with tempfile.TemporaryDirectory(prefix="laav-explore-") as d:
-                p = Path(d) / base
+                p = Path(d) / laav.safe_name(base, "upload")
                 p.write_bytes(data)
                 try:
-                    # MAT files are parsed in a child process: scipy's reader can crash the
-                    # interpreter on some damaged files, and an upload must never do that
-                    load = laav.load_sequence_isolated if suffix == ".mat" else laav.load_sequence
-                    seq = load(p)
+                    # the format comes from the content, whatever the name says; MAT content
+                    # is parsed in a child process (scipy's reader can crash the interpreter
+                    # on some damaged files, and an upload must never do that)
+                    seq = laav.load_sequence(p, isolated=True)
                 except laav.SequenceError as exc:
                     self.state.report(str(exc).replace(str(p), base)
                                       + " — still showing the last valid result")
@@ -886,7 +907,7 @@ class Explorer:
         except Exception as exc:  # never let an upload kill the session
             self.state.report(f"{base}: could not be read ({type(exc).__name__}: {exc})")
             return False
-        return self.state.load(seq, None if seq.labels is not None else int(self.w_motions.value)) is not None
+        return self.state.load(seq, None if seq.labels is not None else C) is not None
 
     # ------------------------------------------------------------------ exports
     def _need_result(self):

@@ -16,9 +16,33 @@ from concurrent.futures import Future
 
 import laav
 
-__all__ = ["main", "build_parser", "app_factory", "DEFAULT_PORT"]
+__all__ = ["main", "build_parser", "app_factory", "page_hosts", "DEFAULT_PORT"]
 
 DEFAULT_PORT = 5006
+_ANY = ("0.0.0.0", "", "::")
+_LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
+def page_hosts(host: str) -> list[str]:
+    """Host names a browser may use to reach a server bound to ``host``.
+
+    Both websockets (the page's and the 3-D view's) accept only these origins. For a
+    wildcard bind: this machine's name, full name and addresses besides the loopback ones.
+    """
+    names = ["127.0.0.1", "localhost"]
+    if host in _ANY:
+        name = socket.gethostname()
+        names += [name, socket.getfqdn()]
+        try:
+            names += [ai[4][0] for ai in socket.getaddrinfo(name, None, socket.AF_INET)]
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:  # sends nothing
+                s.connect(("10.255.255.255", 1))
+                names.append(s.getsockname()[0])  # the address of the default route
+        except OSError:
+            pass
+    elif host not in names:
+        names.append(host)
+    return list(dict.fromkeys(names))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -59,16 +83,19 @@ def _free_port(host: str) -> int:
 
 
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
-                created: list | None = None, viser: bool = True, prebuild: bool = False):
+                created: list | None = None, viser: bool = True, prebuild: bool = False,
+                hosts: list[str] | None = None):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
     or after 3 s at the latest), so the first page does not wait behind the computation.
     ``prebuild`` builds the first tab's explorer now, in a background thread, while the
     server starts and the browser opens. ``created`` (optional list) receives every
-    Explorer built (tests and benchmarks use it).
+    Explorer built (tests and benchmarks use it). ``hosts``: see :func:`page_hosts` (its
+    value for ``host`` by default).
     """
-    iframe_host = None if host in ("0.0.0.0", "", "::") else host
+    iframe_host = None if host in _ANY else host
+    hosts = page_hosts(host) if hosts is None else hosts
     spare: list = []
     lock = threading.Lock()
 
@@ -76,7 +103,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
         from .app import Explorer
 
         return Explorer(seq, n_motions, seed=seed, viser=viser, viser_host=host,
-                        iframe_host=iframe_host, start=False)
+                        iframe_host=iframe_host, start=False, page_hosts=hosts)
 
     if prebuild:
         fut: Future = Future()
@@ -111,7 +138,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
         doc = pn.state.curdoc
         if doc is not None:
             doc.add_timeout_callback(ex.start, 3000)  # no document_ready (e.g. a script client)
-        return ex.template(f"LAAV explorer: {seq.name}")
+        return ex.template(f"LAAV explorer: {laav.safe_name(seq.name)}")  # HTML-safe characters
 
     def close_unclaimed(timeout: float = 30.0) -> None:
         """Stop a prebuilt explorer no session took (at server shutdown)."""
@@ -149,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
             from .demo import demo_sequence
             seq = demo_sequence()
         else:
-            seq = laav.load_sequence(args.file)
+            seq = laav.load_sequence(args.file, isolated=True)
     except (laav.SequenceError, FileNotFoundError) as exc:
         return _fail(parser, str(exc))
     if args.motions is None and seq.labels is None:
@@ -167,20 +194,23 @@ def main(argv: list[str] | None = None) -> int:
 
     import panel as pn
 
-    if args.host in ("0.0.0.0", "", "::"):
-        origins = ["*"]
-    else:
-        origins = [f"{args.host}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
+    hosts = page_hosts(args.host)
+    origins = [f"{h}:{port}" for h in hosts]  # the page's websocket: its own origin only
     try:
-        factory = app_factory(seq, C, args.seed, args.host, prebuild=True)
+        factory = app_factory(seq, C, args.seed, args.host, prebuild=True, hosts=hosts)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
-                          show=False, start=False, title=f"LAAV explorer: {seq.name}", verbose=False)
+                          show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
+                          verbose=False)
     except OSError as exc:
         return _fail(parser, f"cannot listen on {args.host}:{port}: {exc}")
-    shown = "localhost" if args.host in ("0.0.0.0", "", "::") else args.host
+    shown = hosts[2] if args.host in _ANY and len(hosts) > 2 else args.host
     url = f"http://{shown}:{port}/"
     print(f"laav-explore: {seq.name} ({seq.n_points} points, {seq.n_frames} frames, C = {C}) at {url}",
           flush=True)
+    if args.host not in _LOOPBACK:
+        print(f"laav-explore: warning: --host {args.host} opens the app to the network: anyone who can "
+              f"reach this machine can use it (and read the sequence); use 127.0.0.1 for this machine "
+              f"only", flush=True)
     print("laav-explore: press Ctrl-C to stop", flush=True)
     server.start()
     if not args.no_browser:

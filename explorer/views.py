@@ -8,6 +8,8 @@ function returns plain dicts of numpy arrays, ready for ``ColumnDataSource.data 
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 import laav
@@ -18,7 +20,7 @@ __all__ = [
     "align_labels", "point_style", "frame_sources", "graph_sources", "replay_labels",
     "replay_caption", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
-    "space_time", "cost_limit",
+    "space_time", "cost_limit", "md_text",
 ]
 
 #: Colour-by choices (label shown in the widget -> key).
@@ -41,6 +43,21 @@ FINE_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2",
 UNLABELLED = "#c7c7c7"
 ERROR_RED = "#d62728"
 CORRECT = "#9ecae1"
+
+
+_MD_PUNCT = re.compile(r"([!-/:-@\[-`{-~])")  # every ASCII punctuation character
+_CONTROL = re.compile(r"[\x00-\x1f\x7f\u2028\u2029]+")
+
+
+def md_text(text) -> str:
+    """``text`` (a file or sequence name, a message quoting one) as literal Markdown text.
+
+    Every ASCII punctuation character is backslash-escaped (CommonMark allows it for all of
+    them), so ``<``/``>`` cannot open HTML, ``[``/``!``/``(`` cannot make a link or image,
+    ``$`` no math and ``*``/``_``/``#``/`` ` `` no formatting; line breaks and other control
+    characters become one space (no block structure). The page then shows the string as typed.
+    """
+    return _MD_PUNCT.sub(r"\\\1", _CONTROL.sub(" ", str(text)))
 
 
 def hex_to_rgb(colors) -> np.ndarray:

@@ -9,7 +9,9 @@ viser handles may be edited from any thread.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterable
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -21,6 +23,45 @@ __all__ = ["ViserView"]
 
 _JOIN = np.array([33, 102, 172], np.uint8)  # blue: positive cost (join)
 _CUT = np.array([214, 39, 40], np.uint8)  # red: negative cost (cut)
+_SERVE_LOCK = threading.Lock()
+
+
+@contextmanager
+def _origin_checked(hosts: Iterable[str]):
+    """Servers viser starts inside accept a websocket only from their own page.
+
+    viser (1.1) does not check the ``Origin`` of its websocket, so any web page the user
+    visits could read the scene from localhost. While this is active, ``websockets``'
+    ``serve`` gets a ``process_request`` that answers 403 to a websocket handshake unless
+    its ``Origin`` is ``http://HOST:PORT`` with HOST one of ``hosts`` and PORT the port the
+    connection arrived on (the origin of the 3-D page, which viser serves itself).
+    """
+    import http
+
+    import websockets.asyncio.server as ws_server
+    from websockets.datastructures import Headers
+    from websockets.http11 import Response
+
+    hosts = frozenset(hosts)
+    real = ws_server.serve
+
+    def serve(*args, process_request=None, **kw):
+        def checked(connection, request):
+            if request.headers.get("Upgrade", "").lower() == "websocket":
+                port = connection.local_address[1]
+                if request.headers.get("Origin") not in {f"http://{h}:{port}" for h in hosts}:
+                    return Response(http.HTTPStatus.FORBIDDEN, "Forbidden", Headers(),
+                                    b"cross-origin websocket refused\n")
+            return process_request(connection, request) if process_request else None
+
+        return real(*args, process_request=checked, **kw)
+
+    with _SERVE_LOCK:
+        ws_server.serve = serve
+        try:
+            yield
+        finally:
+            ws_server.serve = real
 
 
 class ViserView:
@@ -34,16 +75,22 @@ class ViserView:
         0 for any free port; read :attr:`port` for the one used.
     on_frame : callable, optional
         Called with the new frame when the viser-side frame slider moves.
+    page_hosts : iterable of str, optional
+        Host names the browser may use to reach the 3-D page (default: 127.0.0.1,
+        localhost and ``host``); its websocket refuses every other origin.
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0,
-                 on_frame: Callable[[int], None] | None = None):
+                 on_frame: Callable[[int], None] | None = None,
+                 page_hosts: Iterable[str] | None = None):
         import contextlib
         import io
 
         import viser
 
-        with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner even when quiet
+        hosts = {"127.0.0.1", "localhost", host} if page_hosts is None else set(page_hosts)
+        # viser binds its server before the constructor returns: the check is in place from the start
+        with contextlib.redirect_stdout(io.StringIO()), _origin_checked(hosts):  # a banner even when quiet
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.server.gui.configure_theme(show_share_button=False, control_layout="floating",
                                         control_width="small", show_logo=False)

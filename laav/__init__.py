@@ -6,7 +6,7 @@ package and uses only the public API exported here.
 """
 
 from ._sequence import Sequence, SequenceError
-from .io import find_truth_files, load_sequence, load_sequence_isolated, save_sequence
+from .io import find_truth_files, load_sequence, load_sequence_isolated, safe_name, save_sequence
 from .metrics import best_label_map, confusion_matrix, misclassification_rate
 
 __version__ = "0.1.0"
@@ -18,6 +18,7 @@ __all__ = [
     "load_sequence_isolated",
     "save_sequence",
     "find_truth_files",
+    "safe_name",
     "misclassification_rate",
     "best_label_map",
     "confusion_matrix",

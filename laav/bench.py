@@ -341,7 +341,7 @@ def discover(data: str | os.PathLike, only: SeqT[str] | None = None,
             log(f"skipping {name}: no {name}_truth.mat in the folder")
             continue
         try:
-            seq = load_sequence(truth)
+            seq = load_sequence(truth, isolated=True)  # a damaged file can't crash the bench
         except SequenceError as exc:
             log(f"skipping {name}: {exc}")
             continue

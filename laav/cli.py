@@ -74,7 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="LAAV (default) or plain Random Voting")
     seg.add_argument("--seed", type=_int, default=0, metavar="S", help="random seed (default 0)")
     seg.add_argument("--out", "-o", metavar="CSV",
-                     help="labels file to write (default: <sequence name>_labels.csv)")
+                     help="labels file, or folder to write it in (default: <sequence name>_labels.csv "
+                          "in the current folder, the name reduced to letters, digits and _.+-)")
     seg.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help=_param_help())
 
@@ -113,12 +114,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_segment(args) -> int:
-    from . import SequenceError, load_sequence, misclassification_rate, random_voting, segment
+    from . import (
+        SequenceError,
+        load_sequence,
+        misclassification_rate,
+        random_voting,
+        safe_name,
+        segment,
+    )
     from .bench import params_from_assignments
 
     params = params_from_assignments(args.param)
     try:
-        seq = load_sequence(args.file)
+        seq = load_sequence(args.file, isolated=True)
     except SequenceError as exc:
         raise _UsageError(str(exc)) from None
     C = args.motions if args.motions is not None else seq.n_motions
@@ -132,9 +140,14 @@ def _cmd_segment(args) -> int:
             labels = random_voting(seq, C, params, args.seed).labels
     except ValueError as exc:
         raise _UsageError(f"{args.file}: {exc}") from None
-    out = Path(args.out) if args.out else Path(f"{seq.name}_labels.csv")
+    # a name read from the file is only ever a base name in the current or given folder
+    default = f"{safe_name(seq.name)}_labels.csv"
+    out = Path(args.out) if args.out else Path(default)
+    if out.is_dir():
+        out = out / default
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
+        if args.out:  # folders only where the user said
+            out.parent.mkdir(parents=True, exist_ok=True)
         with open(out, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(("point", "label"))

@@ -1,23 +1,51 @@
 """Reading and writing sequences: Hopkins155 ``*_truth.mat`` files and the project's ``.npz``.
 
-Both readers detect the format from the file's first bytes, not its extension, and turn
-every failure into a :class:`~laav.SequenceError` that names the file and the problem.
+The format is chosen once, from the file's first bytes, never from its extension, and
+every failure becomes a :class:`~laav.SequenceError` that names the file and the problem.
+For untrusted files (``isolated=True``: uploads, the command line, the benchmark) MAT
+content is parsed in a child process (:mod:`laav._matchild`), because scipy's MAT reader
+can crash the interpreter on damaged files.
 """
 
 from __future__ import annotations
 
+import atexit
 import os
+import re
+import select
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
 
 from ._sequence import Sequence, SequenceError
 
-__all__ = ["load_sequence", "load_sequence_isolated", "save_sequence", "find_truth_files"]
+__all__ = ["load_sequence", "load_sequence_isolated", "save_sequence", "find_truth_files",
+           "safe_name"]
 
 _MAT_MAGIC = b"MATLAB 5.0 MAT-file"
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 _ZIP_MAGIC = b"PK\x03\x04"
+
+
+_UNSAFE = re.compile(r"[^\w.+-]+")
+
+
+def safe_name(text, default: str = "sequence", max_len: int = 100) -> str:
+    """``text`` (e.g. a sequence name read from a file) reduced to a safe file base name.
+
+    Only letters, digits, ``_ . + -`` are kept (every other run of characters, path
+    separators included, becomes ``_``); leading dots and underscores are dropped, so
+    the result is never ``..``, hidden or absolute, and it is at most ``max_len`` long.
+    ``default`` when nothing is left.
+    """
+    name = _UNSAFE.sub("_", str(text)).lstrip("._")[:max_len].rstrip(".")
+    return name or default
 
 
 def _name_from_path(path: Path) -> str:
@@ -42,7 +70,8 @@ def _resolve(path: str | os.PathLike) -> Path:
     return p
 
 
-def load_sequence(path: str | os.PathLike) -> Sequence:
+def load_sequence(path: str | os.PathLike, *, isolated: bool = False,
+                  timeout: float = 60.0) -> Sequence:
     """Read a sequence from a Hopkins155 ``*_truth.mat``, a ``.npz``, or a folder holding one.
 
     Parameters
@@ -51,7 +80,14 @@ def load_sequence(path: str | os.PathLike) -> Sequence:
         A MATLAB v5 file with the Hopkins155 variables (``y``: (3, P, F) homogeneous pixel
         coordinates, ``s``: (P, 1) 1-based labels, ``width``, ``height``), a ``.npz`` with
         ``points`` (F, P, 2) and optionally ``labels`` (P,), ``width``, ``height``, or a
-        folder containing exactly one such file.
+        folder containing exactly one such file. The format is taken from the content.
+    isolated : bool
+        Parse MAT content in a child process, so that a file crashing scipy's reader (or
+        hanging it longer than ``timeout`` seconds, or needing more memory than
+        :data:`laav._matchild.MEMORY_LIMIT`) raises a :class:`SequenceError` instead of
+        taking the caller down. Use it for every file you did not write yourself.
+    timeout : float
+        Seconds an isolated read may take.
 
     Returns
     -------
@@ -74,7 +110,7 @@ def load_sequence(path: str | os.PathLike) -> Sequence:
     if head.startswith(_ZIP_MAGIC):
         return _load_npz(p)
     if head.startswith(_MAT_MAGIC):
-        return _load_mat(p)
+        return _load_mat(p, _READER.read(p, timeout) if isolated else _read_mat_here(p))
     if head[:512].find(_HDF5_MAGIC) >= 0 or head.startswith(b"MATLAB 7.3"):
         raise SequenceError(f"{p}: MATLAB v7.3 (HDF5) files are not supported; save with -v7")
     raise SequenceError(
@@ -92,13 +128,16 @@ def _scalar(value, what: str, p: Path) -> int:
         raise SequenceError(f"{p}: variable '{what}' is not a number") from None
 
 
-def _load_mat(p: Path) -> Sequence:
-    import scipy.io
+def _read_mat_here(p: Path) -> dict:
+    from ._matchild import MatReadError, read_mat_variables
 
     try:
-        mat = scipy.io.loadmat(str(p))
-    except Exception as exc:  # scipy raises many types for damaged files
-        raise SequenceError(f"{p}: truncated or corrupt MAT file ({type(exc).__name__}: {exc})") from None
+        return read_mat_variables(str(p))
+    except MatReadError as exc:
+        raise SequenceError(f"{p}: {exc}") from None
+
+
+def _load_mat(p: Path, mat: dict) -> Sequence:
     if "y" not in mat:
         raise SequenceError(f"{p}: missing variable 'y' (homogeneous pixel coordinates, 3 x P x F)")
     y = np.asarray(mat["y"])
@@ -154,12 +193,23 @@ def _load_npz(p: Path) -> Sequence:
                     _scalar(data["width"], "width", p),
                     _scalar(data["height"], "height", p),
                 )
-            name = str(data["name"]) if "name" in files else _name_from_path(p)
+            name = _stored_name(data["name"]) if "name" in files else None
     except SequenceError:
         raise
     except Exception as exc:  # BadZipFile, zlib.error, ValueError, MemoryError, ...
         raise SequenceError(f"{p}: truncated or corrupt NPZ file ({type(exc).__name__}: {exc})") from None
-    return Sequence(points=points, labels=labels, name=name, image_size=image_size, source=str(p))
+    return Sequence(points=points, labels=labels, name=name or _name_from_path(p),
+                    image_size=image_size, source=str(p))
+
+
+def _stored_name(value) -> str | None:
+    """The ``name`` stored in a file: one string, control characters dropped, at most 200 long."""
+    arr = np.asarray(value)
+    if arr.size != 1 or arr.dtype.kind not in "US":
+        return None
+    text = arr.ravel()[0]
+    text = text.decode("utf-8", "replace") if isinstance(text, bytes) else str(text)
+    return re.sub(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]", "", text)[:200].strip() or None
 
 
 def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
@@ -232,54 +282,90 @@ def find_truth_files(root: str | os.PathLike) -> list[Path]:
     return sorted(root.glob("*/*_truth.mat"), key=lambda q: q.parent.name)
 
 
-def _load_in_child(path: str, conn) -> None:  # pragma: no cover - runs in a child process
-    try:
-        seq = load_sequence(path)
-        conn.send(("ok", (np.asarray(seq.points), None if seq.labels is None else np.asarray(seq.labels),
-                          seq.name, seq.image_size, seq.source)))
-    except SequenceError as exc:
-        conn.send(("error", str(exc)))
-    except BaseException as exc:
-        conn.send(("error", f"{path}: could not be read ({type(exc).__name__}: {exc})"))
-    finally:
-        conn.close()
-
-
 def load_sequence_isolated(path: str | os.PathLike, timeout: float = 60.0) -> Sequence:
-    """:func:`load_sequence` in a child process, for untrusted files (uploads).
+    """:func:`load_sequence` with ``isolated=True``: for untrusted files (uploads, the CLI)."""
+    return load_sequence(path, isolated=True, timeout=timeout)
 
-    ``scipy.io.loadmat`` can crash the interpreter outright (a segmentation fault) on some
-    damaged MAT files; reading them in a child process turns such a crash into a
-    :class:`~laav.SequenceError` instead of taking the caller (e.g. the explorer's server)
-    down with it.
 
-    Raises
-    ------
-    SequenceError
-        For every malformed file, including one that crashes or hangs the reader.
+class _MatReader:
+    """The child process that parses MAT files for this process (started on first use, reused).
+
+    A crash, a hang or a memory error of the child becomes a :class:`SequenceError` naming
+    the file; the next read starts a fresh child. Reads are serialised (one child).
     """
-    import multiprocessing as mp
 
-    ctx = mp.get_context("spawn")
-    parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_load_in_child, args=(str(path), child), daemon=True)
-    proc.start()
-    child.close()
-    try:
-        if not parent.poll(timeout):
-            raise SequenceError(f"{path}: reading the file did not finish within {timeout:g} s")
-        status, payload = parent.recv()
-    except EOFError:
-        proc.join(5)
-        raise SequenceError(
-            f"{path}: corrupt file (the reader crashed with exit code {proc.exitcode})"
-        ) from None
-    finally:
-        if proc.is_alive():
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._proc: subprocess.Popen | None = None
+        self._pid = 0  # the process that started the child (a forked copy starts its own)
+
+    def _child(self) -> subprocess.Popen:
+        if self._proc is None or self._proc.poll() is not None or self._pid != os.getpid():
+            env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+            # -c with the current folder dropped from sys.path: the child imports nothing
+            # but numpy and scipy, never a module that happens to sit next to the data
+            code = ("import sys, runpy; del sys.path[0]; "
+                    "runpy.run_path(sys.argv[1], run_name='__main__')")
+            script = str(Path(__file__).with_name("_matchild.py"))
+            self._proc = subprocess.Popen([sys.executable, "-c", code, script], stdin=subprocess.PIPE,
+                                          stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                          bufsize=0, env=env)
+            self._pid = os.getpid()
+        return self._proc
+
+    def read(self, p: Path, timeout: float) -> dict:
+        from ._matchild import decode
+
+        with self._lock:
+            proc = self._child()
+            deadline = time.monotonic() + timeout
+            try:
+                proc.stdin.write(os.fsencode(str(p.resolve())).hex().encode() + b"\n")
+                head = _read_exact(proc.stdout, 9, deadline)
+                payload = _read_exact(proc.stdout, struct.unpack(">Q", head[1:])[0], deadline)
+            except TimeoutError:
+                self.close(kill=True)
+                raise SequenceError(f"{p}: reading the file did not finish within {timeout:g} s") from None
+            except (OSError, EOFError):  # the child died (BrokenPipeError is an OSError)
+                code = self.close()
+                how = f"signal {signal.Signals(-code).name}" if code and code < 0 else f"exit code {code}"
+                raise SequenceError(f"{p}: corrupt MAT file (the reader crashed: {how})") from None
+        if head[:1] == b"e":
+            raise SequenceError(f"{p}: {payload.decode(errors='replace')}")
+        return decode(payload)
+
+    def close(self, kill: bool = False) -> int | None:
+        """Stop the child; its exit code (negative: the signal that ended it)."""
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return None
+        if kill:
             proc.kill()
-        proc.join(5)
-        parent.close()
-    if status == "error":
-        raise SequenceError(payload)
-    points, labels, name, image_size, source = payload
-    return Sequence(points=points, labels=labels, name=name, image_size=image_size, source=source)
+        for stream in (proc.stdin, proc.stdout):
+            try:
+                stream.close()
+            except OSError:
+                pass
+        try:
+            return proc.wait(2)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            return proc.wait()
+
+
+def _read_exact(stream, n: int, deadline: float) -> bytes:
+    fd, chunks = stream.fileno(), []
+    while n:
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            raise TimeoutError
+        chunk = os.read(fd, min(n, 1 << 20))
+        if not chunk:
+            raise EOFError
+        chunks.append(chunk)
+        n -= len(chunk)
+    return b"".join(chunks)
+
+
+_READER = _MatReader()
+atexit.register(_READER.close)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -163,3 +164,27 @@ def test_console_process_exit_code_and_no_gui_imports(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "BAD []" in proc.stdout
+
+
+@pytest.mark.parametrize("stored", ["../../evil/x", "/abs/evil/x", "..", "a/../../b\\c"])
+def test_segment_name_from_the_file_stays_a_base_name(tmp_path, monkeypatch, capsys, stored):
+    """Without --out the labels go to <safe name>_labels.csv in the current folder only."""
+    seq = make_scene(2, seed=1)
+    src = tmp_path / "in"
+    src.mkdir()
+    path = laav.save_sequence(laav.Sequence(seq.points, seq.labels, name=stored), src / "crafted.npz")
+    cwd = tmp_path / "w" / "a" / "b"
+    cwd.mkdir(parents=True)
+    monkeypatch.chdir(cwd)
+    before = sorted(p for p in tmp_path.rglob("*"))
+    assert main(["segment", str(path), *SMALL]) == 0
+    new = sorted(set(tmp_path.rglob("*")) - set(before))
+    want = cwd / f"{laav.safe_name(stored)}_labels.csv"
+    assert new == [want] and "/" not in laav.safe_name(stored)
+    assert not Path("/abs").exists()
+    assert f"labels: {want.name}" in capsys.readouterr().out
+    # a folder given with --out gets the same safe base name inside it
+    outdir = tmp_path / "outdir"
+    outdir.mkdir()
+    assert main(["segment", str(path), "--out", str(outdir), *SMALL]) == 0
+    assert [p.name for p in outdir.iterdir()] == [want.name]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import threading
 import time
 from pathlib import Path
@@ -25,6 +26,11 @@ from explorer.cli import build_parser, main  # noqa: E402
 from explorer.demo import demo_path, demo_sequence  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def _shown(pane) -> str:
+    """A Markdown pane's text as the page shows it (backslash escapes resolved)."""
+    return re.sub(r"\\(.)", r"\1", pane.object)
 
 
 def _two_motion_sequence(n_frames: int = 12, n_points: int = 120, seed: int = 0) -> laav.Sequence:
@@ -173,7 +179,7 @@ def test_invalid_slider_combination_shows_a_message_and_keeps_the_result(ex):
     z = _data(ex.src_z, "z")
     ex.w_params["r1"].value = 60.0  # R1 >= R2 (40)
     assert ex.wait(30)
-    assert ex.alert.visible and "r2 must be larger than r1" in ex.alert.object
+    assert ex.alert.visible and "r2 must be larger than r1" in _shown(ex.alert)
     assert ex.result is res
     np.testing.assert_array_equal(_data(ex.src_z, "z"), z)
     ex.w_params["r1"].value = 20.0
@@ -182,7 +188,7 @@ def test_invalid_slider_combination_shows_a_message_and_keeps_the_result(ex):
     # 2C < C
     ex.w_params["fine_models"].value = 1
     assert ex.wait(30)
-    assert ex.alert.visible and "fine_models" in ex.alert.object
+    assert ex.alert.visible and "fine_models" in _shown(ex.alert)
     ex.w_params["fine_models"].value = 4
     assert ex.wait(60)
     assert not ex.alert.visible
@@ -193,15 +199,15 @@ def test_bad_upload_shows_a_message_and_keeps_the_result(ex):
     ex.w_upload.filename = "broken_truth.mat"
     ex.w_upload.value = b"this is not a MATLAB file"
     assert ex.wait(30)
-    assert ex.alert.visible and "broken_truth.mat" in ex.alert.object
+    assert ex.alert.visible and "broken_truth.mat" in _shown(ex.alert)
     assert ex.result is res
     assert not ex.load_bytes(b"x", "notes.txt")
-    assert ".npz" in ex.alert.object
+    assert ".npz" in _shown(ex.alert)
     # a well-formed file with a bad array
     buf = io.BytesIO()
     np.savez(buf, points=np.zeros((3, 4, 2)))
     assert not ex.load_bytes(buf.getvalue(), "tiny.npz")
-    assert "tiny.npz" in ex.alert.object and ex.result is res
+    assert "tiny.npz" in _shown(ex.alert) and ex.result is res
 
 
 def test_good_upload_replaces_the_sequence(ex, seq):
@@ -274,7 +280,7 @@ def test_pipeline_errors_never_kill_the_session(seq, monkeypatch):
         monkeypatch.setattr(laav.Pipeline, "update", boom)
         ex.w_params["lam"].value = 9.0
         assert ex.wait(30)
-        assert ex.alert.visible and "simulated bug" in ex.alert.object and ex.result is res
+        assert ex.alert.visible and "simulated bug" in _shown(ex.alert) and ex.result is res
         monkeypatch.undo()
         ex.w_params["lam"].value = 8.0
         assert ex.wait(60)
@@ -428,3 +434,54 @@ def test_rv_summary_names_the_points_each_polishing_step_moved():
     off = laav.random_voting(seq, seq.n_motions, p.replace(rv_reassign=False, rv_refine=False),
                              seed=0, init_labels=bad)
     assert "points moved" not in rv_summary(off, None)
+
+
+def test_md_text_renders_names_as_literal_text():
+    """Names from files reach the page as text: no HTML, link, image, math or block markup."""
+    from markdown_it import MarkdownIt
+
+    md = MarkdownIt("commonmark")
+    for raw in ["<img src=x onerror=alert(1)>", "<script>alert(1)</script>", "[x](http://evil.example)",
+                "![i](http://evil.example/i.png)", "a_b *c* $x$ `d` &amp; \\", "line\n# heading\n    code"]:
+        out = md.render(V.md_text(raw))
+        assert out.count("<") == 2 and out.startswith("<p>") and out.endswith("</p>\n"), out
+        assert "href" not in out and "<img" not in out and "<script" not in out
+    assert md.render(V.md_text("<b>&amp;</b>")) == "<p>&lt;b&gt;&amp;amp;&lt;/b&gt;</p>\n"
+
+
+def test_hostile_stored_name_is_escaped_in_the_views(tmp_path):
+    seq = _two_motion_sequence()
+    bad = laav.Sequence(seq.points, seq.labels, name="<img src=x onerror=alert(1)>[a](b)")
+    ex = Explorer(bad, viser=False)
+    try:
+        assert ex.wait(60)
+        for text in (ex.seq_info.object, ex.status.object):
+            assert not re.search(r"(?<!\\)[<\[]", text)
+            assert "\\<img src\\=x onerror\\=alert\\(1\\)\\>\\[a\\]\\(b\\)" in text
+        assert ex.w_dl_csv.filename == "img_src_x_onerror_alert_1_a_b__labels.csv"
+        ex.state.report(f"{bad.name}: broken")
+        assert not re.search(r"(?<!\\)<", ex.alert.object) and "<img src=x" in _shown(ex.alert)
+    finally:
+        ex.close()
+
+
+def test_slider_moved_during_an_upload_keeps_the_new_sequences_C():
+    """A slider moved while another sequence loads never computes it with the old C."""
+    ex = Explorer(demo_sequence(), viser=False)  # three motions
+    try:
+        assert ex.wait(60) and ex.result.n_motions == 3
+        other = _two_motion_sequence(seed=5)
+        buf = io.BytesIO()
+        np.savez(buf, points=other.points, labels=other.labels)
+        assert ex.load_bytes(buf.getvalue(), "two.npz")
+        ex.w_params["lam"].value = 2.5  # before the new sequence's first result is shown
+        assert ex.wait(60)
+        assert ex.sequence.n_points == other.n_points
+        assert ex.result.n_motions == 2 and ex.state.target.n_motions == 2
+        assert ex.result.params.lam == 2.5
+        assert ex.w_motions.value == 2 and not ex.w_motions.disabled
+        # a failed upload unlocks the C box too
+        assert not ex.load_bytes(b"garbage", "bad.npz")
+        assert not ex.w_motions.disabled
+    finally:
+        ex.close()

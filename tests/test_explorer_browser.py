@@ -128,7 +128,13 @@ def test_explorer_in_chromium(tmp_path):
 
                 context.route("**/*", route)
                 page = context.new_page()
-                page.on("websocket", lambda ws: sockets.append(ws.url))
+                received: set[str] = set()
+
+                def on_socket(ws):
+                    sockets.append(ws.url)
+                    ws.on("framereceived", lambda _: received.add(ws.url))
+
+                page.on("websocket", on_socket)
                 page.on("pageerror", lambda e: js_errors.append(str(e)))
                 page.on("console", lambda m: js_errors.append(m.text) if m.type == "error" else None)
                 t0 = time.monotonic()
@@ -164,7 +170,8 @@ def test_explorer_in_chromium(tmp_path):
 
                 # the 3-D view is served by this process on 127.0.0.1 and connects
                 assert ex.viser is not None
-                _wait_for(lambda: any(f":{ex.viser.port}" in u for u in sockets), 30, "viser's websocket")
+                # (its origin check lets its own page in: the scene arrives)
+                _wait_for(lambda: any(f":{ex.viser.port}" in u for u in received), 30, "viser's scene")
                 time.sleep(1.5)
                 page.screenshot(path=str(shots / "explorer_after_lambda.png"))
 
@@ -187,3 +194,79 @@ def test_explorer_in_chromium(tmp_path):
     assert not outside, f"requests left 127.0.0.1: {outside}"
     assert not js_errors, f"JavaScript errors in the page: {js_errors[:5]}"
     print(f"page with first result in {load_s:.1f} s; screenshots in {shots}")
+
+
+# every element a payload could create (bokeh and panel draw inside shadow roots: walk them)
+JS_INJECTED = """() => {
+  const out = {imgs: 0, scripts: 0, svgs: 0};
+  const walk = (root) => {
+    for (const el of root.querySelectorAll('*')) {
+      const tag = el.tagName.toLowerCase();
+      const src = el.getAttribute('src');
+      if (tag === 'img' && (el.hasAttribute('onerror') || src === 'x' || src === 'y')) out.imgs++;
+      if (tag === 'script' && el.textContent.includes('alert(')) out.scripts++;
+      if (tag === 'svg' && el.hasAttribute('onload')) out.svgs++;
+      if (el.shadowRoot) walk(el.shadowRoot);
+    }
+  };
+  walk(document);
+  return out;
+}"""
+
+
+def test_hostile_names_are_shown_as_text(tmp_path):
+    """File names and names stored in files carry HTML/script payloads: they show as text."""
+    import numpy as np
+
+    stored = "<script>alert(2)</script><img src=x onerror=alert(3)>"
+    seq = _sequence()
+    start = laav.Sequence(seq.points, seq.labels, name="<img src=x onerror=alert(5)>")
+    up = laav.Sequence(seq.points[:, ::-1], seq.labels[::-1], name=stored)
+    npz = laav.save_sequence(up, tmp_path / "up.npz").read_bytes()
+    bad_mat = b"MATLAB 5.0 MAT-file" + bytes(200)  # a broken MAT file
+    created: list = []
+    port = _free_port()
+    server = pn.serve({"/": app_factory(start, None, created=created, viser=False)}, port=port,
+                      address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
+                      threaded=True, verbose=False)
+    dialogs: list[str] = []
+    try:
+        _wait_listening(port)
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
+            try:
+                page = browser.new_page(viewport={"width": 1400, "height": 900})
+                page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+                page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+                page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+                ex = _wait_for(lambda: created[0] if created else None, 10, "the session's explorer")
+                assert ex.wait(60)
+                page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=20000)
+
+                # a valid .npz: the file name and the stored name both carry payloads
+                page.set_input_files("input[type=file]", files=[{
+                    "name": "<img src=x onerror=alert(1)>.npz", "mimeType": "application/octet-stream",
+                    "buffer": npz}])
+                _wait_for(lambda: ex.sequence.name == stored and ex.wait(1), 60, "the uploaded sequence")
+                page.get_by_text(stored).first.wait_for(timeout=20000)  # status line and sequence info
+                assert ex.w_dl_csv.filename == "script_alert_2_script_img_src_x_onerror_alert_3__labels.csv"
+
+                # a broken MAT file whose name carries a payload: the message quotes it as text
+                page.set_input_files("input[type=file]", files=[{
+                    "name": "<img src=y onerror=alert(4)>.mat", "mimeType": "application/octet-stream",
+                    "buffer": bad_mat}])
+                page.get_by_text("<img src=y onerror=alert(4)>.mat").first.wait_for(timeout=30000)
+                assert ex.sequence.name == stored  # the last good result is kept
+                time.sleep(1.0)  # let any image error handler fire
+                assert page.evaluate(JS_INJECTED) == {"imgs": 0, "scripts": 0, "svgs": 0}
+                assert "alert(5)" not in page.title()
+                header = page.locator(".app-header .title").inner_text()
+                assert "<" not in header and "img" in header  # the initial name, reduced
+            finally:
+                browser.close()
+    finally:
+        server.stop()
+        for e in created:
+            e.close()
+    assert not dialogs, f"a payload ran: {dialogs}"
+    assert np.all(np.isfinite(ex.result.labels))

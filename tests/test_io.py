@@ -8,6 +8,9 @@ from __future__ import annotations
 
 import math
 import os
+import signal
+import subprocess
+import sys
 from collections import Counter
 from pathlib import Path
 
@@ -552,3 +555,97 @@ def test_mat_round_trip_of_a_frame_wider_than_uint16(tmp_path):
     back = load_sequence(save_sequence(seq, tmp_path / "wide.mat"))
     assert back.image_size == (70_000, 480)
     assert np.array_equal(back.points, seq.points) and np.array_equal(back.labels, seq.labels)
+
+
+def test_safe_name_and_stored_name(tmp_path):
+    """Names from inside files become safe base names; stored names lose control characters."""
+    for raw, want in [("../../evil/x", "evil_x"), ("/etc/passwd", "etc_passwd"), ("..", "sequence"),
+                      ("", "sequence"), ("cars1", "cars1"), (".bashrc", "bashrc"), ("a\\b c", "a_b_c")]:
+        assert laav.safe_name(raw) == want
+    assert len(laav.safe_name("x" * 1000)) == 100
+    seq = _random_sequence(name="\x1b]0;owned\x07two\nlines" + "y" * 300)
+    back = load_sequence(save_sequence(seq, tmp_path / "n.npz"))
+    assert back.name.startswith("]0;ownedtwolines") and len(back.name) == 200
+    path = tmp_path / "weird.npz"
+    np.savez(path, points=seq.points, name=np.array(["a", "b"]))  # not one string: the file stem
+    assert load_sequence(path).name == "weird"
+
+
+# --------------------------------------------------------------------------- untrusted files
+
+
+def _segfaulting_mat(path: Path) -> Path:
+    """A MAT v5 file that crashes scipy's reader: the data tag of ``y`` says miCOMPRESSED."""
+    save_sequence(_random_sequence(frames=6, points=40), path.with_name("seed_truth.mat"))
+    b = bytearray(path.with_name("seed_truth.mat").read_bytes())
+    b[b.index(b"\x01\x00\x01\x00y\x00\x00\x00") + 8] = 15  # after the name 'y': miDOUBLE -> 15
+    path.write_bytes(bytes(b))
+    return path
+
+
+def test_mat_content_named_npz_is_parsed_in_the_child(tmp_path, monkeypatch):
+    seq = _random_sequence()
+    mat = save_sequence(seq, tmp_path / "real_truth.mat")
+    fake = tmp_path / "looks_like.npz"
+    fake.write_bytes(mat.read_bytes())
+    monkeypatch.setattr(laav.io, "_read_mat_here", lambda p: pytest.fail("MAT parsed in-process"))
+    back = load_sequence(fake, isolated=True)
+    np.testing.assert_array_equal(back.points, seq.points)
+    np.testing.assert_array_equal(back.labels, seq.labels)
+
+
+def test_a_mat_file_crashing_the_reader_is_a_clean_error(tmp_path):
+    bad = _segfaulting_mat(tmp_path / "crash.npz")
+    # the file really crashes an in-process read...
+    code = "import sys, laav; laav.load_sequence(sys.argv[1])"
+    run = subprocess.run([sys.executable, "-c", code, str(bad)], capture_output=True, timeout=120)
+    assert run.returncode == -signal.SIGSEGV
+    # ...and only the reader's child process when isolated
+    with pytest.raises(SequenceError, match=r"crash\.npz: corrupt MAT file \(the reader crashed: "
+                                            r"signal SIGSEGV\)"):
+        load_sequence(bad, isolated=True)
+    # the next file gets a fresh reader
+    good = save_sequence(_random_sequence(), tmp_path / "good_truth.mat")
+    assert laav.load_sequence_isolated(good).n_points == 12
+
+
+def test_truncated_mat_and_pickle_npz_are_clean_errors_when_isolated(tmp_path):
+    mat = save_sequence(_random_sequence(), tmp_path / "full_truth.mat").read_bytes()
+    for cut in (130, 300, len(mat) // 2, len(mat) - 9):
+        p = tmp_path / f"cut{cut}.npz"
+        p.write_bytes(mat[:cut])
+        with pytest.raises(SequenceError, match=f"cut{cut}.npz: "):
+            load_sequence(p, isolated=True)
+    marker = tmp_path / "pickle_ran"
+
+    class Evil:
+        def __reduce__(self):
+            return (open, (str(marker), "w"))
+
+    p = tmp_path / "pickled.npz"
+    np.savez(p, points=np.array([Evil(), 1], dtype=object))
+    with pytest.raises(SequenceError, match="pickled.npz: .*(pickle|object)"):
+        load_sequence(p, isolated=True)
+    p.write_bytes(__import__("pickle").dumps(Evil()))
+    with pytest.raises(SequenceError, match="pickled.npz: not a MATLAB v5"):
+        load_sequence(p, isolated=True)
+    assert not marker.exists()
+
+
+def test_cli_and_bench_survive_a_crashing_mat(tmp_path, capsys):
+    from laav import bench
+    from laav.cli import main
+
+    bad = _segfaulting_mat(tmp_path / "bad_truth.mat")
+    assert main(["segment", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "bad_truth.mat: corrupt MAT file (the reader crashed" in err
+    data = tmp_path / "data"
+    for name in ("bad", "good"):
+        (data / name).mkdir(parents=True)
+    _segfaulting_mat(data / "bad" / "bad_truth.mat")
+    save_sequence(_random_sequence(points=20), data / "good" / "good_truth.mat")
+    msgs: list[str] = []
+    found = bench.discover(data, log=msgs.append)
+    assert [s.name for s in found] == ["good"]
+    assert len(msgs) == 1 and msgs[0].startswith("skipping bad: ") and "reader crashed" in msgs[0]

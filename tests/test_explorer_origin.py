@@ -1,0 +1,127 @@
+"""Both websockets of the explorer (the page's and the 3-D view's) accept only their own origin.
+
+Raw websocket clients claiming another ``Origin`` (as a foreign web page in the user's
+browser would) are refused at the handshake. Loopback servers only.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import re
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+
+import pytest
+
+import laav
+
+pn = pytest.importorskip("panel")
+websockets = pytest.importorskip("websockets")
+pytest.importorskip("viser")
+
+from explorer import cli  # noqa: E402
+from explorer.viser_view import ViserView  # noqa: E402
+
+EVIL = "http://evil.example"
+
+
+def _try(url: str, origin: str | None, protocols: list[str]) -> str:
+    """'accepted' (and a first message arrived) or 'refused <status>'."""
+    async def go():
+        try:
+            async with websockets.connect(url, origin=origin, subprotocols=protocols,
+                                          open_timeout=10) as ws:
+                await asyncio.wait_for(ws.recv(), 10)
+                return "accepted"
+        except websockets.exceptions.InvalidStatus as exc:
+            return f"refused {exc.response.status_code}"
+    return asyncio.run(go())
+
+
+def test_viser_websocket_accepts_only_its_own_page():
+    view = ViserView(host="127.0.0.1")
+    try:
+        port = view.port
+        url, proto = f"ws://127.0.0.1:{port}/", [f"viser-v{__import__('viser').__version__}"]
+        assert _try(url, EVIL, proto) == "refused 403"
+        assert _try(url, None, proto) == "refused 403"
+        assert _try(url, "http://127.0.0.1:1", proto) == "refused 403"  # another local page
+        assert _try(url, f"http://127.0.0.1:{port}", proto) == "accepted"
+        assert _try(url, f"http://localhost:{port}", proto) == "accepted"
+        assert urllib.request.urlopen(f"http://127.0.0.1:{port}/").status == 200  # the page itself
+    finally:
+        view.close()
+
+
+@pytest.mark.slow
+def test_page_websocket_accepts_only_its_own_origin():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "explorer.cli", "--no-browser", "--port", str(port)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                html = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=5).read().decode()
+                break
+            except OSError:
+                assert time.monotonic() < deadline and proc.poll() is None, "the server did not start"
+                time.sleep(0.3)
+        token = re.search(r'"token":\s*"([^"]+)"', html).group(1)
+        url, proto = f"ws://127.0.0.1:{port}/ws", ["bokeh", token]
+        assert _try(url, EVIL, proto) == "refused 403"
+        assert _try(url, f"http://127.0.0.1:{port + 1}", proto) == "refused 403"
+        assert _try(url, f"http://127.0.0.1:{port}", proto) == "accepted"
+    finally:
+        proc.terminate()
+        out = proc.communicate(timeout=30)[0]
+    assert "warning" not in out  # loopback: no network warning
+
+
+def _fake_serve(monkeypatch):
+    seen: dict = {}
+
+    class Loop:
+        def add_callback(self, fn):
+            pass
+
+        def start(self):
+            pass
+
+    class Server:
+        io_loop = Loop()
+
+        def start(self):
+            pass
+
+        def stop(self):
+            pass
+
+    def serve(panels, **kw):
+        seen.update(kw)
+        return Server()
+
+    monkeypatch.setattr(pn, "serve", serve)
+    return seen
+
+
+@pytest.mark.parametrize("host", ["0.0.0.0", "192.0.2.7"])
+def test_network_host_prints_url_and_warning_and_keeps_origins(monkeypatch, capsys, tmp_path, host):
+    seen = _fake_serve(monkeypatch)
+    monkeypatch.setattr(cli, "_port_free", lambda h, p: True)
+    p = laav.save_sequence(laav.Sequence(__import__("numpy").random.default_rng(0).uniform(
+        0, 500, (5, 30, 2)), name="s"), tmp_path / "s.npz")
+    assert cli.main([str(p), "--motions", "2", "--no-browser", "--port", "5999", "--host", host]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert re.search(r" at http://[^ ]+:5999/$", out[0])
+    warn = [ln for ln in out if "warning" in ln]
+    assert len(warn) == 1 and f"--host {host} opens the app to the network" in warn[0]
+    origins = seen["websocket_origin"]
+    assert "*" not in origins and all(o.endswith(":5999") for o in origins)
+    if host != "0.0.0.0":
+        assert f"{host}:5999" in origins
