@@ -28,11 +28,21 @@ from .coarse import Coarse, merge_models  # noqa: E402
 from .graph import AtomGraph, atom_graph  # noqa: E402
 from .multicut import Multicut, solve_multicut  # noqa: E402
 from .params import LaavParams  # noqa: E402
-from .pipeline import LAAV, LaavResult, Pipeline, preload, segment  # noqa: E402
-from .voting import RandomVoting, Voting, random_voting  # noqa: E402
+from .pipeline import LaavResult, Pipeline, preload, segment  # noqa: E402
+from .voting import Voting, random_voting  # noqa: E402
 
 __all__ += [
     "LaavParams", "segment", "random_voting", "Pipeline", "LAAV", "RandomVoting",
     "LaavResult", "Atoms", "AtomGraph", "Multicut", "Coarse", "Voting",
     "build_atoms", "atom_graph", "solve_multicut", "merge_models", "preload",
 ]
+
+
+def __getattr__(name: str):
+    # The scikit-learn estimators load on first use: importing sklearn.base costs ~0.3-2 s,
+    # which ``import laav`` (the explorer, the CLI) does not pay.
+    if name in ("LAAV", "RandomVoting"):
+        from . import estimator
+
+        return getattr(estimator, name)
+    raise AttributeError(f"module 'laav' has no attribute {name!r}")

@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._random import resolve_seed
 from ._sequence import Sequence, as_points
 from .geometry import fit_fundamental, sampson_distance
 from .metrics import misclassification_rate
@@ -67,7 +68,7 @@ from .refine import (
 )
 
 __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances", "frame_pairs",
-           "RandomVoting", "labelling_cost", "subspace_cost", "reassign_labels"]
+           "labelling_cost", "subspace_cost", "reassign_labels"]
 
 _RESET_AT = 15
 #: In LAAV's fine-tuning, when the informed trial and plain RV's converged trial disagree
@@ -372,7 +373,8 @@ def _run_trials(points, C, params, rng, informed=None, n_plain=None, plain_after
 
 def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams | None = None,
                   seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
-                  weights: np.ndarray | None = None, membership: np.ndarray | None = None) -> Voting:
+                  weights: np.ndarray | None = None, membership: np.ndarray | None = None, *,
+                  random_state=None) -> Voting:
     """Segment trajectories into ``n_motions`` rigid motions by Random Voting.
 
     Parameters
@@ -384,6 +386,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         Uses the ``rv_*`` fields. Defaults to ``LaavParams()``.
     seed : int or numpy.random.Generator
         Same seed, same labels.
+    random_state : None, int, numpy.random.Generator or RandomState, optional
+        scikit-learn style alternative to ``seed``, used instead of it when given (an int
+        is the seed itself, a generator gives one draw). None (default): ``seed`` is used.
     init_labels : ndarray of shape (P,), optional
         Start labels (LAAV fine-tuning); ``-1`` marks unlabelled points, which start at
         random. None gives plain RV from a random partition.
@@ -415,6 +420,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if C > 1 and params.rv_sample_size > P:
         raise ValueError(f"rv_sample_size ({params.rv_sample_size}) exceeds the number of "
                          f"points ({P})")
+    seed = resolve_seed(seed, random_state)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     pool = _pooling_matrix(membership, params.rv_atom_pooling)
     if pool is not None and pool.shape[0] != P:
@@ -604,31 +610,3 @@ def _consensus(trials, C, rng):
     last = trials[-1]
     return labels, last[1], last[2], last[3], last[4], False
 
-
-class RandomVoting:
-    """scikit-learn style wrapper of :func:`random_voting` (plain RV).
-
-    Parameters
-    ----------
-    n_motions : int
-    seed : int
-    **params
-        Any ``rv_*`` field of :class:`LaavParams` (e.g. ``rv_alpha=0.95``).
-
-    Examples
-    --------
-    >>> labels = RandomVoting(2, seed=0).fit_predict(points)  # doctest: +SKIP
-    """
-
-    def __init__(self, n_motions: int, seed: int = 0, **params):
-        self.n_motions = n_motions
-        self.seed = seed
-        self.params = LaavParams().replace(**params)
-
-    def fit(self, points, y=None):
-        self.result_ = random_voting(np.asarray(points), self.n_motions, self.params, self.seed)
-        self.labels_ = self.result_.labels
-        return self
-
-    def fit_predict(self, points, y=None) -> np.ndarray:
-        return self.fit(points).labels_
