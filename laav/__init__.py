@@ -1,6 +1,6 @@
 """laav: motion segmentation of tracked feature trajectories by Locally Affine Atom Voting.
 
-The algorithm package. It depends on numpy, scipy, scikit-learn, OpenCV and networkx only
+The algorithm package. It depends on numpy, scipy, scikit-learn and threadpoolctl only
 and never imports GUI code; the browser explorer lives in the separate ``explorer``
 package and uses only the public API exported here.
 """

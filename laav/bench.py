@@ -533,7 +533,8 @@ def _results_joblib(make_batches, params, jobs):
     from joblib import Parallel, delayed
 
     batches = make_batches(_n_workers(jobs))
-    par = Parallel(n_jobs=jobs, return_as="generator_unordered", batch_size=1)
+    # processes (loky), each running its batches with the pipeline's one BLAS/OpenMP thread
+    par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered", batch_size=1)
     gen = par(delayed(_run_batch)(b, params) for b in batches)
     try:
         yield from gen

@@ -19,6 +19,7 @@ import numpy as np
 
 from ._random import resolve_seed
 from ._sequence import Sequence
+from ._threads import single_threaded
 from .atoms import Atoms, build_atoms, trajectory_distances
 from .coarse import Coarse, merge_models
 from .graph import AtomGraph, atom_graph
@@ -143,6 +144,7 @@ class Pipeline:
     def _rng(self, stage: str) -> np.random.Generator:
         return np.random.default_rng(_stage_rngs(self.seed)[stage])
 
+    @single_threaded  # one BLAS/OpenMP thread while the stages run (laav/_threads.py)
     def _run(self, start: str) -> LaavResult:
         p, seq, C = self.params, self.seq, self.n_motions
         timings = dict.fromkeys(STAGES, 0.0)

@@ -55,6 +55,7 @@ import numpy as np
 
 from ._random import resolve_seed
 from ._sequence import Sequence, as_points
+from ._threads import single_threaded
 from .geometry import fit_fundamental, sampson_distance
 from .metrics import misclassification_rate
 from .params import LaavParams
@@ -371,6 +372,7 @@ def _run_trials(points, C, params, rng, informed=None, n_plain=None, plain_after
             [t.result() for t in started], plain_ended)
 
 
+@single_threaded  # one BLAS/OpenMP thread, restored after (laav/_threads.py)
 def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams | None = None,
                   seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
                   weights: np.ndarray | None = None, membership: np.ndarray | None = None, *,
