@@ -3,11 +3,19 @@
 Serves the explorer page (panel) with its embedded 3-D view (viser, one server per browser
 tab on a free port) from one process, prints the URL and opens the browser. Exit codes:
 0 after Ctrl-C, 2 for bad arguments or an unreadable FILE (a message, never a traceback).
+
+``--host``: the page's interface (default 127.0.0.1, this machine only). The 3-D view of
+each tab is a separate viser server on another free port of the same interface, which the
+page embeds (an iframe); a remote browser must be able to reach those ports too. With a
+non-loopback host the command prints the address other machines can use and a warning
+that the app (which reads files you name and runs code on this machine's CPU) is open to
+the network.
 """
 
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import socket
 import sys
 import threading
@@ -35,7 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", type=int, metavar="N",
                    help=f"port of the page (default {DEFAULT_PORT}, or a free one if it is taken)")
     p.add_argument("--host", default="127.0.0.1",
-                   help="interface to bind (default 127.0.0.1: this machine only)")
+                   help="interface to bind (default 127.0.0.1: this machine only; 0.0.0.0: every "
+                        "interface, open to the network; each tab's 3-D view uses another free port)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random stages (default 0)")
     p.add_argument("--no-browser", action="store_true", help="do not open a browser")
     return p
@@ -56,6 +65,25 @@ def _free_port(host: str) -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind((host if host not in ("", "0.0.0.0") else "0.0.0.0", 0))
         return int(s.getsockname()[1])
+
+
+def _is_loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(socket.gethostbyname(host)).is_loopback
+    except (OSError, ValueError):
+        return host == "localhost"
+
+
+def _reachable_name(host: str) -> str:
+    """The address other machines use for a server bound to ``host``."""
+    if host not in ("0.0.0.0", "", "::"):
+        return host
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.connect(("192.0.2.1", 9))  # no packet is sent: this only picks the outgoing interface
+            return s.getsockname()[0]
+        except OSError:
+            return socket.gethostname()
 
 
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
@@ -177,10 +205,14 @@ def main(argv: list[str] | None = None) -> int:
                           show=False, start=False, title=f"LAAV explorer: {seq.name}", verbose=False)
     except OSError as exc:
         return _fail(parser, f"cannot listen on {args.host}:{port}: {exc}")
-    shown = "localhost" if args.host in ("0.0.0.0", "", "::") else args.host
-    url = f"http://{shown}:{port}/"
+    local = _is_loopback(args.host)
+    url = f"http://{args.host if local else _reachable_name(args.host)}:{port}/"
     print(f"laav-explore: {seq.name} ({seq.n_points} points, {seq.n_frames} frames, C = {C}) at {url}",
           flush=True)
+    if not local:
+        print(f"laav-explore: warning: listening on {args.host}, open to the network: anyone who can "
+              f"reach this machine can use the app (each tab's 3-D view is served on another free "
+              f"port of {args.host})", flush=True)
     print("laav-explore: press Ctrl-C to stop", flush=True)
     server.start()
     if not args.no_browser:
