@@ -1,8 +1,13 @@
 """laav: motion segmentation of tracked feature trajectories by Locally Affine Atom Voting.
 
-The algorithm package. It depends on numpy, scipy, scikit-learn and threadpoolctl only
-and never imports GUI code; the browser explorer lives in the separate ``explorer``
-package and uses only the public API exported here.
+The algorithm package. The algorithm (:func:`segment`, :class:`Pipeline`, the stages,
+:func:`random_voting`) needs numpy, scipy, scikit-learn and threadpoolctl only; the
+scikit-learn estimators :class:`LAAV` and :class:`RandomVoting` load on first use. The
+benchmark runner (:mod:`laav.bench`, :mod:`laav.report`) also uses joblib, tqdm and
+matplotlib, imported when needed. Nothing here imports GUI code or OpenCV, and networkx
+only in :func:`laav.multicut.exact_multicut`, the tests' reference solver (both come with
+the ``test`` extra); the browser explorer lives in the separate ``explorer`` package and
+uses only the public API exported here.
 """
 
 from ._sequence import Sequence, SequenceError
