@@ -7,9 +7,8 @@ tab on a free port) from one process, prints the URL and opens the browser. Exit
 ``--host``: the page's interface (default 127.0.0.1, this machine only). The 3-D view of
 each tab is a separate viser server on another free port of the same interface, which the
 page embeds (an iframe); a remote browser must be able to reach those ports too. With a
-non-loopback host the command prints the address other machines can use and a warning
-that the app (which reads files you name and runs code on this machine's CPU) is open to
-the network.
+non-loopback host the command prints the address other machines can use, a warning that
+the app is open to the network, and the address of each tab's 3-D view when it starts.
 """
 
 from __future__ import annotations
@@ -19,6 +18,7 @@ import ipaddress
 import socket
 import sys
 import threading
+import time
 import webbrowser
 from concurrent.futures import Future
 
@@ -87,14 +87,16 @@ def _reachable_name(host: str) -> str:
 
 
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
-                created: list | None = None, viser: bool = True, prebuild: bool = False):
+                created: list | None = None, viser: bool = True, prebuild: bool = False,
+                announce_viser: bool = False):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
     or after 3 s at the latest), so the first page does not wait behind the computation.
     ``prebuild`` builds the first tab's explorer now, in a background thread, while the
     server starts and the browser opens. ``created`` (optional list) receives every
-    Explorer built (tests and benchmarks use it).
+    Explorer built (tests and benchmarks use it). ``announce_viser`` prints the address of
+    every tab's 3-D view once its server is up (the CLI does for a non-loopback host).
     """
     iframe_host = None if host in ("0.0.0.0", "", "::") else host
     spare: list = []
@@ -134,6 +136,17 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
             ex = build()
         if created is not None:
             created.append(ex)
+        if announce_viser:
+            def announce():  # where a remote browser must reach this tab's 3-D view
+                deadline = time.monotonic() + 600  # it starts with the session (ex.start)
+                while ex._viser_thread is None and not ex._closed and time.monotonic() < deadline:
+                    time.sleep(0.2)
+                ex._wait_viser(120)
+                if ex.viser is not None:
+                    print(f"laav-explore: a tab's 3-D view is served at "
+                          f"http://{_reachable_name(host)}:{ex.viser.port}/", flush=True)
+
+            threading.Thread(target=announce, name="laav-explore-announce", daemon=True).start()
         pn.state.on_session_destroyed(lambda ctx: ex.close())
         pn.state.onload(ex.start)
         doc = pn.state.curdoc
@@ -200,7 +213,8 @@ def main(argv: list[str] | None = None) -> int:
     else:
         origins = [f"{args.host}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
     try:
-        factory = app_factory(seq, C, args.seed, args.host, prebuild=True)
+        factory = app_factory(seq, C, args.seed, args.host, prebuild=True,
+                              announce_viser=not _is_loopback(args.host))
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {seq.name}", verbose=False)
     except OSError as exc:
@@ -212,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
     if not local:
         print(f"laav-explore: warning: listening on {args.host}, open to the network: anyone who can "
               f"reach this machine can use the app (each tab's 3-D view is served on another free "
-              f"port of {args.host})", flush=True)
+              f"port of {args.host}, printed when the tab opens)", flush=True)
     print("laav-explore: press Ctrl-C to stop", flush=True)
     server.start()
     if not args.no_browser:

@@ -62,6 +62,19 @@ def test_host_all_interfaces_prints_a_reachable_url_and_a_warning(tmp_path):
         assert f":{port}/" in url and "localhost" not in url and "0.0.0.0:" not in url
         assert "warning: listening on 0.0.0.0, open to the network" in out
         assert "3-D view is served on another free port" in out
+        # a session (a script client, as a browser tab would) starts its 3-D view: its address
+        import panel.models  # noqa: F401 - registers the models the client receives
+        from bokeh.client import pull_session
+
+        with pull_session(url=f"http://127.0.0.1:{port}/"):
+            deadline = time.monotonic() + 60
+            while "3-D view is served at" not in log.read_text() and time.monotonic() < deadline:
+                time.sleep(0.5)
+        viser_line = next(ln for ln in log.read_text().splitlines() if "3-D view is served at" in ln)
+        viser_port = int(viser_line.rsplit(":", 1)[1].strip("/"))
+        assert viser_port != port
+        with urllib.request.urlopen(f"http://127.0.0.1:{viser_port}/", timeout=30) as r:
+            assert r.status == 200
     finally:
         _stop(proc)
 
