@@ -69,7 +69,11 @@ def _free_port(host: str) -> int:
 
 def _is_loopback(host: str) -> bool:
     try:
-        return ipaddress.ip_address(socket.gethostbyname(host)).is_loopback
+        return ipaddress.ip_address(host).is_loopback  # 127.x, ::1
+    except ValueError:
+        pass
+    try:
+        return ipaddress.ip_address(socket.gethostbyname(host)).is_loopback  # a name
     except (OSError, ValueError):
         return host == "localhost"
 

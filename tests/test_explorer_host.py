@@ -88,3 +88,11 @@ def test_default_host_prints_the_loopback_url_without_a_warning(tmp_path):
         assert f"at http://127.0.0.1:{port}/" in out and "warning" not in out
     finally:
         _stop(proc)
+
+
+@pytest.mark.parametrize("host, loopback", [("127.0.0.1", True), ("::1", True), ("localhost", True),
+                                            ("0.0.0.0", False), ("::", False), ("192.0.2.7", False)])
+def test_which_hosts_are_this_machine_only(host, loopback):
+    from explorer.cli import _is_loopback
+
+    assert _is_loopback(host) is loopback
