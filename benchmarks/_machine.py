@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import platform
-import subprocess
 import time
 from pathlib import Path
 
@@ -23,15 +22,16 @@ def cpu_model() -> str:
 
 
 def git_commit() -> str:
-    """Short commit of the checkout, marked when ``laav/`` has uncommitted changes."""
-    try:
-        out = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
-                             capture_output=True, text=True, timeout=10)
-        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "--", "laav"],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
-        return out.stdout.strip() + (" (laav/ modified)" if dirty else "") or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
+    """Short commit of this checkout, ``-dirty`` when its code differs (:mod:`laav._provenance`)."""
+    from laav._provenance import commit_of
+
+    return commit_of(REPO)
+
+
+def laav_version() -> str:
+    import laav
+
+    return laav.__version__
 
 
 def write_json_report(path: str | Path, title: str, what: str, result: dict) -> Path:
@@ -47,7 +47,7 @@ def write_json_report(path: str | Path, title: str, what: str, result: dict) -> 
         "",
         f"- Machine: {cpu_model()}, {os.cpu_count()} logical cores, "
         f"{platform.system()} {platform.release()} {platform.machine()}",
-        f"- Software: Python {platform.python_version()} (git {git_commit()})",
+        f"- Software: Python {platform.python_version()}, laav {laav_version()} (git {git_commit()})",
         f"- Measured: {what}",
         "",
         "```json",

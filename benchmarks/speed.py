@@ -18,6 +18,16 @@ so that lazy imports of the algorithm's dependencies do not land in the first se
 
     python benchmarks/speed.py [--data DIR] [--every K] [--only GLOB] [--limit N] [--out FILE]
 
+``--threads`` measures instead what the pipeline's own thread cap (one BLAS/OpenMP thread
+during a run, :mod:`laav._threads`) does, in fresh processes: the wall time of
+``Pipeline(seq, C)`` and of ``random_voting`` (median of ``--repeats``) with the
+environment's default thread counts against the one-thread environment of the per-stage
+timings, each alone and with one busy core beside it (another process spinning), and the
+same with the cap switched off (``laav._threads.MAX_THREADS = None``). It prints the
+ratios to the one-thread time; ``--only`` defaults to ``people1`` there::
+
+    python benchmarks/speed.py --threads [--only GLOB] [--repeats N] [--rounds N] [--out FILE]
+
 The data folder is ``--data``, else ``$HOPKINS155``, else ``../shared/data/hopkins155``
 next to the repository. ``dancing`` and rows of ``sequences.csv`` with
 ``in_hopkins155 = no`` are skipped.
@@ -26,16 +36,20 @@ next to the repository. ``dancing`` and rows of ``sequences.csv`` with
 from __future__ import annotations
 
 import os
+import sys
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-             "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS"):
-    os.environ[_var] = "1"  # one core: must happen before numpy is imported
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+               "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+if "--threads-child" not in sys.argv:  # a --threads child keeps the environment it is given
+    for _var in THREAD_VARS:
+        os.environ[_var] = "1"  # one core: must happen before numpy is imported
 
 import argparse  # noqa: E402
 import csv  # noqa: E402
 import fnmatch  # noqa: E402
+import json  # noqa: E402
 import platform  # noqa: E402
-import sys  # noqa: E402
+import subprocess  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -114,6 +128,99 @@ def table(results: list[dict], title: str) -> list[str]:
     return lines + [""]
 
 
+# ----------------------------------------------------------------------- --threads
+#: (name, environment threads, cap on) of the configurations measured by --threads.
+THREAD_CONFIGS = [("one-thread environment", "1", True), ("default environment", None, True),
+                  ("default environment, cap off", None, False)]
+
+
+def threads_child(files: list[Path], cap: bool, repeats: int) -> dict:
+    """In this process: median seconds of Pipeline(seq, C) and random_voting per sequence."""
+    from threadpoolctl import threadpool_info
+
+    import laav._threads
+
+    if not cap:
+        laav._threads.MAX_THREADS = None
+    seqs = [laav.load_sequence(f) for f in files]
+    warm_up(seqs[0])
+    out = {"pools": sorted({f"{i['internal_api']}={i['num_threads']}" for i in threadpool_info()})}
+    for seq in seqs:
+        laav_s, rv_s = [], []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            laav.Pipeline(seq, seq.n_motions)
+            laav_s.append(time.perf_counter() - t)
+            t = time.perf_counter()
+            laav.random_voting(seq, seq.n_motions, seed=0)
+            rv_s.append(time.perf_counter() - t)
+        out[seq.name] = {"laav": float(np.median(laav_s)), "rv": float(np.median(rv_s))}
+    return out
+
+
+def _threads_run(files: list[Path], env_threads, cap: bool, busy: bool, repeats: int) -> dict:
+    """One fresh process of threads_child (beside a spinning process when ``busy``)."""
+    env = {k: v for k, v in os.environ.items() if k not in THREAD_VARS}
+    if env_threads is not None:
+        env.update(dict.fromkeys(THREAD_VARS, env_threads))
+    cmd = [sys.executable, __file__, "--threads-child", "--repeats", str(repeats),
+           *[a for f in files for a in ("--file", str(f))]] + ([] if cap else ["--no-cap"])
+    spinner = subprocess.Popen([sys.executable, "-c", "while True: pass"]) if busy else None
+    try:
+        proc = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
+    finally:
+        if spinner is not None:
+            spinner.kill()
+            spinner.wait()
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def measure_threads(files: list[Path], repeats: int, rounds: int) -> str:
+    """Every THREAD_CONFIGS entry, idle and beside a busy core, interleaved over ``rounds``
+    (so that other load on the machine hits all alike); the report as Markdown."""
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    per_round: dict = {}
+    for k in range(rounds):
+        for busy in (False, True):
+            for name, env_threads, cap in THREAD_CONFIGS:
+                r = _threads_run(files, env_threads, cap, busy, repeats)
+                per_round.setdefault((name, busy), []).append(r)
+                print(f"round {k + 1}: {name}{', one busy core' if busy else ''}: {r}",
+                      file=sys.stderr, flush=True)
+    runs = {}
+    for key, rs in per_round.items():  # median over rounds of each process's median
+        runs[key] = {"pools": rs[0]["pools"]}
+        for s in (s for s in rs[0] if s != "pools"):
+            runs[key][s] = {m: float(np.median([r[s][m] for r in rs])) for m in ("laav", "rv")}
+    base = runs[(THREAD_CONFIGS[0][0], False)]
+    names = [k for k in base if k != "pools"]
+    lines = [f"# LAAV and BLAS/OpenMP threads ({time.strftime('%Y-%m-%d %H:%M %Z')})", "",
+             f"- Machine: {cpu_model()}, {os.cpu_count()} logical cores, "
+             f"{platform.system()} {platform.release()} {platform.machine()}",
+             f"- Software: Python {platform.python_version()}, numpy {np.__version__}, "
+             f"laav {laav.__version__} (git {git_commit()})",
+             f"- Wall time of `Pipeline(seq, C)` (LAAV) and `random_voting(seq, C)` (RV): median "
+             f"of {repeats} runs in a fresh process after one warm-up, median of {rounds} such "
+             "processes per row, the rows interleaved. Ratio = time / time in the one-thread "
+             "environment without the busy core. Busy core: another process spinning meanwhile.",
+             f"- Load average (1 min) before the measurement: {load:.2f} on {os.cpu_count()} cores",
+             "- Thread pools outside a run: default environment "
+             f"{', '.join(runs[('default environment', False)]['pools'])}; one-thread environment "
+             f"{', '.join(base['pools'])}",
+             "- Same-load ratio: time / time in the one-thread environment under the same load "
+             "(busy core or not).",
+             "",
+             "| configuration | sequence | LAAV ms | LAAV ratio | same-load | RV ms | RV ratio | same-load |",
+             "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for (name, busy), r in runs.items():
+        same = runs[(THREAD_CONFIGS[0][0], busy)]
+        for s in names:
+            cells = [f"{1000 * r[s][m]:.0f} | {r[s][m] / base[s][m]:.2f} | {r[s][m] / same[s][m]:.2f}"
+                     for m in ("laav", "rv")]
+            lines.append(f"| {name}{', one busy core' if busy else ''} | {s} | {cells[0]} | {cells[1]} |")
+    return "\n".join(lines + [""])
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", help="Hopkins155 folder (default $HOPKINS155 or ../shared/data/hopkins155)")
@@ -123,8 +230,24 @@ def main(argv=None) -> int:
                     help="only sequences whose name matches (repeatable)")
     ap.add_argument("--limit", type=int, default=None, metavar="N", help="at most N sequences")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", default="bench-out/speed.md", help="Markdown report (default %(default)s)")
+    ap.add_argument("--out", default=None,
+                    help="Markdown report (default bench-out/speed.md, with --threads bench-out/threads.md)")
+    ap.add_argument("--threads", action="store_true",
+                    help="measure the thread cap instead (default, one thread, busy core; see above)")
+    ap.add_argument("--repeats", type=int, default=3, metavar="N",
+                    help="--threads: runs per sequence and process (default 3)")
+    ap.add_argument("--rounds", type=int, default=3, metavar="N",
+                    help="--threads: processes per configuration, interleaved (default 3)")
+    ap.add_argument("--threads-child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--file", action="append", default=[], help=argparse.SUPPRESS)
+    ap.add_argument("--no-cap", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.threads_child:
+        print(json.dumps(threads_child([Path(f) for f in args.file], not args.no_cap, args.repeats)))
+        return 0
+    if args.threads and not args.only:
+        args.only = ["people1"]
+    args.out = args.out or ("bench-out/threads.md" if args.threads else "bench-out/speed.md")
     if args.every < 1 or (args.limit is not None and args.limit < 1):
         ap.error("--every and --limit must be positive")
 
@@ -137,6 +260,15 @@ def main(argv=None) -> int:
     if not files:
         print(f"speed.py: error: no benchmark *_truth.mat files under {root}", file=sys.stderr)
         return 2
+
+    if args.threads:
+        text = measure_threads(files, args.repeats, args.rounds)
+        print(text)
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text)
+        print(f"written: {out}", file=sys.stderr)
+        return 0
 
     seqs = [laav.load_sequence(f) for f in files]
     warm_up(seqs[0])

@@ -1,8 +1,8 @@
-"""Write the synthetic demo sequences in ``assets/``, byte for byte reproducibly.
+"""Write the synthetic demo sequences in ``explorer/assets/``, byte for byte reproducibly.
 
 Run from anywhere::
 
-    python examples/make_demo_assets.py            # writes <repo>/assets/demo_*.mat
+    python examples/make_demo_assets.py            # writes <repo>/explorer/assets/demo_*.mat
     python examples/make_demo_assets.py --out DIR  # writes DIR/demo_*.mat
 
 Every file comes from :func:`laav.synthetic.make_sequence` with a fixed seed, so rerunning
@@ -10,7 +10,9 @@ the script rewrites identical bytes. ``scipy.io.savemat`` stamps the MAT header 
 platform and the current time; the script replaces that text with a fixed one (the header
 stays a valid MATLAB 5.0 header), which is what makes the files reproducible.
 
-None of these files contain Hopkins155 data; they are synthetic scenes.
+The files are package data of ``explorer`` (they ship inside the wheel, and
+``laav-explore`` finds them with :mod:`importlib.resources`). None of these files contain
+Hopkins155 data; they are synthetic scenes.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from laav import save_sequence
 from laav.synthetic import make_sequence
 
 #: File name -> keyword arguments of ``make_sequence``. The seeds were picked by eye so
-#: that the demos look clear; change them only together with assets/README.md.
+#: that the demos look clear; change them only together with explorer/assets/README.md.
 DEMOS: dict[str, dict] = {
     # Background + one car-like box (a long, low box sliding and turning on the ground).
     "demo_two_objects.mat": dict(n_objects=1, n_points=250, n_frames=30, rng=2030),
@@ -40,6 +42,7 @@ _HEADER_LEN = 116  # the text part of a MATLAB 5.0 file header
 _HEADER = b"MATLAB 5.0 MAT-file, synthetic demo written by laav examples/make_demo_assets.py"
 
 REPO = Path(__file__).resolve().parent.parent
+OUT = REPO / "explorer" / "assets"
 
 
 def _fix_header(path: Path) -> None:
@@ -67,7 +70,7 @@ def write_assets(out_dir: str | Path) -> list[Path]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--out", type=Path, default=REPO / "assets", help="folder to write (default: assets/)"
+        "--out", type=Path, default=OUT, help="folder to write (default: explorer/assets/)"
     )
     args = parser.parse_args(argv)
     for path in write_assets(args.out):

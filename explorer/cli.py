@@ -3,14 +3,22 @@
 Serves the explorer page (panel) with its embedded 3-D view (viser, one server per browser
 tab on a free port) from one process, prints the URL and opens the browser. Exit codes:
 0 after Ctrl-C, 2 for bad arguments or an unreadable FILE (a message, never a traceback).
+
+``--host``: the page's interface (default 127.0.0.1, this machine only). The 3-D view of
+each tab is a separate viser server on another free port of the same interface, which the
+page embeds (an iframe); a remote browser must be able to reach those ports too. With a
+non-loopback host the command prints the address other machines can use, a warning that
+the app is open to the network, and the address of each tab's 3-D view when it starts.
 """
 
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import socket
 import sys
 import threading
+import time
 import webbrowser
 from concurrent.futures import Future
 
@@ -59,7 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", type=int, metavar="N",
                    help=f"port of the page (default {DEFAULT_PORT}, or a free one if it is taken)")
     p.add_argument("--host", default="127.0.0.1",
-                   help="interface to bind (default 127.0.0.1: this machine only)")
+                   help="interface to bind (default 127.0.0.1: this machine only; 0.0.0.0: every "
+                        "interface, open to the network; each tab's 3-D view uses another free port)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random stages (default 0)")
     p.add_argument("--no-browser", action="store_true", help="do not open a browser")
     return p
@@ -82,9 +91,32 @@ def _free_port(host: str) -> int:
         return int(s.getsockname()[1])
 
 
+def _is_loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_loopback  # 127.x, ::1
+    except ValueError:
+        pass
+    try:
+        return ipaddress.ip_address(socket.gethostbyname(host)).is_loopback  # a name
+    except (OSError, ValueError):
+        return host == "localhost"
+
+
+def _reachable_name(host: str) -> str:
+    """The address other machines use for a server bound to ``host``."""
+    if host not in ("0.0.0.0", "", "::"):
+        return host
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.connect(("192.0.2.1", 9))  # no packet is sent: this only picks the outgoing interface
+            return s.getsockname()[0]
+        except OSError:
+            return socket.gethostname()
+
+
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
-                hosts: list[str] | None = None):
+                hosts: list[str] | None = None, announce_viser: bool = False):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
@@ -92,7 +124,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     ``prebuild`` builds the first tab's explorer now, in a background thread, while the
     server starts and the browser opens. ``created`` (optional list) receives every
     Explorer built (tests and benchmarks use it). ``hosts``: see :func:`page_hosts` (its
-    value for ``host`` by default).
+    value for ``host`` by default). ``announce_viser`` prints the address of every tab's
+    3-D view once its server is up (the CLI does for a non-loopback host).
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
@@ -133,6 +166,17 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
             ex = build()
         if created is not None:
             created.append(ex)
+        if announce_viser:
+            def announce():  # where a remote browser must reach this tab's 3-D view
+                deadline = time.monotonic() + 600  # it starts with the session (ex.start)
+                while ex._viser_thread is None and not ex._closed and time.monotonic() < deadline:
+                    time.sleep(0.2)
+                ex._wait_viser(120)
+                if ex.viser is not None:
+                    print(f"laav-explore: a tab's 3-D view is served at "
+                          f"http://{_reachable_name(host)}:{ex.viser.port}/", flush=True)
+
+            threading.Thread(target=announce, name="laav-explore-announce", daemon=True).start()
         pn.state.on_session_destroyed(lambda ctx: ex.close())
         pn.state.onload(ex.start)
         doc = pn.state.curdoc
@@ -197,20 +241,22 @@ def main(argv: list[str] | None = None) -> int:
     hosts = page_hosts(args.host)
     origins = [f"{h}:{port}" for h in hosts]  # the page's websocket: its own origin only
     try:
-        factory = app_factory(seq, C, args.seed, args.host, prebuild=True, hosts=hosts)
+        factory = app_factory(seq, C, args.seed, args.host, prebuild=True, hosts=hosts,
+                              announce_viser=not _is_loopback(args.host))
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False)
     except OSError as exc:
         return _fail(parser, f"cannot listen on {args.host}:{port}: {exc}")
-    shown = hosts[2] if args.host in _ANY and len(hosts) > 2 else args.host
-    url = f"http://{shown}:{port}/"
+    local = _is_loopback(args.host)
+    url = f"http://{args.host if local else _reachable_name(args.host)}:{port}/"
     print(f"laav-explore: {seq.name} ({seq.n_points} points, {seq.n_frames} frames, C = {C}) at {url}",
           flush=True)
-    if args.host not in _LOOPBACK:
+    if not local:
         print(f"laav-explore: warning: --host {args.host} opens the app to the network: anyone who can "
-              f"reach this machine can use it (and read the sequence); use 127.0.0.1 for this machine "
-              f"only", flush=True)
+              f"reach this machine can use it and read the sequence (each tab's 3-D view is served on "
+              f"another free port of {args.host}, printed when the tab opens); use 127.0.0.1 for this "
+              f"machine only", flush=True)
     print("laav-explore: press Ctrl-C to stop", flush=True)
     server.start()
     if not args.no_browser:

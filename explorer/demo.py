@@ -1,26 +1,33 @@
-"""The bundled demo sequence."""
+"""The bundled demo sequence (package data in ``explorer/assets/``, shipped in the wheel)."""
 
 from __future__ import annotations
 
-from pathlib import Path
+from importlib import resources
+from typing import TYPE_CHECKING
 
 import laav
+
+if TYPE_CHECKING:
+    from importlib.resources.abc import Traversable
 
 __all__ = ["assets_dir", "demo_path", "demo_sequence"]
 
 
-def assets_dir() -> Path:
-    """``assets/`` at the top of the repository."""
-    return Path(__file__).resolve().parents[1] / "assets"
+def assets_dir() -> Traversable:
+    """The ``assets`` folder of the installed ``explorer`` package (via :mod:`importlib.resources`)."""
+    return resources.files(__package__) / "assets"
 
 
-def demo_path() -> Path | None:
-    """``assets/demo_three_motions.mat`` if present, else the first ``assets/demo_*.mat``."""
+def demo_path() -> Traversable | None:
+    """``demo_three_motions.mat`` if present, else the first ``demo_*.mat`` / ``.npz`` of the assets."""
     d = assets_dir()
     best = d / "demo_three_motions.mat"
     if best.is_file():
         return best
-    found = sorted(d.glob("demo_*.mat")) + sorted(d.glob("demo_*.npz"))
+    if not d.is_dir():
+        return None
+    found = [p for p in d.iterdir() if p.name.startswith("demo_") and p.name.endswith((".mat", ".npz"))]
+    found.sort(key=lambda p: (p.name.endswith(".npz"), p.name))  # .mat first, as before
     return found[0] if found else None
 
 
@@ -34,7 +41,8 @@ def demo_sequence() -> laav.Sequence:
     """
     p = demo_path()
     if p is not None:
-        return laav.load_sequence(p)
+        with resources.as_file(p) as path:  # a real file even if the package is zipped
+            return laav.load_sequence(path)
     try:
         from laav.synthetic import make_sequence
     except ImportError:

@@ -1,8 +1,13 @@
 """laav: motion segmentation of tracked feature trajectories by Locally Affine Atom Voting.
 
-The algorithm package. It depends on numpy, scipy, scikit-learn, OpenCV and networkx only
-and never imports GUI code; the browser explorer lives in the separate ``explorer``
-package and uses only the public API exported here.
+The algorithm package. The algorithm (:func:`segment`, :class:`Pipeline`, the stages,
+:func:`random_voting`) needs numpy, scipy, scikit-learn and threadpoolctl only; the
+scikit-learn estimators :class:`LAAV` and :class:`RandomVoting` load on first use. The
+benchmark runner (:mod:`laav.bench`, :mod:`laav.report`) also uses joblib, tqdm and
+matplotlib, imported when needed. Nothing here imports GUI code or OpenCV, and networkx
+only in :func:`laav.multicut.exact_multicut`, the tests' reference solver (both come with
+the ``test`` extra); the browser explorer lives in the separate ``explorer`` package and
+uses only the public API exported here.
 """
 
 from ._sequence import Sequence, SequenceError
@@ -29,11 +34,21 @@ from .coarse import Coarse, merge_models  # noqa: E402
 from .graph import AtomGraph, atom_graph  # noqa: E402
 from .multicut import Multicut, solve_multicut  # noqa: E402
 from .params import LaavParams  # noqa: E402
-from .pipeline import LAAV, LaavResult, Pipeline, preload, segment  # noqa: E402
-from .voting import RandomVoting, Voting, random_voting  # noqa: E402
+from .pipeline import LaavResult, Pipeline, preload, segment  # noqa: E402
+from .voting import Voting, random_voting  # noqa: E402
 
 __all__ += [
     "LaavParams", "segment", "random_voting", "Pipeline", "LAAV", "RandomVoting",
     "LaavResult", "Atoms", "AtomGraph", "Multicut", "Coarse", "Voting",
     "build_atoms", "atom_graph", "solve_multicut", "merge_models", "preload",
 ]
+
+
+def __getattr__(name: str):
+    # The scikit-learn estimators load on first use: importing sklearn.base costs ~0.3-2 s,
+    # which ``import laav`` (the explorer, the CLI) does not pay.
+    if name in ("LAAV", "RandomVoting"):
+        from . import estimator
+
+        return getattr(estimator, name)
+    raise AttributeError(f"module 'laav' has no attribute {name!r}")

@@ -14,7 +14,10 @@ source of every number in the report (:mod:`laav.report`). The runner
 * appends each batch of rows to ``runs.csv`` as soon as it arrives (so an interrupted
   bench keeps what finished) and skips, on a rerun with the same output folder, every run
   whose key ``(sequence, method, seed, noise)`` is already there;
-* runs batches in parallel processes with joblib, or on a Dask distributed cluster.
+* runs batches in parallel processes with joblib, or on a Dask distributed cluster;
+* records which code made every row (``version``, ``commit``: :mod:`laav._provenance`,
+  taken where the run executes) and in ``bench.json``; a resume under another commit or
+  version is refused unless ``allow_mixed`` (``--allow-mixed``).
 
 Only the public API of :mod:`laav` is used. Everything here is importable without
 matplotlib, joblib, tqdm or dask; they are imported when needed.
@@ -42,12 +45,12 @@ from . import (
     LaavParams,
     Sequence,
     SequenceError,
-    __version__,
     load_sequence,
     misclassification_rate,
     random_voting,
     segment,
 )
+from ._provenance import provenance
 
 __all__ = [
     "COLUMNS", "KEY", "METHODS", "BenchError", "BenchSequence", "BenchSummary",
@@ -56,9 +59,12 @@ __all__ = [
     "run_bench",
 ]
 
-#: Columns of ``runs.csv``, in order.
+#: Columns of ``runs.csv``, in order. ``version`` and ``commit`` name the code that made the
+#: row (package version; git short hash with ``-dirty``, or ``unknown``).
 COLUMNS = ("sequence", "category", "motions", "points", "frames", "method", "seed", "noise",
-           "error", "seconds", "iterations", "trials", "converged")
+           "error", "seconds", "iterations", "trials", "converged", "version", "commit")
+#: The columns of files written before the provenance columns (still read; "" for them).
+LEGACY_COLUMNS = COLUMNS[:-2]
 #: Columns that identify a run (resume key).
 KEY = ("sequence", "method", "seed", "noise")
 #: Methods the bench knows: LAAV and plain Random Voting.
@@ -224,7 +230,7 @@ def run_one(item: BenchSequence, method: str, seed: int, sigma: float,
         "points": item.seq.n_points, "frames": item.seq.n_frames, "method": method,
         "seed": int(seed), "noise": float(sigma), "error": float(error), "seconds": seconds,
         "iterations": int(voting.n_iterations), "trials": int(voting.n_trials),
-        "converged": bool(voting.converged),
+        "converged": bool(voting.converged), **provenance(),
     }
 
 
@@ -373,7 +379,7 @@ def run_key(row: dict) -> tuple:
 
 def _parse_row(raw: dict) -> dict | None:
     try:
-        row = {c: raw[c] for c in COLUMNS}
+        row = {c: raw[c] for c in LEGACY_COLUMNS}
         if any(v is None for v in row.values()) or not row["sequence"] or not row["method"]:
             return None
         for c in _INT_COLS:
@@ -386,6 +392,8 @@ def _parse_row(raw: dict) -> dict | None:
         row["converged"] = conv == "true"
     except (KeyError, ValueError, TypeError, AttributeError):
         return None
+    row["version"] = raw.get("version") or ""  # "" in files from before these columns
+    row["commit"] = raw.get("commit") or ""
     return row
 
 
@@ -403,7 +411,8 @@ def read_runs(path: str | os.PathLike, repair: bool = False) -> list[dict]:
 
     A row that cannot be parsed (e.g. a line cut short when the bench was killed) and a
     repeated key are dropped; with ``repair=True`` the file is then rewritten without
-    them.
+    them. A file with the columns of before ``version`` and ``commit`` existed
+    (:data:`LEGACY_COLUMNS`) is read with "" there, and rewritten with them by ``repair``.
 
     Raises
     ------
@@ -413,7 +422,8 @@ def read_runs(path: str | os.PathLike, repair: bool = False) -> list[dict]:
     path = Path(path)
     with open(path, newline="") as fh:
         reader = csv.DictReader(fh)
-        if tuple(reader.fieldnames or ()) != COLUMNS:
+        legacy = tuple(reader.fieldnames or ()) == LEGACY_COLUMNS
+        if tuple(reader.fieldnames or ()) != COLUMNS and not legacy:
             raise BenchError(
                 f"{path}: unexpected columns {reader.fieldnames}; expected {','.join(COLUMNS)} "
                 "(use a new --out folder)"
@@ -426,7 +436,7 @@ def read_runs(path: str | os.PathLike, repair: bool = False) -> list[dict]:
                 continue
             seen.add(run_key(row))
             rows.append(row)
-    if bad and repair:
+    if (bad or legacy) and repair:
         _write_rows(path, rows)
     return rows
 
@@ -447,15 +457,22 @@ def _sort_key(row: dict) -> tuple:
 # --------------------------------------------------------------------------- meta
 
 
-def _check_meta(out: Path, params: LaavParams) -> None:
+def _code(version: str, commit: str) -> str:
+    return f"laav {version or '?'} at git {commit or 'unrecorded'}"
+
+
+def _check_meta(out: Path, params: LaavParams, existing: list[dict], allow_mixed: bool) -> None:
+    """Refuse to resume ``out`` with other parameters, or (unless ``allow_mixed``) under
+    other code than made its rows; then write ``bench.json``."""
     meta_path = out / META_JSON
     current = params.to_dict()
-    if meta_path.is_file() and (out / RUNS_CSV).is_file():
-        try:
-            old = json.loads(meta_path.read_text()).get("params", {})
-        except (OSError, ValueError):
-            old = None
-        if old is not None and old != current:
+    try:
+        old_meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    except (OSError, ValueError):
+        old_meta = None
+    if old_meta is not None and (out / RUNS_CSV).is_file():
+        old = old_meta.get("params", {})
+        if old_meta and old != current:
             diff = sorted(set(old) | set(current))
             diff = [f"{k}: {old.get(k)!r} -> {current.get(k)!r}" for k in diff
                     if old.get(k) != current.get(k)]
@@ -464,8 +481,20 @@ def _check_meta(out: Path, params: LaavParams) -> None:
                 "use a new --out folder, or the same --param options (LAAV's defaults may "
                 "have changed since)"
             )
-    meta = {"laav_version": __version__, "params": current,
+    code = provenance()
+    this = (code["version"], code["commit"])
+    made_by = {(r["version"], r["commit"]) for r in existing}
+    others = sorted(made_by - {this})
+    if others and not allow_mixed:
+        raise BenchError(
+            f"{out / RUNS_CSV} holds runs made by other code ({'; '.join(_code(*c) for c in others)}) "
+            f"than this {_code(*this)}; use a new --out folder, or --allow-mixed to add runs "
+            "anyway (every row records the code that made it)"
+        )
+    meta = {"laav_version": code["version"], "commit": code["commit"], "params": current,
             "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    if others:
+        meta["mixed"] = [_code(*c) for c in sorted(made_by | {this})]
     meta_path.write_text(json.dumps(meta, indent=2) + "\n")
 
 
@@ -533,7 +562,8 @@ def _results_joblib(make_batches, params, jobs):
     from joblib import Parallel, delayed
 
     batches = make_batches(_n_workers(jobs))
-    par = Parallel(n_jobs=jobs, return_as="generator_unordered", batch_size=1)
+    # processes (loky), each running its batches with the pipeline's one BLAS/OpenMP thread
+    par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered", batch_size=1)
     gen = par(delayed(_run_batch)(b, params) for b in batches)
     try:
         yield from gen
@@ -583,6 +613,7 @@ def run_bench(
     report: bool = True,
     max_batch: int = 8,
     log: Callable[[str], None] | None = None,
+    allow_mixed: bool = False,
 ) -> BenchSummary:
     """Run (or resume) a benchmark and write ``runs.csv`` and the report into ``out``.
 
@@ -614,6 +645,9 @@ def run_bench(
         Most runs sent to a worker at once.
     log : callable, optional
         Receives messages (default: print to stderr).
+    allow_mixed : bool
+        Resume even when ``runs.csv`` holds rows made by another package version or git
+        commit than the running code (refused by default).
 
     Returns
     -------
@@ -636,16 +670,16 @@ def run_bench(
     out.mkdir(parents=True, exist_ok=True)
     with _OutLock(out):
         return _run_locked(items, out, methods, seeds, noise, jobs, scheduler, params, progress,
-                           report, max_batch, say)
+                           report, max_batch, say, allow_mixed)
 
 
 def _run_locked(items, out, methods, seeds, noise, jobs, scheduler, params, progress, report,
-                max_batch, say) -> BenchSummary:
+                max_batch, say, allow_mixed) -> BenchSummary:
     runs_csv = out / RUNS_CSV
     if runs_csv.is_file() and runs_csv.stat().st_size == 0:
         runs_csv.unlink()
     existing = read_runs(runs_csv, repair=True) if runs_csv.is_file() else []
-    _check_meta(out, params)
+    _check_meta(out, params, existing, allow_mixed)
 
     planned = plan_runs(list(items.values()), methods, seeds, noise)
     done = {run_key(r) for r in existing}

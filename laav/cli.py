@@ -105,6 +105,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help=_param_help())
     bench.add_argument("--no-report", action="store_true",
                        help="only write runs.csv (make the report later with `laav report`)")
+    bench.add_argument("--allow-mixed", action="store_true",
+                       help="resume an --out folder whose runs were made by another git commit or "
+                            "version (refused by default; every row records its code)")
     bench.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
 
     rep = sub.add_parser("report", help="(re)write report.md and figures from a runs.csv",
@@ -179,6 +182,7 @@ def _cmd_bench(args) -> int:
         data=args.data, out=args.out, methods=methods, seeds=args.seeds, noise=noise,
         only=_split(args.only) or None, jobs=args.jobs, scheduler=args.scheduler,
         params=params, progress=not args.quiet, report=not args.no_report,
+        allow_mixed=args.allow_mixed,
     )
     err = sys.stderr
     if summary.interrupted:

@@ -1,4 +1,6 @@
-"""The whole LAAV pipeline: :func:`segment`, the staged :class:`Pipeline`, and :class:`LAAV`.
+"""The whole LAAV pipeline: :func:`segment` and the staged :class:`Pipeline`.
+
+The scikit-learn estimator :class:`laav.LAAV` wrapping them is in :mod:`laav.estimator`.
 
 Randomness: one integer ``seed`` is split by :class:`numpy.random.SeedSequence` into one
 independent stream per random stage (atoms, fine-to-coarse, voting), and every run of a
@@ -15,7 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._random import resolve_seed
 from ._sequence import Sequence
+from ._threads import single_threaded
 from .atoms import Atoms, build_atoms, trajectory_distances
 from .coarse import Coarse, merge_models
 from .graph import AtomGraph, atom_graph
@@ -23,7 +27,7 @@ from .multicut import Multicut, solve_multicut
 from .params import STAGE_PARAMS, STAGES, LaavParams, stages_affected
 from .voting import Voting, random_voting
 
-__all__ = ["LaavResult", "segment", "Pipeline", "LAAV"]
+__all__ = ["LaavResult", "segment", "Pipeline", "preload"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,6 +144,7 @@ class Pipeline:
     def _rng(self, stage: str) -> np.random.Generator:
         return np.random.default_rng(_stage_rngs(self.seed)[stage])
 
+    @single_threaded  # one BLAS/OpenMP thread while the stages run (laav/_threads.py)
     def _run(self, start: str) -> LaavResult:
         p, seq, C = self.params, self.seq, self.n_motions
         timings = dict.fromkeys(STAGES, 0.0)
@@ -232,7 +237,8 @@ def preload() -> None:
     import sklearn.cluster  # noqa: F401
 
 
-def segment(seq, n_motions: int, params: LaavParams | None = None, seed: int = 0) -> LaavResult:
+def segment(seq, n_motions: int, params: LaavParams | None = None, seed: int = 0, *,
+            random_state=None) -> LaavResult:
     """Segment trajectories into ``n_motions`` motions with LAAV.
 
     Parameters
@@ -243,40 +249,13 @@ def segment(seq, n_motions: int, params: LaavParams | None = None, seed: int = 0
     params : LaavParams, optional
     seed : int
         Same seed, same labels.
+    random_state : None, int, numpy.random.Generator or RandomState, optional
+        scikit-learn style alternative to ``seed``, used instead of it when given: an int
+        is the seed itself, a generator gives one draw. None (default): ``seed`` is used.
 
     Returns
     -------
     LaavResult
     """
-    return Pipeline(seq, n_motions, params, seed).result
+    return Pipeline(seq, n_motions, params, resolve_seed(seed, random_state)).result
 
-
-class LAAV:
-    """scikit-learn style estimator for LAAV.
-
-    Parameters
-    ----------
-    n_motions : int
-    seed : int
-    **params
-        Any :class:`LaavParams` field.
-
-    Attributes
-    ----------
-    labels_ : ndarray of shape (P,)
-    result_ : LaavResult
-    """
-
-    def __init__(self, n_motions: int, seed: int = 0, **params):
-        self.n_motions = n_motions
-        self.seed = seed
-        self.params = LaavParams().replace(**params)
-
-    def fit(self, points, y=None):
-        self.result_ = segment(np.asarray(points) if not isinstance(points, Sequence) else points,
-                               self.n_motions, self.params, self.seed)
-        self.labels_ = self.result_.labels
-        return self
-
-    def fit_predict(self, points, y=None) -> np.ndarray:
-        return self.fit(points).labels_

@@ -15,6 +15,7 @@ without pyplot (no global backend state is touched).
 from __future__ import annotations
 
 import os
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -163,6 +164,16 @@ def _balance(rows, seqs, methods, levels) -> list[str]:
     return out
 
 
+def _code_line(rows) -> str:
+    """Which package version and git commit made the runs (the rows' provenance columns)."""
+    made = Counter((r["version"] or "?", r["commit"] or "unrecorded") for r in rows)
+    parts = [f"laav {v} at git `{c}`" for v, c in sorted(made)]
+    if len(made) == 1:
+        return f"Code: {parts[0]} (every run)."
+    counts = [f"{p}: {made[k]} runs" for p, k in zip(parts, sorted(made))]
+    return "Code: **mixed** (resumed with `--allow-mixed`): " + "; ".join(counts) + "."
+
+
 def report_from_csv(path: str | os.PathLike) -> str:
     """The Markdown report of a ``runs.csv`` (every number computed from the CSV)."""
     path = Path(path)
@@ -182,7 +193,9 @@ def report_from_csv(path: str | os.PathLike) -> str:
         f"({n2} with two motions, {n3} with three, {len(seqs) - n2 - n3} other), "
         f"methods {', '.join(method_label(m) for m in methods)}, "
         f"seeds {', '.join(map(str, seeds))}, noise σ = {', '.join(map(_sigma, levels))} px. "
-        "Parameters and software version: `bench.json`.",
+        "Parameters: `bench.json`.",
+        "",
+        _code_line(rows),
         "",
         "Errors are misclassification rates in percent. Each sequence's error is first "
         "averaged over its seeds; means and medians are over sequences.",

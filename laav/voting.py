@@ -30,7 +30,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._random import resolve_seed
 from ._sequence import Sequence, as_points
+from ._threads import single_threaded
 from .metrics import misclassification_rate
 from .params import LaavParams
 from .refine import (
@@ -44,7 +46,7 @@ from .refine import (
 from .rv import consensus, run_trials, vote
 
 __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances", "frame_pairs",
-           "RandomVoting", "labelling_cost", "subspace_cost", "reassign_labels"]
+           "labelling_cost", "subspace_cost", "reassign_labels"]
 
 #: In LAAV's fine-tuning with model selection, when the informed trial and plain RV's
 #: converged trial disagree on more than this share of the points, two more plain RV
@@ -108,9 +110,10 @@ class Voting:
     costs: dict = field(default_factory=dict)
 
 
+@single_threaded  # one BLAS/OpenMP thread, restored after (laav/_threads.py)
 def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams | None = None,
                   seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
-                  weights: np.ndarray | None = None) -> Voting:
+                  weights: np.ndarray | None = None, *, random_state=None) -> Voting:
     """Segment trajectories into ``n_motions`` rigid motions by Random Voting.
 
     Parameters
@@ -122,6 +125,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         Uses the ``rv_*`` fields. Defaults to ``LaavParams()``.
     seed : int or numpy.random.Generator
         Same seed, same labels.
+    random_state : None, int, numpy.random.Generator or RandomState, optional
+        scikit-learn style alternative to ``seed``, used instead of it when given (an int
+        is the seed itself, a generator gives one draw). None (default): ``seed`` is used.
     init_labels : ndarray of shape (P,), optional
         Start labels (LAAV fine-tuning); ``-1`` marks unlabelled points, which start at
         random. None gives plain RV from random partitions.
@@ -149,6 +155,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if C > 1 and params.rv_sample_size > P:
         raise ValueError(f"rv_sample_size ({params.rv_sample_size}) exceeds the number of "
                          f"points ({P})")
+    seed = resolve_seed(seed, random_state)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     if C == 1 or F < 2:
         lab = np.zeros(P, dtype=np.int64)
@@ -298,32 +305,3 @@ def _select(points, C, params, candidates, trials, initialised) -> Voting:
     costs = {e[0]: float(v) for e, v in zip(entries, scores)}
     return _finish(points, C, params, cand, trials, initialised, selected=name,
                    polished=pol, costs=costs)
-
-
-class RandomVoting:
-    """scikit-learn style wrapper of :func:`random_voting` (plain RV).
-
-    Parameters
-    ----------
-    n_motions : int
-    seed : int
-    **params
-        Any ``rv_*`` field of :class:`LaavParams` (e.g. ``rv_alpha=0.95``).
-
-    Examples
-    --------
-    >>> labels = RandomVoting(2, seed=0).fit_predict(points)  # doctest: +SKIP
-    """
-
-    def __init__(self, n_motions: int, seed: int = 0, **params):
-        self.n_motions = n_motions
-        self.seed = seed
-        self.params = LaavParams().replace(**params)
-
-    def fit(self, points, y=None):
-        self.result_ = random_voting(np.asarray(points), self.n_motions, self.params, self.seed)
-        self.labels_ = self.result_.labels
-        return self
-
-    def fit_predict(self, points, y=None) -> np.ndarray:
-        return self.fit(points).labels_

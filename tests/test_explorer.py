@@ -112,9 +112,9 @@ def test_align_labels_renames_to_the_reference():
 # ---------------------------------------------------------------------------- live updates
 def test_lambda_change_alters_z_and_not_the_atoms():
     # a demo sequence: on very easy data the fine models' co-association Z is 0/1 whatever λ is
-    p = REPO / "assets" / "demo_two_objects.mat"
+    p = REPO / "explorer" / "assets" / "demo_two_objects.mat"
     if not p.is_file():
-        pytest.skip("assets/demo_two_objects.mat is missing")
+        pytest.skip("explorer/assets/demo_two_objects.mat is missing")
     ex = Explorer.from_file(p, viser=False)
     try:
         assert ex.wait(120)
@@ -333,8 +333,10 @@ def test_explorer_from_file_and_demo(tmp_path, seq):
         ex.close()
     demo = demo_sequence()
     assert demo.n_points >= 8
-    if demo_path() is not None:
-        assert demo_path().parent == REPO / "assets"
+    # the bundled file, found through importlib.resources in the explorer package
+    assert demo_path() is not None and demo_path().name == "demo_three_motions.mat"
+    assert Path(str(demo_path())) == REPO / "explorer" / "assets" / "demo_three_motions.mat"
+    assert demo.name == "demo_three_motions"
 
 
 # ---------------------------------------------------------------------------- CLI

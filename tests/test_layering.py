@@ -32,3 +32,18 @@ def test_import_laav_defers_the_heavy_imports_that_preload_performs():
     loaded_by_import, missing_after_preload = out.stdout.split("\n")[:2]
     assert loaded_by_import == "", f"`import laav` loaded {loaded_by_import}"
     assert missing_after_preload == "", f"laav.preload() did not load {missing_after_preload}"
+
+
+def test_the_algorithm_needs_neither_opencv_nor_networkx():
+    # what laav/__init__.py and the README say: a segmentation (and the estimator) imports neither
+    code = (
+        "import sys, numpy as np, laav\n"
+        "from laav.synthetic import make_sequence\n"
+        "seq = make_sequence(n_objects=1, n_frames=8, n_points=60, rng=0)\n"
+        "p = laav.LaavParams(rv_max_iter=10, rv_trials=1)\n"
+        "laav.segment(seq, 2, p); laav.random_voting(seq, 2, p)\n"
+        "laav.LAAV(2, random_state=0, rv_max_iter=10, rv_trials=1).fit(seq)\n"
+        "print(','.join(sorted(n for n in sys.modules if n.split('.')[0] in ('cv2', 'networkx'))))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "", f"the algorithm imported {out.stdout.strip()}"

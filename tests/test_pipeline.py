@@ -7,10 +7,8 @@ import pytest
 
 import laav.pipeline as pipeline_module
 from laav import (
-    LAAV,
     LaavParams,
     Pipeline,
-    RandomVoting,
     Sequence,
     misclassification_rate,
     segment,
@@ -264,7 +262,6 @@ def test_single_motion():
     res = segment(seq, 1)
     assert np.all(res.labels == 0)
     assert res.coarse.fine_to_coarse.size == 0 or np.all(res.coarse.fine_to_coarse == 0)
-    assert LAAV(1).fit_predict(seq.points).tolist() == [0] * seq.n_points
 
 
 @pytest.mark.parametrize("n_objects", [1, 2])
@@ -285,21 +282,6 @@ def test_every_feature_in_an_atom():
     assert res.voting.initialised
     err = misclassification_rate(seq.labels, res.labels)
     assert err < 0.01, f"error {err:.3f}"
-
-
-def test_estimators():
-    seq = scene(1, 1)
-    est = LAAV(2, seed=0, lam=3.0)
-    lab = est.fit_predict(seq.points)
-    assert np.array_equal(lab, est.labels_)
-    assert np.array_equal(lab, segment(seq.points, 2, LaavParams(lam=3.0), seed=0).labels)
-    assert est.result_.params.lam == 3.0
-    assert np.array_equal(LAAV(2).fit(seq).labels_, LAAV(2).fit_predict(seq.points))
-    assert misclassification_rate(seq.labels, lab) < 0.01
-    rv = RandomVoting(2, seed=0).fit_predict(seq.points)
-    assert misclassification_rate(seq.labels, rv) < 0.01
-    with pytest.raises(ValueError):
-        LAAV(2, r1=50.0)
 
 
 @pytest.mark.parametrize("n_motions", [0, -1, True, 2.0, 10_000])

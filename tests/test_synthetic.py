@@ -14,7 +14,7 @@ from laav import Sequence, load_sequence
 from laav.synthetic import MIN_POINTS_PER_MOTION, add_noise, make_sequence
 
 REPO = Path(__file__).resolve().parent.parent
-ASSETS = REPO / "assets"
+ASSETS = REPO / "explorer" / "assets"
 SCRIPT = REPO / "examples" / "make_demo_assets.py"
 
 
@@ -347,3 +347,10 @@ def test_assets_readme_mentions_every_file():
     for name in ASSET_NAMES:
         assert name in text
     assert "Hopkins155" in text and "make_demo_assets.py" in text
+
+
+def test_assets_live_in_the_explorer_package():
+    # the script writes the package data by default; the top-level assets/ points there
+    assert _load_script().OUT == ASSETS
+    pointer = (REPO / "assets" / "README.md").read_text()
+    assert "explorer/assets/" in pointer and not list((REPO / "assets").glob("*.mat"))

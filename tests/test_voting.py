@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from laav import LaavParams, RandomVoting, misclassification_rate, random_voting, segment
+from laav import LaavParams, misclassification_rate, random_voting, segment
 from laav.voting import frame_pairs, refine_labels, vote
 
 synthetic = pytest.importorskip("laav.synthetic")
@@ -128,19 +128,6 @@ def test_single_motion_gives_zeros():
     assert res.labels.shape == (seq.n_points,) and np.all(res.labels == 0)
     assert res.votes.shape == (seq.n_points, 1)
     assert len(res.changed) == len(res.margin) == res.n_iterations == 0
-    assert RandomVoting(1).fit_predict(seq.points).tolist() == [0] * seq.n_points
-
-
-def test_random_voting_estimator():
-    seq = scene(1, 1)
-    rv = RandomVoting(2, seed=0, rv_alpha=0.95)
-    lab = rv.fit_predict(seq.points)
-    assert rv.params.rv_alpha == 0.95
-    assert np.array_equal(lab, rv.labels_) and rv.result_.labels is rv.labels_
-    assert misclassification_rate(seq.labels, lab) < 0.01
-    assert np.array_equal(lab, random_voting(seq.points, 2, LaavParams(rv_alpha=0.95), 0).labels)
-    with pytest.raises(ValueError, match="unknown"):
-        RandomVoting(2, rv_alhpa=0.9)
 
 
 _P = scene(1, 0).points

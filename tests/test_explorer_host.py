@@ -1,0 +1,98 @@
+"""``laav-explore --host 0.0.0.0``: the reachable URL, a warning, and a working page."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+pytestmark = pytest.mark.slow
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("0.0.0.0", 0))
+        return s.getsockname()[1]
+
+
+def _serve(tmp_path, *args):
+    log = tmp_path / "server.log"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    with open(log, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "explorer.cli", "--no-browser", *args],
+                                stdout=fh, stderr=subprocess.STDOUT, env=env, cwd=tmp_path)
+    return proc, log
+
+
+def _page(proc, log, port) -> str:
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, log.read_text()
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=30) as r:
+                return r.read().decode()
+        except OSError:
+            time.sleep(0.5)
+    raise AssertionError(f"no page on port {port}:\n{log.read_text()}")
+
+
+def _stop(proc):
+    proc.terminate()
+    try:
+        proc.wait(30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def test_host_all_interfaces_prints_a_reachable_url_and_a_warning(tmp_path):
+    port = _free_port()
+    proc, log = _serve(tmp_path, "--host", "0.0.0.0", "--port", str(port))
+    try:
+        assert "demo_three_motions" in _page(proc, log, port)
+        out = log.read_text()
+        url = next(ln for ln in out.splitlines() if ln.startswith("laav-explore: demo_three_motions"))
+        assert f":{port}/" in url and "localhost" not in url and "0.0.0.0:" not in url
+        assert "warning: --host 0.0.0.0 opens the app to the network" in out
+        assert "3-D view is served on another free port" in out
+        # a session (a script client, as a browser tab would) starts its 3-D view: its address
+        import panel.models  # noqa: F401 - registers the models the client receives
+        from bokeh.client import pull_session
+
+        with pull_session(url=f"http://127.0.0.1:{port}/"):
+            deadline = time.monotonic() + 60
+            while "3-D view is served at" not in log.read_text() and time.monotonic() < deadline:
+                time.sleep(0.5)
+        viser_line = next(ln for ln in log.read_text().splitlines() if "3-D view is served at" in ln)
+        viser_port = int(viser_line.rsplit(":", 1)[1].strip("/"))
+        assert viser_port != port
+        with urllib.request.urlopen(f"http://127.0.0.1:{viser_port}/", timeout=30) as r:
+            assert r.status == 200
+    finally:
+        _stop(proc)
+
+
+def test_default_host_prints_the_loopback_url_without_a_warning(tmp_path):
+    port = _free_port()
+    proc, log = _serve(tmp_path, "--port", str(port))
+    try:
+        _page(proc, log, port)
+        out = log.read_text()
+        assert f"at http://127.0.0.1:{port}/" in out and "warning" not in out
+    finally:
+        _stop(proc)
+
+
+@pytest.mark.parametrize("host, loopback", [("127.0.0.1", True), ("::1", True), ("localhost", True),
+                                            ("0.0.0.0", False), ("::", False), ("192.0.2.7", False)])
+def test_which_hosts_are_this_machine_only(host, loopback):
+    from explorer.cli import _is_loopback
+
+    assert _is_loopback(host) is loopback
