@@ -153,13 +153,16 @@ def test_point_labels_from_atoms_rules():
     assert lab.tolist() == [1, 1, 0, 0, 0, 1, 1, 1, -1]
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "accuracy target: end-to-end coarse labels are not yet reliably right on clean scenes "
-    "(measured 2026-11-29: error > 1 % on covered points in 12 of 32 scene/seed runs, up "
-    "to 44 %; the multicut's segments are pure, the errors come from merging them to 2C "
-    "by mean connecting cost and from the fine-to-coarse merge). Non-strict because it "
-    "depends on the seed: 3 of these 4 cases pass"))
-@pytest.mark.parametrize("n_objects, seed", SCENES[::2])
+#: The clean scene on which the coarse stage is known to be wrong (measured 2026-11-30:
+#: 3-motion scene 0, seed 0: the multicut's 2C fine models are pure, the fine-to-coarse
+#: merge puts two of them in the wrong motion). Strict: a fix shows as a failure here.
+COARSE_KNOWN_WRONG = {(2, 0)}
+
+
+@pytest.mark.parametrize("n_objects, seed", [
+    pytest.param(*case, marks=pytest.mark.xfail(strict=True, reason="known wrong merge, see "
+                                                 "COARSE_KNOWN_WRONG"))
+    if case in COARSE_KNOWN_WRONG else case for case in SCENES[::2]])
 def test_segment_coarse_labels_match_truth_on_covered_points(n_objects, seed):
     seq = synthetic.make_sequence(n_objects=n_objects, n_frames=20, n_points=300, rng=seed)
     res = segment(seq, seq.n_motions, seed=0)
