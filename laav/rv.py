@@ -64,7 +64,10 @@ def _sample_groups(labels, votes, C, m, rng):
         w = np.where(small[..., None], 1.0, w)
     # weighted sampling without replacement (Efraimidis-Spirakis): the m largest keys
     # log(u) / w, i.e. the m smallest of -log(u) / w; non-members never drawn
-    u = rng.random(w.shape)
+    if isinstance(rng, np.random.Generator):
+        u = rng.random(w.shape)
+    else:  # one generator per trial (leading axis): a trial's draws never depend on the batch
+        u = np.stack([r.random(w.shape[1:]) for r in rng])
     neg_keys = np.where(w > 0, -np.log(u) / np.maximum(w, 1e-12), np.inf)
     return np.argpartition(neg_keys, m - 1, axis=-1)[..., :m]
 
@@ -85,7 +88,9 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
     lam : float
     m : int
         Points per fit.
-    rng : numpy.random.Generator
+    rng : numpy.random.Generator, or a sequence of B of them
+        With ``labels`` (B, P), one generator per trial makes every trial's sample
+        independent of which other trials share the batch.
 
     Returns
     -------
@@ -116,8 +121,8 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
 class _Trial:
     """Working state of one voting trial (internal; several run side by side)."""
 
-    def __init__(self, labels, votes, reset, kind):
-        self.labels, self.votes = labels, votes
+    def __init__(self, labels, votes, reset, kind, rng):
+        self.labels, self.votes, self.rng = labels, votes, rng
         self.reset, self.kind = reset, kind
         self.changed: list = []
         self.margins: list = []
@@ -145,18 +150,23 @@ def _margins(votes: np.ndarray) -> np.ndarray:
     return np.add.reduce(spread / (np.abs(votes).sum(-1) + 1e-12), axis=-1) / spread.shape[-1]
 
 
-def _step(points, trials, params, rng):
-    """One voting iteration of every trial in ``trials``, in one batched call."""
-    F, P, _ = points.shape
-    B = len(trials)
+def _frame_pair(F: int, rng: np.random.Generator) -> tuple[int, int]:
+    """A random frame pair at least ``max(1, F // 3)`` apart, in random order."""
     gap = max(1, F // 3)
+    left = int(rng.integers(0, F - gap))
+    right = int(rng.integers(left + gap, F))
+    return (right, left) if rng.random() < 0.5 else (left, right)
+
+
+def _step(points, trials, params):
+    """One voting iteration of every trial in ``trials``, in one batched call; every
+    random draw of a trial comes from its own generator."""
+    F, P, _ = points.shape
     labels = np.stack([t.labels for t in trials])  # (B, P)
     votes = np.stack([t.votes for t in trials])  # (B, P, C)
-    left = rng.integers(0, F - gap, size=B)
-    right = rng.integers(left + gap, F)
-    flip = rng.random(B) < 0.5
-    pairs = np.stack([np.where(flip, right, left), np.where(flip, left, right)], axis=1)
-    votes += vote(points, labels, votes, pairs, params.rv_lambda, params.rv_sample_size, rng)
+    pairs = np.array([_frame_pair(F, t.rng) for t in trials])  # (B, 2)
+    votes += vote(points, labels, votes, pairs, params.rv_lambda, params.rv_sample_size,
+                  [t.rng for t in trials])
     if votes.shape[-1] == 2:  # argmax, without numpy's slow reduction over 2 columns
         new = (votes[..., 1] > votes[..., 0]).astype(np.intp)
     else:
@@ -180,17 +190,15 @@ def _step(points, trials, params, rng):
             t.done = True
 
 
-def run_trials(points, C, params, rng, informed=None, n_plain=None, plain_after_informed=False):
+def run_trials(points, C, params, rng, informed=None, n_plain=None):
     """Run LAAV's informed trial and plain RV's random-start trials, ``rv_batch`` side by side.
 
     Trials advance in lockstep, one batched numpy call per iteration, each with its own
     frame pairs, samples, iteration count and convergence test; a trial starts when a slot
     is free. Plain trials (at most ``n_plain``) start until one converges; the one kept
     is the first *in start order* to converge, as if the trials ran one after another.
-    The informed trial always runs to its end. With ``plain_after_informed`` plain trials
-    start only once the informed trial has ended unconverged. (Running only one plain
-    trial at a time beside the informed one was measured slower: LAAV's median 123 ms
-    against 112 ms, because first plain trials often end unconverged.)
+    The informed trial always runs to its end. Every trial draws from its own generator
+    (spawned from ``rng`` in start order), so the labels do not depend on ``rv_batch``.
 
     Parameters
     ----------
@@ -199,6 +207,7 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, plain_after_
     params : LaavParams
         Uses the ``rv_*`` fields.
     rng : numpy.random.Generator
+        Spawns one generator per trial (:meth:`numpy.random.Generator.spawn`).
     informed : (labels0, votes0) or None
         Start labels (P,) and votes (P, C) of LAAV's informed trial.
     n_plain : int, optional
@@ -217,31 +226,30 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, plain_after_
     """
     P = points.shape[1]
     width = params.rv_batch
+    n_plain = params.rv_trials if n_plain is None else n_plain
+    streams = rng.spawn(1 + n_plain)  # [informed, plain 0, plain 1, ...]
     active: list = []
     if informed is not None:
         labels0, votes0 = informed
-        active.append(_Trial(labels0.copy(), votes0.copy(), False, "informed"))
+        active.append(_Trial(labels0.copy(), votes0.copy(), False, "informed", streams[0]))
     started = list(active)
     plain: list = []  # in start order
     winner = None
-    n_plain = params.rv_trials if n_plain is None else n_plain
 
     def may_start_plain():
-        if len(plain) >= n_plain or any(t.converged for t in plain):
-            return False  # a later trial could no longer be the one kept
-        if plain_after_informed and informed is not None:
-            return started[0].done and not started[0].converged
-        return True
+        # a later trial could no longer be the one kept once an earlier one converged
+        return len(plain) < n_plain and not any(t.converged for t in plain)
 
     while True:
         while len(active) < width and may_start_plain():
-            t = _Trial(rng.integers(0, C, P), np.zeros((P, C)), True, "plain")
+            trial_rng = streams[1 + len(plain)]
+            t = _Trial(trial_rng.integers(0, C, P), np.zeros((P, C)), True, "plain", trial_rng)
             active.append(t)
             started.append(t)
             plain.append(t)
         if not active:
             break
-        _step(points, active, params, rng)
+        _step(points, active, params)
         active = [t for t in active if not t.done]
         # the kept plain trial is the first *in start order* to converge, as if the trials
         # ran one after another: a trial that converges sooner than an earlier one is not

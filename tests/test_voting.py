@@ -353,3 +353,17 @@ def test_paper_preset_fine_tunes_with_the_informed_trial_alone():
     # the informed start is what it votes from: a start from the truth stays there
     start = random_voting(seq, seq.n_motions, p, seed=0, init_labels=seq.labels)
     assert np.array_equal(start.labels, seq.labels) and start.n_trials == 1
+
+
+@pytest.mark.parametrize("init", [False, True])
+def test_labels_do_not_depend_on_how_many_trials_run_side_by_side(init):
+    """One random stream per trial: rv_batch is speed only, whatever converges when."""
+    seq = scene(2, 1)
+    noisy = seq.points + np.random.default_rng(5).normal(0.0, 1.5, seq.points.shape)
+    start = np.where(np.arange(seq.n_points) % 3 == 0, -1, seq.labels) if init else None
+    runs = [random_voting(noisy, seq.n_motions, LaavParams(rv_batch=b), seed=7, init_labels=start)
+            for b in (1, 2, 3)]
+    assert all(len(r.trial_iterations) > 1 for r in runs)  # several trials really ran
+    for r in runs[1:]:
+        assert np.array_equal(r.labels, runs[0].labels)
+        assert r.selected == runs[0].selected and r.converged == runs[0].converged
