@@ -103,15 +103,34 @@ def time_sequence(seq, seed: int = 0) -> dict:
     total = time.perf_counter() - t
     out = {s: float(pipe.result.timings.get(s, 0.0)) for s in STAGES}
     out["total"] = total
+    out["iterations"] = pipe.result.voting.n_iterations
+    out["converged"] = pipe.result.voting.converged
     before = pipe.result
     t = time.perf_counter()
     after = pipe.update(lam=pipe.params.lam * 1.5)
     out["update"] = time.perf_counter() - t
     out["update_reused_voting"] = after.voting is before.voting
     t = time.perf_counter()
-    laav.random_voting(seq, C, seed=seed)
+    rv = laav.random_voting(seq, C, seed=seed)
     out["rv"] = time.perf_counter() - t
+    out["rv_iterations"] = rv.n_iterations
     return out
+
+
+def ratios(results: list[dict]) -> list[str]:
+    """LAAV against plain RV measured in the same run: time and voting iterations."""
+    lines = ["### LAAV against plain RV (same run, same sequences)", "",
+             "| sequences | LAAV / RV median time | LAAV / RV median voting iterations | "
+             "LAAV fine-tuning converged |", "|---|---|---|---|"]
+    for k in [None, *sorted({r["motions"] for r in results})]:
+        rs = [r for r in results if k is None or r["motions"] == k]
+        t, t_rv = (np.median([r[key] for r in rs]) for key in ("total", "rv"))
+        it, it_rv = (np.median([r[key] for r in rs]) for key in ("iterations", "rv_iterations"))
+        lines.append(f"| {'all' if k is None else f'{k} motions'} ({len(rs)}) | "
+                     f"{t / t_rv:.2f} ({1e3 * t:.0f} / {1e3 * t_rv:.0f} ms) | "
+                     f"{it / max(it_rv, 1):.2f} ({it:.0f} / {it_rv:.0f}) | "
+                     f"{100 * np.mean([r['converged'] for r in rs]):.0f} % |")
+    return lines + [""]
 
 
 def table(results: list[dict], title: str) -> list[str]:
@@ -305,6 +324,7 @@ def main(argv=None) -> int:
         "sequences; on the others it reran it.",
         "",
     ]
+    lines += ratios(results)
     lines += table(results, "All sequences")
     for k in sorted({r["motions"] for r in results}):
         lines += table([r for r in results if r["motions"] == k], f"{k} motions")
