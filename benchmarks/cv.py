@@ -66,14 +66,16 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", required=True)
     ap.add_argument("--grid", required=True, help="comma-separated configuration names")
     ap.add_argument("--folds", type=int, default=5)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="seed of the fold shuffle")
+    ap.add_argument("--seeds", default=None, help="only runs of these seeds (e.g. 0,1)")
     args = ap.parse_args(argv)
     grid = args.grid.split(",")
+    seeds = None if args.seeds is None else {int(x) for x in args.seeds.split(",")}
     per: dict = {c: {} for c in grid}
     motions = {}
     with open(args.runs, newline="") as fh:
         for r in csv.DictReader(fh):
-            if r["config"] in per:
+            if r["config"] in per and (seeds is None or int(r["seed"]) in seeds):
                 per[r["config"]].setdefault(r["sequence"], []).append(float(r["error"]))
                 motions[r["sequence"]] = int(r["motions"])
     missing = [c for c in grid if not per[c]]
