@@ -457,7 +457,14 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
     if voting.reassigned:
         moved.append(f"joint reassignment {voting.reassigned}")
     extra = f"; points moved by {' and '.join(moved)}" if moved else ""
-    return f"**{what}:** {len(voting.changed)} iterations, {conv}{trials}{extra}{_selection(voting)}."
+    returned = ""
+    if voting.initialised and voting.selected != "informed":
+        # the labels shown are not LAAV's own trial: say whose they are, and why
+        returned = (f"; **returned {voting.selected}, not LAAV's informed trial**: the model "
+                    f"selection (ours, not in the paper) preferred it; {voting.n_iterations} voting "
+                    f"iterations in all, LAAV's informed trial {per[0] if per else 0}")
+    return (f"**{what}:** {len(voting.changed)} iterations, {conv}{trials}{extra}{returned}"
+            f"{_selection(voting)}.")
 
 
 def _selection(voting: laav.Voting) -> str:
@@ -473,6 +480,7 @@ def _selection(voting: laav.Voting) -> str:
 
 
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None) -> str:
+    """Markdown: LAAV's fine-tuning beside plain RV, with their iteration counts."""
     return (_rv_line(fine_tuning, "LAAV fine-tuning (RV started from the coarse labels)") + "  \n"
             + _rv_line(plain, "Plain RV (random start, same sequence and RV settings)"))
 

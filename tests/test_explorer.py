@@ -487,3 +487,23 @@ def test_slider_moved_during_an_upload_keeps_the_new_sequences_C():
         assert not ex.w_motions.disabled
     finally:
         ex.close()
+
+
+def test_rv_summary_says_when_the_labels_are_not_laavs_own_trial():
+    """The fine-tuning line must not call a plain RV trial LAAV's (issue 12, item 7)."""
+    import dataclasses
+
+    from explorer.views import rv_summary
+
+    seq = laav.load_sequence(Path(__file__).resolve().parents[1] / "explorer" / "assets"
+                             / "demo_two_objects.mat")
+    v = laav.random_voting(seq, seq.n_motions, seed=0, init_labels=seq.labels)
+    own = dataclasses.replace(v, selected="informed")
+    assert "not LAAV's informed trial" not in rv_summary(own, None)
+    other = dataclasses.replace(v, selected="plain trial", trial_iterations=(40, 25),
+                                n_iterations=65, n_trials=2)
+    text = rv_summary(other, None)
+    assert "returned plain trial, not LAAV's informed trial" in text
+    assert "65 voting iterations in all, LAAV's informed trial 40" in text
+    plain = laav.random_voting(seq, seq.n_motions, seed=0)  # not initialised: no such note
+    assert "not LAAV's" not in rv_summary(None, plain)
