@@ -129,8 +129,13 @@ def parse_param(text: str) -> tuple[str, object]:
     return key, value
 
 
-def params_from_assignments(assignments: Iterable[str] | None) -> LaavParams:
-    """A :class:`~laav.LaavParams` with the ``key=value`` assignments applied to the defaults.
+#: Named starting points of the parameters (``--preset``).
+PRESETS = {"default": LaavParams, "paper": LaavParams.paper}
+
+
+def params_from_assignments(assignments: Iterable[str] | None, preset: str = "default") -> LaavParams:
+    """A :class:`~laav.LaavParams` with the ``key=value`` assignments applied to a preset:
+    ``"default"`` (``LaavParams()``, ours) or ``"paper"`` (:meth:`LaavParams.paper`).
 
     Raises
     ------
@@ -138,8 +143,10 @@ def params_from_assignments(assignments: Iterable[str] | None) -> LaavParams:
         For a malformed assignment, an unknown field or an invalid value.
     """
     changes = dict(parse_param(a) for a in (assignments or ()))
+    if preset not in PRESETS:
+        raise BenchError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
     try:
-        return LaavParams().replace(**changes)
+        return PRESETS[preset]().replace(**changes)
     except (ValueError, TypeError) as exc:
         raise BenchError(str(exc)) from None
 

@@ -76,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     seg.add_argument("--out", "-o", metavar="CSV",
                      help="labels file, or folder to write it in (default: <sequence name>_labels.csv "
                           "in the current folder, the name reduced to letters, digits and _.+-)")
+    seg.add_argument("--preset", choices=("default", "paper"), default="default",
+                     help="parameters to start from: default (ours) or paper (every stage as the "
+                          "LAAV paper writes it, LaavParams.paper()); --param changes them")
     seg.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help=_param_help())
 
@@ -101,6 +104,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="run on a Dask distributed cluster, e.g. tcp://10.0.0.5:8786")
     bench.add_argument("--out", "-o", default="bench-out", metavar="DIR",
                        help="output folder (default bench-out)")
+    bench.add_argument("--preset", choices=("default", "paper"), default="default",
+                       help="parameters to start from: default (ours) or paper "
+                            "(LaavParams.paper()); --param changes them")
     bench.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                        help=_param_help())
     bench.add_argument("--no-report", action="store_true",
@@ -127,7 +133,7 @@ def _cmd_segment(args) -> int:
     )
     from .bench import params_from_assignments
 
-    params = params_from_assignments(args.param)
+    params = params_from_assignments(args.param, args.preset)
     try:
         seq = load_sequence(args.file, isolated=True)
     except SequenceError as exc:
@@ -175,7 +181,7 @@ def _split(values) -> list[str]:
 def _cmd_bench(args) -> int:
     from .bench import params_from_assignments, parse_noise, run_bench
 
-    params = params_from_assignments(args.param)
+    params = params_from_assignments(args.param, args.preset)
     noise = parse_noise(args.noise)
     methods = _split([args.methods])
     summary = run_bench(

@@ -188,3 +188,17 @@ def test_segment_name_from_the_file_stays_a_base_name(tmp_path, monkeypatch, cap
     outdir.mkdir()
     assert main(["segment", str(path), "--out", str(outdir), *SMALL]) == 0
     assert [p.name for p in outdir.iterdir()] == [want.name]
+
+
+def test_preset_paper_starts_from_the_papers_parameters(tmp_path):
+    from laav.bench import BenchError, params_from_assignments
+
+    P = laav.LaavParams
+    assert params_from_assignments(["rv_max_iter=5"], "paper") == P.paper(rv_max_iter=5)
+    assert params_from_assignments([], "default") == P()
+    with pytest.raises(BenchError, match="unknown preset"):
+        params_from_assignments([], "fast")
+    out = tmp_path / "labels.csv"
+    demo = Path(__file__).resolve().parents[1] / "explorer" / "assets" / "demo_two_objects.mat"
+    assert main(["segment", str(demo), "--preset", "paper", "--out", str(out)]) == 0
+    assert out.read_text().startswith("point,label")
