@@ -88,6 +88,12 @@ def _check_inputs(seq, n_motions):
     return seq, int(n_motions)
 
 
+def _check_seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**63:
+        raise ValueError(f"seed must be an integer in [0, 2**63), got {seed!r}")
+    return int(seed)
+
+
 class Pipeline:
     """LAAV staged for live recomputation.
 
@@ -122,7 +128,7 @@ class Pipeline:
         self.seq, self.n_motions = _check_inputs(seq, n_motions)
         self.params = LaavParams() if params is None else params
         self.params.n_fine(self.n_motions)
-        self.seed = int(seed)
+        self.seed = _check_seed(seed)
         self._lock = threading.Lock()
         self._distances = None
         self._stages: dict = {}
@@ -197,7 +203,7 @@ class Pipeline:
             For invalid values; the pipeline then keeps its previous state and result.
         """
         with self._lock:
-            seed = int(changed.pop("seed", self.seed))
+            seed = _check_seed(changed.pop("seed", self.seed))
             C = changed.pop("n_motions", self.n_motions)
             new_params = self.params.replace(**changed) if changed else self.params
             _, C = _check_inputs(self.seq, C)
