@@ -51,6 +51,14 @@ def _param_help() -> str:
             "true/false and none are converted)")
 
 
+def _add_max_points(parser: argparse.ArgumentParser) -> None:
+    from .io import MAX_POINTS
+
+    parser.add_argument("--max-points", type=_positive_int, default=None, metavar="N",
+                        help=f"refuse sequences with more than N points (default {MAX_POINTS:,}; "
+                             "memory grows as about 48 bytes x N^2)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -78,6 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "in the current folder, the name reduced to letters, digits and _.+-)")
     seg.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help=_param_help())
+    _add_max_points(seg)
 
     bench = sub.add_parser(
         "bench", help="run the benchmark over a Hopkins155-style folder",
@@ -103,6 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="output folder (default bench-out)")
     bench.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                        help=_param_help())
+    _add_max_points(bench)
     bench.add_argument("--no-report", action="store_true",
                        help="only write runs.csv (make the report later with `laav report`)")
     bench.add_argument("--allow-mixed", action="store_true",
@@ -129,7 +139,7 @@ def _cmd_segment(args) -> int:
 
     params = params_from_assignments(args.param)
     try:
-        seq = load_sequence(args.file, isolated=True)
+        seq = load_sequence(args.file, isolated=True, max_points=args.max_points)
     except SequenceError as exc:
         raise _UsageError(str(exc)) from None
     C = args.motions if args.motions is not None else seq.n_motions
@@ -173,17 +183,25 @@ def _split(values) -> list[str]:
 
 
 def _cmd_bench(args) -> int:
+    from . import io
     from .bench import params_from_assignments, parse_noise, run_bench
 
     params = params_from_assignments(args.param)
     noise = parse_noise(args.noise)
     methods = _split([args.methods])
-    summary = run_bench(
-        data=args.data, out=args.out, methods=methods, seeds=args.seeds, noise=noise,
-        only=_split(args.only) or None, jobs=args.jobs, scheduler=args.scheduler,
-        params=params, progress=not args.quiet, report=not args.no_report,
-        allow_mixed=args.allow_mixed,
-    )
+
+    default_max = io.MAX_POINTS  # the bench loads its sequences with the module's default
+    if args.max_points is not None:
+        io.MAX_POINTS = args.max_points
+    try:
+        summary = run_bench(
+            data=args.data, out=args.out, methods=methods, seeds=args.seeds, noise=noise,
+            only=_split(args.only) or None, jobs=args.jobs, scheduler=args.scheduler,
+            params=params, progress=not args.quiet, report=not args.no_report,
+            allow_mixed=args.allow_mixed,
+        )
+    finally:
+        io.MAX_POINTS = default_max
     err = sys.stderr
     if summary.interrupted:
         print(f"interrupted: {summary.completed} new runs kept in {summary.runs_csv}; "

@@ -188,3 +188,17 @@ def test_segment_name_from_the_file_stays_a_base_name(tmp_path, monkeypatch, cap
     outdir.mkdir()
     assert main(["segment", str(path), "--out", str(outdir), *SMALL]) == 0
     assert [p.name for p in outdir.iterdir()] == [want.name]
+
+
+def test_segment_max_points(tmp_path, capsys):
+    seq = make_scene(2, seed=0)
+    path = laav.save_sequence(seq, tmp_path / "s.npz")
+    assert main(["segment", str(path), "--max-points", "20", "-o", str(tmp_path / "a.csv")]) == 2
+    err = capsys.readouterr().err
+    assert f"{seq.n_points} points exceed the limit of 20" in err and str(path) in err
+    assert err.count("\n") == 1
+    assert main(["segment", str(path), "--max-points", str(seq.n_points), "-o",
+                 str(tmp_path / "b.csv"), *SMALL]) == 0
+    with pytest.raises(SystemExit) as exc:
+        main(["segment", str(path), "--max-points", "0"])
+    assert exc.value.code == 2
