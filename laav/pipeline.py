@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._random import resolve_seed
-from ._sequence import Sequence
+from ._sequence import LaavWarning, Sequence, check_degenerate
 from ._threads import single_threaded
 from .atoms import Atoms, build_atoms, trajectory_distances
 from .coarse import Coarse, merge_models
@@ -85,6 +85,7 @@ def _check_inputs(seq, n_motions):
         raise ValueError(f"n_motions must be >= 1, got {n_motions}")
     if n_motions > seq.n_points:
         raise ValueError(f"n_motions ({n_motions}) exceeds the number of points ({seq.n_points})")
+    check_degenerate(seq, int(n_motions))
     return seq, int(n_motions)
 
 
@@ -263,5 +264,11 @@ def segment(seq, n_motions: int, params: LaavParams | None = None, seed: int = 0
     -------
     LaavResult
     """
-    return Pipeline(seq, n_motions, params, resolve_seed(seed, random_state)).result
+    result = Pipeline(seq, n_motions, params, resolve_seed(seed, random_state)).result
+    if result.n_motions > 1 and np.unique(result.labels).size == 1:
+        import warnings
+
+        warnings.warn(f"{getattr(seq, 'source', '<array>')}: every point got the same label "
+                      f"though {result.n_motions} motions were asked for", LaavWarning, stacklevel=2)
+    return result
 
