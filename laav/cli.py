@@ -12,13 +12,15 @@
 :class:`laav.LaavParams`, e.g. ``--param rv_max_iter=50 --param lam=3``.
 
 Exit codes: 0 success, 1 some benchmark runs failed, 2 bad input (unreadable sequence,
-bad option, missing number of motions), 130 interrupted.
+bad option, missing number of motions, a path that cannot be read or written: one line
+on stderr), 130 interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import os
 import sys
 from pathlib import Path
 
@@ -182,6 +184,19 @@ def _split(values) -> list[str]:
     return out
 
 
+def _check_out_folder(out: Path) -> None:
+    """Refuse an output folder that cannot be created or written, before any work."""
+    if out.exists() and not out.is_dir():
+        raise _UsageError(f"{out}: output folder is a file")
+    base = out
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    if not base.is_dir():
+        raise _UsageError(f"{out}: cannot create the output folder ({base} is not a folder)")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise _UsageError(f"{out}: cannot write in {base} (permission denied)")
+
+
 def _cmd_bench(args) -> int:
     from . import io
     from .bench import params_from_assignments, parse_noise, run_bench
@@ -189,6 +204,7 @@ def _cmd_bench(args) -> int:
     params = params_from_assignments(args.param)
     noise = parse_noise(args.noise)
     methods = _split([args.methods])
+    _check_out_folder(Path(args.out))
 
     default_max = io.MAX_POINTS  # the bench loads its sequences with the module's default
     if args.max_points is not None:
@@ -257,6 +273,10 @@ def main(argv=None) -> int:
         return commands[args.command](args)
     except (_UsageError, BenchError) as exc:
         print(f"laav {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a path the command could not read or write
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"laav {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
