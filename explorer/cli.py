@@ -71,6 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "interface, open to the network; each tab's 3-D view uses another free port)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random stages (default 0)")
     p.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    p.add_argument("--max-points", type=int, default=None, metavar="N",
+                   help=f"refuse a FILE with more than N points (default {laav.io.MAX_POINTS:,}; "
+                        "memory grows as about 48 bytes x N^2)")
     return p
 
 
@@ -213,6 +216,8 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0)
     if args.port is not None and not 0 <= args.port <= 65535:
         return _fail(parser, f"--port must be between 0 and 65535, got {args.port}")
+    if args.max_points is not None and args.max_points < 1:
+        return _fail(parser, f"--max-points must be at least 1, got {args.max_points}")
     if args.motions is not None and args.motions < 1:
         return _fail(parser, f"--motions must be at least 1, got {args.motions}")
     try:
@@ -220,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
             from .demo import demo_sequence
             seq = demo_sequence()
         else:
-            seq = laav.load_sequence(args.file, isolated=True)
+            seq = laav.load_sequence(args.file, isolated=True, max_points=args.max_points)
     except (laav.SequenceError, FileNotFoundError) as exc:
         return _fail(parser, str(exc))
     if args.motions is None and seq.labels is None:

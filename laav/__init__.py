@@ -10,7 +10,7 @@ the ``test`` extra); the browser explorer lives in the separate ``explorer`` pac
 uses only the public API exported here.
 """
 
-from ._sequence import Sequence, SequenceError
+from ._sequence import LaavWarning, Sequence, SequenceError
 from .io import find_truth_files, load_sequence, load_sequence_isolated, safe_name, save_sequence
 from .metrics import best_label_map, confusion_matrix, misclassification_rate
 
@@ -19,6 +19,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Sequence",
     "SequenceError",
+    "LaavWarning",
     "load_sequence",
     "load_sequence_isolated",
     "save_sequence",

@@ -6,7 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Sequence", "SequenceError", "MIN_POINTS", "MIN_FRAMES"]
+__all__ = ["Sequence", "SequenceError", "LaavWarning", "MIN_POINTS", "MIN_FRAMES",
+           "check_degenerate"]
 
 #: Fewest trajectories a sequence may hold (the 8-point algorithm needs eight).
 MIN_POINTS = 8
@@ -20,6 +21,55 @@ class SequenceError(ValueError):
     The message always names the source (file path or ``"<array>"``) and the problem
     in plain words.
     """
+
+
+class LaavWarning(UserWarning):
+    """A result that is probably meaningless: degenerate input, or a single label for C > 1."""
+
+
+#: Spread (px) of the coordinates outside which a warning says the scale is unusual: the
+#: distances of :class:`laav.LaavParams` (``r1``, ``r2``, thresholds, lambda) are in pixels.
+PIXEL_SPREAD = (1.0, 1e6)
+#: Relative tolerance under which trajectories count as identical, static or collinear.
+TOLERANCE = 1e-9
+
+
+def check_degenerate(seq: Sequence, n_motions: int) -> None:
+    """Refuse inputs that cannot hold ``n_motions`` motions; warn about degenerate ones.
+
+    Raises :class:`ValueError` when there are fewer distinct trajectories than motions;
+    warns (:class:`LaavWarning`) when there are fewer than :data:`MIN_POINTS` points per
+    motion (the 8-point algorithm fits each motion's fundamental matrices), when no point
+    moves, when the points are collinear in every frame, or when the coordinates span
+    less than 1 or more than 1e6 pixels. Reads the coordinates only: results never change.
+    """
+    src, pts = seq.source, seq.points
+    P = seq.n_points
+    warn = []
+    if n_motions > 1 and P < MIN_POINTS * n_motions:
+        warn.append(f"{P} points are too few for {n_motions} motions (the 8-point algorithm "
+                    f"fits each motion with at least {MIN_POINTS})")
+    spread = float(np.ptp(pts)) if pts.size else 0.0
+    tol = TOLERANCE * max(spread, np.abs(pts).max())
+    traj = pts.transpose(1, 0, 2).reshape(P, -1)
+    distinct = np.unique(traj, axis=0).shape[0] if spread > tol else 1
+    if distinct < n_motions:
+        raise ValueError(f"{src}: only {distinct} distinct trajector{'y' if distinct == 1 else 'ies'}"
+                         f" for {n_motions} motions")
+    if np.ptp(pts, axis=0).max() <= tol:
+        warn.append("no point moves (every trajectory is static)")
+    centred = pts - pts.mean(axis=1, keepdims=True)
+    sv = np.linalg.svd(centred, compute_uv=False)  # (F, 2) per frame
+    if np.all(sv[:, 1] <= TOLERANCE * sv[:, 0] + tol):
+        warn.append("the points are collinear in every frame (epipolar geometry is degenerate)")
+    if not PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]:
+        warn.append(f"the coordinates span {spread:.3g} px, outside {PIXEL_SPREAD[0]:g}-"
+                    f"{PIXEL_SPREAD[1]:g}: LaavParams distances are in pixels, rescale the input")
+    if warn:
+        import warnings
+
+        warnings.warn(f"{src}: " + "; ".join(warn) + " - the labels are probably meaningless",
+                      LaavWarning, stacklevel=3)
 
 
 @dataclass(frozen=True, eq=False)

@@ -12,13 +12,15 @@
 :class:`laav.LaavParams`, e.g. ``--param rv_max_iter=50 --param lam=3``.
 
 Exit codes: 0 success, 1 some benchmark runs failed, 2 bad input (unreadable sequence,
-bad option, missing number of motions), 130 interrupted.
+bad option, missing number of motions, a path that cannot be read or written: one line
+on stderr), 130 interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import os
 import sys
 from pathlib import Path
 
@@ -51,6 +53,14 @@ def _param_help() -> str:
             "true/false and none are converted)")
 
 
+def _add_max_points(parser: argparse.ArgumentParser) -> None:
+    from .io import MAX_POINTS
+
+    parser.add_argument("--max-points", type=_positive_int, default=None, metavar="N",
+                        help=f"refuse sequences with more than N points (default {MAX_POINTS:,}; "
+                             "memory grows as about 48 bytes x N^2)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -81,6 +91,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "LAAV paper writes it, LaavParams.paper()); --param changes them")
     seg.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help=_param_help())
+    _add_max_points(seg)
 
     bench = sub.add_parser(
         "bench", help="run the benchmark over a Hopkins155-style folder",
@@ -109,6 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "(LaavParams.paper()); --param changes them")
     bench.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                        help=_param_help())
+    _add_max_points(bench)
     bench.add_argument("--no-report", action="store_true",
                        help="only write runs.csv (make the report later with `laav report`)")
     bench.add_argument("--allow-mixed", action="store_true",
@@ -135,7 +147,7 @@ def _cmd_segment(args) -> int:
 
     params = params_from_assignments(args.param, args.preset)
     try:
-        seq = load_sequence(args.file, isolated=True)
+        seq = load_sequence(args.file, isolated=True, max_points=args.max_points)
     except SequenceError as exc:
         raise _UsageError(str(exc)) from None
     C = args.motions if args.motions is not None else seq.n_motions
@@ -178,18 +190,40 @@ def _split(values) -> list[str]:
     return out
 
 
+def _check_out_folder(out: Path) -> None:
+    """Refuse an output folder that cannot be created or written, before any work."""
+    if out.exists() and not out.is_dir():
+        raise _UsageError(f"{out}: output folder is a file")
+    base = out
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    if not base.is_dir():
+        raise _UsageError(f"{out}: cannot create the output folder ({base} is not a folder)")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise _UsageError(f"{out}: cannot write in {base} (permission denied)")
+
+
 def _cmd_bench(args) -> int:
+    from . import io
     from .bench import params_from_assignments, parse_noise, run_bench
 
     params = params_from_assignments(args.param, args.preset)
     noise = parse_noise(args.noise)
     methods = _split([args.methods])
-    summary = run_bench(
-        data=args.data, out=args.out, methods=methods, seeds=args.seeds, noise=noise,
-        only=_split(args.only) or None, jobs=args.jobs, scheduler=args.scheduler,
-        params=params, progress=not args.quiet, report=not args.no_report,
-        allow_mixed=args.allow_mixed,
-    )
+    _check_out_folder(Path(args.out))
+
+    default_max = io.MAX_POINTS  # the bench loads its sequences with the module's default
+    if args.max_points is not None:
+        io.MAX_POINTS = args.max_points
+    try:
+        summary = run_bench(
+            data=args.data, out=args.out, methods=methods, seeds=args.seeds, noise=noise,
+            only=_split(args.only) or None, jobs=args.jobs, scheduler=args.scheduler,
+            params=params, progress=not args.quiet, report=not args.no_report,
+            allow_mixed=args.allow_mixed,
+        )
+    finally:
+        io.MAX_POINTS = default_max
     err = sys.stderr
     if summary.interrupted:
         print(f"interrupted: {summary.completed} new runs kept in {summary.runs_csv}; "
@@ -245,6 +279,10 @@ def main(argv=None) -> int:
         return commands[args.command](args)
     except (_UsageError, BenchError) as exc:
         print(f"laav {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a path the command could not read or write
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"laav {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -33,6 +33,13 @@ _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 _ZIP_MAGIC = b"PK\x03\x04"
 
 
+#: Most trajectories a file may hold unless ``max_points`` says otherwise. LAAV's memory
+#: grows as about 48 bytes x P^2 (pairwise trajectory distances and the voting's arrays):
+#: 10,000 points need about 5 GB, 20,000 would exhaust a 16 GB machine.
+MAX_POINTS = 10_000
+#: Most bytes the arrays read from one file may declare together (before they are read).
+MAX_BYTES = 1 << 28  # 256 MiB: e.g. 10,000 points over 1,600 frames as float64
+
 _UNSAFE = re.compile(r"[^\w.+-]+")
 
 
@@ -71,7 +78,8 @@ def _resolve(path: str | os.PathLike) -> Path:
 
 
 def load_sequence(path: str | os.PathLike, *, isolated: bool = False,
-                  timeout: float = 60.0) -> Sequence:
+                  timeout: float = 60.0, max_points: int | None = None,
+                  max_bytes: int | None = None) -> Sequence:
     """Read a sequence from a Hopkins155 ``*_truth.mat``, a ``.npz``, or a folder holding one.
 
     Parameters
@@ -88,6 +96,13 @@ def load_sequence(path: str | os.PathLike, *, isolated: bool = False,
         taking the caller down. Use it for every file you did not write yourself.
     timeout : float
         Seconds an isolated read may take.
+    max_points : int, optional
+        Most trajectories accepted (default :data:`MAX_POINTS`, read at call time).
+    max_bytes : int, optional
+        Most bytes the file's arrays may declare together (default :data:`MAX_BYTES`).
+        Sizes are checked before the arrays are allocated: from the ``.npy`` headers of an
+        ``.npz``, and for MAT files from the size of the parsed variables the child process
+        sends (isolated) before this process reads them, and from ``y``'s dimensions.
 
     Returns
     -------
@@ -97,8 +112,10 @@ def load_sequence(path: str | os.PathLike, *, isolated: bool = False,
     ------
     SequenceError
         When the file is missing, of another format, corrupt, lacks a variable, or its
-        arrays have the wrong shape or values. The message names the file.
+        arrays have the wrong shape or values, or exceed a limit (the message then gives
+        the size and the limit). The message names the file.
     """
+    lim = _limits(max_points, max_bytes)
     p = _resolve(path)
     try:
         with open(p, "rb") as fh:
@@ -108,14 +125,64 @@ def load_sequence(path: str | os.PathLike, *, isolated: bool = False,
     if not head:
         raise SequenceError(f"{p}: file is empty")
     if head.startswith(_ZIP_MAGIC):
-        return _load_npz(p)
+        return _load_npz(p, lim)
     if head.startswith(_MAT_MAGIC):
-        return _load_mat(p, _READER.read(p, timeout) if isolated else _read_mat_here(p))
+        return _load_mat(p, _READER.read(p, timeout, lim[1]) if isolated else _read_mat_here(p), lim)
     if head[:512].find(_HDF5_MAGIC) >= 0 or head.startswith(b"MATLAB 7.3"):
         raise SequenceError(f"{p}: MATLAB v7.3 (HDF5) files are not supported; save with -v7")
     raise SequenceError(
         f"{p}: not a MATLAB v5 .mat or NumPy .npz file (unrecognised content)"
     )
+
+
+def _limits(max_points, max_bytes) -> tuple[int, int]:
+    out = []
+    for name, value, default in (("max_points", max_points, MAX_POINTS),
+                                 ("max_bytes", max_bytes, MAX_BYTES)):
+        value = default if value is None else value
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        out.append(int(value))
+    return out[0], out[1]
+
+
+def _check_size(p: Path, n_points: int | None, n_bytes: int, lim: tuple[int, int]) -> None:
+    """Refuse a file declaring more points or bytes than the limits, before reading it."""
+    if n_points is not None and n_points > lim[0]:
+        raise SequenceError(f"{p}: {n_points:,} points exceed the limit of {lim[0]:,} "
+                            "(raise it with max_points / --max-points)")
+    if n_bytes > lim[1]:
+        raise SequenceError(f"{p}: its arrays declare {n_bytes:,} bytes, over the limit of "
+                            f"{lim[1]:,} bytes (max_bytes)")
+
+
+def _npz_declared(p: Path, members, lim: tuple[int, int]) -> None:
+    """Check the ``.npy`` headers of ``members`` of the zip ``p`` (nothing else is read)."""
+    import zipfile
+
+    from numpy.lib import format as npy
+
+    total, n_points = 0, None
+    with zipfile.ZipFile(p) as zf:
+        infos = {i.filename: i for i in zf.infolist()}
+        for name in members:
+            info = infos.get(name) or infos.get(name + ".npy")  # np.load's order
+            if info is None:
+                continue
+            with zf.open(info) as fh:
+                if fh.read(len(npy.MAGIC_PREFIX)) != npy.MAGIC_PREFIX:
+                    raise SequenceError(f"{p}: member '{info.filename}' is not a NumPy array")
+                fh.seek(0)
+                version = npy.read_magic(fh)
+                read = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+                shape, _, dtype = read(fh)
+            size = 1
+            for n in shape:
+                size *= int(n)
+            total += size * dtype.itemsize
+            if name == "points" and len(shape) == 3:
+                n_points = int(shape[1])
+    _check_size(p, n_points, total, lim)
 
 
 def _scalar(value, what: str, p: Path) -> int:
@@ -137,10 +204,11 @@ def _read_mat_here(p: Path) -> dict:
         raise SequenceError(f"{p}: {exc}") from None
 
 
-def _load_mat(p: Path, mat: dict) -> Sequence:
+def _load_mat(p: Path, mat: dict, lim: tuple[int, int]) -> Sequence:
     if "y" not in mat:
         raise SequenceError(f"{p}: missing variable 'y' (homogeneous pixel coordinates, 3 x P x F)")
     y = np.asarray(mat["y"])
+    _check_size(p, y.shape[1] if y.ndim == 3 else None, 8 * y.size, lim)
     if not np.issubdtype(y.dtype, np.number):
         raise SequenceError(f"{p}: variable 'y' is not numeric (dtype {y.dtype})")
     if np.iscomplexobj(y):
@@ -179,8 +247,12 @@ def _load_mat(p: Path, mat: dict) -> Sequence:
     )
 
 
-def _load_npz(p: Path) -> Sequence:
+_NPZ_MEMBERS = ("points", "labels", "width", "height", "name")
+
+
+def _load_npz(p: Path, lim: tuple[int, int]) -> Sequence:
     try:
+        _npz_declared(p, _NPZ_MEMBERS, lim)
         with np.load(p, allow_pickle=False) as data:
             files = set(data.files)
             if "points" not in files:
@@ -282,9 +354,11 @@ def find_truth_files(root: str | os.PathLike) -> list[Path]:
     return sorted(root.glob("*/*_truth.mat"), key=lambda q: q.parent.name)
 
 
-def load_sequence_isolated(path: str | os.PathLike, timeout: float = 60.0) -> Sequence:
+def load_sequence_isolated(path: str | os.PathLike, timeout: float = 60.0, *,
+                           max_points: int | None = None, max_bytes: int | None = None) -> Sequence:
     """:func:`load_sequence` with ``isolated=True``: for untrusted files (uploads, the CLI)."""
-    return load_sequence(path, isolated=True, timeout=timeout)
+    return load_sequence(path, isolated=True, timeout=timeout, max_points=max_points,
+                         max_bytes=max_bytes)
 
 
 class _MatReader:
@@ -313,7 +387,7 @@ class _MatReader:
             self._pid = os.getpid()
         return self._proc
 
-    def read(self, p: Path, timeout: float) -> dict:
+    def read(self, p: Path, timeout: float, max_bytes: int = MAX_BYTES) -> dict:
         from ._matchild import decode
 
         with self._lock:
@@ -322,7 +396,11 @@ class _MatReader:
             try:
                 proc.stdin.write(os.fsencode(str(p.resolve())).hex().encode() + b"\n")
                 head = _read_exact(proc.stdout, 9, deadline)
-                payload = _read_exact(proc.stdout, struct.unpack(">Q", head[1:])[0], deadline)
+                size = struct.unpack(">Q", head[1:])[0]
+                if head[:1] == b"o" and size > max_bytes:  # the variables, before reading them
+                    self.close(kill=True)
+                    _check_size(p, None, size, (0, max_bytes))
+                payload = _read_exact(proc.stdout, size, deadline)
             except TimeoutError:
                 self.close(kill=True)
                 raise SequenceError(f"{p}: reading the file did not finish within {timeout:g} s") from None

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
+
+import numpy as np
 
 __all__ = ["LaavParams", "STAGE_PARAMS", "stages_affected"]
 
@@ -96,6 +99,21 @@ class LaavParams:
         the other candidates in the selection score, when there are more than two: the
         labelling most others agree with is preferred among costs that are close.
         2.0 measured best of 0.5-6 once candidates are reassigned (benchmarks/TUNING.md).
+
+    Validation
+    ----------
+    Every field is checked on construction against one table (``_BOUNDS`` below): its
+    type (numpy scalars are accepted and stored as Python numbers; ``True``/``False``
+    are not numbers; NaN and infinity are rejected) and its range. Distances and
+    strengths (``r1``, ``r2``, ``affine_threshold``, ``edge_scale``, ``lam``,
+    ``rv_lambda``) lie in (0, 1e6], ``cut_prior`` in [-1e6, 1e6], the other weights in
+    [0, 1e6] (``pairwise_weight`` and ``rv_alpha`` in [0, 1] and (0, 1]). Counts have
+    upper bounds that keep one run within seconds and memory within a laptop:
+    ``ransac_hypotheses`` <= 1000, ``graph_neighbors`` <= 100, ``fine_models`` <= 1000,
+    ``coarse_frames`` <= 100, ``coarse_samples`` <= 1000, ``pooled_trials`` <= 100,
+    ``rv_max_iter`` <= 10000, ``rv_trials`` <= 100, ``rv_sample_size`` in [8, 1000],
+    ``rv_patience`` <= 10000, ``rv_batch`` <= 32, ``atom_min_size`` in [4, 10000].
+    Also ``r2 > r1``. All problems are reported together in one :class:`ValueError`.
     """
 
     r1: float = 20.0
@@ -128,57 +146,14 @@ class LaavParams:
 
     def __post_init__(self) -> None:
         problems = []
-
-        def need(ok: bool, msg: str) -> None:
-            if not ok:
-                problems.append(msg)
-
-        for name in ("r1", "r2", "affine_threshold", "edge_scale", "lam", "rv_lambda",
-                     "rv_alpha", "rv_label_weight", "motion_weight", "cut_prior",
-                     "rv_select_agreement"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or v != v:
-                problems.append(f"{name} must be a number, got {v!r}")
-        for name in ("atom_min_size", "ransac_hypotheses", "graph_neighbors", "coarse_frames",
-                     "coarse_samples", "rv_max_iter", "rv_trials", "rv_sample_size",
-                     "rv_patience", "rv_batch"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool):
-                problems.append(f"{name} must be an integer, got {v!r}")
-        for name in ("rv_refine", "rv_reassign"):
-            v = getattr(self, name)
-            if not isinstance(v, bool):
-                problems.append(f"{name} must be True or False, got {v!r}")
-        if problems:
-            raise ValueError("invalid LAAV parameters: " + "; ".join(problems))
-        need(self.r1 > 0, f"r1 must be > 0 px, got {self.r1}")
-        need(self.r2 > self.r1, f"r2 must be larger than r1 (got r1={self.r1}, r2={self.r2})")
-        need(self.atom_min_size >= 4, f"atom_min_size must be >= 4, got {self.atom_min_size}")
-        need(self.affine_threshold > 0, "affine_threshold must be > 0 px")
-        need(self.ransac_hypotheses >= 1, "ransac_hypotheses must be >= 1")
-        need(self.graph_neighbors >= 1, "graph_neighbors must be >= 1")
-        need(self.edge_scale > 0, "edge_scale must be > 0 px")
-        need(self.fine_models is None or (isinstance(self.fine_models, int)
-                                          and self.fine_models >= 1),
-             f"fine_models must be None or a positive integer, got {self.fine_models!r}")
-        need(self.lam > 0, f"lam (lambda) must be > 0, got {self.lam}")
-        need(self.coarse_frames >= 1, "coarse_frames must be >= 1")
-        need(self.coarse_samples >= 1, "coarse_samples must be >= 1")
-        need(self.motion_weight >= 0, "motion_weight must be >= 0")
-        need(isinstance(self.pooled_trials, int) and self.pooled_trials >= 0, "pooled_trials must be >= 0")
-        need(0 <= self.pairwise_weight <= 1, "pairwise_weight must be in [0, 1]")
-        need(self.rv_lambda > 0, f"rv_lambda must be > 0, got {self.rv_lambda}")
-        need(0 < self.rv_alpha <= 1, f"rv_alpha must satisfy 0 < alpha <= 1, got {self.rv_alpha}")
-        need(self.rv_max_iter >= 1, "rv_max_iter must be >= 1")
-        need(self.rv_trials >= 1, "rv_trials must be >= 1")
-        need(self.rv_sample_size >= 8, "rv_sample_size must be >= 8 (8-point algorithm)")
-        need(self.rv_patience >= 1, "rv_patience must be >= 1")
-        need(self.rv_label_weight >= 0, "rv_label_weight must be >= 0")
-        need(self.rv_batch >= 1, f"rv_batch must be >= 1, got {self.rv_batch}")
-        need(0 <= self.rv_select_agreement < float("inf"),
-             f"rv_select_agreement must be finite and >= 0, got {self.rv_select_agreement}")
-        need(self.rv_select in ("none", "subspace"),
-             f"rv_select must be 'none' or 'subspace', got {self.rv_select!r}")
+        for name, kind, low, high in _BOUNDS:
+            value, why = _check(getattr(self, name), kind, low, high)
+            if why:
+                problems.append(f"{name} {why}, got {value!r}")
+            elif value is not getattr(self, name):  # a numpy scalar, as the Python number
+                object.__setattr__(self, name, value)
+        if not any(p.startswith(("r1 ", "r2 ")) for p in problems) and not self.r2 > self.r1:
+            problems.append(f"r2 must be larger than r1 (got r1={self.r1}, r2={self.r2})")
         if problems:
             raise ValueError("invalid LAAV parameters: " + "; ".join(problems))
 
@@ -212,6 +187,69 @@ class LaavParams:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+_BIG = 1e6  # px or 1/px^2: far beyond any image, small enough that squares stay finite
+
+#: (field, kind, low, high) for every field, checked by LaavParams.__post_init__. Kinds:
+#: "int" / "float" in [low, high]; "float>" in (low, high]; "int|None" also allows None;
+#: "bool"; "choice" one of ``low``. Upper bounds on counts keep one run within seconds and
+#: memory within a laptop (each multiplies a stage's work or its arrays).
+_BOUNDS = (
+    ("r1", "float>", 0, _BIG),
+    ("r2", "float>", 0, _BIG),
+    ("atom_min_size", "int", 4, 10_000),
+    ("affine_threshold", "float>", 0, _BIG),
+    ("ransac_hypotheses", "int", 1, 1000),
+    ("graph_neighbors", "int", 1, 100),
+    ("edge_scale", "float>", 0, _BIG),
+    ("cut_prior", "float", -_BIG, _BIG),
+    ("fine_models", "int|None", 1, 1000),
+    ("lam", "float>", 0, _BIG),
+    ("coarse_frames", "int", 1, 100),
+    ("coarse_samples", "int", 1, 1000),
+    ("motion_weight", "float", 0, _BIG),
+    ("pooled_trials", "int", 0, 100),
+    ("pairwise_weight", "float", 0, 1),
+    ("rv_lambda", "float>", 0, _BIG),
+    ("rv_alpha", "float>", 0, 1),
+    ("rv_max_iter", "int", 1, 10_000),
+    ("rv_trials", "int", 1, 100),
+    ("rv_sample_size", "int", 8, 1000),
+    ("rv_patience", "int", 1, 10_000),
+    ("rv_label_weight", "float", 0, _BIG),
+    ("rv_batch", "int", 1, 32),
+    ("rv_refine", "bool", None, None),
+    ("rv_reassign", "bool", None, None),
+    ("rv_select", "choice", ("none", "subspace"), None),
+    ("rv_select_agreement", "float", 0, _BIG),
+)
+
+
+def _check(value, kind: str, low, high):
+    """``(value, problem)``: numpy scalars become Python numbers; problem is "" when valid."""
+    if kind == "bool":
+        ok = isinstance(value, (bool, np.bool_))
+        return (bool(value), "") if ok else (value, "must be True or False")
+    if kind == "choice":
+        return value, "" if isinstance(value, str) and value in low else f"must be one of {low}"
+    if kind == "int|None":
+        if value is None:
+            return None, ""
+        kind = "int"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return value, "must be " + ("an integer" if kind == "int" else "a number")
+    if kind == "int" and not isinstance(value, (int, np.integer)):
+        return value, "must be an integer"
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        if not math.isfinite(value):
+            return value, "must be a finite number"
+    value = int(value) if isinstance(value, np.integer) else value
+    above = value > low if kind == "float>" else value >= low
+    if not (above and value <= high):
+        return value, f"must be in {'(' if kind == 'float>' else '['}{low:g}, {high:g}]"
+    return value, ""
 
 
 #: Which parameters each stage reads; a change reruns that stage and all after it.

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._random import resolve_seed
-from ._sequence import Sequence
+from ._sequence import LaavWarning, Sequence, check_degenerate
 from ._threads import single_threaded
 from .atoms import Atoms, build_atoms, trajectory_distances
 from .coarse import Coarse, merge_models
@@ -85,7 +85,14 @@ def _check_inputs(seq, n_motions):
         raise ValueError(f"n_motions must be >= 1, got {n_motions}")
     if n_motions > seq.n_points:
         raise ValueError(f"n_motions ({n_motions}) exceeds the number of points ({seq.n_points})")
+    check_degenerate(seq, int(n_motions))
     return seq, int(n_motions)
+
+
+def _check_seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**63:
+        raise ValueError(f"seed must be an integer in [0, 2**63), got {seed!r}")
+    return int(seed)
 
 
 class Pipeline:
@@ -122,7 +129,7 @@ class Pipeline:
         self.seq, self.n_motions = _check_inputs(seq, n_motions)
         self.params = LaavParams() if params is None else params
         self.params.n_fine(self.n_motions)
-        self.seed = int(seed)
+        self.seed = _check_seed(seed)
         self._lock = threading.Lock()
         self._distances = None
         self._stages: dict = {}
@@ -197,7 +204,7 @@ class Pipeline:
             For invalid values; the pipeline then keeps its previous state and result.
         """
         with self._lock:
-            seed = int(changed.pop("seed", self.seed))
+            seed = _check_seed(changed.pop("seed", self.seed))
             C = changed.pop("n_motions", self.n_motions)
             new_params = self.params.replace(**changed) if changed else self.params
             _, C = _check_inputs(self.seq, C)
@@ -257,5 +264,11 @@ def segment(seq, n_motions: int, params: LaavParams | None = None, seed: int = 0
     -------
     LaavResult
     """
-    return Pipeline(seq, n_motions, params, resolve_seed(seed, random_state)).result
+    result = Pipeline(seq, n_motions, params, resolve_seed(seed, random_state)).result
+    if result.n_motions > 1 and np.unique(result.labels).size == 1:
+        import warnings
+
+        warnings.warn(f"{getattr(seq, 'source', '<array>')}: every point got the same label "
+                      f"though {result.n_motions} motions were asked for", LaavWarning, stacklevel=2)
+    return result
 

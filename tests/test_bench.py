@@ -357,3 +357,14 @@ def test_two_benches_never_share_an_output_folder(data_dir, tmp_path):
             run_bench(data_dir, tmp_path, methods=("rv",), seeds=1, noise=(0.0,), jobs=1,
                       params=SMALL, progress=False, log=lambda m: None)
     assert not (tmp_path / "runs.csv").exists()
+
+
+def test_bench_max_points(data_dir, tmp_path, capsys):
+    from laav import io
+
+    rc = main(["bench", "--data", str(data_dir), "--max-points", "50", "--out",
+               str(tmp_path / "o"), "-q"])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "60 points exceed the limit of 50" in err and "no benchmark sequences" in err
+    assert io.MAX_POINTS == 10_000  # restored for the rest of the process

@@ -202,3 +202,50 @@ def test_preset_paper_starts_from_the_papers_parameters(tmp_path):
     demo = Path(__file__).resolve().parents[1] / "explorer" / "assets" / "demo_two_objects.mat"
     assert main(["segment", str(demo), "--preset", "paper", "--out", str(out)]) == 0
     assert out.read_text().startswith("point,label")
+
+
+def test_segment_max_points(tmp_path, capsys):
+    seq = make_scene(2, seed=0)
+    path = laav.save_sequence(seq, tmp_path / "s.npz")
+    assert main(["segment", str(path), "--max-points", "20", "-o", str(tmp_path / "a.csv")]) == 2
+    err = capsys.readouterr().err
+    assert f"{seq.n_points} points exceed the limit of 20" in err and str(path) in err
+    assert err.count("\n") == 1
+    assert main(["segment", str(path), "--max-points", str(seq.n_points), "-o",
+                 str(tmp_path / "b.csv"), *SMALL]) == 0
+    with pytest.raises(SystemExit) as exc:
+        main(["segment", str(path), "--max-points", "0"])
+    assert exc.value.code == 2
+
+
+@pytest.mark.parametrize("case", ["missing", "folder", "out_under_file", "out_missing_dir",
+                                  "bench_missing", "bench_data_file", "bench_out_file",
+                                  "bench_out_under_file"])
+def test_path_errors_are_one_line_exit_2(tmp_path, capsys, case):
+    seq = make_scene(2, seed=0)
+    path = laav.save_sequence(seq, tmp_path / "s.npz")
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    (tmp_path / "empty").mkdir()
+    data = tmp_path / "data" / "s"
+    data.mkdir(parents=True)
+    laav.save_sequence(seq, data / "s_truth.mat")
+    argv = {
+        "missing": ["segment", str(tmp_path / "nope.npz")],
+        "folder": ["segment", str(tmp_path / "empty")],
+        "out_under_file": ["segment", str(path), "-o", str(afile / "x.csv"), *SMALL],
+        "out_missing_dir": ["segment", str(path), "-o", str(tmp_path / "no" / "x.csv" / "y.csv"),
+                            *SMALL],
+        "bench_missing": ["bench", "--data", str(tmp_path / "nope"), "-q",
+                          "--out", str(tmp_path / "o")],
+        "bench_data_file": ["bench", "--data", str(afile), "-q", "--out", str(tmp_path / "o")],
+        "bench_out_file": ["bench", "--data", str(tmp_path / "data"), "-q", "--out", str(afile)],
+        "bench_out_under_file": ["bench", "--data", str(tmp_path / "data"), "-q",
+                                 "--out", str(afile / "sub")],
+    }[case]
+    if case == "out_missing_dir":  # a folder that can't be made: its parent is a file
+        (tmp_path / "no").write_text("x")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "error" in err and "Traceback" not in err
+    assert str(tmp_path) in err

@@ -649,3 +649,107 @@ def test_cli_and_bench_survive_a_crashing_mat(tmp_path, capsys):
     found = bench.discover(data, log=msgs.append)
     assert [s.name for s in found] == ["good"]
     assert len(msgs) == 1 and msgs[0].startswith("skipping bad: ") and "reader crashed" in msgs[0]
+
+
+# --------------------------------------------------------------------------- size limits
+
+
+def _npz_with_headers(path: Path, members: dict, compress=False) -> Path:
+    """An ``.npz`` whose members hold only ``.npy`` headers declaring ``(shape, dtype)``,
+    or real arrays (ndarray values)."""
+    import io as _io
+    import zipfile
+
+    from numpy.lib import format as npy
+
+    mode = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
+    with zipfile.ZipFile(path, "w", mode) as zf:
+        for name, spec in members.items():
+            buf = _io.BytesIO()
+            if isinstance(spec, np.ndarray):
+                npy.write_array(buf, spec)
+            else:
+                shape, dtype = spec
+                npy.write_array_header_1_0(
+                    buf, {"descr": npy.dtype_to_descr(np.dtype(dtype)), "fortran_order": False,
+                          "shape": shape})
+            zf.writestr(name + ".npy", buf.getvalue())
+    return path
+
+
+def _peak_bytes(fn):
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        fn()
+    finally:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+    return peak
+
+
+def test_npz_declaring_a_huge_array_is_refused_before_reading(tmp_path):
+    p = _npz_with_headers(tmp_path / "bomb.npz", {"points": ((10**6, 10**6, 2), "<f8")})
+    assert p.stat().st_size < 4096
+    with pytest.raises(SequenceError) as info:
+        _peak_bytes(lambda: load_sequence(p))
+    msg = str(info.value)
+    assert str(p) in msg and "1,000,000 points exceed the limit of 10,000" in msg
+
+
+def test_npz_member_over_the_byte_limit(tmp_path):
+    pts = np.random.default_rng(0).uniform(0, 100, (3, 20, 2))
+    p = _npz_with_headers(tmp_path / "labels.npz", {"points": pts, "labels": ((10**9,), "<i8")})
+    with pytest.raises(SequenceError, match=r"declare 8,000,000,960 bytes, over the limit of "
+                                            r"268,435,456 bytes") as info:
+        load_sequence(p)
+    assert str(p) in str(info.value)
+    p2 = _npz_with_headers(tmp_path / "name.npz", {"points": pts, "name": ((), "<U100000000")})
+    with pytest.raises(SequenceError, match="over the limit"):
+        load_sequence(p2)
+
+
+def test_compressed_npz_bomb_stays_small_in_memory(tmp_path):
+    big = np.zeros((50, 20_001, 2))  # 16 MB of zeros, a few KB compressed
+    p = _npz_with_headers(tmp_path / "zeros.npz", {"points": big}, compress=True)
+    assert p.stat().st_size < 100_000
+    del big
+    box = {}
+
+    def load():
+        try:
+            load_sequence(p)
+        except SequenceError as exc:
+            box["error"] = str(exc)
+
+    assert _peak_bytes(load) < 2_000_000
+    assert "20,001 points exceed the limit of 10,000" in box["error"]
+    assert load_sequence(p, max_bytes=10**9, max_points=30_000).n_points == 20_001
+    with pytest.raises(SequenceError, match="20,001 points exceed the limit of 20,000"):
+        load_sequence(p, max_points=20_000)
+
+
+@pytest.mark.parametrize("isolated", [False, True])
+def test_mat_with_too_many_points(tmp_path, isolated):
+    p = tmp_path / "many_truth.mat"
+    scipy.io.savemat(str(p), {"y": np.ones((3, 12_000, 2))}, do_compression=True)
+    with pytest.raises(SequenceError, match="12,000 points exceed the limit of 10,000") as info:
+        load_sequence(p, isolated=isolated)
+    assert str(p) in str(info.value)
+    assert load_sequence(p, isolated=isolated, max_points=12_000).n_points == 12_000
+
+
+def test_isolated_mat_over_the_byte_limit_is_not_read(tmp_path):
+    p = tmp_path / "small_truth.mat"
+    save_sequence(_random_sequence(0, points=30), p)
+    with pytest.raises(SequenceError, match=r"over the limit of 1,000 bytes") as info:
+        load_sequence(p, isolated=True, max_bytes=1000)
+    assert str(p) in str(info.value)
+    assert load_sequence(p, isolated=True).n_points == 30  # the reader still works afterwards
+
+
+@pytest.mark.parametrize("bad", [0, -5, 2.5, True, "10"])
+def test_bad_limits(tmp_path, bad):
+    with pytest.raises(ValueError, match="max_points must be a positive integer"):
+        load_sequence(tmp_path, max_points=bad)

@@ -289,7 +289,7 @@ def test_trials_side_by_side_stay_accurate_and_deterministic(batch):
     assert misclassification_rate(seq.labels, a.labels) < 0.01
 
 
-@pytest.mark.parametrize("bad, message", [(0, "rv_batch must be >= 1"),
+@pytest.mark.parametrize("bad, message", [(0, r"rv_batch must be in \[1, 32\]"),
                                           (1.5, "rv_batch must be an integer"),
                                           (True, "rv_batch must be an integer")])
 def test_rv_batch_is_validated(bad, message):

@@ -1,0 +1,77 @@
+"""Degenerate input gets an error or a LaavWarning, never a silent single label (issue 16)."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+import laav
+from laav import LaavParams, LaavWarning, Sequence, segment
+from laav.synthetic import make_sequence
+
+FAST = LaavParams(rv_max_iter=30, rv_trials=2)
+
+
+def _scene():
+    return make_sequence(n_objects=1, n_frames=8, n_points=80, rng=0)
+
+
+def _segment_quietly(seq, C=2):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LaavWarning)
+        return segment(seq, C, FAST)
+
+
+def test_ordinary_input_gives_no_warning():
+    seq = _scene()
+    res = _segment_quietly(seq)
+    assert laav.misclassification_rate(seq.labels, res.labels) < 0.05
+
+
+def test_too_few_points_for_the_motions():
+    pts = np.random.default_rng(0).uniform(0, 500, (5, 9, 2))
+    with pytest.warns(LaavWarning, match="nine.npz: 9 points are too few for 2 motions"):
+        segment(Sequence(pts, source="nine.npz"), 2, FAST)
+    with pytest.warns(LaavWarning, match="too few"):
+        laav.Pipeline(Sequence(pts, source="nine.npz"), 2, FAST)
+
+
+def test_identical_trajectories():
+    one = np.random.default_rng(0).uniform(0, 500, (5, 1, 2))
+    with pytest.raises(ValueError, match="only 1 distinct trajectory for 2 motions"):
+        segment(np.repeat(one, 40, axis=1), 2, FAST)
+    two = np.concatenate([np.repeat(one, 20, axis=1), np.repeat(one + 50, 20, axis=1)], axis=1)
+    with pytest.raises(ValueError, match="only 2 distinct trajectories for 3 motions"):
+        segment(two, 3, FAST)
+
+
+def test_static_trajectories_warn():
+    still = np.repeat(np.random.default_rng(0).uniform(0, 500, (1, 40, 2)), 6, axis=0)
+    with pytest.warns(LaavWarning, match="no point moves"):
+        segment(still, 2, FAST)
+
+
+def test_collinear_trajectories_warn():
+    rng = np.random.default_rng(1)
+    t = rng.uniform(0, 300, 40)
+    s = [t + 5 * f + (t > 150) * 3 * f for f in range(6)]  # two speeds along one line
+    frames = [np.stack([x, 0.5 * x + 20], axis=1) for x in s]
+    with pytest.warns(LaavWarning, match="collinear in every frame"):
+        segment(np.stack(frames), 2, FAST)
+
+
+@pytest.mark.parametrize("factor", [1e9, 1e-9])
+def test_extreme_scales_warn(factor):
+    seq = _scene()
+    with pytest.warns(LaavWarning, match="px, outside 1-1e"):
+        segment(seq.points * factor, 2, FAST)
+
+
+def test_single_label_result_warns():
+    seq = _scene()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = segment(seq.points * 1e9, 2, FAST)
+    messages = [str(w.message) for w in caught if w.category is LaavWarning]
+    assert np.unique(res.labels).size == 1  # what LAAV does at this scale (pixel radii)
+    assert any("every point got the same label though 2 motions" in m for m in messages)
