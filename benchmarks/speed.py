@@ -281,13 +281,7 @@ def main(argv=None) -> int:
         return 2
 
     if args.threads:
-        text = measure_threads(files, args.repeats, args.rounds)
-        print(text)
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(text)
-        print(f"written: {out}", file=sys.stderr)
-        return 0
+        return _emit(measure_threads(files, args.repeats, args.rounds), args.out)
 
     seqs = [laav.load_sequence(f) for f in files]
     warm_up(seqs[0])
@@ -328,12 +322,16 @@ def main(argv=None) -> int:
     lines += table(results, "All sequences")
     for k in sorted({r["motions"] for r in results}):
         lines += table([r for r in results if r["motions"] == k], f"{k} motions")
-    text = "\n".join(lines)
+    return _emit("\n".join(lines), args.out)
+
+
+def _emit(text: str, out: str) -> int:
+    """Print the report and write it to ``out``."""
     print(text)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text)
-    print(f"written: {out}", file=sys.stderr)
+    path = Path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    print(f"written: {path}", file=sys.stderr)
     return 0
 
 

@@ -56,3 +56,15 @@ def rows_from_files(root: Path) -> list[dict[str, str]]:
                      "width": str(w), "height": str(h),
                      "in_hopkins155": "no" if f.parent.name in NOT_IN_HOPKINS155 else "yes"})
     return rows
+
+
+def stop_process(proc) -> None:
+    """End a server started by a test: terminate, then kill if it has not gone in 30 s."""
+    import subprocess
+
+    proc.terminate()
+    try:
+        proc.wait(30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()

@@ -11,6 +11,7 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+from conftest import stop_process
 
 REPO = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.slow
@@ -43,15 +44,6 @@ def _page(proc, log, port) -> str:
     raise AssertionError(f"no page on port {port}:\n{log.read_text()}")
 
 
-def _stop(proc):
-    proc.terminate()
-    try:
-        proc.wait(30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-
-
 def test_host_all_interfaces_prints_a_reachable_url_and_a_warning(tmp_path):
     port = _free_port()
     proc, log = _serve(tmp_path, "--host", "0.0.0.0", "--port", str(port))
@@ -76,7 +68,7 @@ def test_host_all_interfaces_prints_a_reachable_url_and_a_warning(tmp_path):
         with urllib.request.urlopen(f"http://127.0.0.1:{viser_port}/", timeout=30) as r:
             assert r.status == 200
     finally:
-        _stop(proc)
+        stop_process(proc)
 
 
 def test_default_host_prints_the_loopback_url_without_a_warning(tmp_path):
@@ -87,7 +79,7 @@ def test_default_host_prints_the_loopback_url_without_a_warning(tmp_path):
         out = log.read_text()
         assert f"at http://127.0.0.1:{port}/" in out and "warning" not in out
     finally:
-        _stop(proc)
+        stop_process(proc)
 
 
 @pytest.mark.parametrize("host, loopback", [("127.0.0.1", True), ("::1", True), ("localhost", True),

@@ -23,6 +23,7 @@ import venv
 from pathlib import Path
 
 import pytest
+from conftest import stop_process
 
 REPO = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.slow
@@ -119,9 +120,4 @@ def test_installed_wheel_serves_the_bundled_demo(installed):
         assert "demo_three_motions" in log.read_text()
         assert "synthetic demo" not in page
     finally:
-        proc.terminate()
-        try:
-            proc.wait(30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        stop_process(proc)
