@@ -12,10 +12,14 @@ Choices where the paper is vague (measured on Hopkins155):
 * **Neighbourhoods over the whole sequence.** "Within ``r`` of the seed" means within
   ``r`` in every one of 6 evenly spaced frames (not one frame), so an atom stays small
   for the whole sequence and its affine premise holds.
-* **All frames, not one pair.** An atom's motion model is one affine map from frame 0 to
-  every frame (fitted jointly); a feature is an inlier when its RMS residual over all
-  frames is below ``affine_threshold``. A single random frame pair often shows too little
-  motion to reject a feature of another object.
+* **All frames, not one pair** (``atom_frames="all"``, ours). An atom's motion model is
+  one affine map from frame 0 to every frame (fitted jointly); a feature is an inlier when
+  its RMS residual over all frames is below ``affine_threshold``. A single random frame
+  pair often shows too little motion to reject a feature of another object. The paper's
+  way, ``atom_frames="pair"`` (:meth:`LaavParams.paper`): RANSAC on one random frame pair
+  at least ``F // 3`` apart, drawn for each atom; the accepted members' affine
+  trajectory over all frames is then fitted for the graph, without a check over all
+  frames.
 * **Minimal samples contain the seed**, so the atom is built around it, and all
   ``ransac_hypotheses`` samples are scored in one batched solve. The best consensus is
   refitted by least squares and its inliers recomputed until stable, judging fitted
@@ -132,8 +136,12 @@ def _rms_rows(X, sol, Y, n_frames):
     return np.sqrt(np.add.reduce(r * r, axis=-1) / n_frames)
 
 
-def _ransac_affine(points, cand, seed_pos, params, rng):
+def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     """Inliers (bool over cand) of the best affine consensus containing cand[seed_pos].
+
+    ``points`` (F, P, 2): the maps go from its frame 0 to every frame, or, with
+    ``skip_first``, to every later frame only (the paper's frame pair: ``points`` is then
+    frames (l, r), see ``atom_frames`` in :func:`build_atoms`).
 
     Each hypothesis is the affine map through the seed and two other candidates (all
     pairs when few, random otherwise; near-collinear triples rejected), scored by its
@@ -144,10 +152,11 @@ def _ransac_affine(points, cand, seed_pos, params, rng):
     Python loop over seeds costs.
     """
     n = cand.size
-    Fn = points.shape[0]
     src = points[0, cand]
+    tgt = points[1:] if skip_first else points  # (Fn, P, 2): the frames the maps go to
+    Fn = tgt.shape[0]
     X = np.concatenate([src, np.ones((n, 1))], axis=1)  # (n, 3) homogeneous
-    Y = np.transpose(points[:, cand], (1, 0, 2)).reshape(n, 2 * Fn)  # (n, 2F): x0 y0 x1 y1 ...
+    Y = np.transpose(tgt[:, cand], (1, 0, 2)).reshape(n, 2 * Fn)  # (n, 2F): x0 y0 x1 y1 ...
     others = np.arange(n - 1)
     others[seed_pos:] += 1
     B = params.ransac_hypotheses
@@ -176,7 +185,7 @@ def _ransac_affine(points, cand, seed_pos, params, rng):
     for _ in range(4):
         if mask.sum() < 4:
             break
-        A, h = fit_affine_leverage(src[mask], points[:, cand[mask]])
+        A, h = fit_affine_leverage(src[mask], tgt[:, cand[mask]])
         r = _rms_rows(X, A.transpose(2, 0, 1).reshape(3, 2 * Fn), Y, Fn)
         # a fitted point's residual divided by 1 - h (h its leverage) is its residual
         # under the fit without it: a point of another motion far from the rest (high
@@ -214,6 +223,8 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
     F, P, _ = points.shape
     D = trajectory_distances(points) if distances is None else distances
     near2 = D <= params.r2
+    pair_mode = params.atom_frames == "pair" and F > 2
+    gap = max(1, F // 3)
     owner = np.full(P, -1, dtype=np.int64)
     tried = np.zeros(P, dtype=bool)
     members, seeds, affines, residuals = [], [], [], []
@@ -225,13 +236,19 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
         if cand.size < params.atom_min_size:
             continue
         seed_pos = int(np.searchsorted(cand, s))
-        mask = _ransac_affine(points, cand, seed_pos, params, rng)
+        if pair_mode:  # the paper: one random, well separated frame pair per atom
+            left = int(rng.integers(0, F - gap))
+            right = int(rng.integers(left + gap, F))
+            mask = _ransac_affine(points[[left, right]], cand, seed_pos, params, rng,
+                                  skip_first=True)
+        else:
+            mask = _ransac_affine(points, cand, seed_pos, params, rng)
         if mask is None or not mask[seed_pos] or mask.sum() < params.atom_min_size:
             continue
         mem = cand[mask]
         A = fit_affine(points[0, mem], points[:, mem])
         res = _rms_residuals(A, points[0, mem], points[:, mem])
-        if (res >= params.affine_threshold).any() or not mask[seed_pos]:
+        if not pair_mode and (res >= params.affine_threshold).any():
             continue  # the final model does not hold all its members: no atom here
         atom = len(members)
         members.append(mem)

@@ -32,6 +32,10 @@ class LaavParams:
     affine_threshold : float
         RANSAC inlier threshold (px) on a feature's RMS residual over all frames under the
         atom's affine motion model.
+    atom_frames : {"all", "pair"}
+        Frames an atom's RANSAC judges its features on: ``"all"`` (ours) every frame,
+        one affine trajectory; ``"pair"`` (the paper) one random frame pair at least
+        ``F // 3`` apart per atom.
     ransac_hypotheses : int
         Minimal samples (seed + 2 neighbours) tried per atom, evaluated as one batch.
     graph_neighbors : int
@@ -120,6 +124,7 @@ class LaavParams:
     r2: float = 40.0
     atom_min_size: int = 4
     affine_threshold: float = 2.0
+    atom_frames: str = "all"
     ransac_hypotheses: int = 24
     graph_neighbors: int = 5
     edge_scale: float = 2.0
@@ -161,13 +166,14 @@ class LaavParams:
     def paper(cls, **changes) -> LaavParams:
         """Every stage as the LAAV paper writes it (Posner & Hagege), nothing of ours.
 
-        Fine-to-coarse by the paper's pairwise four-atom epipolar votes alone (no pooled
+        Atoms by RANSAC on one random frame pair each (``atom_frames="pair"``),
+        fine-to-coarse by the paper's pairwise four-atom epipolar votes alone (no pooled
         voting), and a fine-tuning that is Random Voting started from the coarse labels:
         one informed trial, no plain RV run, no model selection, no refinement and no
         joint reassignment. ``changes`` override fields as in :meth:`replace`.
         """
-        return cls(pooled_trials=0, pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
-                   rv_select="none").replace(**changes)
+        return cls(atom_frames="pair", pooled_trials=0, pairwise_weight=1.0, rv_refine=False,
+                   rv_reassign=False, rv_select="none").replace(**changes)
 
     def replace(self, **changes) -> LaavParams:
         """A copy with some fields changed (validated like the original)."""
@@ -200,6 +206,7 @@ _BOUNDS = (
     ("r2", "float>", 0, _BIG),
     ("atom_min_size", "int", 4, 10_000),
     ("affine_threshold", "float>", 0, _BIG),
+    ("atom_frames", "choice", ("all", "pair"), None),
     ("ransac_hypotheses", "int", 1, 1000),
     ("graph_neighbors", "int", 1, 100),
     ("edge_scale", "float>", 0, _BIG),
@@ -254,7 +261,8 @@ def _check(value, kind: str, low, high):
 
 #: Which parameters each stage reads; a change reruns that stage and all after it.
 STAGE_PARAMS: dict[str, frozenset] = {
-    "atoms": frozenset({"r1", "r2", "atom_min_size", "affine_threshold", "ransac_hypotheses"}),
+    "atoms": frozenset({"r1", "r2", "atom_min_size", "affine_threshold", "ransac_hypotheses",
+                        "atom_frames"}),
     "graph": frozenset({"graph_neighbors", "edge_scale", "cut_prior"}),
     "multicut": frozenset({"fine_models"}),
     "coarse": frozenset({"lam", "coarse_frames", "coarse_samples", "motion_weight", "pooled_trials",

@@ -181,3 +181,23 @@ def test_no_atoms_with_tiny_radii():
     assert np.all(atoms.owner == -1)
     assert atoms.affines.shape == (0, seq.n_frames, 2, 3)
     assert atoms.centers(seq.points).shape == (seq.n_frames, 0, 2)
+
+
+def test_paper_atoms_judge_features_on_one_frame_pair():
+    """atom_frames="pair": each atom's RANSAC sees one random frame pair, so a feature that
+    moves with the atom on that pair but not elsewhere can join it; "all" never lets it."""
+    rng = np.random.default_rng(0)
+    F = 12
+    g = np.stack(np.meshgrid(np.arange(6) * 6.0, np.arange(6) * 6.0), -1).reshape(-1, 2) + 100
+    shift = np.cumsum(rng.normal(0, 2.0, (F, 2)), axis=0)
+    pts = np.repeat(g[None], F, axis=0) + shift[:, None]
+    # point 0 follows the grid except in one frame, where it jumps 15 px
+    pts[F // 2, 0] += 15.0
+    p_all = LaavParams(r1=8.0, r2=16.0)
+    p_pair = LaavParams.paper(r1=8.0, r2=16.0)
+    assert p_pair.atom_frames == "pair" and p_all.atom_frames == "all"
+    in_all = [0 in m for m in build_atoms(pts, p_all, np.random.default_rng(1)).members]
+    assert not any(in_all)
+    joined = [any(0 in m for m in build_atoms(pts, p_pair, np.random.default_rng(s)).members)
+              for s in range(10)]
+    assert any(joined)  # on pairs without the jumping frame it fits the grid's affine map
