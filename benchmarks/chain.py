@@ -76,7 +76,7 @@ def _assignment(text: str) -> tuple[str, object]:
 _WARM = []
 
 
-def run_sequence(path: str, seeds: list[int], configs: dict) -> list[dict]:
+def run_sequence(path: str, seeds: list[int], configs: dict, plain_rv: bool = True) -> list[dict]:
     """Every run for one sequence (plain RV and each configuration, seed by seed)."""
     seq = laav.load_sequence(path)
     if not _WARM:  # first use in this process: lazy imports must not land in a timing
@@ -86,9 +86,10 @@ def run_sequence(path: str, seeds: list[int], configs: dict) -> list[dict]:
     C = seq.n_motions
     rows = []
     for seed in seeds:
-        t = time.perf_counter()
-        v = laav.random_voting(seq, C, seed=seed)
-        rows.append(_row("plain-rv", seq, seed, v.labels, None, v, time.perf_counter() - t))
+        if plain_rv:
+            t = time.perf_counter()
+            v = laav.random_voting(seq, C, seed=seed)
+            rows.append(_row("plain-rv", seq, seed, v.labels, None, v, time.perf_counter() - t))
         for name, spec in configs.items():
             t = time.perf_counter()
             res = laav.segment(seq, C, make_params(spec), seed=seed)
@@ -150,6 +151,8 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", default="bench-out/chain.csv")
     ap.add_argument("--report", default=None)
+    ap.add_argument("--no-plain-rv", action="store_true",
+                    help="skip plain RV (its rows are then expected in --out already)")
     args = ap.parse_args(argv)
     configs = dict(args.config) if args.config else dict(DEFAULT_CONFIGS)
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -161,16 +164,18 @@ def main(argv=None) -> int:
         with open(out, newline="") as fh:
             done = list(csv.DictReader(fh))
     have = {(r["config"], r["sequence"], int(r["seed"])) for r in done}
-    todo = [f for f in files if any((c, f.parent.name, s) not in have
-                                    for c in ["plain-rv", *configs] for s in seeds)]
-    rows = [r for r in done if r["sequence"] not in {f.parent.name for f in todo}]
+    wanted = list(configs) if args.no_plain_rv else ["plain-rv", *configs]
+    todo = [f for f in files if any((c, f.parent.name, s) not in have for c in wanted for s in seeds)]
+    redo = {f.parent.name for f in todo}
+    rows = [r for r in done if r["sequence"] not in redo or r["config"] not in wanted]
     with open(out, "w", newline="") as fh:
         w = csv.DictWriter(fh, FIELDS)
         w.writeheader()
         w.writerows(rows)
         with ProcessPoolExecutor(max(1, args.jobs)) as ex:
             for k, new in enumerate(ex.map(run_sequence, [str(f) for f in todo],
-                                           [seeds] * len(todo), [configs] * len(todo))):
+                                           [seeds] * len(todo), [configs] * len(todo),
+                                           [not args.no_plain_rv] * len(todo))):
                 w.writerows(new)
                 fh.flush()
                 rows += new

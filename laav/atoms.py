@@ -250,6 +250,8 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
         res = _rms_residuals(A, points[0, mem], points[:, mem])
         if not pair_mode and (res >= params.affine_threshold).any():
             continue  # the final model does not hold all its members: no atom here
+        if not (np.abs(np.linalg.det(A[:, :, :2])) > 1e-9).all():
+            continue  # a degenerate map (members on a line): the graph must invert it
         atom = len(members)
         members.append(mem)
         seeds.append(s)
