@@ -114,7 +114,7 @@ def summarise(rows: list[dict]) -> list[str]:
     by = {}
     for r in rows:
         by.setdefault(r["config"], []).append(r)
-    rv = {(r["sequence"], r["seed"]): r for r in by.get("plain-rv", [])}
+    rv = {(r["sequence"], str(r["seed"])): r for r in by.get("plain-rv", [])}
     lines = ["| configuration | 2 / 3 / all mean % | worst % | seed range of all-mean (pt) | "
              "coarse <= 1 % / > 10 % (of runs) | converged | iterations / RV (median) | "
              "time / RV median, 2 / 3 motions |",
@@ -128,12 +128,12 @@ def summarise(rows: list[dict]) -> list[str]:
         coarse = f"{(ce <= 1).sum()} / {(ce > 10).sum()} of {ce.size}" if ce.size else "-"
         conv = np.mean([int(r["converged"]) for r in rs])
         it = np.median([int(r["iterations"]) for r in rs])
-        it_rv = np.median([int(rv[(r["sequence"], r["seed"])]["iterations"]) for r in rs])
+        it_rv = np.median([int(rv[(r["sequence"], str(r["seed"]))]["iterations"]) for r in rs])
         ratios = []
         for c in (2, 3):
             sub = [r for r in rs if int(r["motions"]) == c]
             t = np.median([float(r["seconds"]) for r in sub])
-            t_rv = np.median([float(rv[(r["sequence"], r["seed"])]["seconds"]) for r in sub])
+            t_rv = np.median([float(rv[(r["sequence"], str(r["seed"]))]["seconds"]) for r in sub])
             ratios.append(f"{t / t_rv:.2f} ({1e3 * t:.0f} / {1e3 * t_rv:.0f} ms)")
         lines.append(
             f"| {name} | {e[m == 2].mean():.2f} / {e[m == 3].mean():.2f} / {e.mean():.2f} | "
