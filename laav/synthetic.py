@@ -498,7 +498,7 @@ def _epipolar_gap(a0, a1, b0, b1) -> float:
     return float(np.mean(_sampson(_fundamental(x0, x1), x0, x1)))
 
 
-def _place_objects(kinds, cam, rng, s, w, h, background) -> list[_Body]:
+def _place_objects(kinds, cam, rng, s, w, h, background, custom=None) -> list[_Body]:
     """Place the moving bodies so each stays in view, apart from the others, and moves.
 
     Objects are placed one by one by rejection sampling, subject to: in view in every
@@ -509,7 +509,14 @@ def _place_objects(kinds, cam, rng, s, w, h, background) -> list[_Body]:
     any earlier object's leaves a mean Sampson distance of at least 4 px^2 (at 640 px
     width). When an object finds no room after a few dozen tries, the layout starts again,
     a little smaller and, after a few such restarts, with looser limits.
+
+    ``custom`` (used by :func:`make_family`) maps an object's index to ``(make, place)``:
+    ``make(rng)`` returns its :class:`_Body` (of a fixed size, not scaled down in crowded
+    scenes) and ``place(body, rng, bodies)`` draws its motion given the bodies placed
+    before it, returning False to reject the draw (one try used). All the checks above
+    still apply.
     """
+    custom = custom or {}
     min_gap = _MIN_EPIPOLAR_GAP * (w / 640.0) ** 2
     max_overlap = 0.1
     spots = {}
@@ -530,14 +537,21 @@ def _place_objects(kinds, cam, rng, s, w, h, background) -> list[_Body]:
         bodies: list[_Body] = []
         boxes: list[np.ndarray] = []
         ends = [(background[0, :40], background[-1, :40])]  # first/last-frame pixels
-        for kind in kinds:
-            body = _new_body(rng, kind)
-            body.scale = scale
+        for i, kind in enumerate(kinds):
+            make, place = custom.get(i, (None, None))
+            if make is None:
+                body = _new_body(rng, kind)
+                body.scale = scale
+            else:
+                body = make(rng)
             avoid = np.concatenate(
                 [np.stack([b[:, :2].mean(1), b[:, 2:].mean(1)], axis=1) for b in boxes]
             ) if boxes else np.zeros((0, 2))
             for _ in range(30):
-                _place(body, cam, rng, s, spots, avoid)
+                if place is None:
+                    _place(body, cam, rng, s, spots, avoid)
+                elif not place(body, rng, bodies):
+                    continue
                 X, _ = body.world(*body.outline())
                 uv, z = cam.project(X)
                 if not _inside(uv, z, w, h, _MARGIN).all():
@@ -745,8 +759,32 @@ def make_sequence(
     w, h = _check_image_size(image_size)
     if not isinstance(name, str) or not name:
         raise ValueError(f"name must be a non-empty string, got {name!r}")
-    gen = _as_generator(rng)
+    kinds = ["rigid"] * n_objects
+    if nonrigid:
+        kinds[0] = "bend"
+    if articulated:
+        kinds[-1] = "arm"
+    return _render(kinds, n_frames, n_points, noise, outlier_fraction, w, h,
+                   _as_generator(rng), name)
 
+
+def _default_counts(scene_rng, n_points: int, n_objects: int) -> np.ndarray:
+    """Points per motion: the background 35-50 %, the objects about equal shares."""
+    obj_weights = scene_rng.uniform(0.7, 1.3, n_objects)
+    bg_share = scene_rng.uniform(0.35, 0.5)  # background's share of the points
+    weights = np.concatenate([[bg_share / (1.0 - bg_share) * obj_weights.sum()], obj_weights])
+    return _allot(n_points, weights)
+
+
+def _render(kinds, n_frames, n_points, noise, outlier_fraction, w, h, gen, name,
+            family=None) -> Sequence:
+    """The scene of :func:`make_sequence` (arguments already checked).
+
+    ``family(scene_rng, cam, s)`` (used by :func:`make_family`) may return
+    ``(kinds, custom, counts)``: the object kinds, custom placements (see
+    :func:`_place_objects`) and ``counts(scene_rng, n_points, n_objects)`` for the points
+    per motion; it is called after the camera and walls are drawn.
+    """
     # Independent streams: the scene does not depend on noise or outlier settings.
     seeds = gen.integers(0, 2**63 - 1, size=3)
     scene_rng, outlier_rng, noise_rng = (np.random.default_rng(int(x)) for x in seeds)
@@ -759,18 +797,14 @@ def make_sequence(
         scene_rng.choice([-1.0, 1.0]) * scene_rng.uniform(4.0, 7.0),  # side wall x
         scene_rng.uniform(2.5, 6.0) if scene_rng.uniform() < 0.6 else 0.0,  # its height
     )
-    kinds = ["rigid"] * n_objects
-    if nonrigid:
-        kinds[0] = "bend"
-    if articulated:
-        kinds[-1] = "arm"
+    custom, allot = None, _default_counts
+    if family is not None:
+        kinds, custom, allot = family(scene_rng, cam, s)
+    n_objects = len(kinds)
+    n_motions = n_objects + 1
     reference, _ = _background_points(80, cam, scene_rng, w, h, walls)
-    bodies = _place_objects(kinds, cam, scene_rng, s, w, h, reference)
-
-    obj_weights = scene_rng.uniform(0.7, 1.3, n_objects)
-    bg_share = scene_rng.uniform(0.35, 0.5)  # background's share of the points
-    weights = np.concatenate([[bg_share / (1.0 - bg_share) * obj_weights.sum()], obj_weights])
-    counts = _allot(n_points, weights)
+    bodies = _place_objects(kinds, cam, scene_rng, s, w, h, reference, custom)
+    counts = allot(scene_rng, n_points, n_objects)
 
     # Candidate pools per motion, topped up until occlusion leaves enough in each.
     pool_uv: list[list[np.ndarray]] = [[] for _ in range(n_motions)]
