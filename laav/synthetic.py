@@ -1178,8 +1178,8 @@ def affine_residual(points: np.ndarray) -> float:
     dimensions (3 for the shape, 1 for the translation). This projects the vectors of
     ``points`` (F, n, 2) onto the best such subspace (SVD, no centring) and returns the
     mean over trajectories of the root-mean-square per-frame residual, in pixels: 0 for an
-    affine camera, larger the stronger the perspective (or the noise; about sigma *
-    sqrt(1 - 4 / min(2F, n)) for Gaussian noise alone).
+    affine camera, larger the stronger the perspective (or the noise: a little below
+    sigma * sqrt(2 * (1 - 4 / min(2F, n))) for Gaussian noise of sigma px alone).
     """
     points = np.asarray(points, dtype=float)
     if points.ndim != 3 or points.shape[2] != 2:
