@@ -26,6 +26,7 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -89,6 +90,11 @@ class Voting:
         unconverged trial, by subspace cost), ``"informed"`` (LAAV's start); in LAAV's
         fine-tuning the plain RV candidates are named ``"plain trial"``, ``"plain
         consensus"``, ``"plain trial k"``.
+    informed_changed, informed_margin : ndarray of shape (T0,) or None
+        LAAV's informed trial's own trace (labels changed, mean margin per iteration),
+        whichever candidate was returned; None for plain RV.
+    informed_converged : bool or None
+        Whether LAAV's informed trial met the convergence test; None for plain RV.
     costs : dict of str -> float
         Selection score of each candidate compared (empty without ``rv_select``): its
         subspace cost plus ``rv_select_agreement`` times its mean disagreement with the
@@ -108,6 +114,9 @@ class Voting:
     selected: str = "trial"
     reassigned: int = 0
     costs: dict = field(default_factory=dict)
+    informed_changed: np.ndarray | None = None
+    informed_margin: np.ndarray | None = None
+    informed_converged: bool | None = None
 
 
 @single_threaded  # one BLAS/OpenMP thread, restored after (laav/_threads.py)
@@ -189,7 +198,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
         first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0)
-        return _finish(points, C, params, first, trials, True, "informed")
+        return _with_informed(_finish(points, C, params, first, trials, True, "informed"), first)
     # LAAV's start against plain RV: keep the labelling of lower selection score
     first, plain, trials, ended = run_trials(points, C, params, rng, (labels0, votes0))
     cands = [("informed", first)] + _plain_candidates(plain, ended, C, rng, "plain ")
@@ -199,7 +208,13 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
             _, conv, more, ended = run_trials(points, C, params, rng)
             trials = trials + more
             cands += _plain_candidates(conv, ended, C, rng, f"plain {k} ")
-    return _select(points, C, params, cands, trials, initialised=True)
+    return _with_informed(_select(points, C, params, cands, trials, initialised=True), first)
+
+
+def _with_informed(voting: Voting, first: tuple) -> Voting:
+    """``voting`` with LAAV's informed trial's own trace attached."""
+    return dataclasses.replace(voting, informed_changed=first[2], informed_margin=first[3],
+                               informed_converged=bool(first[5]))
 
 
 class _Polished:

@@ -367,3 +367,21 @@ def test_labels_do_not_depend_on_how_many_trials_run_side_by_side(init):
     for r in runs[1:]:
         assert np.array_equal(r.labels, runs[0].labels)
         assert r.selected == runs[0].selected and r.converged == runs[0].converged
+
+
+def test_fine_tuning_keeps_laavs_own_trial_trace_whatever_it_returns():
+    """Voting.informed_*: the informed trial's curve, even when a plain RV trial is returned."""
+    seq = scene(2, 1)
+    bad = np.zeros(seq.n_points, dtype=np.int64)  # an informed start that merges everything
+    v = random_voting(seq, seq.n_motions, seed=0, init_labels=bad)
+    assert v.initialised and v.informed_changed is not None
+    assert v.informed_changed.size == v.trial_iterations[0]  # the informed trial runs first
+    assert v.informed_margin.size == v.informed_changed.size
+    assert isinstance(v.informed_converged, bool)
+    if v.selected != "informed":
+        assert v.changed.size != v.informed_changed.size or not np.array_equal(
+            v.changed, v.informed_changed)
+    plain = random_voting(seq, seq.n_motions, seed=0)
+    assert plain.informed_changed is None and plain.informed_converged is None
+    paper = random_voting(seq, seq.n_motions, LaavParams.paper(), seed=0, init_labels=seq.labels)
+    assert np.array_equal(paper.informed_changed, paper.changed) and paper.selected == "informed"
