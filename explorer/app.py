@@ -165,11 +165,30 @@ class Explorer:
                              page_hosts=self._page_hosts)
         except Exception as exc:  # the 2-D views still work without it
             self._viser_error = f"the 3-D view could not start: {exc}"
+            self._schedule(self._show_viser)
             return
         if self._closed:
             view.close()
         else:
             self.viser = view
+            # a result applied while the server was still starting (a slow, loaded machine)
+            # did not reach it: show the view and send the shown result now
+            self._schedule(self._show_viser)
+
+    def _show_viser(self, send: bool = True) -> None:
+        """(Document thread.) Put the 3-D view on the page once its server has started (or
+        failed) and a result is shown; with ``send``, also give it the shown result."""
+        if not self._want_viser or self.result is None or self._closed:
+            return
+        if self.viser is None and self._viser_thread is not None and self._viser_thread.is_alive():
+            return  # still starting: _start_viser calls again when done
+        if not self._iframe_shown:
+            self._iframe_shown = True
+            self.viser_pane.object = self._iframe_html() if self.viser is not None else (
+                f"<p><i>{html.escape(getattr(self, '_viser_error', 'the 3-D view did not start'))}"
+                "</i></p>")
+        if send and self.viser is not None and self.viser._result is not self.result:
+            self.viser.set_result(self.sequence, self.result, self._style["color"], self.w_frame.value)
 
     def _wait_viser(self, timeout: float = 30.0) -> None:
         """Let the 3-D view's server finish starting (it normally has, before the first result)."""
@@ -604,13 +623,10 @@ class Explorer:
                                       f"2C = {result.multicut.n_models}, seed {settings.seed}{err} "
                                       f"(computed in {1000 * self.state.compute_seconds:.0f} ms).")
                 if self._want_viser and not self._iframe_shown:
-                    self._wait_viser()
-                    self._iframe_shown = True
-                    self.viser_pane.object = self._iframe_html() if self.viser is not None else (
-                        f"<p><i>{html.escape(getattr(self, '_viser_error', 'the 3-D view did not start'))}"
-                        "</i></p>")
+                    self._wait_viser(5.0)  # normally done long before; else _show_viser follows
+                    self._show_viser(send=False)
             if self.viser is not None:
-                if new_seq:
+                if new_seq or self.viser._result is None:
                     self.viser.set_result(seq, result, self._style["color"], self.w_frame.value)
                 else:
                     self.viser._seq = seq

@@ -90,13 +90,19 @@ def _sequence() -> laav.Sequence:
     return laav.Sequence(pts, labels, name="browser_test", image_size=(640, 480))
 
 
-def _wait_for(pred, timeout: float, what: str):
+def _wait_for(pred, timeout: float, what: str, page=None):
+    """Poll ``pred`` until it is true. Give ``page`` when ``pred`` reads anything Playwright
+    records from events (websocket frames, dialogs): the sync API delivers events only while
+    one of its calls runs, never during ``time.sleep``, so waiting is done by the page."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         v = pred()
         if v:
             return v
-        time.sleep(0.1)
+        if page is not None:
+            page.wait_for_timeout(100)
+        else:
+            time.sleep(0.1)
     raise AssertionError(f"timed out waiting for {what}")
 
 
@@ -169,10 +175,13 @@ def test_explorer_in_chromium(tmp_path):
                 assert ex.result is res
 
                 # the 3-D view is served by this process on 127.0.0.1 and connects
-                assert ex.viser is not None
-                # (its origin check lets its own page in: the scene arrives)
-                _wait_for(lambda: any(f":{ex.viser.port}" in u for u in received), 30, "viser's scene")
-                time.sleep(1.5)
+                viser = _wait_for(lambda: ex.viser, 60, "the 3-D view's server")
+                # (its origin check lets its own page in: the scene arrives). Its client loads
+                # with the first result and renders in software: slow on a loaded machine
+                _wait_for(lambda: any(f":{viser.port}" in u for u in received), 90, "viser's scene",
+                          page=page)
+                assert f":{viser.port}/" in ex.viser_pane.object
+                page.wait_for_timeout(1500)  # let the scene draw for the screenshot
                 page.screenshot(path=str(shots / "explorer_after_lambda.png"))
 
                 # a second tab gets its own explorer, unaffected by the first
@@ -181,7 +190,8 @@ def test_explorer_in_chromium(tmp_path):
                 ex2 = _wait_for(lambda: created[1] if len(created) > 1 else None, 30, "a second session")
                 assert ex2.wait(60)
                 # its own 3-D server, started with its first computation
-                assert ex2 is not ex and ex2.viser.port != ex.viser.port
+                viser2 = _wait_for(lambda: ex2.viser, 60, "the second tab's 3-D server")
+                assert ex2 is not ex and viser2.port != viser.port
                 assert ex2.result.params.lam == laav.LaavParams().lam
                 assert ex2.result.params.r1 == laav.LaavParams().r1
                 page2.close()
@@ -257,7 +267,7 @@ def test_hostile_names_are_shown_as_text(tmp_path):
                     "buffer": bad_mat}])
                 page.get_by_text("<img src=y onerror=alert(4)>.mat").first.wait_for(timeout=30000)
                 assert ex.sequence.name == stored  # the last good result is kept
-                time.sleep(1.0)  # let any image error handler fire
+                page.wait_for_timeout(1000)  # let any image error handler fire (and its dialog arrive)
                 assert page.evaluate(JS_INJECTED) == {"imgs": 0, "scripts": 0, "svgs": 0}
                 assert "alert(5)" not in page.title()
                 header = page.locator(".app-header .title").inner_text()
