@@ -56,12 +56,22 @@ PARAM_SLIDERS = {
 }
 
 _TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
+#: Width of the sidebar's widgets (the sidebar is SIDE_W + 35 px wide). With it, every card
+#: fits the main area at 1024 px (checked at 1024x768 and 1280x800 in the browser tests).
+SIDE_W = 265
 _RV_TOOLS = "pan,wheel_zoom,reset"
 _EMPTY_PTS = {"x": [], "y": [], "color": [], "label": [], "index": []}
 
 
 def _card(title: str, *objs, **kw) -> pn.Card:
+    kw.setdefault("sizing_mode", "stretch_width")
     return pn.Card(*objs, title=title, collapsible=False, margin=(6, 6), **kw)
+
+
+def _flex(*objs, **kw) -> pn.FlexBox:
+    """Parts side by side while they fit, wrapped below each other when not."""
+    kw.setdefault("sizing_mode", "stretch_width")
+    return pn.FlexBox(*objs, flex_wrap="wrap", align_items="flex-start", **kw)
 
 
 def _image_figure(title: str, frame_width: int, extent, **kw):
@@ -228,12 +238,12 @@ class Explorer:
         seq, st = self.sequence, self.state.target
         p = st.params
         self.w_frame = pn.widgets.Player(label="frame", start=0, end=max(seq.n_frames - 1, 1), value=0,
-                                         loop_policy="loop", interval=250, width=290,
+                                         loop_policy="loop", interval=250, width=SIDE_W,
                                          show_loop_controls=False, value_align="start",
                                          scale_buttons=0.8)
         self.w_color = pn.widgets.Select(label="Colour points by", options=list(V.COLOR_MODES),
                                          value="ground truth" if seq.labels is not None
-                                         else "final (after Random Voting)", width=290)
+                                         else "final (after Random Voting)", width=SIDE_W)
         self._layer_names = ["trails (last 5 frames)", "atom circles (R1 solid, R2 dashed)",
                              "features in no atom (×)", "misclassified (red ring)"]
         self.w_layers = pn.widgets.CheckBoxGroup(options=self._layer_names, value=list(self._layer_names),
@@ -245,36 +255,36 @@ class Explorer:
                 value = p.n_fine(st.n_motions)
                 hi = max(hi, 4 * st.n_motions)
                 w = pn.widgets.IntSlider(label=label, start=lo, end=hi, step=step, value=value,
-                                                 width=290)
+                                                 width=SIDE_W)
             elif typ is int:
                 w = pn.widgets.IntSlider(label=label, start=lo, end=max(hi, 2 * default),
-                                                 step=step, value=int(getattr(p, name)), width=290)
+                                                 step=step, value=int(getattr(p, name)), width=SIDE_W)
             else:
                 w = pn.widgets.FloatSlider(label=label, start=lo, end=max(hi, 2.0 * default)
                                                    if name != "rv_alpha" else hi, step=step,
-                                                   value=float(getattr(p, name)), width=290)
+                                                   value=float(getattr(p, name)), width=SIDE_W)
             w.param.watch(self._on_param, "value")
             self.w_params[name] = w
         self.w_seed = pn.widgets.IntSlider(label="seed (random stages)", start=0, end=99,
-                                                   value=st.seed, width=290)
+                                                   value=st.seed, width=SIDE_W)
         self.w_seed.param.watch(self._on_param, "value")
         self.w_motions = pn.widgets.IntInput(label="C — number of motions", start=1, value=st.n_motions,
                                              width=140)
         self.w_motions.param.watch(self._on_param, "value")
-        self.w_upload = pn.widgets.FileInput(accept=".mat,.npz", multiple=False, width=290)
+        self.w_upload = pn.widgets.FileInput(accept=".mat,.npz", multiple=False, width=SIDE_W)
         self.w_upload.param.watch(self._on_upload, "value")
         self.w_reset = pn.widgets.Button(label="Reset parameters to defaults", color="warning",
-                                         width=290)
+                                         width=SIDE_W)
         self.w_reset.on_click(self._on_reset)
         self.w_dl_csv = pn.widgets.FileDownload(callback=self._export_csv, filename="labels.csv",
                                                 label="Labels (CSV)", color="primary",
-                                                embed=False, width=290)
+                                                embed=False, width=SIDE_W)
         self.w_dl_json = pn.widgets.FileDownload(callback=self._export_json, filename="params.json",
                                                  label="Parameters (JSON)", color="primary",
-                                                 embed=False, width=290)
+                                                 embed=False, width=SIDE_W)
         self.w_dl_png = pn.widgets.FileDownload(callback=self._export_png, filename="views.png",
                                                 label="Views (PNG)", color="primary",
-                                                embed=False, width=290)
+                                                embed=False, width=SIDE_W)
         self.w_step = pn.widgets.IntSlider(label="GAEC contraction step (rightmost = final fine models)",
                                            start=0, end=1, value=1, width=520)
         self.w_pair_j = pn.widgets.Select(label="epipolar check: j", options=["f1"], width=105)
@@ -364,8 +374,8 @@ class Explorer:
         self.src_epi_l = ColumnDataSource(dict(empty_p))
         self.src_epi_r = ColumnDataSource(dict(empty_p))
         self.src_epi_lines = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": []})
-        self.fig_epi_l = _image_figure("frame l", 230, ext, toolbar_location=None, tools="")
-        self.fig_epi_r = _image_figure("frame r with epipolar lines", 230, ext, toolbar_location=None,
+        self.fig_epi_l = _image_figure("frame l", 200, ext, toolbar_location=None, tools="")
+        self.fig_epi_r = _image_figure("frame r with epipolar lines", 200, ext, toolbar_location=None,
                                        tools="")
         self.fig_epi_r.x_range = self.fig_epi_l.x_range
         self.fig_epi_r.y_range = self.fig_epi_l.y_range
@@ -387,9 +397,9 @@ class Explorer:
         empty_rv = {"iteration": [], "changed": [], "changed_plot": [], "margin": []}
         self.src_rv_laav = ColumnDataSource(dict(empty_rv))
         self.src_rv_plain = ColumnDataSource(dict(empty_rv))
-        self.fig_rv_changed = figure(title="Labels changed per iteration", width=520, height=235,
+        self.fig_rv_changed = figure(title="Labels changed per iteration", width=440, height=235,
                                      y_axis_type="log", tools=_RV_TOOLS, toolbar_location="above")
-        self.fig_rv_margin = figure(title="Mean vote margin per iteration", width=520, height=235,
+        self.fig_rv_margin = figure(title="Mean vote margin per iteration", width=440, height=235,
                                     tools=_RV_TOOLS, toolbar_location="above")
         for fig, col, ylab in ((self.fig_rv_changed, "changed_plot", "labels changed (0 drawn as ½)"),
                                (self.fig_rv_margin, "margin", "(best − 2nd best) / sum of votes")):
@@ -424,25 +434,28 @@ class Explorer:
         self.note = pn.pane.Alert("", alert_type="info", visible=False, sizing_mode="stretch_width",
                                   margin=(4, 6))
         self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6))
-        self.status = pn.pane.Markdown("Computing the first result…", margin=(4, 6))
-        self.seq_info = pn.pane.Markdown(self._seq_text(seq), width=290, margin=(0, 10))
+        self.status = pn.pane.Markdown("Computing the first result…", margin=(4, 6),
+                                       sizing_mode="stretch_width")
+        self.seq_info = pn.pane.Markdown(self._seq_text(seq), width=SIDE_W, margin=(0, 10))
         self.numbers = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
-        self.graph_caption = pn.pane.Markdown("", width=520, margin=(0, 10))
+        self.graph_caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
         self.merge_md = pn.pane.Markdown("", width=250, margin=(0, 6))
-        self.epi_caption = pn.pane.Markdown("", width=500, margin=(0, 10))
-        self.rv_md = pn.pane.Markdown("", width=520, margin=(0, 10))
-        self.frame_caption = pn.pane.Markdown("", width=600, margin=(0, 10))
+        self.epi_caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=800, margin=(0, 10))
+        self.rv_md = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
+        self.frame_caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=900, margin=(0, 10))
         if self._want_viser:
             # the iframe is set with the first result: the 3-D client's WebGL loop then does not
             # compete with the first computation (it is costly in software-rendered browsers)
             self._iframe_shown = False
             self.viser_pane = pn.pane.HTML(
-                '<div style="width:550px;height:480px;border:1px solid #ccc;border-radius:4px;'
+                '<div style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
                 'display:flex;align-items:center;justify-content:center;color:#666">'
-                "The 3-D view opens with the first result…</div>", width=550, height=480, margin=0)
+                "The 3-D view opens with the first result…</div>", height=440, margin=0,
+                sizing_mode="stretch_width", max_width=900)
         else:
             msg = getattr(self, "_viser_error", "the 3-D view is switched off")
-            self.viser_pane = pn.pane.Markdown(f"*{V.md_text(msg)}*", width=600, height=80)
+            self.viser_pane = pn.pane.Markdown(f"*{V.md_text(msg)}*", sizing_mode="stretch_width",
+                                               height=60)
         self.sidebar = [
             pn.pane.Markdown("### Sequence", margin=(0, 10)), self.seq_info,
             pn.pane.Markdown("Open another sequence (Hopkins `*_truth.mat` or `.npz`):", margin=(0, 10)),
@@ -452,28 +465,29 @@ class Explorer:
             *self.w_params.values(), self.w_seed, self.w_reset,
             pn.pane.Markdown("### Export", margin=(0, 10)), self.w_dl_csv, self.w_dl_json, self.w_dl_png,
         ]
-        self.v_frame = _card("1 · Frame view: points, trails and atoms",
+        # cards in the order of the stages; each lays its parts out in a wrapping FlexBox, so
+        # they sit side by side on a wide screen and stack on a projector (1024 px)
+        self.v_frame = _card("1 · Atoms: points, trails and atoms in one frame",
                              pn.pane.Bokeh(self.fig_frame), self.frame_caption)
-        self.v_viser = _card("6 · 3-D space-time view (viser): trajectories along the frame axis",
-                             self.viser_pane)
-        self.v_graph = _card("2 · Multicut graph of atoms (GAEC replay)", pn.pane.Bokeh(self.fig_graph),
-                             self.w_step, self.graph_caption)
+        self.v_viser = pn.Card(self.viser_pane, title="3-D space-time view (viser): trajectories along the "
+                               "frame axis, atoms and their graph", collapsible=True, collapsed=False,
+                               margin=(6, 6), sizing_mode="stretch_width")
+        self.v_graph = _card("2 · Multicut graph of atoms → fine models (GAEC replay)",
+                             pn.pane.Bokeh(self.fig_graph), self.w_step, self.graph_caption)
         self.v_coarse = _card(
-            "3 · Fine models merged into motions (fine-to-coarse)",
-            pn.Row(pn.pane.Bokeh(self.fig_z), self.merge_md,
-                   pn.Column(pn.Row(self.w_pair_j, self.w_pair_k),
-                             pn.Row(pn.pane.Bokeh(self.fig_epi_l), pn.pane.Bokeh(self.fig_epi_r)),
-                             self.epi_caption)),
-            sizing_mode="stretch_width")
-        self.v_rv = _card("4 · Random Voting convergence: LAAV fine-tuning vs plain RV",
-                          pn.pane.Bokeh(self.fig_rv_changed), pn.pane.Bokeh(self.fig_rv_margin),
+            "3 · Fine-to-coarse: fine models merged into motions",
+            _flex(pn.pane.Bokeh(self.fig_z), self.merge_md,
+                  pn.Column(pn.Row(self.w_pair_j, self.w_pair_k),
+                            _flex(pn.pane.Bokeh(self.fig_epi_l), pn.pane.Bokeh(self.fig_epi_r)),
+                            self.epi_caption, max_width=580, sizing_mode="stretch_width")))
+        self.v_rv = _card("4 · Fine-tuning (Random Voting): LAAV's start vs plain RV",
+                          _flex(pn.pane.Bokeh(self.fig_rv_changed), pn.pane.Bokeh(self.fig_rv_margin)),
                           self.rv_md)
-        self.v_numbers = _card("5 · Numbers: every stage against the ground truth", self.numbers,
-                               sizing_mode="stretch_width")
+        self.v_numbers = _card("5 · Final labels and numbers: every stage against the ground truth",
+                               self.numbers)
         self.main = [
-            pn.Row(self.spinner, self.status), self.alert, self.note,
-            pn.Row(self.v_frame, self.v_viser), self.v_numbers,
-            pn.Row(self.v_graph, self.v_rv), self.v_coarse,
+            pn.Row(self.spinner, self.status, sizing_mode="stretch_width"), self.alert, self.note,
+            self.v_frame, self.v_viser, self.v_graph, self.v_coarse, self.v_rv, self.v_numbers,
         ]
 
     def _iframe_html(self) -> str:
@@ -482,7 +496,8 @@ class Explorer:
             hdr = (pn.state.headers or {}).get("Host", "") if pn.state.curdoc else ""
             host = hdr.rsplit(":", 1)[0] if hdr else "127.0.0.1"
         return (f'<iframe src="http://{host}:{self.viser.port}/" title="LAAV 3-D view (viser)" '
-                f'style="width:550px;height:480px;border:1px solid #ccc;border-radius:4px"></iframe>')
+                'style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
+                'box-sizing:border-box"></iframe>')
 
     @staticmethod
     def _seq_text(seq: laav.Sequence) -> str:
@@ -493,11 +508,11 @@ class Explorer:
     def template(self, title: str = "LAAV explorer", lazy: bool | None = None):
         """The page (a BootstrapTemplate: loads all its resources from the server).
 
-        ``lazy`` (default: when served) sends the frame view, 3-D view and numbers first and
-        adds the lower views (graph, coarse merges, RV) once the page has loaded, so the page
-        appears sooner.
+        ``lazy`` (default: when served) sends the atoms and 3-D cards first and adds the
+        later stages' cards (graph, fine-to-coarse, RV, numbers) once the page has loaded, so
+        the page appears sooner.
         """
-        n_first = 5  # status, alert, note, frame + 3-D row, numbers
+        n_first = 5  # status, alert, note, atoms card, 3-D card
         if lazy is None:
             lazy = self._session_doc is not None
         main = pn.Column(*(self.main[:n_first] if lazy else self.main), sizing_mode="stretch_width")
@@ -505,15 +520,15 @@ class Explorer:
             rest = self.main[n_first:]
             pn.state.onload(lambda: main.extend(rest))
         self.main_column = main
-        # one root per area: every extra document root costs a full model walk on page load
+        # one root per area: every extra document root costs a full model walk on page load.
+        # The header's button folds the sidebar away.
         return pn.template.BootstrapTemplate(
-            title=f"{title} — Locally Affine Atom Voting, stage by stage",
-            sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
-            main=[main], sidebar_width=330, header_background="#2c4a66")
+            title=title, sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
+            main=[main], sidebar_width=SIDE_W + 35, header_background="#2c4a66")
 
     def panel(self) -> pn.viewable.Viewable:
         """The whole explorer as one panel layout (for notebooks)."""
-        return pn.Row(pn.Column(*self.sidebar, width=320), pn.Column(*self.main))
+        return pn.Row(pn.Column(*self.sidebar, width=SIDE_W + 30), pn.Column(*self.main, width=760))
 
     def _repr_mimebundle_(self, include=None, exclude=None):
         return self.panel()._repr_mimebundle_(include, exclude)

@@ -280,3 +280,119 @@ def test_hostile_names_are_shown_as_text(tmp_path):
             e.close()
     assert not dialogs, f"a payload ran: {dialogs}"
     assert np.all(np.isfinite(ex.result.labels))
+
+
+# the right edge of every element drawn on the page (shadow roots included), against the viewport
+JS_OVERFLOW = """() => {
+  const W = window.innerWidth;
+  const over = [];
+  let right = 0;
+  const walk = (root) => {
+    for (const el of root.querySelectorAll('*')) {
+      const r = el.getBoundingClientRect();
+      const st = getComputedStyle(el);
+      if (r.width > 0 && r.height > 0 && st.visibility !== 'hidden' && st.display !== 'none') {
+        right = Math.max(right, r.right);
+        if (r.right > W + 0.5) {
+          const name = `${el.tagName.toLowerCase()}.${String(el.className).slice(0, 40)}`;
+          over.push(`${name} right=${Math.round(r.right)}`);
+        }
+      }
+      if (el.shadowRoot) walk(el.shadowRoot);
+    }
+  };
+  walk(document);
+  return {width: W, right: Math.round(right), scrollWidth: document.scrollingElement.scrollWidth,
+          over: over.slice(0, 15), n_over: over.length};
+}"""
+
+# the titles of the page's cards, in document order
+JS_CARD_TITLES = """() => {
+  const out = [];
+  const walk = (root) => {
+    for (const el of root.querySelectorAll('*')) {
+      if (el.classList && el.classList.contains('card-title')) {
+        const h = (el.shadowRoot || el).querySelector('h3');
+        out.push((h ? h.textContent : el.textContent).trim());
+      }
+      if (el.shadowRoot) walk(el.shadowRoot);
+    }
+  };
+  walk(document);
+  return out;
+}"""
+
+
+def _settled(page, js: str, timeout: float = 30.0):
+    """``page.evaluate(js)`` once it gives the same value twice, 300 ms apart (layout done)."""
+    last = page.evaluate(js)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        page.wait_for_timeout(300)
+        now = page.evaluate(js)
+        if now == last:
+            return now
+        last = now
+    raise AssertionError("the page layout kept changing")
+
+
+def test_layout_fits_a_projector(tmp_path):
+    """At 1280x800 and 1024x768 nothing reaches past the right edge and nothing scrolls
+    sideways; the cards run in stage order; the 3-D card and the sidebar fold away."""
+    shots = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
+    shots.mkdir(parents=True, exist_ok=True)
+    seq = _sequence()
+    created: list = []
+    port = _free_port()
+    server = pn.serve({"/": app_factory(seq, None, created=created)}, port=port, address="127.0.0.1",
+                      websocket_origin=[f"127.0.0.1:{port}"], show=False, threaded=True, verbose=False)
+    try:
+        _wait_listening(port)
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
+            try:
+                for i, (w, h) in enumerate(((1280, 800), (1024, 768))):
+                    page = browser.new_page(viewport={"width": w, "height": h})
+                    page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+                    page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+                    ex = _wait_for(lambda i=i: created[i] if len(created) > i else None, 30, "the explorer")
+                    assert ex.wait(60)
+                    page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=30000)
+                    page.wait_for_function(f"({JS_CARD_TITLES})().length >= 6", timeout=30000)
+                    viser = _wait_for(lambda ex=ex: ex.viser, 60, "the 3-D view's server")
+                    page.frame_locator("iframe").locator("body").wait_for(timeout=60000)
+                    m = _settled(page, JS_OVERFLOW)
+                    page.screenshot(path=str(shots / f"layout_{w}x{h}.png"))
+                    assert m["width"] == w
+                    assert m["n_over"] == 0 and m["right"] <= w, f"{w}x{h}: cut off at the right: {m}"
+                    assert m["scrollWidth"] <= w, f"{w}x{h}: the page scrolls sideways: {m}"
+                    titles = page.evaluate(JS_CARD_TITLES)
+                    order = [t.split(" ·")[0] for t in titles if " · " in t]
+                    assert order == ["1", "2", "3", "4", "5"], titles
+                    assert [t.split(":")[0] for t in titles if " · " in t] == [
+                        "1 · Atoms", "2 · Multicut graph of atoms → fine models (GAEC replay)",
+                        "3 · Fine-to-coarse", "4 · Fine-tuning (Random Voting)",
+                        "5 · Final labels and numbers"]
+                    assert any(t.startswith("3-D") for t in titles)
+                    if i == 1:
+                        # the 3-D card folds away (and back)
+                        iframe = page.locator(f"iframe[src*=':{viser.port}/']")
+                        assert iframe.is_visible()
+                        page.locator(".card-header", has_text="3-D space-time view").first.click()
+                        iframe.wait_for(state="hidden", timeout=10000)
+                        _wait_for(lambda ex=ex: ex.v_viser.collapsed, 10, "the 3-D card to fold")
+                        # the sidebar folds away: the main area gets its width
+                        sidebar = page.locator("#sidebar")
+                        assert sidebar.is_visible()
+                        page.locator("#sidebar-toggle").click()
+                        sidebar.wait_for(state="hidden", timeout=10000)
+                        m2 = _settled(page, JS_OVERFLOW)
+                        assert m2["n_over"] == 0 and m2["scrollWidth"] <= w
+                        page.screenshot(path=str(shots / f"layout_{w}x{h}_folded.png"))
+                    page.close()
+            finally:
+                browser.close()
+    finally:
+        server.stop()
+        for e in created:
+            e.close()
