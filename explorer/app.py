@@ -60,7 +60,7 @@ _TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
 #: fits the main area at 1024 px (checked at 1024x768 and 1280x800 in the browser tests).
 SIDE_W = 265
 _RV_TOOLS = "pan,wheel_zoom,reset"
-_EMPTY_PTS = {"x": [], "y": [], "color": [], "label": [], "index": []}
+_EMPTY_PTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "index": []}
 
 
 def _card(title: str, *objs, **kw) -> pn.Card:
@@ -137,6 +137,7 @@ class Explorer:
         self.result: laav.LaavResult | None = None
         self.sequence: laav.Sequence = seq
         self._style = None
+        self._fine_colors = None
         self._shown_key = None
         self._plain: laav.Voting | None = None
         self._seq_shown: laav.Sequence | None = None
@@ -245,7 +246,7 @@ class Explorer:
                                          value="ground truth" if seq.labels is not None
                                          else "final (after Random Voting)", width=SIDE_W)
         self._layer_names = ["trails (last 5 frames)", "atom circles (R1 solid, R2 dashed)",
-                             "features in no atom (×)", "misclassified (red ring)"]
+                             "features in no atom (×)", "misclassified (black ring)"]
         self.w_layers = pn.widgets.CheckBoxGroup(options=self._layer_names, value=list(self._layer_names),
                                                  inline=False)
         self.w_params: dict = {}
@@ -313,12 +314,14 @@ class Explorer:
         self.r_r1 = f.circle("x", "y", radius="r1", source=self.src_atoms, fill_alpha=0.06,
                              fill_color="color", line_color="color", line_alpha=0.7, line_width=1.2,
                              legend_label="atom R1")
-        self.r_points = f.scatter("x", "y", source=self.src_points, size=6, fill_color="color",
-                                  line_color="color", legend_field="label")
+        # one colour and marker shape per motion (views.MOTION_COLORS / MOTION_MARKERS)
+        self.r_points = f.scatter("x", "y", source=self.src_points, size=7, fill_color="color",
+                                  marker="marker", line_color="#333333", line_width=0.4,
+                                  legend_field="label")
         self.r_unassigned = f.scatter("x", "y", source=self.src_unassigned, marker="x", size=7,
-                                      line_color="black", line_width=1.5, legend_label="in no atom")
-        self.r_errors = f.scatter("x", "y", source=self.src_errors, marker="circle", size=14,
-                                  fill_alpha=0, line_color=V.ERROR_RED, line_width=2,
+                                      line_color=V.NO_ATOM, line_width=1.5, legend_label="in no atom")
+        self.r_errors = f.scatter("x", "y", source=self.src_errors, marker="circle", size=15,
+                                  fill_alpha=0, line_color=V.ERROR_MARK, line_width=2.5,
                                   legend_label="misclassified")
         f.add_tools(HoverTool(renderers=[self.r_points], tooltips=[("point", "@index"), ("", "@label")]))
         self._move_legend(f)
@@ -403,9 +406,10 @@ class Explorer:
                                     tools=_RV_TOOLS, toolbar_location="above")
         for fig, col, ylab in ((self.fig_rv_changed, "changed_plot", "labels changed (0 drawn as ½)"),
                                (self.fig_rv_margin, "margin", "(best − 2nd best) / sum of votes")):
-            fig.line("iteration", col, source=self.src_rv_laav, line_width=2.5, color="#1f77b4",
+            # neutral greys: colours mean motions on this page
+            fig.line("iteration", col, source=self.src_rv_laav, line_width=2.5, color="#222222",
                      legend_label="LAAV fine-tuning")
-            fig.line("iteration", col, source=self.src_rv_plain, line_width=2, color="#ff7f0e",
+            fig.line("iteration", col, source=self.src_rv_plain, line_width=2, color="#8C8C8C",
                      line_dash="dashed", legend_label="plain RV (random start)")
             fig.xaxis.axis_label = "Random Voting iteration"
             fig.yaxis.axis_label = ylab
@@ -607,6 +611,7 @@ class Explorer:
                     self._set_sequence_widgets(seq, settings)
                 self.result, self.sequence = result, seq
                 self._style = V.point_style(seq, result, V.COLOR_MODES[self.w_color.value])
+                self._fine_colors = V.fine_colors(seq, result)
                 K = len(result.multicut.contractions)
                 at_end = self.w_step.value >= self.w_step.end
                 self.w_step.end = K + 1
@@ -712,7 +717,7 @@ class Explorer:
         self.frame_caption.object = (
             f"{res.atoms.n_atoms} atoms (R1 = {res.atoms.r1:g} px solid, R2 = {res.atoms.r2:g} px dashed, "
             f"drawn at their seeds); {np.asarray(res.atoms.unassigned).size} features in no atom (×); "
-            f"{int(self._style['misclassified'].sum())} points misclassified (red ring). "
+            f"{int(self._style['misclassified'].sum())} points misclassified (black ring). "
             "Click legend entries to hide them.")
 
     def _draw_graph(self) -> None:
@@ -720,7 +725,7 @@ class Explorer:
         if res is None:
             return
         f, step = int(self.w_frame.value), int(self.w_step.value)
-        d = V.graph_sources(res, f, step)
+        d = V.graph_sources(res, f, step, self._fine_colors)
         lim = V.cost_limit(res)
         self.cost_mapper.low, self.cost_mapper.high = -lim, lim
         self.src_nodes.data = d["nodes"]

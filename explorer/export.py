@@ -13,6 +13,10 @@ from . import views as V
 
 __all__ = ["labels_csv", "params_json", "views_png"]
 
+#: bokeh marker names (views.MOTION_MARKERS) -> matplotlib markers
+_MPL_MARKERS = {"circle": "o", "square": "s", "triangle": "^", "diamond": "D", "inverted_triangle": "v",
+                "hex": "h"}
+
 
 def labels_csv(seq: laav.Sequence, result: laav.LaavResult) -> str:
     return V.labels_table(seq, result)
@@ -51,11 +55,16 @@ def views_png(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: str
         ax.add_patch(Circle((x, y), r1, fill=False, lw=0.5, alpha=0.5, color="0.3"))
         ax.add_patch(Circle((x, y), r2, fill=False, lw=0.4, alpha=0.25, ls="--", color="0.3"))
     p = fs["points"]
-    ax.scatter(p["x"], p["y"], c=list(p["color"]), s=14, edgecolors="none")
+    labels = np.asarray(p["label"])
+    for lab in dict.fromkeys(labels.tolist()):  # one legend entry per label, in order
+        sel = labels == lab
+        mk = _MPL_MARKERS.get(str(np.asarray(p["marker"])[sel][0]), "o")
+        ax.scatter(np.asarray(p["x"])[sel], np.asarray(p["y"])[sel], c=list(np.asarray(p["color"])[sel]),
+                   marker=mk, s=16, edgecolors="#333333", linewidths=0.3, label=lab)
     u = fs["unassigned"]
-    ax.scatter(u["x"], u["y"], marker="x", c="k", s=22, lw=1, label="in no atom")
+    ax.scatter(u["x"], u["y"], marker="x", c=V.NO_ATOM, s=22, lw=1, label="in no atom")
     e = fs["errors"]
-    ax.scatter(e["x"], e["y"], facecolors="none", edgecolors=V.ERROR_RED, s=70, lw=1.5,
+    ax.scatter(e["x"], e["y"], facecolors="none", edgecolors=V.ERROR_MARK, s=80, lw=1.8,
                label="misclassified")
     ax.set(xlim=(x0, x1), ylim=(y1, y0), aspect="equal", xlabel="x (px)", ylabel="y (px, down)",
            title=f"{seq.name}: frame {frame}, coloured by {mode_name}")
@@ -64,7 +73,7 @@ def views_png(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: str
     ax = axs[0, 1]
     K = len(result.multicut.contractions)
     step = K + 1 if step is None else step
-    g = V.graph_sources(result, frame, step)
+    g = V.graph_sources(result, frame, step, V.fine_colors(seq, result))
     lim = V.cost_limit(result)
     from matplotlib import colormaps
     cmap = colormaps["RdBu"]
@@ -96,7 +105,8 @@ def views_png(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: str
     for vt, name, ls in ((result.voting, "LAAV fine-tuning", "-"), (plain, "plain RV", "--")):
         r = V.rv_sources(vt)
         if len(r["iteration"]):
-            ax.semilogy(r["iteration"], r["changed_plot"], ls, label=f"{name}: labels changed")
+            ax.semilogy(r["iteration"], r["changed_plot"], ls, color="#222222" if ls == "-" else "#8C8C8C",
+                        label=f"{name}: labels changed")
     ax.set(xlabel="iteration", ylabel="labels changed (0 drawn at 0.5)",
            title="Random Voting convergence")
     ax.legend(fontsize=8)

@@ -16,7 +16,8 @@ import laav
 from laav.geometry import epipolar_lines
 
 __all__ = [
-    "COLOR_MODES", "MOTION_COLORS", "FINE_COLORS", "UNLABELLED", "ERROR_RED",
+    "COLOR_MODES", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK",
+    "NO_ATOM", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "point_style", "frame_sources", "graph_sources", "replay_labels",
     "replay_caption", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
@@ -33,16 +34,26 @@ COLOR_MODES = {
     "errors": "errors",
 }
 
-#: One colour per motion (tab10 without its red: red marks errors).
-MOTION_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2",
-                 "#17becf", "#bcbd22", "#7f7f7f", "#393b79")
-#: Fine models and atoms (Category20 without reds).
-FINE_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf",
-               "#bcbd22", "#aec7e8", "#ffbb78", "#98df8a", "#c5b0d5", "#c49c94", "#f7b6d2",
-               "#9edae5", "#dbdb8d", "#7f7f7f", "#393b79")
-UNLABELLED = "#c7c7c7"
-ERROR_RED = "#d62728"
-CORRECT = "#9ecae1"
+#: One colour per motion, everywhere (frame view, 3-D view, fine models as its shades): Okabe-Ito
+#: colours, the subset and order whose pairs stay apart under simulated deuteranopia (CIE Lab
+#: ΔE >= 24.9 after Machado et al. 2009, severity 1; tests/test_explorer.py checks it).
+#: Motions beyond five repeat a colour with another marker shape.
+MOTION_COLORS = ("#0072B2", "#D55E00", "#009E73", "#F0E442", "#56B4E9")
+#: One marker shape per motion (bokeh marker names), so motions differ by more than colour.
+MOTION_MARKERS = ("circle", "square", "triangle", "diamond", "inverted_triangle", "hex")
+#: Atoms (the "atoms" colour mode only: an atom is no motion) cycle through these greys and
+#: muted tones, never a motion colour.
+ATOM_COLORS = ("#4D4D4D", "#8C8C8C", "#B07AA1", "#9C755F", "#76B7B2", "#BAB0AC", "#D4A6C8",
+               "#86BCB6", "#A0CBE8", "#6F6F6F")
+#: Shades of a motion colour for the fine models that joined it: >0 mixes in white, <0 black.
+FINE_SHADES = (0.0, 0.5, -0.45, 0.72, -0.65, 0.28, -0.25, 0.85)
+UNLABELLED = "#C7C7C7"
+#: Misclassified points are ringed in black (not red: a red ring vanishes on green points
+#: for deuteranopes; black stays apart from every motion colour, ΔE >= 56 simulated).
+ERROR_MARK = "#000000"
+CORRECT = "#BBBBBB"
+#: Features in no atom: a dark grey cross.
+NO_ATOM = "#555555"
 
 
 _MD_PUNCT = re.compile(r"([!-/:-@\[-`{-~])")  # every ASCII punctuation character
@@ -76,6 +87,35 @@ def _palette(labels: np.ndarray, palette) -> np.ndarray:
     ok = labels >= 0
     out[ok] = pal[labels[ok] % pal.size]
     return out
+
+
+def motion_color(m: int) -> str:
+    """Colour of (0-based) motion ``m``."""
+    return MOTION_COLORS[int(m) % len(MOTION_COLORS)]
+
+
+def motion_marker(m: int) -> str:
+    """Marker shape of (0-based) motion ``m``."""
+    return MOTION_MARKERS[int(m) % len(MOTION_MARKERS)]
+
+
+def shade(color: str, t: float) -> str:
+    """``color`` mixed with white (``t`` > 0) or black (``t`` < 0) by ``|t|``."""
+    rgb = hex_to_rgb([color])[0].astype(float)
+    target = 255.0 if t > 0 else 0.0
+    out = np.clip(np.round(rgb + abs(t) * (target - rgb)), 0, 255).astype(int)
+    return "#{:02X}{:02X}{:02X}".format(*out)
+
+
+def _motion_palette(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Colours and markers of motion labels (-1: unlabelled grey circle)."""
+    labels = np.asarray(labels, dtype=np.int64)
+    col = np.full(labels.shape, UNLABELLED, dtype="U7")
+    mk = np.full(labels.shape, "circle", dtype=object)
+    ok = labels >= 0
+    col[ok] = np.asarray(MOTION_COLORS, dtype="U7")[labels[ok] % len(MOTION_COLORS)]
+    mk[ok] = np.asarray(MOTION_MARKERS, dtype=object)[labels[ok] % len(MOTION_MARKERS)]
+    return col, mk
 
 
 def align_labels(pred: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
@@ -114,26 +154,58 @@ def _aligned(seq: laav.Sequence, result: laav.LaavResult) -> dict:
     return {"gt": gt, "coarse": coarse, "final": final}
 
 
+def fine_motions(seq: laav.Sequence, result: laav.LaavResult) -> np.ndarray:
+    """The (0-based) motion each fine model joined, numbered like the coarse colours
+    (the coarse labels aligned with the ground truth)."""
+    f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
+    if f2c.size == 0:
+        return f2c
+    coarse_al = _aligned(seq, result)["coarse"]
+    raw = np.asarray(result.coarse.point_labels)
+    ren = {}
+    for m in np.unique(raw[raw >= 0]).tolist():
+        ren[m] = int(np.bincount(coarse_al[raw == m]).argmax())
+    return np.array([ren.get(int(m), int(m)) for m in f2c.tolist()], dtype=np.int64)
+
+
+def fine_colors(seq: laav.Sequence, result: laav.LaavResult) -> np.ndarray:
+    """Colour of each fine model: a shade of the colour of the motion it joined (the first
+    fine model of a motion gets the motion's own colour, the next ones lighter / darker)."""
+    mot = fine_motions(seq, result)
+    out = np.empty(mot.size, dtype="U7")
+    seen: dict = {}
+    for j, m in enumerate(mot.tolist()):
+        r = seen.get(m, 0)
+        seen[m] = r + 1
+        out[j] = shade(motion_color(m), FINE_SHADES[r % len(FINE_SHADES)])
+    return out
+
+
 def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str) -> dict:
-    """Colour and legend label of every point for a colour-by ``mode`` (see COLOR_MODES).
+    """Colour, marker and legend label of every point for a colour-by ``mode`` (see COLOR_MODES).
+
+    Motions have one colour and marker shape each (:data:`MOTION_COLORS`,
+    :data:`MOTION_MARKERS`) in every mode; a fine model is drawn as a shade of the motion
+    it joined, with that motion's marker.
 
     Returns
     -------
-    dict with ``color`` (P,) hex strings, ``label`` (P,) legend strings, ``misclassified``
-    (P,) bool (all False without ground truth), ``note`` (str, empty unless the mode
-    cannot be shown).
+    dict with ``color`` (P,) hex strings, ``marker`` (P,) bokeh marker names, ``label`` (P,)
+    legend strings, ``misclassified`` (P,) bool (all False without ground truth), ``note``
+    (str, empty unless the mode cannot be shown).
     """
     P = seq.n_points
     al = _aligned(seq, result)
     gt = al["gt"]
     wrong = np.zeros(P, dtype=bool) if gt is None else al["final"] != gt
     note = ""
+    marker = np.full(P, "circle", dtype=object)
     if mode in ("gt", "errors") and gt is None:
         note = "this sequence has no ground truth: showing the final labels"
         mode = "final"
     if mode == "gt":
         lab = gt
-        color = _palette(lab, MOTION_COLORS)
+        color, marker = _motion_palette(lab)
         label = np.char.add("motion ", (lab + 1).astype("U3"))
     elif mode == "atoms":
         owner = np.asarray(result.atoms.owner)
@@ -142,23 +214,30 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str) -> dict:
         for i, m in enumerate(result.atoms.members):
             sel = m[first[m] < 0]
             first[sel] = i
-        color = _palette(first, FINE_COLORS)
+        color = _palette(first, ATOM_COLORS)
         label = np.where(first >= 0, "in an atom (colour = atom)", "in no atom")
     elif mode == "fine":
-        lab = np.asarray(result.coarse.fine_point_labels)
-        color = _palette(lab, FINE_COLORS)
-        label = np.where(lab >= 0, np.char.add("fine model ", (lab + 1).astype("U3")), "in no atom")
+        lab = np.asarray(result.coarse.fine_point_labels, dtype=np.int64)
+        fc, mot = fine_colors(seq, result), fine_motions(seq, result)
+        ok = lab >= 0
+        joined = np.full(P, -1, dtype=np.int64)
+        joined[ok] = mot[lab[ok]]
+        color = np.full(P, UNLABELLED, dtype="U7")
+        color[ok] = fc[lab[ok]]
+        _, marker = _motion_palette(joined)
+        label = np.array([f"fine model {f + 1} → motion {m + 1}" if f >= 0 else "in no atom"
+                          for f, m in zip(lab.tolist(), joined.tolist())], dtype=object)
     elif mode in ("coarse", "final"):
         lab = al[mode]
-        color = _palette(lab, MOTION_COLORS)
+        color, marker = _motion_palette(lab)
         label = np.where(lab >= 0, np.char.add("motion ", (lab + 1).astype("U3")), "in no atom")
     elif mode == "errors":
-        color = np.where(wrong, ERROR_RED, CORRECT).astype("U7")
+        color = np.where(wrong, ERROR_MARK, CORRECT).astype("U7")
         label = np.where(wrong, "misclassified", "correct")
     else:
         raise ValueError(f"unknown colour mode {mode!r}")
-    return {"color": np.asarray(color, dtype="U7"), "label": np.asarray(label).astype(str),
-            "misclassified": wrong, "note": note}
+    return {"color": np.asarray(color, dtype="U7"), "marker": np.asarray(marker, dtype=object),
+            "label": np.asarray(label).astype(str), "misclassified": wrong, "note": note}
 
 
 def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style: dict,
@@ -176,8 +255,10 @@ def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style
     color = style["color"]
     # points in label order, so the legend lists "motion 1, motion 2, ..." in order
     order = np.argsort(style["label"], kind="stable")
+    marker = style.get("marker")
+    marker = np.full(color.shape, "circle", dtype=object) if marker is None else marker
     out = {"points": {"x": xy[order, 0], "y": xy[order, 1], "color": color[order],
-                      "label": style["label"][order], "index": order}}
+                      "marker": marker[order], "label": style["label"][order], "index": order}}
     f0 = max(0, f - trail)
     if f > f0:
         seg = pts[f0:f + 1]  # (t+1, P, 2)
@@ -206,6 +287,26 @@ def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style
 
 
 # ---------------------------------------------------------------------- multicut graph
+def replay_roots(result: laav.LaavResult, step: int) -> np.ndarray:
+    """The cluster of each atom after the first ``step`` GAEC contractions, named by its
+    root: the atom that was kept at every contraction the cluster took part in."""
+    mc = result.multicut
+    n = result.graph.n_nodes
+    parent = np.arange(n)
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for kept, merged in np.asarray(mc.contractions[:step]).reshape(-1, 2).tolist():
+        a, b = find(kept), find(merged)
+        if a != b:
+            parent[b] = a
+    return np.array([find(i) for i in range(n)], dtype=np.int64)
+
+
 def replay_labels(result: laav.LaavResult, step: int) -> np.ndarray:
     """Cluster of each atom after replaying the first ``step`` GAEC contractions.
 
@@ -218,19 +319,7 @@ def replay_labels(result: laav.LaavResult, step: int) -> np.ndarray:
     K = len(mc.contractions)
     if step > K:
         return np.asarray(mc.atom_labels, dtype=np.int64)
-    parent = np.arange(n)
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for kept, merged in np.asarray(mc.contractions[:step]).tolist():
-        a, b = find(kept), find(merged)
-        if a != b:
-            parent[b] = a
-    roots = np.array([find(i) for i in range(n)], dtype=np.int64)
+    roots = replay_roots(result, step)
     if n == 0:
         return roots
     uniq, inv, counts = np.unique(roots, return_inverse=True, return_counts=True)
@@ -264,8 +353,12 @@ def cost_limit(result: laav.LaavResult) -> float:
     return float(max(np.percentile(c, 95), 1e-6))
 
 
-def graph_sources(result: laav.LaavResult, frame: int, step: int) -> dict:
+def graph_sources(result: laav.LaavResult, frame: int, step: int, colors=None) -> dict:
     """Data of the multicut graph view at ``frame`` after ``step`` GAEC contractions.
+
+    ``colors``: colour of each final fine model (:func:`fine_colors`). An atom is drawn in
+    the colour of its final fine model; a cluster during the replay in the colour of its
+    root atom's (:func:`replay_roots`): a contraction recolours only the merged cluster.
 
     Keys: ``nodes`` (x, y, color, cluster, atom, size, members), ``joined`` and ``cut``
     edges (x0, y0, x1, y1, cost, error), ``step_edge`` (the contraction of this step).
@@ -276,7 +369,12 @@ def graph_sources(result: laav.LaavResult, frame: int, step: int) -> dict:
     xy = pos[f] if pos.size else np.zeros((0, 2))
     lab = replay_labels(result, step)
     sizes = np.array([len(m) for m in result.atoms.members], dtype=float)
-    nodes = {"x": xy[:, 0], "y": xy[:, 1], "color": _palette(lab, FINE_COLORS), "cluster": lab + 1,
+    final = np.asarray(result.multicut.atom_labels, dtype=np.int64)
+    pal = np.asarray(colors if colors is not None and len(colors) else ATOM_COLORS, dtype="U7")
+    K0 = len(result.multicut.contractions)
+    owner = final if step > K0 else final[replay_roots(result, step)] if final.size else final
+    node_color = pal[owner % pal.size] if owner.size else np.zeros(0, "U7")
+    nodes = {"x": xy[:, 0], "y": xy[:, 1], "color": node_color, "cluster": lab + 1,
              "atom": np.arange(g.n_nodes), "members": sizes.astype(int),
              "size": 7 + 2.0 * np.sqrt(sizes)}
     E = np.asarray(g.edges, dtype=np.int64).reshape(-1, 2)
@@ -314,13 +412,7 @@ def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None) -> tupl
     n = Z.shape[0]
     f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
     if seq is not None and n:
-        # name motions like the aligned coarse labels
-        coarse_al = _aligned(seq, result)["coarse"]
-        raw = np.asarray(result.coarse.point_labels)
-        ren = {}
-        for m in np.unique(raw[raw >= 0]).tolist():
-            ren[m] = int(np.bincount(coarse_al[raw == m]).argmax())
-        f2c = np.array([ren.get(int(m), int(m)) for m in f2c.tolist()], dtype=np.int64)
+        f2c = fine_motions(seq, result)  # name motions like the aligned coarse labels
     factors = [f"f{j + 1}→M{int(m) + 1}" for j, m in enumerate(f2c.tolist())]
     jj, kk = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     jj, kk = jj.ravel(), kk.ravel()
@@ -394,8 +486,9 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     blank["frames"] = (fl, fr)
     fine = np.asarray(co.fine_point_labels)
     idx = np.flatnonzero((fine == j) | (fine == k))
-    cols = np.where(fine[idx] == j, FINE_COLORS[j % len(FINE_COLORS)],
-                    FINE_COLORS[k % len(FINE_COLORS)]).astype("U7")
+    fc = fine_colors(seq, result)
+    cj, ck = fc[j], fc[k]
+    cols = np.where(fine[idx] == j, cj, ck).astype("U7")
     model = np.where(fine[idx] == j, f"fine model f{j + 1}", f"fine model f{k + 1}").astype(object)
     pts = seq.points
     left = {"x": pts[fl, idx, 0], "y": pts[fl, idx, 1], "color": cols, "model": model}
@@ -417,8 +510,7 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     ext = seq.extent()
     X0, Y0, X1, Y1 = _clip_lines(lines, ext)
     resid = np.abs(lines[:, 0] * pts[fr, sel, 0] + lines[:, 1] * pts[fr, sel, 1] + lines[:, 2])
-    lc = np.where(fine[sel] == j, FINE_COLORS[j % len(FINE_COLORS)],
-                  FINE_COLORS[k % len(FINE_COLORS)]).astype("U7")
+    lc = np.where(fine[sel] == j, cj, ck).astype("U7")
     out["lines"] = {"x0": X0, "y0": Y0, "x1": X1, "y1": Y1, "color": lc}
     out["residual"] = float(resid.mean()) if resid.size else float("nan")
     in_j = fine[sel] == j

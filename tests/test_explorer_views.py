@@ -1,0 +1,125 @@
+"""The explorer's GUI-free parts: colours, what changed between results, the page URL state.
+
+No browser and no panel server: pure functions of results (``explorer.views``) and the
+session state (``explorer.state``).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import laav
+from explorer import views as V
+from explorer.demo import demo_sequence
+
+# Machado, Oliveira & Fernandes (2009), deuteranopia at severity 1.0, on linear RGB
+DEUTERANOPIA = np.array([[0.367322, 0.860646, -0.227968],
+                         [0.280085, 0.672501, 0.047413],
+                         [-0.011820, 0.042940, 0.968881]])
+#: CIE76 ΔE every pair must exceed (about 10 just-noticeable differences; "clearly different")
+MIN_DELTA_E = 20.0
+
+
+def _linear(hex_colors) -> np.ndarray:
+    c = V.hex_to_rgb(hex_colors).astype(float) / 255
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _lab(linear_rgb: np.ndarray) -> np.ndarray:
+    """Linear sRGB -> CIE L*a*b* (D65)."""
+    m = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
+    xyz = linear_rgb @ m.T / np.array([0.95047, 1.0, 1.08883])
+    d = 6 / 29
+    f = np.where(xyz > d ** 3, np.cbrt(xyz), xyz / (3 * d ** 2) + 4 / 29)
+    return np.stack([116 * f[:, 1] - 16, 500 * (f[:, 0] - f[:, 1]), 200 * (f[:, 1] - f[:, 2])], axis=1)
+
+
+def _lab_deuteranope(hex_colors) -> np.ndarray:
+    return _lab(np.clip(_linear(hex_colors) @ DEUTERANOPIA.T, 0, 1))
+
+
+def test_simulation_is_the_standard_one():
+    # white and black stay; pure red and pure green become nearly the same colour
+    lab = _lab_deuteranope(["#FFFFFF", "#000000", "#FF0000", "#00FF00"])
+    assert lab[0, 0] == pytest.approx(100, abs=0.5) and lab[1, 0] == pytest.approx(0, abs=0.5)
+    normal = _lab(_linear(["#FF0000", "#00FF00"]))
+    assert np.linalg.norm(normal[0] - normal[1]) > 150
+    # the old red error ring on the old green motion: 170 apart normally, far less for a deuteranope
+    old = _lab_deuteranope(["#d62728", "#2ca02c"])
+    assert np.linalg.norm(old[0] - old[1]) < 40
+
+
+def test_motion_colours_and_error_marks_stay_apart_under_deuteranopia():
+    lab = _lab_deuteranope(V.MOTION_COLORS)
+    pairs = {(a, b): float(np.linalg.norm(lab[i] - lab[j]))
+             for (i, a), (j, b) in itertools.combinations(enumerate(V.MOTION_COLORS), 2)}
+    assert min(pairs.values()) > MIN_DELTA_E, pairs
+    err = _lab_deuteranope([V.ERROR_MARK])[0]
+    to_err = {c: float(np.linalg.norm(err - lab[i])) for i, c in enumerate(V.MOTION_COLORS)}
+    assert min(to_err.values()) > MIN_DELTA_E, to_err
+    # and with normal vision
+    norm = _lab(_linear(list(V.MOTION_COLORS) + [V.ERROR_MARK]))
+    for i, j in itertools.combinations(range(len(norm)), 2):
+        assert np.linalg.norm(norm[i] - norm[j]) > MIN_DELTA_E
+    # motion colours are Okabe-Ito colours; atoms never borrow one
+    okabe_ito = {"#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "#CC79A7", "#000000"}
+    assert set(V.MOTION_COLORS) <= okabe_ito
+    assert not set(V.ATOM_COLORS) & set(V.MOTION_COLORS)
+    # one marker shape per motion, and (colour, shape) unique for many more motions than C ever is
+    assert len(set(V.MOTION_MARKERS)) == len(V.MOTION_MARKERS)
+    combos = {(V.motion_color(m), V.motion_marker(m)) for m in range(30)}
+    assert len(combos) == 30
+
+
+@pytest.fixture(scope="module")
+def demo():
+    seq = demo_sequence()
+    return seq, laav.Pipeline(seq, 3).result
+
+
+def test_every_view_gives_a_motion_one_colour_and_shape(demo):
+    seq, res = demo
+    gt = V.point_style(seq, res, "gt")
+    for m in range(3):
+        sel = seq.labels == m
+        assert set(gt["color"][sel].tolist()) == {V.motion_color(m)}
+        assert set(gt["marker"][sel].tolist()) == {V.motion_marker(m)}
+    final = V.point_style(seq, res, "final")
+    fl = V.align_labels(res.labels, seq.labels)
+    for m in np.unique(fl).tolist():
+        assert set(final["color"][fl == m].tolist()) == {V.motion_color(m)}
+        assert set(final["marker"][fl == m].tolist()) == {V.motion_marker(m)}
+    fs = V.frame_sources(seq, res, 3, final)
+    assert len(fs["points"]["marker"]) == seq.n_points
+
+
+def test_fine_models_are_shades_of_the_motion_they_joined(demo):
+    seq, res = demo
+    mot = V.fine_motions(seq, res)
+    fc = V.fine_colors(seq, res)
+    assert mot.size == fc.size == res.multicut.n_models
+    for m in np.unique(mot).tolist():
+        shades = fc[mot == m].tolist()
+        assert len(set(shades)) == len(shades), "two fine models of one motion look the same"
+        assert shades[0] == V.motion_color(m)  # the first is the motion's own colour
+        allowed = {V.shade(V.motion_color(m), t) for t in V.FINE_SHADES}
+        assert set(shades) <= allowed
+    # the merge table / Z axis name the same motion the colours say
+    _, factors = V.z_sources(res, seq)
+    assert [int(f.split("→M")[1]) - 1 for f in factors] == mot.tolist()
+    # points coloured by fine model: colour of their model, marker of its motion
+    st = V.point_style(seq, res, "fine")
+    lab = np.asarray(res.coarse.fine_point_labels)
+    ok = lab >= 0
+    assert np.array_equal(st["color"][ok], fc[lab[ok]])
+    assert [V.motion_marker(m) for m in mot[lab[ok]]] == st["marker"][ok].tolist()
+    assert set(st["color"][~ok].tolist()) <= {V.UNLABELLED}
+    # the graph's atoms at the final step: the colour of their fine model
+    g = V.graph_sources(res, 0, len(res.multicut.contractions) + 1, fc)
+    assert np.array_equal(g["nodes"]["color"], fc[np.asarray(res.multicut.atom_labels)])
+    # the epipolar panel: its two models in their colours
+    e = V.epipolar_sources(seq, res, 0, 1)
+    assert set(e["left"]["color"].tolist()) <= {fc[0], fc[1]}
