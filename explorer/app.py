@@ -41,7 +41,7 @@ from laav import LaavParams
 
 from . import export
 from . import views as V
-from .state import ExplorerState
+from .state import ExplorerState, non_defaults
 
 __all__ = ["Explorer", "PARAM_SLIDERS"]
 
@@ -138,6 +138,8 @@ class Explorer:
         self.sequence: laav.Sequence = seq
         self._style = None
         self._fine_colors = None
+        self._moved = None
+        self.change = None
         self._shown_key = None
         self._plain: laav.Voting | None = None
         self._seq_shown: laav.Sequence | None = None
@@ -246,7 +248,8 @@ class Explorer:
                                          value="ground truth" if seq.labels is not None
                                          else "final (after Random Voting)", width=SIDE_W)
         self._layer_names = ["trails (last 5 frames)", "atom circles (R1 solid, R2 dashed)",
-                             "features in no atom (×)", "misclassified (black ring)"]
+                             "features in no atom (×)", "misclassified (black ring)",
+                             "changed motion in the last recompute (purple ring)"]
         self.w_layers = pn.widgets.CheckBoxGroup(options=self._layer_names, value=list(self._layer_names),
                                                  inline=False)
         self.w_params: dict = {}
@@ -306,6 +309,7 @@ class Explorer:
         self.src_atoms = ColumnDataSource({"x": [], "y": [], "r1": [], "r2": [], "color": [], "atom": []})
         self.src_unassigned = ColumnDataSource({"x": [], "y": []})
         self.src_errors = ColumnDataSource({"x": [], "y": []})
+        self.src_changed = ColumnDataSource({"x": [], "y": []})
         f = self.fig_frame = _image_figure("Points at frame 0", 410, ext)
         self.r_trails = f.segment("x0", "y0", "x1", "y1", source=self.src_trails, line_color="color",
                                   line_alpha="alpha", line_width=1.5)
@@ -320,6 +324,9 @@ class Explorer:
                                   legend_field="label")
         self.r_unassigned = f.scatter("x", "y", source=self.src_unassigned, marker="x", size=7,
                                       line_color=V.NO_ATOM, line_width=1.5, legend_label="in no atom")
+        self.r_changed = f.scatter("x", "y", source=self.src_changed, marker="circle", size=21,
+                                   fill_alpha=0, line_color=V.CHANGED_MARK, line_width=2.5,
+                                   legend_label="changed motion")
         self.r_errors = f.scatter("x", "y", source=self.src_errors, marker="circle", size=15,
                                   fill_alpha=0, line_color=V.ERROR_MARK, line_width=2.5,
                                   legend_label="misclassified")
@@ -328,6 +335,7 @@ class Explorer:
         items = {getattr(it.label, "value", None): it for it in f.legend[0].items}
         self._item_unassigned = items.get("in no atom")
         self._item_errors = items.get("misclassified")
+        self._item_changed = items.get("changed motion")
 
         # 2 multicut graph
         # RdBu11 runs blue -> red; cost > 0 (join) is blue
@@ -440,6 +448,7 @@ class Explorer:
         self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6))
         self.status = pn.pane.Markdown("Computing the first result…", margin=(4, 6),
                                        sizing_mode="stretch_width")
+        self.change_md = pn.pane.Markdown("", margin=(0, 10), visible=False, sizing_mode="stretch_width")
         self.seq_info = pn.pane.Markdown(self._seq_text(seq), width=SIDE_W, margin=(0, 10))
         self.numbers = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.graph_caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
@@ -490,7 +499,8 @@ class Explorer:
         self.v_numbers = _card("5 · Final labels and numbers: every stage against the ground truth",
                                self.numbers)
         self.main = [
-            pn.Row(self.spinner, self.status, sizing_mode="stretch_width"), self.alert, self.note,
+            pn.Column(pn.Row(self.spinner, self.status, sizing_mode="stretch_width"), self.change_md,
+                      sizing_mode="stretch_width"), self.alert, self.note,
             self.v_frame, self.v_viser, self.v_graph, self.v_coarse, self.v_rv, self.v_numbers,
         ]
 
@@ -610,6 +620,8 @@ class Explorer:
                 if new_seq:
                     self._set_sequence_widgets(seq, settings)
                 self.result, self.sequence = result, seq
+                self.change = self.state.change_of(result) if not new_seq else None
+                self._moved = None if self.change is None else self.change.moved
                 self._style = V.point_style(seq, result, V.COLOR_MODES[self.w_color.value])
                 self._fine_colors = V.fine_colors(seq, result)
                 K = len(result.multicut.contractions)
@@ -638,10 +650,15 @@ class Explorer:
                 self.note.visible = bool(notes)
                 ef = num["error_final"]
                 err = "" if ef is None else f" — final error **{100 * ef:.1f} %**"
-                self.status.object = (f"Showing {V.md_text(seq.name)} with R1 = {settings.params.r1:g}, "
-                                      f"R2 = {settings.params.r2:g}, λ = {settings.params.lam:g}, "
-                                      f"2C = {result.multicut.n_models}, seed {settings.seed}{err} "
-                                      f"(computed in {1000 * self.state.compute_seconds:.0f} ms).")
+                changed = non_defaults(settings, self.state.default_motions(seq))
+                self.status.object = (
+                    f"Showing {V.md_text(seq.name)}{err} (computed in "
+                    f"{1000 * self.state.compute_seconds:.0f} ms). "
+                    + (f"Not at the defaults: {V.md_text(', '.join(changed))}." if changed
+                       else "All settings at their defaults."))
+                self.change_md.object = ("" if self.change is None else
+                                         f"**What changed:** {V.md_text(self.change.text())}")
+                self.change_md.visible = self.change is not None
                 if self._want_viser and not self._iframe_shown:
                     self._wait_viser(5.0)  # normally done long before; else _show_viser follows
                     self._show_viser(send=False)
@@ -701,16 +718,20 @@ class Explorer:
         if res is None:
             return
         f = int(self.w_frame.value)
-        d = V.frame_sources(seq, res, f, self._style)
+        d = V.frame_sources(seq, res, f, self._style, moved=self._moved)
         self.src_points.data = d["points"]
         self.src_trails.data = d["trails"]
         self.src_atoms.data = d["atoms"]
         self.src_unassigned.data = d["unassigned"]
         self.src_errors.data = d["errors"]
+        self.src_changed.data = d["changed"]
         self.fig_frame.title.text = f"frame {f} of {seq.n_frames - 1} · colour: {self.w_color.value}"
         n_un, n_bad = len(d["unassigned"]["x"]), len(d["errors"]["x"])
         if self._item_unassigned is not None:
             self._item_unassigned.label = value(f"in no atom: {n_un}")
+        if self._item_changed is not None:
+            n_mv = len(d["changed"]["x"])
+            self._item_changed.label = value(f"changed motion: {n_mv}")
         if self._item_errors is not None:
             self._item_errors.label = value(f"misclassified: {n_bad}" if seq.labels is not None
                                             else "misclassified: (no truth)")
@@ -884,6 +905,7 @@ class Explorer:
         self.r_r1.visible = self.r_r2.visible = names[1] in on
         self.r_unassigned.visible = names[2] in on
         self.r_errors.visible = names[3] in on
+        self.r_changed.visible = names[4] in on
 
     def _on_step(self, event=None) -> None:
         self._schedule(self._step_now, now_if_on_doc_thread=True)

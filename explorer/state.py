@@ -27,10 +27,15 @@ from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 
+import numpy as np
+
 import laav
 from laav import LaavParams, LaavResult, Pipeline, Sequence
 
-__all__ = ["ExplorerState", "Settings", "RV_FIELDS"]
+from .views import align_labels, stage_numbers
+
+__all__ = ["ExplorerState", "Settings", "RV_FIELDS", "Change", "describe_change", "non_defaults",
+           "PARAM_NAMES"]
 
 #: The parameters plain Random Voting depends on (its cache key).
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_"))
@@ -48,6 +53,82 @@ class Settings:
         """Keyword arguments for :meth:`laav.Pipeline.update` (the full settings: the
         pipeline works out itself which stages they touch)."""
         return {**self.params.to_dict(), "seed": self.seed, "n_motions": self.n_motions}
+
+
+#: Short names the page uses for parameters (status line, "what changed"); every other
+#: parameter goes by its LaavParams field name (the URL and params.json keys).
+PARAM_NAMES = {"r1": "R1", "r2": "R2", "lam": "λ", "fine_models": "2C", "rv_alpha": "α",
+               "rv_max_iter": "iteration cap", "seed": "seed", "n_motions": "C"}
+
+
+def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return "on" if v else "off"
+    if isinstance(v, float):
+        return f"{v:g}"
+    return str(v)
+
+
+def _values(settings: Settings) -> dict:
+    """Every setting by name, as shown: fine_models as the number of fine models used."""
+    d = settings.params.to_dict()
+    d["fine_models"] = settings.params.n_fine(settings.n_motions)
+    d["seed"], d["n_motions"] = settings.seed, settings.n_motions
+    return d
+
+
+def non_defaults(settings: Settings, default_motions: int | None) -> list[str]:
+    """``name = value`` for every setting that differs from the defaults (the LaavParams
+    defaults, seed 0, C of the ground truth, 2C fine models)."""
+    default = _values(Settings(LaavParams(), 0, settings.n_motions if default_motions is None
+                               else default_motions))
+    default["fine_models"] = 2 * settings.n_motions  # "2C" follows the C in use
+    now = _values(settings)
+    return [f"{PARAM_NAMES.get(k, k)} = {_fmt(v)}" for k, v in now.items() if v != default[k]]
+
+
+@dataclasses.dataclass(frozen=True)
+class Change:
+    """What one recompute changed against the result shown before it (same sequence).
+
+    Attributes
+    ----------
+    settings : tuple of (name, old, new)
+        The settings that changed (short names, see :data:`PARAM_NAMES`).
+    errors : tuple of (stage, old, new)
+        Error rates (fractions) of the coarse and final stages, when there is ground truth.
+    moved : numpy.ndarray
+        Indices of the points whose final motion changed (the new labels matched to the
+        old ones first, so a mere renaming of motions moves nothing).
+    """
+
+    settings: tuple
+    errors: tuple
+    moved: np.ndarray
+
+    def text(self) -> str:
+        """One line, e.g. ``R1 20 → 21: coarse 3.6 → 14.2 %, final 0.0 → 1.1 %, 17 points
+        changed motion``."""
+        what = ", ".join(f"{n} {_fmt(a)} → {_fmt(b)}" for n, a, b in self.settings) or "recomputed"
+        parts = [f"{st} {100 * a:.1f} → {100 * b:.1f} %" for st, a, b in self.errors]
+        n = int(self.moved.size)
+        parts.append(f"{n} point{'s' if n != 1 else ''} changed motion")
+        return f"{what}: {', '.join(parts)}"
+
+
+def describe_change(seq: Sequence, before: LaavResult, before_settings: Settings, after: LaavResult,
+                    after_settings: Settings) -> Change:
+    """The :class:`Change` from ``before`` to ``after`` (two results on ``seq``)."""
+    old, new = _values(before_settings), _values(after_settings)
+    changed = tuple((PARAM_NAMES.get(k, k), old[k], new[k]) for k in new if new[k] != old[k])
+    errors = ()
+    if seq.labels is not None:
+        a, b = stage_numbers(seq, before), stage_numbers(seq, after)
+        errors = tuple((st, a[f"error_{st}"], b[f"error_{st}"]) for st in ("coarse", "final")
+                       if a[f"error_{st}"] is not None and b[f"error_{st}"] is not None)
+    prev = np.asarray(before.labels)
+    moved = np.flatnonzero(align_labels(after.labels, prev) != prev)
+    return Change(changed, errors, moved)
 
 
 def check_settings(seq: Sequence, settings: Settings) -> None:
@@ -106,6 +187,9 @@ class ExplorerState:
         self.settings = target
         self.result: LaavResult | None = None
         self.error: str | None = None
+        #: what the last recompute changed (None after a new sequence or the first result)
+        self.change: Change | None = None
+        self._changes: OrderedDict = OrderedDict()
         self.compute_seconds = 0.0
         self._target = target
         self._target_seq = seq
@@ -248,6 +332,16 @@ class ExplorerState:
             if gen != self._gen:
                 return  # a newer request came in meanwhile: drop this result
             self.compute_seconds = time.perf_counter() - t0
+            change = None
+            if self.result is not None and self.sequence is seq and result is not self.result:
+                try:
+                    change = describe_change(seq, self.result, self.settings, result, target)
+                except Exception:  # a summary must never cost the result
+                    traceback.print_exc()
+            self._changes[id(result)] = (result, change)
+            while len(self._changes) > 4:
+                self._changes.popitem(last=False)
+            self.change = change
             self.result, self.sequence, self.settings = result, seq, target
             self.error = None
             self._published = gen
@@ -270,6 +364,16 @@ class ExplorerState:
                 if kind == "load":
                     self._target = self.settings
         self._report(message + (" — still showing the last valid result" if self.result else ""))
+
+    def change_of(self, result: LaavResult) -> Change | None:
+        """The :class:`Change` that ``result`` made (None for a first result or a new sequence)."""
+        entry = self._changes.get(id(result))
+        return entry[1] if entry is not None and entry[0] is result else None
+
+    def default_motions(self, seq: Sequence | None = None) -> int | None:
+        """C of the ground truth of ``seq`` (the shown sequence by default), if it has one."""
+        seq = self.sequence if seq is None else seq
+        return seq.n_motions if seq.labels is not None else None
 
     def wait(self, timeout: float = 60.0) -> bool:
         """Block until no request is queued or computing (and its views were notified);

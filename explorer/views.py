@@ -17,7 +17,7 @@ from laav.geometry import epipolar_lines
 
 __all__ = [
     "COLOR_MODES", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK",
-    "NO_ATOM", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
+    "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "point_style", "frame_sources", "graph_sources", "replay_labels",
     "replay_caption", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
@@ -54,6 +54,9 @@ ERROR_MARK = "#000000"
 CORRECT = "#BBBBBB"
 #: Features in no atom: a dark grey cross.
 NO_ATOM = "#555555"
+#: Points whose final motion changed with the last recompute: a large reddish-purple ring
+#: (Okabe-Ito; no motion uses it).
+CHANGED_MARK = "#CC79A7"
 
 
 _MD_PUNCT = re.compile(r"([!-/:-@\[-`{-~])")  # every ASCII punctuation character
@@ -241,8 +244,11 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str) -> dict:
 
 
 def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style: dict,
-                  trail: int = 5) -> dict:
+                  trail: int = 5, moved=None) -> dict:
     """Data of the frame view at ``frame``.
+
+    ``moved``: indices of points whose final motion changed with the last recompute
+    (``changed``: their x, y).
 
     Keys: ``points`` (x, y, color, label, index), ``trails`` (x0, y0, x1, y1, color,
     alpha: the last ``trail`` frames, fading), ``atoms`` (x, y at the seeds, r1, r2,
@@ -283,6 +289,8 @@ def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style
     out["unassigned"] = {"x": xy[un, 0], "y": xy[un, 1]}
     bad = np.flatnonzero(style["misclassified"])
     out["errors"] = {"x": xy[bad, 0], "y": xy[bad, 1]}
+    mv = np.zeros(0, np.int64) if moved is None else np.asarray(moved, dtype=np.int64)
+    out["changed"] = {"x": xy[mv, 0], "y": xy[mv, 1]}
     return out
 
 

@@ -485,3 +485,47 @@ def test_slider_moved_during_an_upload_keeps_the_new_sequences_C():
         assert not ex.w_motions.disabled
     finally:
         ex.close()
+
+
+def test_what_changed_is_shown_and_ringed():
+    """After a recompute: one line says what moved, the points that changed motion are ringed
+    (a layer toggle), the status names every setting off its default."""
+    ex = Explorer(demo_sequence(), viser=False)
+    try:
+        assert ex.wait(120)
+        assert not ex.change_md.visible and ex.change is None  # first result: nothing to compare
+        assert "All settings at their defaults" in ex.status.object
+        before = ex.result
+        ex.w_params["r1"].value = 21.0
+        assert ex.wait(120)
+        ch = ex.change
+        assert ch is not None and ex.state.change_of(ex.result) is ch
+        assert ex.change_md.visible
+        assert _shown(ex.change_md).startswith("**What changed:** R1 20 → 21: coarse ")
+        assert f"{ch.moved.size} point" in _shown(ex.change_md)
+        # the rings sit on exactly the points whose final motion changed
+        prev = np.asarray(before.labels)
+        expect = np.flatnonzero(V.align_labels(ex.result.labels, prev) != prev)
+        assert ch.moved.tolist() == expect.tolist()
+        f = int(ex.w_frame.value)
+        ring = np.c_[ex.src_changed.data["x"], ex.src_changed.data["y"]]
+        assert np.allclose(ring, ex.sequence.points[f, expect])
+        assert "R1 = 21" in _shown(ex.status)
+        # the layer toggle hides and shows the rings
+        layer = [n for n in ex.w_layers.options if n.startswith("changed motion")][0]
+        ex.w_layers.value = [n for n in ex.w_layers.value if n != layer]
+        assert not ex.r_changed.visible
+        ex.w_layers.value = [*ex.w_layers.value, layer]
+        assert ex.r_changed.visible
+        # seed and α too; back at the defaults the status says so
+        ex.w_seed.value = 2
+        assert ex.wait(120)
+        assert _shown(ex.change_md).startswith("**What changed:** seed 0 → 2: ")
+        assert "R1 = 21, seed = 2" in _shown(ex.status)
+        ex.w_reset.clicks += 1
+        assert ex.wait(120)
+        assert "All settings at their defaults" in ex.status.object
+        assert _shown(ex.change_md).startswith("**What changed:** R1 21 → 20, seed 2 → 0: ")
+        print(f"demo R1 20 -> 21: {ch.text()}")
+    finally:
+        ex.close()

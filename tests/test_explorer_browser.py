@@ -163,6 +163,9 @@ def test_explorer_in_chromium(tmp_path):
                 assert ex.result.atoms is atoms0
                 _wait_for(lambda: f"λ = {target:g}" in page.evaluate(JS_SOURCES).get("ztitle", ""), 20,
                           "the Z title in the browser")
+                # one line says what the change did (and the status names λ: it is off its default)
+                page.get_by_text(f"What changed: λ {lam0:g} → {target:g}").first.wait_for(timeout=20000)
+                page.get_by_text(f"λ = {target:g}").first.wait_for(timeout=20000)
                 after = page.evaluate(JS_SOURCES)
                 # the browser shows the new result's Z (whether or not λ moved it on this sequence)
                 assert after["z"] == pytest.approx(list(ex.result.coarse.affinity.ravel()))

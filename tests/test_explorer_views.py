@@ -123,3 +123,61 @@ def test_fine_models_are_shades_of_the_motion_they_joined(demo):
     # the epipolar panel: its two models in their colours
     e = V.epipolar_sources(seq, res, 0, 1)
     assert set(e["left"]["color"].tolist()) <= {fc[0], fc[1]}
+
+
+# ---------------------------------------------------------------------------- what changed
+def test_describe_change_counts_points_that_changed_motion(demo):
+    import dataclasses
+
+    from explorer.state import Settings, describe_change
+
+    seq, res = demo
+    s0 = Settings(laav.LaavParams(), 0, 3)
+    s1 = Settings(laav.LaavParams(r1=21.0), 0, 3)
+    # a renaming of the motions moves nothing
+    renamed = dataclasses.replace(res, labels=(np.asarray(res.labels) + 1) % 3)
+    ch = describe_change(seq, res, s0, renamed, s1)
+    assert ch.moved.size == 0
+    assert ch.settings == (("R1", 20.0, 21.0),)
+    # three points put in another motion: exactly those are reported
+    moved = np.array([5, 77, 300])
+    lab = np.asarray(res.labels).copy()
+    lab[moved] = (lab[moved] + 1) % 3
+    after = dataclasses.replace(res, labels=lab)
+    ch = describe_change(seq, res, s0, after, s1)
+    assert ch.moved.tolist() == moved.tolist()
+    final_before = laav.misclassification_rate(seq.labels, res.labels)
+    final_after = laav.misclassification_rate(seq.labels, lab)
+    stages = dict((st, (a, b)) for st, a, b in ch.errors)
+    assert stages["final"] == pytest.approx((final_before, final_after))
+    assert stages["coarse"][0] == stages["coarse"][1]  # the coarse stage is the same result
+    coarse = 100 * stages["coarse"][0]
+    assert ch.text() == (f"R1 20 → 21: coarse {coarse:.1f} → {coarse:.1f} %, final "
+                         f"{100 * final_before:.1f} → {100 * final_after:.1f} %, 3 points changed motion")
+    # seed, C and fine models are settings too; no ground truth: no errors
+    bare = laav.Sequence(seq.points, None, name="bare")
+    ch = describe_change(bare, res, s0, after, Settings(laav.LaavParams(), 4, 3))
+    assert ch.errors == () and ch.text() == "seed 0 → 4: 3 points changed motion"
+
+
+def test_non_defaults_names_every_changed_setting():
+    from explorer.state import Settings, non_defaults
+
+    P = laav.LaavParams
+    assert non_defaults(Settings(P(), 0, 3), 3) == []
+    assert non_defaults(Settings(P(r1=25.0), 3, 3), 3) == ["R1 = 25", "seed = 3"]
+    got = non_defaults(Settings(P(rv_alpha=0.8, rv_max_iter=90, coarse_frames=5, rv_refine=False,
+                                  rv_select="none", fine_models=8), 0, 2), 3)
+    assert got == ["2C = 8", "coarse_frames = 5", "α = 0.8", "iteration cap = 90", "rv_refine = off",
+                   "rv_select = none", "C = 2"]
+    # 2C follows C: C = 2 with fine_models unset is 2C = 4, not a change of its own
+    assert non_defaults(Settings(P(), 0, 2), 3) == ["C = 2"]
+    assert non_defaults(Settings(P(), 0, 2), None) == []  # no ground truth: C is the user's
+
+
+def test_frame_view_rings_the_points_given_as_moved(demo):
+    seq, res = demo
+    st = V.point_style(seq, res, "final")
+    d = V.frame_sources(seq, res, 4, st, moved=np.array([5, 77]))
+    assert np.allclose(np.c_[d["changed"]["x"], d["changed"]["y"]], seq.points[4, [5, 77]])
+    assert len(V.frame_sources(seq, res, 4, st)["changed"]["x"]) == 0
