@@ -15,6 +15,7 @@ import io
 import tempfile
 import threading
 import time
+import urllib.parse
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
@@ -41,7 +42,7 @@ from laav import LaavParams
 
 from . import export
 from . import views as V
-from .state import ExplorerState, non_defaults
+from .state import ExplorerState, Settings, non_defaults, parse_settings, query_of, settings_from_json
 
 __all__ = ["Explorer", "PARAM_SLIDERS"]
 
@@ -215,6 +216,7 @@ class Explorer:
         # and a worker thread must never touch them during that).
         cur = pn.state.curdoc
         self._session_doc = cur if cur is not None and cur.session_context is not None else None
+        self._location = pn.state.location if self._session_doc is not None else None
         self._doc_thread = threading.get_ident()  # the session's event-loop thread
 
     def attach_session(self) -> None:
@@ -272,10 +274,11 @@ class Explorer:
         self.w_seed = pn.widgets.IntSlider(label="seed (random stages)", start=0, end=99,
                                                    value=st.seed, width=SIDE_W)
         self.w_seed.param.watch(self._on_param, "value")
-        self.w_motions = pn.widgets.IntInput(label="C — number of motions", start=1, value=st.n_motions,
-                                             width=140)
+        # C: at least 1 and at most the number of points (the browser's box clamps to these)
+        self.w_motions = pn.widgets.IntInput(label="C — number of motions", start=1, end=seq.n_points,
+                                             value=st.n_motions, width=140)
         self.w_motions.param.watch(self._on_param, "value")
-        self.w_upload = pn.widgets.FileInput(accept=".mat,.npz", multiple=False, width=SIDE_W)
+        self.w_upload = pn.widgets.FileInput(accept=".mat,.npz,.json", multiple=False, width=SIDE_W)
         self.w_upload.param.watch(self._on_upload, "value")
         self.w_reset = pn.widgets.Button(label="Reset parameters to defaults", color="warning",
                                          width=SIDE_W)
@@ -445,11 +448,22 @@ class Explorer:
                                    margin=(4, 6))
         self.note = pn.pane.Alert("", alert_type="info", visible=False, sizing_mode="stretch_width",
                                   margin=(4, 6))
+        # problems with the settings a shared URL carried (kept until the next URL)
+        self.url_alert = pn.pane.Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
+                                       margin=(4, 6))
         self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6))
-        self.status = pn.pane.Markdown("Computing the first result…", margin=(4, 6),
+        self._status_text = "Computing the first result…"
+        self.status = pn.pane.Markdown(self._status_text, margin=(4, 6),
                                        sizing_mode="stretch_width")
         self.change_md = pn.pane.Markdown("", margin=(0, 10), visible=False, sizing_mode="stretch_width")
         self.seq_info = pn.pane.Markdown(self._seq_text(seq), width=SIDE_W, margin=(0, 10))
+        # the sequence shown, in the page header (the template's own title is fixed at load)
+        # the browser tab's title follows the sequence shown (bokeh's document title is sent
+        # once, with the page): a hidden box whose value the page copies into document.title
+        self._tab_title = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
+        self._tab_title.jscallback(value="document.title = cb_obj.value")
+        self.header_name = pn.pane.Markdown(self._header_text(seq), margin=(0, 10),
+                                            styles={"color": "white", "font-size": "1.25em"})
         self.numbers = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.graph_caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
         self.merge_md = pn.pane.Markdown("", width=250, margin=(0, 6))
@@ -471,12 +485,14 @@ class Explorer:
                                                height=60)
         self.sidebar = [
             pn.pane.Markdown("### Sequence", margin=(0, 10)), self.seq_info,
-            pn.pane.Markdown("Open another sequence (Hopkins `*_truth.mat` or `.npz`):", margin=(0, 10)),
+            pn.pane.Markdown("Open another sequence (Hopkins `*_truth.mat` or `.npz`), or a `params.json` "
+                             "exported here:", margin=(0, 10)),
             self.w_upload, self.w_motions,
             pn.pane.Markdown("### View", margin=(0, 10)), self.w_frame, self.w_color, self.w_layers,
             pn.pane.Markdown("### Parameters", margin=(0, 10)),
             *self.w_params.values(), self.w_seed, self.w_reset,
             pn.pane.Markdown("### Export", margin=(0, 10)), self.w_dl_csv, self.w_dl_json, self.w_dl_png,
+            self._tab_title,
         ]
         # cards in the order of the stages; each lays its parts out in a wrapping FlexBox, so
         # they sit side by side on a wide screen and stack on a projector (1024 px)
@@ -500,7 +516,7 @@ class Explorer:
                                self.numbers)
         self.main = [
             pn.Column(pn.Row(self.spinner, self.status, sizing_mode="stretch_width"), self.change_md,
-                      sizing_mode="stretch_width"), self.alert, self.note,
+                      sizing_mode="stretch_width"), self.alert, self.url_alert, self.note,
             self.v_frame, self.v_viser, self.v_graph, self.v_coarse, self.v_rv, self.v_numbers,
         ]
 
@@ -512,6 +528,10 @@ class Explorer:
         return (f'<iframe src="http://{host}:{self.viser.port}/" title="LAAV 3-D view (viser)" '
                 'style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
                 'box-sizing:border-box"></iframe>')
+
+    @staticmethod
+    def _header_text(seq: laav.Sequence) -> str:
+        return f"{V.md_text(seq.name)} · {seq.n_points} points, {seq.n_frames} frames"
 
     @staticmethod
     def _seq_text(seq: laav.Sequence) -> str:
@@ -526,7 +546,7 @@ class Explorer:
         later stages' cards (graph, fine-to-coarse, RV, numbers) once the page has loaded, so
         the page appears sooner.
         """
-        n_first = 5  # status, alert, note, atoms card, 3-D card
+        n_first = 6  # status, alerts, note, atoms card, 3-D card
         if lazy is None:
             lazy = self._session_doc is not None
         main = pn.Column(*(self.main[:n_first] if lazy else self.main), sizing_mode="stretch_width")
@@ -538,7 +558,7 @@ class Explorer:
         # The header's button folds the sidebar away.
         return pn.template.BootstrapTemplate(
             title=title, sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
-            main=[main], sidebar_width=SIDE_W + 35, header_background="#2c4a66")
+            header=[self.header_name], main=[main], sidebar_width=SIDE_W + 35, header_background="#2c4a66")
 
     def panel(self) -> pn.viewable.Viewable:
         """The whole explorer as one panel layout (for notebooks)."""
@@ -651,7 +671,7 @@ class Explorer:
                 ef = num["error_final"]
                 err = "" if ef is None else f" — final error **{100 * ef:.1f} %**"
                 changed = non_defaults(settings, self.state.default_motions(seq))
-                self.status.object = (
+                self.status.object = self._status_text = (
                     f"Showing {V.md_text(seq.name)}{err} (computed in "
                     f"{1000 * self.state.compute_seconds:.0f} ms). "
                     + (f"Not at the defaults: {V.md_text(', '.join(changed))}." if changed
@@ -670,6 +690,7 @@ class Explorer:
                     self.viser._result = result
                     self.viser.set_colors(self._style["color"])
             self._seq_shown = seq
+            self._sync_url()
         finally:
             self._suppress -= 1
         self.apply_seconds = time.perf_counter() - t0
@@ -693,6 +714,9 @@ class Explorer:
         fm = self.w_params["fine_models"]
         fm.end = max(fm.end, 4 * settings.n_motions)
         self.seq_info.object = self._seq_text(seq)
+        self.header_name.object = self._header_text(seq)
+        self.w_motions.end = seq.n_points
+        self._tab_title.value = f"LAAV explorer: {laav.safe_name(seq.name)}"  # the browser tab
         for w, ext in ((self.w_dl_csv, "labels.csv"), (self.w_dl_json, "params.json"),
                        (self.w_dl_png, "views.png")):
             w.filename = f"{laav.safe_name(seq.name)}_{ext}"
@@ -817,6 +841,8 @@ class Explorer:
         sequence) is locked and slider moves keep the C of the sequence being loaded."""
         self._switching = locked
         self.w_motions.disabled = locked
+        if not locked and self.status.object.startswith("Reading "):
+            self.status.object = self._status_text  # the read failed: back to what is shown
 
     def _show_error(self, message: str) -> None:
         self._lock_for_upload(False)
@@ -858,6 +884,7 @@ class Explorer:
         self.state.request(params=self._widget_params(), seed=int(self.w_seed.value), n_motions=C)
 
     def _on_reset(self, event=None) -> None:
+        """Every parameter (with or without a control here), and the seed, to its default."""
         d = self._defaults
         self._suppress += 1
         try:
@@ -867,7 +894,8 @@ class Explorer:
             self.w_seed.value = 0
         finally:
             self._suppress -= 1
-        self._on_param()
+        C = None if self._switching or self.w_motions.value is None else int(self.w_motions.value)
+        self.state.request(params={**d.to_dict(), **self._widget_params()}, seed=0, n_motions=C)
 
     def _on_frame(self, event=None) -> None:
         self._schedule(self._frame_now, now_if_on_doc_thread=True)
@@ -878,6 +906,7 @@ class Explorer:
         with self._hold():
             self._draw_frame()
             self._draw_graph()
+            self._sync_url()
         if self.viser is not None:
             self.viser.set_frame(int(self.w_frame.value))
 
@@ -892,6 +921,7 @@ class Explorer:
             self._draw_frame()
             self.note.object = self._style["note"]
             self.note.visible = bool(self._style["note"])
+            self._sync_url()
         if self.viser is not None:
             self.viser.set_colors(self._style["color"])
 
@@ -925,9 +955,89 @@ class Explorer:
         with self._hold():
             self._draw_epipolar()
 
+    # ------------------------------------------------------------------ shared state (URL, params.json)
+    def _default_color(self, seq=None) -> str:
+        seq = self.sequence if seq is None else seq
+        return "gt" if seq.labels is not None else "final"
+
+    def _show_settings(self, settings: Settings) -> None:
+        """Put ``settings`` on the controls without triggering a computation."""
+        self._suppress += 1
+        try:
+            C = settings.n_motions
+            fm = self.w_params["fine_models"]
+            fm.end = max(fm.end, 4 * C, settings.params.n_fine(C))
+            for name, w in self.w_params.items():
+                v = settings.params.n_fine(C) if name == "fine_models" else getattr(settings.params, name)
+                if name != "fine_models":
+                    w.start, w.end = min(w.start, v), max(w.end, v)
+                w.value = v
+            self.w_seed.end = max(self.w_seed.end, settings.seed)
+            self.w_seed.value = settings.seed
+            self.w_motions.value = C
+        finally:
+            self._suppress -= 1
+
+    def apply_query(self, pairs: dict) -> list[str]:
+        """Take the settings and view a page URL's query carries (see :data:`state.URL_KEYS`).
+
+        Every value is validated (:func:`state.parse_settings`); what cannot be used is
+        listed in a warning on the page, as text, and the rest is applied. Before
+        :meth:`start` the first computation uses them; afterwards they are requested."""
+        pairs = {k: v for k, v in pairs.items() if not str(k).startswith("bokeh")}
+        if not pairs:
+            return []
+        new, view, problems = parse_settings(pairs, self.sequence, self.state.target)
+        if not self.state._started:
+            self.state.retarget(new)
+        else:
+            self.state.request(params=new.params.to_dict(), seed=new.seed, n_motions=new.n_motions)
+        self._show_settings(new)
+        modes = {v: k for k, v in V.COLOR_MODES.items()}
+        if "color" in view:
+            self.w_color.value = modes[view["color"]]
+        if "frame" in view:
+            self.w_frame.value = view["frame"]
+        self.url_alert.object = ("" if not problems else "**Some settings in the page address were not "
+                                 "used:** " + "; ".join(V.md_text(m) for m in problems))
+        self.url_alert.visible = bool(problems)
+        return problems
+
+    def query(self) -> dict[str, str]:
+        """The URL query of what the page shows now (only what differs from the defaults)."""
+        return query_of(self.state.settings, self.state.default_motions(), int(self.w_frame.value),
+                        V.COLOR_MODES[self.w_color.value], self._default_color())
+
+    def _sync_url(self) -> None:
+        """(Document thread.) The page address carries the shown state (pushState, no reload)."""
+        loc = self._location
+        if loc is None or self.result is None:
+            return
+        q = self.query()
+        search = "?" + urllib.parse.urlencode(q) if q else ""
+        if loc.search != search:
+            loc.search = search
+
+    def load_params(self, data: bytes | str, filename: str = "params.json") -> bool:
+        """Apply a params.json (as exported here). False, and a message, when it is not valid."""
+        try:
+            new = settings_from_json(data, self.sequence, self.state.target)
+        except ValueError as exc:
+            self.state.report(f"{Path(filename).name}: {exc} — nothing was changed")
+            return False
+        self._schedule(self._show_settings, new)
+        return self.state.request(params=new.params.to_dict(), seed=new.seed,
+                                  n_motions=new.n_motions) is not None
+
     def _on_upload(self, event=None) -> None:
         data, name = self.w_upload.value, self.w_upload.filename or "upload"
-        if not data:
+        if data is None:
+            return
+        if len(data) == 0:
+            self.state.report(f"{Path(name).name} is empty (0 bytes): nothing was loaded")
+            return
+        if data.lstrip()[:1] == b"{":  # a params.json (a sequence file never starts so)
+            self.load_params(data, name)
             return
         if self._session_doc is None:
             self.load_bytes(data, name)

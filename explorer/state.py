@@ -20,6 +20,7 @@ runs on a second worker thread, once per sequence/seed/RV settings, and is cache
 from __future__ import annotations
 
 import dataclasses
+import json
 import threading
 import time
 import traceback
@@ -35,7 +36,8 @@ from laav import LaavParams, LaavResult, Pipeline, Sequence
 from .views import align_labels, stage_numbers
 
 __all__ = ["ExplorerState", "Settings", "RV_FIELDS", "Change", "describe_change", "non_defaults",
-           "PARAM_NAMES"]
+           "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of", "settings_from_json",
+           "parse_value"]
 
 #: The parameters plain Random Voting depends on (its cache key).
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_"))
@@ -131,6 +133,174 @@ def describe_change(seq: Sequence, before: LaavResult, before_settings: Settings
     return Change(changed, errors, moved)
 
 
+# ---------------------------------------------------------------------- settings as text
+_FIELDS = {f.name: f for f in dataclasses.fields(LaavParams)}
+_DEFAULTS = LaavParams()
+#: Colour-by keys in the URL (``color=final``) -> the views' colour modes.
+VIEW_COLORS = ("gt", "atoms", "fine", "coarse", "final", "errors")
+#: Keys of the page URL's query: every LaavParams field, then the seed, C, frame and colour.
+URL_KEYS = tuple(_FIELDS) + ("seed", "motions", "frame", "color")
+_TRUE, _FALSE = ("1", "true", "on", "yes"), ("0", "false", "off", "no")
+
+
+def parse_value(name: str, text: str):
+    """The value of LaavParams field ``name`` written as ``text`` (URL, ``--param``).
+
+    Raises ValueError with a readable message; the value is *not* range-checked here
+    (constructing LaavParams does that)."""
+    if name not in _FIELDS:
+        raise ValueError(f"unknown parameter {name!r}")
+    t = str(text).strip()
+    default = getattr(_DEFAULTS, name)
+    try:
+        if name == "fine_models":
+            return None if t.lower() in ("", "none", "auto") else int(t)
+        if isinstance(default, bool):
+            if t.lower() in _TRUE:
+                return True
+            if t.lower() in _FALSE:
+                return False
+            raise ValueError
+        if isinstance(default, int):
+            return int(t)
+        if isinstance(default, float):
+            return float(t)
+        return t
+    except ValueError:
+        kind = ("a whole number" if isinstance(default, int) and not isinstance(default, bool) else
+                "true or false" if isinstance(default, bool) else "a number")
+        raise ValueError(f"{name} must be {kind}, got {t[:40]!r}") from None
+
+
+def _whole(name: str, text, lo: int, hi: int) -> int:
+    try:
+        v = int(str(text).strip())
+    except ValueError:
+        raise ValueError(f"{name} must be a whole number, got {str(text)[:40]!r}") from None
+    if not lo <= v <= hi:
+        raise ValueError(f"{name} must be between {lo} and {hi}, got {v}")
+    return v
+
+
+def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings, dict, list[str]]:
+    """Settings (and view state) from text key/value pairs: a page URL's query, ``--param``.
+
+    ``pairs`` maps :data:`URL_KEYS` to strings (a list of strings: the last one counts).
+    Every parameter goes through :class:`laav.LaavParams` and the seed, C, frame and colour
+    are checked against ``seq``. Returns ``(settings, view, problems)``: the settings from
+    ``base`` with every valid value applied, ``view`` with ``frame`` / ``color`` when given
+    and valid, and one readable message per key that was not used (never raises).
+    """
+    problems: list[str] = []
+    values: dict = {}
+    view: dict = {}
+    seed, C = base.seed, base.n_motions
+    for key, raw in pairs.items():
+        if isinstance(raw, (list, tuple)):
+            raw = raw[-1] if raw else ""
+        if isinstance(raw, bytes):
+            raw = raw.decode("utf-8", "replace")
+        try:
+            if key in _FIELDS:
+                values[key] = parse_value(key, raw)
+            elif key == "seed":
+                seed = _whole("seed", raw, 0, 2**32 - 1)
+            elif key == "motions":
+                C = _whole("motions (C)", raw, 1, seq.n_points)
+            elif key == "frame":
+                view["frame"] = _whole("frame", raw, 0, seq.n_frames - 1)
+            elif key == "color":
+                if str(raw) not in VIEW_COLORS:
+                    raise ValueError(f"color must be one of {', '.join(VIEW_COLORS)}, got {str(raw)[:40]!r}")
+                view["color"] = str(raw)
+            else:
+                raise ValueError(f"unknown setting {str(key)[:40]!r}")
+        except ValueError as exc:
+            problems.append(str(exc))
+    params = base.params
+    if values:
+        try:
+            params = base.params.replace(**values)
+        except (ValueError, TypeError) as exc:
+            problems.append(str(exc))
+            # keep the values that are fine on their own
+            for k, v in values.items():
+                try:
+                    params = params.replace(**{k: v})
+                except (ValueError, TypeError):
+                    pass
+    new = Settings(params, seed, C)
+    try:
+        check_settings(seq, new)
+    except ValueError as exc:
+        problems.append(str(exc))
+        new = Settings(params, seed, base.n_motions)
+        try:
+            check_settings(seq, new)
+        except ValueError:
+            new = base
+    return new, view, problems
+
+
+def _short_float(v: float) -> str:
+    """``25.0`` -> ``"25"``; as many digits as it takes to read back the same float."""
+    g = format(v, "g")
+    return g if float(g) == v else repr(v)
+
+
+def query_of(settings: Settings, default_motions: int | None, frame: int = 0,
+             color: str | None = None, default_color: str | None = None) -> dict[str, str]:
+    """The URL query for these settings and view: only what differs from the defaults
+    (``parse_settings(query_of(s, ...), ...)`` gives ``s`` back)."""
+    q: dict[str, str] = {}
+    for name in _FIELDS:
+        v = getattr(settings.params, name)
+        if v != getattr(_DEFAULTS, name):
+            q[name] = ("none" if v is None else "true" if v is True else "false" if v is False
+                       else _short_float(v) if isinstance(v, float) else str(v))
+    if settings.seed != 0:
+        q["seed"] = str(settings.seed)
+    if default_motions is None or settings.n_motions != default_motions:
+        q["motions"] = str(settings.n_motions)
+    if frame:
+        q["frame"] = str(int(frame))
+    if color is not None and color != default_color:
+        q["color"] = color
+    return q
+
+
+def settings_from_json(text: str | bytes, seq: Sequence, base: Settings) -> Settings:
+    """Settings from a params.json the explorer exported (``{"params": {...}, "seed": ...,
+    "n_motions": ...}``) or a bare ``{field: value}`` object. Raises ValueError (readable)
+    when it is not such a file or a value is invalid; nothing is half-applied."""
+    try:
+        d = json.loads(text)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ValueError(f"not a JSON file ({exc})") from None
+    if not isinstance(d, dict):
+        raise ValueError("a params file holds one JSON object")
+    params = d.get("params", d if "params" not in d else None)
+    if not isinstance(params, dict):
+        raise ValueError('"params" must be an object of LAAV parameters')
+    params = {k: v for k, v in params.items() if k not in ("sequence", "seed", "n_motions")}
+    unknown = sorted(set(params) - set(_FIELDS))
+    if unknown:
+        raise ValueError(f"unknown LAAV parameter(s): {', '.join(map(str, unknown))[:200]}")
+    try:
+        new_params = LaavParams(**{**_DEFAULTS.to_dict(), **params})
+    except TypeError as exc:
+        raise ValueError(f"invalid LAAV parameters: {exc}") from None
+    seed = d.get("seed", base.seed)
+    C = d.get("n_motions", base.n_motions)
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f"seed must be a whole number >= 0, got {seed!r}")
+    if not isinstance(C, int) or isinstance(C, bool):
+        raise ValueError(f"n_motions must be a whole number, got {C!r}")
+    new = Settings(new_params, seed, C)
+    check_settings(seq, new)
+    return new
+
+
 def check_settings(seq: Sequence, settings: Settings) -> None:
     """Raise ValueError with a readable message when ``settings`` cannot run on ``seq``."""
     C = settings.n_motions
@@ -211,6 +381,16 @@ class ExplorerState:
         self._started = False
         if autostart:
             self.start()
+
+    def retarget(self, settings: Settings) -> None:
+        """Before :meth:`start`: compute ``settings`` first instead (a shared URL's state).
+        A warm pipeline given for other settings is dropped."""
+        check_settings(self._target_seq, settings)
+        if self._started:
+            raise RuntimeError("retarget() only before start(); use request()")
+        if settings != self._target:
+            self._target = self.settings = settings
+            self._first = None
 
     def start(self) -> None:
         """Queue the first computation (call after setting the ``on_*`` hooks)."""

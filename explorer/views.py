@@ -644,16 +644,22 @@ def numbers_markdown(num: dict) -> str:
 
 
 def labels_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
-    """CSV text: one row per point with its labels after every stage (1-based, 0 = none)."""
+    """CSV text, one row per point; labels are 0-based like ``laav segment``'s file.
+
+    Columns: ``point`` (0-based index), ``label`` (final motion: the same two columns as
+    ``laav segment --out``), ``x0``, ``y0`` (position in frame 0), ``ground_truth`` (empty
+    without), ``owner_atom``, ``fine_model``, ``coarse_motion`` (-1: the stage left the
+    point out, i.e. it is in no atom).
+    """
     st = result.stage_labels()
     owner = np.asarray(result.atoms.owner)
     gt = seq.labels
-    lines = ["point,x0,y0,ground_truth,owner_atom,fine_model,coarse_motion,final_motion"]
+    lines = ["point,label,x0,y0,ground_truth,owner_atom,fine_model,coarse_motion"]
     p0 = seq.points[0]
     for i in range(seq.n_points):
-        g = "" if gt is None else str(int(gt[i]) + 1)
-        lines.append(f"{i},{p0[i, 0]:.3f},{p0[i, 1]:.3f},{g},{int(owner[i]) + 1},"
-                     f"{int(st['fine'][i]) + 1},{int(st['coarse'][i]) + 1},{int(st['final'][i]) + 1}")
+        g = "" if gt is None else str(int(gt[i]))
+        lines.append(f"{i},{int(st['final'][i])},{p0[i, 0]:.3f},{p0[i, 1]:.3f},{g},{int(owner[i])},"
+                     f"{int(st['fine'][i])},{int(st['coarse'][i])}")
     return "\n".join(lines) + "\n"
 
 

@@ -194,6 +194,22 @@ def test_invalid_slider_combination_shows_a_message_and_keeps_the_result(ex):
     assert not ex.alert.visible
 
 
+def test_empty_upload_says_so_and_c_box_is_bounded(ex, seq):
+    res = ex.result
+    ex.w_upload.filename = "nothing.npz"
+    ex.w_upload.value = b""
+    assert ex.wait(60) and ex.result is res
+    assert ex.alert.visible and "nothing.npz is empty (0 bytes)" in _shown(ex.alert)
+    # C: at least 1, at most the number of points (the browser box clamps to these)
+    assert (ex.w_motions.start, ex.w_motions.end) == (1, seq.n_points)
+    # set from Python past them: a message, the result kept
+    for bad, msg in ((0, "must be a positive integer"), (-2, "must be a positive integer"),
+                     (seq.n_points + 1, f"more than the {seq.n_points} points")):
+        ex.w_motions.value = bad
+        assert ex.wait(60) and ex.result is res
+        assert ex.alert.visible and msg in _shown(ex.alert)
+
+
 def test_bad_upload_shows_a_message_and_keeps_the_result(ex):
     res = ex.result
     ex.w_upload.filename = "broken_truth.mat"
@@ -234,8 +250,32 @@ def test_reset_restores_defaults(ex):
 
 
 def test_exports(ex, seq):
+    import csv as csvmod
+
+    from explorer import export
+
     csv = ex._export_csv().getvalue().splitlines()
-    assert csv[0].startswith("point,") and len(csv) == seq.n_points + 1
+    assert csv[0].startswith("point,label,") and len(csv) == seq.n_points + 1
+    rows = list(csvmod.DictReader(csv))
+    # 0-based like `laav segment`: the point index and the final label as in result.labels
+    assert [int(r["point"]) for r in rows] == list(range(seq.n_points))
+    assert [int(r["label"]) for r in rows] == np.asarray(ex.result.labels).tolist()
+    assert [int(r["ground_truth"]) for r in rows] == np.asarray(seq.labels).tolist()
+    st = ex.result.stage_labels()
+    assert [int(r["coarse_motion"]) for r in rows] == np.asarray(st["coarse"]).tolist()  # -1: in no atom
+    assert [int(r["owner_atom"]) for r in rows] == np.asarray(ex.result.atoms.owner).tolist()
+    # the PNG carries the parameters, errors and legends
+    fig = export.views_figure(seq, ex.result, 3, "final", plain=None)
+    head = fig._suptitle.get_text()
+    num = V.stage_numbers(seq, ex.result)
+    for part in (seq.name, "C = 2", "seed 0", f"R1 = {ex.result.params.r1:g}", "λ = ",
+                 f"final {100 * num['error_final']:.1f} %", f"coarse {100 * num['error_coarse']:.1f} %",
+                 "not at the defaults: none"):
+        assert part in head, (part, head)
+    axes = [a for a in fig.axes if a.get_label() != "<colorbar>"]
+    assert axes[0].get_legend() is not None and axes[1].get_legend() is not None  # frame, graph
+    assert any(a.get_label() == "<colorbar>" for a in fig.axes)  # Z's colour bar
+    assert "motion 1" in [t.get_text() for t in axes[0].get_legend().get_texts()]
     d = json.loads(ex._export_json().getvalue())
     assert laav.LaavParams(**d["params"]) == ex.result.params and d["n_motions"] == 2
     png = ex._export_png().getvalue()
@@ -529,3 +569,105 @@ def test_what_changed_is_shown_and_ringed():
         print(f"demo R1 20 -> 21: {ch.text()}")
     finally:
         ex.close()
+
+
+def test_query_and_params_json_set_the_state(seq, tmp_path):
+    from explorer import export
+
+    ex = Explorer(seq, viser=False, start=False)
+    try:
+        problems = ex.apply_query({"r1": ["25"], "seed": ["3"], "frame": ["4"], "color": ["final"],
+                                   "lam": ["<img src=x onerror=alert(1)>"], "bokeh-session-id": ["x"]})
+        assert len(problems) == 1 and "lam must be a number" in problems[0]
+        ex.start()
+        assert ex.wait(120)
+        assert (ex.result.params.r1, ex.result.seed) == (25.0, 3)
+        assert (ex.w_params["r1"].value, ex.w_seed.value, ex.w_frame.value) == (25.0, 3, 4)
+        assert ex.w_color.value == "final (after Random Voting)"
+        # the problem is shown as text (escaped), and stays after the result arrived
+        assert ex.url_alert.visible and re.search(r"(?<!\\)<", ex.url_alert.object) is None
+        assert "<img src=x onerror=alert(1)>" in _shown(ex.url_alert)
+        assert ex.query() == {"r1": "25", "seed": "3", "frame": "4", "color": "final"}
+        # a control moves the state the URL would carry
+        ex.w_params["lam"].value = 3.0
+        assert ex.wait(120)
+        assert ex.query()["lam"] == "3"
+        # the exported params.json loads back (as an upload): state restored, also fields
+        # without a control here
+        text = export.params_json(ex.sequence, ex.result)
+        ex.w_params["r1"].value = 30.0
+        assert ex.wait(120)
+        d = json.loads(text)
+        d["params"]["coarse_frames"] = 5
+        ex.w_upload.filename = "params.json"
+        ex.w_upload.value = json.dumps(d).encode()
+        assert ex.wait(120)
+        p = ex.result.params
+        assert (p.r1, p.lam, p.coarse_frames, ex.result.seed) == (25.0, 3.0, 5, 3)
+        assert ex.w_params["r1"].value == 25.0
+        # a broken one changes nothing and says why
+        res = ex.result
+        ex.w_upload.filename = "bad.json"
+        ex.w_upload.value = b'{"params": {"r1": -1}}'
+        assert ex.wait(120) and ex.result is res
+        assert ex.alert.visible and "bad.json" in _shown(ex.alert) and "r1 must be > 0" in _shown(ex.alert)
+        # reset brings back every default, also the ones without a control
+        ex.w_reset.clicks += 1
+        assert ex.wait(120)
+        assert ex.result.params == laav.LaavParams() and ex.query() == {"frame": "4", "color": "final"}
+    finally:
+        ex.close()
+
+
+def test_cli_loads_params_json_and_param(monkeypatch, tmp_path, capsys):
+    import explorer.cli as cli
+
+    seen = {}
+
+    def fake_factory(seq, n_motions, seed=0, host="127.0.0.1", **kw):
+        seen.update(n_motions=n_motions, seed=seed, params=kw.get("params"))
+
+        def make():
+            pass
+        make.close_unclaimed = lambda: None
+        return make
+
+    class FakeServer:
+        class io_loop:  # noqa: N801
+            @staticmethod
+            def add_callback(fn):
+                pass
+
+            @staticmethod
+            def start():
+                pass
+
+        def start(self):
+            pass
+
+        def stop(self):
+            pass
+
+    monkeypatch.setattr(cli, "app_factory", fake_factory)
+    monkeypatch.setattr(pn, "serve", lambda panels, **kw: FakeServer())
+    s = _two_motion_sequence()
+    f = laav.save_sequence(s, tmp_path / "s.npz")
+    pj = tmp_path / "p.json"
+    pj.write_text(json.dumps({"sequence": "x", "n_motions": 2, "seed": 5,
+                              "params": {**laav.LaavParams(r1=22.0, lam=1.5).to_dict()}}))
+    assert main([str(f), "--no-browser", "--port", "0", "--params", str(pj), "--param", "lam=3",
+                 "--param", "rv_refine=false"]) == 0
+    assert seen["params"] == laav.LaavParams(r1=22.0, lam=3.0, rv_refine=False)
+    assert seen["seed"] == 5 and seen["n_motions"] == 2
+    assert main([str(f), "--no-browser", "--port", "0", "--params", str(pj), "--seed", "1"]) == 0
+    assert seen["seed"] == 1
+    capsys.readouterr()
+    for args, msg in ((["--param", "lam=abc"], "lam must be a number"),
+                      (["--param", "lam"], "NAME=VALUE"),
+                      (["--param", "r2=5"], "r2 must be larger than r1"),
+                      (["--param", "zz=1"], "unknown setting 'zz'"),
+                      (["--params", str(tmp_path / "missing.json")], "No such file"),
+                      (["--params", str(f)], "not a JSON file")):
+        assert main([str(f), "--no-browser", "--port", "0", *args]) == 2
+        err = capsys.readouterr().err
+        assert msg in err and "Traceback" not in err, (args, err)

@@ -270,11 +270,15 @@ def test_hostile_names_are_shown_as_text(tmp_path):
                     "buffer": bad_mat}])
                 page.get_by_text("<img src=y onerror=alert(4)>.mat").first.wait_for(timeout=30000)
                 assert ex.sequence.name == stored  # the last good result is kept
+                # and the status line no longer says "Reading …" (it shows the kept result again)
+                _wait_for(lambda: ex.status.object.startswith("Showing"), 20, "the status line back")
                 page.wait_for_timeout(1000)  # let any image error handler fire (and its dialog arrive)
                 assert page.evaluate(JS_INJECTED) == {"imgs": 0, "scripts": 0, "svgs": 0}
-                assert "alert(5)" not in page.title()
-                header = page.locator(".app-header .title").inner_text()
-                assert "<" not in header and "img" in header  # the initial name, reduced
+                # the header and the tab name the sequence shown (the upload), as text
+                page.get_by_text(f"{stored} · {up.n_points} points").first.wait_for(timeout=20000)
+                safe = laav.safe_name(stored)
+                page.wait_for_function(f"document.title === 'LAAV explorer: {safe}'", timeout=20000)
+                assert "<" not in page.title() and "alert(5)" not in page.title()
             finally:
                 browser.close()
     finally:
@@ -399,3 +403,81 @@ def test_layout_fits_a_projector(tmp_path):
         server.stop()
         for e in created:
             e.close()
+
+
+def test_url_carries_the_state(tmp_path):
+    """``/?r1=25&seed=3&frame=4&color=final`` opens that state; moving a control updates the
+    address; bad values are named as text on the page (no script runs); params.json uploads."""
+    import json
+
+    seq = _sequence()
+    created: list = []
+    port = _free_port()
+    server = pn.serve({"/": app_factory(seq, None, created=created, viser=False)}, port=port,
+                      address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
+                      threaded=True, verbose=False)
+    dialogs: list[str] = []
+    try:
+        _wait_listening(port)
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
+            try:
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+                page.goto(f"http://127.0.0.1:{port}/?r1=25&seed=3&frame=4&color=final",
+                          wait_until="domcontentloaded")
+                page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+                ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+                assert ex.wait(60)
+                assert (ex.result.params.r1, ex.result.seed, ex.w_frame.value) == (25.0, 3, 4)
+                assert ex.w_color.value.startswith("final")
+                page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=30000)
+                # the browser's R1 slider shows it too
+                r1 = page.evaluate("""() => { for (const m of Bokeh.documents[0].all_models)
+                    if (m.type === 'Slider' && String(m.title).startsWith('R1')) return m.value; }""")
+                assert r1 == 25
+                # the C box takes only 1 .. number of points (the browser's spinner clamps to them)
+                lims = page.evaluate("""() => {
+                  for (const m of Bokeh.documents[0].all_models)
+                    if (m.type === 'Spinner' && String(m.title).startsWith('C ')) return [m.low, m.high];
+                }""")
+                assert lims == [1, seq.n_points]
+                # moving λ updates the address (no reload: the same session)
+                assert page.evaluate(JS_SET_SLIDER, ["λ", 3.5]) is not None
+                page.wait_for_function("location.search.includes('lam=3.5')", timeout=30000)
+                q = dict(x.split("=") for x in page.evaluate("location.search")[1:].split("&"))
+                assert q == {"r1": "25", "lam": "3.5", "seed": "3", "frame": "4", "color": "final"}
+                assert len(created) == 1
+                # a params.json upload (as exported) loads back
+                d = json.loads(ex._export_json().getvalue())
+                d["params"]["r1"], d["seed"] = 30.0, 1
+                page.set_input_files("input[type=file]", files=[{
+                    "name": "params.json", "mimeType": "application/json", "buffer": json.dumps(d).encode()}])
+                _wait_for(lambda: ex.result.params.r1 == 30.0 and ex.result.seed == 1 and ex.wait(1), 60,
+                          "the uploaded parameters")
+                page.wait_for_function(
+                    "location.search.includes('r1=30') && location.search.includes('seed=1')", timeout=30000)
+                page.close()
+
+                # bad values: a message naming them, as text; the rest applied
+                bad = "<img src=x onerror=alert(1)>"
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+                page.goto(f"http://127.0.0.1:{port}/?lam={bad}&r1=abc&seed=2&%3Cscript%3Ealert(2)%3C/script%3E=1",
+                          wait_until="domcontentloaded")
+                page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+                ex2 = _wait_for(lambda: created[1] if len(created) > 1 else None, 30, "the second explorer")
+                assert ex2.wait(60)
+                assert ex2.result.seed == 2 and ex2.result.params.r1 == 20.0
+                page.get_by_text(f"lam must be a number, got '{bad}'").first.wait_for(timeout=20000)
+                page.get_by_text("r1 must be a number, got 'abc'").first.wait_for(timeout=20000)
+                page.get_by_text("unknown setting '<script>alert(2)</script>'").first.wait_for(timeout=20000)
+                page.wait_for_timeout(1000)  # let any error handler fire (and its dialog arrive)
+                assert page.evaluate(JS_INJECTED) == {"imgs": 0, "scripts": 0, "svgs": 0}
+            finally:
+                browser.close()
+    finally:
+        server.stop()
+        for e in created:
+            e.close()
+    assert not dialogs, f"a payload ran: {dialogs}"

@@ -181,3 +181,59 @@ def test_frame_view_rings_the_points_given_as_moved(demo):
     d = V.frame_sources(seq, res, 4, st, moved=np.array([5, 77]))
     assert np.allclose(np.c_[d["changed"]["x"], d["changed"]["y"]], seq.points[4, [5, 77]])
     assert len(V.frame_sources(seq, res, 4, st)["changed"]["x"]) == 0
+
+
+# ---------------------------------------------------------------------------- URL and params.json
+def test_url_query_round_trip_and_validation(demo):
+    from explorer.state import URL_KEYS, Settings, parse_settings, query_of
+
+    seq, _ = demo
+    base = Settings(laav.LaavParams(), 0, 3)
+    assert set(URL_KEYS) == {f.name for f in __import__("dataclasses").fields(laav.LaavParams)} | {
+        "seed", "motions", "frame", "color"}
+    s, view, problems = parse_settings({"r1": "25", "seed": ["3"], "frame": "4", "color": "final",
+                                        "rv_refine": "off", "fine_models": "8", "lam": b"3.5"}, seq, base)
+    assert problems == []
+    assert (s.params.r1, s.params.lam, s.params.rv_refine, s.params.fine_models, s.seed, s.n_motions) == (
+        25.0, 3.5, False, 8, 3, 3)
+    assert view == {"frame": 4, "color": "final"}
+    q = query_of(s, 3, view["frame"], view["color"], "gt")
+    assert q == {"r1": "25", "fine_models": "8", "lam": "3.5", "rv_refine": "false", "seed": "3",
+                 "frame": "4", "color": "final"}
+    assert parse_settings(q, seq, base) == (s, view, [])
+    assert query_of(base, 3, 0, "gt", "gt") == {}  # the defaults: a bare address
+    assert query_of(base, None) == {"motions": "3"}  # no ground truth: C is part of the state
+    odd = Settings(laav.LaavParams(lam=1 / 3), 0, 3)
+    assert parse_settings(query_of(odd, 3), seq, base)[0] == odd  # every digit kept
+    # bad values: a readable message each, everything else applied, never an exception
+    s, view, problems = parse_settings(
+        {"r1": "abc", "r2": "10", "seed": "-1", "motions": "9999", "frame": "30", "color": "<b>x</b>",
+         "nonsense": "1", "lam": "4", "rv_max_iter": "1.5"}, seq, base)
+    assert s.params.lam == 4.0 and s.params.r1 == 20.0 and s.params.r2 == 40.0 and s.seed == 0
+    assert s.n_motions == 3 and view == {}
+    text = " | ".join(problems)
+    for part in ("r1 must be a number, got 'abc'", "r2 must be larger than r1", "seed must be between 0",
+                 "motions (C) must be between 1 and 350", "frame must be between 0 and 29",
+                 "color must be one of", "'<b>x</b>'", "unknown setting 'nonsense'",
+                 "rv_max_iter must be a whole number, got '1.5'"):
+        assert part in text, (part, problems)
+
+
+def test_params_json_loads_back(demo):
+    from explorer import export
+    from explorer.state import Settings, settings_from_json
+
+    seq, res = demo
+    p = res.params.replace(r1=23.0, rv_alpha=0.8, coarse_frames=5)
+    shown = __import__("dataclasses").replace(res, params=p, seed=4, n_motions=2)
+    text = export.params_json(seq, shown)
+    got = settings_from_json(text, seq, Settings(laav.LaavParams(), 0, 3))
+    assert got == Settings(p, 4, 2)
+    assert settings_from_json(b'{"lam": 3}', seq, got).params == laav.LaavParams(lam=3.0)  # bare object
+    for bad, msg in ((b"\x00\x01", "not a JSON file"), (b"[1]", "one JSON object"),
+                     (b'{"params": {"r9": 1}}', "unknown LAAV parameter(s): r9"),
+                     (b'{"params": {"r1": "x"}}', "r1 must be a number"),
+                     (b'{"params": {}, "n_motions": 999}', "more than the 350 points"),
+                     (b'{"params": {}, "seed": -2}', "seed must be")):
+        with pytest.raises(ValueError, match=__import__("re").escape(msg)):
+            settings_from_json(bad, seq, got)
