@@ -251,7 +251,7 @@ class Explorer:
                                          else "final (after Random Voting)", width=SIDE_W)
         self._layer_names = ["trails (last 5 frames)", "atom circles (R1 solid, R2 dashed)",
                              "features in no atom (×)", "misclassified (black ring)",
-                             "changed motion in the last recompute (purple ring)"]
+                             "changed motion (purple ring)"]
         self.w_layers = pn.widgets.CheckBoxGroup(options=self._layer_names, value=list(self._layer_names),
                                                  inline=False)
         self.w_params: dict = {}

@@ -228,7 +228,7 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str) -> dict:
         color = np.full(P, UNLABELLED, dtype="U7")
         color[ok] = fc[lab[ok]]
         _, marker = _motion_palette(joined)
-        label = np.array([f"fine model {f + 1} → motion {m + 1}" if f >= 0 else "in no atom"
+        label = np.array([f"fine model {f + 1} → motion {m + 1}" if f >= 0 else "no fine model"
                           for f, m in zip(lab.tolist(), joined.tolist())], dtype=object)
     elif mode in ("coarse", "final"):
         lab = al[mode]

@@ -294,21 +294,26 @@ JS_OVERFLOW = """() => {
   const W = window.innerWidth;
   const over = [];
   let right = 0;
-  const walk = (root) => {
-    for (const el of root.querySelectorAll('*')) {
-      const r = el.getBoundingClientRect();
-      const st = getComputedStyle(el);
-      if (r.width > 0 && r.height > 0 && st.visibility !== 'hidden' && st.display !== 'none') {
-        right = Math.max(right, r.right);
-        if (r.right > W + 0.5) {
-          const name = `${el.tagName.toLowerCase()}.${String(el.className).slice(0, 40)}`;
-          over.push(`${name} right=${Math.round(r.right)}`);
-        }
+  const name = (el) => `${el.tagName.toLowerCase()}.${String(el.className).slice(0, 40)}`;
+  // clip: the right edge of the nearest ancestor that hides or scrolls its overflow
+  const visit = (el, clip) => {
+    const st = getComputedStyle(el);
+    if (st.display === 'none') return;
+    const r = el.getBoundingClientRect();
+    const shown = r.width > 0 && r.height > 0 && st.visibility !== 'hidden';
+    if (shown) {
+      right = Math.max(right, r.right);
+      if (r.right > W + 0.5) over.push(`${name(el)} right=${Math.round(r.right)}`);
+      else if (r.right > clip + 1 && el.children.length === 0 && el.textContent.trim()) {
+        over.push(`cut-off text "${el.textContent.trim().slice(0, 40)}" right=${Math.round(r.right)}`);
       }
-      if (el.shadowRoot) walk(el.shadowRoot);
     }
+    let c = clip;
+    if (shown && ['hidden', 'clip', 'auto', 'scroll'].includes(st.overflowX)) c = Math.min(c, r.right);
+    for (const k of el.children) visit(k, c);
+    if (el.shadowRoot) for (const k of el.shadowRoot.children) visit(k, c);
   };
-  walk(document);
+  visit(document.documentElement, W);
   return {width: W, right: Math.round(right), scrollWidth: document.scrollingElement.scrollWidth,
           over: over.slice(0, 15), n_over: over.length};
 }"""
