@@ -349,7 +349,8 @@ class Explorer:
         self.src_cut = ColumnDataSource(dict(empty_e))
         self.src_step = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": []})
         self.src_nodes = ColumnDataSource({"x": [], "y": [], "color": [], "cluster": [], "atom": [],
-                                           "members": [], "size": []})
+                                           "members": [], "size": [], "label": []})
+        self.src_pair = ColumnDataSource({"x": [], "y": [], "color": [], "size": [], "atom": []})
         g.segment("x0", "y0", "x1", "y1", source=self.src_step, line_color="#222222", line_alpha=0.35,
                   line_width=10, legend_label="contracted at this step")
         by_cost = {"field": "cost", "transform": self.cost_mapper}
@@ -359,6 +360,11 @@ class Explorer:
                   line_color=by_cost, legend_label="cut edge (dashed)")
         r_nodes = g.scatter("x", "y", source=self.src_nodes, size="size", fill_color="color",
                             line_color="black", line_width=0.8, legend_label="atom (colour = cluster)")
+        # atom ids beside the nodes; the pair joined at this step on top of everything, ringed
+        g.text("x", "y", text="label", source=self.src_nodes, x_offset=6, y_offset=-4,
+               text_font_size="7pt", text_color="#333333")
+        g.scatter("x", "y", source=self.src_pair, size="size", fill_color="color", line_color="#111111",
+                  line_width=3, legend_label="joined at this step (ringed)")
         g.add_tools(HoverTool(renderers=[r_nodes], tooltips=[("atom", "@atom"), ("cluster", "@cluster"),
                                                              ("features", "@members")]))
         g.add_layout(ColorBar(color_mapper=self.cost_mapper, title="edge cost: + join (blue), − cut (red)",
@@ -642,13 +648,14 @@ class Explorer:
                 self.result, self.sequence = result, seq
                 self.change = self.state.change_of(result) if not new_seq else None
                 self._moved = None if self.change is None else self.change.moved
-                self._style = V.point_style(seq, result, V.COLOR_MODES[self.w_color.value])
+                plain = self.state.plain_rv()
+                self._style = V.point_style(seq, result, V.COLOR_MODES[self.w_color.value], plain)
                 self._fine_colors = V.fine_colors(seq, result)
+                # a new result starts the replay at its final step (a step of another result
+                # would show contractions that no longer exist)
                 K = len(result.multicut.contractions)
-                at_end = self.w_step.value >= self.w_step.end
                 self.w_step.end = K + 1
-                if at_end or self.w_step.value > K + 1:
-                    self.w_step.value = K + 1
+                self.w_step.value = K + 1
                 n = int(np.asarray(result.coarse.fine_to_coarse).size)
                 opts = [f"f{j + 1}" for j in range(max(n, 1))]
                 if list(self.w_pair_j.options) != opts:
@@ -659,7 +666,7 @@ class Explorer:
                 self._draw_coarse()
                 self._draw_epipolar()
                 self._draw_rv(result.voting, self.state.plain_rv())
-                num = V.stage_numbers(seq, result)
+                num = V.stage_numbers(seq, result, plain)
                 self.numbers.object = V.numbers_markdown(num)
                 self.alert.visible = self.state.error is not None
                 notes = [n for n in (self._style["note"],) if n]
@@ -720,7 +727,8 @@ class Explorer:
         for w, ext in ((self.w_dl_csv, "labels.csv"), (self.w_dl_json, "params.json"),
                        (self.w_dl_png, "views.png")):
             w.filename = f"{laav.safe_name(seq.name)}_{ext}"
-        if seq.labels is None and self.w_color.value in ("ground truth", "errors"):
+        mode = V.COLOR_MODES[self.w_color.value]
+        if seq.labels is None and (mode == "gt" or mode.startswith("errors")):
             self.w_color.value = "final (after Random Voting)"
         elif seq.labels is not None and self._seq_shown is not None and self.sequence.labels is None:
             self.w_color.value = "ground truth"
@@ -756,14 +764,15 @@ class Explorer:
         if self._item_changed is not None:
             n_mv = len(d["changed"]["x"])
             self._item_changed.label = value(f"changed motion: {n_mv}")
+        stage = self._style.get("stage", "final")
         if self._item_errors is not None:
-            self._item_errors.label = value(f"misclassified: {n_bad}" if seq.labels is not None
+            self._item_errors.label = value(f"misclassified ({stage}): {n_bad}" if seq.labels is not None
                                             else "misclassified: (no truth)")
         self.frame_caption.object = (
             f"{res.atoms.n_atoms} atoms (R1 = {res.atoms.r1:g} px solid, R2 = {res.atoms.r2:g} px dashed, "
             f"drawn at their seeds); {np.asarray(res.atoms.unassigned).size} features in no atom (×); "
-            f"{int(self._style['misclassified'].sum())} points misclassified (black ring). "
-            "Click legend entries to hide them.")
+            f"{int(self._style['misclassified'].sum())} points misclassified by the {stage} stage (black "
+            "ring; the colour-by choice picks the stage). Click legend entries to hide them.")
 
     def _draw_graph(self) -> None:
         res = self.result
@@ -777,6 +786,7 @@ class Explorer:
         self.src_joined.data = d["joined"]
         self.src_cut.data = d["cut"]
         self.src_step.data = d["step_edge"]
+        self.src_pair.data = d["pair"]
         self.fig_graph.title.text = (f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {f} · "
                                      f"{len(np.unique(d['nodes']['cluster']))} clusters")
         self.graph_caption.object = V.replay_caption(res, step)
@@ -832,6 +842,9 @@ class Explorer:
             return
         with self._hold():
             self._draw_rv(self.result.voting, voting)
+            self.numbers.object = V.numbers_markdown(V.stage_numbers(self.sequence, self.result, voting))
+            if V.COLOR_MODES[self.w_color.value] in ("plain", "errors_plain"):
+                self._color_now()
         with self._applied:
             self.applied_plain_key = key
             self._applied.notify_all()
@@ -916,7 +929,8 @@ class Explorer:
     def _color_now(self) -> None:
         if self.result is None:
             return
-        self._style = V.point_style(self.sequence, self.result, V.COLOR_MODES[self.w_color.value])
+        self._style = V.point_style(self.sequence, self.result, V.COLOR_MODES[self.w_color.value],
+                                    self.state.plain_rv())
         with self._hold():
             self._draw_frame()
             self.note.object = self._style["note"]

@@ -51,15 +51,17 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
 
     from .state import Settings, non_defaults
 
-    style = V.point_style(seq, result, mode)
+    style = V.point_style(seq, result, mode, plain)
     fs = V.frame_sources(seq, result, frame, style)
     x0, x1, y0, y1 = seq.extent()
     fig = Figure(figsize=(13, 10.8), dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
-    num = V.stage_numbers(seq, result)
+    num = V.stage_numbers(seq, result, plain)
     settings = Settings(result.params, int(result.seed), int(result.n_motions))
     off = non_defaults(settings, seq.n_motions if seq.labels is not None else None)
     errs = ", ".join(f"{st} {V._pct(num[f'error_{st}'])}" for st in ("fine", "coarse", "final"))
+    if plain is not None:
+        errs += f"; plain RV {V._pct(num['error_plain'])}"
     p = result.params
     fig.suptitle(
         f"LAAV on {seq.name}: {seq.n_points} points, {seq.n_frames} frames, C = {result.n_motions}, "

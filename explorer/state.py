@@ -33,7 +33,7 @@ import numpy as np
 import laav
 from laav import LaavParams, LaavResult, Pipeline, Sequence
 
-from .views import align_labels, stage_numbers
+from .views import COLOR_MODES, align_labels, stage_numbers
 
 __all__ = ["ExplorerState", "Settings", "RV_FIELDS", "Change", "describe_change", "non_defaults",
            "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of", "settings_from_json",
@@ -137,7 +137,7 @@ def describe_change(seq: Sequence, before: LaavResult, before_settings: Settings
 _FIELDS = {f.name: f for f in dataclasses.fields(LaavParams)}
 _DEFAULTS = LaavParams()
 #: Colour-by keys in the URL (``color=final``) -> the views' colour modes.
-VIEW_COLORS = ("gt", "atoms", "fine", "coarse", "final", "errors")
+VIEW_COLORS = tuple(COLOR_MODES.values())
 #: Keys of the page URL's query: every LaavParams field, then the seed, C, frame and colour.
 URL_KEYS = tuple(_FIELDS) + ("seed", "motions", "frame", "color")
 _TRUE, _FALSE = ("1", "true", "on", "yes"), ("0", "false", "off", "no")

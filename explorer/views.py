@@ -16,7 +16,8 @@ import laav
 from laav.geometry import epipolar_lines
 
 __all__ = [
-    "COLOR_MODES", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK",
+    "COLOR_MODES", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS",
+    "UNLABELLED", "ERROR_MARK",
     "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "point_style", "frame_sources", "graph_sources", "replay_labels",
     "replay_caption", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
@@ -31,8 +32,16 @@ COLOR_MODES = {
     "fine models": "fine",
     "coarse (atoms merged)": "coarse",
     "final (after Random Voting)": "final",
-    "errors": "errors",
+    "plain RV (random start)": "plain",
+    "errors: fine models": "errors_fine",
+    "errors: coarse": "errors_coarse",
+    "errors: final": "errors",
+    "errors: plain RV": "errors_plain",
 }
+#: The stage whose errors a colour mode marks (black rings / black points).
+ERROR_STAGE = {"gt": "final", "atoms": "final", "fine": "fine", "coarse": "coarse", "final": "final",
+               "plain": "plain", "errors_fine": "fine", "errors_coarse": "coarse", "errors": "final",
+               "errors_plain": "plain"}
 
 #: One colour per motion, everywhere (frame view, 3-D view, fine models as its shades): Okabe-Ito
 #: colours, the subset and order whose pairs stay apart under simulated deuteranopia (CIE Lab
@@ -184,7 +193,46 @@ def fine_colors(seq: laav.Sequence, result: laav.LaavResult) -> np.ndarray:
     return out
 
 
-def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str) -> dict:
+def stage_errors(seq: laav.Sequence, result: laav.LaavResult, stage: str,
+                 plain: laav.Voting | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Which points ``stage`` got wrong, and which it labelled at all.
+
+    ``fine``: a point is wrong when its fine model's majority true motion is not its own
+    (a fine model counts as one motion; over-segmentation is no error); ``coarse``: its
+    motion after the fine-to-coarse merge, matched to the truth; ``final`` and ``plain``
+    (plain RV from a random start, ``plain`` given): the same for every point. Points a
+    stage leaves out (in no atom) are neither. Without ground truth (or plain RV not
+    computed yet) nothing is wrong and nothing is scored.
+    """
+    P = seq.n_points
+    gt = seq.labels
+    none = np.zeros(P, dtype=bool)
+    if gt is None:
+        return none, none
+    gt = np.asarray(gt, dtype=np.int64)
+    if stage == "fine":
+        lab = np.asarray(result.coarse.fine_point_labels, dtype=np.int64)
+        ok = lab >= 0
+        wrong = none.copy()
+        for f in np.unique(lab[ok]).tolist():
+            sel = lab == f
+            wrong[sel] = gt[sel] != np.bincount(gt[sel]).argmax()
+        return wrong, ok
+    if stage == "coarse":
+        lab = _aligned(seq, result)["coarse"]
+        ok = lab >= 0
+        return ok & (lab != gt), ok
+    if stage == "final":
+        return _aligned(seq, result)["final"] != gt, ~none
+    if stage == "plain":
+        if plain is None:
+            return none, none
+        return align_labels(plain.labels, gt) != gt, ~none
+    raise ValueError(f"unknown stage {stage!r}")
+
+
+def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
+                plain: laav.Voting | None = None) -> dict:
     """Colour, marker and legend label of every point for a colour-by ``mode`` (see COLOR_MODES).
 
     Motions have one colour and marker shape each (:data:`MOTION_COLORS`,
@@ -194,18 +242,23 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str) -> dict:
     Returns
     -------
     dict with ``color`` (P,) hex strings, ``marker`` (P,) bokeh marker names, ``label`` (P,)
-    legend strings, ``misclassified`` (P,) bool (all False without ground truth), ``note``
-    (str, empty unless the mode cannot be shown).
+    legend strings, ``misclassified`` (P,) bool: the points the mode's stage got wrong
+    (:data:`ERROR_STAGE`, :func:`stage_errors`; all False without ground truth), ``stage``
+    (that stage), ``note`` (str, empty unless the mode cannot be shown as asked).
     """
     P = seq.n_points
     al = _aligned(seq, result)
     gt = al["gt"]
-    wrong = np.zeros(P, dtype=bool) if gt is None else al["final"] != gt
     note = ""
     marker = np.full(P, "circle", dtype=object)
-    if mode in ("gt", "errors") and gt is None:
+    if mode in ("plain", "errors_plain") and plain is None:
+        note = "plain RV is still computing: showing the final labels until it is ready"
+        mode = "final" if mode == "plain" else "errors"
+    if (mode == "gt" or mode.startswith("errors")) and gt is None:
         note = "this sequence has no ground truth: showing the final labels"
         mode = "final"
+    stage = ERROR_STAGE[mode]
+    wrong, scored = stage_errors(seq, result, stage, plain)
     if mode == "gt":
         lab = gt
         color, marker = _motion_palette(lab)
@@ -230,17 +283,20 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str) -> dict:
         _, marker = _motion_palette(joined)
         label = np.array([f"fine model {f + 1} → motion {m + 1}" if f >= 0 else "no fine model"
                           for f, m in zip(lab.tolist(), joined.tolist())], dtype=object)
-    elif mode in ("coarse", "final"):
-        lab = al[mode]
+    elif mode in ("coarse", "final", "plain"):
+        lab = al[mode] if mode != "plain" else align_labels(plain.labels, gt if gt is not None
+                                                             else al["final"])
         color, marker = _motion_palette(lab)
         label = np.where(lab >= 0, np.char.add("motion ", (lab + 1).astype("U3")), "in no atom")
-    elif mode == "errors":
-        color = np.where(wrong, ERROR_MARK, CORRECT).astype("U7")
-        label = np.where(wrong, "misclassified", "correct")
+    elif mode.startswith("errors"):
+        color = np.where(wrong, ERROR_MARK, np.where(scored, CORRECT, "#EEEEEE")).astype("U7")
+        label = np.where(wrong, f"misclassified ({stage})",
+                         np.where(scored, f"correct ({stage})", "not labelled at this stage"))
     else:
         raise ValueError(f"unknown colour mode {mode!r}")
     return {"color": np.asarray(color, dtype="U7"), "marker": np.asarray(marker, dtype=object),
-            "label": np.asarray(label).astype(str), "misclassified": wrong, "note": note}
+            "label": np.asarray(label).astype(str), "misclassified": wrong, "stage": stage,
+            "note": note}
 
 
 def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style: dict,
@@ -348,9 +404,10 @@ def replay_caption(result: laav.LaavResult, step: int) -> str:
         return (f"**GAEC step 0 / {K}:** every one of the {n} atoms is its own cluster. GAEC repeatedly "
                 f"joins the two clusters linked by the largest positive total cost.")
     kept, merged = np.asarray(mc.contractions[step - 1]).tolist()
-    return (f"**GAEC step {step} / {K}:** joined atoms {kept} and {merged} "
-            f"(cost {float(mc.contraction_costs[step - 1]):+.2f}); {n - step} clusters. "
-            f"Dashed edges run between clusters.")
+    return (f"**GAEC step {step} / {K}:** joined atoms {kept} and {merged} (ringed, on top; "
+            f"cost {float(mc.contraction_costs[step - 1]):+.2f}); {n - step} clusters. Atom {merged}'s "
+            f"cluster took the colour of atom {kept}'s; no other atom changed colour. Dashed edges run "
+            f"between clusters; a cluster's colour is the final fine model its first atom ends in.")
 
 
 def cost_limit(result: laav.LaavResult) -> float:
@@ -368,8 +425,10 @@ def graph_sources(result: laav.LaavResult, frame: int, step: int, colors=None) -
     the colour of its final fine model; a cluster during the replay in the colour of its
     root atom's (:func:`replay_roots`): a contraction recolours only the merged cluster.
 
-    Keys: ``nodes`` (x, y, color, cluster, atom, size, members), ``joined`` and ``cut``
-    edges (x0, y0, x1, y1, cost, error), ``step_edge`` (the contraction of this step).
+    Keys: ``nodes`` (x, y, color, cluster, atom, size, members, label: the atom id),
+    ``joined`` and ``cut`` edges (x0, y0, x1, y1, cost, error), ``step_edge`` (the
+    contraction of this step), ``pair`` (x, y, color, size, atom: its two atoms; empty at
+    step 0 and after the last contraction).
     """
     g = result.graph
     pos = np.asarray(g.positions)
@@ -396,12 +455,17 @@ def graph_sources(result: laav.LaavResult, frame: int, step: int, colors=None) -
                 "a": e[:, 0], "b": e[:, 1]}
 
     out = {"nodes": nodes, "joined": edges(~cut), "cut": edges(cut)}
+    nodes["label"] = np.array([str(i) for i in range(g.n_nodes)], dtype=object)
     if 0 < step <= K:
         k, m = np.asarray(result.multicut.contractions[step - 1]).tolist()
         out["step_edge"] = {"x0": xy[[k], 0], "y0": xy[[k], 1], "x1": xy[[m], 0], "y1": xy[[m], 1]}
+        # the two atoms joined at this step, drawn again on top of the others, ringed
+        out["pair"] = {"x": xy[[k, m], 0], "y": xy[[k, m], 1], "color": node_color[[k, m]],
+                       "size": nodes["size"][[k, m]] + 6, "atom": np.array([k, m])}
     else:
         e = np.zeros(0)
         out["step_edge"] = {"x0": e, "y0": e, "x1": e, "y1": e}
+        out["pair"] = {"x": e, "y": e, "color": np.zeros(0, "U7"), "size": e, "atom": np.zeros(0, int)}
     return out
 
 
@@ -585,12 +649,15 @@ def _many_to_one_error(gt: np.ndarray, pred: np.ndarray) -> float:
     return 1.0 - counts.max(axis=0).sum() / max(gt.size, 1)
 
 
-def stage_numbers(seq: laav.Sequence, result: laav.LaavResult) -> dict:
+def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Voting | None = None) -> dict:
     """Scores and counts of one result.
 
     ``error_fine`` / ``error_coarse`` are measured on the points inside atoms only
-    (``coverage`` of them); ``error_final`` on all points. Errors are None without
-    ground truth. ``timings_ms`` per stage, ``total_ms``.
+    (``coverage`` of them); ``error_final`` on all points; ``error_plain``: plain RV from a
+    random start (``plain``, with the same sequence, C, seed and RV settings) on all points.
+    Errors are None without ground truth (``error_plain`` also before plain RV is given).
+    ``plain_iterations`` / ``plain_converged`` describe that run. ``timings_ms`` per stage,
+    ``total_ms``.
     """
     gt = seq.labels
     st = result.stage_labels()
@@ -610,6 +677,11 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult) -> dict:
             out["error_coarse"] = float(laav.misclassification_rate(gt[covered],
                                                                     np.asarray(st["coarse"])[covered]))
         out["error_final"] = float(laav.misclassification_rate(gt, np.asarray(st["final"])))
+    out["error_plain"] = None
+    out["plain_iterations"] = None if plain is None else len(plain.changed)
+    out["plain_converged"] = None if plain is None else bool(plain.converged)
+    if gt is not None and plain is not None:
+        out["error_plain"] = float(laav.misclassification_rate(gt, np.asarray(plain.labels)))
     return out
 
 
@@ -621,6 +693,13 @@ def _ms(t: dict, stage: str) -> str:
     """A stage time for display; a stage reused from the previous run (0 s) reads "reused"."""
     v = float(t.get(stage, 0.0))
     return "reused" if v == 0 else f"{v:.0f} ms"
+
+
+def _plain_result(num: dict) -> str:
+    it = num.get("plain_iterations")
+    if it is None:
+        return "computing…"
+    return f"{it} iterations, " + ("converged" if num.get("plain_converged") else "hit the iteration cap")
 
 
 def numbers_markdown(num: dict) -> str:
@@ -639,6 +718,8 @@ def numbers_markdown(num: dict) -> str:
         f"| 5 Random Voting | all {num['n_points']} points labelled | **{_pct(num['error_final'])}** "
         f"(all points) | {_ms(t, 'voting')} |",
         f"| total (this update) | | | {num['total_ms']:.0f} ms |",
+        f"| *plain RV* (random start; same C, seed, RV settings) | {_plain_result(num)} | "
+        f"{_pct(num.get('error_plain'))} (all points) | |",
     ]
     return "\n".join(rows)
 

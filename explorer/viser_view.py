@@ -183,7 +183,11 @@ class ViserView:
                                         thickness=2.0, thickness_units="screen")
 
     def close(self) -> None:
+        import contextlib
+        import io
+
         try:
-            self.server.stop()
+            with contextlib.redirect_stdout(io.StringIO()):  # viser prints "Server stopped"
+                self.server.stop()
         except Exception:
             pass

@@ -164,8 +164,8 @@ def test_frame_change_moves_points_without_recomputing(ex, seq):
 def test_colour_by_and_gaec_step(ex):
     ex.w_color.value = "atoms"
     c_atoms = list(ex.src_points.data["color"])
-    ex.w_color.value = "errors"
-    assert set(ex.src_points.data["label"]) <= {"correct", "misclassified"}
+    ex.w_color.value = "errors: final"
+    assert set(ex.src_points.data["label"]) <= {"correct (final)", "misclassified (final)"}
     assert list(ex.src_points.data["color"]) != c_atoms
     ex.w_step.value = 0
     assert len(ex.src_cut.data["x0"]) == ex.result.graph.n_edges  # nothing contracted yet
@@ -671,3 +671,36 @@ def test_cli_loads_params_json_and_param(monkeypatch, tmp_path, capsys):
         assert main([str(f), "--no-browser", "--port", "0", *args]) == 2
         err = capsys.readouterr().err
         assert msg in err and "Traceback" not in err, (args, err)
+
+
+def test_stage_errors_plain_rv_numbers_and_replay_reset():
+    ex = Explorer(demo_sequence(), viser=False)
+    try:
+        assert ex.wait(120, plain_rv=True)
+        seq, res = ex.sequence, ex.result
+        plain = ex.state.plain_rv()
+        # plain RV's error beside LAAV's in the numbers card
+        num = V.stage_numbers(seq, res, plain)
+        assert f"{100 * num['error_plain']:.1f} %" in ex.numbers.object and "plain RV" in ex.numbers.object
+        # colouring by the coarse stage rings the coarse stage's mistakes (the demo's coarse
+        # stage is wrong on some points; the old view said "misclassified: 0" here)
+        ex.w_color.value = "coarse (atoms merged)"
+        wrong = V.stage_errors(seq, res, "coarse")[0]
+        assert wrong.sum() > 0 and len(ex.src_errors.data["x"]) == wrong.sum()
+        assert "misclassified by the coarse stage" in ex.frame_caption.object
+        for label, stage in (("errors: fine models", "fine"), ("errors: plain RV", "plain")):
+            ex.w_color.value = label
+            w = V.stage_errors(seq, res, stage, plain)[0]
+            assert len(ex.src_errors.data["x"]) == w.sum()
+            assert (np.asarray(ex.src_points.data["color"]) == V.ERROR_MARK).sum() == w.sum()
+        ex.w_color.value = "plain RV (random start)"
+        assert ex.query()["color"] == "plain"
+        # GAEC replay: the pair of a step is ringed; a new result starts at its final step
+        ex.w_step.value = 3
+        assert len(ex.src_pair.data["x"]) == 2
+        ex.w_params["lam"].value = 2.5
+        assert ex.wait(120)
+        assert ex.w_step.value == ex.w_step.end == len(ex.result.multicut.contractions) + 1
+        assert len(ex.src_pair.data["x"]) == 0
+    finally:
+        ex.close()

@@ -237,3 +237,61 @@ def test_params_json_loads_back(demo):
                      (b'{"params": {}, "seed": -2}', "seed must be")):
         with pytest.raises(ValueError, match=__import__("re").escape(msg)):
             settings_from_json(bad, seq, got)
+
+
+# ---------------------------------------------------------------------------- errors at every stage
+def test_errors_at_every_stage(demo):
+    seq, res = demo
+    plain = laav.random_voting(seq, 3, res.params, 0)
+    num = V.stage_numbers(seq, res, plain)
+    for stage in ("fine", "coarse", "final", "plain"):
+        wrong, scored = V.stage_errors(seq, res, stage, plain)
+        assert not (wrong & ~scored).any()
+        assert wrong.sum() / scored.sum() == pytest.approx(num[f"error_{stage}"]), stage
+    assert num["error_plain"] == pytest.approx(laav.misclassification_rate(seq.labels, plain.labels))
+    # the demo's coarse stage is wrong on some points: colouring by it rings exactly those
+    st = V.point_style(seq, res, "coarse", plain)
+    assert st["stage"] == "coarse" and st["misclassified"].sum() > 0
+    assert np.array_equal(st["misclassified"], V.stage_errors(seq, res, "coarse")[0])
+    assert num["error_coarse"] > 0
+    # each "errors" mode paints its own stage's mistakes black
+    for mode, stage in (("errors_fine", "fine"), ("errors_coarse", "coarse"), ("errors", "final"),
+                        ("errors_plain", "plain")):
+        st = V.point_style(seq, res, mode, plain)
+        wrong = V.stage_errors(seq, res, stage, plain)[0]
+        assert np.array_equal(st["color"] == V.ERROR_MARK, wrong), mode
+    # plain RV labels in motion colours; before plain RV exists: the final labels and a note
+    st = V.point_style(seq, res, "plain", plain)
+    pl = V.align_labels(plain.labels, seq.labels)
+    assert st["color"].tolist() == [V.motion_color(m) for m in pl.tolist()]
+    assert "still computing" in V.point_style(seq, res, "plain", None)["note"]
+    # the numbers card has plain RV's error beside LAAV's
+    md = V.numbers_markdown(num)
+    assert "*plain RV*" in md and f"{100 * num['error_plain']:.1f} %" in md
+    assert "computing…" in V.numbers_markdown(V.stage_numbers(seq, res))
+
+
+# ---------------------------------------------------------------------------- GAEC replay
+def test_gaec_replay_keeps_colours_and_rings_the_joined_pair(demo):
+    seq, res = demo
+    fc = V.fine_colors(seq, res)
+    K = len(res.multicut.contractions)
+    assert K > 3
+    prev = V.graph_sources(res, 0, 0, fc)
+    assert len(prev["pair"]["x"]) == 0
+    for step in range(1, K + 1):
+        g = V.graph_sources(res, 0, step, fc)
+        kept, merged = np.asarray(res.multicut.contractions[step - 1]).tolist()
+        roots = V.replay_roots(res, step - 1)
+        moved = roots == roots[merged]  # the cluster that was joined into kept's
+        changed = g["nodes"]["color"] != prev["nodes"]["color"]
+        assert not (changed & ~moved).any(), f"step {step} recoloured atoms outside the merged cluster"
+        assert (g["nodes"]["color"][moved] == g["nodes"]["color"][kept]).all()
+        assert g["pair"]["atom"].tolist() == [kept, merged]
+        assert np.allclose(g["pair"]["x"], g["nodes"]["x"][[kept, merged]])
+        assert (g["pair"]["size"] > g["nodes"]["size"][[kept, merged]]).all()  # ring around the node
+        prev = g
+    assert g["nodes"]["label"].tolist() == [str(i) for i in range(res.graph.n_nodes)]
+    final = V.graph_sources(res, 0, K + 1, fc)
+    assert len(final["pair"]["x"]) == 0
+    assert np.array_equal(final["nodes"]["color"], fc[np.asarray(res.multicut.atom_labels)])
