@@ -292,8 +292,13 @@ class Explorer:
         self.w_dl_png = pn.widgets.FileDownload(callback=self._export_png, filename="views.png",
                                                 label="Views (PNG)", color="primary",
                                                 embed=False, width=SIDE_W)
-        self.w_step = pn.widgets.IntSlider(label="GAEC contraction step (rightmost = final fine models)",
-                                           start=0, end=1, value=1, width=520)
+        # a player, not a slider: its range input takes Home/End to the first/last step (the
+        # slider's noUiSlider keeps its first range for the End key: it went to step 1), and
+        # play steps through the contractions for a class
+        self.w_step = pn.widgets.Player(label="GAEC contraction step (rightmost = final fine models)",
+                                        start=0, end=1, value=1, interval=600, loop_policy="once",
+                                        show_loop_controls=False, value_align="start", scale_buttons=0.8,
+                                        width=420)
         self.w_pair_j = pn.widgets.Select(label="epipolar check: j", options=["f1"], width=105)
         self.w_pair_k = pn.widgets.Select(label="and k", options=["f1"], width=105)
         self.w_frame.param.watch(self._on_frame, "value")

@@ -486,3 +486,62 @@ def test_url_carries_the_state(tmp_path):
         for e in created:
             e.close()
     assert not dialogs, f"a payload ran: {dialogs}"
+
+
+def test_gaec_replay_keys_reach_both_ends():
+    """The replay's Home/End keys go to step 0 and to the final step, also after a new result
+    changed the number of steps (the old slider's End key went to step 1)."""
+    seq = _sequence()
+    created: list = []
+    port = _free_port()
+    server = pn.serve({"/": app_factory(seq, None, created=created, viser=False)}, port=port,
+                      address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
+                      threaded=True, verbose=False)
+    try:
+        _wait_listening(port)
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
+            try:
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+                page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+                ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+                assert ex.wait(60)
+
+                def replay_input():
+                    # the replay's range input (CSS locators pierce shadow roots); its max follows
+                    rng = page.locator(f"input[type=range][max='{ex.w_step.end}']")
+                    rng.first.wait_for(timeout=30000)
+                    assert rng.count() == 1  # the frame player's max differs here
+                    return rng
+
+                for _ in range(2):
+                    K1 = ex.w_step.end
+                    assert K1 == len(ex.result.multicut.contractions) + 1 and ex.w_step.value == K1
+                    box = replay_input()
+                    box.focus()
+                    page.keyboard.press("Home")
+                    _wait_for(lambda: ex.w_step.value == 0, 20, "step 0", page=page)
+                    page.keyboard.press("End")
+                    _wait_for(lambda K1=K1: ex.w_step.value == K1, 20, "the final step", page=page)
+                    # a new result with another number of contractions
+                    before = K1
+                    ex.w_params["r1"].value = 14.0 if ex.w_params["r1"].value != 14.0 else 26.0
+                    assert ex.wait(60)
+                    _wait_for(lambda: ex.result.params.r1 == ex.w_params["r1"].value, 30, "the R1 result")
+                    if ex.w_step.end != before:
+                        break
+                assert ex.w_step.end != before, "R1 did not change the number of GAEC steps"
+                K2 = ex.w_step.end
+                box = replay_input()
+                box.focus()
+                page.keyboard.press("Home")
+                _wait_for(lambda: ex.w_step.value == 0, 20, "step 0", page=page)
+                page.keyboard.press("End")
+                _wait_for(lambda: ex.w_step.value == K2, 20, "the new final step", page=page)
+            finally:
+                browser.close()
+    finally:
+        server.stop()
+        for e in created:
+            e.close()
