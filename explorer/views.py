@@ -625,15 +625,23 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
 
 
 def _selection(voting: laav.Voting) -> str:
-    """Which candidate labelling the selection kept, and against what."""
-    costs = voting.costs
+    """Which candidate labelling the selection kept, and the candidates' scores.
+
+    Only the public ``selected`` (a name, shown as text whatever it is) and ``costs``
+    (name -> score) are read; the name kept need not be among the scored candidates, and
+    nothing assumes how the algorithm chose (e.g. the lowest score).
+    """
+    costs = dict(voting.costs or {})
+    kept = voting.selected
     if len(costs) < 2:
         return ""
-    kept = voting.selected
-    if len(costs) <= 3:
-        others = ", ".join(f"{k} {v:.2f}" for k, v in costs.items() if k != kept)
-        return f"; kept the *{kept}* labelling (selection score {costs[kept]:.2f}; {others})"
-    return f"; kept *{kept}* (selection score {costs[kept]:.2f}, lowest of {len(costs)} candidates)"
+    name = md_text(kept) if kept else "(unnamed)"
+    score = f" (score {float(costs[kept]):.2f})" if kept in costs else ""
+    others = [(k, v) for k, v in costs.items() if k != kept]
+    if len(others) <= 2:
+        listed = ", ".join(f"{md_text(k)} {float(v):.2f}" for k, v in others)
+        return f"; kept the *{name}* labelling{score}; other candidates: {listed}"
+    return f"; kept *{name}*{score} of {len(costs)} scored candidates"
 
 
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None) -> str:

@@ -295,3 +295,23 @@ def test_gaec_replay_keeps_colours_and_rings_the_joined_pair(demo):
     final = V.graph_sources(res, 0, K + 1, fc)
     assert len(final["pair"]["x"]) == 0
     assert np.array_equal(final["nodes"]["color"], fc[np.asarray(res.multicut.atom_labels)])
+
+
+def test_rv_summary_reads_only_public_fields_and_any_selected_name(demo):
+    import dataclasses
+
+    seq, res = demo
+    v = res.voting
+    for selected, costs in (("informed", {"informed": 1.0, "plain": 2.0}),
+                            ("something new", {"a": 1.0, "b": 0.5}),  # not among the scored
+                            ("<b>x</b>", {"<b>x</b>": 0.1, "y": 0.2, "z": 0.3, "w": 0.4}),
+                            ("", {}), ("only", {"only": 3.0})):
+        w = dataclasses.replace(v, selected=selected, costs=costs)
+        text = V.rv_summary(w, None)
+        assert "LAAV fine-tuning" in text
+        if len(costs) >= 2:
+            assert V.md_text(selected or "(unnamed)") in text
+        assert "<b>" not in text
+    assert "lowest" not in V.rv_summary(dataclasses.replace(v, selected="a", costs={"a": 2.0, "b": 1.0,
+                                                                                       "c": 3.0, "d": 4.0}),
+                                        None)
