@@ -315,3 +315,16 @@ def test_rv_summary_reads_only_public_fields_and_any_selected_name(demo):
     assert "lowest" not in V.rv_summary(dataclasses.replace(v, selected="a", costs={"a": 2.0, "b": 1.0,
                                                                                        "c": 3.0, "d": 4.0}),
                                         None)
+
+
+def test_3d_view_gets_linear_colours_so_it_shows_the_2d_ones():
+    pytest.importorskip("viser")
+    from explorer.viser_view import _for_webgl
+
+    rgb = V.hex_to_rgb(["#FFFFFF", "#000000", "#808080", V.MOTION_COLORS[0]])
+    lin = _for_webgl(rgb)
+    assert lin[0].tolist() == [255, 255, 255] and lin[1].tolist() == [0, 0, 0]
+    assert lin[2].tolist() == [55, 55, 55]  # sRGB 128 is 21.6 % linear light
+    # three.js encodes linear -> sRGB for the screen: that gives the 2-D colour back
+    back = np.where(lin / 255 <= 0.0031308, 12.92 * lin / 255, 1.055 * (lin / 255) ** (1 / 2.4) - 0.055)
+    assert np.abs(back * 255 - rgb).max() <= 6
