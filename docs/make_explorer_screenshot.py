@@ -1,7 +1,8 @@
 """Regenerate ``docs/explorer.png``: the real explorer page in headless Debian Chromium.
 
 Usage: ``python docs/make_explorer_screenshot.py [SEQUENCE_FILE] [--frame N] [--out PATH]``
-(default: the bundled demo ``assets/demo_three_motions.mat`` at frame 15). Needs
+(default: the bundled demo ``assets/demo_three_motions.mat`` at frame 15, 1280 px wide as on
+a projector, every card open). Needs
 ``/usr/bin/chromium`` (``apt-get install -y chromium``) and the playwright package; no
 request leaves 127.0.0.1. The PNG is quantised to 256 colours to stay under 500 KB.
 """
@@ -25,7 +26,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("file", nargs="?", help="sequence file (default: the bundled demo)")
     ap.add_argument("--frame", type=int, default=15)
-    ap.add_argument("--width", type=int, default=1600)
+    ap.add_argument("--width", type=int, default=1280, help="page width (default 1280: a projector)")
+    ap.add_argument("--height", type=int, default=3700, help="tall enough for every card")
     ap.add_argument("--out", default=str(REPO / "docs" / "explorer.png"))
     args = ap.parse_args(argv)
 
@@ -81,7 +83,7 @@ def main(argv=None) -> int:
                     time.sleep(0.5)
             # software WebGL (SwiftShader) is slow: give the scene time to fade in, and close
             # viser's "software WebGL" notice whenever it shows up (headless only)
-            page.set_viewport_size({"width": args.width, "height": 2200})
+            page.set_viewport_size({"width": args.width, "height": args.height})
             for _ in range(25):
                 for fr in page.frames:
                     if fr != page.main_frame:

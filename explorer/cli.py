@@ -1,4 +1,10 @@
-"""``laav-explore [FILE] [--motions C] [--port N] [--host H] [--no-browser]``.
+"""``laav-explore [FILE] [--motions C] [--params P.JSON] [--param NAME=VALUE ...] [--port N] [--host H]
+[--no-browser]``.
+
+The page address carries its state: ``/?r1=25&seed=3`` opens with R1 = 25 and seed 3 (keys:
+every :class:`laav.LaavParams` field, ``seed``, ``motions``, ``frame``, ``color``), and moving
+a control updates it, so a copied address shows the same view. ``--params`` loads a
+``params.json`` exported by the page; ``--param`` sets one parameter (repeatable, applied last).
 
 Serves the explorer page (panel) with its embedded 3-D view (viser, one server per browser
 tab on a free port) from one process, prints the URL and opens the browser. Exit codes:
@@ -69,7 +75,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1",
                    help="interface to bind (default 127.0.0.1: this machine only; 0.0.0.0: every "
                         "interface, open to the network; each tab's 3-D view uses another free port)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random stages (default 0)")
+    p.add_argument("--seed", type=int, default=None, help="seed of the random stages (default 0, or the "
+                   "one in --params)")
+    p.add_argument("--params", metavar="P.JSON",
+                   help="parameters to start with: a params.json exported by the explorer")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="set one LaavParams field, e.g. --param lam=3 (repeatable; after --params)")
     p.add_argument("--no-browser", action="store_true", help="do not open a browser")
     p.add_argument("--max-points", type=int, default=None, metavar="N",
                    help=f"refuse a FILE with more than N points (default {laav.io.MAX_POINTS:,}; "
@@ -119,7 +130,8 @@ def _reachable_name(host: str) -> str:
 
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
-                hosts: list[str] | None = None, announce_viser: bool = False):
+                hosts: list[str] | None = None, announce_viser: bool = False,
+                params: laav.LaavParams | None = None):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
@@ -129,6 +141,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     Explorer built (tests and benchmarks use it). ``hosts``: see :func:`page_hosts` (its
     value for ``host`` by default). ``announce_viser`` prints the address of every tab's
     3-D view once its server is up (the CLI does for a non-loopback host).
+    A session whose address carries settings (``/?r1=25&seed=3``) starts with them
+    (validated; problems shown on the page as text).
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
@@ -138,7 +152,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     def build():
         from .app import Explorer
 
-        return Explorer(seq, n_motions, seed=seed, viser=viser, viser_host=host,
+        return Explorer(seq, n_motions, params=params, seed=seed, viser=viser, viser_host=host,
                         iframe_host=iframe_host, start=False, page_hosts=hosts)
 
     if prebuild:
@@ -167,6 +181,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                 ex = None
         if ex is None:
             ex = build()
+        ex.apply_query(dict(pn.state.session_args or {}))  # before the first computation starts
         if created is not None:
             created.append(ex)
         if announce_viser:
@@ -185,7 +200,9 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
         doc = pn.state.curdoc
         if doc is not None:
             doc.add_timeout_callback(ex.start, 3000)  # no document_ready (e.g. a script client)
-        return ex.template(f"LAAV explorer: {laav.safe_name(seq.name)}")  # HTML-safe characters
+        # the header shows the sequence in a pane that follows uploads; the tab's title is set
+        # to the shown sequence with every result of a new one
+        return ex.template("LAAV explorer")
 
     def close_unclaimed(timeout: float = 30.0) -> None:
         """Stop a prebuilt explorer no session took (at server shutdown)."""
@@ -234,6 +251,33 @@ def main(argv: list[str] | None = None) -> int:
     C = args.motions if args.motions is not None else seq.n_motions
     if C > seq.n_points:
         return _fail(parser, f"--motions {C} exceeds the {seq.n_points} points of {seq.name}")
+    from .state import Settings, parse_settings, settings_from_json
+
+    settings = Settings(laav.LaavParams(), 0 if args.seed is None else args.seed, C)
+    if args.params is not None:
+        try:
+            with open(args.params, "rb") as fh:
+                loaded = settings_from_json(fh.read(), seq, settings)
+        except OSError as exc:
+            return _fail(parser, f"--params {args.params}: {exc.strerror or exc}")
+        except ValueError as exc:
+            return _fail(parser, f"--params {args.params}: {exc}")
+        # the file's seed and C, unless given on the command line
+        settings = Settings(loaded.params, loaded.seed if args.seed is None else args.seed,
+                            C if args.motions is not None else loaded.n_motions)
+    if args.param:
+        pairs = {}
+        for item in args.param:
+            name, sep, val = item.partition("=")
+            if not sep or not name.strip():
+                return _fail(parser, f"--param takes NAME=VALUE, got {item!r}")
+            if name.strip() in ("seed", "motions", "frame", "color"):
+                return _fail(parser, f"--param sets LaavParams fields; use --seed / --motions for {name!r}")
+            pairs[name.strip()] = val
+        settings, _, problems = parse_settings(pairs, seq, settings)
+        if problems:
+            return _fail(parser, "--param: " + "; ".join(problems))
+    C = settings.n_motions
     if args.port is None:
         port = DEFAULT_PORT if _port_free(args.host, DEFAULT_PORT) else _free_port(args.host)
     else:
@@ -246,8 +290,8 @@ def main(argv: list[str] | None = None) -> int:
     hosts = page_hosts(args.host)
     origins = [f"{h}:{port}" for h in hosts]  # the page's websocket: its own origin only
     try:
-        factory = app_factory(seq, C, args.seed, args.host, prebuild=True, hosts=hosts,
-                              announce_viser=not _is_loopback(args.host))
+        factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
+                              announce_viser=not _is_loopback(args.host), params=settings.params)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False)

@@ -11,10 +11,16 @@ import laav
 
 from . import views as V
 
-__all__ = ["labels_csv", "params_json", "views_png"]
+__all__ = ["labels_csv", "params_json", "views_png", "views_figure"]
+
+#: bokeh marker names (views.MOTION_MARKERS) -> matplotlib markers
+_MPL_MARKERS = {"circle": "o", "square": "s", "triangle": "^", "diamond": "D", "inverted_triangle": "v",
+                "hex": "h"}
 
 
 def labels_csv(seq: laav.Sequence, result: laav.LaavResult) -> str:
+    """0-based labels, first columns ``point,label`` as ``laav segment`` writes (see
+    :func:`explorer.views.labels_table`)."""
     return V.labels_table(seq, result)
 
 
@@ -27,17 +33,44 @@ def params_json(seq: laav.Sequence, result: laav.LaavResult) -> str:
 
 def views_png(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: str,
               step: int | None = None, plain: laav.Voting | None = None, dpi: int = 100) -> bytes:
-    """A 2x2 PNG: frame view, multicut graph, affinity Z, RV convergence."""
+    """The views as a PNG (see :func:`views_figure`)."""
+    buf = io.BytesIO()
+    views_figure(seq, result, frame, mode, step, plain, dpi).savefig(buf, format="png")
+    return buf.getvalue()
+
+
+def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: str,
+                 step: int | None = None, plain: laav.Voting | None = None, dpi: int = 100):
+    """A 2x2 PNG: frame view, multicut graph, affinity Z, RV convergence, under a header
+    naming the sequence, C, the seed, every parameter off its default and each stage's error;
+    every panel has its legend or colour bar."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.collections import LineCollection
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle
 
-    style = V.point_style(seq, result, mode)
+    from .state import Settings, non_defaults
+
+    style = V.point_style(seq, result, mode, plain)
     fs = V.frame_sources(seq, result, frame, style)
     x0, x1, y0, y1 = seq.extent()
-    fig = Figure(figsize=(13, 10), dpi=dpi, layout="constrained")
+    fig = Figure(figsize=(13, 10.8), dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
+    num = V.stage_numbers(seq, result, plain)
+    settings = Settings(result.params, int(result.seed), int(result.n_motions))
+    off = non_defaults(settings, seq.n_motions if seq.labels is not None else None)
+    errs = ", ".join(f"{st} {V._pct(num[f'error_{st}'])}" for st in ("fine", "coarse", "final"))
+    if plain is not None:
+        errs += f"; plain RV {V._pct(num['error_plain'])}"
+    p = result.params
+    fig.suptitle(
+        f"LAAV on {seq.name}: {seq.n_points} points, {seq.n_frames} frames, C = {result.n_motions}, "
+        f"seed {result.seed}\n"
+        f"R1 = {p.r1:g}, R2 = {p.r2:g}, λ = {p.lam:g}, 2C = {result.multicut.n_models}, α = {p.rv_alpha:g}, "
+        f"iteration cap {p.rv_max_iter}; not at the defaults: {', '.join(off) if off else 'none'}\n"
+        + (f"errors vs ground truth: {errs} (fine and coarse on the points in atoms)"
+           if seq.labels is not None else "no ground truth: errors cannot be scored"),
+        fontsize=11)
     axs = fig.subplots(2, 2)
     mode_name = {v: k for k, v in V.COLOR_MODES.items()}.get(mode, mode)
 
@@ -51,20 +84,25 @@ def views_png(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: str
         ax.add_patch(Circle((x, y), r1, fill=False, lw=0.5, alpha=0.5, color="0.3"))
         ax.add_patch(Circle((x, y), r2, fill=False, lw=0.4, alpha=0.25, ls="--", color="0.3"))
     p = fs["points"]
-    ax.scatter(p["x"], p["y"], c=list(p["color"]), s=14, edgecolors="none")
+    labels = np.asarray(p["label"])
+    for lab in dict.fromkeys(labels.tolist()):  # one legend entry per label, in order
+        sel = labels == lab
+        mk = _MPL_MARKERS.get(str(np.asarray(p["marker"])[sel][0]), "o")
+        ax.scatter(np.asarray(p["x"])[sel], np.asarray(p["y"])[sel], c=list(np.asarray(p["color"])[sel]),
+                   marker=mk, s=16, edgecolors="#333333", linewidths=0.3, label=lab)
     u = fs["unassigned"]
-    ax.scatter(u["x"], u["y"], marker="x", c="k", s=22, lw=1, label="in no atom")
+    ax.scatter(u["x"], u["y"], marker="x", c=V.NO_ATOM, s=22, lw=1, label="in no atom")
     e = fs["errors"]
-    ax.scatter(e["x"], e["y"], facecolors="none", edgecolors=V.ERROR_RED, s=70, lw=1.5,
+    ax.scatter(e["x"], e["y"], facecolors="none", edgecolors=V.ERROR_MARK, s=80, lw=1.8,
                label="misclassified")
     ax.set(xlim=(x0, x1), ylim=(y1, y0), aspect="equal", xlabel="x (px)", ylabel="y (px, down)",
-           title=f"{seq.name}: frame {frame}, coloured by {mode_name}")
-    ax.legend(loc="upper right", fontsize=8)
+           title=f"Frame {frame}, coloured by {mode_name}")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0)
 
     ax = axs[0, 1]
     K = len(result.multicut.contractions)
     step = K + 1 if step is None else step
-    g = V.graph_sources(result, frame, step)
+    g = V.graph_sources(result, frame, step, V.fine_colors(seq, result))
     lim = V.cost_limit(result)
     from matplotlib import colormaps
     cmap = colormaps["RdBu"]
@@ -78,7 +116,17 @@ def views_png(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: str
     ax.scatter(n["x"], n["y"], c=list(n["color"]), s=np.asarray(n["size"]) ** 2 / 2.5,
                edgecolors="k", linewidths=0.5, zorder=3)
     ax.set(xlim=(x0, x1), ylim=(y1, y0), aspect="equal", xlabel="x (px)", ylabel="y (px, down)",
-           title=f"Multicut graph of {result.atoms.n_atoms} atoms (dashed = cut; blue join, red cut)")
+           title=f"Multicut graph of {result.atoms.n_atoms} atoms (colour = fine model)")
+    from matplotlib.lines import Line2D
+    handles = [Line2D([], [], color="0.3", lw=1.6, label="kept edge (solid)"),
+               Line2D([], [], color="0.3", lw=1.0, ls="--", label="cut edge (dashed)"),
+               Line2D([], [], color=cmap(0.95), lw=2, label="edge cost > 0 (join)"),
+               Line2D([], [], color=cmap(0.05), lw=2, label="edge cost < 0 (cut)")]
+    fc = V.fine_colors(seq, result)
+    mot = V.fine_motions(seq, result)
+    handles += [Line2D([], [], ls="", marker="o", mfc=c, mec="k", label=f"f{j + 1} → motion {m + 1}")
+                for j, (c, m) in enumerate(zip(fc.tolist(), mot.tolist()))][:12]
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0)
 
     ax = axs[1, 0]
     Z = np.asarray(result.coarse.affinity)
@@ -89,18 +137,17 @@ def views_png(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: str
                 color="white" if v > 0.55 else "black")
     ax.set_xticks(range(len(factors)), factors, rotation=45)
     ax.set_yticks(range(len(factors)), factors)
-    ax.set_title("Affinity Z between fine models (fN→Mk: fine model N joined motion k)")
+    ax.set_title("Affinity Z (fN→Mk: fine model N joined motion k)")
     fig.colorbar(im, ax=ax, shrink=0.8)
 
     ax = axs[1, 1]
     for vt, name, ls in ((result.voting, "LAAV fine-tuning", "-"), (plain, "plain RV", "--")):
         r = V.rv_sources(vt)
         if len(r["iteration"]):
-            ax.semilogy(r["iteration"], r["changed_plot"], ls, label=f"{name}: labels changed")
+            ax.semilogy(r["iteration"], r["changed_plot"], ls, color="#222222" if ls == "-" else "#8C8C8C",
+                        label=f"{name}: labels changed")
     ax.set(xlabel="iteration", ylabel="labels changed (0 drawn at 0.5)",
            title="Random Voting convergence")
     ax.legend(fontsize=8)
 
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    return buf.getvalue()
+    return fig

@@ -20,6 +20,7 @@ runs on a second worker thread, once per sequence/seed/RV settings, and is cache
 from __future__ import annotations
 
 import dataclasses
+import json
 import threading
 import time
 import traceback
@@ -27,10 +28,16 @@ from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 
+import numpy as np
+
 import laav
 from laav import LaavParams, LaavResult, Pipeline, Sequence
 
-__all__ = ["ExplorerState", "Settings", "RV_FIELDS"]
+from .views import COLOR_MODES, align_labels, stage_numbers
+
+__all__ = ["ExplorerState", "Settings", "RV_FIELDS", "Change", "describe_change", "non_defaults",
+           "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of", "settings_from_json",
+           "parse_value"]
 
 #: The parameters plain Random Voting depends on (its cache key).
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_"))
@@ -48,6 +55,250 @@ class Settings:
         """Keyword arguments for :meth:`laav.Pipeline.update` (the full settings: the
         pipeline works out itself which stages they touch)."""
         return {**self.params.to_dict(), "seed": self.seed, "n_motions": self.n_motions}
+
+
+#: Short names the page uses for parameters (status line, "what changed"); every other
+#: parameter goes by its LaavParams field name (the URL and params.json keys).
+PARAM_NAMES = {"r1": "R1", "r2": "R2", "lam": "λ", "fine_models": "2C", "rv_alpha": "α",
+               "rv_max_iter": "iteration cap", "seed": "seed", "n_motions": "C"}
+
+
+def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return "on" if v else "off"
+    if isinstance(v, float):
+        return f"{v:g}"
+    return str(v)
+
+
+def _values(settings: Settings) -> dict:
+    """Every setting by name, as shown: fine_models as the number of fine models used."""
+    d = settings.params.to_dict()
+    d["fine_models"] = settings.params.n_fine(settings.n_motions)
+    d["seed"], d["n_motions"] = settings.seed, settings.n_motions
+    return d
+
+
+def non_defaults(settings: Settings, default_motions: int | None) -> list[str]:
+    """``name = value`` for every setting that differs from the defaults (the LaavParams
+    defaults, seed 0, C of the ground truth, 2C fine models)."""
+    default = _values(Settings(LaavParams(), 0, settings.n_motions if default_motions is None
+                               else default_motions))
+    default["fine_models"] = 2 * settings.n_motions  # "2C" follows the C in use
+    now = _values(settings)
+    return [f"{PARAM_NAMES.get(k, k)} = {_fmt(v)}" for k, v in now.items() if v != default[k]]
+
+
+@dataclasses.dataclass(frozen=True)
+class Change:
+    """What one recompute changed against the result shown before it (same sequence).
+
+    Attributes
+    ----------
+    settings : tuple of (name, old, new)
+        The settings that changed (short names, see :data:`PARAM_NAMES`).
+    errors : tuple of (stage, old, new)
+        Error rates (fractions) of the coarse and final stages, when there is ground truth.
+    moved : numpy.ndarray
+        Indices of the points whose final motion changed (the new labels matched to the
+        old ones first, so a mere renaming of motions moves nothing).
+    """
+
+    settings: tuple
+    errors: tuple
+    moved: np.ndarray
+
+    def text(self) -> str:
+        """One line, e.g. ``R1 20 → 21: coarse 3.6 → 14.2 %, final 0.0 → 1.1 %, 17 points
+        changed motion``."""
+        what = ", ".join(f"{n} {_fmt(a)} → {_fmt(b)}" for n, a, b in self.settings) or "recomputed"
+        parts = [f"{st} {100 * a:.1f} → {100 * b:.1f} %" for st, a, b in self.errors]
+        n = int(self.moved.size)
+        parts.append(f"{n} point{'s' if n != 1 else ''} changed motion")
+        return f"{what}: {', '.join(parts)}"
+
+
+def describe_change(seq: Sequence, before: LaavResult, before_settings: Settings, after: LaavResult,
+                    after_settings: Settings) -> Change:
+    """The :class:`Change` from ``before`` to ``after`` (two results on ``seq``)."""
+    old, new = _values(before_settings), _values(after_settings)
+    changed = tuple((PARAM_NAMES.get(k, k), old[k], new[k]) for k in new if new[k] != old[k])
+    errors = ()
+    if seq.labels is not None:
+        a, b = stage_numbers(seq, before), stage_numbers(seq, after)
+        errors = tuple((st, a[f"error_{st}"], b[f"error_{st}"]) for st in ("coarse", "final")
+                       if a[f"error_{st}"] is not None and b[f"error_{st}"] is not None)
+    prev = np.asarray(before.labels)
+    moved = np.flatnonzero(align_labels(after.labels, prev) != prev)
+    return Change(changed, errors, moved)
+
+
+# ---------------------------------------------------------------------- settings as text
+_FIELDS = {f.name: f for f in dataclasses.fields(LaavParams)}
+_DEFAULTS = LaavParams()
+#: Colour-by keys in the URL (``color=final``) -> the views' colour modes.
+VIEW_COLORS = tuple(COLOR_MODES.values())
+#: Keys of the page URL's query: every LaavParams field, then the seed, C, frame and colour.
+URL_KEYS = tuple(_FIELDS) + ("seed", "motions", "frame", "color")
+_TRUE, _FALSE = ("1", "true", "on", "yes"), ("0", "false", "off", "no")
+
+
+def parse_value(name: str, text: str):
+    """The value of LaavParams field ``name`` written as ``text`` (URL, ``--param``).
+
+    Raises ValueError with a readable message; the value is *not* range-checked here
+    (constructing LaavParams does that)."""
+    if name not in _FIELDS:
+        raise ValueError(f"unknown parameter {name!r}")
+    t = str(text).strip()
+    default = getattr(_DEFAULTS, name)
+    try:
+        if name == "fine_models":
+            return None if t.lower() in ("", "none", "auto") else int(t)
+        if isinstance(default, bool):
+            if t.lower() in _TRUE:
+                return True
+            if t.lower() in _FALSE:
+                return False
+            raise ValueError
+        if isinstance(default, int):
+            return int(t)
+        if isinstance(default, float):
+            return float(t)
+        return t
+    except ValueError:
+        kind = ("a whole number" if isinstance(default, int) and not isinstance(default, bool) else
+                "true or false" if isinstance(default, bool) else "a number")
+        raise ValueError(f"{name} must be {kind}, got {t[:40]!r}") from None
+
+
+def _whole(name: str, text, lo: int, hi: int) -> int:
+    try:
+        v = int(str(text).strip())
+    except ValueError:
+        raise ValueError(f"{name} must be a whole number, got {str(text)[:40]!r}") from None
+    if not lo <= v <= hi:
+        raise ValueError(f"{name} must be between {lo} and {hi}, got {v}")
+    return v
+
+
+def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings, dict, list[str]]:
+    """Settings (and view state) from text key/value pairs: a page URL's query, ``--param``.
+
+    ``pairs`` maps :data:`URL_KEYS` to strings (a list of strings: the last one counts).
+    Every parameter goes through :class:`laav.LaavParams` and the seed, C, frame and colour
+    are checked against ``seq``. Returns ``(settings, view, problems)``: the settings from
+    ``base`` with every valid value applied, ``view`` with ``frame`` / ``color`` when given
+    and valid, and one readable message per key that was not used (never raises).
+    """
+    problems: list[str] = []
+    values: dict = {}
+    view: dict = {}
+    seed, C = base.seed, base.n_motions
+    for key, raw in pairs.items():
+        if isinstance(raw, (list, tuple)):
+            raw = raw[-1] if raw else ""
+        if isinstance(raw, bytes):
+            raw = raw.decode("utf-8", "replace")
+        try:
+            if key in _FIELDS:
+                values[key] = parse_value(key, raw)
+            elif key == "seed":
+                seed = _whole("seed", raw, 0, 2**32 - 1)
+            elif key == "motions":
+                C = _whole("motions (C)", raw, 1, seq.n_points)
+            elif key == "frame":
+                view["frame"] = _whole("frame", raw, 0, seq.n_frames - 1)
+            elif key == "color":
+                if str(raw) not in VIEW_COLORS:
+                    raise ValueError(f"color must be one of {', '.join(VIEW_COLORS)}, got {str(raw)[:40]!r}")
+                view["color"] = str(raw)
+            else:
+                raise ValueError(f"unknown setting {str(key)[:40]!r}")
+        except ValueError as exc:
+            problems.append(str(exc))
+    params = base.params
+    if values:
+        try:
+            params = base.params.replace(**values)
+        except (ValueError, TypeError) as exc:
+            problems.append(str(exc))
+            # keep the values that are fine on their own
+            for k, v in values.items():
+                try:
+                    params = params.replace(**{k: v})
+                except (ValueError, TypeError):
+                    pass
+    new = Settings(params, seed, C)
+    try:
+        check_settings(seq, new)
+    except ValueError as exc:
+        problems.append(str(exc))
+        new = Settings(params, seed, base.n_motions)
+        try:
+            check_settings(seq, new)
+        except ValueError:
+            new = base
+    return new, view, problems
+
+
+def _short_float(v: float) -> str:
+    """``25.0`` -> ``"25"``; as many digits as it takes to read back the same float."""
+    g = format(v, "g")
+    return g if float(g) == v else repr(v)
+
+
+def query_of(settings: Settings, default_motions: int | None, frame: int = 0,
+             color: str | None = None, default_color: str | None = None) -> dict[str, str]:
+    """The URL query for these settings and view: only what differs from the defaults
+    (``parse_settings(query_of(s, ...), ...)`` gives ``s`` back)."""
+    q: dict[str, str] = {}
+    for name in _FIELDS:
+        v = getattr(settings.params, name)
+        if v != getattr(_DEFAULTS, name):
+            q[name] = ("none" if v is None else "true" if v is True else "false" if v is False
+                       else _short_float(v) if isinstance(v, float) else str(v))
+    if settings.seed != 0:
+        q["seed"] = str(settings.seed)
+    if default_motions is None or settings.n_motions != default_motions:
+        q["motions"] = str(settings.n_motions)
+    if frame:
+        q["frame"] = str(int(frame))
+    if color is not None and color != default_color:
+        q["color"] = color
+    return q
+
+
+def settings_from_json(text: str | bytes, seq: Sequence, base: Settings) -> Settings:
+    """Settings from a params.json the explorer exported (``{"params": {...}, "seed": ...,
+    "n_motions": ...}``) or a bare ``{field: value}`` object. Raises ValueError (readable)
+    when it is not such a file or a value is invalid; nothing is half-applied."""
+    try:
+        d = json.loads(text)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ValueError(f"not a JSON file ({exc})") from None
+    if not isinstance(d, dict):
+        raise ValueError("a params file holds one JSON object")
+    params = d.get("params", d if "params" not in d else None)
+    if not isinstance(params, dict):
+        raise ValueError('"params" must be an object of LAAV parameters')
+    params = {k: v for k, v in params.items() if k not in ("sequence", "seed", "n_motions")}
+    unknown = sorted(set(params) - set(_FIELDS))
+    if unknown:
+        raise ValueError(f"unknown LAAV parameter(s): {', '.join(map(str, unknown))[:200]}")
+    try:
+        new_params = LaavParams(**{**_DEFAULTS.to_dict(), **params})
+    except TypeError as exc:
+        raise ValueError(f"invalid LAAV parameters: {exc}") from None
+    seed = d.get("seed", base.seed)
+    C = d.get("n_motions", base.n_motions)
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f"seed must be a whole number >= 0, got {seed!r}")
+    if not isinstance(C, int) or isinstance(C, bool):
+        raise ValueError(f"n_motions must be a whole number, got {C!r}")
+    new = Settings(new_params, seed, C)
+    check_settings(seq, new)
+    return new
 
 
 def check_settings(seq: Sequence, settings: Settings) -> None:
@@ -106,6 +357,9 @@ class ExplorerState:
         self.settings = target
         self.result: LaavResult | None = None
         self.error: str | None = None
+        #: what the last recompute changed (None after a new sequence or the first result)
+        self.change: Change | None = None
+        self._changes: OrderedDict = OrderedDict()
         self.compute_seconds = 0.0
         self._target = target
         self._target_seq = seq
@@ -127,6 +381,16 @@ class ExplorerState:
         self._started = False
         if autostart:
             self.start()
+
+    def retarget(self, settings: Settings) -> None:
+        """Before :meth:`start`: compute ``settings`` first instead (a shared URL's state).
+        A warm pipeline given for other settings is dropped."""
+        check_settings(self._target_seq, settings)
+        if self._started:
+            raise RuntimeError("retarget() only before start(); use request()")
+        if settings != self._target:
+            self._target = self.settings = settings
+            self._first = None
 
     def start(self) -> None:
         """Queue the first computation (call after setting the ``on_*`` hooks)."""
@@ -248,6 +512,16 @@ class ExplorerState:
             if gen != self._gen:
                 return  # a newer request came in meanwhile: drop this result
             self.compute_seconds = time.perf_counter() - t0
+            change = None
+            if self.result is not None and self.sequence is seq and result is not self.result:
+                try:
+                    change = describe_change(seq, self.result, self.settings, result, target)
+                except Exception:  # a summary must never cost the result
+                    traceback.print_exc()
+            self._changes[id(result)] = (result, change)
+            while len(self._changes) > 4:
+                self._changes.popitem(last=False)
+            self.change = change
             self.result, self.sequence, self.settings = result, seq, target
             self.error = None
             self._published = gen
@@ -270,6 +544,16 @@ class ExplorerState:
                 if kind == "load":
                     self._target = self.settings
         self._report(message + (" — still showing the last valid result" if self.result else ""))
+
+    def change_of(self, result: LaavResult) -> Change | None:
+        """The :class:`Change` that ``result`` made (None for a first result or a new sequence)."""
+        entry = self._changes.get(id(result))
+        return entry[1] if entry is not None and entry[0] is result else None
+
+    def default_motions(self, seq: Sequence | None = None) -> int | None:
+        """C of the ground truth of ``seq`` (the shown sequence by default), if it has one."""
+        seq = self.sequence if seq is None else seq
+        return seq.n_motions if seq.labels is not None else None
 
     def wait(self, timeout: float = 60.0) -> bool:
         """Block until no request is queued or computing (and its views were notified);

@@ -16,7 +16,9 @@ import laav
 from laav.geometry import epipolar_lines
 
 __all__ = [
-    "COLOR_MODES", "MOTION_COLORS", "FINE_COLORS", "UNLABELLED", "ERROR_RED",
+    "COLOR_MODES", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS",
+    "UNLABELLED", "ERROR_MARK",
+    "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "point_style", "frame_sources", "graph_sources", "replay_labels",
     "replay_caption", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
@@ -30,19 +32,40 @@ COLOR_MODES = {
     "fine models": "fine",
     "coarse (atoms merged)": "coarse",
     "final (after Random Voting)": "final",
-    "errors": "errors",
+    "plain RV (random start)": "plain",
+    "errors: fine models": "errors_fine",
+    "errors: coarse": "errors_coarse",
+    "errors: final": "errors",
+    "errors: plain RV": "errors_plain",
 }
+#: The stage whose errors a colour mode marks (black rings / black points).
+ERROR_STAGE = {"gt": "final", "atoms": "final", "fine": "fine", "coarse": "coarse", "final": "final",
+               "plain": "plain", "errors_fine": "fine", "errors_coarse": "coarse", "errors": "final",
+               "errors_plain": "plain"}
 
-#: One colour per motion (tab10 without its red: red marks errors).
-MOTION_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2",
-                 "#17becf", "#bcbd22", "#7f7f7f", "#393b79")
-#: Fine models and atoms (Category20 without reds).
-FINE_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf",
-               "#bcbd22", "#aec7e8", "#ffbb78", "#98df8a", "#c5b0d5", "#c49c94", "#f7b6d2",
-               "#9edae5", "#dbdb8d", "#7f7f7f", "#393b79")
-UNLABELLED = "#c7c7c7"
-ERROR_RED = "#d62728"
-CORRECT = "#9ecae1"
+#: One colour per motion, everywhere (frame view, 3-D view, fine models as its shades): Okabe-Ito
+#: colours, the subset and order whose pairs stay apart under simulated deuteranopia (CIE Lab
+#: ΔE >= 24.9 after Machado et al. 2009, severity 1; tests/test_explorer.py checks it).
+#: Motions beyond five repeat a colour with another marker shape.
+MOTION_COLORS = ("#0072B2", "#D55E00", "#009E73", "#F0E442", "#56B4E9")
+#: One marker shape per motion (bokeh marker names), so motions differ by more than colour.
+MOTION_MARKERS = ("circle", "square", "triangle", "diamond", "inverted_triangle", "hex")
+#: Atoms (the "atoms" colour mode only: an atom is no motion) cycle through these greys and
+#: muted tones, never a motion colour.
+ATOM_COLORS = ("#4D4D4D", "#8C8C8C", "#B07AA1", "#9C755F", "#76B7B2", "#BAB0AC", "#D4A6C8",
+               "#86BCB6", "#A0CBE8", "#6F6F6F")
+#: Shades of a motion colour for the fine models that joined it: >0 mixes in white, <0 black.
+FINE_SHADES = (0.0, 0.5, -0.45, 0.72, -0.65, 0.28, -0.25, 0.85)
+UNLABELLED = "#C7C7C7"
+#: Misclassified points are ringed in black (not red: a red ring vanishes on green points
+#: for deuteranopes; black stays apart from every motion colour, ΔE >= 56 simulated).
+ERROR_MARK = "#000000"
+CORRECT = "#BBBBBB"
+#: Features in no atom: a dark grey cross.
+NO_ATOM = "#555555"
+#: Points whose final motion changed with the last recompute: a large reddish-purple ring
+#: (Okabe-Ito; no motion uses it).
+CHANGED_MARK = "#CC79A7"
 
 
 _MD_PUNCT = re.compile(r"([!-/:-@\[-`{-~])")  # every ASCII punctuation character
@@ -76,6 +99,35 @@ def _palette(labels: np.ndarray, palette) -> np.ndarray:
     ok = labels >= 0
     out[ok] = pal[labels[ok] % pal.size]
     return out
+
+
+def motion_color(m: int) -> str:
+    """Colour of (0-based) motion ``m``."""
+    return MOTION_COLORS[int(m) % len(MOTION_COLORS)]
+
+
+def motion_marker(m: int) -> str:
+    """Marker shape of (0-based) motion ``m``."""
+    return MOTION_MARKERS[int(m) % len(MOTION_MARKERS)]
+
+
+def shade(color: str, t: float) -> str:
+    """``color`` mixed with white (``t`` > 0) or black (``t`` < 0) by ``|t|``."""
+    rgb = hex_to_rgb([color])[0].astype(float)
+    target = 255.0 if t > 0 else 0.0
+    out = np.clip(np.round(rgb + abs(t) * (target - rgb)), 0, 255).astype(int)
+    return "#{:02X}{:02X}{:02X}".format(*out)
+
+
+def _motion_palette(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Colours and markers of motion labels (-1: unlabelled grey circle)."""
+    labels = np.asarray(labels, dtype=np.int64)
+    col = np.full(labels.shape, UNLABELLED, dtype="U7")
+    mk = np.full(labels.shape, "circle", dtype=object)
+    ok = labels >= 0
+    col[ok] = np.asarray(MOTION_COLORS, dtype="U7")[labels[ok] % len(MOTION_COLORS)]
+    mk[ok] = np.asarray(MOTION_MARKERS, dtype=object)[labels[ok] % len(MOTION_MARKERS)]
+    return col, mk
 
 
 def align_labels(pred: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
@@ -114,26 +166,102 @@ def _aligned(seq: laav.Sequence, result: laav.LaavResult) -> dict:
     return {"gt": gt, "coarse": coarse, "final": final}
 
 
-def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str) -> dict:
-    """Colour and legend label of every point for a colour-by ``mode`` (see COLOR_MODES).
+def fine_motions(seq: laav.Sequence, result: laav.LaavResult) -> np.ndarray:
+    """The (0-based) motion each fine model joined, numbered like the coarse colours
+    (the coarse labels aligned with the ground truth)."""
+    f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
+    if f2c.size == 0:
+        return f2c
+    coarse_al = _aligned(seq, result)["coarse"]
+    raw = np.asarray(result.coarse.point_labels)
+    ren = {}
+    for m in np.unique(raw[raw >= 0]).tolist():
+        ren[m] = int(np.bincount(coarse_al[raw == m]).argmax())
+    return np.array([ren.get(int(m), int(m)) for m in f2c.tolist()], dtype=np.int64)
+
+
+def fine_colors(seq: laav.Sequence, result: laav.LaavResult) -> np.ndarray:
+    """Colour of each fine model: a shade of the colour of the motion it joined (the first
+    fine model of a motion gets the motion's own colour, the next ones lighter / darker)."""
+    mot = fine_motions(seq, result)
+    out = np.empty(mot.size, dtype="U7")
+    seen: dict = {}
+    for j, m in enumerate(mot.tolist()):
+        r = seen.get(m, 0)
+        seen[m] = r + 1
+        out[j] = shade(motion_color(m), FINE_SHADES[r % len(FINE_SHADES)])
+    return out
+
+
+def stage_errors(seq: laav.Sequence, result: laav.LaavResult, stage: str,
+                 plain: laav.Voting | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Which points ``stage`` got wrong, and which it labelled at all.
+
+    ``fine``: a point is wrong when its fine model's majority true motion is not its own
+    (a fine model counts as one motion; over-segmentation is no error); ``coarse``: its
+    motion after the fine-to-coarse merge, matched to the truth; ``final`` and ``plain``
+    (plain RV from a random start, ``plain`` given): the same for every point. Points a
+    stage leaves out (in no atom) are neither. Without ground truth (or plain RV not
+    computed yet) nothing is wrong and nothing is scored.
+    """
+    P = seq.n_points
+    gt = seq.labels
+    none = np.zeros(P, dtype=bool)
+    if gt is None:
+        return none, none
+    gt = np.asarray(gt, dtype=np.int64)
+    if stage == "fine":
+        lab = np.asarray(result.coarse.fine_point_labels, dtype=np.int64)
+        ok = lab >= 0
+        wrong = none.copy()
+        for f in np.unique(lab[ok]).tolist():
+            sel = lab == f
+            wrong[sel] = gt[sel] != np.bincount(gt[sel]).argmax()
+        return wrong, ok
+    if stage == "coarse":
+        lab = _aligned(seq, result)["coarse"]
+        ok = lab >= 0
+        return ok & (lab != gt), ok
+    if stage == "final":
+        return _aligned(seq, result)["final"] != gt, ~none
+    if stage == "plain":
+        if plain is None:
+            return none, none
+        return align_labels(plain.labels, gt) != gt, ~none
+    raise ValueError(f"unknown stage {stage!r}")
+
+
+def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
+                plain: laav.Voting | None = None) -> dict:
+    """Colour, marker and legend label of every point for a colour-by ``mode`` (see COLOR_MODES).
+
+    Motions have one colour and marker shape each (:data:`MOTION_COLORS`,
+    :data:`MOTION_MARKERS`) in every mode; a fine model is drawn as a shade of the motion
+    it joined, with that motion's marker.
 
     Returns
     -------
-    dict with ``color`` (P,) hex strings, ``label`` (P,) legend strings, ``misclassified``
-    (P,) bool (all False without ground truth), ``note`` (str, empty unless the mode
-    cannot be shown).
+    dict with ``color`` (P,) hex strings, ``marker`` (P,) bokeh marker names, ``label`` (P,)
+    legend strings, ``misclassified`` (P,) bool: the points the mode's stage got wrong
+    (:data:`ERROR_STAGE`, :func:`stage_errors`; all False without ground truth), ``stage``
+    (that stage), ``note`` (str, empty unless the mode cannot be shown as asked).
     """
     P = seq.n_points
     al = _aligned(seq, result)
     gt = al["gt"]
-    wrong = np.zeros(P, dtype=bool) if gt is None else al["final"] != gt
     note = ""
-    if mode in ("gt", "errors") and gt is None:
+    marker = np.full(P, "circle", dtype=object)
+    if mode in ("plain", "errors_plain") and plain is None:
+        note = "plain RV is still computing: showing the final labels until it is ready"
+        mode = "final" if mode == "plain" else "errors"
+    if (mode == "gt" or mode.startswith("errors")) and gt is None:
         note = "this sequence has no ground truth: showing the final labels"
         mode = "final"
+    stage = ERROR_STAGE[mode]
+    wrong, scored = stage_errors(seq, result, stage, plain)
     if mode == "gt":
         lab = gt
-        color = _palette(lab, MOTION_COLORS)
+        color, marker = _motion_palette(lab)
         label = np.char.add("motion ", (lab + 1).astype("U3"))
     elif mode == "atoms":
         owner = np.asarray(result.atoms.owner)
@@ -142,28 +270,41 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str) -> dict:
         for i, m in enumerate(result.atoms.members):
             sel = m[first[m] < 0]
             first[sel] = i
-        color = _palette(first, FINE_COLORS)
+        color = _palette(first, ATOM_COLORS)
         label = np.where(first >= 0, "in an atom (colour = atom)", "in no atom")
     elif mode == "fine":
-        lab = np.asarray(result.coarse.fine_point_labels)
-        color = _palette(lab, FINE_COLORS)
-        label = np.where(lab >= 0, np.char.add("fine model ", (lab + 1).astype("U3")), "in no atom")
-    elif mode in ("coarse", "final"):
-        lab = al[mode]
-        color = _palette(lab, MOTION_COLORS)
+        lab = np.asarray(result.coarse.fine_point_labels, dtype=np.int64)
+        fc, mot = fine_colors(seq, result), fine_motions(seq, result)
+        ok = lab >= 0
+        joined = np.full(P, -1, dtype=np.int64)
+        joined[ok] = mot[lab[ok]]
+        color = np.full(P, UNLABELLED, dtype="U7")
+        color[ok] = fc[lab[ok]]
+        _, marker = _motion_palette(joined)
+        label = np.array([f"fine model {f + 1} → motion {m + 1}" if f >= 0 else "no fine model"
+                          for f, m in zip(lab.tolist(), joined.tolist())], dtype=object)
+    elif mode in ("coarse", "final", "plain"):
+        lab = al[mode] if mode != "plain" else align_labels(plain.labels, gt if gt is not None
+                                                             else al["final"])
+        color, marker = _motion_palette(lab)
         label = np.where(lab >= 0, np.char.add("motion ", (lab + 1).astype("U3")), "in no atom")
-    elif mode == "errors":
-        color = np.where(wrong, ERROR_RED, CORRECT).astype("U7")
-        label = np.where(wrong, "misclassified", "correct")
+    elif mode.startswith("errors"):
+        color = np.where(wrong, ERROR_MARK, np.where(scored, CORRECT, "#EEEEEE")).astype("U7")
+        label = np.where(wrong, f"misclassified ({stage})",
+                         np.where(scored, f"correct ({stage})", "not labelled at this stage"))
     else:
         raise ValueError(f"unknown colour mode {mode!r}")
-    return {"color": np.asarray(color, dtype="U7"), "label": np.asarray(label).astype(str),
-            "misclassified": wrong, "note": note}
+    return {"color": np.asarray(color, dtype="U7"), "marker": np.asarray(marker, dtype=object),
+            "label": np.asarray(label).astype(str), "misclassified": wrong, "stage": stage,
+            "note": note}
 
 
 def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style: dict,
-                  trail: int = 5) -> dict:
+                  trail: int = 5, moved=None) -> dict:
     """Data of the frame view at ``frame``.
+
+    ``moved``: indices of points whose final motion changed with the last recompute
+    (``changed``: their x, y).
 
     Keys: ``points`` (x, y, color, label, index), ``trails`` (x0, y0, x1, y1, color,
     alpha: the last ``trail`` frames, fading), ``atoms`` (x, y at the seeds, r1, r2,
@@ -176,8 +317,10 @@ def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style
     color = style["color"]
     # points in label order, so the legend lists "motion 1, motion 2, ..." in order
     order = np.argsort(style["label"], kind="stable")
+    marker = style.get("marker")
+    marker = np.full(color.shape, "circle", dtype=object) if marker is None else marker
     out = {"points": {"x": xy[order, 0], "y": xy[order, 1], "color": color[order],
-                      "label": style["label"][order], "index": order}}
+                      "marker": marker[order], "label": style["label"][order], "index": order}}
     f0 = max(0, f - trail)
     if f > f0:
         seg = pts[f0:f + 1]  # (t+1, P, 2)
@@ -202,10 +345,32 @@ def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style
     out["unassigned"] = {"x": xy[un, 0], "y": xy[un, 1]}
     bad = np.flatnonzero(style["misclassified"])
     out["errors"] = {"x": xy[bad, 0], "y": xy[bad, 1]}
+    mv = np.zeros(0, np.int64) if moved is None else np.asarray(moved, dtype=np.int64)
+    out["changed"] = {"x": xy[mv, 0], "y": xy[mv, 1]}
     return out
 
 
 # ---------------------------------------------------------------------- multicut graph
+def replay_roots(result: laav.LaavResult, step: int) -> np.ndarray:
+    """The cluster of each atom after the first ``step`` GAEC contractions, named by its
+    root: the atom that was kept at every contraction the cluster took part in."""
+    mc = result.multicut
+    n = result.graph.n_nodes
+    parent = np.arange(n)
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for kept, merged in np.asarray(mc.contractions[:step]).reshape(-1, 2).tolist():
+        a, b = find(kept), find(merged)
+        if a != b:
+            parent[b] = a
+    return np.array([find(i) for i in range(n)], dtype=np.int64)
+
+
 def replay_labels(result: laav.LaavResult, step: int) -> np.ndarray:
     """Cluster of each atom after replaying the first ``step`` GAEC contractions.
 
@@ -218,19 +383,7 @@ def replay_labels(result: laav.LaavResult, step: int) -> np.ndarray:
     K = len(mc.contractions)
     if step > K:
         return np.asarray(mc.atom_labels, dtype=np.int64)
-    parent = np.arange(n)
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for kept, merged in np.asarray(mc.contractions[:step]).tolist():
-        a, b = find(kept), find(merged)
-        if a != b:
-            parent[b] = a
-    roots = np.array([find(i) for i in range(n)], dtype=np.int64)
+    roots = replay_roots(result, step)
     if n == 0:
         return roots
     uniq, inv, counts = np.unique(roots, return_inverse=True, return_counts=True)
@@ -251,9 +404,10 @@ def replay_caption(result: laav.LaavResult, step: int) -> str:
         return (f"**GAEC step 0 / {K}:** every one of the {n} atoms is its own cluster. GAEC repeatedly "
                 f"joins the two clusters linked by the largest positive total cost.")
     kept, merged = np.asarray(mc.contractions[step - 1]).tolist()
-    return (f"**GAEC step {step} / {K}:** joined atoms {kept} and {merged} "
-            f"(cost {float(mc.contraction_costs[step - 1]):+.2f}); {n - step} clusters. "
-            f"Dashed edges run between clusters.")
+    return (f"**GAEC step {step} / {K}:** joined atoms {kept} and {merged} (ringed, on top; "
+            f"cost {float(mc.contraction_costs[step - 1]):+.2f}); {n - step} clusters. Atom {merged}'s "
+            f"cluster took the colour of atom {kept}'s; no other atom changed colour. Dashed edges run "
+            f"between clusters; a cluster's colour is the final fine model its first atom ends in.")
 
 
 def cost_limit(result: laav.LaavResult) -> float:
@@ -264,11 +418,17 @@ def cost_limit(result: laav.LaavResult) -> float:
     return float(max(np.percentile(c, 95), 1e-6))
 
 
-def graph_sources(result: laav.LaavResult, frame: int, step: int) -> dict:
+def graph_sources(result: laav.LaavResult, frame: int, step: int, colors=None) -> dict:
     """Data of the multicut graph view at ``frame`` after ``step`` GAEC contractions.
 
-    Keys: ``nodes`` (x, y, color, cluster, atom, size, members), ``joined`` and ``cut``
-    edges (x0, y0, x1, y1, cost, error), ``step_edge`` (the contraction of this step).
+    ``colors``: colour of each final fine model (:func:`fine_colors`). An atom is drawn in
+    the colour of its final fine model; a cluster during the replay in the colour of its
+    root atom's (:func:`replay_roots`): a contraction recolours only the merged cluster.
+
+    Keys: ``nodes`` (x, y, color, cluster, atom, size, members, label: the atom id),
+    ``joined`` and ``cut`` edges (x0, y0, x1, y1, cost, error), ``step_edge`` (the
+    contraction of this step), ``pair`` (x, y, color, size, atom: its two atoms; empty at
+    step 0 and after the last contraction).
     """
     g = result.graph
     pos = np.asarray(g.positions)
@@ -276,7 +436,12 @@ def graph_sources(result: laav.LaavResult, frame: int, step: int) -> dict:
     xy = pos[f] if pos.size else np.zeros((0, 2))
     lab = replay_labels(result, step)
     sizes = np.array([len(m) for m in result.atoms.members], dtype=float)
-    nodes = {"x": xy[:, 0], "y": xy[:, 1], "color": _palette(lab, FINE_COLORS), "cluster": lab + 1,
+    final = np.asarray(result.multicut.atom_labels, dtype=np.int64)
+    pal = np.asarray(colors if colors is not None and len(colors) else ATOM_COLORS, dtype="U7")
+    K0 = len(result.multicut.contractions)
+    owner = final if step > K0 else final[replay_roots(result, step)] if final.size else final
+    node_color = pal[owner % pal.size] if owner.size else np.zeros(0, "U7")
+    nodes = {"x": xy[:, 0], "y": xy[:, 1], "color": node_color, "cluster": lab + 1,
              "atom": np.arange(g.n_nodes), "members": sizes.astype(int),
              "size": 7 + 2.0 * np.sqrt(sizes)}
     E = np.asarray(g.edges, dtype=np.int64).reshape(-1, 2)
@@ -290,12 +455,17 @@ def graph_sources(result: laav.LaavResult, frame: int, step: int) -> dict:
                 "a": e[:, 0], "b": e[:, 1]}
 
     out = {"nodes": nodes, "joined": edges(~cut), "cut": edges(cut)}
+    nodes["label"] = np.array([str(i) for i in range(g.n_nodes)], dtype=object)
     if 0 < step <= K:
         k, m = np.asarray(result.multicut.contractions[step - 1]).tolist()
         out["step_edge"] = {"x0": xy[[k], 0], "y0": xy[[k], 1], "x1": xy[[m], 0], "y1": xy[[m], 1]}
+        # the two atoms joined at this step, drawn again on top of the others, ringed
+        out["pair"] = {"x": xy[[k, m], 0], "y": xy[[k, m], 1], "color": node_color[[k, m]],
+                       "size": nodes["size"][[k, m]] + 6, "atom": np.array([k, m])}
     else:
         e = np.zeros(0)
         out["step_edge"] = {"x0": e, "y0": e, "x1": e, "y1": e}
+        out["pair"] = {"x": e, "y": e, "color": np.zeros(0, "U7"), "size": e, "atom": np.zeros(0, int)}
     return out
 
 
@@ -314,13 +484,7 @@ def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None) -> tupl
     n = Z.shape[0]
     f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
     if seq is not None and n:
-        # name motions like the aligned coarse labels
-        coarse_al = _aligned(seq, result)["coarse"]
-        raw = np.asarray(result.coarse.point_labels)
-        ren = {}
-        for m in np.unique(raw[raw >= 0]).tolist():
-            ren[m] = int(np.bincount(coarse_al[raw == m]).argmax())
-        f2c = np.array([ren.get(int(m), int(m)) for m in f2c.tolist()], dtype=np.int64)
+        f2c = fine_motions(seq, result)  # name motions like the aligned coarse labels
     factors = [f"f{j + 1}→M{int(m) + 1}" for j, m in enumerate(f2c.tolist())]
     jj, kk = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     jj, kk = jj.ravel(), kk.ravel()
@@ -394,8 +558,9 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     blank["frames"] = (fl, fr)
     fine = np.asarray(co.fine_point_labels)
     idx = np.flatnonzero((fine == j) | (fine == k))
-    cols = np.where(fine[idx] == j, FINE_COLORS[j % len(FINE_COLORS)],
-                    FINE_COLORS[k % len(FINE_COLORS)]).astype("U7")
+    fc = fine_colors(seq, result)
+    cj, ck = fc[j], fc[k]
+    cols = np.where(fine[idx] == j, cj, ck).astype("U7")
     model = np.where(fine[idx] == j, f"fine model f{j + 1}", f"fine model f{k + 1}").astype(object)
     pts = seq.points
     left = {"x": pts[fl, idx, 0], "y": pts[fl, idx, 1], "color": cols, "model": model}
@@ -417,8 +582,7 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     ext = seq.extent()
     X0, Y0, X1, Y1 = _clip_lines(lines, ext)
     resid = np.abs(lines[:, 0] * pts[fr, sel, 0] + lines[:, 1] * pts[fr, sel, 1] + lines[:, 2])
-    lc = np.where(fine[sel] == j, FINE_COLORS[j % len(FINE_COLORS)],
-                  FINE_COLORS[k % len(FINE_COLORS)]).astype("U7")
+    lc = np.where(fine[sel] == j, cj, ck).astype("U7")
     out["lines"] = {"x0": X0, "y0": Y0, "x1": X1, "y1": Y1, "color": lc}
     out["residual"] = float(resid.mean()) if resid.size else float("nan")
     in_j = fine[sel] == j
@@ -430,22 +594,27 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
 
 # ---------------------------------------------------------------------- RV convergence
 def rv_sources(voting: laav.Voting | None) -> dict:
-    """Per-iteration label changes and vote margin of a :class:`laav.Voting`."""
+    """Per-iteration label changes and vote margin of a :class:`laav.Voting`: for LAAV's
+    fine-tuning its own informed trial's (``informed_*``), whichever candidate it returned."""
     if voting is None:
         e = np.zeros(0)
         return {"iteration": e, "changed": e, "changed_plot": e, "margin": e}
-    ch = np.asarray(voting.changed, dtype=float)
+    own = voting.informed_changed is not None
+    ch = np.asarray(voting.informed_changed if own else voting.changed, dtype=float)
     it = np.arange(1, ch.size + 1)
     # changes are drawn on a log axis: show 0 as 0.5 (below the "1" tick)
     return {"iteration": it, "changed": ch, "changed_plot": np.where(ch > 0, ch, 0.5),
-            "margin": np.asarray(voting.margin, dtype=float)}
+            "margin": np.asarray(voting.informed_margin if own else voting.margin, dtype=float)}
 
 
 def _rv_line(voting: laav.Voting | None, what: str) -> str:
     if voting is None:
         return f"**{what}:** computing…"
     per = [int(t) for t in voting.trial_iterations]
-    conv = "converged" if voting.converged else "**not converged** (hit the iteration cap)"
+    own = voting.informed_changed is not None  # LAAV: describe its own informed trial
+    done = voting.informed_converged if own else voting.converged
+    n_it = len(voting.informed_changed) if own else len(voting.changed)
+    conv = "converged" if done else "**not converged** (hit the iteration cap)"
     trials = ""
     if voting.n_trials > 1:
         if per and len(set(per)) == 1:
@@ -460,23 +629,31 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
     returned = ""
     if voting.initialised and voting.selected != "informed":
         # the labels shown are not LAAV's own trial: say whose they are, and why
-        returned = (f"; **returned {voting.selected}, not LAAV's informed trial**: the model "
+        returned = (f"; **returned {md_text(voting.selected)}, not LAAV's informed trial**: the model "
                     f"selection (ours, not in the paper) preferred it; {voting.n_iterations} voting "
                     f"iterations in all, LAAV's informed trial {per[0] if per else 0}")
-    return (f"**{what}:** {len(voting.changed)} iterations, {conv}{trials}{extra}{returned}"
+    return (f"**{what}:** {n_it} iterations, {conv}{trials}{extra}{returned}"
             f"{_selection(voting)}.")
 
 
 def _selection(voting: laav.Voting) -> str:
-    """Which candidate labelling the selection kept, and against what."""
-    costs = voting.costs
+    """Which candidate labelling the selection kept, and the candidates' scores.
+
+    Only the public ``selected`` (a name, shown as text whatever it is) and ``costs``
+    (name -> score) are read; the name kept need not be among the scored candidates, and
+    nothing assumes how the algorithm chose (e.g. the lowest score).
+    """
+    costs = dict(voting.costs or {})
+    kept = voting.selected
     if len(costs) < 2:
         return ""
-    kept = voting.selected
-    if len(costs) <= 3:
-        others = ", ".join(f"{k} {v:.2f}" for k, v in costs.items() if k != kept)
-        return f"; kept the *{kept}* labelling (selection score {costs[kept]:.2f}; {others})"
-    return f"; kept *{kept}* (selection score {costs[kept]:.2f}, lowest of {len(costs)} candidates)"
+    name = md_text(kept) if kept else "(unnamed)"
+    score = f" (score {float(costs[kept]):.2f})" if kept in costs else ""
+    others = [(k, v) for k, v in costs.items() if k != kept]
+    if len(others) <= 2:
+        listed = ", ".join(f"{md_text(k)} {float(v):.2f}" for k, v in others)
+        return f"; kept the *{name}* labelling{score}; other candidates: {listed}"
+    return f"; kept *{name}*{score} of {len(costs)} scored candidates"
 
 
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None) -> str:
@@ -493,12 +670,15 @@ def _many_to_one_error(gt: np.ndarray, pred: np.ndarray) -> float:
     return 1.0 - counts.max(axis=0).sum() / max(gt.size, 1)
 
 
-def stage_numbers(seq: laav.Sequence, result: laav.LaavResult) -> dict:
+def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Voting | None = None) -> dict:
     """Scores and counts of one result.
 
     ``error_fine`` / ``error_coarse`` are measured on the points inside atoms only
-    (``coverage`` of them); ``error_final`` on all points. Errors are None without
-    ground truth. ``timings_ms`` per stage, ``total_ms``.
+    (``coverage`` of them); ``error_final`` on all points; ``error_plain``: plain RV from a
+    random start (``plain``, with the same sequence, C, seed and RV settings) on all points.
+    Errors are None without ground truth (``error_plain`` also before plain RV is given).
+    ``plain_iterations`` / ``plain_converged`` describe that run. ``timings_ms`` per stage,
+    ``total_ms``.
     """
     gt = seq.labels
     st = result.stage_labels()
@@ -518,6 +698,11 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult) -> dict:
             out["error_coarse"] = float(laav.misclassification_rate(gt[covered],
                                                                     np.asarray(st["coarse"])[covered]))
         out["error_final"] = float(laav.misclassification_rate(gt, np.asarray(st["final"])))
+    out["error_plain"] = None
+    out["plain_iterations"] = None if plain is None else len(plain.changed)
+    out["plain_converged"] = None if plain is None else bool(plain.converged)
+    if gt is not None and plain is not None:
+        out["error_plain"] = float(laav.misclassification_rate(gt, np.asarray(plain.labels)))
     return out
 
 
@@ -529,6 +714,13 @@ def _ms(t: dict, stage: str) -> str:
     """A stage time for display; a stage reused from the previous run (0 s) reads "reused"."""
     v = float(t.get(stage, 0.0))
     return "reused" if v == 0 else f"{v:.0f} ms"
+
+
+def _plain_result(num: dict) -> str:
+    it = num.get("plain_iterations")
+    if it is None:
+        return "computing…"
+    return f"{it} iterations, " + ("converged" if num.get("plain_converged") else "hit the iteration cap")
 
 
 def numbers_markdown(num: dict) -> str:
@@ -547,21 +739,29 @@ def numbers_markdown(num: dict) -> str:
         f"| 5 Random Voting | all {num['n_points']} points labelled | **{_pct(num['error_final'])}** "
         f"(all points) | {_ms(t, 'voting')} |",
         f"| total (this update) | | | {num['total_ms']:.0f} ms |",
+        f"| *plain RV* (random start; same C, seed, RV settings) | {_plain_result(num)} | "
+        f"{_pct(num.get('error_plain'))} (all points) | |",
     ]
     return "\n".join(rows)
 
 
 def labels_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
-    """CSV text: one row per point with its labels after every stage (1-based, 0 = none)."""
+    """CSV text, one row per point; labels are 0-based like ``laav segment``'s file.
+
+    Columns: ``point`` (0-based index), ``label`` (final motion: the same two columns as
+    ``laav segment --out``), ``x0``, ``y0`` (position in frame 0), ``ground_truth`` (empty
+    without), ``owner_atom``, ``fine_model``, ``coarse_motion`` (-1: the stage left the
+    point out, i.e. it is in no atom).
+    """
     st = result.stage_labels()
     owner = np.asarray(result.atoms.owner)
     gt = seq.labels
-    lines = ["point,x0,y0,ground_truth,owner_atom,fine_model,coarse_motion,final_motion"]
+    lines = ["point,label,x0,y0,ground_truth,owner_atom,fine_model,coarse_motion"]
     p0 = seq.points[0]
     for i in range(seq.n_points):
-        g = "" if gt is None else str(int(gt[i]) + 1)
-        lines.append(f"{i},{p0[i, 0]:.3f},{p0[i, 1]:.3f},{g},{int(owner[i]) + 1},"
-                     f"{int(st['fine'][i]) + 1},{int(st['coarse'][i]) + 1},{int(st['final'][i]) + 1}")
+        g = "" if gt is None else str(int(gt[i]))
+        lines.append(f"{i},{int(st['final'][i])},{p0[i, 0]:.3f},{p0[i, 1]:.3f},{g},{int(owner[i])},"
+                     f"{int(st['fine'][i])},{int(st['coarse'][i])}")
     return "\n".join(lines) + "\n"
 
 

@@ -64,6 +64,15 @@ def _origin_checked(hosts: Iterable[str]):
             ws_server.serve = real
 
 
+def _for_webgl(rgb: np.ndarray) -> np.ndarray:
+    """sRGB colours (uint8) as the linear values three.js expects in vertex colour buffers:
+    it converts them to sRGB for the screen, so without this every colour of the 3-D view
+    came out lighter than the same colour in the 2-D views (blue looked cyan)."""
+    c = np.asarray(rgb, dtype=np.float64) / 255.0
+    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return np.clip(np.round(lin * 255.0), 0, 255).astype(np.uint8)
+
+
 class ViserView:
     """A viser server showing one sequence and result.
 
@@ -140,7 +149,7 @@ class ViserView:
         seq, m = self._seq, self._map
         if seq is None:
             return
-        rgb = V.hex_to_rgb(colors)
+        rgb = _for_webgl(V.hex_to_rgb(colors))
         if getattr(self, "_traj_key", None) is not None and self._traj_key[0] is seq \
                 and np.array_equal(self._traj_key[1], rgb):
             self._draw_frame_items()  # same trajectories and colours: only atoms/edges may change
@@ -178,12 +187,16 @@ class ViserView:
             E = np.asarray(res.graph.edges, dtype=np.int64).reshape(-1, 2)
             if E.size:
                 segs = np.stack([centers[E[:, 0]], centers[E[:, 1]]], axis=1).astype(np.float32)
-                col = np.where((np.asarray(res.graph.costs) >= 0)[:, None], _JOIN, _CUT)
+                col = _for_webgl(np.where((np.asarray(res.graph.costs) >= 0)[:, None], _JOIN, _CUT))
                 scene.add_line_segments("/graph_edges", segs, np.repeat(col[:, None], 2, axis=1),
                                         thickness=2.0, thickness_units="screen")
 
     def close(self) -> None:
+        import contextlib
+        import io
+
         try:
-            self.server.stop()
+            with contextlib.redirect_stdout(io.StringIO()):  # viser prints "Server stopped"
+                self.server.stop()
         except Exception:
             pass

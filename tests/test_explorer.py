@@ -164,8 +164,8 @@ def test_frame_change_moves_points_without_recomputing(ex, seq):
 def test_colour_by_and_gaec_step(ex):
     ex.w_color.value = "atoms"
     c_atoms = list(ex.src_points.data["color"])
-    ex.w_color.value = "errors"
-    assert set(ex.src_points.data["label"]) <= {"correct", "misclassified"}
+    ex.w_color.value = "errors: final"
+    assert set(ex.src_points.data["label"]) <= {"correct (final)", "misclassified (final)"}
     assert list(ex.src_points.data["color"]) != c_atoms
     ex.w_step.value = 0
     assert len(ex.src_cut.data["x0"]) == ex.result.graph.n_edges  # nothing contracted yet
@@ -192,6 +192,22 @@ def test_invalid_slider_combination_shows_a_message_and_keeps_the_result(ex):
     ex.w_params["fine_models"].value = 4
     assert ex.wait(60)
     assert not ex.alert.visible
+
+
+def test_empty_upload_says_so_and_c_box_is_bounded(ex, seq):
+    res = ex.result
+    ex.w_upload.filename = "nothing.npz"
+    ex.w_upload.value = b""
+    assert ex.wait(60) and ex.result is res
+    assert ex.alert.visible and "nothing.npz is empty (0 bytes)" in _shown(ex.alert)
+    # C: at least 1, at most the number of points (the browser box clamps to these)
+    assert (ex.w_motions.start, ex.w_motions.end) == (1, seq.n_points)
+    # set from Python past them: a message, the result kept
+    for bad, msg in ((0, "must be a positive integer"), (-2, "must be a positive integer"),
+                     (seq.n_points + 1, f"more than the {seq.n_points} points")):
+        ex.w_motions.value = bad
+        assert ex.wait(60) and ex.result is res
+        assert ex.alert.visible and msg in _shown(ex.alert)
 
 
 def test_bad_upload_shows_a_message_and_keeps_the_result(ex):
@@ -234,8 +250,32 @@ def test_reset_restores_defaults(ex):
 
 
 def test_exports(ex, seq):
+    import csv as csvmod
+
+    from explorer import export
+
     csv = ex._export_csv().getvalue().splitlines()
-    assert csv[0].startswith("point,") and len(csv) == seq.n_points + 1
+    assert csv[0].startswith("point,label,") and len(csv) == seq.n_points + 1
+    rows = list(csvmod.DictReader(csv))
+    # 0-based like `laav segment`: the point index and the final label as in result.labels
+    assert [int(r["point"]) for r in rows] == list(range(seq.n_points))
+    assert [int(r["label"]) for r in rows] == np.asarray(ex.result.labels).tolist()
+    assert [int(r["ground_truth"]) for r in rows] == np.asarray(seq.labels).tolist()
+    st = ex.result.stage_labels()
+    assert [int(r["coarse_motion"]) for r in rows] == np.asarray(st["coarse"]).tolist()  # -1: in no atom
+    assert [int(r["owner_atom"]) for r in rows] == np.asarray(ex.result.atoms.owner).tolist()
+    # the PNG carries the parameters, errors and legends
+    fig = export.views_figure(seq, ex.result, 3, "final", plain=None)
+    head = fig._suptitle.get_text()
+    num = V.stage_numbers(seq, ex.result)
+    for part in (seq.name, "C = 2", "seed 0", f"R1 = {ex.result.params.r1:g}", "λ = ",
+                 f"final {100 * num['error_final']:.1f} %", f"coarse {100 * num['error_coarse']:.1f} %",
+                 "not at the defaults: none"):
+        assert part in head, (part, head)
+    axes = [a for a in fig.axes if a.get_label() != "<colorbar>"]
+    assert axes[0].get_legend() is not None and axes[1].get_legend() is not None  # frame, graph
+    assert any(a.get_label() == "<colorbar>" for a in fig.axes)  # Z's colour bar
+    assert "motion 1" in [t.get_text() for t in axes[0].get_legend().get_texts()]
     d = json.loads(ex._export_json().getvalue())
     assert laav.LaavParams(**d["params"]) == ex.result.params and d["n_motions"] == 2
     png = ex._export_png().getvalue()
@@ -507,3 +547,182 @@ def test_rv_summary_says_when_the_labels_are_not_laavs_own_trial():
     assert "65 voting iterations in all, LAAV's informed trial 40" in text
     plain = laav.random_voting(seq, seq.n_motions, seed=0)  # not initialised: no such note
     assert "not LAAV's" not in rv_summary(None, plain)
+
+
+def test_what_changed_is_shown_and_ringed():
+    """After a recompute: one line says what moved, the points that changed motion are ringed
+    (a layer toggle), the status names every setting off its default."""
+    ex = Explorer(demo_sequence(), viser=False)
+    try:
+        assert ex.wait(120)
+        assert not ex.change_md.visible and ex.change is None  # first result: nothing to compare
+        assert "All settings at their defaults" in ex.status.object
+        before = ex.result
+        ex.w_params["r1"].value = 21.0
+        assert ex.wait(120)
+        ch = ex.change
+        assert ch is not None and ex.state.change_of(ex.result) is ch
+        assert ex.change_md.visible
+        assert _shown(ex.change_md).startswith("**What changed:** R1 20 → 21: coarse ")
+        assert f"{ch.moved.size} point" in _shown(ex.change_md)
+        # the rings sit on exactly the points whose final motion changed
+        prev = np.asarray(before.labels)
+        expect = np.flatnonzero(V.align_labels(ex.result.labels, prev) != prev)
+        assert ch.moved.tolist() == expect.tolist()
+        f = int(ex.w_frame.value)
+        ring = np.c_[ex.src_changed.data["x"], ex.src_changed.data["y"]]
+        assert np.allclose(ring, ex.sequence.points[f, expect])
+        assert "R1 = 21" in _shown(ex.status)
+        # the layer toggle hides and shows the rings
+        layer = [n for n in ex.w_layers.options if n.startswith("changed motion")][0]
+        ex.w_layers.value = [n for n in ex.w_layers.value if n != layer]
+        assert not ex.r_changed.visible
+        ex.w_layers.value = [*ex.w_layers.value, layer]
+        assert ex.r_changed.visible
+        # seed and α too; back at the defaults the status says so
+        ex.w_seed.value = 2
+        assert ex.wait(120)
+        assert _shown(ex.change_md).startswith("**What changed:** seed 0 → 2: ")
+        assert "R1 = 21, seed = 2" in _shown(ex.status)
+        ex.w_reset.clicks += 1
+        assert ex.wait(120)
+        assert "All settings at their defaults" in ex.status.object
+        assert _shown(ex.change_md).startswith("**What changed:** R1 21 → 20, seed 2 → 0: ")
+        print(f"demo R1 20 -> 21: {ch.text()}")
+    finally:
+        ex.close()
+
+
+def test_query_and_params_json_set_the_state(seq, tmp_path):
+    from explorer import export
+
+    ex = Explorer(seq, viser=False, start=False)
+    try:
+        problems = ex.apply_query({"r1": ["25"], "seed": ["3"], "frame": ["4"], "color": ["final"],
+                                   "lam": ["<img src=x onerror=alert(1)>"], "bokeh-session-id": ["x"]})
+        assert len(problems) == 1 and "lam must be a number" in problems[0]
+        ex.start()
+        assert ex.wait(120)
+        assert (ex.result.params.r1, ex.result.seed) == (25.0, 3)
+        assert (ex.w_params["r1"].value, ex.w_seed.value, ex.w_frame.value) == (25.0, 3, 4)
+        assert ex.w_color.value == "final (after Random Voting)"
+        # the problem is shown as text (escaped), and stays after the result arrived
+        assert ex.url_alert.visible and re.search(r"(?<!\\)<", ex.url_alert.object) is None
+        assert "<img src=x onerror=alert(1)>" in _shown(ex.url_alert)
+        assert ex.query() == {"r1": "25", "seed": "3", "frame": "4", "color": "final"}
+        # a control moves the state the URL would carry
+        ex.w_params["lam"].value = 3.0
+        assert ex.wait(120)
+        assert ex.query()["lam"] == "3"
+        # the exported params.json loads back (as an upload): state restored, also fields
+        # without a control here
+        text = export.params_json(ex.sequence, ex.result)
+        ex.w_params["r1"].value = 30.0
+        assert ex.wait(120)
+        d = json.loads(text)
+        d["params"]["coarse_frames"] = 5
+        ex.w_upload.filename = "params.json"
+        ex.w_upload.value = json.dumps(d).encode()
+        assert ex.wait(120)
+        p = ex.result.params
+        assert (p.r1, p.lam, p.coarse_frames, ex.result.seed) == (25.0, 3.0, 5, 3)
+        assert ex.w_params["r1"].value == 25.0
+        # a broken one changes nothing and says why
+        res = ex.result
+        ex.w_upload.filename = "bad.json"
+        ex.w_upload.value = b'{"params": {"r1": -1}}'
+        assert ex.wait(120) and ex.result is res
+        assert ex.alert.visible and "bad.json" in _shown(ex.alert) and "r1 must be in (0" in _shown(ex.alert)
+        # reset brings back every default, also the ones without a control
+        ex.w_reset.clicks += 1
+        assert ex.wait(120)
+        assert ex.result.params == laav.LaavParams() and ex.query() == {"frame": "4", "color": "final"}
+    finally:
+        ex.close()
+
+
+def test_cli_loads_params_json_and_param(monkeypatch, tmp_path, capsys):
+    import explorer.cli as cli
+
+    seen = {}
+
+    def fake_factory(seq, n_motions, seed=0, host="127.0.0.1", **kw):
+        seen.update(n_motions=n_motions, seed=seed, params=kw.get("params"))
+
+        def make():
+            pass
+        make.close_unclaimed = lambda: None
+        return make
+
+    class FakeServer:
+        class io_loop:  # noqa: N801
+            @staticmethod
+            def add_callback(fn):
+                pass
+
+            @staticmethod
+            def start():
+                pass
+
+        def start(self):
+            pass
+
+        def stop(self):
+            pass
+
+    monkeypatch.setattr(cli, "app_factory", fake_factory)
+    monkeypatch.setattr(pn, "serve", lambda panels, **kw: FakeServer())
+    s = _two_motion_sequence()
+    f = laav.save_sequence(s, tmp_path / "s.npz")
+    pj = tmp_path / "p.json"
+    pj.write_text(json.dumps({"sequence": "x", "n_motions": 2, "seed": 5,
+                              "params": {**laav.LaavParams(r1=22.0, lam=1.5).to_dict()}}))
+    assert main([str(f), "--no-browser", "--port", "0", "--params", str(pj), "--param", "lam=3",
+                 "--param", "rv_refine=false"]) == 0
+    assert seen["params"] == laav.LaavParams(r1=22.0, lam=3.0, rv_refine=False)
+    assert seen["seed"] == 5 and seen["n_motions"] == 2
+    assert main([str(f), "--no-browser", "--port", "0", "--params", str(pj), "--seed", "1"]) == 0
+    assert seen["seed"] == 1
+    capsys.readouterr()
+    for args, msg in ((["--param", "lam=abc"], "lam must be a number"),
+                      (["--param", "lam"], "NAME=VALUE"),
+                      (["--param", "r2=5"], "r2 must be larger than r1"),
+                      (["--param", "zz=1"], "unknown setting 'zz'"),
+                      (["--params", str(tmp_path / "missing.json")], "No such file"),
+                      (["--params", str(f)], "not a JSON file")):
+        assert main([str(f), "--no-browser", "--port", "0", *args]) == 2
+        err = capsys.readouterr().err
+        assert msg in err and "Traceback" not in err, (args, err)
+
+
+def test_stage_errors_plain_rv_numbers_and_replay_reset():
+    ex = Explorer(demo_sequence(), viser=False)
+    try:
+        assert ex.wait(120, plain_rv=True)
+        seq, res = ex.sequence, ex.result
+        plain = ex.state.plain_rv()
+        # plain RV's error beside LAAV's in the numbers card
+        num = V.stage_numbers(seq, res, plain)
+        assert f"{100 * num['error_plain']:.1f} %" in ex.numbers.object and "plain RV" in ex.numbers.object
+        # colouring by the coarse stage rings the coarse stage's mistakes (the demo's coarse
+        # stage is wrong on some points; the old view said "misclassified: 0" here)
+        ex.w_color.value = "coarse (atoms merged)"
+        wrong = V.stage_errors(seq, res, "coarse")[0]
+        assert wrong.sum() > 0 and len(ex.src_errors.data["x"]) == wrong.sum()
+        assert "misclassified by the coarse stage" in ex.frame_caption.object
+        for label, stage in (("errors: fine models", "fine"), ("errors: plain RV", "plain")):
+            ex.w_color.value = label
+            w = V.stage_errors(seq, res, stage, plain)[0]
+            assert len(ex.src_errors.data["x"]) == w.sum()
+            assert (np.asarray(ex.src_points.data["color"]) == V.ERROR_MARK).sum() == w.sum()
+        ex.w_color.value = "plain RV (random start)"
+        assert ex.query()["color"] == "plain"
+        # GAEC replay: the pair of a step is ringed; a new result starts at its final step
+        ex.w_step.value = 3
+        assert len(ex.src_pair.data["x"]) == 2
+        ex.w_params["lam"].value = 2.5
+        assert ex.wait(120)
+        assert ex.w_step.value == ex.w_step.end == len(ex.result.multicut.contractions) + 1
+        assert len(ex.src_pair.data["x"]) == 0
+    finally:
+        ex.close()

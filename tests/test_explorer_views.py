@@ -1,0 +1,330 @@
+"""The explorer's GUI-free parts: colours, what changed between results, the page URL state.
+
+No browser and no panel server: pure functions of results (``explorer.views``) and the
+session state (``explorer.state``).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import laav
+from explorer import views as V
+from explorer.demo import demo_sequence
+
+# Machado, Oliveira & Fernandes (2009), deuteranopia at severity 1.0, on linear RGB
+DEUTERANOPIA = np.array([[0.367322, 0.860646, -0.227968],
+                         [0.280085, 0.672501, 0.047413],
+                         [-0.011820, 0.042940, 0.968881]])
+#: CIE76 ΔE every pair must exceed (about 10 just-noticeable differences; "clearly different")
+MIN_DELTA_E = 20.0
+
+
+def _linear(hex_colors) -> np.ndarray:
+    c = V.hex_to_rgb(hex_colors).astype(float) / 255
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _lab(linear_rgb: np.ndarray) -> np.ndarray:
+    """Linear sRGB -> CIE L*a*b* (D65)."""
+    m = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
+    xyz = linear_rgb @ m.T / np.array([0.95047, 1.0, 1.08883])
+    d = 6 / 29
+    f = np.where(xyz > d ** 3, np.cbrt(xyz), xyz / (3 * d ** 2) + 4 / 29)
+    return np.stack([116 * f[:, 1] - 16, 500 * (f[:, 0] - f[:, 1]), 200 * (f[:, 1] - f[:, 2])], axis=1)
+
+
+def _lab_deuteranope(hex_colors) -> np.ndarray:
+    return _lab(np.clip(_linear(hex_colors) @ DEUTERANOPIA.T, 0, 1))
+
+
+def test_simulation_is_the_standard_one():
+    # white and black stay; pure red and pure green become nearly the same colour
+    lab = _lab_deuteranope(["#FFFFFF", "#000000", "#FF0000", "#00FF00"])
+    assert lab[0, 0] == pytest.approx(100, abs=0.5) and lab[1, 0] == pytest.approx(0, abs=0.5)
+    normal = _lab(_linear(["#FF0000", "#00FF00"]))
+    assert np.linalg.norm(normal[0] - normal[1]) > 150
+    # the old red error ring on the old green motion: 170 apart normally, far less for a deuteranope
+    old = _lab_deuteranope(["#d62728", "#2ca02c"])
+    assert np.linalg.norm(old[0] - old[1]) < 40
+
+
+def test_motion_colours_and_error_marks_stay_apart_under_deuteranopia():
+    lab = _lab_deuteranope(V.MOTION_COLORS)
+    pairs = {(a, b): float(np.linalg.norm(lab[i] - lab[j]))
+             for (i, a), (j, b) in itertools.combinations(enumerate(V.MOTION_COLORS), 2)}
+    assert min(pairs.values()) > MIN_DELTA_E, pairs
+    err = _lab_deuteranope([V.ERROR_MARK])[0]
+    to_err = {c: float(np.linalg.norm(err - lab[i])) for i, c in enumerate(V.MOTION_COLORS)}
+    assert min(to_err.values()) > MIN_DELTA_E, to_err
+    # and with normal vision
+    norm = _lab(_linear(list(V.MOTION_COLORS) + [V.ERROR_MARK]))
+    for i, j in itertools.combinations(range(len(norm)), 2):
+        assert np.linalg.norm(norm[i] - norm[j]) > MIN_DELTA_E
+    # motion colours are Okabe-Ito colours; atoms never borrow one
+    okabe_ito = {"#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "#CC79A7", "#000000"}
+    assert set(V.MOTION_COLORS) <= okabe_ito
+    assert not set(V.ATOM_COLORS) & set(V.MOTION_COLORS)
+    # one marker shape per motion, and (colour, shape) unique for many more motions than C ever is
+    assert len(set(V.MOTION_MARKERS)) == len(V.MOTION_MARKERS)
+    combos = {(V.motion_color(m), V.motion_marker(m)) for m in range(30)}
+    assert len(combos) == 30
+
+
+@pytest.fixture(scope="module")
+def demo():
+    seq = demo_sequence()
+    return seq, laav.Pipeline(seq, 3).result
+
+
+def test_every_view_gives_a_motion_one_colour_and_shape(demo):
+    seq, res = demo
+    gt = V.point_style(seq, res, "gt")
+    for m in range(3):
+        sel = seq.labels == m
+        assert set(gt["color"][sel].tolist()) == {V.motion_color(m)}
+        assert set(gt["marker"][sel].tolist()) == {V.motion_marker(m)}
+    final = V.point_style(seq, res, "final")
+    fl = V.align_labels(res.labels, seq.labels)
+    for m in np.unique(fl).tolist():
+        assert set(final["color"][fl == m].tolist()) == {V.motion_color(m)}
+        assert set(final["marker"][fl == m].tolist()) == {V.motion_marker(m)}
+    fs = V.frame_sources(seq, res, 3, final)
+    assert len(fs["points"]["marker"]) == seq.n_points
+
+
+def test_fine_models_are_shades_of_the_motion_they_joined(demo):
+    seq, res = demo
+    mot = V.fine_motions(seq, res)
+    fc = V.fine_colors(seq, res)
+    assert mot.size == fc.size == res.multicut.n_models
+    for m in np.unique(mot).tolist():
+        shades = fc[mot == m].tolist()
+        assert len(set(shades)) == len(shades), "two fine models of one motion look the same"
+        assert shades[0] == V.motion_color(m)  # the first is the motion's own colour
+        allowed = {V.shade(V.motion_color(m), t) for t in V.FINE_SHADES}
+        assert set(shades) <= allowed
+    # the merge table / Z axis name the same motion the colours say
+    _, factors = V.z_sources(res, seq)
+    assert [int(f.split("→M")[1]) - 1 for f in factors] == mot.tolist()
+    # points coloured by fine model: colour of their model, marker of its motion
+    st = V.point_style(seq, res, "fine")
+    lab = np.asarray(res.coarse.fine_point_labels)
+    ok = lab >= 0
+    assert np.array_equal(st["color"][ok], fc[lab[ok]])
+    assert [V.motion_marker(m) for m in mot[lab[ok]]] == st["marker"][ok].tolist()
+    assert set(st["color"][~ok].tolist()) <= {V.UNLABELLED}
+    # the graph's atoms at the final step: the colour of their fine model
+    g = V.graph_sources(res, 0, len(res.multicut.contractions) + 1, fc)
+    assert np.array_equal(g["nodes"]["color"], fc[np.asarray(res.multicut.atom_labels)])
+    # the epipolar panel: its two models in their colours
+    e = V.epipolar_sources(seq, res, 0, 1)
+    assert set(e["left"]["color"].tolist()) <= {fc[0], fc[1]}
+
+
+# ---------------------------------------------------------------------------- what changed
+def test_describe_change_counts_points_that_changed_motion(demo):
+    import dataclasses
+
+    from explorer.state import Settings, describe_change
+
+    seq, res = demo
+    s0 = Settings(laav.LaavParams(), 0, 3)
+    s1 = Settings(laav.LaavParams(r1=21.0), 0, 3)
+    # a renaming of the motions moves nothing
+    renamed = dataclasses.replace(res, labels=(np.asarray(res.labels) + 1) % 3)
+    ch = describe_change(seq, res, s0, renamed, s1)
+    assert ch.moved.size == 0
+    assert ch.settings == (("R1", 20.0, 21.0),)
+    # three points put in another motion: exactly those are reported
+    moved = np.array([5, 77, 300])
+    lab = np.asarray(res.labels).copy()
+    lab[moved] = (lab[moved] + 1) % 3
+    after = dataclasses.replace(res, labels=lab)
+    ch = describe_change(seq, res, s0, after, s1)
+    assert ch.moved.tolist() == moved.tolist()
+    final_before = laav.misclassification_rate(seq.labels, res.labels)
+    final_after = laav.misclassification_rate(seq.labels, lab)
+    stages = dict((st, (a, b)) for st, a, b in ch.errors)
+    assert stages["final"] == pytest.approx((final_before, final_after))
+    assert stages["coarse"][0] == stages["coarse"][1]  # the coarse stage is the same result
+    coarse = 100 * stages["coarse"][0]
+    assert ch.text() == (f"R1 20 → 21: coarse {coarse:.1f} → {coarse:.1f} %, final "
+                         f"{100 * final_before:.1f} → {100 * final_after:.1f} %, 3 points changed motion")
+    # seed, C and fine models are settings too; no ground truth: no errors
+    bare = laav.Sequence(seq.points, None, name="bare")
+    ch = describe_change(bare, res, s0, after, Settings(laav.LaavParams(), 4, 3))
+    assert ch.errors == () and ch.text() == "seed 0 → 4: 3 points changed motion"
+
+
+def test_non_defaults_names_every_changed_setting():
+    from explorer.state import Settings, non_defaults
+
+    P = laav.LaavParams
+    assert non_defaults(Settings(P(), 0, 3), 3) == []
+    assert non_defaults(Settings(P(r1=25.0), 3, 3), 3) == ["R1 = 25", "seed = 3"]
+    got = non_defaults(Settings(P(rv_alpha=0.8, rv_max_iter=90, coarse_frames=5, rv_refine=False,
+                                  rv_select="none", fine_models=8), 0, 2), 3)
+    assert got == ["2C = 8", "coarse_frames = 5", "α = 0.8", "iteration cap = 90", "rv_refine = off",
+                   "rv_select = none", "C = 2"]
+    # 2C follows C: C = 2 with fine_models unset is 2C = 4, not a change of its own
+    assert non_defaults(Settings(P(), 0, 2), 3) == ["C = 2"]
+    assert non_defaults(Settings(P(), 0, 2), None) == []  # no ground truth: C is the user's
+
+
+def test_frame_view_rings_the_points_given_as_moved(demo):
+    seq, res = demo
+    st = V.point_style(seq, res, "final")
+    d = V.frame_sources(seq, res, 4, st, moved=np.array([5, 77]))
+    assert np.allclose(np.c_[d["changed"]["x"], d["changed"]["y"]], seq.points[4, [5, 77]])
+    assert len(V.frame_sources(seq, res, 4, st)["changed"]["x"]) == 0
+
+
+# ---------------------------------------------------------------------------- URL and params.json
+def test_url_query_round_trip_and_validation(demo):
+    from explorer.state import URL_KEYS, Settings, parse_settings, query_of
+
+    seq, _ = demo
+    base = Settings(laav.LaavParams(), 0, 3)
+    assert set(URL_KEYS) == {f.name for f in __import__("dataclasses").fields(laav.LaavParams)} | {
+        "seed", "motions", "frame", "color"}
+    s, view, problems = parse_settings({"r1": "25", "seed": ["3"], "frame": "4", "color": "final",
+                                        "rv_refine": "off", "fine_models": "8", "lam": b"3.5"}, seq, base)
+    assert problems == []
+    assert (s.params.r1, s.params.lam, s.params.rv_refine, s.params.fine_models, s.seed, s.n_motions) == (
+        25.0, 3.5, False, 8, 3, 3)
+    assert view == {"frame": 4, "color": "final"}
+    q = query_of(s, 3, view["frame"], view["color"], "gt")
+    assert q == {"r1": "25", "fine_models": "8", "lam": "3.5", "rv_refine": "false", "seed": "3",
+                 "frame": "4", "color": "final"}
+    assert parse_settings(q, seq, base) == (s, view, [])
+    assert query_of(base, 3, 0, "gt", "gt") == {}  # the defaults: a bare address
+    assert query_of(base, None) == {"motions": "3"}  # no ground truth: C is part of the state
+    odd = Settings(laav.LaavParams(lam=1 / 3), 0, 3)
+    assert parse_settings(query_of(odd, 3), seq, base)[0] == odd  # every digit kept
+    # bad values: a readable message each, everything else applied, never an exception
+    s, view, problems = parse_settings(
+        {"r1": "abc", "r2": "10", "seed": "-1", "motions": "9999", "frame": "30", "color": "<b>x</b>",
+         "nonsense": "1", "lam": "4", "rv_max_iter": "1.5"}, seq, base)
+    assert s.params.lam == 4.0 and s.params.r1 == 20.0 and s.params.r2 == 40.0 and s.seed == 0
+    assert s.n_motions == 3 and view == {}
+    text = " | ".join(problems)
+    for part in ("r1 must be a number, got 'abc'", "r2 must be larger than r1", "seed must be between 0",
+                 "motions (C) must be between 1 and 350", "frame must be between 0 and 29",
+                 "color must be one of", "'<b>x</b>'", "unknown setting 'nonsense'",
+                 "rv_max_iter must be a whole number, got '1.5'"):
+        assert part in text, (part, problems)
+
+
+def test_params_json_loads_back(demo):
+    from explorer import export
+    from explorer.state import Settings, settings_from_json
+
+    seq, res = demo
+    p = res.params.replace(r1=23.0, rv_alpha=0.8, coarse_frames=5)
+    shown = __import__("dataclasses").replace(res, params=p, seed=4, n_motions=2)
+    text = export.params_json(seq, shown)
+    got = settings_from_json(text, seq, Settings(laav.LaavParams(), 0, 3))
+    assert got == Settings(p, 4, 2)
+    assert settings_from_json(b'{"lam": 3}', seq, got).params == laav.LaavParams(lam=3.0)  # bare object
+    for bad, msg in ((b"\x00\x01", "not a JSON file"), (b"[1]", "one JSON object"),
+                     (b'{"params": {"r9": 1}}', "unknown LAAV parameter(s): r9"),
+                     (b'{"params": {"r1": "x"}}', "r1 must be a number"),
+                     (b'{"params": {}, "n_motions": 999}', "more than the 350 points"),
+                     (b'{"params": {}, "seed": -2}', "seed must be")):
+        with pytest.raises(ValueError, match=__import__("re").escape(msg)):
+            settings_from_json(bad, seq, got)
+
+
+# ---------------------------------------------------------------------------- errors at every stage
+def test_errors_at_every_stage(demo):
+    seq, res = demo
+    plain = laav.random_voting(seq, 3, res.params, 0)
+    num = V.stage_numbers(seq, res, plain)
+    for stage in ("fine", "coarse", "final", "plain"):
+        wrong, scored = V.stage_errors(seq, res, stage, plain)
+        assert not (wrong & ~scored).any()
+        assert wrong.sum() / scored.sum() == pytest.approx(num[f"error_{stage}"]), stage
+    assert num["error_plain"] == pytest.approx(laav.misclassification_rate(seq.labels, plain.labels))
+    # the demo's coarse stage is wrong on some points: colouring by it rings exactly those
+    st = V.point_style(seq, res, "coarse", plain)
+    assert st["stage"] == "coarse" and st["misclassified"].sum() > 0
+    assert np.array_equal(st["misclassified"], V.stage_errors(seq, res, "coarse")[0])
+    assert num["error_coarse"] > 0
+    # each "errors" mode paints its own stage's mistakes black
+    for mode, stage in (("errors_fine", "fine"), ("errors_coarse", "coarse"), ("errors", "final"),
+                        ("errors_plain", "plain")):
+        st = V.point_style(seq, res, mode, plain)
+        wrong = V.stage_errors(seq, res, stage, plain)[0]
+        assert np.array_equal(st["color"] == V.ERROR_MARK, wrong), mode
+    # plain RV labels in motion colours; before plain RV exists: the final labels and a note
+    st = V.point_style(seq, res, "plain", plain)
+    pl = V.align_labels(plain.labels, seq.labels)
+    assert st["color"].tolist() == [V.motion_color(m) for m in pl.tolist()]
+    assert "still computing" in V.point_style(seq, res, "plain", None)["note"]
+    # the numbers card has plain RV's error beside LAAV's
+    md = V.numbers_markdown(num)
+    assert "*plain RV*" in md and f"{100 * num['error_plain']:.1f} %" in md
+    assert "computing…" in V.numbers_markdown(V.stage_numbers(seq, res))
+
+
+# ---------------------------------------------------------------------------- GAEC replay
+def test_gaec_replay_keeps_colours_and_rings_the_joined_pair(demo):
+    seq, res = demo
+    fc = V.fine_colors(seq, res)
+    K = len(res.multicut.contractions)
+    assert K > 3
+    prev = V.graph_sources(res, 0, 0, fc)
+    assert len(prev["pair"]["x"]) == 0
+    for step in range(1, K + 1):
+        g = V.graph_sources(res, 0, step, fc)
+        kept, merged = np.asarray(res.multicut.contractions[step - 1]).tolist()
+        roots = V.replay_roots(res, step - 1)
+        moved = roots == roots[merged]  # the cluster that was joined into kept's
+        changed = g["nodes"]["color"] != prev["nodes"]["color"]
+        assert not (changed & ~moved).any(), f"step {step} recoloured atoms outside the merged cluster"
+        assert (g["nodes"]["color"][moved] == g["nodes"]["color"][kept]).all()
+        assert g["pair"]["atom"].tolist() == [kept, merged]
+        assert np.allclose(g["pair"]["x"], g["nodes"]["x"][[kept, merged]])
+        assert (g["pair"]["size"] > g["nodes"]["size"][[kept, merged]]).all()  # ring around the node
+        prev = g
+    assert g["nodes"]["label"].tolist() == [str(i) for i in range(res.graph.n_nodes)]
+    final = V.graph_sources(res, 0, K + 1, fc)
+    assert len(final["pair"]["x"]) == 0
+    assert np.array_equal(final["nodes"]["color"], fc[np.asarray(res.multicut.atom_labels)])
+
+
+def test_rv_summary_reads_only_public_fields_and_any_selected_name(demo):
+    import dataclasses
+
+    seq, res = demo
+    v = res.voting
+    for selected, costs in (("informed", {"informed": 1.0, "plain": 2.0}),
+                            ("something new", {"a": 1.0, "b": 0.5}),  # not among the scored
+                            ("<b>x</b>", {"<b>x</b>": 0.1, "y": 0.2, "z": 0.3, "w": 0.4}),
+                            ("", {}), ("only", {"only": 3.0})):
+        w = dataclasses.replace(v, selected=selected, costs=costs)
+        text = V.rv_summary(w, None)
+        assert "LAAV fine-tuning" in text
+        if len(costs) >= 2:
+            assert V.md_text(selected or "(unnamed)") in text
+        assert "<b>" not in text
+    assert "lowest" not in V.rv_summary(dataclasses.replace(v, selected="a", costs={"a": 2.0, "b": 1.0,
+                                                                                       "c": 3.0, "d": 4.0}),
+                                        None)
+
+
+def test_3d_view_gets_linear_colours_so_it_shows_the_2d_ones():
+    pytest.importorskip("viser")
+    from explorer.viser_view import _for_webgl
+
+    rgb = V.hex_to_rgb(["#FFFFFF", "#000000", "#808080", V.MOTION_COLORS[0]])
+    lin = _for_webgl(rgb)
+    assert lin[0].tolist() == [255, 255, 255] and lin[1].tolist() == [0, 0, 0]
+    assert lin[2].tolist() == [55, 55, 55]  # sRGB 128 is 21.6 % linear light
+    # three.js encodes linear -> sRGB for the screen: that gives the 2-D colour back
+    back = np.where(lin / 255 <= 0.0031308, 12.92 * lin / 255, 1.055 * (lin / 255) ** (1 / 2.4) - 0.055)
+    assert np.abs(back * 255 - rgb).max() <= 6
