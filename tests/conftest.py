@@ -68,3 +68,22 @@ def stop_process(proc) -> None:
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait()
+
+
+def session_text(url: str, timeout: float = 60.0) -> str:
+    """All text a browser tab of the served app is given (every bokeh model's ``text``),
+    read through a script session: the sequence name lives in the page's panes, not in its
+    static HTML."""
+    import time
+
+    import panel.models  # noqa: F401 - registers the models the client receives
+    from bokeh.client import pull_session
+
+    with pull_session(url=url) as session:
+        deadline = time.monotonic() + timeout
+        while True:
+            texts = [str(getattr(m, "text", "") or "") for m in session.document.models]
+            joined = "\n".join(texts)
+            if joined.strip() or time.monotonic() > deadline:
+                return joined
+            time.sleep(0.5)

@@ -23,7 +23,7 @@ import venv
 from pathlib import Path
 
 import pytest
-from conftest import stop_process
+from conftest import session_text, stop_process
 
 REPO = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.slow
@@ -116,8 +116,9 @@ def test_installed_wheel_serves_the_bundled_demo(installed):
             except OSError:
                 time.sleep(0.5)
         assert page is not None, log.read_text()
-        assert "demo_three_motions" in page
+        shown = session_text(f"http://127.0.0.1:{port}/")  # what a tab is given
+        assert "demo_three_motions" in shown
         assert "demo_three_motions" in log.read_text()
-        assert "synthetic demo" not in page
+        assert "synthetic demo" not in shown
     finally:
         stop_process(proc)
