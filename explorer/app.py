@@ -477,7 +477,7 @@ class Explorer:
                                             styles={"color": "white", "font-size": "1.25em"})
         self.numbers = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.graph_caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
-        self.merge_md = pn.pane.Markdown("", width=250, margin=(0, 6))
+        self.merge_md = pn.pane.Markdown("", width=340, margin=(0, 6))
         self.epi_caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=800, margin=(0, 10))
         self.rv_md = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
         self.frame_caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=900, margin=(0, 10))

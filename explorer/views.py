@@ -498,18 +498,32 @@ def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None) -> tupl
 
 
 def merge_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
-    """Markdown table: each fine model, its atoms and points, and the motion it joined."""
+    """Markdown table: each fine model, its atoms and points, the motion it joined and, with
+    ground truth, the true motion most of its points belong to (and what share of them)."""
     f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
     fine = np.asarray(result.coarse.fine_point_labels)
     atom_lab = np.asarray(result.multicut.atom_labels)
     factors = z_sources(result, seq)[1]
-    rows = ["| fine model | atoms | points | merged into |", "|---|---|---|---|"]
+    gt = seq.labels
+    truth = gt is not None
+    head = "| fine model | atoms | points | merged into |" + (" true motion |" if truth else "")
+    rows = [head, "|---|---|---|---|" + ("---|" if truth else "")]
     for j in range(f2c.size):
         motion = factors[j].split("→")[1]
-        rows.append(f"| f{j + 1} | {int((atom_lab == j).sum())} | {int((fine == j).sum())} | "
-                    f"motion {motion[1:]} |")
+        row = f"| f{j + 1} | {int((atom_lab == j).sum())} | {int((fine == j).sum())} | motion {motion[1:]} |"
+        if truth:
+            sel = fine == j
+            if sel.any():
+                counts = np.bincount(np.asarray(gt)[sel])
+                m = int(counts.argmax())
+                share = 100.0 * counts[m] / sel.sum()
+                agree = "" if m == int(motion[1:]) - 1 else " ✗"
+                row += f" motion {m + 1} ({share:.0f} %){agree} |"
+            else:
+                row += " – |"
+        rows.append(row)
     if f2c.size == 0:
-        rows.append("| – | 0 | 0 | (no atoms formed) |")
+        rows.append("| – | 0 | 0 | (no atoms formed) |" + (" – |" if truth else ""))
     return "\n".join(rows)
 
 

@@ -328,3 +328,20 @@ def test_3d_view_gets_linear_colours_so_it_shows_the_2d_ones():
     # three.js encodes linear -> sRGB for the screen: that gives the 2-D colour back
     back = np.where(lin / 255 <= 0.0031308, 12.92 * lin / 255, 1.055 * (lin / 255) ** (1 / 2.4) - 0.055)
     assert np.abs(back * 255 - rgb).max() <= 6
+
+
+def test_merge_table_has_a_true_motion_column(demo):
+    seq, res = demo
+    md = V.merge_table(seq, res)
+    lines = md.splitlines()
+    assert lines[0].endswith("| true motion |") and len(lines) == 2 + res.multicut.n_models
+    fine = np.asarray(res.coarse.fine_point_labels)
+    mot = V.fine_motions(seq, res)
+    for j, line in enumerate(lines[2:]):
+        sel = fine == j
+        m = int(np.bincount(seq.labels[sel]).argmax())
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        assert cells[3] == f"motion {mot[j] + 1}"
+        assert cells[4].startswith(f"motion {m + 1} (") and cells[4].endswith("✗") == (m != mot[j])
+    bare = laav.Sequence(seq.points, None, name="bare")
+    assert "true motion" not in V.merge_table(bare, res)
