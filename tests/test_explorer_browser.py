@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import socket
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -106,104 +107,114 @@ def _wait_for(pred, timeout: float, what: str, page=None):
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def test_explorer_in_chromium(tmp_path):
-    shots = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
-    shots.mkdir(parents=True, exist_ok=True)
-    seq = _sequence()
+@contextmanager
+def _served(seq, viser: bool = True):
+    """The app for ``seq`` on a free loopback port and a headless Chromium:
+    ``(port, browser, created)``, ``created`` listing each session's Explorer; the server
+    stopped, the browser and the explorers closed afterwards."""
     created: list = []
     port = _free_port()
-    server = pn.serve({"/": app_factory(seq, None, created=created)}, port=port, address="127.0.0.1",
-                      websocket_origin=[f"127.0.0.1:{port}"], show=False, threaded=True, verbose=False)
-    outside: list[str] = []
-    sockets: list[str] = []
-    js_errors: list[str] = []
+    server = pn.serve({"/": app_factory(seq, None, created=created, viser=viser)}, port=port,
+                      address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
+                      threaded=True, verbose=False)
     try:
         _wait_listening(port)
         with sync_api.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
             try:
-                context = browser.new_context(viewport={"width": 1600, "height": 1000})
-
-                def route(r):
-                    url = r.request.url
-                    if url.startswith(LOCAL):
-                        r.continue_()
-                    else:
-                        outside.append(url)
-                        r.abort()
-
-                context.route("**/*", route)
-                page = context.new_page()
-                received: set[str] = set()
-
-                def on_socket(ws):
-                    sockets.append(ws.url)
-                    ws.on("framereceived", lambda _: received.add(ws.url))
-
-                page.on("websocket", on_socket)
-                page.on("pageerror", lambda e: js_errors.append(str(e)))
-                page.on("console", lambda m: js_errors.append(m.text) if m.type == "error" else None)
-                t0 = time.monotonic()
-                page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
-                page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
-                ex = _wait_for(lambda: created[0] if created else None, 10, "the session's explorer")
-                assert ex.wait(60), "the first result did not arrive"
-                page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=20000)
-                load_s = time.monotonic() - t0
-                before = page.evaluate(JS_SOURCES)
-                assert before["points"] == seq.n_points
-                page.screenshot(path=str(shots / "explorer_loaded.png"))
-
-                # move λ in the page: the server recomputes and the browser's Z changes
-                lam0 = ex.result.params.lam
-                atoms0 = ex.result.atoms
-                target = round(lam0 * 2 + 0.5, 1)
-                assert page.evaluate(JS_SET_SLIDER, ["λ", target]) is not None
-                _wait_for(lambda: ex.result.params.lam == target and ex.wait(1), 60, "the λ result")
-                assert ex.result.atoms is atoms0
-                _wait_for(lambda: f"λ = {target:g}" in page.evaluate(JS_SOURCES).get("ztitle", ""), 20,
-                          "the Z title in the browser")
-                # one line says what the change did (and the status names λ: it is off its default)
-                page.get_by_text(f"What changed: λ {lam0:g} → {target:g}").first.wait_for(timeout=20000)
-                page.get_by_text(f"λ = {target:g}").first.wait_for(timeout=20000)
-                after = page.evaluate(JS_SOURCES)
-                # the browser shows the new result's Z (whether or not λ moved it on this sequence)
-                assert after["z"] == pytest.approx(list(ex.result.coarse.affinity.ravel()))
-                assert after["r1"] == before["r1"], "atoms changed with λ"
-
-                # an impossible R1 shows a message in the page and keeps the result
-                res = ex.result
-                assert page.evaluate(JS_SET_SLIDER, ["R1", 90.0]) is not None
-                page.get_by_text("Cannot use these settings").first.wait_for(timeout=20000)
-                assert ex.result is res
-
-                # the 3-D view is served by this process on 127.0.0.1 and connects
-                viser = _wait_for(lambda: ex.viser, 60, "the 3-D view's server")
-                # (its origin check lets its own page in: the scene arrives). Its client loads
-                # with the first result and renders in software: slow on a loaded machine
-                _wait_for(lambda: any(f":{viser.port}" in u for u in received), 90, "viser's scene",
-                          page=page)
-                assert f":{viser.port}/" in ex.viser_pane.object
-                page.wait_for_timeout(1500)  # let the scene draw for the screenshot
-                page.screenshot(path=str(shots / "explorer_after_lambda.png"))
-
-                # a second tab gets its own explorer, unaffected by the first
-                page2 = context.new_page()
-                page2.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
-                ex2 = _wait_for(lambda: created[1] if len(created) > 1 else None, 30, "a second session")
-                assert ex2.wait(60)
-                # its own 3-D server, started with its first computation
-                viser2 = _wait_for(lambda: ex2.viser, 60, "the second tab's 3-D server")
-                assert ex2 is not ex and viser2.port != viser.port
-                assert ex2.result.params.lam == laav.LaavParams().lam
-                assert ex2.result.params.r1 == laav.LaavParams().r1
-                page2.close()
+                yield port, browser, created
             finally:
                 browser.close()
     finally:
         server.stop()
-        for e in created:
-            e.close()
+        for ex in created:
+            ex.close()
+
+
+def test_explorer_in_chromium(tmp_path):
+    shots = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
+    shots.mkdir(parents=True, exist_ok=True)
+    seq = _sequence()
+    outside: list[str] = []
+    sockets: list[str] = []
+    js_errors: list[str] = []
+    with _served(seq, viser=True) as (port, browser, created):
+        context = browser.new_context(viewport={"width": 1600, "height": 1000})
+
+        def route(r):
+            url = r.request.url
+            if url.startswith(LOCAL):
+                r.continue_()
+            else:
+                outside.append(url)
+                r.abort()
+
+        context.route("**/*", route)
+        page = context.new_page()
+        received: set[str] = set()
+
+        def on_socket(ws):
+            sockets.append(ws.url)
+            ws.on("framereceived", lambda _: received.add(ws.url))
+
+        page.on("websocket", on_socket)
+        page.on("pageerror", lambda e: js_errors.append(str(e)))
+        page.on("console", lambda m: js_errors.append(m.text) if m.type == "error" else None)
+        t0 = time.monotonic()
+        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+        ex = _wait_for(lambda: created[0] if created else None, 10, "the session's explorer")
+        assert ex.wait(60), "the first result did not arrive"
+        page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=20000)
+        load_s = time.monotonic() - t0
+        before = page.evaluate(JS_SOURCES)
+        assert before["points"] == seq.n_points
+        page.screenshot(path=str(shots / "explorer_loaded.png"))
+
+        # move λ in the page: the server recomputes and the browser's Z changes
+        lam0 = ex.result.params.lam
+        atoms0 = ex.result.atoms
+        target = round(lam0 * 2 + 0.5, 1)
+        assert page.evaluate(JS_SET_SLIDER, ["λ", target]) is not None
+        _wait_for(lambda: ex.result.params.lam == target and ex.wait(1), 60, "the λ result")
+        assert ex.result.atoms is atoms0
+        _wait_for(lambda: f"λ = {target:g}" in page.evaluate(JS_SOURCES).get("ztitle", ""), 20,
+                  "the Z title in the browser")
+        # one line says what the change did (and the status names λ: it is off its default)
+        page.get_by_text(f"What changed: λ {lam0:g} → {target:g}").first.wait_for(timeout=20000)
+        page.get_by_text(f"λ = {target:g}").first.wait_for(timeout=20000)
+        after = page.evaluate(JS_SOURCES)
+        # the browser shows the new result's Z (whether or not λ moved it on this sequence)
+        assert after["z"] == pytest.approx(list(ex.result.coarse.affinity.ravel()))
+        assert after["r1"] == before["r1"], "atoms changed with λ"
+
+        # an impossible R1 shows a message in the page and keeps the result
+        res = ex.result
+        assert page.evaluate(JS_SET_SLIDER, ["R1", 90.0]) is not None
+        page.get_by_text("Cannot use these settings").first.wait_for(timeout=20000)
+        assert ex.result is res
+
+        # the 3-D view is served by this process on 127.0.0.1 and connects
+        viser = _wait_for(lambda: ex.viser, 60, "the 3-D view's server")
+        # (its origin check lets its own page in: the scene arrives). Its client loads
+        # with the first result and renders in software: slow on a loaded machine
+        _wait_for(lambda: any(f":{viser.port}" in u for u in received), 90, "viser's scene",
+                  page=page)
+        assert f":{viser.port}/" in ex.viser_pane.object
+        page.wait_for_timeout(1500)  # let the scene draw for the screenshot
+        page.screenshot(path=str(shots / "explorer_after_lambda.png"))
+
+        # a second tab gets its own explorer, unaffected by the first
+        page2 = context.new_page()
+        page2.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        ex2 = _wait_for(lambda: created[1] if len(created) > 1 else None, 30, "a second session")
+        assert ex2.wait(60)
+        # its own 3-D server, started with its first computation
+        viser2 = _wait_for(lambda: ex2.viser, 60, "the second tab's 3-D server")
+        assert ex2 is not ex and viser2.port != viser.port
+        assert ex2.result.params.lam == laav.LaavParams().lam
+        assert ex2.result.params.r1 == laav.LaavParams().r1
+        page2.close()
     assert not outside, f"requests left 127.0.0.1: {outside}"
     assert not js_errors, f"JavaScript errors in the page: {js_errors[:5]}"
     print(f"page with first result in {load_s:.1f} s; screenshots in {shots}")
@@ -237,54 +248,39 @@ def test_hostile_names_are_shown_as_text(tmp_path):
     up = laav.Sequence(seq.points[:, ::-1], seq.labels[::-1], name=stored)
     npz = laav.save_sequence(up, tmp_path / "up.npz").read_bytes()
     bad_mat = b"MATLAB 5.0 MAT-file" + bytes(200)  # a broken MAT file
-    created: list = []
-    port = _free_port()
-    server = pn.serve({"/": app_factory(start, None, created=created, viser=False)}, port=port,
-                      address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
-                      threaded=True, verbose=False)
     dialogs: list[str] = []
-    try:
-        _wait_listening(port)
-        with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
-            try:
-                page = browser.new_page(viewport={"width": 1400, "height": 900})
-                page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
-                page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
-                page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
-                ex = _wait_for(lambda: created[0] if created else None, 10, "the session's explorer")
-                assert ex.wait(60)
-                page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=20000)
+    with _served(start, viser=False) as (port, browser, created):
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+        ex = _wait_for(lambda: created[0] if created else None, 10, "the session's explorer")
+        assert ex.wait(60)
+        page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=20000)
 
-                # a valid .npz: the file name and the stored name both carry payloads
-                page.set_input_files("input[type=file]", files=[{
-                    "name": "<img src=x onerror=alert(1)>.npz", "mimeType": "application/octet-stream",
-                    "buffer": npz}])
-                _wait_for(lambda: ex.sequence.name == stored and ex.wait(1), 60, "the uploaded sequence")
-                page.get_by_text(stored).first.wait_for(timeout=20000)  # status line and sequence info
-                assert ex.w_dl_csv.filename == "script_alert_2_script_img_src_x_onerror_alert_3__labels.csv"
+        # a valid .npz: the file name and the stored name both carry payloads
+        page.set_input_files("input[type=file]", files=[{
+            "name": "<img src=x onerror=alert(1)>.npz", "mimeType": "application/octet-stream",
+            "buffer": npz}])
+        _wait_for(lambda: ex.sequence.name == stored and ex.wait(1), 60, "the uploaded sequence")
+        page.get_by_text(stored).first.wait_for(timeout=20000)  # status line and sequence info
+        assert ex.w_dl_csv.filename == "script_alert_2_script_img_src_x_onerror_alert_3__labels.csv"
 
-                # a broken MAT file whose name carries a payload: the message quotes it as text
-                page.set_input_files("input[type=file]", files=[{
-                    "name": "<img src=y onerror=alert(4)>.mat", "mimeType": "application/octet-stream",
-                    "buffer": bad_mat}])
-                page.get_by_text("<img src=y onerror=alert(4)>.mat").first.wait_for(timeout=30000)
-                assert ex.sequence.name == stored  # the last good result is kept
-                # and the status line no longer says "Reading …" (it shows the kept result again)
-                _wait_for(lambda: ex.status.object.startswith("Showing"), 20, "the status line back")
-                page.wait_for_timeout(1000)  # let any image error handler fire (and its dialog arrive)
-                assert page.evaluate(JS_INJECTED) == {"imgs": 0, "scripts": 0, "svgs": 0}
-                # the header and the tab name the sequence shown (the upload), as text
-                page.get_by_text(f"{stored} · {up.n_points} points").first.wait_for(timeout=20000)
-                safe = laav.safe_name(stored)
-                page.wait_for_function(f"document.title === 'LAAV explorer: {safe}'", timeout=20000)
-                assert "<" not in page.title() and "alert(5)" not in page.title()
-            finally:
-                browser.close()
-    finally:
-        server.stop()
-        for e in created:
-            e.close()
+        # a broken MAT file whose name carries a payload: the message quotes it as text
+        page.set_input_files("input[type=file]", files=[{
+            "name": "<img src=y onerror=alert(4)>.mat", "mimeType": "application/octet-stream",
+            "buffer": bad_mat}])
+        page.get_by_text("<img src=y onerror=alert(4)>.mat").first.wait_for(timeout=30000)
+        assert ex.sequence.name == stored  # the last good result is kept
+        # and the status line no longer says "Reading …" (it shows the kept result again)
+        _wait_for(lambda: ex.status.object.startswith("Showing"), 20, "the status line back")
+        page.wait_for_timeout(1000)  # let any image error handler fire (and its dialog arrive)
+        assert page.evaluate(JS_INJECTED) == {"imgs": 0, "scripts": 0, "svgs": 0}
+        # the header and the tab name the sequence shown (the upload), as text
+        page.get_by_text(f"{stored} · {up.n_points} points").first.wait_for(timeout=20000)
+        safe = laav.safe_name(stored)
+        page.wait_for_function(f"document.title === 'LAAV explorer: {safe}'", timeout=20000)
+        assert "<" not in page.title() and "alert(5)" not in page.title()
     assert not dialogs, f"a payload ran: {dialogs}"
     assert np.all(np.isfinite(ex.result.labels))
 
@@ -354,60 +350,46 @@ def test_layout_fits_a_projector(tmp_path):
     shots = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
     shots.mkdir(parents=True, exist_ok=True)
     seq = _sequence()
-    created: list = []
-    port = _free_port()
-    server = pn.serve({"/": app_factory(seq, None, created=created)}, port=port, address="127.0.0.1",
-                      websocket_origin=[f"127.0.0.1:{port}"], show=False, threaded=True, verbose=False)
-    try:
-        _wait_listening(port)
-        with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
-            try:
-                for i, (w, h) in enumerate(((1280, 800), (1024, 768))):
-                    page = browser.new_page(viewport={"width": w, "height": h})
-                    page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
-                    page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
-                    ex = _wait_for(lambda i=i: created[i] if len(created) > i else None, 30, "the explorer")
-                    assert ex.wait(60)
-                    page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=30000)
-                    page.wait_for_function(f"({JS_CARD_TITLES})().length >= 6", timeout=30000)
-                    viser = _wait_for(lambda ex=ex: ex.viser, 60, "the 3-D view's server")
-                    page.frame_locator("iframe").locator("body").wait_for(timeout=60000)
-                    m = _settled(page, JS_OVERFLOW)
-                    page.screenshot(path=str(shots / f"layout_{w}x{h}.png"))
-                    assert m["width"] == w
-                    assert m["n_over"] == 0 and m["right"] <= w, f"{w}x{h}: cut off at the right: {m}"
-                    assert m["scrollWidth"] <= w, f"{w}x{h}: the page scrolls sideways: {m}"
-                    titles = page.evaluate(JS_CARD_TITLES)
-                    order = [t.split(" ·")[0] for t in titles if " · " in t]
-                    assert order == ["1", "2", "3", "4", "5"], titles
-                    assert [t.split(":")[0] for t in titles if " · " in t] == [
-                        "1 · Atoms", "2 · Multicut graph of atoms → fine models (GAEC replay)",
-                        "3 · Fine-to-coarse", "4 · Fine-tuning (Random Voting)",
-                        "5 · Final labels and numbers"]
-                    assert any(t.startswith("3-D") for t in titles)
-                    if i == 1:
-                        # the 3-D card folds away (and back)
-                        iframe = page.locator(f"iframe[src*=':{viser.port}/']")
-                        assert iframe.is_visible()
-                        page.locator(".card-header", has_text="3-D space-time view").first.click()
-                        iframe.wait_for(state="hidden", timeout=10000)
-                        _wait_for(lambda ex=ex: ex.v_viser.collapsed, 10, "the 3-D card to fold")
-                        # the sidebar folds away: the main area gets its width
-                        sidebar = page.locator("#sidebar")
-                        assert sidebar.is_visible()
-                        page.locator("#sidebar-toggle").click()
-                        sidebar.wait_for(state="hidden", timeout=10000)
-                        m2 = _settled(page, JS_OVERFLOW)
-                        assert m2["n_over"] == 0 and m2["scrollWidth"] <= w
-                        page.screenshot(path=str(shots / f"layout_{w}x{h}_folded.png"))
-                    page.close()
-            finally:
-                browser.close()
-    finally:
-        server.stop()
-        for e in created:
-            e.close()
+    with _served(seq, viser=True) as (port, browser, created):
+        for i, (w, h) in enumerate(((1280, 800), (1024, 768))):
+            page = browser.new_page(viewport={"width": w, "height": h})
+            page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+            page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+            ex = _wait_for(lambda i=i: created[i] if len(created) > i else None, 30, "the explorer")
+            assert ex.wait(60)
+            page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=30000)
+            page.wait_for_function(f"({JS_CARD_TITLES})().length >= 6", timeout=30000)
+            viser = _wait_for(lambda ex=ex: ex.viser, 60, "the 3-D view's server")
+            page.frame_locator("iframe").locator("body").wait_for(timeout=60000)
+            m = _settled(page, JS_OVERFLOW)
+            page.screenshot(path=str(shots / f"layout_{w}x{h}.png"))
+            assert m["width"] == w
+            assert m["n_over"] == 0 and m["right"] <= w, f"{w}x{h}: cut off at the right: {m}"
+            assert m["scrollWidth"] <= w, f"{w}x{h}: the page scrolls sideways: {m}"
+            titles = page.evaluate(JS_CARD_TITLES)
+            order = [t.split(" ·")[0] for t in titles if " · " in t]
+            assert order == ["1", "2", "3", "4", "5"], titles
+            assert [t.split(":")[0] for t in titles if " · " in t] == [
+                "1 · Atoms", "2 · Multicut graph of atoms → fine models (GAEC replay)",
+                "3 · Fine-to-coarse", "4 · Fine-tuning (Random Voting)",
+                "5 · Final labels and numbers"]
+            assert any(t.startswith("3-D") for t in titles)
+            if i == 1:
+                # the 3-D card folds away (and back)
+                iframe = page.locator(f"iframe[src*=':{viser.port}/']")
+                assert iframe.is_visible()
+                page.locator(".card-header", has_text="3-D space-time view").first.click()
+                iframe.wait_for(state="hidden", timeout=10000)
+                _wait_for(lambda ex=ex: ex.v_viser.collapsed, 10, "the 3-D card to fold")
+                # the sidebar folds away: the main area gets its width
+                sidebar = page.locator("#sidebar")
+                assert sidebar.is_visible()
+                page.locator("#sidebar-toggle").click()
+                sidebar.wait_for(state="hidden", timeout=10000)
+                m2 = _settled(page, JS_OVERFLOW)
+                assert m2["n_over"] == 0 and m2["scrollWidth"] <= w
+                page.screenshot(path=str(shots / f"layout_{w}x{h}_folded.png"))
+            page.close()
 
 
 def test_url_carries_the_state(tmp_path):
@@ -416,75 +398,60 @@ def test_url_carries_the_state(tmp_path):
     import json
 
     seq = _sequence()
-    created: list = []
-    port = _free_port()
-    server = pn.serve({"/": app_factory(seq, None, created=created, viser=False)}, port=port,
-                      address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
-                      threaded=True, verbose=False)
     dialogs: list[str] = []
-    try:
-        _wait_listening(port)
-        with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
-            try:
-                page = browser.new_page(viewport={"width": 1280, "height": 800})
-                page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
-                page.goto(f"http://127.0.0.1:{port}/?r1=25&seed=3&frame=4&color=final",
-                          wait_until="domcontentloaded")
-                page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
-                ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
-                assert ex.wait(60)
-                assert (ex.result.params.r1, ex.result.seed, ex.w_frame.value) == (25.0, 3, 4)
-                assert ex.w_color.value.startswith("final")
-                page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=30000)
-                # the browser's R1 slider shows it too
-                r1 = page.evaluate("""() => { for (const m of Bokeh.documents[0].all_models)
-                    if (m.type === 'Slider' && String(m.title).startsWith('R1')) return m.value; }""")
-                assert r1 == 25
-                # the C box takes only 1 .. number of points (the browser's spinner clamps to them)
-                lims = page.evaluate("""() => {
-                  for (const m of Bokeh.documents[0].all_models)
-                    if (m.type === 'Spinner' && String(m.title).startsWith('C ')) return [m.low, m.high];
-                }""")
-                assert lims == [1, seq.n_points]
-                # moving λ updates the address (no reload: the same session)
-                assert page.evaluate(JS_SET_SLIDER, ["λ", 3.5]) is not None
-                page.wait_for_function("location.search.includes('lam=3.5')", timeout=30000)
-                q = dict(x.split("=") for x in page.evaluate("location.search")[1:].split("&"))
-                assert q == {"r1": "25", "lam": "3.5", "seed": "3", "frame": "4", "color": "final"}
-                assert len(created) == 1
-                # a params.json upload (as exported) loads back
-                d = json.loads(ex._export_json().getvalue())
-                d["params"]["r1"], d["seed"] = 30.0, 1
-                page.set_input_files("input[type=file]", files=[{
-                    "name": "params.json", "mimeType": "application/json", "buffer": json.dumps(d).encode()}])
-                _wait_for(lambda: ex.result.params.r1 == 30.0 and ex.result.seed == 1 and ex.wait(1), 60,
-                          "the uploaded parameters")
-                page.wait_for_function(
-                    "location.search.includes('r1=30') && location.search.includes('seed=1')", timeout=30000)
-                page.close()
+    with _served(seq, viser=False) as (port, browser, created):
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+        page.goto(f"http://127.0.0.1:{port}/?r1=25&seed=3&frame=4&color=final",
+                  wait_until="domcontentloaded")
+        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        assert ex.wait(60)
+        assert (ex.result.params.r1, ex.result.seed, ex.w_frame.value) == (25.0, 3, 4)
+        assert ex.w_color.value.startswith("final")
+        page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=30000)
+        # the browser's R1 slider shows it too
+        r1 = page.evaluate("""() => { for (const m of Bokeh.documents[0].all_models)
+            if (m.type === 'Slider' && String(m.title).startsWith('R1')) return m.value; }""")
+        assert r1 == 25
+        # the C box takes only 1 .. number of points (the browser's spinner clamps to them)
+        lims = page.evaluate("""() => {
+          for (const m of Bokeh.documents[0].all_models)
+            if (m.type === 'Spinner' && String(m.title).startsWith('C ')) return [m.low, m.high];
+        }""")
+        assert lims == [1, seq.n_points]
+        # moving λ updates the address (no reload: the same session)
+        assert page.evaluate(JS_SET_SLIDER, ["λ", 3.5]) is not None
+        page.wait_for_function("location.search.includes('lam=3.5')", timeout=30000)
+        q = dict(x.split("=") for x in page.evaluate("location.search")[1:].split("&"))
+        assert q == {"r1": "25", "lam": "3.5", "seed": "3", "frame": "4", "color": "final"}
+        assert len(created) == 1
+        # a params.json upload (as exported) loads back
+        d = json.loads(ex._export_json().getvalue())
+        d["params"]["r1"], d["seed"] = 30.0, 1
+        page.set_input_files("input[type=file]", files=[{
+            "name": "params.json", "mimeType": "application/json", "buffer": json.dumps(d).encode()}])
+        _wait_for(lambda: ex.result.params.r1 == 30.0 and ex.result.seed == 1 and ex.wait(1), 60,
+                  "the uploaded parameters")
+        page.wait_for_function(
+            "location.search.includes('r1=30') && location.search.includes('seed=1')", timeout=30000)
+        page.close()
 
-                # bad values: a message naming them, as text; the rest applied
-                bad = "<img src=x onerror=alert(1)>"
-                page = browser.new_page(viewport={"width": 1280, "height": 800})
-                page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
-                page.goto(f"http://127.0.0.1:{port}/?lam={bad}&r1=abc&seed=2&%3Cscript%3Ealert(2)%3C/script%3E=1",
-                          wait_until="domcontentloaded")
-                page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
-                ex2 = _wait_for(lambda: created[1] if len(created) > 1 else None, 30, "the second explorer")
-                assert ex2.wait(60)
-                assert ex2.result.seed == 2 and ex2.result.params.r1 == 20.0
-                page.get_by_text(f"lam must be a number, got '{bad}'").first.wait_for(timeout=20000)
-                page.get_by_text("r1 must be a number, got 'abc'").first.wait_for(timeout=20000)
-                page.get_by_text("unknown setting '<script>alert(2)</script>'").first.wait_for(timeout=20000)
-                page.wait_for_timeout(1000)  # let any error handler fire (and its dialog arrive)
-                assert page.evaluate(JS_INJECTED) == {"imgs": 0, "scripts": 0, "svgs": 0}
-            finally:
-                browser.close()
-    finally:
-        server.stop()
-        for e in created:
-            e.close()
+        # bad values: a message naming them, as text; the rest applied
+        bad = "<img src=x onerror=alert(1)>"
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+        page.goto(f"http://127.0.0.1:{port}/?lam={bad}&r1=abc&seed=2&%3Cscript%3Ealert(2)%3C/script%3E=1",
+                  wait_until="domcontentloaded")
+        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+        ex2 = _wait_for(lambda: created[1] if len(created) > 1 else None, 30, "the second explorer")
+        assert ex2.wait(60)
+        assert ex2.result.seed == 2 and ex2.result.params.r1 == 20.0
+        page.get_by_text(f"lam must be a number, got '{bad}'").first.wait_for(timeout=20000)
+        page.get_by_text("r1 must be a number, got 'abc'").first.wait_for(timeout=20000)
+        page.get_by_text("unknown setting '<script>alert(2)</script>'").first.wait_for(timeout=20000)
+        page.wait_for_timeout(1000)  # let any error handler fire (and its dialog arrive)
+        assert page.evaluate(JS_INJECTED) == {"imgs": 0, "scripts": 0, "svgs": 0}
     assert not dialogs, f"a payload ran: {dialogs}"
 
 
@@ -492,56 +459,41 @@ def test_gaec_replay_keys_reach_both_ends():
     """The replay's Home/End keys go to step 0 and to the final step, also after a new result
     changed the number of steps (the old slider's End key went to step 1)."""
     seq = _sequence()
-    created: list = []
-    port = _free_port()
-    server = pn.serve({"/": app_factory(seq, None, created=created, viser=False)}, port=port,
-                      address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
-                      threaded=True, verbose=False)
-    try:
-        _wait_listening(port)
-        with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
-            try:
-                page = browser.new_page(viewport={"width": 1280, "height": 800})
-                page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
-                page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
-                ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
-                assert ex.wait(60)
+    with _served(seq, viser=False) as (port, browser, created):
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        assert ex.wait(60)
 
-                def replay_input():
-                    # the replay's range input (CSS locators pierce shadow roots); its max follows
-                    rng = page.locator(f"input[type=range][max='{ex.w_step.end}']")
-                    rng.first.wait_for(timeout=30000)
-                    assert rng.count() == 1  # the frame player's max differs here
-                    return rng
+        def replay_input():
+            # the replay's range input (CSS locators pierce shadow roots); its max follows
+            rng = page.locator(f"input[type=range][max='{ex.w_step.end}']")
+            rng.first.wait_for(timeout=30000)
+            assert rng.count() == 1  # the frame player's max differs here
+            return rng
 
-                for _ in range(2):
-                    K1 = ex.w_step.end
-                    assert K1 == len(ex.result.multicut.contractions) + 1 and ex.w_step.value == K1
-                    box = replay_input()
-                    box.focus()
-                    page.keyboard.press("Home")
-                    _wait_for(lambda: ex.w_step.value == 0, 20, "step 0", page=page)
-                    page.keyboard.press("End")
-                    _wait_for(lambda K1=K1: ex.w_step.value == K1, 20, "the final step", page=page)
-                    # a new result with another number of contractions
-                    before = K1
-                    ex.w_params["r1"].value = 14.0 if ex.w_params["r1"].value != 14.0 else 26.0
-                    assert ex.wait(60)
-                    _wait_for(lambda: ex.result.params.r1 == ex.w_params["r1"].value, 30, "the R1 result")
-                    if ex.w_step.end != before:
-                        break
-                assert ex.w_step.end != before, "R1 did not change the number of GAEC steps"
-                K2 = ex.w_step.end
-                box = replay_input()
-                box.focus()
-                page.keyboard.press("Home")
-                _wait_for(lambda: ex.w_step.value == 0, 20, "step 0", page=page)
-                page.keyboard.press("End")
-                _wait_for(lambda: ex.w_step.value == K2, 20, "the new final step", page=page)
-            finally:
-                browser.close()
-    finally:
-        server.stop()
-        for e in created:
-            e.close()
+        for _ in range(2):
+            K1 = ex.w_step.end
+            assert K1 == len(ex.result.multicut.contractions) + 1 and ex.w_step.value == K1
+            box = replay_input()
+            box.focus()
+            page.keyboard.press("Home")
+            _wait_for(lambda: ex.w_step.value == 0, 20, "step 0", page=page)
+            page.keyboard.press("End")
+            _wait_for(lambda K1=K1: ex.w_step.value == K1, 20, "the final step", page=page)
+            # a new result with another number of contractions
+            before = K1
+            ex.w_params["r1"].value = 14.0 if ex.w_params["r1"].value != 14.0 else 26.0
+            assert ex.wait(60)
+            _wait_for(lambda: ex.result.params.r1 == ex.w_params["r1"].value, 30, "the R1 result")
+            if ex.w_step.end != before:
+                break
+        assert ex.w_step.end != before, "R1 did not change the number of GAEC steps"
+        K2 = ex.w_step.end
+        box = replay_input()
+        box.focus()
+        page.keyboard.press("Home")
+        _wait_for(lambda: ex.w_step.value == 0, 20, "step 0", page=page)
+        page.keyboard.press("End")
+        _wait_for(lambda: ex.w_step.value == K2, 20, "the new final step", page=page)
