@@ -1,0 +1,153 @@
+"""Latency a person feels in the explorer: from a control's release to the views redrawn,
+measured in real Chromium.
+
+Starts the real command (``python -m explorer.cli [FILE] --no-browser --port N``) as a
+fresh process, loads the page in Debian's Chromium (``/usr/bin/chromium``, via Playwright;
+Chromium is launched before the command, so its own start-up is not counted) and measures,
+in the page's own clock:
+
+- ``first_points_s`` / ``first_result_s``: seconds from starting the command to the
+  trajectories drawn in the frame view / to the first segmentation shown (the status line
+  reads "Showing …");
+- ``lambda_ms_median``, ``radius_ms_median`` (R1 and R2), ``seed_ms_median``,
+  ``frame_ms_median``: from a slider's release (its value set in the page, as a released
+  drag sets it) until the page shows the new result: the status line names the new value
+  (the app updates every view and the status in one document change, so they arrive
+  together), or for the frame the frame view's title shows the new frame, then two
+  animation frames so that the browser has drawn them.
+
+Each control is moved ``--repeats`` times between two values. Prints ONE JSON line and
+writes it, with date, machine and commit, to ``--out`` (default
+``bench-out/explorer_browser_latency.md``). Usage::
+
+    python benchmarks/explorer_browser_latency.py [--repeats 3] [--out REPORT.md] [FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from _machine import write_json_report  # this folder, on sys.path
+
+from explorer.cli import _free_port
+
+REPO = Path(__file__).resolve().parents[1]
+CHROMIUM = Path("/usr/bin/chromium")
+ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+#: State of the page: the status line's text, the frame view's title, trajectories drawn.
+JS_STATE = """() => {
+  const out = {status: '', frame_title: '', points: 0};
+  if (!(window.Bokeh && Bokeh.documents.length > 0)) return out;
+  for (const m of Bokeh.documents[0].all_models) {
+    if (typeof m.text === 'string' && m.text.includes('Showing')) out.status = m.text;
+    if (m.type === 'Title' && /^frame \\d+ of/.test(m.text)) out.frame_title = m.text;
+    if (m.type === 'ColumnDataSource' && m.data.index !== undefined) out.points = m.data.index.length;
+  }
+  return out;
+}"""
+
+#: Set a slider as a released drag does, then wait until ``test(state)`` holds and two
+#: animation frames have passed; the milliseconds (page clock), or -1 after 60 s.
+JS_MOVE = """async ([prefix, value, kind, marker]) => {
+  const state = """ + JS_STATE + """;
+  let slider = null;
+  for (const m of Bokeh.documents[0].all_models) {
+    if ((m.type === 'Slider' || m.type.endsWith('Player')) && typeof m.title === 'string'
+        && m.title.startsWith(prefix)) slider = m;
+  }
+  if (slider === null) return -2;  // no such control
+  const frame = () => new Promise(r => requestAnimationFrame(() => r()));
+  const t0 = performance.now();
+  slider.value = value; slider.value_throttled = value;
+  while (true) {
+    const s = state();
+    const done = kind === 'frame' ? s.frame_title.startsWith(marker) : s.status.includes(marker);
+    if (done) break;
+    if (performance.now() - t0 > 60000) return -1;
+    await frame();
+  }
+  await frame(); await frame();
+  return performance.now() - t0;
+}"""
+
+#: (name in the JSON, slider title prefix, kind, two values, status marker for a value)
+CONTROLS = [
+    ("lambda", "λ", "status", (3.0, 2.5), lambda v: f"λ = {v:g}"),
+    ("radius", "R1", "status", (22.0, 18.0), lambda v: f"R1 = {v:g}"),
+    ("radius", "R2", "status", (44.0, 36.0), lambda v: f"R2 = {v:g}"),
+    ("seed", "seed", "status", (1, 2), lambda v: f"seed = {v:g}"),
+    ("frame", "frame", "frame", (3, 7), lambda v: f"frame {v:g} of"),
+]
+
+
+def measure(file: str | None, repeats: int) -> dict:
+    from playwright import sync_api
+
+    port = _free_port("127.0.0.1")
+    cmd = [sys.executable, "-m", "explorer.cli", *([file] if file else []), "--no-browser",
+           "--port", str(port)]
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    out: dict = {"file": file or "bundled demo"}
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
+        proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        t_cmd = time.monotonic()
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            deadline = t_cmd + 120
+            while True:
+                try:
+                    page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+                    break
+                except Exception:  # noqa: BLE001 - not listening yet
+                    if time.monotonic() > deadline or proc.poll() is not None:
+                        raise
+                    time.sleep(0.05)
+            page.wait_for_function("() => (" + JS_STATE + ")().points > 0", timeout=120000, polling=20)
+            out["first_points_s"] = round(time.monotonic() - t_cmd, 2)
+            page.wait_for_function("() => (" + JS_STATE + ")().status.length > 0", timeout=120000,
+                                   polling=20)
+            out["first_result_s"] = round(time.monotonic() - t_cmd, 2)
+            page.wait_for_timeout(1000)  # the lazily added cards arrive after the first result
+            runs: dict = {}
+            for _ in range(repeats):
+                for name, prefix, kind, values, marker in CONTROLS:
+                    for v in values:
+                        ms = page.evaluate(JS_MOVE, [prefix, v, kind, marker(v)])
+                        if ms < 0:
+                            raise RuntimeError(f"{prefix} = {v}: no result in the page ({ms})")
+                        runs.setdefault(name, []).append(round(ms, 1))
+            for name, values in runs.items():
+                out[f"{name}_ms_median"] = round(statistics.median(values), 1)
+                out[f"{name}_ms"] = values
+        finally:
+            proc.terminate()
+            proc.wait(30)
+            browser.close()
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("file", nargs="?", help="sequence file (default: the bundled demo)")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--out", default="bench-out/explorer_browser_latency.md")
+    args = ap.parse_args(argv)
+    result = measure(args.file, args.repeats)
+    write_json_report(args.out, "Explorer latency in Chromium, control release to views redrawn",
+                      f"{result['file']}, {args.repeats} moves of each control between two values, "
+                      "viewport 1280x800, headless Chromium (software WebGL)", result)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
