@@ -76,7 +76,9 @@ def _stage_rngs(seed: int):
     return {"atoms": children[0], "coarse": children[1], "voting": children[2]}
 
 
-def _check_inputs(seq, n_motions):
+def _check_inputs(seq, n_motions, degenerate: bool = True):
+    """The sequence as a :class:`Sequence` and C as an int, validated; with ``degenerate``
+    also :func:`check_degenerate` (reads every coordinate: once per sequence and C)."""
     if not isinstance(seq, Sequence):
         seq = Sequence(np.asarray(seq, dtype=np.float64))
     if not isinstance(n_motions, (int, np.integer)) or isinstance(n_motions, bool):
@@ -85,7 +87,8 @@ def _check_inputs(seq, n_motions):
         raise ValueError(f"n_motions must be >= 1, got {n_motions}")
     if n_motions > seq.n_points:
         raise ValueError(f"n_motions ({n_motions}) exceeds the number of points ({seq.n_points})")
-    check_degenerate(seq, int(n_motions))
+    if degenerate:
+        check_degenerate(seq, int(n_motions))
     return seq, int(n_motions)
 
 
@@ -207,7 +210,8 @@ class Pipeline:
             seed = _check_seed(changed.pop("seed", self.seed))
             C = changed.pop("n_motions", self.n_motions)
             new_params = self.params.replace(**changed) if changed else self.params
-            _, C = _check_inputs(self.seq, C)
+            # the sequence is the one checked at construction: only a new C is checked again
+            _, C = _check_inputs(self.seq, C, degenerate=C != self.n_motions)
             new_params.n_fine(C)
             diff = {k for k, v in new_params.to_dict().items() if v != getattr(self.params, k)}
             starts = [stages_affected(diff)] if diff else []

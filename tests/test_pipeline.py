@@ -299,3 +299,23 @@ def test_segment_rejects_bad_points():
         segment(pts[0], 2)
     with pytest.raises(ValueError, match="fine_models"):
         segment(scene(1, 0), 3, LaavParams(fine_models=2))
+
+
+def test_update_checks_the_sequence_again_only_for_a_new_number_of_motions(monkeypatch):
+    """A slider move must not re-read every coordinate (nor warn again): the degenerate-input
+    check runs at construction and when C changes, not on a λ or R1 update."""
+    import laav.pipeline as pipeline_module
+    from laav.synthetic import make_sequence
+
+    seq = make_sequence(n_objects=1, n_frames=12, n_points=120, rng=0)
+    calls = []
+    real = pipeline_module.check_degenerate
+    monkeypatch.setattr(pipeline_module, "check_degenerate",
+                        lambda s, c: (calls.append(c), real(s, c))[1])
+    pipe = Pipeline(seq, 2)
+    assert calls == [2]
+    pipe.update(lam=3.0)
+    pipe.update(r1=22.0, seed=1)
+    assert calls == [2]
+    pipe.update(n_motions=3)
+    assert calls == [2, 3]
