@@ -187,9 +187,9 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
         if announce_viser:
             def announce():  # where a remote browser must reach this tab's 3-D view
                 deadline = time.monotonic() + 600  # it starts with the session (ex.start)
-                while ex._viser_thread is None and not ex._closed and time.monotonic() < deadline:
+                while ex.view3d.thread is None and not ex.view3d.closed and time.monotonic() < deadline:
                     time.sleep(0.2)
-                ex._wait_viser(120)
+                ex.view3d.wait(120)
                 if ex.viser is not None:
                     print(f"laav-explore: a tab's 3-D view is served at "
                           f"http://{_reachable_name(host)}:{ex.viser.port}/", flush=True)

@@ -254,7 +254,7 @@ def test_exports(ex, seq):
 
     from explorer import export
 
-    csv = ex._export_csv().getvalue().splitlines()
+    csv = ex.files.export_csv().getvalue().splitlines()
     assert csv[0].startswith("point,label,") and len(csv) == seq.n_points + 1
     rows = list(csvmod.DictReader(csv))
     # 0-based like `laav segment`: the point index and the final label as in result.labels
@@ -276,9 +276,9 @@ def test_exports(ex, seq):
     assert axes[0].get_legend() is not None and axes[1].get_legend() is not None  # frame, graph
     assert any(a.get_label() == "<colorbar>" for a in fig.axes)  # Z's colour bar
     assert "motion 1" in [t.get_text() for t in axes[0].get_legend().get_texts()]
-    d = json.loads(ex._export_json().getvalue())
+    d = json.loads(ex.files.export_json().getvalue())
     assert laav.LaavParams(**d["params"]) == ex.result.params and d["n_motions"] == 2
-    png = ex._export_png().getvalue()
+    png = ex.files.export_png().getvalue()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
 
 

@@ -427,7 +427,7 @@ def test_url_carries_the_state(tmp_path):
         assert q == {"r1": "25", "lam": "3.5", "seed": "3", "frame": "4", "color": "final"}
         assert len(created) == 1
         # a params.json upload (as exported) loads back
-        d = json.loads(ex._export_json().getvalue())
+        d = json.loads(ex.files.export_json().getvalue())
         d["params"]["r1"], d["seed"] = 30.0, 1
         page.set_input_files("input[type=file]", files=[{
             "name": "params.json", "mimeType": "application/json", "buffer": json.dumps(d).encode()}])

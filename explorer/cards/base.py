@@ -1,0 +1,85 @@
+"""What every card shares: the card and figure builders, sizes, and the app a card talks to.
+
+A card's callbacks never compute: they ask the app (:class:`Host`) to run a redraw on the
+document's thread, and draw what the app shows (``host.result``; the algorithm runs in
+:class:`~explorer.state.ExplorerState`'s worker).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import panel as pn
+from bokeh.models import Legend, Range1d
+from bokeh.plotting import figure
+
+TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
+#: Width of the sidebar's widgets (the sidebar is SIDE_W + 35 px wide). With it, every card
+#: fits the main area at 1024 px (checked at 1024x768 and 1280x800 in the browser tests).
+SIDE_W = 265
+
+
+class Host(Protocol):
+    """The part of :class:`explorer.app.Explorer` the cards use."""
+
+    result: object  # the laav.LaavResult shown (None before the first)
+    sequence: object  # the laav.Sequence shown
+    style: dict  # the points' colours and marks (views.point_style)
+    fine_colors: object  # the fine models' colours (views.fine_colors)
+
+    @property
+    def frame(self) -> int: ...  # the frame shown
+
+    @property
+    def quieted(self) -> bool: ...  # the app is putting values on widgets: callbacks do nothing
+
+    def schedule(self, fn, *args, now_if_on_doc_thread: bool = False) -> None: ...
+
+    def hold(self): ...  # context manager: the model changes inside go out as one batch
+
+
+def card(title: str, *objs, **kw) -> pn.Card:
+    kw.setdefault("sizing_mode", "stretch_width")
+    return pn.Card(*objs, title=title, collapsible=False, margin=(6, 6), **kw)
+
+
+def flex(*objs, **kw) -> pn.FlexBox:
+    """Parts side by side while they fit, wrapped below each other when not."""
+    kw.setdefault("sizing_mode", "stretch_width")
+    return pn.FlexBox(*objs, flex_wrap="wrap", align_items="flex-start", **kw)
+
+
+def image_figure(title: str, frame_width: int, extent, **kw):
+    """A bokeh figure in pixel coordinates with the y axis pointing down."""
+    x0, x1, y0, y1 = extent
+    fh = int(round(frame_width * (y1 - y0) / max(x1 - x0, 1e-9)))
+    kw.setdefault("toolbar_location", "right")
+    kw.setdefault("tools", TOOLS)
+    fig = figure(title=title, frame_width=frame_width, frame_height=max(fh, 80),
+                 x_range=Range1d(x0, x1), y_range=Range1d(y1, y0), match_aspect=True, **kw)
+    fig.xaxis.axis_label = "x (px)"
+    fig.yaxis.axis_label = "y (px, pointing down)"
+    fig.title.text_font_size = "11pt"
+    return fig
+
+
+def fit_image_figure(fig, extent) -> None:
+    """Point an :func:`image_figure` at another sequence's pixel extent (same frame width)."""
+    x0, x1, y0, y1 = extent
+    fig.x_range.start, fig.x_range.end = x0, x1
+    fig.y_range.start, fig.y_range.end = y1, y0
+    fw = fig.frame_width
+    fig.frame_height = max(int(round(fw * (y1 - y0) / max(x1 - x0, 1e-9))), 80)
+
+
+def move_legend(fig) -> None:
+    """The figure's legend to its right, small, click to hide an entry."""
+    leg = fig.legend[0]
+    fig.renderers  # noqa: B018 (legend already built)
+    fig.center = [c for c in fig.center if not isinstance(c, Legend)]
+    leg.location = "top_left"
+    leg.label_text_font_size = "9pt"
+    leg.spacing = 0
+    leg.padding = 4
+    leg.click_policy = "hide"
+    fig.add_layout(leg, "right")

@@ -1,0 +1,52 @@
+"""Card 3 · Fine-to-coarse: the affinity Z of the fine models, which motion each joined, and
+the epipolar check of a pair (:mod:`explorer.cards.epipolar`)."""
+
+from __future__ import annotations
+
+import panel as pn
+from bokeh.models import ColorBar, ColumnDataSource, FactorRange, LinearColorMapper
+from bokeh.palettes import Blues256
+from bokeh.plotting import figure
+
+from .. import views as V
+from .base import Host, card, flex
+from .epipolar import EpipolarPanel
+
+
+class CoarseView:
+    """Z as a heat map, the merge table, and the epipolar panel."""
+
+    def __init__(self, host: Host, extent) -> None:
+        self.z_mapper = LinearColorMapper(palette=list(Blues256[::-1]), low=0, high=1)
+        self.src_z = ColumnDataSource({"x": [], "y": [], "z": [], "text": [], "text_color": [], "d": [],
+                                       "j": [], "k": []})
+        z = self.fig_z = figure(title="Affinity Z of fine-model pairs", width=320, height=320,
+                                x_range=FactorRange(factors=["f1"]), y_range=FactorRange(factors=["f1"]),
+                                tools="hover", toolbar_location=None,
+                                tooltips=[("pair", "f@j, f@k"), ("Z", "@text"), ("epipolar distance", "@d")])
+        z.rect("x", "y", 1, 1, source=self.src_z, fill_color={"field": "z", "transform": self.z_mapper},
+               line_color="white")
+        z.text("x", "y", text="text", source=self.src_z, text_align="center", text_baseline="middle",
+               text_font_size="9pt", text_color="text_color")
+        z.xaxis.major_label_orientation = 0.8
+        z.xaxis.axis_label = "fine model → motion it joined"
+        z.yaxis.axis_label = "fine model → motion"
+        z.grid.visible = False
+        z.add_layout(ColorBar(color_mapper=self.z_mapper, width=8, padding=2), "right")
+        self.merge_md = pn.pane.Markdown("", width=340, margin=(0, 6))
+        self.epipolar = EpipolarPanel(host, extent)
+        self.card = card("3 · Fine-to-coarse: fine models merged into motions",
+                         flex(pn.pane.Bokeh(self.fig_z), self.merge_md, self.epipolar.layout))
+
+    def fit(self, seq) -> None:
+        self.epipolar.fit(seq)
+
+    def draw(self, seq, res) -> None:
+        """Z and the merge table of ``res`` (the epipolar panel draws separately)."""
+        data, factors = V.z_sources(res, seq)
+        self.fig_z.x_range.factors = factors or ["–"]
+        self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
+        self.src_z.data = data
+        self.fig_z.title.text = f"Affinity Z (λ = {res.params.lam:g}): {len(factors)} fine models"
+        self.merge_md.object = ("**Which fine model joined which motion** (spectral clustering of Z):\n\n"
+                                + V.merge_table(seq, res))

@@ -1,0 +1,166 @@
+"""The sidebar's controls: the view (frame, colour-by) and the parameters (sliders for the
+main :class:`laav.LaavParams` fields, seed, C, reset), mapped onto
+:meth:`ExplorerState.request <explorer.state.ExplorerState.request>`.
+
+A parameter's callback only requests; the state's worker computes, and the app draws the
+result when it arrives.
+"""
+
+from __future__ import annotations
+
+import panel as pn
+
+from .. import views as V
+from .base import SIDE_W, Host
+
+#: Parameter sliders: LaavParams field -> (label, type, start, end, step).
+PARAM_SLIDERS = {
+    "r1": ("R1 — inner atom radius (px)", float, 2.0, 100.0, 1.0),
+    "r2": ("R2 — outer atom radius (px)", float, 4.0, 160.0, 1.0),
+    "lam": ("λ — epipolar voting strength (1/px²)", float, 0.1, 10.0, 0.1),
+    "fine_models": ("2C — fine models of the multicut", int, 1, 12, 1),
+    "rv_alpha": ("RV α — forgetting factor", float, 0.5, 1.0, 0.01),
+    "rv_max_iter": ("RV iteration cap", int, 10, 500, 10),
+}
+
+
+class Controls:
+    """Frame, colour-by, the parameter sliders, seed, C and reset, for ``state``."""
+
+    def __init__(self, host: Host, state, seq, defaults) -> None:
+        self.host, self.state, self.defaults = host, state, defaults
+        self.switching = False  # a new sequence is being read or computed (see lock_motions)
+        st = state.target
+        p = st.params
+        self.w_frame = pn.widgets.Player(label="frame", start=0, end=max(seq.n_frames - 1, 1), value=0,
+                                         loop_policy="loop", interval=250, width=SIDE_W,
+                                         show_loop_controls=False, value_align="start",
+                                         scale_buttons=0.8)
+        self.w_color = pn.widgets.Select(label="Colour points by", options=list(V.COLOR_MODES),
+                                         value="ground truth" if seq.labels is not None
+                                         else "final (after Random Voting)", width=SIDE_W)
+        self.w_params: dict = {}
+        for name, (label, typ, lo, hi, step) in PARAM_SLIDERS.items():
+            default = getattr(defaults, name)
+            if name == "fine_models":
+                value = p.n_fine(st.n_motions)
+                hi = max(hi, 4 * st.n_motions)
+                w = pn.widgets.IntSlider(label=label, start=lo, end=hi, step=step, value=value,
+                                         width=SIDE_W)
+            elif typ is int:
+                w = pn.widgets.IntSlider(label=label, start=lo, end=max(hi, 2 * default),
+                                         step=step, value=int(getattr(p, name)), width=SIDE_W)
+            else:
+                w = pn.widgets.FloatSlider(label=label, start=lo, end=max(hi, 2.0 * default)
+                                           if name != "rv_alpha" else hi, step=step,
+                                           value=float(getattr(p, name)), width=SIDE_W)
+            w.param.watch(self._on_param, "value")
+            self.w_params[name] = w
+        self.w_seed = pn.widgets.IntSlider(label="seed (random stages)", start=0, end=99,
+                                           value=st.seed, width=SIDE_W)
+        self.w_seed.param.watch(self._on_param, "value")
+        # C: at least 1 and at most the number of points (the browser's box clamps to these)
+        self.w_motions = pn.widgets.IntInput(label="C — number of motions", start=1, end=seq.n_points,
+                                             value=st.n_motions, width=140)
+        self.w_motions.param.watch(self._on_param, "value")
+        self.w_reset = pn.widgets.Button(label="Reset parameters to defaults", color="warning",
+                                         width=SIDE_W)
+        self.w_reset.on_click(self._on_reset)
+
+    @property
+    def color_mode(self) -> str:
+        """The colour-by choice as a :data:`views.COLOR_MODES` key (``gt``, ``final``, …)."""
+        return V.COLOR_MODES[self.w_color.value]
+
+    def set_color_mode(self, mode: str) -> None:
+        self.w_color.value = {v: k for k, v in V.COLOR_MODES.items()}[mode]
+
+    # ------------------------------------------------------------------ widgets -> request
+    def widget_params(self) -> dict:
+        out = {}
+        C = int(self.w_motions.value or 1)
+        for name, w in self.w_params.items():
+            v = w.value
+            if name == "fine_models":
+                v = None if int(v) == 2 * C and self.defaults.fine_models is None else int(v)
+            elif isinstance(getattr(self.defaults, name), float):
+                v = float(v)
+            else:
+                v = int(v)
+            out[name] = v
+        return out
+
+    def _motions(self) -> int | None:
+        """C to request: None (keep the state's) while another sequence is being loaded."""
+        return None if self.switching or self.w_motions.value is None else int(self.w_motions.value)
+
+    def _on_param(self, event=None) -> None:
+        if self.host.quieted:
+            return
+        if event is not None and event.obj is self.w_motions:
+            fm = self.w_params["fine_models"]
+            old = event.old if isinstance(event.old, int) else None
+            if old is not None and fm.value == 2 * old:
+                with self.host.quiet():
+                    fm.end = max(fm.end, 4 * int(event.new or 1))
+                    fm.value = 2 * int(event.new or 1)
+        self.state.request(params=self.widget_params(), seed=int(self.w_seed.value),
+                           n_motions=self._motions())
+
+    def _on_reset(self, event=None) -> None:
+        """Every parameter (with or without a control here), and the seed, to its default."""
+        d = self.defaults
+        with self.host.quiet():
+            C = int(self.w_motions.value or 1)
+            for name, w in self.w_params.items():
+                w.value = d.n_fine(C) if name == "fine_models" else getattr(d, name)
+            self.w_seed.value = 0
+        self.state.request(params={**d.to_dict(), **self.widget_params()}, seed=0, n_motions=self._motions())
+
+    # ------------------------------------------------------------------ settings -> widgets
+    def show_settings(self, settings) -> None:
+        """Put ``settings`` on the controls without triggering a computation."""
+        with self.host.quiet():
+            C = settings.n_motions
+            fm = self.w_params["fine_models"]
+            fm.end = max(fm.end, 4 * C, settings.params.n_fine(C))
+            for name, w in self.w_params.items():
+                v = settings.params.n_fine(C) if name == "fine_models" else getattr(settings.params, name)
+                if name != "fine_models":
+                    w.start, w.end = min(w.start, v), max(w.end, v)
+                w.value = v
+            self.w_seed.end = max(self.w_seed.end, settings.seed)
+            self.w_seed.value = settings.seed
+            self.w_motions.value = C
+
+    def sync_to(self, settings) -> None:
+        """After a load, show the settings actually used (never after a slider move: the
+        widgets may already be ahead of the result being applied)."""
+        p = settings.params
+        for name, w in self.w_params.items():
+            v = p.n_fine(settings.n_motions) if name == "fine_models" else getattr(p, name)
+            if self.state.error is None and w.value != v:
+                w.value = v
+        if self.state.error is None and self.w_seed.value != settings.seed:
+            self.w_seed.value = settings.seed
+
+    def lock_motions(self, locked: bool) -> None:
+        """While another sequence is read and first computed, the C box (which belongs to the
+        sequence) is locked and slider moves keep the C of the sequence being loaded."""
+        self.switching = locked
+        self.w_motions.disabled = locked
+
+    def fit_frames(self, seq) -> None:
+        """The frame player over ``seq``'s frames (back to 0 when past its end)."""
+        self.w_frame.end = max(seq.n_frames - 1, 1)
+        if self.w_frame.value > seq.n_frames - 1:
+            self.w_frame.value = 0
+
+    def fit_color(self, seq, shown_seq) -> None:
+        """No truth-based colouring for a sequence without truth; the truth again for one with
+        it after one without (``shown_seq``: the sequence shown until now, None at first)."""
+        mode = self.color_mode
+        if seq.labels is None and (mode == "gt" or mode.startswith("errors")):
+            self.w_color.value = "final (after Random Voting)"
+        elif seq.labels is not None and shown_seq is not None and shown_seq.labels is None:
+            self.w_color.value = "ground truth"

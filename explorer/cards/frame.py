@@ -1,0 +1,109 @@
+"""Card 1 · Atoms: the points of one frame with their trails, atoms, error and change rings.
+
+Its own control: which layers are drawn (the checkboxes sit in the sidebar's View section).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import panel as pn
+from bokeh.core.properties import value
+from bokeh.models import ColumnDataSource, HoverTool
+
+from .. import views as V
+from .base import Host, card, fit_image_figure, image_figure, move_legend
+
+EMPTY_POINTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "index": []}
+#: The layers a checkbox shows or hides, in the sidebar's order.
+LAYERS = ["trails (last 5 frames)", "atom circles (R1 solid, R2 dashed)",
+          "features in no atom (×)", "misclassified (black ring)", "changed motion (purple ring)"]
+
+
+class FrameView:
+    """The frame view: points, trails (last 5 frames), atom circles, the marks; a caption."""
+
+    def __init__(self, host: Host, extent) -> None:
+        self.host = host
+        self.w_layers = pn.widgets.CheckBoxGroup(options=list(LAYERS), value=list(LAYERS), inline=False)
+        self.w_layers.param.watch(self._on_layers, "value")
+
+        self.src_points = ColumnDataSource(dict(EMPTY_POINTS))
+        self.src_trails = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": [], "alpha": []})
+        self.src_atoms = ColumnDataSource({"x": [], "y": [], "r1": [], "r2": [], "color": [], "atom": []})
+        self.src_unassigned = ColumnDataSource({"x": [], "y": []})
+        self.src_errors = ColumnDataSource({"x": [], "y": []})
+        self.src_changed = ColumnDataSource({"x": [], "y": []})
+        f = self.fig = image_figure("Points at frame 0", 410, extent)
+        self.r_trails = f.segment("x0", "y0", "x1", "y1", source=self.src_trails, line_color="color",
+                                  line_alpha="alpha", line_width=1.5)
+        self.r_r2 = f.circle("x", "y", radius="r2", source=self.src_atoms, fill_alpha=0, line_color="color",
+                             line_alpha=0.35, line_dash="dashed", line_width=1, legend_label="atom R2")
+        self.r_r1 = f.circle("x", "y", radius="r1", source=self.src_atoms, fill_alpha=0.06,
+                             fill_color="color", line_color="color", line_alpha=0.7, line_width=1.2,
+                             legend_label="atom R1")
+        # one colour and marker shape per motion (views.MOTION_COLORS / MOTION_MARKERS)
+        self.r_points = f.scatter("x", "y", source=self.src_points, size=7, fill_color="color",
+                                  marker="marker", line_color="#333333", line_width=0.4,
+                                  legend_field="label")
+        self.r_unassigned = f.scatter("x", "y", source=self.src_unassigned, marker="x", size=7,
+                                      line_color=V.NO_ATOM, line_width=1.5, legend_label="in no atom")
+        self.r_changed = f.scatter("x", "y", source=self.src_changed, marker="circle", size=21,
+                                   fill_alpha=0, line_color=V.CHANGED_MARK, line_width=2.5,
+                                   legend_label="changed motion")
+        self.r_errors = f.scatter("x", "y", source=self.src_errors, marker="circle", size=15,
+                                  fill_alpha=0, line_color=V.ERROR_MARK, line_width=2.5,
+                                  legend_label="misclassified")
+        f.add_tools(HoverTool(renderers=[self.r_points], tooltips=[("point", "@index"), ("", "@label")]))
+        move_legend(f)
+        items = {getattr(it.label, "value", None): it for it in f.legend[0].items}
+        self._item_unassigned = items.get("in no atom")
+        self._item_errors = items.get("misclassified")
+        self._item_changed = items.get("changed motion")
+
+        self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=900, margin=(0, 10))
+        self.card = card("1 · Atoms: points, trails and atoms in one frame", pn.pane.Bokeh(self.fig),
+                         self.caption)
+
+    def fit(self, seq) -> None:
+        fit_image_figure(self.fig, seq.extent())
+
+    def draw(self, seq, res, frame: int, style: dict, moved, color_label: str) -> None:
+        """Show ``res`` at ``frame``, coloured by ``style`` (:func:`views.point_style`)."""
+        if res is None:
+            return
+        f = int(frame)
+        d = V.frame_sources(seq, res, f, style, moved=moved)
+        self.src_points.data = d["points"]
+        self.src_trails.data = d["trails"]
+        self.src_atoms.data = d["atoms"]
+        self.src_unassigned.data = d["unassigned"]
+        self.src_errors.data = d["errors"]
+        self.src_changed.data = d["changed"]
+        self.fig.title.text = f"frame {f} of {seq.n_frames - 1} · colour: {color_label}"
+        n_un, n_bad = len(d["unassigned"]["x"]), len(d["errors"]["x"])
+        if self._item_unassigned is not None:
+            self._item_unassigned.label = value(f"in no atom: {n_un}")
+        if self._item_changed is not None:
+            n_mv = len(d["changed"]["x"])
+            self._item_changed.label = value(f"changed motion: {n_mv}")
+        stage = style.get("stage", "final")
+        if self._item_errors is not None:
+            self._item_errors.label = value(f"misclassified ({stage}): {n_bad}" if seq.labels is not None
+                                            else "misclassified: (no truth)")
+        self.caption.object = (
+            f"{res.atoms.n_atoms} atoms (R1 = {res.atoms.r1:g} px solid, R2 = {res.atoms.r2:g} px dashed, "
+            f"drawn at their seeds); {np.asarray(res.atoms.unassigned).size} features in no atom (×); "
+            f"{int(style['misclassified'].sum())} points misclassified by the {stage} stage (black "
+            "ring; the colour-by choice picks the stage). Click legend entries to hide them.")
+
+    # ------------------------------------------------------------------ callbacks
+    def _on_layers(self, event=None) -> None:
+        self.host.schedule(self._layers_now, now_if_on_doc_thread=True)
+
+    def _layers_now(self) -> None:
+        on = set(self.w_layers.value)
+        self.r_trails.visible = LAYERS[0] in on
+        self.r_r1.visible = self.r_r2.visible = LAYERS[1] in on
+        self.r_unassigned.visible = LAYERS[2] in on
+        self.r_errors.visible = LAYERS[3] in on
+        self.r_changed.visible = LAYERS[4] in on

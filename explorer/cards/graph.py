@@ -1,0 +1,103 @@
+"""Card 2 · Multicut graph: the atom graph at the shown frame, and the GAEC replay.
+
+Its own control: the contraction step (a player: Home/End and play step through it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import panel as pn
+from bokeh.models import ColorBar, ColumnDataSource, HoverTool, LinearColorMapper
+from bokeh.palettes import RdBu11
+
+from .. import views as V
+from .base import Host, card, fit_image_figure, image_figure, move_legend
+
+
+class GraphView:
+    """Atoms as nodes at their seeds' positions in the shown frame, kept / cut edges by cost,
+    clusters after a GAEC step coloured by the fine model they end in."""
+
+    def __init__(self, host: Host, extent) -> None:
+        self.host = host
+        # a player, not a slider: its range input takes Home/End to the first/last step (the
+        # slider's noUiSlider keeps its first range for the End key: it went to step 1), and
+        # play steps through the contractions for a class
+        self.w_step = pn.widgets.Player(label="GAEC contraction step (rightmost = final fine models)",
+                                        start=0, end=1, value=1, interval=600, loop_policy="once",
+                                        show_loop_controls=False, value_align="start", scale_buttons=0.8,
+                                        width=420)
+        self.w_step.param.watch(self._on_step, "value")
+
+        # RdBu11 runs blue -> red; cost > 0 (join) is blue
+        self.cost_mapper = LinearColorMapper(palette=list(RdBu11)[::-1], low=-1, high=1)
+        g = self.fig = image_figure("Atom graph at frame 0", 410, extent)
+        empty_e = {"x0": [], "y0": [], "x1": [], "y1": [], "cost": [], "error": [], "a": [], "b": []}
+        self.src_joined = ColumnDataSource(dict(empty_e))
+        self.src_cut = ColumnDataSource(dict(empty_e))
+        self.src_step = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": []})
+        self.src_nodes = ColumnDataSource({"x": [], "y": [], "color": [], "cluster": [], "atom": [],
+                                           "members": [], "size": [], "label": []})
+        self.src_pair = ColumnDataSource({"x": [], "y": [], "color": [], "size": [], "atom": []})
+        g.segment("x0", "y0", "x1", "y1", source=self.src_step, line_color="#222222", line_alpha=0.35,
+                  line_width=10, legend_label="contracted at this step")
+        by_cost = {"field": "cost", "transform": self.cost_mapper}
+        g.segment("x0", "y0", "x1", "y1", source=self.src_joined, line_width=2.5, line_color=by_cost,
+                  legend_label="kept edge (solid)")
+        g.segment("x0", "y0", "x1", "y1", source=self.src_cut, line_width=1.8, line_dash="dashed",
+                  line_color=by_cost, legend_label="cut edge (dashed)")
+        r_nodes = g.scatter("x", "y", source=self.src_nodes, size="size", fill_color="color",
+                            line_color="black", line_width=0.8, legend_label="atom (colour = cluster)")
+        # atom ids beside the nodes; the pair joined at this step on top of everything, ringed
+        g.text("x", "y", text="label", source=self.src_nodes, x_offset=6, y_offset=-4,
+               text_font_size="7pt", text_color="#333333")
+        g.scatter("x", "y", source=self.src_pair, size="size", fill_color="color", line_color="#111111",
+                  line_width=3, legend_label="joined at this step (ringed)")
+        g.add_tools(HoverTool(renderers=[r_nodes], tooltips=[("atom", "@atom"), ("cluster", "@cluster"),
+                                                             ("features", "@members")]))
+        g.add_layout(ColorBar(color_mapper=self.cost_mapper, title="edge cost: + join (blue), − cut (red)",
+                              orientation="horizontal", height=8, title_text_font_size="9pt",
+                              padding=4), "below")
+        move_legend(g)
+
+        self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
+        self.card = card("2 · Multicut graph of atoms → fine models (GAEC replay)",
+                         pn.pane.Bokeh(self.fig), self.w_step, self.caption)
+
+    def fit(self, seq) -> None:
+        fit_image_figure(self.fig, seq.extent())
+
+    def to_final_step(self, res) -> None:
+        """A new result starts the replay at its final step (a step of another result would
+        show contractions that no longer exist)."""
+        K = len(res.multicut.contractions)
+        self.w_step.end = K + 1
+        self.w_step.value = K + 1
+
+    def draw(self, res, frame: int, fine_colors) -> None:
+        """Show ``res``'s graph at ``frame`` and the replay's step."""
+        if res is None:
+            return
+        f, step = int(frame), int(self.w_step.value)
+        d = V.graph_sources(res, f, step, fine_colors)
+        lim = V.cost_limit(res)
+        self.cost_mapper.low, self.cost_mapper.high = -lim, lim
+        self.src_nodes.data = d["nodes"]
+        self.src_joined.data = d["joined"]
+        self.src_cut.data = d["cut"]
+        self.src_step.data = d["step_edge"]
+        self.src_pair.data = d["pair"]
+        self.fig.title.text = (f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {f} · "
+                               f"{len(np.unique(d['nodes']['cluster']))} clusters")
+        self.caption.object = V.replay_caption(res, step)
+
+    # ------------------------------------------------------------------ callbacks
+    def _on_step(self, event=None) -> None:
+        self.host.schedule(self._step_now, now_if_on_doc_thread=True)
+
+    def _step_now(self) -> None:
+        h = self.host
+        if h.result is None or h.quieted:
+            return
+        with h.hold():
+            self.draw(h.result, h.frame, h.fine_colors)

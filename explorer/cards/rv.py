@@ -1,0 +1,50 @@
+"""Card 4 · Fine-tuning (Random Voting): how LAAV's informed start converges, beside plain
+Random Voting from a random start."""
+
+from __future__ import annotations
+
+import panel as pn
+from bokeh.models import ColumnDataSource, LogAxis
+from bokeh.plotting import figure
+
+from .. import views as V
+from .base import card, flex
+
+RV_TOOLS = "pan,wheel_zoom,reset"
+
+
+class RVView:
+    """Labels changed and mean vote margin per iteration, for both runs; a summary."""
+
+    def __init__(self) -> None:
+        self.plain = None  # the plain-RV run drawn (None until it arrives)
+        empty_rv = {"iteration": [], "changed": [], "changed_plot": [], "margin": []}
+        self.src_rv_laav = ColumnDataSource(dict(empty_rv))
+        self.src_rv_plain = ColumnDataSource(dict(empty_rv))
+        self.fig_changed = figure(title="Labels changed per iteration", width=440, height=235,
+                                  y_axis_type="log", tools=RV_TOOLS, toolbar_location="above")
+        self.fig_margin = figure(title="Mean vote margin per iteration", width=440, height=235,
+                                 tools=RV_TOOLS, toolbar_location="above")
+        for fig, col, ylab in ((self.fig_changed, "changed_plot", "labels changed (0 drawn as ½)"),
+                               (self.fig_margin, "margin", "(best − 2nd best) / sum of votes")):
+            # neutral greys: colours mean motions on this page
+            fig.line("iteration", col, source=self.src_rv_laav, line_width=2.5, color="#222222",
+                     legend_label="LAAV's informed trial")
+            fig.line("iteration", col, source=self.src_rv_plain, line_width=2, color="#8C8C8C",
+                     line_dash="dashed", legend_label="plain RV (random start)")
+            fig.xaxis.axis_label = "Random Voting iteration"
+            fig.yaxis.axis_label = ylab
+            fig.legend.location = "top_right" if col == "changed_plot" else "bottom_right"
+            fig.legend.background_fill_alpha = 0.7
+            fig.title.text_font_size = "11pt"
+        assert isinstance(self.fig_changed.yaxis[0], LogAxis)
+        self.rv_md = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
+        self.card = card("4 · Fine-tuning (Random Voting): LAAV's start vs plain RV",
+                         flex(pn.pane.Bokeh(self.fig_changed), pn.pane.Bokeh(self.fig_margin)),
+                         self.rv_md)
+
+    def draw(self, laav_voting, plain) -> None:
+        self.src_rv_laav.data = V.rv_sources(laav_voting)
+        self.src_rv_plain.data = V.rv_sources(plain)
+        self.plain = plain
+        self.rv_md.object = V.rv_summary(laav_voting, plain)

@@ -1,0 +1,83 @@
+"""The page's messages: the header's sequence name (and the browser tab's title), the status
+line with its spinner, what the last recompute changed, and the alerts (errors, notes, a
+shared address's unusable settings)."""
+
+from __future__ import annotations
+
+import panel as pn
+
+import laav
+
+from .. import views as V
+
+
+def header_text(seq: laav.Sequence) -> str:
+    return f"{V.md_text(seq.name)} · {seq.n_points} points, {seq.n_frames} frames"
+
+
+class StatusBar:
+    def __init__(self, seq: laav.Sequence) -> None:
+        self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
+                                   margin=(4, 6))
+        self.note = pn.pane.Alert("", alert_type="info", visible=False, sizing_mode="stretch_width",
+                                  margin=(4, 6))
+        # problems with the settings a shared URL carried (kept until the next URL)
+        self.url_alert = pn.pane.Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
+                                       margin=(4, 6))
+        self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6))
+        self._status_text = "Computing the first result…"
+        self.status = pn.pane.Markdown(self._status_text, margin=(4, 6),
+                                       sizing_mode="stretch_width")
+        self.change_md = pn.pane.Markdown("", margin=(0, 10), visible=False, sizing_mode="stretch_width")
+        # the sequence shown, in the page header (the template's own title is fixed at load)
+        # the browser tab's title follows the sequence shown (bokeh's document title is sent
+        # once, with the page): a hidden box whose value the page copies into document.title
+        self.tab_title = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
+        self.tab_title.jscallback(value="document.title = cb_obj.value")
+        self.header_name = pn.pane.Markdown(header_text(seq), margin=(0, 10),
+                                            styles={"color": "white", "font-size": "1.25em"})
+        self.line = pn.Column(pn.Row(self.spinner, self.status, sizing_mode="stretch_width"), self.change_md,
+                              sizing_mode="stretch_width")
+
+    def show_sequence(self, seq: laav.Sequence) -> None:
+        self.header_name.object = header_text(seq)
+        self.tab_title.value = f"LAAV explorer: {laav.safe_name(seq.name)}"  # the browser tab
+
+    def show_reading(self, name: str) -> None:
+        self.status.object = f"Reading {V.md_text(name)}…"
+
+    def end_reading(self) -> None:
+        """A read that failed: back to what is shown."""
+        if self.status.object.startswith("Reading "):
+            self.status.object = self._status_text
+
+    def show_error(self, message: str) -> None:
+        self.alert.object = f"**Cannot use these settings:** {V.md_text(message)}"
+        self.alert.visible = True
+
+    def show_busy(self, busy: bool, has_result: bool) -> None:
+        self.spinner.value = bool(busy)
+        if busy and has_result:
+            self.status.object = "Recomputing… (the views keep the last result until the new one is ready)"
+
+    def show_note(self, note: str) -> None:
+        self.note.object = note
+        self.note.visible = bool(note)
+
+    def show_url_problems(self, problems: list[str]) -> None:
+        self.url_alert.object = ("" if not problems else "**Some settings in the page address were not "
+                                 "used:** " + "; ".join(V.md_text(m) for m in problems))
+        self.url_alert.visible = bool(problems)
+
+    def show_result(self, seq, error_final, compute_seconds: float, changed: list[str], change) -> None:
+        """The status line for a shown result (``changed``: the settings off their defaults)
+        and what moved since the last (``change``: :class:`state.Change` or None)."""
+        err = "" if error_final is None else f" — final error **{100 * error_final:.1f} %**"
+        self.status.object = self._status_text = (
+            f"Showing {V.md_text(seq.name)}{err} (computed in "
+            f"{1000 * compute_seconds:.0f} ms). "
+            + (f"Not at the defaults: {V.md_text(', '.join(changed))}." if changed
+               else "All settings at their defaults."))
+        self.change_md.object = ("" if change is None else
+                                 f"**What changed:** {V.md_text(change.text())}")
+        self.change_md.visible = change is not None

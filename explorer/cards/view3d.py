@@ -1,0 +1,142 @@
+"""The 3-D space-time view: a viser server of its own (:mod:`explorer.viser_view`), shown in
+an iframe in a collapsible card.
+
+The server starts with the first computation, in its own thread: importing viser and
+starting its server (~0.4 s) stays off the page's load. The iframe is set with the first
+result: the 3-D client's WebGL loop then does not compete with the first computation (it is
+costly in software-rendered browsers).
+"""
+
+from __future__ import annotations
+
+import html
+import threading
+
+import panel as pn
+
+from .. import views as V
+from .base import Host
+
+PLACEHOLDER = ('<div style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
+               'display:flex;align-items:center;justify-content:center;color:#666">'
+               "The 3-D view opens with the first result…</div>")
+
+
+class View3D:
+    """The 3-D card and its viser server (``viser``: None until started, or when off).
+
+    ``iframe_host``: the host name the browser uses to reach the server (None: the page's
+    own host); ``page_hosts``: the page origins its websocket accepts; ``on_frame``: called
+    with a frame picked in the 3-D view (from viser's thread)."""
+
+    def __init__(self, host: Host, want: bool, viser_host: str, page_hosts, iframe_host, on_frame) -> None:
+        self.host = host
+        self.viser = None
+        self.want = bool(want)
+        self.thread: threading.Thread | None = None
+        self.closed = False
+        self.error: str | None = None
+        self._viser_host = viser_host
+        self._page_hosts = page_hosts
+        self._iframe_host = iframe_host
+        self._on_frame = on_frame
+        self.iframe_shown = False
+        if self.want:
+            self.pane = pn.pane.HTML(PLACEHOLDER, height=440, margin=0, sizing_mode="stretch_width",
+                                     max_width=900)
+        else:
+            self.pane = pn.pane.Markdown(f"*{V.md_text('the 3-D view is switched off')}*",
+                                         sizing_mode="stretch_width", height=60)
+        self.card = pn.Card(self.pane, title="3-D space-time view (viser): trajectories along the "
+                            "frame axis, atoms and their graph", collapsible=True, collapsed=False,
+                            margin=(6, 6), sizing_mode="stretch_width")
+
+    def start(self) -> None:
+        """Start the server in its thread (idempotent; nothing when the view is off)."""
+        if self.want and self.thread is None:
+            self.thread = threading.Thread(target=self._start_server, name="laav-explore-viser",
+                                           daemon=True)
+            self.thread.start()
+
+    def _start_server(self) -> None:
+        try:
+            from ..viser_view import ViserView
+
+            view = ViserView(host=self._viser_host, on_frame=self._on_frame, page_hosts=self._page_hosts)
+        except Exception as exc:  # the 2-D views still work without it
+            self.error = f"the 3-D view could not start: {exc}"
+            self.host.schedule(self.show)
+            return
+        if self.closed:
+            view.close()
+        else:
+            self.viser = view
+            # a result applied while the server was still starting (a slow, loaded machine)
+            # did not reach it: show the view and send the shown result now
+            self.host.schedule(self.show)
+
+    def show(self, send: bool = True) -> None:
+        """(Document thread.) Put the 3-D view on the page once its server has started (or
+        failed) and a result is shown; with ``send``, also give it the shown result."""
+        h = self.host
+        if not self.want or h.result is None or self.closed:
+            return
+        if self.viser is None and self.thread is not None and self.thread.is_alive():
+            return  # still starting: _start_server calls again when done
+        if not self.iframe_shown:
+            self.iframe_shown = True
+            self.pane.object = self.iframe_html() if self.viser is not None else (
+                f"<p><i>{html.escape(self.error or 'the 3-D view did not start')}</i></p>")
+        if send and self.viser is not None and self.viser._result is not h.result:
+            self.viser.set_result(h.sequence, h.result, h.style["color"], h.frame)
+
+    def show_first(self) -> None:
+        """(Document thread, with the first result.) The iframe, once the server is up."""
+        if self.want and not self.iframe_shown:
+            self.wait(5.0)  # normally done long before; else show() follows
+            self.show(send=False)
+
+    def draw(self, seq, res, colors, frame: int, new_seq: bool) -> None:
+        """Give the server a new result (the whole scene for a new sequence, else the colours)."""
+        if self.viser is None:
+            return
+        if new_seq or self.viser._result is None:
+            self.viser.set_result(seq, res, colors, frame)
+        else:
+            self.viser._seq = seq
+            self.viser._result = res
+            self.viser.set_colors(colors)
+
+    def set_frame(self, frame: int) -> None:
+        if self.viser is not None:
+            self.viser.set_frame(int(frame))
+
+    def set_colors(self, colors) -> None:
+        if self.viser is not None:
+            self.viser.set_colors(colors)
+
+    def reattach(self) -> None:
+        """The page's host may have changed (an explorer adopted by a server session)."""
+        if self.viser is not None and self.iframe_shown:
+            self.pane.object = self.iframe_html()
+
+    def iframe_html(self) -> str:
+        host = self._iframe_host
+        if host is None:
+            hdr = (pn.state.headers or {}).get("Host", "") if pn.state.curdoc else ""
+            host = hdr.rsplit(":", 1)[0] if hdr else "127.0.0.1"
+        return (f'<iframe src="http://{host}:{self.viser.port}/" title="LAAV 3-D view (viser)" '
+                'style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
+                'box-sizing:border-box"></iframe>')
+
+    def wait(self, timeout: float = 30.0) -> None:
+        """Let the server finish starting (it normally has, before the first result)."""
+        t = self.thread
+        if t is not None and t.is_alive():
+            t.join(timeout)
+
+    def close(self) -> None:
+        self.closed = True
+        self.wait()
+        if self.viser is not None:
+            self.viser.close()
