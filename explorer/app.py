@@ -278,7 +278,7 @@ class Explorer:
         self.w_motions = pn.widgets.IntInput(label="C — number of motions", start=1, end=seq.n_points,
                                              value=st.n_motions, width=140)
         self.w_motions.param.watch(self._on_param, "value")
-        self.w_upload = pn.widgets.FileInput(accept=".mat,.npz,.json", multiple=False, width=SIDE_W)
+        self.w_upload = pn.widgets.FileInput(accept=".mat,.npz,.csv,.json", multiple=False, width=SIDE_W)
         self.w_upload.param.watch(self._on_upload, "value")
         self.w_reset = pn.widgets.Button(label="Reset parameters to defaults", color="warning",
                                          width=SIDE_W)
@@ -496,7 +496,7 @@ class Explorer:
                                                height=60)
         self.sidebar = [
             pn.pane.Markdown("### Sequence", margin=(0, 10)), self.seq_info,
-            pn.pane.Markdown("Open another sequence (Hopkins `*_truth.mat` or `.npz`), or a `params.json` "
+            pn.pane.Markdown("Open another sequence (`.mat`, `.npz` or tracks `.csv`), or a `params.json` "
                              "exported here:", margin=(0, 10)),
             self.w_upload, self.w_motions,
             pn.pane.Markdown("### View", margin=(0, 10)), self.w_frame, self.w_color, self.w_layers,
@@ -1087,6 +1087,7 @@ class Explorer:
                     # is parsed in a child process (scipy's reader can crash the interpreter
                     # on some damaged files, and an upload must never do that)
                     seq = laav.load_sequence(p, isolated=True)
+                    laav.require_complete(seq)  # the last good result stays (issue 14)
                 except laav.SequenceError as exc:
                     self.state.report(str(exc).replace(str(p), base)
                                       + " — still showing the last valid result")
