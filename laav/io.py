@@ -289,7 +289,7 @@ def _load_kt3d(p: Path, mat: dict, lim: tuple[int, int]) -> Sequence:
         raise SequenceError(f"{p}: struct 'Data' has no field 'ySparse' (KT3DMoSeg: homogeneous "
                             "pixel coordinates, 3 x P x F)")
     y = _numeric(p, mat["Data.ySparse"], "Data.ySparse")
-    _check_size(p, y.shape[1] if y.ndim == 3 else None, 9 * y.size, lim)
+    _check_size(p, y.shape[1] if y.ndim == 3 else None, 8 * y.size, lim)
     if y.ndim != 3 or y.shape[0] != 3:
         raise SequenceError(f"{p}: Data.ySparse must have shape 3 x P x F, got {y.shape}")
     _, P, F = y.shape
