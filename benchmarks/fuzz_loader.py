@@ -1,9 +1,11 @@
 """Fuzz the sequence loader the way untrusted files reach it (uploads, ``laav segment``, bench).
 
-Builds >= 5,000 mutants from the bundled ``assets/*.mat`` and a few Hopkins155 files (bit
-flips, truncation, wrong MAT tags and dimensions, extension/content mismatch, pickles,
-NaN/Inf, wrong shapes, random bytes) and loads each with
-``laav.load_sequence(path, isolated=True)`` in a worker process. Prints the count of each
+Builds >= 5,000 mutants from the bundled ``explorer/assets/*.mat`` and a few Hopkins155
+files (bit flips, truncation, wrong MAT tags and dimensions, extension/content mismatch,
+pickles, NaN/Inf, wrong shapes, random bytes; the same sequences with tracks hidden, as
+KT3DMoSeg ``.mat`` and tracks CSV, bit-flipped, truncated, duplicated rows and text in
+numeric fields) and loads each with ``laav.load_sequence(path, isolated=True)`` in a
+worker process. Prints the count of each
 outcome:
 
 * ok: a Sequence came back;
@@ -52,7 +54,7 @@ class _Evil:
 
 
 def _sources(hopkins: Path | None) -> list[tuple[str, bytes]]:
-    out = [(p.stem, p.read_bytes()) for p in sorted((REPO / "assets").glob("*.mat"))]
+    out = [(p.stem, p.read_bytes()) for p in sorted((REPO / "explorer" / "assets").glob("*.mat"))]
     if hopkins is not None and hopkins.is_dir():
         for name in HOPKINS:
             f = hopkins / name / f"{name}_truth.mat"
@@ -96,10 +98,49 @@ def _as_npz(seq_bytes: bytes) -> bytes:
         return Path(laav.save_sequence(seq, Path(d) / "s.npz")).read_bytes()
 
 
+def _as_incomplete(seq_bytes: bytes, fmt: str) -> bytes:
+    """A MAT source's sequence with a quarter of its tracks ending early, saved as ``fmt``."""
+    import laav
+
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "s_truth.mat"
+        p.write_bytes(seq_bytes)
+        seq = laav.load_sequence(p)
+        vis = np.ones((seq.n_frames, seq.n_points), bool)
+        vis[max(2, seq.n_frames // 2):, ::4] = False
+        seq = laav.Sequence(seq.points, seq.labels, name=seq.name, visible=vis)
+        return Path(laav.save_sequence(seq, Path(d) / "s.x", format=fmt)).read_bytes()
+
+
+def _incomplete_mutant(kind: str, b: bytearray, name: str, rng) -> tuple[str, bytes]:
+    """Mutants of the KT3DMoSeg (``kt3d_*``) and tracks CSV (``csv_*``) forms of a source."""
+    fname = f"{name}_Tracks.mat" if kind.startswith("kt3d") else f"{name}.csv"
+    if kind.endswith("_bitflip"):
+        for pos in rng.integers(0, len(b), rng.integers(1, 9)):
+            b[pos] ^= 1 << int(rng.integers(8))
+        return fname, bytes(b)
+    if kind.endswith("_truncate"):
+        return fname, bytes(b[: int(rng.integers(0, len(b)))])
+    lines = bytes(b).split(b"\n")
+    if kind == "csv_duplicate":  # a (track, frame) twice
+        return fname, b"\n".join(lines + [lines[1 + int(rng.integers(len(lines) - 2))]])
+    if kind == "csv_text":  # a word in a numeric field
+        i = 1 + int(rng.integers(len(lines) - 2))
+        cells = lines[i].split(b",")
+        cells[int(rng.integers(len(cells)))] = b"<b>x</b>"
+        lines[i] = b",".join(cells)
+        return fname, b"\n".join(lines)
+    if kind == "csv_huge_grid":  # 10,000 rows declaring a (10,000 frames x 5,000 tracks) grid
+        rows = b"".join(b"%d,%d,1,2\n" % (t, 2 * t + k) for t in range(5000) for k in range(2))
+        return fname, b"track,frame,x,y\n" + rows
+    raise ValueError(kind)
+
+
 def build_specs(n_sources: int, per_source: int) -> list[tuple]:
     """``(kind, source index, seed)`` for every mutant (bytes are made on demand)."""
     kinds = {"bitflip": 0.45, "header_flip": 0.15, "truncate": 0.08, "tag": 0.12, "dims": 0.08,
-             "npz_bitflip": 0.06, "npz_truncate": 0.03, "zip_entry": 0.03}
+             "npz_bitflip": 0.06, "npz_truncate": 0.03, "zip_entry": 0.03,
+             "kt3d_bitflip": 0.06, "kt3d_truncate": 0.02, "csv_bitflip": 0.04, "csv_truncate": 0.02}
     specs = []
     for s in range(n_sources):
         for kind, share in kinds.items():
@@ -107,7 +148,7 @@ def build_specs(n_sources: int, per_source: int) -> list[tuple]:
     fixed = ["mat_as_npz", "npz_as_mat", "mat_as_txt", "pickle_npz", "pickle_raw", "pickle_raw_mat",
              "nan_mat", "inf_mat", "nan_npz", "inf_npz", "shape_3d_points", "shape_2d_points",
              "shape_labels", "shape_y_4rows", "labels_zero", "empty", "random", "magic_only",
-             "hdf5", "zero_w"]
+             "hdf5", "zero_w", "csv_duplicate", "csv_text", "csv_huge_grid"]
     for s in range(n_sources):
         specs += [(kind, s, 0) for kind in fixed]
     return specs
@@ -119,6 +160,11 @@ def make_mutant(spec: tuple, sources: list[tuple[str, bytes]], npz_cache: dict) 
     name, mat = sources[s]
     rng = np.random.default_rng([s, seed, sum(map(ord, kind))])
     b = bytearray(mat)
+    if kind.startswith(("kt3d_", "csv_")):
+        fmt = "kt3d" if kind.startswith("kt3d") else "csv"
+        if (s, fmt) not in npz_cache:
+            npz_cache[(s, fmt)] = _as_incomplete(mat, fmt)
+        return _incomplete_mutant(kind, bytearray(npz_cache[(s, fmt)]), name, rng)
     if kind.startswith("npz_") or kind == "zip_entry":
         if s not in npz_cache:
             npz_cache[s] = _as_npz(mat)

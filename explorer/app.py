@@ -192,7 +192,7 @@ class Explorer:
 
         self.sidebar = [
             heading("Sequence"), f.seq_info,
-            pn.pane.Markdown("Open another sequence (Hopkins `*_truth.mat` or `.npz`), or a `params.json` "
+            pn.pane.Markdown("Open another sequence (`.mat`, `.npz` or tracks `.csv`), or a `params.json` "
                              "exported here:", margin=(0, 10)),
             f.w_upload, c.w_motions,
             heading("View"), c.w_frame, c.w_color, self.frame_view.w_layers,

@@ -66,8 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Without FILE the bundled demo sequence is shown. A FILE without ground-truth labels "
                "needs --motions.")
     p.add_argument("file", nargs="?", metavar="FILE",
-                   help="Hopkins155 *_truth.mat, a .npz with points (F, P, 2) [and labels], or a folder "
-                        "holding one *_truth.mat")
+                   help="Hopkins155 *_truth.mat, KT3DMoSeg .mat, a .npz with points (F, P, 2) [and "
+                        "labels, visible], a tracks CSV (track,frame,x,y[,label]), or a folder holding one")
     p.add_argument("--motions", "-C", type=int, metavar="C",
                    help="number of motions C (default: from the ground truth)")
     p.add_argument("--port", type=int, metavar="N",
@@ -85,6 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-points", type=int, default=None, metavar="N",
                    help=f"refuse a FILE with more than N points (default {laav.io.MAX_POINTS:,}; "
                         "memory grows as about 48 bytes x N^2)")
+    p.add_argument("--complete-only", action="store_true",
+                   help="keep only the tracks visible in every frame (LAAV's stages do not handle "
+                        "missing entries yet); the page then numbers the kept points 0..K-1")
     return p
 
 
@@ -243,6 +246,13 @@ def main(argv: list[str] | None = None) -> int:
             seq = demo_sequence()
         else:
             seq = laav.load_sequence(args.file, isolated=True, max_points=args.max_points)
+        if args.complete_only and not seq.is_complete:
+            missing = 100 * (1 - seq.visible_share)
+            seq, kept = seq.complete()
+            print(f"--complete-only: kept {kept.size} points (those visible in every frame; "
+                  f"{missing:.1f} % of the entries were missing), numbered 0..{kept.size - 1}",
+                  file=sys.stderr)
+        laav.require_complete(seq)
     except (laav.SequenceError, FileNotFoundError) as exc:
         return _fail(parser, str(exc))
     if args.motions is None and seq.labels is None:

@@ -10,7 +10,7 @@ the ``test`` extra); the browser explorer lives in the separate ``explorer`` pac
 uses only the public API exported here.
 """
 
-from ._sequence import LaavWarning, Sequence, SequenceError
+from ._sequence import IncompleteSequenceError, LaavWarning, Sequence, SequenceError, require_complete
 from .io import find_truth_files, load_sequence, load_sequence_isolated, safe_name, save_sequence
 from .metrics import best_label_map, confusion_matrix, misclassification_rate
 
@@ -19,6 +19,8 @@ __version__ = "0.1.0"
 __all__ = [
     "Sequence",
     "SequenceError",
+    "IncompleteSequenceError",
+    "require_complete",
     "LaavWarning",
     "load_sequence",
     "load_sequence_isolated",

@@ -21,8 +21,11 @@ import sys
 
 import numpy as np
 
-#: The Hopkins155 variables laav reads; every other variable is skipped.
-VARIABLES = ("y", "s", "width", "height")
+#: The variables laav reads: Hopkins155's, and KT3DMoSeg's struct ``Data``; every other
+#: variable is skipped.
+VARIABLES = ("y", "s", "width", "height", "Data")
+#: The fields of KT3DMoSeg's ``Data`` laav reads, returned as ``"Data.<field>"``.
+DATA_FIELDS = ("ySparse", "visibleSparse", "GtLabel")
 #: Address-space cap of the child process (bytes).
 MEMORY_LIMIT = 3 << 30
 
@@ -32,7 +35,11 @@ class MatReadError(Exception):
 
 
 def read_mat_variables(path: str) -> dict:
-    """The Hopkins155 variables of the MAT v5 file ``path`` (raises :class:`MatReadError`)."""
+    """The :data:`VARIABLES` of the MAT v5 file ``path`` (raises :class:`MatReadError`).
+
+    A struct ``Data`` (KT3DMoSeg) is returned as its :data:`DATA_FIELDS`, each under the
+    key ``"Data.<field>"``; ``"Data"`` itself then maps to the list of its field names.
+    """
     import scipy.io
 
     try:
@@ -41,15 +48,29 @@ def read_mat_variables(path: str) -> dict:
         raise MatReadError("too large: its arrays do not fit in memory") from None
     except Exception as exc:  # scipy raises many types for damaged files
         raise MatReadError(f"truncated or corrupt MAT file ({type(exc).__name__}: {exc})") from None
-    return {k: mat[k] for k in VARIABLES if k in mat}
+    out = {k: mat[k] for k in VARIABLES if k in mat}
+    data = out.pop("Data", None)
+    if data is not None:
+        names = data.dtype.names if isinstance(data, np.ndarray) else None
+        if not names:
+            raise MatReadError(f"variable 'Data' is not a struct (MATLAB class of dtype {data.dtype})")
+        if data.size != 1:
+            raise MatReadError(f"variable 'Data' must be one struct, got a {data.shape} struct array")
+        record = data.reshape(-1)[0]
+        out["Data"] = np.array(names, dtype=str)
+        for name in DATA_FIELDS:
+            if name in names:
+                out["Data." + name] = record[name]
+    return out
 
 
 def _encode(variables: dict) -> bytes:
-    """Numeric variables as an ``.npz`` (no pickles); others are only named, with their type."""
+    """Numeric variables (and ``Data``'s field names) as an ``.npz`` (no pickles); others are
+    only named, with their type."""
     arrays, other = {}, []
     for k, v in variables.items():
         a = np.asarray(v)
-        if a.dtype.kind in "biuf":
+        if a.dtype.kind in "biufc" or (k == "Data" and a.dtype.kind == "U"):
             arrays[k] = a
         else:
             other.append(f"{k}={a.dtype}")

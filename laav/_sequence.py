@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Sequence", "SequenceError", "LaavWarning", "MIN_POINTS", "MIN_FRAMES",
-           "check_degenerate"]
+__all__ = ["Sequence", "SequenceError", "IncompleteSequenceError", "LaavWarning", "MIN_POINTS",
+           "MIN_FRAMES", "check_degenerate", "require_complete"]
 
 #: Fewest trajectories a sequence may hold (the 8-point algorithm needs eight).
 MIN_POINTS = 8
@@ -21,6 +21,46 @@ class SequenceError(ValueError):
     The message always names the source (file path or ``"<array>"``) and the problem
     in plain words.
     """
+
+
+class IncompleteSequenceError(SequenceError):
+    """A sequence with missing entries was given to a stage that needs every point in every frame.
+
+    Attributes
+    ----------
+    missing_share : float
+        Share of the (frame, point) entries that are not visible, 0-1.
+    n_complete : int
+        Number of points visible in every frame (what :meth:`Sequence.complete` keeps).
+    """
+
+    def __init__(self, message: str, missing_share: float = 0.0, n_complete: int = 0):
+        super().__init__(message)
+        self.missing_share = missing_share
+        self.n_complete = n_complete
+
+
+def require_complete(seq: Sequence) -> None:
+    """Raise :class:`IncompleteSequenceError` unless every point of ``seq`` is visible in every frame.
+
+    LAAV's stages (atoms, graph, fine-to-coarse, voting) do not handle missing data yet
+    (issue 14, item 3); until they do, they refuse an incomplete sequence with this message
+    rather than reading the NaN that stands in for the missing coordinates.
+    """
+    if seq.is_complete:
+        return
+    missing = 1.0 - seq.visible_share
+    n_full = int(np.count_nonzero(seq.visible.all(axis=0)))
+    pct = 100.0 * missing
+    pct_text = f"{pct:.1f}" if pct >= 0.1 else f"{pct:.2g}"
+    keep = (f"keep the {n_full} of {seq.n_points} points visible in every frame with "
+            "seq.complete() (command line: --complete-only)")
+    if n_full < MIN_POINTS:
+        keep += f", though {n_full} are fewer than the {MIN_POINTS} points LAAV needs"
+    raise IncompleteSequenceError(
+        f"{seq.source}: the sequence has {pct_text} % missing entries ({seq.n_points} points x "
+        f"{seq.n_frames} frames); incomplete tracks are not supported yet by LAAV's stages: {keep}",
+        missing_share=missing, n_complete=n_full)
 
 
 class LaavWarning(UserWarning):
@@ -74,12 +114,13 @@ def check_degenerate(seq: Sequence, n_motions: int) -> None:
 
 @dataclass(frozen=True, eq=False)
 class Sequence:
-    """P feature points tracked over F frames, with optional ground-truth labels.
+    """P feature points tracked over F frames, with optional ground-truth labels and visibility.
 
     Parameters
     ----------
     points : ndarray of shape (F, P, 2), float64
-        Pixel coordinates ``(x, y)`` of every point in every frame.
+        Pixel coordinates ``(x, y)`` of every point in every frame. Where ``visible`` is
+        False they are ignored (they may hold NaN or anything else) and stored as NaN.
     labels : ndarray of shape (P,), int64, or None
         Ground-truth motion label of each point, 0-based and contiguous
         (``0 .. n_motions - 1``, every label used at least once).
@@ -89,6 +130,11 @@ class Sequence:
         Frame size in pixels when known.
     source : str
         Where the sequence came from (a path or ``"<array>"``); used in error messages.
+    visible : ndarray of shape (F, P), bool, or None
+        Whether each point is seen in each frame (real trackers lose points: tracks start
+        late, end early, are occluded). None (default): every point in every frame. Every
+        point must be visible in at least 2 frames. After construction the attribute is
+        always a read-only (F, P) bool array.
 
     Attributes
     ----------
@@ -96,11 +142,26 @@ class Sequence:
         F and P.
     n_motions : int or None
         Number of distinct ground-truth labels, or None without labels.
+    is_complete : bool
+        Every point visible in every frame.
+    visible_share : float
+        Share of the F x P entries that are visible (1.0 when complete).
+    track_lengths : ndarray of shape (P,), int64
+        Number of frames each point is visible in.
 
     Raises
     ------
     SequenceError
-        On construction, when an array has the wrong shape or values.
+        On construction, when an array has the wrong shape or values: among others a
+        ``visible`` mask of another shape than (F, P), a point visible in fewer than 2
+        frames, or NaN / infinite coordinates where a point is visible.
+
+    Examples
+    --------
+    >>> seq = Sequence(points, visible=mask)               # doctest: +SKIP
+    >>> seq.is_complete, seq.visible_share                 # doctest: +SKIP
+    (False, 0.62)
+    >>> full, kept = seq.complete()  # the points seen in every frame, and their indices  # doctest: +SKIP
     """
 
     points: np.ndarray
@@ -108,6 +169,7 @@ class Sequence:
     name: str = "sequence"
     image_size: tuple[int, int] | None = None
     source: str = field(default="<array>", repr=False)
+    visible: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         src = self.source
@@ -135,11 +197,28 @@ class Sequence:
                 f"{src}: needs at least {MIN_POINTS} points, got {n_points}"
             )
         pts = np.ascontiguousarray(pts, dtype=np.float64)
-        if not np.isfinite(pts).all():
-            bad = int((~np.isfinite(pts)).any(axis=(0, 2)).sum())
-            raise SequenceError(f"{src}: {bad} point(s) have NaN or infinite coordinates")
+        vis = None if self.visible is None else _check_visible(self.visible, n_frames, n_points, src)
+        if vis is None or vis.all():
+            if not np.isfinite(pts).all():
+                bad = int((~np.isfinite(pts)).any(axis=(0, 2)).sum())
+                raise SequenceError(f"{src}: {bad} point(s) have NaN or infinite coordinates")
+            vis = np.ones((n_frames, n_points), dtype=bool)
+            complete = True
+        else:
+            bad = vis & ~np.isfinite(pts).all(axis=2)  # (F, P)
+            if bad.any():
+                f, q = np.argwhere(bad)[0]
+                n_bad = int(bad.any(axis=0).sum())
+                raise SequenceError(
+                    f"{src}: {n_bad} point(s) have NaN or infinite coordinates in frames where "
+                    f"they are visible (first: point {q} in frame {f})")
+            pts = np.where(vis[..., None], pts, np.nan)  # a new array: the caller's stays as it was
+            complete = False
         pts.setflags(write=False)
+        vis.setflags(write=False)
         object.__setattr__(self, "points", pts)
+        object.__setattr__(self, "visible", vis)
+        object.__setattr__(self, "_complete", complete)
 
         if self.labels is not None:
             lab = np.asarray(self.labels)
@@ -200,29 +279,130 @@ class Sequence:
     def n_motions(self) -> int | None:
         return None if self.labels is None else int(self.labels.max()) + 1
 
+    @property
+    def is_complete(self) -> bool:
+        """Every point is visible in every frame."""
+        return self._complete
+
+    @property
+    def visible_share(self) -> float:
+        """Share of the F x P entries that are visible, 0-1 (1.0 when complete)."""
+        return 1.0 if self._complete else float(np.count_nonzero(self.visible)) / self.visible.size
+
+    @property
+    def track_lengths(self) -> np.ndarray:
+        """(P,) int64: the number of frames each point is visible in."""
+        return np.count_nonzero(self.visible, axis=0).astype(np.int64)
+
     def with_points(self, points: np.ndarray, name: str | None = None) -> Sequence:
-        """Copy with other coordinates (same labels), e.g. after adding noise."""
+        """Copy with other coordinates (same labels and visibility), e.g. after adding noise."""
         return Sequence(
             points=points,
             labels=self.labels,
             name=self.name if name is None else name,
             image_size=self.image_size,
             source=self.source,
+            visible=None if self._complete else self.visible,
         )
 
+    def subset(self, indices) -> Sequence:
+        """The points ``indices`` only (an int index array or a (P,) bool mask), in that order.
+
+        Ground-truth labels follow their points; when a motion loses every point, the
+        remaining labels are renumbered ``0 .. K-1`` in their order (so ``n_motions`` drops).
+
+        Raises
+        ------
+        SequenceError
+            For indices out of range, or when fewer than :data:`MIN_POINTS` points remain.
+        """
+        idx = np.asarray(indices)
+        if idx.dtype == bool:
+            if idx.shape != (self.n_points,):
+                raise SequenceError(f"{self.source}: a point mask must have shape ({self.n_points},), "
+                                    f"got {idx.shape}")
+            idx = np.flatnonzero(idx)
+        elif idx.size == 0:
+            idx = idx.astype(np.int64)
+        if idx.ndim != 1 or not np.issubdtype(idx.dtype, np.integer):
+            raise SequenceError(f"{self.source}: point indices must be a vector of integers, "
+                                f"got dtype {idx.dtype} and shape {idx.shape}")
+        if idx.size and (idx.min() < -self.n_points or idx.max() >= self.n_points):
+            raise SequenceError(f"{self.source}: point index out of range for {self.n_points} points")
+        labels = None
+        if self.labels is not None:
+            labels = np.unique(self.labels[idx], return_inverse=True)[1].reshape(-1)
+        vis = None if self._complete else self.visible[:, idx]
+        return Sequence(points=self.points[:, idx], labels=labels, name=self.name,
+                        image_size=self.image_size, source=self.source, visible=vis)
+
+    def complete(self) -> tuple[Sequence, np.ndarray]:
+        """The points visible in every frame, and their indices in this sequence.
+
+        Returns
+        -------
+        seq : Sequence
+            Complete (``is_complete``); ``self`` when it already is. Labels as in :meth:`subset`.
+        kept : ndarray of shape (K,), int64
+            Indices of the kept points, increasing: ``result.labels`` of the returned
+            sequence belong to ``self``'s points ``kept``.
+
+        Raises
+        ------
+        SequenceError
+            When fewer than :data:`MIN_POINTS` points are visible in every frame.
+        """
+        if self._complete:
+            return self, np.arange(self.n_points, dtype=np.int64)
+        kept = np.flatnonzero(self.visible.all(axis=0)).astype(np.int64)
+        if kept.size < MIN_POINTS:
+            raise SequenceError(
+                f"{self.source}: only {kept.size} of {self.n_points} points are visible in every "
+                f"frame; at least {MIN_POINTS} are needed")
+        return self.subset(kept), kept
+
     def extent(self) -> tuple[float, float, float, float]:
-        """``(xmin, xmax, ymin, ymax)`` of all points, or the image frame when known."""
+        """``(xmin, xmax, ymin, ymax)`` of all visible points, or the image frame when known."""
         if self.image_size is not None:
             return 0.0, float(self.image_size[0]), 0.0, float(self.image_size[1])
         x = self.points[..., 0]
         y = self.points[..., 1]
-        return float(x.min()), float(x.max()), float(y.min()), float(y.max())
+        if self._complete:
+            return float(x.min()), float(x.max()), float(y.min()), float(y.max())
+        return float(np.nanmin(x)), float(np.nanmax(x)), float(np.nanmin(y)), float(np.nanmax(y))
 
     def __repr__(self) -> str:
         mot = "unlabelled" if self.labels is None else f"{self.n_motions} motions"
+        vis = "" if self._complete else f", {100 * self.visible_share:.1f} % visible"
         return (
-            f"Sequence(name={self.name!r}, frames={self.n_frames}, points={self.n_points}, {mot})"
+            f"Sequence(name={self.name!r}, frames={self.n_frames}, points={self.n_points}, "
+            f"{mot}{vis})"
         )
+
+
+def _check_visible(visible, n_frames: int, n_points: int, src: str) -> np.ndarray:
+    """``visible`` as a (F, P) bool array; :class:`SequenceError` for anything else."""
+    try:
+        vis = np.asarray(visible)
+    except Exception as exc:
+        raise SequenceError(f"{src}: visible cannot be read as an array ({exc})") from None
+    if vis.dtype != bool:
+        if vis.dtype == object or np.iscomplexobj(vis) or not np.issubdtype(vis.dtype, np.number):
+            raise SequenceError(f"{src}: visible must be a bool (or 0/1) array, got dtype {vis.dtype}")
+        if not np.isin(vis, (0, 1)).all():
+            raise SequenceError(f"{src}: visible must hold only 0/1 (or True/False)")
+        vis = vis != 0
+    if vis.shape != (n_frames, n_points):
+        hint = " (points x frames: transpose it)" if vis.shape == (n_points, n_frames) else ""
+        raise SequenceError(f"{src}: visible must have shape (frames, points) = "
+                            f"({n_frames}, {n_points}) like the points, got {vis.shape}{hint}")
+    counts = np.count_nonzero(vis, axis=0)
+    short = np.flatnonzero(counts < MIN_FRAMES)
+    if short.size:
+        shown = ", ".join(str(q) for q in short[:5]) + (", ..." if short.size > 5 else "")
+        raise SequenceError(f"{src}: {short.size} point(s) are visible in fewer than {MIN_FRAMES} "
+                            f"frames (points {shown}); every point needs at least {MIN_FRAMES}")
+    return np.array(vis, dtype=bool)  # a copy: read-only without touching the caller's
 
 
 def as_points(seq: Sequence | np.ndarray) -> np.ndarray:

@@ -6,6 +6,7 @@
     laav bench --data DIR [--methods laav,rv] [--seeds N] [--noise 0,0.5,1,2] [--only GLOB]
                [--jobs N] [--scheduler tcp://HOST:PORT] [--out DIR]
     laav report DIR
+    laav convert IN OUT [--format hopkins|kt3d|npz|csv] [--complete-only]
     laav --version
 
 ``--param key=value`` (repeatable, ``segment`` and ``bench``) sets any field of
@@ -92,6 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
     seg.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help=_param_help())
     _add_max_points(seg)
+    _add_complete_only(seg)
 
     bench = sub.add_parser(
         "bench", help="run the benchmark over a Hopkins155-style folder",
@@ -131,23 +133,80 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="(re)write report.md and figures from a runs.csv",
                          description="Write DIR/report.md and its figures from DIR/runs.csv.")
     rep.add_argument("dir", metavar="DIR", help="bench output folder holding runs.csv")
+    _add_convert(sub)
     return parser
+
+
+def _add_complete_only(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--complete-only", action="store_true",
+                        help="keep only the tracks visible in every frame (LAAV's stages do not "
+                             "handle missing entries yet); output rows keep the file's point numbers")
+
+
+def _add_convert(sub) -> None:
+    from .io import FORMATS
+
+    conv = sub.add_parser(
+        "convert", help="convert a sequence file to another format",
+        description="Read a sequence (Hopkins155 or KT3DMoSeg .mat, .npz, tracks CSV; format "
+                    "from the content) and write it as OUT, in the format its extension names "
+                    "(.npz, .csv, .mat: Hopkins155 when complete, else KT3DMoSeg) or --format.")
+    conv.add_argument("input", metavar="IN", help="sequence file or its folder")
+    conv.add_argument("output", metavar="OUT", help="file to write")
+    conv.add_argument("--format", choices=FORMATS, default=None,
+                      help="output format (default: from OUT's extension)")
+    _add_complete_only(conv)
+    _add_max_points(conv)
+
+
+def _load_for_command(args):
+    """The sequence of ``args.file``/``args.input``, with ``--complete-only`` applied.
+
+    Returns ``(seq, kept)``: ``kept`` the file's indices of ``seq``'s points (None: all).
+    """
+    from . import SequenceError, load_sequence
+
+    path = getattr(args, "file", None) or args.input
+    try:
+        seq = load_sequence(path, isolated=True, max_points=args.max_points)
+        if not args.complete_only or seq.is_complete:
+            return seq, None
+        full, kept = seq.complete()
+    except SequenceError as exc:
+        raise _UsageError(str(exc)) from None
+    print(f"--complete-only: kept {kept.size} of {seq.n_points} points (those visible in every "
+          f"frame; {100 * (1 - seq.visible_share):.1f} % of the entries were missing)", file=sys.stderr)
+    return full, kept
+
+
+def _cmd_convert(args) -> int:
+    from . import SequenceError, save_sequence
+
+    seq, _ = _load_for_command(args)
+    try:
+        out = save_sequence(seq, args.output, args.format)
+    except SequenceError as exc:
+        raise _UsageError(str(exc)) from None
+    vis = "" if seq.is_complete else f", {100 * seq.visible_share:.1f} % visible"
+    print(f"wrote {out} ({seq.n_frames} frames, {seq.n_points} points{vis})")
+    return 0
 
 
 def _cmd_segment(args) -> int:
     from . import (
         SequenceError,
-        load_sequence,
         misclassification_rate,
         random_voting,
+        require_complete,
         safe_name,
         segment,
     )
     from .bench import params_from_assignments
 
     params = params_from_assignments(args.param, args.preset)
+    seq, kept = _load_for_command(args)
     try:
-        seq = load_sequence(args.file, isolated=True, max_points=args.max_points)
+        require_complete(seq)
     except SequenceError as exc:
         raise _UsageError(str(exc)) from None
     C = args.motions if args.motions is not None else seq.n_motions
@@ -172,7 +231,8 @@ def _cmd_segment(args) -> int:
         with open(out, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(("point", "label"))
-            w.writerows((i, int(v)) for i, v in enumerate(labels))
+            index = range(len(labels)) if kept is None else kept.tolist()  # the file's numbers
+            w.writerows((i, int(v)) for i, v in zip(index, labels))
     except OSError as exc:
         raise _UsageError(f"{out}: cannot write labels ({exc.strerror or exc})") from None
     print(f"labels: {out}")
@@ -274,7 +334,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     from .bench import BenchError
 
-    commands = {"segment": _cmd_segment, "bench": _cmd_bench, "report": _cmd_report}
+    commands = {"segment": _cmd_segment, "bench": _cmd_bench, "report": _cmd_report,
+                "convert": _cmd_convert}
     try:
         return commands[args.command](args)
     except (_UsageError, BenchError) as exc:

@@ -1,4 +1,4 @@
-"""Reading and writing sequences: Hopkins155 ``*_truth.mat`` files and the project's ``.npz``.
+"""Reading and writing sequences: Hopkins155 ``*_truth.mat``, KT3DMoSeg ``.mat``, ``.npz``, tracks CSV.
 
 The format is chosen once, from the file's first bytes, never from its extension, and
 every failure becomes a :class:`~laav.SequenceError` that names the file and the problem.
@@ -26,7 +26,10 @@ import numpy as np
 from ._sequence import Sequence, SequenceError
 
 __all__ = ["load_sequence", "load_sequence_isolated", "save_sequence", "find_truth_files",
-           "safe_name"]
+           "safe_name", "FORMATS"]
+
+#: The formats :func:`save_sequence` writes (``format=``); :func:`load_sequence` reads them all.
+FORMATS = ("hopkins", "kt3d", "npz", "csv")
 
 _MAT_MAGIC = b"MATLAB 5.0 MAT-file"
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
@@ -57,7 +60,10 @@ def safe_name(text, default: str = "sequence", max_len: int = 100) -> str:
 
 def _name_from_path(path: Path) -> str:
     stem = path.stem
-    return stem[: -len("_truth")] if stem.endswith("_truth") else stem
+    for suffix in ("_truth", "_Tracks"):  # Hopkins155's and KT3DMoSeg's file names
+        if stem.endswith(suffix) and len(stem) > len(suffix):
+            return stem[: -len(suffix)]
+    return stem
 
 
 def _resolve(path: str | os.PathLike) -> Path:
@@ -67,7 +73,7 @@ def _resolve(path: str | os.PathLike) -> Path:
     if p.is_dir():
         found = sorted(p.glob("*_truth.mat"))
         if not found:
-            found = sorted(q for q in p.iterdir() if q.suffix.lower() in (".mat", ".npz"))
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() in (".mat", ".npz", ".csv"))
         if len(found) != 1:
             what = "no" if not found else f"{len(found)}"
             raise SequenceError(
@@ -80,15 +86,30 @@ def _resolve(path: str | os.PathLike) -> Path:
 def load_sequence(path: str | os.PathLike, *, isolated: bool = False,
                   timeout: float = 60.0, max_points: int | None = None,
                   max_bytes: int | None = None) -> Sequence:
-    """Read a sequence from a Hopkins155 ``*_truth.mat``, a ``.npz``, or a folder holding one.
+    """Read a sequence from a Hopkins155 or KT3DMoSeg ``.mat``, a ``.npz``, a tracks CSV, or a
+    folder holding one.
 
     Parameters
     ----------
     path : str or path-like
-        A MATLAB v5 file with the Hopkins155 variables (``y``: (3, P, F) homogeneous pixel
-        coordinates, ``s``: (P, 1) 1-based labels, ``width``, ``height``), a ``.npz`` with
-        ``points`` (F, P, 2) and optionally ``labels`` (P,), ``width``, ``height``, or a
-        folder containing exactly one such file. The format is taken from the content.
+        The format is taken from the content, never from the extension:
+
+        - **Hopkins155** ``*_truth.mat`` (MATLAB v5; complete): ``y`` (3, P, F) homogeneous
+          pixel coordinates, ``s`` (P, 1) 1-based labels, ``width``, ``height``.
+        - **KT3DMoSeg** ``*_Tracks.mat`` (MATLAB v5): a struct ``Data`` with ``ySparse``
+          (3, P, F) homogeneous coordinates (third row 1 where visible), ``visibleSparse``
+          (P, F), 1 = visible (absent: all visible), ``GtLabel`` (P,) labels 1..K
+          (optional); its other fields are ignored, ``width`` / ``height`` beside it are read.
+        - **.npz**: ``points`` (F, P, 2) and optionally ``labels`` (P,), ``visible`` (F, P)
+          bool, ``width``, ``height``, ``name``.
+        - **tracks CSV**: a header naming the columns ``track,frame,x,y`` and optionally
+          ``label`` (any order, other columns ignored; ``,`` ``;`` or tab separated), then
+          one row per observation. Tracks are points in increasing track id, frames the
+          distinct frame numbers in increasing order (a tracker's stride leaves no empty
+          frame); labels must be constant per track, non-negative integers, and are
+          renumbered 0..K-1 in increasing order.
+
+        or a folder containing exactly one such file (a ``*_truth.mat`` first).
     isolated : bool
         Parse MAT content in a child process, so that a file crashing scipy's reader (or
         hanging it longer than ``timeout`` seconds, or needing more memory than
@@ -130,8 +151,11 @@ def load_sequence(path: str | os.PathLike, *, isolated: bool = False,
         return _load_mat(p, _READER.read(p, timeout, lim[1]) if isolated else _read_mat_here(p), lim)
     if head[:512].find(_HDF5_MAGIC) >= 0 or head.startswith(b"MATLAB 7.3"):
         raise SequenceError(f"{p}: MATLAB v7.3 (HDF5) files are not supported; save with -v7")
+    csv_head = _csv_header(p)
+    if csv_head is not None:
+        return _load_csv(p, csv_head, lim)
     raise SequenceError(
-        f"{p}: not a MATLAB v5 .mat or NumPy .npz file (unrecognised content)"
+        f"{p}: not a MATLAB v5 .mat, NumPy .npz or tracks CSV file (unrecognised content)"
     )
 
 
@@ -205,8 +229,11 @@ def _read_mat_here(p: Path) -> dict:
 
 
 def _load_mat(p: Path, mat: dict, lim: tuple[int, int]) -> Sequence:
+    if "y" not in mat and "Data" in mat:
+        return _load_kt3d(p, mat, lim)
     if "y" not in mat:
-        raise SequenceError(f"{p}: missing variable 'y' (homogeneous pixel coordinates, 3 x P x F)")
+        raise SequenceError(f"{p}: missing variable 'y' (Hopkins155: homogeneous pixel coordinates, "
+                            "3 x P x F) or struct 'Data' (KT3DMoSeg: ySparse, visibleSparse, GtLabel)")
     y = np.asarray(mat["y"])
     _check_size(p, y.shape[1] if y.ndim == 3 else None, 8 * y.size, lim)
     if not np.issubdtype(y.dtype, np.number):
@@ -247,7 +274,180 @@ def _load_mat(p: Path, mat: dict, lim: tuple[int, int]) -> Sequence:
     )
 
 
-_NPZ_MEMBERS = ("points", "labels", "width", "height", "name")
+def _numeric(p: Path, value, what: str) -> np.ndarray:
+    a = np.asarray(value)
+    if a.dtype == object or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
+        raise SequenceError(f"{p}: {what} is not numeric (dtype {a.dtype})")
+    if np.iscomplexobj(a):
+        raise SequenceError(f"{p}: {what} must be real numbers, got complex values")
+    return a
+
+
+def _load_kt3d(p: Path, mat: dict, lim: tuple[int, int]) -> Sequence:
+    """KT3DMoSeg: struct ``Data`` with ``ySparse`` (3, P, F), ``visibleSparse`` (P, F), ``GtLabel``."""
+    if "Data.ySparse" not in mat:
+        raise SequenceError(f"{p}: struct 'Data' has no field 'ySparse' (KT3DMoSeg: homogeneous "
+                            "pixel coordinates, 3 x P x F)")
+    y = _numeric(p, mat["Data.ySparse"], "Data.ySparse")
+    _check_size(p, y.shape[1] if y.ndim == 3 else None, 8 * y.size, lim)
+    if y.ndim != 3 or y.shape[0] != 3:
+        raise SequenceError(f"{p}: Data.ySparse must have shape 3 x P x F, got {y.shape}")
+    _, P, F = y.shape
+    if "Data.visibleSparse" in mat:
+        v = _numeric(p, mat["Data.visibleSparse"], "Data.visibleSparse")
+        if v.shape != (P, F):
+            raise SequenceError(f"{p}: Data.visibleSparse must have shape P x F = {P} x {F} like "
+                                f"Data.ySparse, got {v.shape}")
+        if v.dtype != bool:
+            if not np.isin(v, (0, 1)).all():
+                raise SequenceError(f"{p}: Data.visibleSparse must hold only 0 and 1")
+            v = v != 0
+        vis = v.T  # (F, P)
+    else:
+        vis = np.ones((F, P), dtype=bool)
+    y = y.astype(np.float64)
+    w = y[2].T  # (F, P)
+    finite = np.isfinite(y).all(axis=0).T  # check before dividing: x / inf would look finite
+    bad = vis & ~finite
+    if bad.any():
+        raise SequenceError(f"{p}: {int(bad.any(axis=0).sum())} point(s) have NaN or infinite "
+                            "coordinates in Data.ySparse where Data.visibleSparse says visible")
+    if np.any(vis & (np.abs(np.where(finite, w, 1.0)) < 1e-12)):
+        raise SequenceError(f"{p}: Data.ySparse has a zero homogeneous coordinate where visible")
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        points = np.transpose(y[:2], (2, 1, 0)) / w[..., None]  # (F, P, 2)
+    labels = None
+    if "Data.GtLabel" in mat:
+        g = _numeric(p, mat["Data.GtLabel"], "Data.GtLabel").astype(np.float64).ravel()
+        if g.size and np.isfinite(g).all() and g.min() < 1:
+            raise SequenceError(f"{p}: Data.GtLabel must hold labels 1..K, found {g.min():g}")
+        labels = g - 1
+    image_size = None
+    if "width" in mat and "height" in mat:
+        image_size = (_scalar(mat["width"], "width", p), _scalar(mat["height"], "height", p))
+    return Sequence(points=points, labels=labels, name=_name_from_path(p), image_size=image_size,
+                    source=str(p), visible=vis)
+
+
+#: Columns of a tracks CSV: required, then optional.
+CSV_COLUMNS = ("track", "frame", "x", "y")
+CSV_OPTIONAL = ("label",)
+
+
+def _csv_header(p: Path) -> tuple[str, dict] | None:
+    """``(delimiter, {column: index})`` when ``p`` starts with a tracks-CSV header, else None.
+
+    Raises :class:`SequenceError` for a text file that looks like a CSV without that header.
+    """
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(1 << 16)
+    except OSError as exc:
+        raise SequenceError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    first = head.split(b"\n", 1)[0]
+    if b"\0" in first:
+        return None
+    try:
+        line = first.decode("utf-8").lstrip("\ufeff").rstrip("\r")
+    except UnicodeDecodeError:
+        return None
+    for delim in (",", ";", "\t"):
+        names = [c.strip().strip('"').strip().lower() for c in line.split(delim)]
+        if set(CSV_COLUMNS) <= set(names):
+            dup = sorted({n for n in names if names.count(n) > 1 and n in CSV_COLUMNS + CSV_OPTIONAL})
+            if dup:
+                raise SequenceError(f"{p}: tracks CSV header names column(s) {dup} twice")
+            return delim, {n: names.index(n) for n in CSV_COLUMNS + CSV_OPTIONAL if n in names}
+    if any(d in line for d in (",", ";", "\t")):
+        shown = line[:60] + ("..." if len(line) > 60 else "")
+        raise SequenceError(f"{p}: a CSV file without the tracks header: its first line must name "
+                            f"the columns track,frame,x,y (and optionally label), got {shown!r}")
+    return None
+
+
+def _load_csv(p: Path, header: tuple[str, dict], lim: tuple[int, int]) -> Sequence:
+    """A tracks CSV: one row per observation of a track in a frame."""
+    import warnings
+
+    delim, cols = header
+    size = p.stat().st_size
+    if size > lim[1] // 4:  # parsed, a row of >= 8 bytes becomes <= 5 float64 values
+        raise SequenceError(f"{p}: {size:,} bytes is over the limit of {lim[1] // 4:,} bytes for a "
+                            "tracks CSV (max_bytes / 4)")
+    names = [n for n in CSV_COLUMNS + CSV_OPTIONAL if n in cols]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "input contained no data": said below
+            table = np.loadtxt(p, delimiter=delim, skiprows=1, usecols=[cols[n] for n in names],
+                               dtype=np.float64, ndmin=2, encoding="utf-8", quotechar='"')
+    except ValueError as exc:
+        msg = str(exc).rstrip(".")
+        m = re.search(r"at row (\d+), column (\d+)$", msg)  # numpy: 0-based data row
+        if m:
+            by_index = {i + 1: n for n, i in cols.items()}
+            col = by_index.get(int(m.group(2)), f"column {m.group(2)}")
+            msg = f"{msg[: m.start()].strip()} in column '{col}' of data row {int(m.group(1)) + 1}"
+        else:  # numpy: 0-based line of the file
+            msg = re.sub(r"at row (\d+)", lambda g: f"on line {int(g.group(1)) + 1}", msg)
+        raise SequenceError(f"{p}: bad tracks CSV: {msg}") from None
+    except Exception as exc:  # UnicodeDecodeError, MemoryError, ...
+        raise SequenceError(f"{p}: bad tracks CSV ({type(exc).__name__}: {exc})") from None
+    if table.shape[0] == 0:
+        raise SequenceError(f"{p}: tracks CSV has a header but no observations")
+    col = dict(zip(names, table.T))
+
+    def _row(mask) -> int:
+        return int(np.flatnonzero(mask)[0]) + 1
+
+    for name in ("track", "frame") + (("label",) if "label" in col else ()):
+        v = col[name]
+        bad = ~np.isfinite(v) | (v != np.round(v)) | (np.abs(v) > 2.0**53)
+        if bad.any():
+            raise SequenceError(f"{p}: column '{name}' must hold whole numbers, got "
+                                f"{float(v[bad][0]):g} on data row {_row(bad)}")
+    bad = ~np.isfinite(col["x"]) | ~np.isfinite(col["y"])
+    if bad.any():
+        raise SequenceError(f"{p}: NaN or infinite coordinate on data row {_row(bad)}")
+    tracks, ti = np.unique(col["track"], return_inverse=True)
+    frames, fi = np.unique(col["frame"], return_inverse=True)
+    P, F = tracks.size, frames.size
+    _check_size(p, P, 17 * F * P, lim)  # points (F, P, 2) float64 and visible (F, P)
+    key = ti * F + fi
+    order = np.argsort(key, kind="stable")
+    dup = np.flatnonzero(key[order][1:] == key[order][:-1])
+    if dup.size:
+        a, b = sorted(order[dup[0]: dup[0] + 2])
+        raise SequenceError(f"{p}: track {int(tracks[ti[a]])} has two rows for frame "
+                            f"{int(frames[fi[a]])} (data rows {a + 1} and {b + 1}); one row per "
+                            "track and frame")
+    counts = np.bincount(ti, minlength=P)
+    if (counts < 2).any():
+        short = tracks[counts < 2].astype(np.int64)
+        shown = ", ".join(str(t) for t in short[:5]) + (", ..." if short.size > 5 else "")
+        raise SequenceError(f"{p}: {short.size} track(s) have a single observation (track {shown}); "
+                            "every track needs at least 2 frames")
+    labels = None
+    if "label" in col:
+        lab = col["label"]
+        first = lab[np.unique(ti, return_index=True)[1]]  # each track's label on its first row
+        bad = lab != first[ti]
+        if bad.any():
+            r = int(np.flatnonzero(bad)[0])
+            raise SequenceError(f"{p}: track {int(tracks[ti[r]])} has labels {first[ti[r]]:g} and "
+                                f"{lab[r]:g} (data row {r + 1}); a track keeps one label")
+        if first.min() < 0:
+            raise SequenceError(f"{p}: column 'label' must be non-negative, found {first.min():g}")
+        labels = np.unique(first, return_inverse=True)[1].reshape(-1)
+    points = np.full((F, P, 2), np.nan)
+    points[fi, ti, 0] = col["x"]
+    points[fi, ti, 1] = col["y"]
+    visible = np.zeros((F, P), dtype=bool)
+    visible[fi, ti] = True
+    return Sequence(points=points, labels=labels, name=_name_from_path(p), source=str(p),
+                    visible=visible)
+
+
+_NPZ_MEMBERS = ("points", "labels", "visible", "width", "height", "name")
 
 
 def _load_npz(p: Path, lim: tuple[int, int]) -> Sequence:
@@ -259,6 +459,7 @@ def _load_npz(p: Path, lim: tuple[int, int]) -> Sequence:
                 raise SequenceError(f"{p}: missing array 'points' (frames x points x 2)")
             points = data["points"]
             labels = data["labels"] if "labels" in files else None
+            visible = data["visible"] if "visible" in files else None
             image_size = None
             if "width" in files and "height" in files:
                 image_size = (
@@ -271,7 +472,7 @@ def _load_npz(p: Path, lim: tuple[int, int]) -> Sequence:
     except Exception as exc:  # BadZipFile, zlib.error, ValueError, MemoryError, ...
         raise SequenceError(f"{p}: truncated or corrupt NPZ file ({type(exc).__name__}: {exc})") from None
     return Sequence(points=points, labels=labels, name=name or _name_from_path(p),
-                    image_size=image_size, source=str(p))
+                    image_size=image_size, source=str(p), visible=visible)
 
 
 def _stored_name(value) -> str | None:
@@ -284,22 +485,51 @@ def _stored_name(value) -> str | None:
     return re.sub(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]", "", text)[:200].strip() or None
 
 
-def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
-    """Write ``seq`` to ``path`` as ``.npz`` or Hopkins-style MATLAB v5 ``.mat`` (by extension).
+def save_sequence(seq: Sequence, path: str | os.PathLike, format: str | None = None) -> Path:
+    """Write ``seq`` to ``path`` in one of :data:`FORMATS`; :func:`load_sequence` reads it back exactly.
 
-    Coordinates are written as float64, so ``load_sequence(save_sequence(seq, p))`` gives
-    back identical arrays. The ``.mat`` file carries ``x``, ``y``, ``K``, ``s`` (1-based,
-    only with labels), ``points``, ``frames``, ``width`` and ``height`` like Hopkins155.
+    Parameters
+    ----------
+    seq : Sequence
+    path : str or path-like
+    format : {"hopkins", "kt3d", "npz", "csv"}, optional
+        Default from the extension: ``.npz``, ``.csv``, and ``.mat`` as ``"hopkins"`` for a
+        complete sequence, ``"kt3d"`` for one with missing entries.
+
+        - ``"npz"``: ``points`` (F, P, 2) float64 (NaN where hidden), ``visible`` (only when
+          incomplete), ``labels``, ``width``, ``height``, ``name``.
+        - ``"hopkins"``: MATLAB v5 with ``x``, ``y``, ``K``, ``s`` (1-based, only with
+          labels), ``points``, ``frames``, ``width`` and ``height`` like Hopkins155.
+          Complete sequences only.
+        - ``"kt3d"``: MATLAB v5 with struct ``Data``: ``ySparse`` (3, P, F; 0 where hidden),
+          ``visibleSparse`` (P, F) logical, ``GtLabel`` (P, 1) 1-based (with labels),
+          ``nFrames``, ``nSparsePoints``; ``width`` and ``height`` beside it when known.
+        - ``"csv"``: ``track,frame,x,y[,label]``, one row per visible entry, tracks
+          ``0..P-1``, frames ``0..F-1``, labels 0-based, coordinates written exactly. The
+          image size is not kept, and a frame where no point is visible cannot be written.
+
+    The name read back is the stored one (``.npz``) or the file name (without
+    ``_truth`` / ``_Tracks``). Coordinates are float64 and written exactly, so
+    ``load_sequence(save_sequence(seq, p))`` gives back identical points, visibility and
+    labels.
 
     Returns
     -------
     Path
         The path written.
+
+    Raises
+    ------
+    SequenceError
+        For an unknown extension or format, an incomplete sequence as ``"hopkins"``, or an
+        empty frame as ``"csv"``.
     """
     p = Path(path)
-    suffix = p.suffix.lower()
-    if suffix == ".npz":
+    fmt = _save_format(seq, p, format)
+    if fmt == "npz":
         arrays = {"points": seq.points, "name": np.array(seq.name)}
+        if not seq.is_complete:
+            arrays["visible"] = seq.visible
         if seq.labels is not None:
             arrays["labels"] = seq.labels
         if seq.image_size is not None:
@@ -308,34 +538,90 @@ def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
         with open(p, "wb") as fh:  # np.savez on an open handle keeps the exact name
             np.savez_compressed(fh, **arrays)
         return p
-    if suffix == ".mat":
-        import scipy.io
+    if fmt == "csv":
+        _save_csv(seq, p)
+        return p
+    import scipy.io
 
-        F, P, _ = seq.points.shape
-        y = np.ones((3, P, F))
-        y[:2] = np.transpose(seq.points, (2, 1, 0))
-        if seq.image_size is not None:
-            width, height = seq.image_size
-        else:
-            xmin, xmax, ymin, ymax = seq.extent()
-            width, height = int(np.ceil(max(xmax, 1.0))), int(np.ceil(max(ymax, 1.0)))
-        K = np.array([[width / 2.0, 0.0, width / 2.0], [0.0, height / 2.0, height / 2.0], [0, 0, 1]])
-        x = np.linalg.solve(K, y.reshape(3, -1)).reshape(3, P, F)
-        out = {
-            "x": x,
-            "y": y,
-            "K": K,
-            "points": np.array([[P]], dtype=_mat_uint(P)),
-            "frames": np.array([[F]], dtype=_mat_uint(F)),
-            "width": np.array([[width]], dtype=_mat_uint(width)),
-            "height": np.array([[height]], dtype=_mat_uint(height)),
-        }
+    F, P, _ = seq.points.shape
+    if fmt == "kt3d":
+        vis = seq.visible.T  # (P, F)
+        y = np.zeros((3, P, F))
+        y[:2] = np.where(vis, np.transpose(seq.points, (2, 1, 0)), 0.0)
+        y[2] = vis
+        data = {"ySparse": y, "visibleSparse": vis.copy(),
+                "nFrames": np.array([[F]], dtype=np.float64),
+                "nSparsePoints": np.array([[P]], dtype=np.float64)}
         if seq.labels is not None:
-            top = int(seq.labels.max()) + 1
-            out["s"] = (seq.labels + 1).astype(_mat_uint(top, np.uint8)).reshape(-1, 1)
+            data["GtLabel"] = (seq.labels + 1).astype(np.float64).reshape(-1, 1)
+        out = {"Data": data}
+        if seq.image_size is not None:
+            out["width"] = np.array([[seq.image_size[0]]], dtype=_mat_uint(seq.image_size[0]))
+            out["height"] = np.array([[seq.image_size[1]]], dtype=_mat_uint(seq.image_size[1]))
         scipy.io.savemat(str(p), out, do_compression=False, format="5")
         return p
-    raise SequenceError(f"{p}: unknown extension {p.suffix!r}; use .npz or .mat")
+    y = np.ones((3, P, F))
+    y[:2] = np.transpose(seq.points, (2, 1, 0))
+    if seq.image_size is not None:
+        width, height = seq.image_size
+    else:
+        xmin, xmax, ymin, ymax = seq.extent()
+        width, height = int(np.ceil(max(xmax, 1.0))), int(np.ceil(max(ymax, 1.0)))
+    K = np.array([[width / 2.0, 0.0, width / 2.0], [0.0, height / 2.0, height / 2.0], [0, 0, 1]])
+    x = np.linalg.solve(K, y.reshape(3, -1)).reshape(3, P, F)
+    out = {
+        "x": x,
+        "y": y,
+        "K": K,
+        "points": np.array([[P]], dtype=_mat_uint(P)),
+        "frames": np.array([[F]], dtype=_mat_uint(F)),
+        "width": np.array([[width]], dtype=_mat_uint(width)),
+        "height": np.array([[height]], dtype=_mat_uint(height)),
+    }
+    if seq.labels is not None:
+        top = int(seq.labels.max()) + 1
+        out["s"] = (seq.labels + 1).astype(_mat_uint(top, np.uint8)).reshape(-1, 1)
+    scipy.io.savemat(str(p), out, do_compression=False, format="5")
+    return p
+
+
+def _save_format(seq: Sequence, p: Path, format: str | None) -> str:
+    if format is not None:
+        if format not in FORMATS:
+            raise SequenceError(f"{p}: unknown format {format!r}; use one of {', '.join(FORMATS)}")
+        fmt = format
+    else:
+        fmt = {".npz": "npz", ".csv": "csv", ".mat": "hopkins" if seq.is_complete else "kt3d"}.get(
+            p.suffix.lower())
+        if fmt is None:
+            raise SequenceError(f"{p}: unknown extension {p.suffix!r}; use .npz, .mat or .csv "
+                                "(or give the format)")
+    if fmt == "hopkins" and not seq.is_complete:
+        raise SequenceError(
+            f"{p}: the Hopkins155 format cannot hold missing entries ({100 * (1 - seq.visible_share):.1f} "
+            "% of this sequence's are missing): save as kt3d, npz or csv, or seq.complete() first")
+    return fmt
+
+
+def _save_csv(seq: Sequence, p: Path) -> None:
+    empty = np.flatnonzero(~seq.visible.any(axis=1))
+    if empty.size:
+        raise SequenceError(f"{p}: frame(s) {', '.join(map(str, empty[:5]))} have no visible point, "
+                            "which a tracks CSV (one row per observation) cannot hold: save as npz or kt3d")
+    fi, ti = np.nonzero(seq.visible)
+    order = np.lexsort((fi, ti))  # by track, then frame
+    fi, ti = fi[order], ti[order]
+    xy = seq.points[fi, ti]
+    header = "track,frame,x,y" + (",label" if seq.labels is not None else "")
+    with open(p, "w", newline="", encoding="utf-8") as fh:
+        fh.write(header + "\n")
+        if seq.labels is None:
+            fh.writelines(f"{t},{f},{x!r},{y!r}\n"
+                          for t, f, x, y in zip(ti.tolist(), fi.tolist(), *xy.T.tolist()))
+        else:
+            lab = seq.labels[ti].tolist()
+            fh.writelines(f"{t},{f},{x!r},{y!r},{c}\n"
+                          for t, f, x, y, c in zip(ti.tolist(), fi.tolist(), *xy.T.tolist(), lab))
 
 
 def _mat_uint(largest: int, narrowest=np.uint16) -> type:

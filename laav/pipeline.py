@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._random import resolve_seed
-from ._sequence import LaavWarning, Sequence, check_degenerate
+from ._sequence import LaavWarning, Sequence, check_degenerate, require_complete
 from ._threads import single_threaded
 from .atoms import Atoms, build_atoms, trajectory_distances
 from .coarse import Coarse, merge_models
@@ -81,6 +81,7 @@ def _check_inputs(seq, n_motions, degenerate: bool = True):
     also :func:`check_degenerate` (reads every coordinate: once per sequence and C)."""
     if not isinstance(seq, Sequence):
         seq = Sequence(np.asarray(seq, dtype=np.float64))
+    require_complete(seq)  # until the stages handle missing data (issue 14)
     if not isinstance(n_motions, (int, np.integer)) or isinstance(n_motions, bool):
         raise ValueError(f"n_motions must be an integer, got {n_motions!r}")
     if n_motions < 1:
@@ -104,6 +105,8 @@ class Pipeline:
     Parameters
     ----------
     seq : Sequence or ndarray of shape (F, P, 2)
+        Complete (every point visible in every frame): an incomplete sequence raises
+        :class:`laav.IncompleteSequenceError` until the stages handle missing data.
     n_motions : int
         C.
     params : LaavParams, optional
@@ -267,6 +270,12 @@ def segment(seq, n_motions: int, params: LaavParams | None = None, seed: int = 0
     Returns
     -------
     LaavResult
+
+    Raises
+    ------
+    IncompleteSequenceError
+        When ``seq`` has missing entries (``not seq.is_complete``): the stages do not handle
+        them yet; ``seq.complete()`` keeps the points visible in every frame.
     """
     result = Pipeline(seq, n_motions, params, resolve_seed(seed, random_state)).result
     if result.n_motions > 1 and np.unique(result.labels).size == 1:

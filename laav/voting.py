@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._random import resolve_seed
-from ._sequence import Sequence, as_points
+from ._sequence import Sequence, as_points, require_complete
 from ._threads import single_threaded
 from .metrics import misclassification_rate
 from .params import LaavParams
@@ -148,6 +148,8 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     -------
     Voting
     """
+    if isinstance(seq, Sequence):
+        require_complete(seq)  # until the stages handle missing data (issue 14)
     points = as_points(seq)
     if points.ndim != 3 or points.shape[2] != 2:
         raise ValueError(f"points must have shape (F, P, 2), got {points.shape}")

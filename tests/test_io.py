@@ -199,8 +199,8 @@ def test_round_trip(tmp_path, suffix, with_labels, with_size):
 
 def test_save_unknown_extension(tmp_path):
     with pytest.raises(SequenceError) as excinfo:
-        save_sequence(_random_sequence(), tmp_path / "x.csv")
-    _assert_error_names(tmp_path / "x.csv", excinfo)
+        save_sequence(_random_sequence(), tmp_path / "x.txt")
+    _assert_error_names(tmp_path / "x.txt", excinfo)
 
 
 @HYPOTHESIS

@@ -33,7 +33,7 @@ class Files:
     def __init__(self, host, state, controls, status, seq: laav.Sequence, view) -> None:
         self.host, self.state, self.controls, self.status, self._view = host, state, controls, status, view
         self.seq_info = pn.pane.Markdown(seq_text(seq), width=SIDE_W, margin=(0, 10))
-        self.w_upload = pn.widgets.FileInput(accept=".mat,.npz,.json", multiple=False, width=SIDE_W)
+        self.w_upload = pn.widgets.FileInput(accept=".mat,.npz,.csv,.json", multiple=False, width=SIDE_W)
         self.w_upload.param.watch(self._on_upload, "value")
         self.w_dl_csv = pn.widgets.FileDownload(callback=self.export_csv, filename="labels.csv",
                                                 label="Labels (CSV)", color="primary",
@@ -94,6 +94,7 @@ class Files:
                     # is parsed in a child process (scipy's reader can crash the interpreter
                     # on some damaged files, and an upload must never do that)
                     seq = laav.load_sequence(p, isolated=True)
+                    laav.require_complete(seq)  # the last good result stays (issue 14)
                 except laav.SequenceError as exc:
                     self.state.report(str(exc).replace(str(p), base)
                                       + " — still showing the last valid result")
