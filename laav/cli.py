@@ -7,14 +7,15 @@
                [--jobs N] [--scheduler tcp://HOST:PORT] [--out DIR]
     laav report DIR
     laav convert IN OUT [--format hopkins|kt3d|npz|csv] [--complete-only]
+    laav track VIDEO [-o tracks.npz] [--max-points N] [--min-length L] [--stride S] ...
     laav --version
 
 ``--param key=value`` (repeatable, ``segment`` and ``bench``) sets any field of
 :class:`laav.LaavParams`, e.g. ``--param rv_max_iter=50 --param lam=3``.
 
 Exit codes: 0 success, 1 some benchmark runs failed, 2 bad input (unreadable sequence,
-bad option, missing number of motions, a path that cannot be read or written: one line
-on stderr), 130 interrupted.
+bad option, missing number of motions, a path that cannot be read or written, a video
+that cannot be opened or gives no usable tracks: one line on stderr), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -134,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Write DIR/report.md and its figures from DIR/runs.csv.")
     rep.add_argument("dir", metavar="DIR", help="bench output folder holding runs.csv")
     _add_convert(sub)
+    _add_track(sub)
     return parser
 
 
@@ -189,6 +191,75 @@ def _cmd_convert(args) -> int:
         raise _UsageError(str(exc)) from None
     vis = "" if seq.is_complete else f", {100 * seq.visible_share:.1f} % visible"
     print(f"wrote {out} ({seq.n_frames} frames, {seq.n_points} points{vis})")
+    return 0
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not v > 0 or v == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return v
+
+
+def _add_track(sub) -> None:
+    tr = sub.add_parser(
+        "track", help="track features through a video and write tracks.npz",
+        description="Track corners through a video (anything OpenCV opens) or a folder of "
+                    "images with pyramidal Lucas-Kanade and a forward-backward check; write "
+                    ".npz with points (F, P, 2, NaN where not visible), visible (F, P) and "
+                    "name. Needs OpenCV (pip install 'laav[track]').")
+    tr.add_argument("video", metavar="VIDEO", help="video file or folder of frames")
+    tr.add_argument("--out", "-o", metavar="NPZ",
+                    help="output file (default: <video name>_tracks.npz in the current folder)")
+    tr.add_argument("--max-points", type=_positive_int, default=1000, metavar="N",
+                    help="most tracks alive at once (default 1000)")
+    tr.add_argument("--max-tracks", type=_positive_int, default=None, metavar="N",
+                    help="keep only the N longest tracks (default: all)")
+    tr.add_argument("--min-length", type=_positive_int, default=5, metavar="L",
+                    help="drop tracks seen in fewer than L tracked frames (default 5)")
+    tr.add_argument("--stride", type=_positive_int, default=1, metavar="S",
+                    help="track every S-th frame (default 1)")
+    tr.add_argument("--redetect-every", type=_positive_int, default=5, metavar="K",
+                    help="look for new corners every K frames where no track is (default 5)")
+    tr.add_argument("--fb-max", type=_positive_float, default=1.0, metavar="PX",
+                    help="largest forward-backward error of a step, pixels (default 1)")
+    tr.add_argument("--max-frames", type=_positive_int, default=None, metavar="N",
+                    help="stop after N tracked frames")
+    tr.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+
+
+def _cmd_track(args) -> int:
+    from . import safe_name
+    from .track import TrackError, save_tracks, track
+
+    if args.min_length < 2:
+        raise _UsageError("--min-length must be at least 2")
+    if args.max_frames is not None and args.max_frames < 2:
+        raise _UsageError("--max-frames must be at least 2")
+    # FFmpeg's own log (e.g. "moov atom not found") would add lines to our one-line errors
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+    try:
+        tracks = track(args.video, max_points=args.max_points, max_tracks=args.max_tracks,
+                       min_length=args.min_length, stride=args.stride,
+                       redetect_every=args.redetect_every, fb_max=args.fb_max,
+                       max_frames=args.max_frames, progress=False if args.quiet else None)
+    except TrackError as exc:
+        raise _UsageError(str(exc)) from None
+    default = f"{safe_name(tracks.name)}_tracks.npz"
+    out = Path(args.out) if args.out else Path(default)
+    if out.is_dir():
+        out = out / default
+    try:
+        save_tracks(tracks, out)
+    except OSError as exc:
+        raise _UsageError(f"{out}: cannot write tracks ({exc.strerror or exc})") from None
+    vis = tracks.visible
+    print(f"tracks: {out} ({tracks.n_tracks} tracks over {tracks.n_frames} frames, "
+          f"{100 * vis.mean():.0f} % of entries visible, {len(tracks.complete())} visible in "
+          "every frame)")
     return 0
 
 
@@ -335,7 +406,7 @@ def main(argv=None) -> int:
     from .bench import BenchError
 
     commands = {"segment": _cmd_segment, "bench": _cmd_bench, "report": _cmd_report,
-                "convert": _cmd_convert}
+                "convert": _cmd_convert, "track": _cmd_track}
     try:
         return commands[args.command](args)
     except (_UsageError, BenchError) as exc:
