@@ -24,6 +24,7 @@ import numpy as np
 
 from ._sequence import Sequence, as_points
 from .atoms import Atoms
+from .coding import best_partition, merge_cost, model_stats
 from .geometry import fit_fundamental, sampson_distance
 from .multicut import Multicut
 from .params import LaavParams
@@ -62,6 +63,15 @@ class Coarse:
     pair_fundamentals : ndarray of shape (n_fine, n_fine, 3, 3)
         F fitted on all features of models j and k over ``pair_frames`` (for drawing
         epipolar lines; on the diagonal, model j alone).
+    method : str
+        ``params.coarse_merge``: ``"coding"`` (the partition of least coding length
+        decided; ``affinity`` is then ``exp(-max(merge_cost, 0))``) or ``"epipolar"``
+        (spectral clustering of the epipolar affinity decided).
+    merge_cost : ndarray of shape (n_fine, n_fine)
+        Coding length (nats per point) that merging each pair of fine models adds
+        (:func:`laav.coding.merge_cost`; computed in both methods, for comparison).
+    coding_length : float
+        Total coding length of the chosen partition (nats).
     """
 
     fine_to_coarse: np.ndarray
@@ -74,6 +84,9 @@ class Coarse:
     frame_pairs: np.ndarray
     pair_frames: np.ndarray
     pair_fundamentals: np.ndarray
+    method: str = "epipolar"
+    merge_cost: np.ndarray | None = None
+    coding_length: float = float("nan")
 
 
 def point_labels_from_atoms(atoms: Atoms, atom_labels: np.ndarray) -> np.ndarray:
@@ -195,7 +208,8 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     if n == 0:
         e = np.zeros((0, 0))
         return Coarse(np.zeros(0, np.int64), e, e, e, np.zeros(0, np.int64), fine_pts,
-                      fine_pts.copy(), pairs, widest, np.zeros((0, 0, 3, 3)))
+                      fine_pts.copy(), pairs, widest, np.zeros((0, 0, 3, 3)),
+                      params.coarse_merge, e)
 
     model_atoms = [np.flatnonzero(multicut.atom_labels == j) for j in range(n)]
     groups = [np.flatnonzero(fine_pts == j) for j in range(n)]
@@ -228,7 +242,10 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     Mdist = _motion_distance(points, groups) if params.motion_weight > 0 else np.zeros((n, n))
     pairwise = np.eye(n)
     pairwise[jj, kk] = pairwise[kk, jj] = vote
-    if n > n_motions and params.pooled_trials > 0:
+    coding = params.coarse_merge == "coding"
+    stats = model_stats(points, fine_pts, n)
+    gain = merge_cost(stats, params.coding_eps)
+    if n > n_motions and params.pooled_trials > 0 and not coding:
         assign = pooled_voting(points, fine_pts, n, n_motions, params, rng, params.pooled_trials)
         coassoc = (assign[:, :, None] == assign[:, None, :]).mean(axis=0)
     else:
@@ -238,8 +255,13 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     Z = Z * np.exp(-params.motion_weight * Mdist)
     np.fill_diagonal(Z, 1.0)
 
+    assign, length = best_partition(stats, n_motions, params.coding_eps)
+    if coding:
+        Z = np.exp(-np.maximum(gain, 0.0))
     if n <= n_motions:
         f2c = np.arange(n, dtype=np.int64)
+    elif coding:
+        f2c = _canonical(assign)
     else:
         from sklearn.cluster import SpectralClustering
 
@@ -270,6 +292,9 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         frame_pairs=pairs,
         pair_frames=widest,
         pair_fundamentals=pf,
+        method=params.coarse_merge,
+        merge_cost=gain,
+        coding_length=length,
     )
 
 

@@ -45,7 +45,18 @@ class LaavParams:
     cut_prior : float
         Added to every edge's "cut" side: ``cost = 2 log(edge_scale / error) - cut_prior``.
     fine_models : int or None
-        Number of fine motion models the multicut is brought to; None means ``2 C``.
+        Number of fine motion models the multicut is brought to; None means
+        ``fine_per_motion * C``.
+    fine_per_motion : int
+        Fine models per motion when ``fine_models`` is None: 2 in the paper; 3 (ours) with
+        the coding-length merge, which needs no fine model to mix two motions and can
+        afford more models (see ``docs/ALGORITHM.md``).
+    coarse_merge : {"coding", "epipolar"}
+        How the fine models are merged into C motions: ``"coding"`` (ours) the partition
+        of least lossy coding length of the models' trajectories (:mod:`laav.coding`);
+        ``"epipolar"`` (the paper) spectral clustering of the epipolar-vote affinity Z.
+    coding_eps : float
+        Distortion (px) of the coding length (``coarse_merge="coding"``).
     lam : float
         Epipolar voting strength lambda of the fine-to-coarse stage (1/px^2).
     coarse_frames : int
@@ -130,6 +141,9 @@ class LaavParams:
     edge_scale: float = 2.0
     cut_prior: float = 0.0
     fine_models: int | None = None
+    fine_per_motion: int = 3
+    coarse_merge: str = "coding"
+    coding_eps: float = 10.0
     lam: float = 2.0
     coarse_frames: int = 7
     coarse_samples: int = 8
@@ -166,14 +180,16 @@ class LaavParams:
     def paper(cls, **changes) -> LaavParams:
         """Every stage as the LAAV paper writes it (Posner & Hagege), nothing of ours.
 
-        Atoms by RANSAC on one random frame pair each (``atom_frames="pair"``),
-        fine-to-coarse by the paper's pairwise four-atom epipolar votes alone (no pooled
-        voting), and a fine-tuning that is Random Voting started from the coarse labels:
-        one informed trial, no plain RV run, no model selection, no refinement and no
-        joint reassignment. ``changes`` override fields as in :meth:`replace`.
+        Atoms by RANSAC on one random frame pair each (``atom_frames="pair"``), 2C fine
+        models, fine-to-coarse by spectral clustering of the paper's pairwise four-atom
+        epipolar votes alone (``coarse_merge="epipolar"``, no pooled voting), and a
+        fine-tuning that is Random Voting started from the coarse labels: one informed
+        trial, no plain RV run, no model selection, no refinement and no joint
+        reassignment. ``changes`` override fields as in :meth:`replace`.
         """
-        return cls(atom_frames="pair", pooled_trials=0, pairwise_weight=1.0, rv_refine=False,
-                   rv_reassign=False, rv_select="none").replace(**changes)
+        return cls(atom_frames="pair", fine_per_motion=2, coarse_merge="epipolar", pooled_trials=0,
+                   pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
+                   rv_select="none").replace(**changes)
 
     def replace(self, **changes) -> LaavParams:
         """A copy with some fields changed (validated like the original)."""
@@ -183,8 +199,9 @@ class LaavParams:
         return dataclasses.replace(self, **changes)
 
     def n_fine(self, n_motions: int) -> int:
-        """Number of fine models for ``n_motions`` motions (``fine_models`` or 2 C)."""
-        k = 2 * n_motions if self.fine_models is None else self.fine_models
+        """Number of fine models for ``n_motions`` motions (``fine_models`` or
+        ``fine_per_motion`` C)."""
+        k = self.fine_per_motion * n_motions if self.fine_models is None else self.fine_models
         if k < n_motions:
             raise ValueError(
                 f"fine_models ({k}) must be >= the number of motions ({n_motions})"
@@ -212,6 +229,9 @@ _BOUNDS = (
     ("edge_scale", "float>", 0, _BIG),
     ("cut_prior", "float", -_BIG, _BIG),
     ("fine_models", "int|None", 1, 1000),
+    ("fine_per_motion", "int", 1, 100),
+    ("coarse_merge", "choice", ("coding", "epipolar"), None),
+    ("coding_eps", "float>", 0, _BIG),
     ("lam", "float>", 0, _BIG),
     ("coarse_frames", "int", 1, 100),
     ("coarse_samples", "int", 1, 1000),
@@ -264,8 +284,9 @@ STAGE_PARAMS: dict[str, frozenset] = {
     "atoms": frozenset({"r1", "r2", "atom_min_size", "affine_threshold", "ransac_hypotheses",
                         "atom_frames"}),
     "graph": frozenset({"graph_neighbors", "edge_scale", "cut_prior"}),
-    "multicut": frozenset({"fine_models"}),
-    "coarse": frozenset({"lam", "coarse_frames", "coarse_samples", "motion_weight", "pooled_trials",
+    "multicut": frozenset({"fine_models", "fine_per_motion"}),
+    "coarse": frozenset({"coarse_merge", "coding_eps", "lam", "coarse_frames", "coarse_samples",
+                         "motion_weight", "pooled_trials",
                          "pairwise_weight"}),
     # every Random Voting setting is named rv_*
     "voting": frozenset(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_")),

@@ -1,0 +1,209 @@
+"""Merging fine models into motions by coding length (this project's stage 4, not the paper's).
+
+Under an affine camera the trajectories of one rigid motion, each stacked as a 2F vector,
+lie on an affine subspace of dimension at most 3. Two motions that share the camera's
+rotation (a static background and a translating object, the usual *dependent* motions of
+Hopkins155) together still fit one low-dimensional linear subspace and often one
+fundamental matrix, which is why subspace residuals and epipolar votes merge them. What
+tells them apart is how many bits it takes to describe them: one group needs a coordinate
+along the extra direction for every point, two groups do not. This is the lossy coding
+length of Ma, Derksen, Hong and Wright (PAMI 2007, "Segmentation of multivariate mixed
+data via lossy data compression"), used here over whole fine models:
+
+    L(W) = (N + D) / 2 * logdet(I + D / (eps^2 N) * Wc Wc^T) + N / 2 * log(1 + |mu|^2 / eps^2)
+
+for N trajectories W (D = 2F rows) with mean mu and centred Wc, distortion ``eps`` (px).
+The merge chooses the partition of the fine models into C groups of least total length.
+
+Everything needed is a few sufficient statistics per fine model (count, sum, scatter), in
+the K principal directions of all trajectories (K = 20 holds every motion's subspace for
+C <= 5 with room for noise), so each candidate group costs one small eigenvalue problem:
+all 2^n - 1 groups are evaluated at once and the partitions enumerated exactly when there
+are few (n = 3C fine models: 9,841 partitions for C = 3), else a greedy merge followed by
+moves of single models.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+__all__ = ["ModelStats", "model_stats", "coding_lengths", "best_partition", "merge_cost"]
+
+#: Principal directions of all trajectories the statistics are kept in.
+PROJECTION_RANK = 20
+#: Most assignments (C^(n-1)) enumerated exactly; beyond, greedy merge + single moves.
+_EXHAUSTIVE_MAX = 200_000
+#: Most fine models whose 2^n - 1 subsets are all evaluated.
+_SUBSETS_MAX_MODELS = 16
+
+
+class ModelStats:
+    """Sufficient statistics of each fine model's trajectories, in K principal directions.
+
+    Attributes
+    ----------
+    count : ndarray of shape (n,)
+    total : ndarray of shape (n, K)
+        Sum of the projected trajectories.
+    scatter : ndarray of shape (n, K, K)
+        Sum of their outer products.
+    dim : int
+        D = 2F, the trajectories' dimension.
+    """
+
+    def __init__(self, count, total, scatter, dim):
+        self.count, self.total, self.scatter, self.dim = count, total, scatter, int(dim)
+
+    @property
+    def n_models(self) -> int:
+        return int(self.count.size)
+
+    def union(self, members: np.ndarray) -> tuple:
+        """(count, total, scatter) of the groups ``members`` (G, n) of 0/1 weights."""
+        m = np.asarray(members, dtype=np.float64)
+        return m @ self.count, m @ self.total, np.einsum("gm,mij->gij", m, self.scatter)
+
+
+def model_stats(points: np.ndarray, fine_labels: np.ndarray, n_models: int,
+                rank: int = PROJECTION_RANK) -> ModelStats:
+    """Statistics of every fine model.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    fine_labels : ndarray of shape (P,)
+        Fine model of every point, -1 for points in none (ignored).
+    n_models : int
+    rank : int
+        K.
+    """
+    F, P, _ = points.shape
+    cov = fine_labels >= 0
+    W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)[:, cov]
+    f = fine_labels[cov]
+    k = min(rank, *W.shape)
+    U = np.linalg.svd(W, full_matrices=False)[0][:, :k]
+    X = U.T @ W  # (K, n_cov)
+    onehot = np.zeros((n_models, f.size))
+    onehot[f, np.arange(f.size)] = 1.0
+    count = onehot.sum(1)
+    total = onehot @ X.T
+    scatter = np.einsum("mp,ip,jp->mij", onehot, X, X)
+    return ModelStats(count, total, scatter, 2 * F)
+
+
+def coding_lengths(count, total, scatter, dim: int, eps: float) -> np.ndarray:
+    """Lossy coding length (nats) of groups given their statistics.
+
+    Parameters
+    ----------
+    count : ndarray of shape (G,)
+    total : ndarray of shape (G, K)
+    scatter : ndarray of shape (G, K, K)
+    dim : int
+        D.
+    eps : float
+        Distortion (px).
+
+    Returns
+    -------
+    ndarray of shape (G,)
+        0 for empty groups.
+    """
+    n = np.maximum(np.asarray(count, dtype=np.float64), 1.0)
+    mu = total / n[:, None]
+    cov = scatter / n[:, None, None] - mu[:, :, None] * mu[:, None, :]
+    ev = np.clip(np.linalg.eigvalsh(cov), 0.0, None)
+    e2 = float(eps) ** 2
+    L = ((n + dim) / 2.0 * np.log1p(dim / e2 * ev).sum(1)
+         + n / 2.0 * np.log1p((mu ** 2).sum(1) / e2))
+    return np.where(np.asarray(count) > 0, L, 0.0)
+
+
+def merge_cost(stats: ModelStats, eps: float) -> np.ndarray:
+    """Coding length gained by merging each pair of models, per point (nats), (n, n).
+
+    ``L(j + k) - L(j) - L(k)`` divided by ``n_j + n_k``; negative when one group is the
+    cheaper description; 0 on the diagonal.
+    """
+    n = stats.n_models
+    single = coding_lengths(stats.count, stats.total, stats.scatter, stats.dim, eps)
+    jj, kk = np.triu_indices(n, 1)
+    pair = np.zeros((jj.size, n))
+    pair[np.arange(jj.size), jj] = 1.0
+    pair[np.arange(jj.size), kk] = 1.0
+    both = coding_lengths(*stats.union(pair), stats.dim, eps)
+    out = np.zeros((n, n))
+    out[jj, kk] = out[kk, jj] = (both - single[jj] - single[kk]) / (stats.count[jj] + stats.count[kk])
+    return out
+
+
+def _assignments(n: int, C: int) -> np.ndarray:
+    """Every assignment of n models to C non-empty groups, model 0 in group 0, (A, n)."""
+    A = np.array(list(itertools.product(range(C), repeat=n - 1)), dtype=np.int64).reshape(-1, n - 1)
+    A = np.concatenate([np.zeros((A.shape[0], 1), np.int64), A], axis=1)
+    full = np.all([(A == c).any(1) for c in range(C)], axis=0)
+    return A[full]
+
+
+def _total(stats, assign, C, eps) -> float:
+    m = (assign[None, :] == np.arange(C)[:, None]).astype(np.float64)
+    return float(coding_lengths(*stats.union(m), stats.dim, eps).sum())
+
+
+def best_partition(stats: ModelStats, n_groups: int, eps: float) -> tuple[np.ndarray, float]:
+    """The assignment of the models to ``n_groups`` groups of least total coding length.
+
+    Exact (every partition) when there are at most ``_EXHAUSTIVE_MAX`` assignments,
+    otherwise greedy pairwise merging from single models, then single-model moves while
+    the total decreases.
+
+    Returns
+    -------
+    assign : ndarray of shape (n,), int64
+        Group of each model (renumbered in order of first appearance).
+    total : float
+        Its total coding length (nats).
+    """
+    n, C = stats.n_models, int(n_groups)
+    if n <= C:
+        return np.arange(n, dtype=np.int64), _total(stats, np.arange(n), max(n, 1), eps)
+    if n <= _SUBSETS_MAX_MODELS and C ** (n - 1) <= _EXHAUSTIVE_MAX:
+        masks = np.arange(1, 2 ** n)
+        bits = (masks[:, None] >> np.arange(n)) & 1
+        cost = coding_lengths(*stats.union(bits), stats.dim, eps)  # every non-empty subset
+        A = _assignments(n, C)
+        pow2 = 1 << np.arange(n)
+        groups = np.stack([(A == c).astype(np.int64) @ pow2 for c in range(C)], axis=1)
+        tot = cost[groups - 1].sum(1)
+        k = int(np.argmin(tot))
+        return A[k].copy(), float(tot[k])
+    # greedy: merge the pair of groups whose union adds the least length
+    assign = np.arange(n, dtype=np.int64)
+    while assign.max() + 1 > C:
+        G = assign.max() + 1
+        m = (assign[None, :] == np.arange(G)[:, None]).astype(np.float64)
+        single = coding_lengths(*stats.union(m), stats.dim, eps)
+        jj, kk = np.triu_indices(G, 1)
+        both = coding_lengths(*stats.union(m[jj] + m[kk]), stats.dim, eps)
+        b = int(np.argmin(both - single[jj] - single[kk]))
+        assign[assign == kk[b]] = jj[b]
+        assign = np.unique(assign, return_inverse=True)[1].astype(np.int64)
+    best = _total(stats, assign, C, eps)
+    improved = True
+    while improved:
+        improved = False
+        for i in range(n):
+            for c in range(C):
+                if c == assign[i] or (assign == assign[i]).sum() == 1:
+                    continue
+                trial = assign.copy()
+                trial[i] = c
+                t = _total(stats, trial, C, eps)
+                if t < best - 1e-9:
+                    assign, best, improved = trial, t, True
+    _, first = np.unique(assign, return_index=True)
+    rank = np.argsort(np.argsort(first))
+    return rank[assign].astype(np.int64), best
