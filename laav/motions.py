@@ -130,13 +130,51 @@ def motion_profile(seq, max_motions: int = 5, params=None, seed: int = 0,
         with no labelling (fewer fine models than C, or a group under 8 points) has inf
         rows.
     """
+    ctx = _prepare(seq, max_motions, params, seed, rank)
+    K = max_motions + 1
+    cands = np.arange(1, K + 1)
+    R = np.full((K, ctx.P), np.inf)
+    E = np.full((K, ctx.P), np.inf)
+    L = np.zeros((K, ctx.P), dtype=np.int64)
+    for i, C in enumerate(cands):
+        got = _evaluate(ctx, int(C))
+        if got is not None:
+            L[i], R[i], E[i] = got
+    mcost = np.array([ctx.paid.get(int(C), np.nan) for C in cands])
+    return MotionProfile(cands, R, E, L, mcost, ctx.noise2, ctx.n_segments, ctx.n_atoms,
+                         ctx.fine_cost, ctx.fine_sizes)
+
+
+@dataclass(eq=False)
+class _Context:
+    pts: np.ndarray
+    W: np.ndarray
+    norm2: np.ndarray
+    point_fine: np.ndarray
+    states: dict
+    paid: dict
+    noise2: float
+    n_segments: int
+    n_atoms: int
+    fine_cost: np.ndarray
+    fine_sizes: np.ndarray
+    rank: int
+    pairs: np.ndarray
+
+    @property
+    def P(self) -> int:
+        return self.pts.shape[1]
+
+
+def _prepare(seq, max_motions, params, seed, rank) -> _Context:
+    """Atoms, graph, multicut and the greedy merges: everything before the candidates."""
     from .atoms import build_atoms, trajectory_distances
     from .coarse import point_labels_from_atoms
     from .graph import atom_graph
     from .multicut import solve_multicut
     from .params import LaavParams
     from .pipeline import _stage_rngs
-    from .refine import frame_pairs, motion_distances, reassign_labels
+    from .refine import frame_pairs
 
     if not isinstance(seq, Sequence):
         seq = Sequence(np.asarray(seq, dtype=np.float64))
@@ -154,37 +192,34 @@ def motion_profile(seq, max_motions: int = 5, params=None, seed: int = 0,
     point_fine = point_labels_from_atoms(atoms, fine) if M else np.full(P, -1)
     res = [np.ravel(r) for r in atoms.residuals if np.size(r)]
     noise2 = float(np.median(np.concatenate(res)) ** 2) if res else 0.0
-
     W = np.transpose(pts, (0, 2, 1)).reshape(2 * F, P)
     norm2 = np.einsum("ij,ij->j", W, W)
     # merge costs in the span of the leading directions (C motions span at most 4C)
     d = min(2 * F, rank * (max_motions + 1) + rank)
     U0 = np.linalg.svd(W, full_matrices=False)[0][:, :d]
-    Wp = U0.T @ W
-    Kmax = max_motions + 1
-    states, paid, fine_cost, sizes = _greedy_merge(Wp, point_fine, M, rank, Kmax)
-    cands = np.arange(1, Kmax + 1)
-    R = np.full((cands.size, P), np.inf)
-    L = np.zeros((cands.size, P), dtype=np.int64)
-    mcost = np.full(cands.size, np.nan)
-    E = np.full((cands.size, P), np.inf)
-    pairs = frame_pairs(F, 12)
-    for i, C in enumerate(cands):
-        if C not in states:
-            continue
-        lab0 = np.full(P, -1, dtype=np.int64)
-        for k, fines in enumerate(states[C]):
-            lab0[np.isin(point_fine, fines)] = k
-        mcost[i] = paid.get(C, np.nan)
-        lab, _ = _polish(W, norm2, lab0, C, rank)
-        if C > 1 and np.bincount(lab, minlength=C).min() >= MIN_POINTS:
-            lab, _ = reassign_labels(pts, lab, C, rounds=2, min_size=MIN_POINTS)
-        L[i] = lab
-        R[i] = _group_residuals(W, norm2, lab, C, rank).min(axis=0)
-        Dm = motion_distances(pts, L[i], C, pairs)
-        E[i] = np.where(np.isfinite(Dm), Dm, np.inf).min(axis=0)
-    return MotionProfile(cands, R, E, L, mcost, noise2, mc.n_segments, atoms.n_atoms,
-                         fine_cost, sizes)
+    states, paid, fine_cost, sizes = _greedy_merge(U0.T @ W, point_fine, M, rank, max_motions + 1)
+    return _Context(pts, W, norm2, point_fine, states, paid, noise2, mc.n_segments,
+                    atoms.n_atoms, fine_cost, sizes, rank, frame_pairs(F, 12))
+
+
+def _evaluate(ctx: _Context, C: int):
+    """(labels, subspace residuals, epipolar distances) of candidate C, None if it has no
+    labelling."""
+    from .refine import motion_distances, reassign_labels
+
+    if C not in ctx.states:
+        return None
+    lab0 = np.full(ctx.P, -1, dtype=np.int64)
+    for k, fines in enumerate(ctx.states[C]):
+        lab0[np.isin(ctx.point_fine, fines)] = k
+    lab, _ = _polish(ctx.W, ctx.norm2, lab0, C, ctx.rank)
+    if C > 1 and np.bincount(lab, minlength=C).min() >= MIN_POINTS:
+        lab, _ = reassign_labels(ctx.pts, lab, C, rounds=2, min_size=MIN_POINTS)
+    R = _group_residuals(ctx.W, ctx.norm2, lab, C, ctx.rank).min(axis=0)
+    Dm = motion_distances(ctx.pts, lab, C, ctx.pairs)
+    E = np.where(np.isfinite(Dm), Dm, np.inf).min(axis=0)
+    return lab, R, E
+
 
 
 def _greedy_merge(Wp, point_fine, n_fine, rank, n_keep):
@@ -244,46 +279,64 @@ def profile_levels(residuals: np.ndarray, epipolar: np.ndarray) -> np.ndarray:
     return out
 
 
-def step_features(levels: np.ndarray, C: int) -> np.ndarray:
-    """Log gains of going from C to C + 1 and from C + 1 to C + 2 (0 where unknown)."""
+def _column(levels):
+    """Candidate C (1-based) -> its (2,) log levels (NaN when unknown), from a (2, K) array
+    or from such a function."""
+    if callable(levels):
+        return levels
+    levels = np.asarray(levels, dtype=float)
+
+    def col(c):
+        return levels[:, c - 1] if 1 <= c <= levels.shape[1] else np.full(2, np.nan)
+    return col
+
+
+def step_features(levels, C: int) -> np.ndarray:
+    """Log gains of going from C to C + 1 and from C + 1 to C + 2 (0 where unknown).
+
+    ``levels``: (2, K) array of :func:`profile_levels`, or a function of C giving its column.
+    """
+    col = _column(levels)
+
     def gain(c):
-        if c + 1 > levels.shape[1] or not np.isfinite(levels[:, [c - 1, c]]).all():
-            return np.zeros(2)
-        return levels[:, c - 1] - levels[:, c]
+        a, b = col(c), col(c + 1)
+        return a - b if np.isfinite(a).all() and np.isfinite(b).all() else np.zeros(2)
     return np.concatenate([gain(C), gain(C + 1)])
 
 
-def decide(levels: np.ndarray, noise2: float, max_motions: int, weights=None, bias=None,
+def decide(levels, noise2: float, max_motions: int, weights=None, bias=None,
            one_motion_ratio=None) -> tuple[int, np.ndarray, str]:
     """The sequential test: (C, score of each step C -> C + 1, why).
 
-    Step scores are > 0 where the test adds a motion; the first step's is
-    ``log(ratio x noise / epipolar level of one motion)``'s negation... see the module doc.
+    ``levels``: (2, K) array of :func:`profile_levels` (K >= ``max_motions`` + 1), or a
+    function of C giving its column, called only for the candidates a step needs (C, C + 1
+    and C + 2). Step scores are > 0 where the test adds a motion: for 1 -> 2 the log of one
+    motion's epipolar level over ``one_motion_ratio`` x ``noise2``, for later steps the
+    linear score; NaN for steps not reached.
     """
+    col = _column(levels)
     w = np.asarray(STEP_WEIGHTS if weights is None else weights, dtype=float)
     b = STEP_BIAS if bias is None else bias
     k1 = ONE_MOTION_RATIO if one_motion_ratio is None else one_motion_ratio
-    scores = np.full(max_motions - 1, np.nan)
+    scores = np.full(max(max_motions - 1, 0), np.nan)
     if max_motions < 2:
         return 1, scores, "max_motions is 1"
-    e1 = np.exp(levels[1, 0])
+    e1 = float(np.exp(col(1)[1]))
     scores[0] = float(np.log(e1 + 1e-12) - np.log(k1 * noise2 + 1e-12))
     if scores[0] <= 0:
         return 1, scores, (f"one motion explains the points: epipolar level {e1:.3g} px^2 <= "
                            f"{k1:g} x noise {noise2:.3g} px^2")
     C = 2
     while C < max_motions:
-        if not np.isfinite(levels[:, C]).all():
+        if not np.isfinite(col(C + 1)).all():
             return C, scores, f"no labelling with {C + 1} motions of >= {MIN_POINTS} points each"
-        scores[C - 1] = float(w @ step_features(levels, C) + b)
+        g = step_features(col, C)
+        scores[C - 1] = float(w @ g + b)
         if scores[C - 1] <= 0:
-            break
+            return C, scores, (f"going to {C + 1} motions gains too little (log gains subspace "
+                               f"{g[0]:.2f}, epipolar {g[1]:.2f}; step score {scores[C - 1]:.2f} <= 0)")
         C += 1
-    if C == max_motions:
-        return C, scores, f"every step up to max_motions = {max_motions} gained enough"
-    g = step_features(levels, C)
-    return C, scores, (f"going to {C + 1} motions gains too little (log gains subspace "
-                       f"{g[0]:.2f}, epipolar {g[1]:.2f}; step score {scores[C - 1]:.2f} <= 0)")
+    return C, scores, f"every step up to max_motions = {max_motions} gained enough"
 
 
 @dataclass(frozen=True)
@@ -299,7 +352,9 @@ class MotionCount:
     subspace_level, epipolar_level : tuple of float
         Per candidate: 95 % trimmed mean squared distance (px^2) of the points to their
         motion's rank-4 trajectory subspace, and mean Sampson distance (px^2) to the
-        nearest motion's fundamental matrices (NaN: no labelling with that many motions).
+        nearest motion's fundamental matrices. NaN: not needed by the test (candidates are
+        evaluated only as far as the test goes: C + 2 at most) or no labelling with that
+        many motions.
     step_scores : tuple of float
         Per step C -> C + 1 (C = 1 .. ``max_motions`` - 1): > 0 where a motion was
         added; NaN for steps not reached.
@@ -361,12 +416,32 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     max_motions = min(max_motions, P // MIN_POINTS)
     seed = as_seed(random_state)
     t = time.perf_counter()
-    pr = motion_profile(seq_or_points, max_motions, params=params, seed=seed)
-    levels = profile_levels(pr.residuals, pr.epipolar)
-    C, scores, why = decide(levels, pr.noise2, max_motions)
+    C, scores, levels, noise2, why = _estimate(seq_or_points, max_motions, params, seed)
     return MotionCount(
-        n_motions=int(C), candidates=tuple(int(c) for c in pr.candidates),
+        n_motions=int(C), candidates=tuple(range(1, max_motions + 2)),
         subspace_level=tuple(float(v) for v in np.exp(levels[0])),
         epipolar_level=tuple(float(v) for v in np.exp(levels[1])),
-        step_scores=tuple(float(v) for v in scores), noise=float(pr.noise2), reason=why,
+        step_scores=tuple(float(v) for v in scores), noise=noise2, reason=why,
         seed=seed, seconds=time.perf_counter() - t)
+
+
+@single_threaded
+def _estimate(seq, max_motions, params, seed):
+    """The profile's candidates evaluated only as the sequential test reaches them."""
+    ctx = _prepare(seq, max_motions, params, seed, RANK)
+    K = max_motions + 1
+    levels = np.full((2, K), np.nan)
+    done = set()
+
+    def col(c):
+        if not 1 <= c <= K:
+            return np.full(2, np.nan)
+        if c not in done:
+            done.add(c)
+            got = _evaluate(ctx, c)
+            if got is not None:
+                levels[:, c - 1] = profile_levels(got[1][None], got[2][None])[:, 0]
+        return levels[:, c - 1]
+
+    C, scores, why = decide(col, ctx.noise2, max_motions)
+    return C, scores, levels, float(ctx.noise2), why
