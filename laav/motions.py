@@ -398,7 +398,8 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     ------
     ValueError
         For a bad ``max_motions`` or too few points (fewer than 8 per motion of C = 2;
-        a smaller sequence has C = 1 only if said so).
+        a smaller sequence has C = 1 only if said so); a sequence with missing entries
+        (where sequences carry a visibility mask) as :func:`laav.segment` refuses it.
     """
     import time
 
@@ -409,6 +410,11 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     max_motions = int(max_motions)
     if not isinstance(seq_or_points, Sequence):
         seq_or_points = Sequence(np.asarray(seq_or_points, dtype=np.float64))
+    from . import _sequence
+
+    require_complete = getattr(_sequence, "require_complete", None)  # with visible masks
+    if require_complete is not None:
+        require_complete(seq_or_points)  # incomplete tracks: refused as segment() does
     P = seq_or_points.n_points
     if P < 2 * MIN_POINTS:
         raise ValueError(f"{seq_or_points.source}: {P} points are too few to estimate the number "

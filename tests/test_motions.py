@@ -81,6 +81,18 @@ def test_too_few_points():
         estimate_motions(few)
 
 
+def test_incomplete_sequence_refused():
+    seq = _scene(2, 0)
+    visible = np.ones(seq.points.shape[:2], dtype=bool)
+    visible[0, 0] = False
+    try:
+        incomplete = laav.Sequence(seq.points, visible=visible)
+    except TypeError:
+        pytest.skip("this version has no visibility masks")
+    with pytest.raises(laav.SequenceError, match="missing"):
+        estimate_motions(incomplete)
+
+
 def test_decide_sequential_test():
     """The rule alone, on made-up levels: big gains up to the true C, none after."""
     K = 6
