@@ -35,6 +35,7 @@ __all__ = [
 from .atoms import Atoms, build_atoms  # noqa: E402
 from .coarse import Coarse, merge_models  # noqa: E402
 from .graph import AtomGraph, atom_graph  # noqa: E402
+from .motions import MotionCount, estimate_motions  # noqa: E402
 from .multicut import Multicut, solve_multicut  # noqa: E402
 from .params import LaavParams  # noqa: E402
 from .pipeline import LaavResult, Pipeline, preload, segment  # noqa: E402
@@ -45,6 +46,7 @@ __all__ += [
     "LaavResult", "Atoms", "AtomGraph", "Multicut", "Coarse", "Voting",
     "build_atoms", "atom_graph", "solve_multicut", "merge_models", "preload",
 ]
+__all__ += ["estimate_motions", "MotionCount"]
 
 
 def __getattr__(name: str):

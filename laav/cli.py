@@ -2,7 +2,7 @@
 
 ::
 
-    laav segment FILE [--motions C] [--method laav|rv] [--seed S] [--out labels.csv]
+    laav segment FILE [--motions C|auto] [--method laav|rv] [--seed S] [--out labels.csv]
     laav bench --data DIR [--methods laav,rv] [--seeds N] [--noise 0,0.5,1,2] [--only GLOB]
                [--jobs N] [--scheduler tcp://HOST:PORT] [--out DIR]
     laav report DIR
@@ -50,6 +50,15 @@ def _int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
 
 
+def _motions(text: str):
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return _positive_int(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or 'auto', got {text!r}") from None
+
+
 def _param_help() -> str:
     return ("set a LaavParams field, e.g. --param rv_max_iter=50 (repeatable; numbers, "
             "true/false and none are converted)")
@@ -80,8 +89,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "a folder holding one) and write the labels as CSV (point,label). With "
                     "ground truth in the file, also print the misclassification rate.")
     seg.add_argument("file", metavar="FILE", help="sequence file (.mat / .npz) or its folder")
-    seg.add_argument("--motions", "-C", type=_positive_int, metavar="C",
-                     help="number of motions (default: from the file's ground truth)")
+    seg.add_argument("--motions", "-C", type=_motions, metavar="C",
+                     help="number of motions, or auto to estimate it (default: from the file's "
+                          "ground truth)")
     seg.add_argument("--method", choices=("laav", "rv"), default="laav",
                      help="LAAV (default) or plain Random Voting")
     seg.add_argument("--seed", type=_int, default=0, metavar="S", help="random seed (default 0)")
@@ -283,8 +293,14 @@ def _cmd_segment(args) -> int:
     C = args.motions if args.motions is not None else seq.n_motions
     if C is None:
         raise _UsageError(f"{args.file}: no ground-truth labels in the file; give the number "
-                          "of motions with --motions C")
+                          "of motions with --motions C (or --motions auto)")
     try:
+        if C == "auto":
+            from .motions import estimate_motions
+
+            count = estimate_motions(seq, params=params, random_state=args.seed)
+            C = count.n_motions
+            print(f"motions: {C} (estimated: {count.reason})")
         if args.method == "laav":
             labels = segment(seq, C, params, args.seed).labels
         else:

@@ -46,6 +46,8 @@ class LaavResult:
     params : LaavParams
     n_motions : int
     seed : int
+    motion_count : MotionCount or None
+        How C was estimated when :func:`segment` was asked for ``"auto"``.
     """
 
     labels: np.ndarray
@@ -58,6 +60,7 @@ class LaavResult:
     params: LaavParams = field(default_factory=LaavParams)
     n_motions: int = 2
     seed: int = 0
+    motion_count: object = None
 
     def stage_labels(self) -> dict:
         """Point labels after each stage (-1 where a stage leaves a point unlabelled).
@@ -251,15 +254,17 @@ def preload() -> None:
     import sklearn.cluster  # noqa: F401
 
 
-def segment(seq, n_motions: int, params: LaavParams | None = None, seed: int = 0, *,
+def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: int = 0, *,
             random_state=None) -> LaavResult:
     """Segment trajectories into ``n_motions`` motions with LAAV.
 
     Parameters
     ----------
     seq : Sequence or ndarray of shape (F, P, 2)
-    n_motions : int
-        C, the number of motions.
+    n_motions : int or "auto"
+        C, the number of motions; ``"auto"`` estimates it first
+        (:func:`laav.motions.estimate_motions`, same seed, up to 5 motions; the estimate
+        is kept as ``result.motion_count``).
     params : LaavParams, optional
     seed : int
         Same seed, same labels.
@@ -277,7 +282,21 @@ def segment(seq, n_motions: int, params: LaavParams | None = None, seed: int = 0
         When ``seq`` has missing entries (``not seq.is_complete``): the stages do not handle
         them yet; ``seq.complete()`` keeps the points visible in every frame.
     """
-    result = Pipeline(seq, n_motions, params, resolve_seed(seed, random_state)).result
+    seed = resolve_seed(seed, random_state)
+    count = None
+    if isinstance(n_motions, str):
+        if n_motions != "auto":
+            raise ValueError(f"n_motions must be an integer or 'auto', got {n_motions!r}")
+        from .motions import estimate_motions
+
+        seed = _check_seed(seed)
+        count = estimate_motions(seq, params=params, random_state=seed)
+        n_motions = count.n_motions
+    result = Pipeline(seq, n_motions, params, seed).result
+    if count is not None:
+        from dataclasses import replace
+
+        result = replace(result, motion_count=count)
     if result.n_motions > 1 and np.unique(result.labels).size == 1:
         import warnings
 
