@@ -59,8 +59,8 @@ class Settings:
 
 #: Short names the page uses for parameters (status line, "what changed"); every other
 #: parameter goes by its LaavParams field name (the URL and params.json keys).
-PARAM_NAMES = {"r1": "R1", "r2": "R2", "lam": "λ", "fine_models": "2C", "rv_alpha": "α",
-               "rv_max_iter": "iteration cap", "seed": "seed", "n_motions": "C"}
+PARAM_NAMES = {"r1": "R1", "r2": "R2", "lam": "λ", "fine_models": "fine models", "coding_eps": "ε",
+               "rv_alpha": "α", "rv_max_iter": "iteration cap", "seed": "seed", "n_motions": "C"}
 
 
 def _fmt(v) -> str:
@@ -81,10 +81,10 @@ def _values(settings: Settings) -> dict:
 
 def non_defaults(settings: Settings, default_motions: int | None) -> list[str]:
     """``name = value`` for every setting that differs from the defaults (the LaavParams
-    defaults, seed 0, C of the ground truth, 2C fine models)."""
+    defaults, seed 0, C of the ground truth, ``fine_per_motion`` C fine models)."""
     default = _values(Settings(LaavParams(), 0, settings.n_motions if default_motions is None
                                else default_motions))
-    default["fine_models"] = 2 * settings.n_motions  # "2C" follows the C in use
+    default["fine_models"] = LaavParams().n_fine(settings.n_motions)  # follows the C in use
     now = _values(settings)
     return [f"{PARAM_NAMES.get(k, k)} = {_fmt(v)}" for k, v in now.items() if v != default[k]]
 

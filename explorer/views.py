@@ -552,7 +552,7 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
 
     Keys: ``left`` and ``right`` (x, y, color, model: the two models' points in frame l and
     frame r), ``lines`` (x0, y0, x1, y1, color: epipolar lines in frame r of up to
-    ``max_lines`` frame-l points, from ``Coarse.pair_fundamentals[j, k]``), ``frames``
+    ``max_lines`` frame-l points, from ``Coarse.pair_fundamental(points, j, k)``), ``frames``
     (l, r), ``distance`` (``Coarse.epipolar_distance[j, k]``), ``residual`` (mean distance
     in px of the drawn frame-r points to their lines; ``residual_j`` / ``residual_k`` per
     model), ``ok`` (False when no F exists).
@@ -579,7 +579,7 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     pts = seq.points
     left = {"x": pts[fl, idx, 0], "y": pts[fl, idx, 1], "color": cols, "model": model}
     right = {"x": pts[fr, idx, 0], "y": pts[fr, idx, 1], "color": cols, "model": model}
-    F = np.asarray(co.pair_fundamentals)[j, k]
+    F = co.pair_fundamental(seq.points, j, k)
     out = dict(blank, left=left, right=right,
                distance=float(np.asarray(co.epipolar_distance)[j, k]))
     if idx.size == 0 or not np.any(F):

@@ -59,10 +59,7 @@ class Coarse:
     frame_pairs : ndarray of shape (K, 2), int64
         Frame pairs used for voting.
     pair_frames : ndarray of shape (2,), int64
-        The frame pair of ``pair_fundamentals`` (the widest used).
-    pair_fundamentals : ndarray of shape (n_fine, n_fine, 3, 3)
-        F fitted on all features of models j and k over ``pair_frames`` (for drawing
-        epipolar lines; on the diagonal, model j alone).
+        The frame pair of :meth:`pair_fundamental` (the first and the last frame).
     method : str
         ``params.coarse_merge``: ``"coding"`` (the partition of least coding length
         decided; ``affinity`` is then ``exp(-max(merge_cost, 0))``) or ``"epipolar"``
@@ -83,10 +80,27 @@ class Coarse:
     point_labels: np.ndarray
     frame_pairs: np.ndarray
     pair_frames: np.ndarray
-    pair_fundamentals: np.ndarray
     method: str = "epipolar"
     merge_cost: np.ndarray | None = None
     coding_length: float = float("nan")
+
+    def pair_fundamental(self, points: np.ndarray, j: int, k: int) -> np.ndarray:
+        """F fitted (normalised 8-point) on every feature of fine models ``j`` and ``k``
+        over ``pair_frames``, for drawing epipolar lines (``j == k``: model j alone).
+
+        Parameters
+        ----------
+        points : ndarray of shape (F, P, 2)
+
+        Returns
+        -------
+        ndarray of shape (3, 3); zeros when the models hold fewer than 8 features.
+        """
+        g = np.flatnonzero(np.isin(self.fine_point_labels, (j, k)))
+        if g.size < 8:
+            return np.zeros((3, 3))
+        fl, fr = (int(v) for v in self.pair_frames)
+        return fit_fundamental(points[fl, g], points[fr, g])
 
 
 def point_labels_from_atoms(atoms: Atoms, atom_labels: np.ndarray) -> np.ndarray:
@@ -208,8 +222,7 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     if n == 0:
         e = np.zeros((0, 0))
         return Coarse(np.zeros(0, np.int64), e, e, e, np.zeros(0, np.int64), fine_pts,
-                      fine_pts.copy(), pairs, widest, np.zeros((0, 0, 3, 3)),
-                      params.coarse_merge, e)
+                      fine_pts.copy(), pairs, widest, params.coarse_merge, e)
 
     model_atoms = [np.flatnonzero(multicut.atom_labels == j) for j in range(n)]
     groups = [np.flatnonzero(fine_pts == j) for j in range(n)]
@@ -273,14 +286,6 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     atom_coarse = f2c[multicut.atom_labels]
     coarse_pts = np.where(fine_pts >= 0, f2c[np.maximum(fine_pts, 0)], -1)
 
-    # one F per model pair on the widest frame pair, for drawing
-    pf = np.zeros((n, n, 3, 3))
-    for j in range(n):
-        for k in range(j, n):
-            g = np.union1d(groups[j], groups[k])
-            if g.size >= 8:
-                Fjk = fit_fundamental(points[widest[0], g], points[widest[1], g])
-                pf[j, k] = pf[k, j] = Fjk
     return Coarse(
         fine_to_coarse=f2c,
         affinity=Z,
@@ -291,7 +296,6 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         point_labels=coarse_pts,
         frame_pairs=pairs,
         pair_frames=widest,
-        pair_fundamentals=pf,
         method=params.coarse_merge,
         merge_cost=gain,
         coding_length=length,

@@ -168,9 +168,9 @@ def test_non_defaults_names_every_changed_setting():
     assert non_defaults(Settings(P(r1=25.0), 3, 3), 3) == ["R1 = 25", "seed = 3"]
     got = non_defaults(Settings(P(rv_alpha=0.8, rv_max_iter=90, coarse_frames=5, rv_refine=False,
                                   rv_select="none", fine_models=8), 0, 2), 3)
-    assert got == ["2C = 8", "coarse_frames = 5", "α = 0.8", "iteration cap = 90", "rv_refine = off",
+    assert got == ["fine models = 8", "coarse_frames = 5", "α = 0.8", "iteration cap = 90", "rv_refine = off",
                    "rv_select = none", "C = 2"]
-    # 2C follows C: C = 2 with fine_models unset is 2C = 4, not a change of its own
+    # the fine models follow C: C = 2 with fine_models unset is 3C = 6, not a change of its own
     assert non_defaults(Settings(P(), 0, 2), 3) == ["C = 2"]
     assert non_defaults(Settings(P(), 0, 2), None) == []  # no ground truth: C is the user's
 

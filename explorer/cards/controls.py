@@ -17,8 +17,9 @@ from .base import SIDE_W, Host
 PARAM_SLIDERS = {
     "r1": ("R1 — inner atom radius (px)", float, 2.0, 100.0, 1.0),
     "r2": ("R2 — outer atom radius (px)", float, 4.0, 160.0, 1.0),
-    "lam": ("λ — epipolar voting strength (1/px²)", float, 0.1, 10.0, 0.1),
-    "fine_models": ("2C — fine models of the multicut", int, 1, 12, 1),
+    "fine_models": ("fine models of the multicut (paper: 2C)", int, 1, 12, 1),
+    "coding_eps": ("ε — coding distortion of the merge (px)", float, 1.0, 40.0, 0.5),
+    "lam": ("λ — epipolar voting strength (paper's merge, 1/px²)", float, 0.1, 10.0, 0.1),
     "rv_alpha": ("RV α — forgetting factor", float, 0.5, 1.0, 0.01),
     "rv_max_iter": ("RV iteration cap", int, 10, 500, 10),
 }
@@ -82,7 +83,8 @@ class Controls:
         for name, w in self.w_params.items():
             v = w.value
             if name == "fine_models":
-                v = None if int(v) == 2 * C and self.defaults.fine_models is None else int(v)
+                v = (None if self.defaults.fine_models is None and C >= 1
+                     and int(v) == self.defaults.fine_per_motion * C else int(v))
             elif isinstance(getattr(self.defaults, name), float):
                 v = float(v)
             else:
