@@ -12,7 +12,8 @@ tab on a free port) from one process, prints the URL and opens the browser. Exit
 
 ``--host``: the page's interface (default 127.0.0.1, this machine only). The 3-D view of
 each tab is a separate viser server on another free port of the same interface, which the
-page embeds (an iframe); a remote browser must be able to reach those ports too. With a
+page embeds (an iframe) under a random path only that tab's page is given; a remote browser
+must be able to reach those ports too. With a
 non-loopback host the command prints the address other machines can use, a warning that
 the app is open to the network, and the address of each tab's 3-D view when it starts.
 """
@@ -194,8 +195,10 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                     time.sleep(0.2)
                 ex.view3d.wait(120)
                 if ex.viser is not None:
+                    # the port only: its page answers under the tab's secret path alone
                     print(f"laav-explore: a tab's 3-D view is served at "
-                          f"http://{_reachable_name(host)}:{ex.viser.port}/", flush=True)
+                          f"http://{_reachable_name(host)}:{ex.viser.port}/ (under a secret path "
+                          "only that tab's page knows)", flush=True)
 
             threading.Thread(target=announce, name="laav-explore-announce", daemon=True).start()
         pn.state.on_session_destroyed(lambda ctx: ex.close())
