@@ -32,7 +32,7 @@ from . import views as V
 from .cards.base import SIDE_W
 from .cards.coarse import CoarseView
 from .cards.controls import PARAM_SLIDERS, Controls
-from .cards.files import Files
+from .cards.files import DEFAULT_MAX_UPLOAD, Files
 from .cards.frame import FrameView
 from .cards.graph import GraphView
 from .cards.numbers import NumbersView
@@ -89,6 +89,8 @@ class Explorer:
     start : bool
         Start computing at once; else call ``explorer.start()`` (the server does so
         once the page is on screen, so the first page is not slowed down by the pipeline).
+    max_upload : int
+        Largest upload accepted, in bytes (``laav-explore --max-upload``).
 
     Examples
     --------
@@ -98,7 +100,7 @@ class Explorer:
     def __init__(self, seq: laav.Sequence, n_motions: int | None = None,
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
-                 start: bool = True, page_hosts=None):
+                 start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD):
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False)
         self._session_doc = None
         self._doc_thread = threading.get_ident()
@@ -122,7 +124,8 @@ class Explorer:
         ext = seq.extent()
         self.controls = Controls(self, self.state, seq, self._defaults)
         self.status_bar = StatusBar(seq)
-        self.files = Files(self, self.state, self.controls, self.status_bar, seq, self._png_view)
+        self.files = Files(self, self.state, self.controls, self.status_bar, seq, self._png_view,
+                           max_upload=max_upload)
         self.frame_view = FrameView(self, ext)
         # the 3-D view's server starts with the first computation (``start``)
         self.view3d = View3D(self, viser, viser_host, page_hosts,
@@ -150,6 +153,7 @@ class Explorer:
         """Start the first computation and, alongside it, the 3-D view's server (idempotent)."""
         self.view3d.start()
         self.state.start()
+        self.files.arm()  # the upload box's browser-side checks, the progress line
 
     @property
     def viser(self):
@@ -194,12 +198,13 @@ class Explorer:
             heading("Sequence"), f.seq_info,
             pn.pane.Markdown("Open another sequence (`.mat`, `.npz` or tracks `.csv`), or a `params.json` "
                              "exported here:", margin=(0, 10)),
-            f.w_upload, c.w_motions,
+            f.w_upload, f.upload_hint, c.w_motions,
             heading("View"), c.w_frame, c.w_color, self.frame_view.w_layers,
             heading("Parameters"), *c.w_params.values(), c.w_seed, c.w_reset,
             heading("Export"), *f.downloads,
-            s.tab_title,
+            s.tab_title, f.w_refused,
         ]
+        s.line.insert(1, f.progress)  # long work: its progress and a Cancel button
         # cards in the order of the stages; each lays its parts out in a wrapping FlexBox, so
         # they sit side by side on a wide screen and stack on a projector (1024 px)
         self.main = [

@@ -1,5 +1,5 @@
 """``laav-explore [FILE] [--motions C] [--params P.JSON] [--param NAME=VALUE ...] [--port N] [--host H]
-[--no-browser]``.
+[--max-upload SIZE] [--no-browser]``.
 
 The page address carries its state: ``/?r1=25&seed=3`` opens with R1 = 25 and seed 3 (keys:
 every :class:`laav.LaavParams` field, ``seed``, ``motions``, ``frame``, ``color``), and moving
@@ -12,9 +12,15 @@ tab on a free port) from one process, prints the URL and opens the browser. Exit
 
 ``--host``: the page's interface (default 127.0.0.1, this machine only). The 3-D view of
 each tab is a separate viser server on another free port of the same interface, which the
-page embeds (an iframe); a remote browser must be able to reach those ports too. With a
+page embeds (an iframe) under a random path only that tab's page is given; a remote browser
+must be able to reach those ports too. With a
 non-loopback host the command prints the address other machines can use, a warning that
 the app is open to the network, and the address of each tab's 3-D view when it starts.
+
+``--max-upload SIZE`` (default 50MB; ``20MB``, ``750KB``, ``2GB``): the largest file the page
+accepts. The browser refuses a larger one before sending it and the server checks again as
+it arrives, before any parsing. Uploads travel in 1 MB messages, so the page's websocket
+limit (:data:`WEBSOCKET_MAX_MESSAGE`) does not depend on it.
 """
 
 from __future__ import annotations
@@ -30,9 +36,14 @@ from concurrent.futures import Future
 
 import laav
 
-__all__ = ["main", "build_parser", "app_factory", "page_hosts", "DEFAULT_PORT"]
+__all__ = ["main", "build_parser", "app_factory", "page_hosts", "DEFAULT_PORT", "WEBSOCKET_MAX_MESSAGE",
+           "serve_options"]
 
 DEFAULT_PORT = 5006
+#: Largest websocket message the page's server takes (bokeh's default, 20 MB). An upload
+#: travels in chunks of ``files.UPLOAD_CHUNK`` (1 MB), every other message is small: a file of
+#: any size up to --max-upload fits, and a client sending more is disconnected, alone.
+WEBSOCKET_MAX_MESSAGE = 20 * 1024 * 1024
 _ANY = ("0.0.0.0", "", "::")
 _LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
@@ -59,6 +70,23 @@ def page_hosts(host: str) -> list[str]:
     return list(dict.fromkeys(names))
 
 
+def serve_options() -> dict:
+    """Keyword arguments for ``pn.serve`` that every server of the explorer needs."""
+    from .cards.files import UPLOAD_CHUNK
+
+    assert 2 * UPLOAD_CHUNK < WEBSOCKET_MAX_MESSAGE  # a chunk and its message's framing fit
+    return {"websocket_max_message_size": WEBSOCKET_MAX_MESSAGE}
+
+
+def _size(text: str) -> int:
+    from .cards.files import parse_size
+
+    try:
+        return parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="laav-explore",
@@ -81,6 +109,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="parameters to start with: a params.json exported by the explorer")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="set one LaavParams field, e.g. --param lam=3 (repeatable; after --params)")
+    p.add_argument("--max-upload", type=_size, default="50MB", metavar="SIZE",
+                   help="largest file the page accepts, e.g. 20MB, 750KB, 2GB (default 50MB); checked "
+                        "in the browser before sending and on the server before any parsing")
     p.add_argument("--no-browser", action="store_true", help="do not open a browser")
     p.add_argument("--max-points", type=int, default=None, metavar="N",
                    help=f"refuse a FILE with more than N points (default {laav.io.MAX_POINTS:,}; "
@@ -134,7 +165,7 @@ def _reachable_name(host: str) -> str:
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
                 hosts: list[str] | None = None, announce_viser: bool = False,
-                params: laav.LaavParams | None = None):
+                params: laav.LaavParams | None = None, max_upload: int | None = None):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
@@ -145,7 +176,9 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     value for ``host`` by default). ``announce_viser`` prints the address of every tab's
     3-D view once its server is up (the CLI does for a non-loopback host).
     A session whose address carries settings (``/?r1=25&seed=3``) starts with them
-    (validated; problems shown on the page as text).
+    (validated; problems shown on the page as text). ``max_upload``: the largest upload in
+    bytes (default :data:`explorer.cards.files.DEFAULT_MAX_UPLOAD`); serve with
+    :func:`serve_options`.
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
@@ -154,9 +187,11 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
 
     def build():
         from .app import Explorer
+        from .cards.files import DEFAULT_MAX_UPLOAD
 
         return Explorer(seq, n_motions, params=params, seed=seed, viser=viser, viser_host=host,
-                        iframe_host=iframe_host, start=False, page_hosts=hosts)
+                        iframe_host=iframe_host, start=False, page_hosts=hosts,
+                        max_upload=DEFAULT_MAX_UPLOAD if max_upload is None else max_upload)
 
     if prebuild:
         fut: Future = Future()
@@ -194,8 +229,10 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                     time.sleep(0.2)
                 ex.view3d.wait(120)
                 if ex.viser is not None:
+                    # the port only: its page answers under the tab's secret path alone
                     print(f"laav-explore: a tab's 3-D view is served at "
-                          f"http://{_reachable_name(host)}:{ex.viser.port}/", flush=True)
+                          f"http://{_reachable_name(host)}:{ex.viser.port}/ (under a secret path "
+                          "only that tab's page knows)", flush=True)
 
             threading.Thread(target=announce, name="laav-explore-announce", daemon=True).start()
         pn.state.on_session_destroyed(lambda ctx: ex.close())
@@ -301,10 +338,11 @@ def main(argv: list[str] | None = None) -> int:
     origins = [f"{h}:{port}" for h in hosts]  # the page's websocket: its own origin only
     try:
         factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
-                              announce_viser=not _is_loopback(args.host), params=settings.params)
+                              announce_viser=not _is_loopback(args.host), params=settings.params,
+                              max_upload=args.max_upload)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
-                          verbose=False)
+                          verbose=False, **serve_options())
     except OSError as exc:
         return _fail(parser, f"cannot listen on {args.host}:{port}: {exc}")
     local = _is_loopback(args.host)

@@ -35,9 +35,23 @@ from laav import LaavParams, LaavResult, Pipeline, Sequence
 
 from .views import COLOR_MODES, align_labels, stage_numbers
 
-__all__ = ["ExplorerState", "Settings", "RV_FIELDS", "Change", "describe_change", "non_defaults",
+__all__ = ["ExplorerState", "Cancelled", "Settings", "RV_FIELDS", "Change", "describe_change", "non_defaults",
            "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of", "settings_from_json",
            "parse_value"]
+
+class Cancelled(Exception):
+    """Raised inside the worker's computation by :meth:`ExplorerState.cancel`."""
+
+
+def _interrupt(thread_id: int, exc: type[BaseException] | None) -> None:
+    """Raise ``exc`` in thread ``thread_id`` at its next Python instruction (None: withdraw
+    one not raised yet). A thread inside one long C call (a large numpy operation) sees it
+    when that call returns."""
+    import ctypes
+
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread_id),
+                                               ctypes.py_object(exc) if exc is not None else None)
+
 
 #: The parameters plain Random Voting depends on (its cache key).
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_"))
@@ -378,6 +392,7 @@ class ExplorerState:
         self._rv_cache: OrderedDict = OrderedDict()
         self._rv_key = None
         self._closed = False
+        self._running: int | None = None  # the worker's thread id while it computes
         self._first = pipeline
         self._started = False
         if autostart:
@@ -407,6 +422,15 @@ class ExplorerState:
     def target(self) -> Settings:
         """The settings most recently requested (valid ones only)."""
         return self._target
+
+    @property
+    def target_sequence(self) -> Sequence:
+        """The sequence most recently requested (being read into the pipeline, or shown)."""
+        return self._target_seq
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
 
     @property
     def generation(self) -> int:
@@ -454,6 +478,36 @@ class ExplorerState:
             return None
         return self._submit("load", seq, new)
 
+    def cancel(self) -> bool:
+        """Stop the computation running and drop every queued request: the views keep the
+        last result, and the next request starts from its settings. Returns False when
+        nothing was running. The computation is interrupted at its next Python step
+        (:class:`Cancelled`; ``Pipeline.update`` rolls back); its result, if it still
+        finishes, is dropped."""
+        with self._lock:
+            if self._pending == 0:
+                return False
+            self._gen += 1  # the running job's result is dropped, queued ones are skipped
+            if self.result is not None:
+                self._target_seq, self._target = self.sequence, self.settings
+            if self._running is not None:
+                _interrupt(self._running, Cancelled)
+        return True
+
+    def _computing(self, on: bool) -> None:
+        """Mark the worker as computing (cancel() may interrupt it) or not (and withdraw an
+        interruption that arrived too late to be raised)."""
+        tid = threading.get_ident()
+        while True:
+            try:
+                with self._lock:
+                    self._running = tid if on else None
+                    if not on:
+                        _interrupt(tid, None)
+                return
+            except Cancelled:  # raised just now, before the lock: the job is stale anyway
+                continue
+
     def report(self, message: str) -> None:
         """Show a problem found outside the state (e.g. an unreadable upload)."""
         self._report(message)
@@ -491,15 +545,23 @@ class ExplorerState:
                 return  # superseded before it started
             t0 = time.perf_counter()
             try:
-                if kind == "load" or self._pipe is None or self._pipe.seq is not seq:
-                    if isinstance(pipeline, Future):
-                        pipeline = pipeline.result()
-                    pipe = pipeline if pipeline is not None else Pipeline(
-                        seq, target.n_motions, target.params, target.seed)
-                    result = pipe.result
-                else:
-                    pipe = self._pipe
-                    result = pipe.update(**target.update_kwargs())
+                self._computing(True)
+                try:
+                    if gen != self._gen:
+                        raise Cancelled
+                    if kind == "load" or self._pipe is None or self._pipe.seq is not seq:
+                        if isinstance(pipeline, Future):
+                            pipeline = pipeline.result()
+                        pipe = pipeline if pipeline is not None else Pipeline(
+                            seq, target.n_motions, target.params, target.seed)
+                        result = pipe.result
+                    else:
+                        pipe = self._pipe
+                        result = pipe.update(**target.update_kwargs())
+                finally:
+                    self._computing(False)
+            except Cancelled:
+                return  # cancel() already fell back to the shown result
             except ValueError as exc:  # includes laav.SequenceError
                 if gen == self._gen:
                     self._fail(kind, str(exc))

@@ -27,15 +27,26 @@ _SERVE_LOCK = threading.Lock()
 
 
 @contextmanager
-def _origin_checked(hosts: Iterable[str]):
-    """Servers viser starts inside accept a websocket only from their own page.
+def _origin_checked(hosts: Iterable[str], token: str):
+    """Servers viser starts inside serve their page and websocket only to the page's own
+    origin and only under the tab's secret path ``/TOKEN/``.
 
-    viser (1.1) does not check the ``Origin`` of its websocket, so any web page the user
-    visits could read the scene from localhost. While this is active, ``websockets``'
-    ``serve`` gets a ``process_request`` that answers 403 to a websocket handshake unless
-    its ``Origin`` is ``http://HOST:PORT`` with HOST one of ``hosts`` and PORT the port the
-    connection arrived on (the origin of the 3-D page, which viser serves itself).
+    viser (1.1) checks neither the ``Origin`` of its websocket nor who asks: any web page the
+    user visits, or any other client that can reach the port, could read the scene. While
+    this is active, ``websockets``' ``serve`` gets a ``process_request`` that
+
+    - answers 403 to a websocket handshake unless its ``Origin`` is ``http://HOST:PORT``
+      with HOST one of ``hosts`` and PORT the port the connection arrived on (the origin of
+      the 3-D page, which viser serves itself), and unless its path is ``/TOKEN`` (viser's
+      client connects to its page's address without the query and the trailing slash);
+    - answers 404 to every HTTP request outside ``/TOKEN/``, and hands the rest to viser's
+      own file server with the prefix removed (its client is one self-contained page).
+
+    The token is random per server and reaches only the page of the session that owns it
+    (the iframe's address), so another tab, another client or another origin gets nothing.
     """
+    import dataclasses
+    import hmac
     import http
 
     import websockets.asyncio.server as ws_server
@@ -43,16 +54,28 @@ def _origin_checked(hosts: Iterable[str]):
     from websockets.http11 import Response
 
     hosts = frozenset(hosts)
+    prefix = f"/{token}"
     real = ws_server.serve
+
+    def refuse(status: http.HTTPStatus, text: str) -> Response:
+        return Response(status, status.phrase, Headers(), text.encode())
 
     def serve(*args, process_request=None, **kw):
         def checked(connection, request):
+            path = request.path.partition("?")[0]
+            head, sep, rest = path[1:].partition("/")
+            ok_token = hmac.compare_digest(f"/{head}".encode(), prefix.encode())
             if request.headers.get("Upgrade", "").lower() == "websocket":
                 port = connection.local_address[1]
                 if request.headers.get("Origin") not in {f"http://{h}:{port}" for h in hosts}:
-                    return Response(http.HTTPStatus.FORBIDDEN, "Forbidden", Headers(),
-                                    b"cross-origin websocket refused\n")
-            return process_request(connection, request) if process_request else None
+                    return refuse(http.HTTPStatus.FORBIDDEN, "cross-origin websocket refused\n")
+                if not ok_token or rest:
+                    return refuse(http.HTTPStatus.FORBIDDEN, "websocket refused: not this view's address\n")
+                return process_request(connection, request) if process_request else None
+            if not ok_token or not sep:  # /TOKEN without its slash: not the page either
+                return refuse(http.HTTPStatus.NOT_FOUND, "not found\n")
+            inner = dataclasses.replace(request, path="/" + request.path[len(prefix) + 1:])
+            return process_request(connection, inner) if process_request else None
 
         return real(*args, process_request=checked, **kw)
 
@@ -87,6 +110,9 @@ class ViserView:
     page_hosts : iterable of str, optional
         Host names the browser may use to reach the 3-D page (default: 127.0.0.1,
         localhost and ``host``); its websocket refuses every other origin.
+
+    The page and its websocket are served only under :attr:`path` (``/TOKEN/``, a random
+    token per server): embed :meth:`url`, never the bare port.
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0,
@@ -94,12 +120,15 @@ class ViserView:
                  page_hosts: Iterable[str] | None = None):
         import contextlib
         import io
+        import secrets
 
         import viser
 
         hosts = {"127.0.0.1", "localhost", host} if page_hosts is None else set(page_hosts)
-        # viser binds its server before the constructor returns: the check is in place from the start
-        with contextlib.redirect_stdout(io.StringIO()), _origin_checked(hosts):  # a banner even when quiet
+        self.token = secrets.token_urlsafe(24)
+        # viser binds its server before the constructor returns: the check is in place from the
+        # start (and it prints a banner even when quiet)
+        with contextlib.redirect_stdout(io.StringIO()), _origin_checked(hosts, self.token):
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.server.gui.configure_theme(show_share_button=False, control_layout="floating",
                                         control_width="small", show_logo=False)
@@ -116,6 +145,15 @@ class ViserView:
     @property
     def port(self) -> int:
         return int(self.server.get_port())
+
+    @property
+    def path(self) -> str:
+        """The secret path the page and its websocket are served under (``/TOKEN/``)."""
+        return f"/{self.token}/"
+
+    def url(self, host: str = "127.0.0.1") -> str:
+        """The 3-D page's address for a browser reaching this machine as ``host``."""
+        return f"http://{host}:{self.port}{self.path}"
 
     def _frame_from_viser(self, event) -> None:
         f = int(self._frame_box.value)

@@ -209,10 +209,16 @@ def test_invalid_slider_combination_shows_a_message_and_keeps_the_result(ex):
     assert not ex.alert.visible
 
 
+def _upload(ex, name: str, data: bytes) -> None:
+    """What the page's upload box sends: the file in chunks (see test_explorer_upload)."""
+    from test_explorer_upload import send_chunks
+
+    send_chunks(ex, name, data)
+
+
 def test_empty_upload_says_so_and_c_box_is_bounded(ex, seq):
     res = ex.result
-    ex.w_upload.filename = "nothing.npz"
-    ex.w_upload.value = b""
+    _upload(ex, "nothing.npz", b"")
     assert ex.wait(60) and ex.result is res
     assert ex.alert.visible and "nothing.npz is empty (0 bytes)" in _shown(ex.alert)
     # C: at least 1, at most the number of points (the browser box clamps to these)
@@ -227,8 +233,7 @@ def test_empty_upload_says_so_and_c_box_is_bounded(ex, seq):
 
 def test_bad_upload_shows_a_message_and_keeps_the_result(ex):
     res = ex.result
-    ex.w_upload.filename = "broken_truth.mat"
-    ex.w_upload.value = b"this is not a MATLAB file"
+    _upload(ex, "broken_truth.mat", b"this is not a MATLAB file")
     assert ex.wait(30)
     assert ex.alert.visible and "broken_truth.mat" in _shown(ex.alert)
     assert ex.result is res
@@ -636,16 +641,14 @@ def test_query_and_params_json_set_the_state(seq, tmp_path):
         assert ex.wait(120)
         d = json.loads(text)
         d["params"]["coarse_frames"] = 5
-        ex.w_upload.filename = "params.json"
-        ex.w_upload.value = json.dumps(d).encode()
+        _upload(ex, "params.json", json.dumps(d).encode())
         assert ex.wait(120)
         p = ex.result.params
         assert (p.r1, p.lam, p.coarse_frames, ex.result.seed) == (25.0, 3.0, 5, 3)
         assert ex.w_params["r1"].value == 25.0
         # a broken one changes nothing and says why
         res = ex.result
-        ex.w_upload.filename = "bad.json"
-        ex.w_upload.value = b'{"params": {"r1": -1}}'
+        _upload(ex, "bad.json", b'{"params": {"r1": -1}}')
         assert ex.wait(120) and ex.result is res
         assert ex.alert.visible and "bad.json" in _shown(ex.alert) and "r1 must be in (0" in _shown(ex.alert)
         # reset brings back every default, also the ones without a control

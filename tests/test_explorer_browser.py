@@ -26,7 +26,7 @@ sync_api = pytest.importorskip("playwright.sync_api")
 pn = pytest.importorskip("panel")
 
 import laav  # noqa: E402
-from explorer.cli import app_factory  # noqa: E402
+from explorer.cli import app_factory, serve_options  # noqa: E402
 
 ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
         "--disable-background-networking", "--disable-component-update", "--disable-sync"]
@@ -108,15 +108,16 @@ def _wait_for(pred, timeout: float, what: str, page=None):
 
 
 @contextmanager
-def _served(seq, viser: bool = True):
+def _served(seq, viser: bool = True, max_upload: int | None = None):
     """The app for ``seq`` on a free loopback port and a headless Chromium:
     ``(port, browser, created)``, ``created`` listing each session's Explorer; the server
-    stopped, the browser and the explorers closed afterwards."""
+    stopped, the browser and the explorers closed afterwards. Served as ``laav-explore``
+    serves it (:func:`explorer.cli.serve_options`)."""
     created: list = []
     port = _free_port()
-    server = pn.serve({"/": app_factory(seq, None, created=created, viser=viser)}, port=port,
-                      address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
-                      threaded=True, verbose=False)
+    server = pn.serve({"/": app_factory(seq, None, created=created, viser=viser, max_upload=max_upload)},
+                      port=port, address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
+                      threaded=True, verbose=False, **serve_options())
     try:
         _wait_listening(port)
         with sync_api.sync_playwright() as p:
@@ -497,3 +498,90 @@ def test_gaec_replay_keys_reach_both_ends():
         _wait_for(lambda: ex.w_step.value == 0, 20, "step 0", page=page)
         page.keyboard.press("End")
         _wait_for(lambda: ex.w_step.value == K2, 20, "the new final step", page=page)
+
+
+def _npz_bytes(seq, pad: int = 0) -> bytes:
+    import io
+
+    import numpy as np
+
+    buf = io.BytesIO()
+    extra = {"padding": np.zeros(pad, np.uint8)} if pad else {}
+    np.savez(buf, points=seq.points, labels=seq.labels, name=seq.name, **extra)
+    return buf.getvalue()
+
+
+def _big_sequence(P: int = 3000, F: int = 30) -> laav.Sequence:
+    """3,000 points each moving its own way: a first computation of ~12 s on one core."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 500, (1, P, 2)) + np.linspace(0, 1, F)[:, None, None] * rng.normal(0, 30, (1, P, 2))
+    return laav.Sequence(pts, np.r_[np.zeros(P // 2, int), np.ones(P - P // 2, int)], name="big_one")
+
+
+def test_uploads_past_the_limit_and_long_work(tmp_path):
+    """``--max-upload 24MB``: a 25 MB file is refused in the browser (never sent) with a
+    message naming it, its size and the limit, and the page keeps working; an empty file
+    says so; a valid 22 MB file (past the old ~15 MB death and bokeh's 20 MB message limit)
+    loads; a long first computation shows progress and Cancel keeps the last result."""
+    shots = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
+    shots.mkdir(parents=True, exist_ok=True)
+    seq = _sequence()
+    js_errors: list[str] = []
+    with _served(seq, viser=False, max_upload=24_000_000) as (port, browser, created):
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.on("pageerror", lambda e: js_errors.append(str(e)))
+        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        assert ex.wait(60)
+        page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=30000)
+        page.get_by_text("Up to 24 MB").first.wait_for(timeout=20000)
+        res = ex.result
+
+        # over the limit: the browser does not send it, the page names it, size and limit
+        page.set_input_files("input[type=file]", files=[{
+            "name": "too big.npz", "mimeType": "application/octet-stream", "buffer": bytes(25_000_000)}])
+        page.get_by_text("too big.npz (25 MB) is larger than the upload limit of 24 MB and was not "
+                         "sent").first.wait_for(timeout=30000)
+        page.get_by_text("File is too large").first.wait_for(timeout=10000)  # the box's own
+        page.screenshot(path=str(shots / "upload_too_big.png"))
+        assert ex.files._parts == {} and ex.result is res  # not one chunk arrived
+        # the page still responds: a slider move recomputes
+        assert page.evaluate(JS_SET_SLIDER, ["λ", 4.5]) is not None
+        _wait_for(lambda: ex.result.params.lam == 4.5 and ex.wait(1), 60, "the λ result")
+
+        # an empty file
+        page.set_input_files("input[type=file]", files=[{
+            "name": "empty.npz", "mimeType": "application/octet-stream", "buffer": b""}])
+        page.get_by_text("empty.npz is empty (0 bytes): nothing was loaded").first.wait_for(timeout=30000)
+        assert ex.sequence is seq
+
+        # a valid file of 22 MB: in 1 MB messages, past the old limits
+        other = _sequence()
+        other = laav.Sequence(other.points[:, ::-1], other.labels[::-1], name="padded_22MB")
+        base = len(_npz_bytes(other, pad=1000)) - 1000
+        data = _npz_bytes(other, pad=22_000_000 - base)
+        assert len(data) == 22_000_000
+        page.set_input_files("input[type=file]", files=[{
+            "name": "padded.npz", "mimeType": "application/octet-stream", "buffer": data}])
+        _wait_for(lambda: ex.sequence.name == "padded_22MB" and ex.wait(1), 120, "the 22 MB upload")
+        page.get_by_text("Showing padded_22MB").first.wait_for(timeout=30000)
+        res = ex.result
+
+        # a long first computation: progress, then Cancel keeps the last result
+        page.set_input_files("input[type=file]", files=[{
+            "name": "big_one.npz", "mimeType": "application/octet-stream",
+            "buffer": _npz_bytes(_big_sequence())}])
+        page.get_by_text("Computing the first result for big_one").first.wait_for(timeout=60000)
+        page.screenshot(path=str(shots / "upload_progress.png"))
+        page.locator("button", has_text="Cancel").last.click()
+        page.get_by_text("Cancelled the first computation of big_one").first.wait_for(timeout=30000)
+        page.get_by_text("still showing padded_22MB with its last result").first.wait_for(timeout=10000)
+        assert ex.wait(30) and ex.result is res and ex.sequence.name == "padded_22MB"
+        page.screenshot(path=str(shots / "upload_cancelled.png"))
+        assert page.evaluate(JS_SET_SLIDER, ["λ", 2.5]) is not None
+        _wait_for(lambda: ex.result.params.lam == 2.5 and ex.wait(1), 60, "a result after cancelling")
+        assert ex.sequence.name == "padded_22MB"
+    assert not js_errors, js_errors[:5]

@@ -12,6 +12,7 @@ import socket
 import subprocess
 import sys
 import time
+import urllib.error
 import urllib.request
 
 import pytest
@@ -44,16 +45,44 @@ def _try(url: str, origin: str | None, protocols: list[str]) -> str:
 def test_viser_websocket_accepts_only_its_own_page():
     view = ViserView(host="127.0.0.1")
     try:
-        port = view.port
-        url, proto = f"ws://127.0.0.1:{port}/", [f"viser-v{__import__('viser').__version__}"]
+        port, path = view.port, view.path.rstrip("/")
+        url, proto = f"ws://127.0.0.1:{port}{path}", [f"viser-v{__import__('viser').__version__}"]
         assert _try(url, EVIL, proto) == "refused 403"
         assert _try(url, None, proto) == "refused 403"
         assert _try(url, "http://127.0.0.1:1", proto) == "refused 403"  # another local page
         assert _try(url, f"http://127.0.0.1:{port}", proto) == "accepted"
         assert _try(url, f"http://localhost:{port}", proto) == "accepted"
-        assert urllib.request.urlopen(f"http://127.0.0.1:{port}/").status == 200  # the page itself
+        assert _try(url + "/", f"http://127.0.0.1:{port}", proto) == "accepted"  # the page's own form
+        assert urllib.request.urlopen(view.url()).status == 200  # the page itself
     finally:
         view.close()
+
+
+def test_viser_view_answers_only_under_its_tabs_secret_path():
+    """The 3-D view belongs to one tab: a client without its token (another tab, another
+    program on this machine or the network, even with the right Origin) gets nothing."""
+    import viser
+
+    view = ViserView(host="127.0.0.1")
+    other = ViserView(host="127.0.0.1")
+    try:
+        port, own = view.port, f"http://127.0.0.1:{view.port}"
+        proto = [f"viser-v{viser.__version__}"]
+        assert len(view.token) >= 32 and view.token != other.token
+        for path in ("", "/", "/x", f"/{view.token[:-1]}", f"/{other.token}", f"/{view.token}/x",
+                     f"/{view.token}x", f"/?{view.token}"):
+            assert _try(f"ws://127.0.0.1:{port}{path}", own, proto) == "refused 403", path
+        for path in ("/", "/index.html", f"/{other.token}/", f"/{view.token}", f"/x/{view.token}/",
+                     f"/{view.token}x/"):
+            with pytest.raises(urllib.error.HTTPError) as err:
+                urllib.request.urlopen(f"{own}{path}", timeout=10)
+            assert err.value.code == 404, path
+        page = urllib.request.urlopen(view.url(), timeout=10).read()
+        assert b"<html" in page.lower()
+        assert _try(f"ws://127.0.0.1:{port}/{view.token}", own, proto) == "accepted"
+    finally:
+        view.close()
+        other.close()
 
 
 @pytest.mark.slow

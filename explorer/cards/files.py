@@ -1,12 +1,26 @@
 """The sidebar's files: the sequence shown, opening another one (or a ``params.json``) by
 upload, and the exports (labels CSV, parameters JSON, views PNG; see :mod:`explorer.export`).
+
+Uploads (issue 16, items 5 and 8). The upload box (panel's ``FileDropper``) sends a file in
+chunks of :data:`UPLOAD_CHUNK` bytes, so no websocket message grows with the file (the old
+single-message upload closed the connection, code 1009, past ~15 MB and left a dead tab).
+The size limit (``laav-explore --max-upload``, :data:`DEFAULT_MAX_UPLOAD`) is checked three
+times, before anything is parsed: in the browser before sending (the box refuses the file,
+and the page names it, its size and the limit), on the server from the first chunk's count
+and while the chunks arrive (for a client that skips the browser's check). An empty file
+gets its own message. Long work (reading a big file, a first computation, any recompute
+past a second) shows a progress line with the elapsed time and a Cancel button; cancelling
+keeps the last good result and says so.
 """
 
 from __future__ import annotations
 
 import io
+import json
+import re
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 import panel as pn
@@ -16,6 +30,84 @@ import laav
 from .. import export
 from .. import views as V
 from .base import SIDE_W
+
+#: Default upload limit (bytes, decimal units like the upload box's "50 MB").
+DEFAULT_MAX_UPLOAD = 50_000_000
+#: Bytes per websocket message of an upload: far below the server's message limit.
+UPLOAD_CHUNK = 1_000_000
+#: Work shorter than this shows no progress line (a slider move on a small sequence).
+PROGRESS_AFTER = 1.0
+
+_UNITS = {"": 1, "B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "KIB": 2**10, "MIB": 2**20, "GIB": 2**30}
+
+
+def parse_size(text) -> int:
+    """Bytes from ``"50MB"``, ``"750 KB"``, ``"1.5GB"``, ``"20MiB"`` or a plain number of bytes
+    (KB/MB/GB are powers of 1000). Raises ValueError with a readable message."""
+    m = re.fullmatch(r"\s*(\d+(?:\.\d*)?|\.\d+)\s*([A-Za-z]*)\s*", str(text))
+    unit = m.group(2).upper() if m else None
+    if m is None or unit not in _UNITS:
+        raise ValueError(f"a size like 50MB, 750KB or 2GB, got {str(text)[:40]!r}")
+    n = int(float(m.group(1)) * _UNITS[unit])
+    if n < 1:
+        raise ValueError(f"a size of at least 1 byte, got {str(text)[:40]!r}")
+    return n
+
+
+def fmt_size(n: int) -> str:
+    """``812 bytes``, ``3.4 KB``, ``61.2 MB``, ``2.1 GB`` (powers of 1000, as the upload box)."""
+    n = int(n)
+    if n < 1000:
+        return f"{n} byte{'s' if n != 1 else ''}"
+    for unit, f in (("GB", 10**9), ("MB", 10**6), ("KB", 10**3)):
+        if n >= f:
+            v = n / f
+            return f"{v:.0f} {unit}" if v >= 100 or v == int(v) else f"{v:.1f} {unit}"
+    raise AssertionError
+
+
+class UploadBox(pn.widgets.FileDropper):
+    """panel's FileDropper, its chunks handed to ``receiver(name, chunk, n_chunks, data)`` as
+    they arrive instead of being collected in ``value`` (the files card counts them against
+    the limit and assembles them)."""
+
+    def __init__(self, receiver, **params):
+        super().__init__(**params)
+        self._receiver = receiver
+
+    def _process_event(self, event) -> None:
+        if event.event_name != "upload_event":
+            return  # a removed file: nothing is kept here
+        d = event.data
+        self._receiver(str(d.get("name") or "upload"), int(d.get("chunk", 1)),
+                       int(d.get("total_chunks", 1)), d.get("data") or b"")
+
+
+# Runs in the browser when the server writes ``arm:N`` into the hidden ``w_refused`` box
+# (see Files.arm; repeated until the browser answers ``armed``): files the upload box refuses
+# (over the limit) or that are empty are reported to the server through that box, so the
+# page names them in its alert too; an empty file is removed from the box (it would
+# otherwise wait for an upload that never ends).
+_ARM_JS = """
+if (!String(cb_obj.value).startsWith('arm:')) return;
+const tries = [0];
+const hook = () => {
+  const view = Bokeh.index.find_one(box);
+  const pond = view == null ? null : view._file_pond;
+  if (pond == null) { if (tries[0]++ < 100) setTimeout(hook, 100); return; }
+  if (view._laav_armed) { out.value = JSON.stringify({kind: 'armed', t: Date.now()}); return; }
+  view._laav_armed = true;
+  out.value = JSON.stringify({kind: 'armed', t: Date.now()});
+  pond.on('addfile', (error, item) => {
+    const say = (kind) => {
+      out.value = JSON.stringify({kind: kind, name: item.filename, size: item.fileSize, t: Date.now()});
+    };
+    if (error) { say('too_big'); }
+    else if (item.fileSize === 0) { say('empty'); setTimeout(() => pond.removeFile(item.id), 0); }
+  });
+};
+hook();
+"""
 
 
 def seq_text(seq: laav.Sequence) -> str:
@@ -30,11 +122,38 @@ class Files:
     a file without ground truth; ``view`` returns what the PNG shows now:
     ``(frame, colour mode, GAEC step, plain RV run)``."""
 
-    def __init__(self, host, state, controls, status, seq: laav.Sequence, view) -> None:
+    def __init__(self, host, state, controls, status, seq: laav.Sequence, view,
+                 max_upload: int = DEFAULT_MAX_UPLOAD) -> None:
         self.host, self.state, self.controls, self.status, self._view = host, state, controls, status, view
+        self.max_upload = int(max_upload)
         self.seq_info = pn.pane.Markdown(seq_text(seq), width=SIDE_W, margin=(0, 10))
-        self.w_upload = pn.widgets.FileInput(accept=".mat,.npz,.csv,.json", multiple=False, width=SIDE_W)
-        self.w_upload.param.watch(self._on_upload, "value")
+        # any content: the format is taken from the bytes (the box's type filter would also
+        # refuse a .mat whose type the browser does not know)
+        self.w_upload = UploadBox(self._receive, multiple=False, chunk_size=UPLOAD_CHUNK,
+                                  max_file_size=f"{max(self.max_upload // 1000, 1)}KB",
+                                  layout="compact", previews=[], width=SIDE_W, margin=(5, 10))
+        self.upload_hint = pn.pane.Markdown(
+            f"Up to {fmt_size(self.max_upload)} (`laav-explore --max-upload`).", margin=(0, 10),
+            styles={"font-size": "0.85em", "color": "#555"})
+        # the browser reports files its upload box refused (see _ARM_JS)
+        self.w_refused = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
+        self.w_refused.jscallback(args={"box": self.w_upload, "out": self.w_refused}, value=_ARM_JS)
+        self.w_refused.param.watch(self._on_refused, "value")
+        self._parts: dict = {}  # name -> [chunks, bytes so far] of the upload arriving
+        self._upload_lock = threading.Lock()
+        self._reading: tuple | None = None  # (token, name, size, t0) of the file being read
+        self._work_t0: float | None = None  # since when the state has been busy
+        # the progress line of long work (reading, a first computation, a recompute)
+        self.progress_md = pn.pane.Markdown("", margin=(4, 6), sizing_mode="stretch_width")
+        self.progress_bar = pn.indicators.Progress(value=-1, active=True, width=160, height=14,
+                                                   margin=(12, 6), bar_color="primary")
+        self.w_cancel = pn.widgets.Button(label="Cancel", color="warning", width=90,
+                                          margin=(6, 6))
+        self.w_cancel.on_click(self._on_cancel)
+        self.progress = pn.Row(self.progress_bar, self.progress_md, self.w_cancel, visible=False,
+                               sizing_mode="stretch_width")
+        self._ticker: threading.Thread | None = None
+        self._armed, self._arms = False, 0  # the page reports refused files (see arm)
         self.w_dl_csv = pn.widgets.FileDownload(callback=self.export_csv, filename="labels.csv",
                                                 label="Labels (CSV)", color="primary",
                                                 embed=False, width=SIDE_W)
@@ -55,12 +174,76 @@ class Files:
             w.filename = f"{laav.safe_name(seq.name)}_{ext}"
 
     # ------------------------------------------------------------------ upload
-    def _on_upload(self, event=None) -> None:
-        data, name = self.w_upload.value, self.w_upload.filename or "upload"
-        if data is None:
+    def arm(self) -> None:
+        """(Document thread, once the page is on screen.) Let the browser report the files
+        its upload box refuses (asked again every 2 s until the page answers: a request
+        sent before the page had its widgets would go unseen), and start the progress
+        line's clock."""
+        if not self._armed:
+            self._arms += 1
+            self.w_refused.value = f"arm:{self._arms}"
+        if self._ticker is None:
+            self._ticker = threading.Thread(target=self._tick, name="laav-explore-progress", daemon=True)
+            self._ticker.start()
+
+    def _on_refused(self, event) -> None:
+        try:
+            d = json.loads(event.new) if str(event.new).startswith("{") else None
+            if d.get("kind") == "armed":
+                self._armed = True
+                return
+            name, size = Path(str(d["name"])).name or "upload", int(d["size"])
+        except (ValueError, TypeError, KeyError, AttributeError):
             return
+        if d.get("kind") == "empty":
+            self._refuse_empty(name)
+        else:
+            self._refuse_big(name, size, sent=False)
+
+    def _refuse_empty(self, name: str) -> None:
+        self.state.report(f"{name} is empty (0 bytes): nothing was loaded — still showing the last "
+                          "valid result")
+
+    def _refuse_big(self, name: str, size: int | None, sent: bool = True) -> None:
+        what = f"{name} ({fmt_size(size)})" if size is not None else name
+        self.state.report(f"{what} is larger than the upload limit of {fmt_size(self.max_upload)}"
+                          f"{'' if sent else ' and was not sent'} (start laav-explore with a larger "
+                          "--max-upload to open it) — still showing the last valid result")
+
+    def _receive(self, name: str, chunk: int, total: int, data) -> None:
+        """One chunk of an upload (the document's thread). Counted against the limit as it
+        arrives: an upload over it is dropped at once, before anything is parsed."""
+        with self._upload_lock:
+            if chunk == 1:
+                self._parts[name] = [[], 0]
+                if (total - 1) * UPLOAD_CHUNK > self.max_upload:  # the count alone says so
+                    self._parts[name] = None
+                    self._refuse_big(name, (total - 1) * UPLOAD_CHUNK)
+                    return
+            part = self._parts.get(name)
+            if part is None:
+                return  # refused, or its first chunk never came
+            part[0].append(bytes(data))
+            part[1] += len(data)
+            if part[1] > self.max_upload:
+                self._parts[name] = None
+                self._refuse_big(name, None)
+                return
+            if chunk < total:
+                return
+            del self._parts[name]
+        self.receive(b"".join(part[0]), name)
+
+    def receive(self, data: bytes, name: str) -> None:
+        """A whole uploaded file: a params.json, or a sequence read in the background."""
+        name = name or "upload"
+        if isinstance(data, str):
+            data = data.encode("utf-8")
         if len(data) == 0:
-            self.state.report(f"{Path(name).name} is empty (0 bytes): nothing was loaded")
+            self._refuse_empty(Path(name).name)
+            return
+        if len(data) > self.max_upload:
+            self._refuse_big(Path(name).name, len(data))
             return
         if data.lstrip()[:1] == b"{":  # a params.json (a sequence file never starts so)
             self.host.load_params(data, name)
@@ -71,20 +254,35 @@ class Files:
         self.host.lock_for_upload(True)
         # reading (a MAT file is parsed in a child process) must not block the page
         self.status.show_reading(Path(name).name)
-        threading.Thread(target=self.load_bytes, args=(data, name), name="laav-explore-upload",
+        token = object()
+        self._reading = (token, Path(name).name, len(data), time.monotonic())
+        threading.Thread(target=self._read_upload, args=(token, data, name), name="laav-explore-upload",
                          daemon=True).start()
 
-    def load_bytes(self, data: bytes, filename: str) -> bool:
-        """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure."""
+    def _read_upload(self, token, data: bytes, name: str) -> None:
+        self.load_bytes(data, name, token)
+
+    def load_bytes(self, data: bytes, filename: str, token=None) -> bool:
+        """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure.
+        ``token``: the upload's (see :meth:`cancel`); a cancelled read's sequence is dropped."""
         base = Path(filename).name or "upload"
         C = int(self.controls.w_motions.value or 1)  # read before locking: the C for a file without labels
         self.controls.switching = True
-        if not self._load_bytes(data, base, C):
-            self.host.schedule(self.host.lock_for_upload, False)
+        if not self._load_bytes(data, base, C, token):
+            if token is None or self._end_reading(token):
+                self.host.schedule(self.host.lock_for_upload, False)
             return False
         return True
 
-    def _load_bytes(self, data: bytes, base: str, C: int) -> bool:
+    def _end_reading(self, token) -> bool:
+        """The read of ``token`` is over; False when it had been cancelled meanwhile."""
+        with self._upload_lock:
+            if self._reading is None or self._reading[0] is not token:
+                return False
+            self._reading = None
+        return True
+
+    def _load_bytes(self, data: bytes, base: str, C: int, token=None) -> bool:
         try:
             with tempfile.TemporaryDirectory(prefix="laav-explore-") as d:
                 p = Path(d) / laav.safe_name(base, "upload")
@@ -96,13 +294,101 @@ class Files:
                     seq = laav.load_sequence(p, isolated=True)
                     laav.require_complete(seq)  # the last good result stays (issue 14)
                 except laav.SequenceError as exc:
-                    self.state.report(str(exc).replace(str(p), base)
-                                      + " — still showing the last valid result")
+                    if token is None or self._reading is not None and self._reading[0] is token:
+                        self.state.report(str(exc).replace(str(p), base)
+                                          + " — still showing the last valid result")
                     return False
         except Exception as exc:  # never let an upload kill the session
             self.state.report(f"{base}: could not be read ({type(exc).__name__}: {exc})")
             return False
+        if token is not None and not self._end_reading(token):
+            return False  # cancelled while reading: the shown result stays
         return self.state.load(seq, None if seq.labels is not None else C) is not None
+
+    # ------------------------------------------------------------------ progress and cancel
+    def _tick(self) -> None:
+        """Twice a second: the progress line (shown once work has lasted PROGRESS_AFTER)."""
+        shown = False
+        n = 0
+        while not self.state.closed:
+            n += 1
+            try:
+                if not self._armed and self.host.on_server and n % 4 == 0:
+                    self.host.schedule(self.arm)
+                busy = self.state.busy
+                if busy and self._work_t0 is None:
+                    self._work_t0 = time.monotonic()
+                elif not busy:
+                    self._work_t0 = None
+                text = self.progress_text()
+                if text is not None or shown:
+                    shown = text is not None
+                    self.host.schedule(self._show_progress, text)
+            except Exception:  # the clock must keep going
+                import traceback
+                traceback.print_exc()
+            time.sleep(0.5)
+
+    def progress_text(self) -> str | None:
+        """What the progress line says now (None: nothing long is going on)."""
+        now = time.monotonic()
+        reading = self._reading
+        if reading is not None:
+            _, name, size, t0 = reading
+            if now - t0 < PROGRESS_AFTER:
+                return None
+            return f"Reading **{V.md_text(name)}** ({fmt_size(size)})… {now - t0:.0f} s"
+        t0 = self._work_t0
+        if t0 is None or now - t0 < PROGRESS_AFTER or not self.state.busy:
+            return None
+        seq = self.state.target_sequence
+        if seq is not self.host.sequence or self.host.result is None:
+            what = (f"Computing the first result for **{V.md_text(seq.name)}** ({seq.n_points:,} points, "
+                    f"{seq.n_frames} frames)")
+        else:
+            what = "Recomputing"
+        return f"{what}… {now - t0:.0f} s"
+
+    def _show_progress(self, text: str | None) -> None:
+        if text is not None:
+            text = self.progress_text()  # now, on the document's thread: the work may be over
+        if text is None:
+            self.progress.visible = False
+            return
+        self.progress_md.object = text
+        self.progress.visible = True
+
+    def _on_cancel(self, event=None) -> None:
+        self.cancel()
+
+    def cancel(self) -> bool:
+        """Stop the read or computation going on: the last good result stays, and the page
+        says so. Returns False when there was nothing to cancel."""
+        seq = self.state.target_sequence
+        what = ("the recomputation" if seq is self.host.sequence and self.host.result is not None
+                else f"the first computation of {seq.name}")
+        with self._upload_lock:
+            reading, self._reading = self._reading, None
+        stopped = self.state.cancel()
+        if reading is None and not stopped:
+            return False
+        if reading is not None:
+            what = f"reading {reading[1]}"
+        shown = self.host.sequence.name if self.host.result is not None else None
+        self.host.schedule(self._after_cancel, what, shown)
+        return True
+
+    def _after_cancel(self, what: str, shown: str | None) -> None:
+        """(Document thread.) Controls back to the shown result's settings, and a note."""
+        self.host.lock_for_upload(False)
+        self.controls.switching = False
+        self.controls.show_settings(self.state.settings)
+        self.progress.visible = False
+        self._work_t0 = None
+        self.status.show_last()
+        self.status.show_note(f"**Cancelled** {V.md_text(what)}"
+                              + (f" — still showing {V.md_text(shown)} with its last result."
+                                 if shown else "."))
 
     # ------------------------------------------------------------------ exports
     def _need_result(self):

@@ -51,6 +51,10 @@ class StatusBar:
         if self.status.object.startswith("Reading "):
             self.status.object = self._status_text
 
+    def show_last(self) -> None:
+        """Back to the shown result's status line (after a cancelled read or computation)."""
+        self.status.object = self._status_text
+
     def show_error(self, message: str) -> None:
         self.alert.object = f"**Cannot use these settings:** {V.md_text(message)}"
         self.alert.visible = True

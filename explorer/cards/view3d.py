@@ -125,7 +125,8 @@ class View3D:
         if host is None:
             hdr = (pn.state.headers or {}).get("Host", "") if pn.state.curdoc else ""
             host = hdr.rsplit(":", 1)[0] if hdr else "127.0.0.1"
-        return (f'<iframe src="http://{host}:{self.viser.port}/" title="LAAV 3-D view (viser)" '
+        # the tab's secret path: the 3-D server answers nothing else (see viser_view)
+        return (f'<iframe src="{html.escape(self.viser.url(host))}" title="LAAV 3-D view (viser)" '
                 'style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
                 'box-sizing:border-box"></iframe>')
 
