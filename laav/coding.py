@@ -19,12 +19,13 @@ Everything needed is a few sufficient statistics per fine model (count, sum, sca
 the K principal directions of all trajectories (K = 20 holds every motion's subspace for
 C <= 5 with room for noise), so each candidate group costs one small eigenvalue problem:
 all 2^n - 1 groups are evaluated at once and the partitions enumerated exactly when there
-are few (n = 3C fine models: 9,841 partitions for C = 3), else a greedy merge followed by
+are few (n = 3C fine models: 3,025 partitions for C = 3), else a greedy merge followed by
 moves of single models.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 
 import numpy as np
@@ -140,12 +141,16 @@ def merge_cost(stats: ModelStats, eps: float) -> np.ndarray:
     return out
 
 
+@functools.lru_cache(maxsize=32)
 def _assignments(n: int, C: int) -> np.ndarray:
-    """Every assignment of n models to C non-empty groups, model 0 in group 0, (A, n)."""
+    """Every partition of n models into C non-empty groups, once: groups numbered in order
+    of their first model (model 0 in group 0), (A, n), read-only."""
     A = np.array(list(itertools.product(range(C), repeat=n - 1)), dtype=np.int64).reshape(-1, n - 1)
     A = np.concatenate([np.zeros((A.shape[0], 1), np.int64), A], axis=1)
-    full = np.all([(A == c).any(1) for c in range(C)], axis=0)
-    return A[full]
+    first = np.stack([np.where((A == c).any(1), (A == c).argmax(1), n) for c in range(C)], axis=1)
+    A = A[np.all(np.diff(first, axis=1) > 0, axis=1) & (first[:, -1] < n)]  # all used, in order
+    A.flags.writeable = False
+    return A
 
 
 def _total(stats, assign, C, eps) -> float:

@@ -108,3 +108,12 @@ def test_merge_cost_is_symmetric_and_negative_within_a_motion():
     g = coding.merge_cost(coding.model_stats(pts, fine, 3), eps=10.0)
     assert np.allclose(g, g.T) and np.all(np.diag(g) == 0)
     assert g[0, 1] < 0 < g[0, 2]
+
+
+@pytest.mark.parametrize("n, C, stirling", [(3, 3, 1), (4, 2, 7), (6, 2, 31), (9, 3, 3025),
+                                             (7, 4, 350)])
+def test_every_partition_is_enumerated_once(n, C, stirling):
+    A = coding._assignments(n, C)
+    assert A.shape == (stirling, n)  # Stirling numbers of the second kind S(n, C)
+    canon = {tuple(np.unique(a, return_inverse=True)[1]) for a in A}
+    assert len(canon) == stirling and all(len(set(a)) == C for a in A.tolist())
