@@ -476,7 +476,8 @@ def _model_factors(result: laav.LaavResult) -> list:
 
 
 def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None) -> tuple[dict, list]:
-    """Heat-map cells of the affinity Z (n_fine x n_fine) and the axis factors.
+    """Heat-map cells of the affinity Z (n_fine x n_fine) and the axis factors; ``d`` the
+    pair's epipolar distance, ``g`` the coding length merging it adds (nats per point).
 
     Factors read ``f3→M1``: fine model 3 merged into motion 1 (motions numbered like the
     coarse colours when ``seq`` has ground truth)."""
@@ -493,6 +494,8 @@ def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None) -> tupl
             "z": Z.ravel(), "text": np.array([f"{v:.2f}" for v in Z.ravel()], dtype=object),
             "text_color": np.where(Z.ravel() > 0.55, "white", "black"),
             "d": np.asarray(result.coarse.epipolar_distance, float).ravel(),
+            "g": (np.zeros(n * n) if result.coarse.merge_cost is None
+                  else np.asarray(result.coarse.merge_cost, float).ravel()),
             "j": jj + 1, "k": kk + 1}
     return data, factors
 

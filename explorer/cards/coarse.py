@@ -19,11 +19,12 @@ class CoarseView:
     def __init__(self, host: Host, extent) -> None:
         self.z_mapper = LinearColorMapper(palette=list(Blues256[::-1]), low=0, high=1)
         self.src_z = ColumnDataSource({"x": [], "y": [], "z": [], "text": [], "text_color": [], "d": [],
-                                       "j": [], "k": []})
+                                       "g": [], "j": [], "k": []})
         z = self.fig_z = figure(title="Affinity Z of fine-model pairs", width=320, height=320,
                                 x_range=FactorRange(factors=["f1"]), y_range=FactorRange(factors=["f1"]),
                                 tools="hover", toolbar_location=None,
-                                tooltips=[("pair", "f@j, f@k"), ("Z", "@text"), ("epipolar distance", "@d")])
+                                tooltips=[("pair", "f@j, f@k"), ("Z", "@text"), ("epipolar distance", "@d"),
+                                          ("coding length added by merging (nats/point)", "@g")])
         z.rect("x", "y", 1, 1, source=self.src_z, fill_color={"field": "z", "transform": self.z_mapper},
                line_color="white")
         z.text("x", "y", text="text", source=self.src_z, text_align="center", text_baseline="middle",
@@ -47,6 +48,13 @@ class CoarseView:
         self.fig_z.x_range.factors = factors or ["–"]
         self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
         self.src_z.data = data
-        self.fig_z.title.text = f"Affinity Z (λ = {res.params.lam:g}): {len(factors)} fine models"
-        self.merge_md.object = ("**Which fine model joined which motion** (spectral clustering of Z):\n\n"
+        if res.coarse.method == "coding":
+            self.fig_z.title.text = (f"Coding affinity exp(−ΔL), ε = {res.params.coding_eps:g} px: "
+                                     f"{len(factors)} fine models")
+            how = ("the partition of least coding length decided (ours; ΔL: bits per point that "
+                   "merging a pair adds; the paper's epipolar vote is the paper preset)")
+        else:
+            self.fig_z.title.text = f"Affinity Z (λ = {res.params.lam:g}): {len(factors)} fine models"
+            how = "spectral clustering of Z (the paper's epipolar votes)"
+        self.merge_md.object = (f"**Which fine model joined which motion** ({how}):\n\n"
                                 + V.merge_table(seq, res))
