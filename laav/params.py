@@ -92,10 +92,6 @@ class LaavParams:
         with plain RV's random starts). Speed only: each trial draws from its own random
         stream and keeps its own convergence test, and the trial kept is the same as if
         they ran one after another, so a seed's labels do not depend on it.
-    rv_fill : bool
-        LAAV's informed trial starts the points in no atom at the motion whose rank-4
-        trajectory subspace (fitted on its atom points) explains them best, with the atom
-        points' weight (ours); False: at random with no votes (the paper).
     rv_refine : bool
         After voting, reassign each point to the motion whose fundamental matrices (fitted
         on the motion's points over many frame pairs) explain it best.
@@ -162,7 +158,6 @@ class LaavParams:
     rv_patience: int = 15
     rv_label_weight: float = 5.0
     rv_batch: int = 2
-    rv_fill: bool = True
     rv_refine: bool = True
     rv_reassign: bool = True
     rv_select: str = "subspace"
@@ -188,12 +183,12 @@ class LaavParams:
         Atoms by RANSAC on one random frame pair each (``atom_frames="pair"``), 2C fine
         models, fine-to-coarse by spectral clustering of the paper's pairwise four-atom
         epipolar votes alone (``coarse_merge="epipolar"``, no pooled voting), and a
-        fine-tuning that is Random Voting started from the coarse labels (the points in no
-        atom at random): one informed trial, no plain RV run, no model selection, no
-        refinement and no joint reassignment. ``changes`` override fields as in :meth:`replace`.
+        fine-tuning that is Random Voting started from the coarse labels: one informed
+        trial, no plain RV run, no model selection, no refinement and no joint
+        reassignment. ``changes`` override fields as in :meth:`replace`.
         """
         return cls(atom_frames="pair", fine_per_motion=2, coarse_merge="epipolar", pooled_trials=0,
-                   pairwise_weight=1.0, rv_fill=False, rv_refine=False, rv_reassign=False,
+                   pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
                    rv_select="none").replace(**changes)
 
     def replace(self, **changes) -> LaavParams:
@@ -251,7 +246,6 @@ _BOUNDS = (
     ("rv_patience", "int", 1, 10_000),
     ("rv_label_weight", "float", 0, _BIG),
     ("rv_batch", "int", 1, 32),
-    ("rv_fill", "bool", None, None),
     ("rv_refine", "bool", None, None),
     ("rv_reassign", "bool", None, None),
     ("rv_select", "choice", ("none", "subspace"), None),

@@ -19,7 +19,7 @@ import numpy as np
 from .geometry import fit_fundamental, sampson_distance
 
 __all__ = ["labelling_cost", "subspace_cost", "motion_distances", "refine_labels",
-           "subspace_residuals", "reassign_labels", "frame_pairs", "fill_labels"]
+           "subspace_residuals", "reassign_labels", "frame_pairs"]
 
 #: Rank of the trajectory subspaces of :func:`subspace_cost` (affine camera: 4, plus one
 #: for perspective and tracking noise; 5 measured best of 4..8, see benchmarks/TUNING.md).
@@ -299,29 +299,3 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
             break
         cur = new
     return cur.copy(), int((cur != start).sum())
-
-
-def fill_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                rank: int = REASSIGN_RANK) -> np.ndarray:
-    """Labels with every unlabelled point (-1) given the motion whose rank-``rank``
-    trajectory subspace, fitted (unweighted) on that motion's labelled points, is nearest.
-
-    Parameters
-    ----------
-    points : ndarray of shape (F, P, 2)
-    labels : ndarray of shape (P,)
-        Motion of every point, -1 for unlabelled ones.
-    n_motions : int
-    rank : int
-
-    Returns
-    -------
-    ndarray of shape (P,), int64
-        ``labels`` unchanged where labelled; unchanged (-1 stays) when a motion has
-        ``rank + 1`` labelled points or fewer, so no subspace can be fitted to it.
-    """
-    labels = np.asarray(labels, dtype=np.int64)
-    R = subspace_residuals(points, labels, n_motions, rank, rounds=1)
-    if R is None:
-        return labels.copy()
-    return np.where(labels >= 0, labels, R.argmin(axis=0))

@@ -6,11 +6,6 @@ starts) or as LAAV's fine-tuning (one *informed* trial started from the coarse l
 as the LAAV paper says), and then the steps beyond both papers, each a named setting
 (``docs/ALGORITHM.md`` has the table with what each measured):
 
-* **Filled start** (``rv_fill``). The points in no atom start LAAV's informed trial at
-  the motion whose rank-4 trajectory subspace, fitted on that motion's atom points,
-  explains them best (:func:`laav.refine.fill_labels`), with the atom points' weight,
-  instead of at random: the trial starts from a whole labelling and has only to confirm
-  it.
 * **Refinement** (``rv_refine``). Every motion fits robust fundamental matrices on its own
   points over a fixed spread of frame pairs; points their own motion does not explain
   move to the motion with the smallest mean Sampson distance (:func:`refine_labels`).
@@ -42,7 +37,6 @@ from ._threads import single_threaded
 from .metrics import misclassification_rate
 from .params import LaavParams
 from .refine import (
-    fill_labels,
     frame_pairs,
     labelling_cost,
     motion_distances,
@@ -145,8 +139,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         is the seed itself, a generator gives one draw). None (default): ``seed`` is used.
     init_labels : ndarray of shape (P,), optional
         Start labels (LAAV fine-tuning); ``-1`` marks unlabelled points, which start at
-        the motion whose subspace explains them best (``rv_fill``, :func:`fill_labels`)
-        or at random. None gives plain RV from random partitions.
+        random. None gives plain RV from random partitions.
     weights : ndarray of shape (P,), optional
         Initial votes of each point for its start label (default ``rv_label_weight`` for
         labelled points, 0 otherwise). Only with ``init_labels``.
@@ -195,8 +188,6 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
     if init.max() >= C:
         raise ValueError(f"init_labels has label {init.max()} but n_motions is {C}")
-    if params.rv_fill and (init < 0).any():
-        init = fill_labels(points, init, C)
     known = init >= 0
     if weights is None:
         w = np.where(known, params.rv_label_weight, 0.0)

@@ -99,31 +99,3 @@ def test_reassignment_repairs_laav_on_hopkins(hopkins_root, name):
 def test_reassign_flag_is_validated(bad_value):
     with pytest.raises(ValueError, match="rv_reassign must be True or False"):
         LaavParams(rv_reassign=bad_value)
-
-
-def test_fill_labels_gives_unlabelled_points_the_nearest_motion_subspace():
-    """Against a direct computation: per motion, the top-4 left singular vectors of its
-    labelled trajectories; each unlabelled point to the motion of least residual."""
-    from laav.refine import fill_labels
-
-    rng = np.random.default_rng(0)
-    seq = synthetic.make_sequence(n_objects=2, n_frames=12, n_points=150, rng=3)
-    pts = seq.points
-    labels = seq.labels.copy()
-    hidden = rng.choice(labels.size, 40, replace=False)
-    labels[hidden] = -1
-    got = fill_labels(pts, labels, 3)
-    F = pts.shape[0]
-    W = np.transpose(pts, (0, 2, 1)).reshape(2 * F, -1)
-    res = []
-    for g in range(3):
-        U = np.linalg.svd(W[:, labels == g], full_matrices=False)[0][:, :4]
-        res.append(((W - U @ (U.T @ W)) ** 2).sum(0))
-    want = np.where(labels >= 0, labels, np.argmin(res, axis=0))
-    np.testing.assert_array_equal(got, want)
-    assert np.array_equal(got[labels >= 0], labels[labels >= 0])
-    assert (got[hidden] == seq.labels[hidden]).mean() > 0.9  # and it is mostly right
-    # a motion too small for a subspace: nothing is filled
-    tiny = labels.copy()
-    tiny[np.flatnonzero(tiny == 2)[3:]] = -1
-    np.testing.assert_array_equal(fill_labels(pts, tiny, 3), tiny)
