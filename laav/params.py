@@ -48,13 +48,15 @@ class LaavParams:
         Number of fine motion models the multicut is brought to; None means
         ``fine_per_motion * C``.
     fine_per_motion : int
-        Fine models per motion when ``fine_models`` is None: 2 in the paper; 3 (ours) with
-        the coding-length merge, which needs no fine model to mix two motions and can
-        afford more models (see ``docs/ALGORITHM.md``).
-    coarse_merge : {"coding", "epipolar"}
-        How the fine models are merged into C motions: ``"coding"`` (ours) the partition
-        of least lossy coding length of the models' trajectories (:mod:`laav.coding`);
-        ``"epipolar"`` (the paper) spectral clustering of the epipolar-vote affinity Z.
+        Fine models per motion when ``fine_models`` is None: 2 (the paper, the default);
+        3 suits the coding-length merge, which can afford more models
+        (see ``docs/ALGORITHM.md``).
+    coarse_merge : {"epipolar", "coding"}
+        How the fine models are merged into C motions: ``"epipolar"`` (the default, the
+        paper's form) spectral clustering of the epipolar-vote affinity Z; ``"coding"``
+        (ours, an option) the partition of least lossy coding length of the models'
+        trajectories (:mod:`laav.coding`): better on Hopkins155, much worse when one
+        motion holds a few percent of the points (``docs/ALGORITHM.md``).
     coding_eps : float
         Distortion (px) of the coding length (``coarse_merge="coding"``).
     lam : float
@@ -141,8 +143,8 @@ class LaavParams:
     edge_scale: float = 2.0
     cut_prior: float = 0.0
     fine_models: int | None = None
-    fine_per_motion: int = 3
-    coarse_merge: str = "coding"
+    fine_per_motion: int = 2
+    coarse_merge: str = "epipolar"
     coding_eps: float = 10.0
     lam: float = 2.0
     coarse_frames: int = 7

@@ -154,11 +154,11 @@ def test_point_labels_from_atoms_rules():
     assert lab.tolist() == [1, 1, 0, 0, 0, 1, 1, 1, -1]
 
 
-#: Clean scenes on which the coarse stage is known to be wrong. Empty since the
-#: coding-length merge (2026-11-30); the paper's epipolar merge still gets 3-motion scene
-#: 0, seed 0 wrong (the multicut's 2C fine models are pure, spectral clustering of the
-#: epipolar affinity puts two of them in the wrong motion): see the test below.
-COARSE_KNOWN_WRONG: set = set()
+#: The clean scene on which the default coarse stage is known to be wrong (measured
+#: 2026-11-30: 3-motion scene 0, seed 0: the multicut's 2C fine models are pure, the
+#: epipolar merge puts two of them in the wrong motion; the coding merge gets it right,
+#: see the test below). Strict: a fix shows as a failure here.
+COARSE_KNOWN_WRONG = {(2, 0)}
 
 
 @pytest.mark.parametrize("n_objects, seed", [

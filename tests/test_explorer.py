@@ -115,9 +115,9 @@ def test_lambda_change_alters_z_and_not_the_atoms():
     p = REPO / "explorer" / "assets" / "demo_two_objects.mat"
     if not p.is_file():
         pytest.skip("explorer/assets/demo_two_objects.mat is missing")
-    # λ enters Z only with the paper's epipolar merge (the default coding merge does not
-    # use it: see test_lambda_does_not_move_the_coding_merge)
-    ex = Explorer.from_file(p, viser=False, params=laav.LaavParams(coarse_merge="epipolar"))
+    # λ enters Z with the epipolar merge (the default; the coding merge does not use it:
+    # see test_lambda_does_not_move_the_coding_merge)
+    ex = Explorer.from_file(p, viser=False)
     try:
         assert ex.wait(120)
         z0 = _data(ex.src_z, "z")
@@ -136,9 +136,11 @@ def test_lambda_change_alters_z_and_not_the_atoms():
         ex.close()
 
 
-def test_lambda_does_not_move_the_coding_merge(ex):
-    """With the default coding-length merge λ is not used: stage 4 reruns, its decision and
-    the Z drawn (the coding affinity) stay."""
+def test_lambda_does_not_move_the_coding_merge():
+    """With the coding-length merge λ is not used: stage 4 reruns, its decision and the Z
+    drawn (the coding affinity) stay."""
+    ex = Explorer.demo(viser=False, params=laav.LaavParams(coarse_merge="coding", fine_per_motion=3))
+    assert ex.wait(120)
     co0 = ex.result.coarse
     z0 = _data(ex.src_z, "z")
     ex.w_params["lam"].value = 0.3
@@ -147,6 +149,8 @@ def test_lambda_does_not_move_the_coding_merge(ex):
     assert co is not co0 and co.method == "coding"
     np.testing.assert_array_equal(co.fine_to_coarse, co0.fine_to_coarse)
     np.testing.assert_allclose(_data(ex.src_z, "z"), z0)
+    assert "ε = 10 px" in ex.fig_z.title.text
+    ex.close()
 
 
 def test_radius_change_alters_the_atoms(ex):

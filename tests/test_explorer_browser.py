@@ -173,23 +173,22 @@ def test_explorer_in_chromium(tmp_path):
         assert before["points"] == seq.n_points
         page.screenshot(path=str(shots / "explorer_loaded.png"))
 
-        # move ε (the default merge's distortion) in the page: the server recomputes
-        # stage 4 and the browser's Z follows
-        eps0 = ex.result.params.coding_eps
+        # move λ in the page: the server recomputes and the browser's Z changes
+        lam0 = ex.result.params.lam
         atoms0 = ex.result.atoms
-        target = round(eps0 * 1.5 + 0.5, 1)
-        assert page.evaluate(JS_SET_SLIDER, ["ε", target]) is not None
-        _wait_for(lambda: ex.result.params.coding_eps == target and ex.wait(1), 60, "the ε result")
+        target = round(lam0 * 2 + 0.5, 1)
+        assert page.evaluate(JS_SET_SLIDER, ["λ", target]) is not None
+        _wait_for(lambda: ex.result.params.lam == target and ex.wait(1), 60, "the λ result")
         assert ex.result.atoms is atoms0
-        _wait_for(lambda: f"ε = {target:g} px" in page.evaluate(JS_SOURCES).get("ztitle", ""), 20,
+        _wait_for(lambda: f"λ = {target:g}" in page.evaluate(JS_SOURCES).get("ztitle", ""), 20,
                   "the Z title in the browser")
-        # one line says what the change did (and the status names ε: it is off its default)
-        page.get_by_text(f"What changed: ε {eps0:g} → {target:g}").first.wait_for(timeout=20000)
-        page.get_by_text(f"ε = {target:g}").first.wait_for(timeout=20000)
+        # one line says what the change did (and the status names λ: it is off its default)
+        page.get_by_text(f"What changed: λ {lam0:g} → {target:g}").first.wait_for(timeout=20000)
+        page.get_by_text(f"λ = {target:g}").first.wait_for(timeout=20000)
         after = page.evaluate(JS_SOURCES)
-        # the browser shows the new result's Z (whether or not ε moved it on this sequence)
+        # the browser shows the new result's Z (whether or not λ moved it on this sequence)
         assert after["z"] == pytest.approx(list(ex.result.coarse.affinity.ravel()))
-        assert after["r1"] == before["r1"], "atoms changed with ε"
+        assert after["r1"] == before["r1"], "atoms changed with λ"
 
         # an impossible R1 shows a message in the page and keeps the result
         res = ex.result
