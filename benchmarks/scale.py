@@ -5,7 +5,8 @@ and the background, 640 x 480 image, 0.5 px noise, seed 0) runs the pipeline's s
 after another, exactly as :class:`laav.Pipeline` does, twice, each time in a fresh
 subprocess:
 
-* a *timing* run (no tracing): seconds per stage, and the process's peak resident memory
+* a *timing* run (no tracing): CPU seconds per stage (``time.process_time``, robust to
+  other work on a shared machine) and the wall total, and the process's peak resident memory
   (``resource.getrusage(...).ru_maxrss``: interpreter, numpy and the sequence included);
 * a *memory* run under ``tracemalloc``: the peak of the memory allocated *during* each
   stage (``tracemalloc.reset_peak`` before it), i.e. what the stage adds above what is
@@ -63,7 +64,7 @@ def _child(P: int, F: int, seed: int, memory: bool) -> dict:
     p = laav.LaavParams()
     rngs = _stage_rngs(seed)
     new_api = hasattr(atoms_mod, "Neighbourhoods")
-    out = {"P": P, "F": F, "C": C, "seconds": {}, "peak_mb": {}}
+    out = {"P": P, "F": F, "C": C, "seconds": {}, "cpu": {}, "peak_mb": {}}
     st: dict = {}
 
     def run(stage):
@@ -94,9 +95,10 @@ def _child(P: int, F: int, seed: int, memory: bool) -> dict:
             if memory:
                 tracemalloc.reset_peak()
                 before = tracemalloc.get_traced_memory()[0]
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             run(stage)
             out["seconds"][stage] = time.perf_counter() - t
+            out["cpu"][stage] = time.process_time() - c
             if memory:
                 out["peak_mb"][stage] = (tracemalloc.get_traced_memory()[1] - before) / 2**20
         if memory:
@@ -124,16 +126,17 @@ def _spawn(P, F, seed, memory, timeout):
 
 def _fmt_row(t: dict, m: dict | None) -> str:
     if "failed" in t:
-        return f"| {t['P']:,} | {t['F']} | failed: {t['failed']} |" + " |" * (2 * len(STAGES) + 2)
-    secs = " | ".join(f"{t['seconds'][s]:.2f}" for s in STAGES)
-    total = sum(t["seconds"].values())
+        return f"| {t['P']:,} | {t['F']} | failed: {t['failed']} |" + " |" * (2 * len(STAGES) + 3)
+    secs = " | ".join(f"{t['cpu'][s]:.2f}" for s in STAGES)
+    total = sum(t["cpu"].values())
+    wall = sum(t["seconds"].values())
     if m and "failed" not in m:
         mems = " | ".join(f"{m['peak_mb'][s]:.0f}" for s in STAGES)
         mmax = f"{max(m['peak_mb'].values()):.0f}"
     else:
         mems = " | ".join("-" for _ in STAGES)
         mmax = "-"
-    return (f"| {t['P']:,} | {t['F']} | {secs} | **{total:.1f}** | {mems} | {mmax} | "
+    return (f"| {t['P']:,} | {t['F']} | {secs} | **{total:.1f}** | {wall:.1f} | {mems} | {mmax} | "
             f"{t['maxrss_mb']:.0f} | {t['atoms']} | {t['edges']} | {t['error_pct']:.2f} |")
 
 
@@ -164,14 +167,15 @@ def main(argv=None) -> int:
         if "failed" in t:
             print(f"P={P} F={args.frames}: {t['failed']}", flush=True)
             continue
-        line = " ".join(f"{s}={t['seconds'][s]:.2f}s" for s in STAGES)
+        line = " ".join(f"{s}={t['cpu'][s]:.2f}s" for s in STAGES)
         if m and "failed" not in m:
             line += " | peak " + " ".join(f"{s}={m['peak_mb'][s]:.0f}MB" for s in STAGES)
-        print(f"P={P} F={args.frames} total={sum(t['seconds'].values()):.1f}s {line} | "
+        print(f"P={P} F={args.frames} cpu={sum(t['cpu'].values()):.1f}s "
+              f"wall={sum(t['seconds'].values()):.1f}s {line} | "
               f"maxrss={t['maxrss_mb']:.0f}MB atoms={t['atoms']} edges={t['edges']} "
               f"error={t['error_pct']:.2f}%", flush=True)
 
-    head_s = " | ".join(f"{s} s" for s in STAGES)
+    head_s = " | ".join(f"{s} CPU s" for s in STAGES)
     head_m = " | ".join(f"{s} MB" for s in STAGES)
     lines = [
         f"# LAAV against the number of tracks ({time.strftime('%Y-%m-%d %H:%M %Z')})",
@@ -183,13 +187,16 @@ def main(argv=None) -> int:
         f"n_points=P, noise={NOISE}, rng={args.seed})` (3 motions, 640 x 480), default `LaavParams()`",
         "- Command: `python benchmarks/scale.py "
         + " ".join(argv if argv is not None else sys.argv[1:]) + "`",
-        "- Seconds: a run without tracing, in a fresh process per size. Stage MB: the peak of "
+        "- Seconds: a run without tracing, in a fresh process per size; CPU seconds of the process "
+        "(time.process_time: the machine is shared, wall time depends on its load), and the wall "
+        "total. Stage MB: the peak of "
         "memory allocated during the stage above what was held before it (tracemalloc, a second "
         "fresh process). maxrss: the timing process's peak resident memory (interpreter, "
         "libraries and sequence included).",
         "",
-        f"| P | F | {head_s} | total s | {head_m} | max stage MB | maxrss MB | atoms | edges | error % |",
-        "|" + "---|" * (2 * len(STAGES) + 8),
+        f"| P | F | {head_s} | total CPU s | wall s | {head_m} | max stage MB | maxrss MB | atoms | "
+        "edges | error % |",
+        "|" + "---|" * (2 * len(STAGES) + 9),
     ]
     lines += [_fmt_row(t, m) for t, m in rows]
     lines.append("")
