@@ -35,7 +35,7 @@ from cv import cross_validate  # noqa: E402
 from speed import data_dir, truth_files  # noqa: E402
 
 import laav  # noqa: E402
-from laav.atoms import build_atoms, trajectory_distances  # noqa: E402
+from laav.atoms import Neighbourhoods, build_atoms  # noqa: E402
 from laav.coarse import merge_models  # noqa: E402
 from laav.graph import atom_graph  # noqa: E402
 from laav.multicut import solve_multicut  # noqa: E402
@@ -60,7 +60,7 @@ def run_sequence(path: Path, seed: int, per_motion: list[int], merges: list[str]
     C = seq.n_motions
     rng = _stage_rngs(seed)
     base = laav.LaavParams()
-    D = trajectory_distances(seq.points)
+    D = Neighbourhoods(seq.points)
     atoms = build_atoms(seq, base, np.random.default_rng(rng["atoms"]), D)
     graph = atom_graph(seq, atoms, base, D)
     rows = []

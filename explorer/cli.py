@@ -115,7 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-browser", action="store_true", help="do not open a browser")
     p.add_argument("--max-points", type=int, default=None, metavar="N",
                    help=f"refuse a FILE with more than N points (default {laav.io.MAX_POINTS:,}; "
-                        "memory grows as about 48 bytes x N^2)")
+                        "time and memory grow about linearly; docs/bench/scale.md)")
     p.add_argument("--complete-only", action="store_true",
                    help="keep only the tracks visible in every frame (LAAV's stages do not handle "
                         "missing entries yet); the page then numbers the kept points 0..K-1")

@@ -11,7 +11,11 @@ Choices where the paper is vague (measured on Hopkins155):
 
 * **Neighbourhoods over the whole sequence.** "Within ``r`` of the seed" means within
   ``r`` in every one of 6 evenly spaced frames (not one frame), so an atom stays small
-  for the whole sequence and its affine premise holds.
+  for the whole sequence and its affine premise holds. They come from a KD-tree
+  (:class:`Neighbourhoods`), never from a P x P matrix: a point within ``r`` in every
+  frame is within ``r`` in each coordinate, so a ball query in the max-norm over the
+  sampled frames' coordinates gives the candidates, and the exact distance (computed
+  as :func:`trajectory_distances` does, bit for bit) decides.
 * **All frames, not one pair** (``atom_frames="all"``, ours). An atom's motion model is
   one affine map from frame 0 to every frame (fitted jointly); a feature is an inlier when
   its RMS residual over all frames is below ``affine_threshold``. A single random frame
@@ -38,7 +42,7 @@ from ._sequence import Sequence, as_points
 from .geometry import affine_residuals, fit_affine, fit_affine_leverage
 from .params import LaavParams
 
-__all__ = ["Atoms", "build_atoms", "trajectory_distances"]
+__all__ = ["Atoms", "Neighbourhoods", "build_atoms", "trajectory_distances"]
 
 _NEIGHBOURHOOD_FRAMES = 6
 
@@ -100,8 +104,148 @@ class Atoms:
         return np.stack([points[:, m].mean(axis=1) for m in self.members], axis=1)
 
 
+def _sampled_frames(F: int, n_frames: int = _NEIGHBOURHOOD_FRAMES) -> np.ndarray:
+    """The evenly spaced frames (first and last included) neighbourhoods are judged on."""
+    return np.unique(np.round(np.linspace(0, F - 1, min(n_frames, F))).astype(int))
+
+
+class Neighbourhoods:
+    """Which trajectories are near which, without a P x P matrix.
+
+    The distance of two trajectories is the largest distance between them over
+    :data:`_NEIGHBOURHOOD_FRAMES` evenly spaced frames, exactly :func:`trajectory_distances`
+    (same arithmetic, same bits) but computed only for pairs a KD-tree proposes: a pair
+    within ``r`` in every sampled frame is within ``r`` in each of its ``2K`` sampled
+    coordinates, so a max-norm ball query (``scipy.spatial.cKDTree``, ``p=inf``) finds a
+    superset and the exact distances decide.
+
+    One object serves every radius: :meth:`within` keeps the pairs of the largest radius
+    asked so far and answers a smaller one by filtering them (what :class:`laav.Pipeline`
+    reuses when R1 or R2 change), a larger one by a new query.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    n_frames : int
+        Frames sampled.
+    """
+
+    def __init__(self, points: np.ndarray, n_frames: int = _NEIGHBOURHOOD_FRAMES):
+        points = np.asarray(points, dtype=np.float64)
+        F, P, _ = points.shape
+        self.n_points = P
+        self.frames = _sampled_frames(F, n_frames)
+        # (P, 2K): x, y of every sampled frame in turn
+        self.coords = np.ascontiguousarray(np.transpose(points[self.frames], (1, 0, 2)).reshape(P, -1))
+        self._columns = np.ascontiguousarray(self.coords.T)  # (2K, P): one coordinate per row
+        self._tree = None
+        self._cache = None  # (radius, counts, cols, dist): every ordered pair within radius
+
+    @property
+    def tree(self):
+        if self._tree is None:
+            from scipy.spatial import cKDTree  # lazy: off `import laav`
+
+            self._tree = cKDTree(self.coords)
+        return self._tree
+
+    def distances(self, i, j) -> np.ndarray:
+        """Exact distances of the pairs ``(i[k], j[k])`` (1-D index arrays), as
+        :func:`trajectory_distances` computes them (the largest squared distance over the
+        sampled frames, then its square root)."""
+        i, j = np.asarray(i), np.asarray(j)
+        out = np.zeros(np.broadcast(i, j).shape)
+        c = self._columns
+        for k in range(0, c.shape[0], 2):
+            dx = c[k][i] - c[k][j]
+            dy = c[k + 1][i] - c[k + 1][j]
+            dx *= dx
+            dy *= dy
+            dx += dy
+            np.maximum(out, dx, out=out)
+        return np.sqrt(out, out=out)
+
+    def _query(self, radius: float):
+        P = self.n_points
+        r = float(radius)
+        # a slightly larger max-norm ball: only a superset is needed, the exact test follows
+        pairs = self.tree.query_pairs(r * (1.0 + 1e-9) + 1e-12, p=np.inf, output_type="ndarray")
+        keys, dists = [np.arange(P, dtype=np.int64) * (P + 1)], [np.zeros(P)]  # i itself
+        for s in range(0, pairs.shape[0], 1 << 20):  # bounded temporaries
+            i = pairs[s:s + (1 << 20), 0].astype(np.int64)
+            j = pairs[s:s + (1 << 20), 1].astype(np.int64)
+            d = self.distances(i, j)
+            keep = d <= r
+            i, j, d = i[keep], j[keep], d[keep]
+            keys += [i * P + j, j * P + i]
+            dists += [d, d]
+        del pairs
+        keys = np.concatenate(keys)
+        order = np.argsort(keys)
+        keys = keys[order]
+        dist = np.concatenate(dists)[order]
+        del order
+        counts = np.bincount(keys // P, minlength=P)
+        self._cache = (r, counts, keys % P, dist)
+
+    def within(self, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every trajectory within ``radius`` of every other, as compressed rows.
+
+        Returns
+        -------
+        indptr : ndarray of shape (P + 1,), int64
+        indices : ndarray of int64
+            Row ``i``'s neighbours are ``indices[indptr[i]:indptr[i + 1]]``, in increasing
+            order, ``i`` itself included.
+        dist : ndarray
+            Their distances (the values :func:`trajectory_distances` has there).
+        """
+        if self._cache is None or self._cache[0] < radius:
+            self._query(radius)
+        r, counts, cols, dist = self._cache
+        if r > radius:
+            keep = dist <= radius
+            rows = np.repeat(np.arange(self.n_points), counts)
+            counts = np.bincount(rows[keep], minlength=self.n_points)
+            cols, dist = cols[keep], dist[keep]
+        indptr = np.zeros(self.n_points + 1, dtype=np.int64)
+        np.cumsum(counts, out=indptr[1:])
+        return indptr, cols, dist
+
+
+class _DenseNeighbourhoods:
+    """A precomputed :func:`trajectory_distances` matrix behind :class:`Neighbourhoods`'
+    interface (callers that still hold one)."""
+
+    def __init__(self, D: np.ndarray):
+        self.D = np.asarray(D)
+        self.n_points = self.D.shape[0]
+
+    def distances(self, i, j) -> np.ndarray:
+        return self.D[i, j]
+
+    def within(self, radius: float):
+        rows, cols = np.nonzero(self.D <= radius)
+        indptr = np.zeros(self.n_points + 1, dtype=np.int64)
+        np.cumsum(np.bincount(rows, minlength=self.n_points), out=indptr[1:])
+        return indptr, cols.astype(np.int64), self.D[rows, cols]
+
+
+def as_neighbourhoods(points: np.ndarray, distances=None):
+    """``distances`` (a :class:`Neighbourhoods`, a dense :func:`trajectory_distances`
+    matrix, or None: built from ``points``) as a :class:`Neighbourhoods`-like object."""
+    if distances is None:
+        return Neighbourhoods(points)
+    if isinstance(distances, np.ndarray):
+        return _DenseNeighbourhoods(distances)
+    return distances
+
+
 def trajectory_distances(points: np.ndarray, n_frames: int = _NEIGHBOURHOOD_FRAMES) -> np.ndarray:
-    """Largest distance between two trajectories over evenly spaced frames.
+    """Largest distance between two trajectories over evenly spaced frames, dense.
+
+    A P x P matrix (8 bytes x P^2): the reference the stages' :class:`Neighbourhoods`
+    equal; the pipeline never builds it.
 
     Parameters
     ----------
@@ -113,8 +257,7 @@ def trajectory_distances(points: np.ndarray, n_frames: int = _NEIGHBOURHOOD_FRAM
     -------
     D : ndarray of shape (P, P)
     """
-    F = points.shape[0]
-    frames = np.unique(np.round(np.linspace(0, F - 1, min(n_frames, F))).astype(int))
+    frames = _sampled_frames(points.shape[0], n_frames)
     from scipy.spatial.distance import cdist  # lazy: 0.17 s off `import laav`
 
     D = np.zeros((points.shape[1], points.shape[1]))
@@ -200,7 +343,7 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
 
 def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
                 rng: np.random.Generator | None = None,
-                distances: np.ndarray | None = None) -> Atoms:
+                distances: Neighbourhoods | np.ndarray | None = None) -> Atoms:
     """Group neighbouring trajectories into overlapping locally affine atoms.
 
     Parameters
@@ -210,8 +353,9 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
         Uses ``r1``, ``r2``, ``atom_min_size``, ``affine_threshold``, ``ransac_hypotheses``.
     rng : numpy.random.Generator
         Seed order and RANSAC samples.
-    distances : ndarray of shape (P, P), optional
-        Precomputed :func:`trajectory_distances` (reused when only the radii change).
+    distances : Neighbourhoods, optional
+        Precomputed :class:`Neighbourhoods` of ``seq`` (reused when only the radii change);
+        a dense :func:`trajectory_distances` matrix is accepted too.
 
     Returns
     -------
@@ -221,8 +365,7 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
     params = LaavParams() if params is None else params
     rng = np.random.default_rng(0) if rng is None else rng
     F, P, _ = points.shape
-    D = trajectory_distances(points) if distances is None else distances
-    near2 = D <= params.r2
+    indptr, near, near_d = as_neighbourhoods(points, distances).within(params.r2)
     pair_mode = params.atom_frames == "pair" and F > 2
     gap = max(1, F // 3)
     owner = np.full(P, -1, dtype=np.int64)
@@ -232,7 +375,9 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
         if owner[s] >= 0 or tried[s]:
             continue
         tried[s] = True
-        cand = np.flatnonzero(near2[s] & (owner < 0))
+        row = slice(indptr[s], indptr[s + 1])
+        free = owner[near[row]] < 0
+        cand = near[row][free]  # increasing, as the seed's free neighbours within r2
         if cand.size < params.atom_min_size:
             continue
         seed_pos = int(np.searchsorted(cand, s))
@@ -257,7 +402,7 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
         seeds.append(s)
         affines.append(A)
         residuals.append(res)
-        inner = mem[D[s, mem] <= params.r1]
+        inner = mem[near_d[row][free][mask] <= params.r1]
         owner[inner] = atom
         tried[inner] = True
     covered = np.zeros(P, dtype=bool)

@@ -69,7 +69,7 @@ def _add_max_points(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--max-points", type=_positive_int, default=None, metavar="N",
                         help=f"refuse sequences with more than N points (default {MAX_POINTS:,}; "
-                             "memory grows as about 48 bytes x N^2)")
+                             "time and memory grow about linearly; docs/bench/scale.md)")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -5,6 +5,11 @@ among the other's ``graph_neighbors`` nearest atoms (largest seed-to-seed distan
 the sequence), or when the edge is needed to keep the graph connected (minimum spanning
 tree of those distances).
 
+Nothing here is quadratic in memory: atom overlaps are a sparse product of the sparse
+membership matrix, and the nearest atoms and the spanning tree come from one pass of
+Prim's algorithm that computes each seed's distance row once (O(N) memory, O(N^2) time
+in N atoms, not points).
+
 **Forward-backward error.** For an edge (a, b) and a frame pair (l, r), atom a's affine
 map from l to r (``A_a[r] A_a[l]^-1``) carries b's features from l to r, and its inverse
 carries them back from r to l; the error is the mean of the two Euclidean discrepancies
@@ -24,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._sequence import Sequence, as_points
-from .atoms import Atoms, trajectory_distances
+from .atoms import Atoms, Neighbourhoods, _DenseNeighbourhoods, as_neighbourhoods
 from .geometry import affine_residuals
 from .params import LaavParams
 
@@ -126,7 +131,9 @@ def forward_backward_error(points: np.ndarray, atoms: Atoms, edges: np.ndarray) 
         return (e * mk).sum(1) / mk.sum(1)
 
     out = np.empty(E)
-    chunk = 256
+    # edges per batch: the batch's arrays hold K x chunk x mmax points (each edge's result
+    # does not depend on the batch it is in)
+    chunk = int(np.clip(2**17 // max(left.size * mmax, 1), 16, 256))
     for s in range(0, E, chunk):
         a = edges[s : s + chunk, 0]
         b = edges[s : s + chunk, 1]
@@ -140,8 +147,59 @@ def _transfer_error(T: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.sqrt(dx * dx + dy * dy)
 
 
+def _seed_graph(nb, seeds: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` nearest seeds of every seed, and the minimum spanning tree of all seeds.
+
+    Distances are those of :class:`~laav.atoms.Neighbourhoods` (the largest over the
+    sampled frames); the tree spans the complete graph with weights ``distance + 1e-9``
+    (so that coincident seeds are still joined). One pass of Prim's algorithm computes
+    every seed's distance row once, in the order the seeds join the tree, and takes its
+    ``k`` nearest from the same row: no N x N array.
+
+    Returns
+    -------
+    nn : ndarray of shape (N, k), int64
+    tree : ndarray of shape (N - 1, 2), int64
+        The tree's edges (unordered pairs).
+    """
+    N = seeds.size
+    if isinstance(nb, _DenseNeighbourhoods):
+        def row_of(u):
+            return nb.D[seeds[u], seeds]
+    else:
+        # per coordinate rows (2K, N): a row is a few contiguous vector operations
+        Xt = np.ascontiguousarray(nb.coords[seeds].T)
+
+        def row_of(u):
+            d = Xt - Xt[:, u:u + 1]
+            d *= d
+            return np.sqrt((d[0::2] + d[1::2]).max(axis=0))  # as Neighbourhoods.distances
+
+    nn = np.empty((N, k), dtype=np.int64)
+    key = np.full(N, np.inf)
+    parent = np.full(N, -1, dtype=np.int64)
+    outside = np.ones(N, dtype=bool)
+    tree = np.empty((N - 1, 2), dtype=np.int64)
+    u = 0
+    for step in range(N):
+        outside[u] = False
+        row = row_of(u)
+        knn = row.copy()
+        knn[u] = np.inf
+        nn[u] = np.argpartition(knn, k - 1)[:k]
+        if step == N - 1:
+            break
+        w = row + 1e-9
+        better = outside & (w < key)
+        key[better] = w[better]
+        parent[better] = u
+        u = int(np.argmin(np.where(outside, key, np.inf)))
+        tree[step] = (parent[u], u)
+    return nn, tree
+
+
 def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | None = None,
-               distances: np.ndarray | None = None) -> AtomGraph:
+               distances: Neighbourhoods | np.ndarray | None = None) -> AtomGraph:
     """Build the atom graph with forward-backward edge errors and signed costs.
 
     Parameters
@@ -150,8 +208,9 @@ def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | No
     atoms : Atoms
     params : LaavParams
         Uses ``graph_neighbors``, ``edge_scale``, ``cut_prior``.
-    distances : ndarray of shape (P, P), optional
-        Precomputed :func:`~laav.atoms.trajectory_distances`.
+    distances : Neighbourhoods, optional
+        Precomputed :class:`~laav.atoms.Neighbourhoods` (a dense
+        :func:`~laav.atoms.trajectory_distances` matrix is accepted too).
 
     Returns
     -------
@@ -164,27 +223,28 @@ def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | No
     if N < 2:
         return AtomGraph(np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0),
                          np.zeros(0, np.int64), positions, N)
-    M = atoms.membership().astype(np.float64)  # float: BLAS, 10x faster than int32 (exact)
-    shared = (M @ M.T).astype(np.int64)
-    np.fill_diagonal(shared, 0)
-    D = trajectory_distances(points) if distances is None else distances
-    Ds = D[np.ix_(atoms.seeds, atoms.seeds)].copy()
-    np.fill_diagonal(Ds, np.inf)
-    k = min(params.graph_neighbors, N - 1)
-    nn = np.argpartition(Ds, k - 1, axis=1)[:, :k]
-    adj = shared > 0
-    rows = np.repeat(np.arange(N), k)
-    adj[rows, nn.ravel()] = True
-    Dm = np.where(np.isfinite(Ds), Ds, 0.0) + 1e-9
-    np.fill_diagonal(Dm, 0.0)
-    from scipy.sparse.csgraph import minimum_spanning_tree  # lazy: 0.4 s off `import laav`
+    from scipy.sparse import csr_matrix  # lazy: off `import laav`
 
-    mst = minimum_spanning_tree(Dm).toarray() > 0
-    adj |= mst
-    adj |= adj.T
-    i, j = np.nonzero(np.triu(adj, 1))
+    P = atoms.n_points
+    sizes = np.array([m.size for m in atoms.members], dtype=np.int64)
+    M = csr_matrix((np.ones(int(sizes.sum())), np.concatenate(atoms.members),
+                    np.concatenate([[0], np.cumsum(sizes)])), shape=(N, P))
+    shared = (M @ M.T).tocoo()  # features two atoms share (exact: small integer sums)
+    up = shared.row < shared.col
+    sh_i, sh_j = shared.row[up].astype(np.int64), shared.col[up].astype(np.int64)
+    sh_n = np.rint(shared.data[up]).astype(np.int64)
+    nb = as_neighbourhoods(points, distances)
+    k = min(params.graph_neighbors, N - 1)
+    nn, tree = _seed_graph(nb, atoms.seeds, k)
+    a = np.concatenate([sh_i, np.repeat(np.arange(N), k), tree[:, 0]])
+    b = np.concatenate([sh_j, nn.ravel(), tree[:, 1]])
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    keys = np.unique(lo * N + hi)  # row-major order, as np.nonzero(np.triu(adj, 1))
+    i, j = keys // N, keys % N
     edges = np.stack([i, j], axis=1).astype(np.int64)
+    overlap = np.zeros(keys.size, dtype=np.int64)
+    overlap[np.searchsorted(keys, sh_i * N + sh_j)] = sh_n
     errors = forward_backward_error(points, atoms, edges)
     costs = 2.0 * np.log(params.edge_scale / np.maximum(errors, 1e-6)) - params.cut_prior
     return AtomGraph(edges=edges, errors=errors, costs=costs,
-                     overlap=shared[i, j].astype(np.int64), positions=positions, n_nodes=N)
+                     overlap=overlap, positions=positions, n_nodes=N)

@@ -36,10 +36,10 @@ _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 _ZIP_MAGIC = b"PK\x03\x04"
 
 
-#: Most trajectories a file may hold unless ``max_points`` says otherwise. LAAV's memory
-#: grows as about 48 bytes x P^2 (pairwise trajectory distances and the voting's arrays):
-#: 10,000 points need about 5 GB, 20,000 would exhaust a 16 GB machine.
-MAX_POINTS = 10_000
+#: Most trajectories a file may hold unless ``max_points`` says otherwise. No stage holds
+#: a P x P array (issue 14 item 8): memory grows linearly in P, and 20,000 tracks x 100
+#: frames segment in about 1 GB; what grows is time (``docs/bench/scale.md``).
+MAX_POINTS = 20_000
 #: Most bytes the arrays read from one file may declare together (before they are read).
 MAX_BYTES = 1 << 28  # 256 MiB: e.g. 10,000 points over 1,600 frames as float64
 

@@ -168,7 +168,7 @@ class _Context:
 
 def _prepare(seq, max_motions, params, seed, rank) -> _Context:
     """Atoms, graph, multicut and the greedy merges: everything before the candidates."""
-    from .atoms import build_atoms, trajectory_distances
+    from .atoms import Neighbourhoods, build_atoms
     from .coarse import point_labels_from_atoms
     from .graph import atom_graph
     from .multicut import solve_multicut
@@ -182,7 +182,7 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
     pts = seq.points
     F, P, _ = pts.shape
     rng = np.random.default_rng(_stage_rngs(seed)["atoms"])
-    D = trajectory_distances(pts)
+    D = Neighbourhoods(pts)
     atoms = build_atoms(seq, p, rng, D)
     graph = atom_graph(seq, atoms, p, D)
     kmin = max_motions + 1

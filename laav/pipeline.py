@@ -20,7 +20,7 @@ import numpy as np
 from ._random import resolve_seed
 from ._sequence import LaavWarning, Sequence, check_degenerate, require_complete
 from ._threads import single_threaded
-from .atoms import Atoms, build_atoms, trajectory_distances
+from .atoms import Atoms, Neighbourhoods, build_atoms
 from .coarse import Coarse, merge_models
 from .graph import AtomGraph, atom_graph
 from .multicut import Multicut, solve_multicut
@@ -166,9 +166,9 @@ class Pipeline:
         timings = dict.fromkeys(STAGES, 0.0)
         todo = STAGES[STAGES.index(start):]
         st = self._stages
-        if self._distances is None:
+        if self._distances is None:  # kept for every later run: R1/R2 changes reuse it
             t = time.perf_counter()
-            self._distances = trajectory_distances(seq.points)
+            self._distances = Neighbourhoods(seq.points)
             timings["atoms"] += time.perf_counter() - t
         for stage in todo:
             t = time.perf_counter()

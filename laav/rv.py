@@ -271,13 +271,11 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None):
 
 
 def consensus(trials, C, rng):
-    """Combine the labellings of unconverged trials by spectral clustering."""
-    from sklearn.cluster import SpectralClustering
+    """Combine the labellings of unconverged trials by spectral clustering of their
+    co-association (+ 1e-6), without the P x P matrix (:mod:`laav._spectral`)."""
+    from ._spectral import coassociation_clustering
 
     labs = np.stack([t[0] for t in trials])  # (T, P)
-    A = (labs[:, :, None] == labs[:, None, :]).mean(axis=0)
-    sc = SpectralClustering(n_clusters=C, affinity="precomputed", assign_labels="cluster_qr",
-                            random_state=int(rng.integers(2**31 - 1)))
-    labels = sc.fit_predict(A + 1e-6).astype(np.int64)
+    labels = coassociation_clustering(labs, C, int(rng.integers(2**31 - 1)))
     last = trials[-1]
     return labels, last[1], last[2], last[3], last[4], False

@@ -367,4 +367,4 @@ def test_bench_max_points(data_dir, tmp_path, capsys):
     assert rc == 2
     err = capsys.readouterr().err
     assert "60 points exceed the limit of 50" in err and "no benchmark sequences" in err
-    assert io.MAX_POINTS == 10_000  # restored for the rest of the process
+    assert io.MAX_POINTS == 20_000  # restored for the rest of the process

@@ -695,7 +695,7 @@ def test_npz_declaring_a_huge_array_is_refused_before_reading(tmp_path):
     with pytest.raises(SequenceError) as info:
         _peak_bytes(lambda: load_sequence(p))
     msg = str(info.value)
-    assert str(p) in msg and "1,000,000 points exceed the limit of 10,000" in msg
+    assert str(p) in msg and "1,000,000 points exceed the limit of 20,000" in msg
 
 
 def test_npz_member_over_the_byte_limit(tmp_path):
@@ -724,7 +724,7 @@ def test_compressed_npz_bomb_stays_small_in_memory(tmp_path):
             box["error"] = str(exc)
 
     assert _peak_bytes(load) < 2_000_000
-    assert "20,001 points exceed the limit of 10,000" in box["error"]
+    assert "20,001 points exceed the limit of 20,000" in box["error"]
     assert load_sequence(p, max_bytes=10**9, max_points=30_000).n_points == 20_001
     with pytest.raises(SequenceError, match="20,001 points exceed the limit of 20,000"):
         load_sequence(p, max_points=20_000)
@@ -733,11 +733,11 @@ def test_compressed_npz_bomb_stays_small_in_memory(tmp_path):
 @pytest.mark.parametrize("isolated", [False, True])
 def test_mat_with_too_many_points(tmp_path, isolated):
     p = tmp_path / "many_truth.mat"
-    scipy.io.savemat(str(p), {"y": np.ones((3, 12_000, 2))}, do_compression=True)
-    with pytest.raises(SequenceError, match="12,000 points exceed the limit of 10,000") as info:
+    scipy.io.savemat(str(p), {"y": np.ones((3, 21_000, 2))}, do_compression=True)
+    with pytest.raises(SequenceError, match="21,000 points exceed the limit of 20,000") as info:
         load_sequence(p, isolated=isolated)
     assert str(p) in str(info.value)
-    assert load_sequence(p, isolated=isolated, max_points=12_000).n_points == 12_000
+    assert load_sequence(p, isolated=isolated, max_points=21_000).n_points == 21_000
 
 
 def test_isolated_mat_over_the_byte_limit_is_not_read(tmp_path):
