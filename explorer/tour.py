@@ -1,0 +1,70 @@
+"""The guided tour's steps and texts, in one place for review (no GUI imports).
+
+The tour (:mod:`explorer.cards.tour`) shows one stage at a time: its card, highlighted,
+under a panel with the step's title and two sentences in large type, for a class. Each
+text says what the code does with the default parameters (``LaavParams()``); where the
+paper does otherwise it names the ``paper`` preset (``LaavParams.paper()``).
+
+``cards`` names the cards a step shows (``frame``, ``view3d``, ``graph``, ``coarse``,
+``rv``, ``numbers``; the first is the one highlighted), ``color`` the frame view's
+colour-by (a :data:`explorer.views.COLOR_MODES` key; ``color_no_truth`` instead for a
+sequence without ground truth; None leaves it as it is).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["TourStep", "TOUR"]
+
+
+@dataclass(frozen=True)
+class TourStep:
+    title: str
+    text: str
+    cards: tuple[str, ...]
+    color: str | None = None
+    color_no_truth: str | None = None
+
+
+TOUR: tuple[TourStep, ...] = (
+    TourStep(
+        "1 · Atoms: small groups that move as one",
+        "Each atom grows around a random seed feature: RANSAC keeps the neighbours within the outer "
+        "radius R2 that one affine motion carries through every frame. Features within R1 of the seed "
+        "belong to that atom alone, the ring out to R2 may be shared with other atoms, and features no "
+        "atom takes (grey crosses) wait for stage 4.",
+        ("frame",), color="atoms", color_no_truth="atoms"),
+    TourStep(
+        "2 · Multicut: cutting the atom graph into fine models",
+        "Atoms become nodes of a graph whose edges join overlapping and nearby atoms, blue when one "
+        "atom's affine motion carries the other's features forward and back well (join), red when it "
+        "does not (cut). A minimum cost multicut (greedy contraction, replayed by the slider, then "
+        "Kernighan-Lin) cuts the graph, and its segments are merged or split to 3C fine models, on "
+        "purpose more than the C motions (the paper: 2C).",
+        ("graph",)),
+    TourStep(
+        "3 · Fine-to-coarse: merging fine models into C motions",
+        "The fine models are grouped into C motions by coding length: the grouping whose trajectories "
+        "take the fewest bits to describe (up to a distortion ε) wins, since two motions coded as one "
+        "need an extra coordinate for every point. The paper instead lets pairs of fine models vote "
+        "with epipolar geometry and splits their affinity Z by spectral clustering: that is the paper "
+        "preset (coarse_merge = epipolar).",
+        ("coarse",)),
+    TourStep(
+        "4 · Fine-tuning: Random Voting labels every point",
+        "Random Voting starts from the coarse labels: in each iteration every motion fits a "
+        "fundamental matrix to a few of its points on a random pair of frames, and every point votes "
+        "for the motions whose epipolar geometry fits it, older votes fading by α. This labels the "
+        "features no atom took and can undo a wrong merge; by default plain Random Voting from random "
+        "starts runs beside it and the best-scoring labelling is kept (the paper keeps the informed "
+        "run alone).",
+        ("rv",)),
+    TourStep(
+        "5 · Result: one motion per point, and its error",
+        "Every point now belongs to one of the C motions; with ground truth, the error is the share "
+        "of points misassigned under the best matching of motions to true labels, shown here for "
+        "every stage. Atoms, the merge and the voting are random, so the seed sweep below the cards "
+        "runs seeds 0-9 to show whether a result is typical or a bad draw.",
+        ("numbers", "frame"), color="errors", color_no_truth="final"),
+)
