@@ -8,7 +8,9 @@ paper does otherwise it names the ``paper`` preset (``LaavParams.paper()``).
 ``cards`` names the cards a step shows (``frame``, ``view3d``, ``graph``, ``coarse``,
 ``rv``, ``numbers``; the first is the one highlighted), ``color`` the frame view's
 colour-by (a :data:`explorer.views.COLOR_MODES` key; ``color_no_truth`` instead for a
-sequence without ground truth; None leaves it as it is).
+sequence without ground truth; None leaves it as it is). A text follows the result shown
+(:meth:`TourStep.text_for`): ``{fine}`` is its number of fine models (``3C``, ``2C``), and
+``text_epipolar`` replaces the text when the paper's epipolar merge decided.
 """
 
 from __future__ import annotations
@@ -25,6 +27,15 @@ class TourStep:
     cards: tuple[str, ...]
     color: str | None = None
     color_no_truth: str | None = None
+    text_epipolar: str | None = None
+
+    def text_for(self, params, n_motions: int) -> str:
+        """The text for a result of ``params`` (a :class:`laav.LaavParams`) with C =
+        ``n_motions``: the merge it used, its number of fine models."""
+        text = self.text_epipolar if self.text_epipolar and params.coarse_merge == "epipolar" else self.text
+        n = params.n_fine(n_motions)
+        k = n // n_motions if n_motions and n % n_motions == 0 else None
+        return text.replace("{fine}", f"{k}C" if k is not None else str(n))
 
 
 TOUR: tuple[TourStep, ...] = (
@@ -40,8 +51,8 @@ TOUR: tuple[TourStep, ...] = (
         "Atoms become nodes of a graph whose edges join overlapping and nearby atoms, blue when one "
         "atom's affine motion carries the other's features forward and back well (join), red when it "
         "does not (cut). A minimum cost multicut (greedy contraction, replayed by the slider, then "
-        "Kernighan-Lin) cuts the graph, and its segments are merged or split to 3C fine models, on "
-        "purpose more than the C motions (the paper: 2C).",
+        "Kernighan-Lin) cuts the graph, and its segments are merged or split to {fine} fine models, on "
+        "purpose more than the C motions.",
         ("graph",)),
     TourStep(
         "3 · Fine-to-coarse: merging fine models into C motions",
@@ -50,7 +61,13 @@ TOUR: tuple[TourStep, ...] = (
         "need an extra coordinate for every point. The paper instead lets pairs of fine models vote "
         "with epipolar geometry and splits their affinity Z by spectral clustering: that is the paper "
         "preset (coarse_merge = epipolar).",
-        ("coarse",)),
+        ("coarse",),
+        # the text when the epipolar merge decided (coarse_merge = "epipolar", the paper's)
+        text_epipolar=(
+            "Pairs of fine models vote with epipolar geometry: one fundamental matrix fitted to atoms of "
+            "both explains both when they move as one rigid body, and the votes form the affinity Z. "
+            "Spectral clustering splits Z into C motions, as the paper does; the option coarse_merge = "
+            "coding instead picks the grouping whose trajectories take the fewest bits to describe.")),
     TourStep(
         "4 · Fine-tuning: Random Voting labels every point",
         "Random Voting starts from the coarse labels: in each iteration every motion fits a "

@@ -246,6 +246,15 @@ def test_tour_texts_are_two_sentences_each():
         for c in (s.color, s.color_no_truth):
             assert c is None or c in COLOR_MODES.values()
     assert "coding length" in TOUR[2].text and "paper" in TOUR[2].text
+    coding, paper = laav.LaavParams(coarse_merge="coding"), laav.LaavParams.paper()
+    assert "coding length" in TOUR[2].text_for(coding, 3)
+    assert TOUR[2].text_for(paper, 3).startswith("Pairs of fine models vote with epipolar geometry")
+    assert "to 3C fine models" in TOUR[1].text_for(coding.replace(fine_per_motion=3), 3)
+    assert "to 2C fine models" in TOUR[1].text_for(paper, 2)
+    assert "to 7 fine models" in TOUR[1].text_for(coding.replace(fine_models=7), 3)
+    for s in TOUR:
+        for t in (s.text_for(coding, 3), s.text_for(paper, 3)):
+            assert len(re.findall(r"[.!?](?=\s+[A-Z]|\s*$)", t)) == 2 and "{" not in t
 
 
 def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
@@ -255,7 +264,7 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     before = ex.controls.color_mode
     tour.w_start.clicks += 1
     assert tour.active and tour.panel.visible and tour.step == 0
-    assert tour.texts == (TOUR[0].title, TOUR[0].text)
+    assert tour.texts == (TOUR[0].title, TOUR[0].text_for(ex.result.params, ex.result.n_motions))
     assert [n for n, c in cards.items() if c.visible] == ["frame"]
     assert cards["frame"].styles.get("outline") and ex.controls.color_mode == "atoms"
     tour.w_next.clicks += 1
@@ -267,7 +276,7 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     # the page's keys: → and ← (sent by the browser through the hidden box)
     tour.w_key.value = "next:1"
     tour.w_key.value = "next:2"
-    assert tour.step == 2 and tour.texts[1] == TOUR[2].text
+    assert tour.step == 2 and tour.texts[1] == TOUR[2].text_for(ex.result.params, 2)
     tour.w_key.value = "back:3"
     assert tour.step == 1
     for _ in range(5):

@@ -114,7 +114,7 @@ def test_guided_tour_in_the_page(tmp_path):
         page.get_by_text(TOUR[1].title).first.wait_for(timeout=20000)
         _wait_for(lambda: ex.tour.step == 1, 10, "step 2", page=page)
         graph.first.wait_for(state="visible", timeout=10000)
-        page.get_by_text(TOUR[1].text[:60]).first.wait_for(timeout=10000)
+        page.get_by_text(TOUR[1].text_for(ex.result.params, 2)[:60]).first.wait_for(timeout=10000)
         page.locator("button", has_text="Next ▶").first.click()
         page.get_by_text(TOUR[2].title).first.wait_for(timeout=20000)
         page.get_by_text("step 3 of 5").first.wait_for(timeout=10000)

@@ -144,7 +144,10 @@ class TourView:
                 c.styles = {**self._saved[name][1], **(HIGHLIGHT if name == s.cards[0] else {})}
             self.step_md.object = f"Guided tour · step {self.step + 1} of {len(TOUR)}"
             self.title_md.object = s.title
-            self.text_md.object = s.text
+            res = self.host.result
+            self.text_md.object = (s.text_for(res.params, res.n_motions) if res is not None
+                                   else s.text_for(self.controls.state.target.params,
+                                                   self.controls.state.target.n_motions))
             self.w_back.disabled = self.step == 0
             self.w_next.label = "Next ▶" if self.step < len(TOUR) - 1 else "Finish"
         if color is not None and self.controls.color_mode != color:
