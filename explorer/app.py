@@ -38,6 +38,8 @@ from .cards.graph import GraphView
 from .cards.numbers import NumbersView
 from .cards.rv import RVView
 from .cards.status import StatusBar
+from .cards.sweep import SweepView
+from .cards.tour import TourView
 from .cards.view3d import View3D
 from .state import ExplorerState, non_defaults, parse_settings, query_of, settings_from_json
 
@@ -135,6 +137,11 @@ class Explorer:
         self.coarse_view = CoarseView(self, ext)
         self.rv_view = RVView()
         self.numbers_view = NumbersView()
+        self.sweep_view = SweepView(self, self.state, self.controls)
+        self.tour = TourView(self, self.controls, {
+            "frame": self.frame_view.card, "view3d": self.view3d.card, "graph": self.graph_view.card,
+            "coarse": self.coarse_view.card, "rv": self.rv_view.card, "numbers": self.numbers_view.card,
+            "sweep": self.sweep_view.card})
         # the view controls that redraw more than one card
         self.controls.w_frame.param.watch(self._on_frame, "value")
         self.controls.w_color.param.watch(self._on_color, "value")
@@ -199,7 +206,7 @@ class Explorer:
             pn.pane.Markdown("Open another sequence (`.mat`, `.npz` or tracks `.csv`), or a `params.json` "
                              "exported here:", margin=(0, 10)),
             f.w_upload, f.upload_hint, c.w_motions,
-            heading("View"), c.w_frame, c.w_color, self.frame_view.w_layers,
+            heading("View"), self.tour.w_start, c.w_frame, c.w_color, self.frame_view.w_layers,
             heading("Parameters"), *c.w_params.values(), c.w_seed, c.w_reset,
             heading("Export"), *f.downloads,
             s.tab_title, f.w_refused,
@@ -208,9 +215,9 @@ class Explorer:
         # cards in the order of the stages; each lays its parts out in a wrapping FlexBox, so
         # they sit side by side on a wide screen and stack on a projector (1024 px)
         self.main = [
-            s.line, s.alert, s.url_alert, s.note,
+            s.line, s.alert, s.url_alert, s.note, self.tour.panel,
             self.frame_view.card, self.view3d.card, self.graph_view.card, self.coarse_view.card,
-            self.rv_view.card, self.numbers_view.card,
+            self.rv_view.card, self.numbers_view.card, self.sweep_view.card,
         ]
 
     def template(self, title: str = "LAAV explorer", lazy: bool | None = None):
@@ -220,7 +227,7 @@ class Explorer:
         later stages' cards (graph, fine-to-coarse, RV, numbers) once the page has loaded, so
         the page appears sooner.
         """
-        n_first = 6  # status, alerts, note, atoms card, 3-D card
+        n_first = self.main.index(self.view3d.card) + 1  # status, alerts, note, tour, atoms, 3-D
         if lazy is None:
             lazy = self._session_doc is not None
         main = pn.Column(*(self.main[:n_first] if lazy else self.main), sizing_mode="stretch_width")
@@ -319,6 +326,7 @@ class Explorer:
         self.schedule(self._show_error, message)
 
     def _on_busy(self, busy: bool) -> None:
+        self.sweep_view.settings_changed()  # other parameters, C or sequence: the sweep stops
         self.schedule(self._show_busy, busy)
 
     def _on_plain_rv(self, voting, key) -> None:
@@ -528,5 +536,6 @@ class Explorer:
 
     def close(self) -> None:
         self.view3d.closed = True  # a 3-D server still starting closes itself
+        self.sweep_view.close()
         self.state.close()
         self.view3d.close()

@@ -12,6 +12,8 @@ how it draws a result and its callbacks; :class:`explorer.app.Explorer` composes
 ``epipolar``       3 · the epipolar check of two fine models
 ``rv``             4 · Random Voting convergence, LAAV's start vs plain RV
 ``numbers``        5 · every stage's numbers
+``sweep``          the seed sweep: seeds 0-9 in the background, a click loads one
+``tour``           the guided tour: one stage at a time, large type (texts: ``explorer.tour``)
 ``base``           card / figure helpers, sizes, the :class:`~base.Host` protocol
 =================  ===========================================================
 """

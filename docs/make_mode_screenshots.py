@@ -1,0 +1,112 @@
+"""Regenerate ``docs/explorer_sweep.png`` and ``docs/explorer_tour.png`` (1280x800, a projector):
+the seed sweep run to the end, and step 3 of the guided tour, in headless Debian Chromium.
+
+Usage: ``python docs/make_mode_screenshots.py [SEQUENCE_FILE] [--param NAME=VALUE ...]``
+(default: the bundled demo with the default parameters). Needs ``/usr/bin/chromium`` and
+the playwright package; no request leaves 127.0.0.1. PNGs quantised to 256 colours.
+"""
+
+from __future__ import annotations
+
+import argparse
+import socket
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+def _save(page, out: Path) -> None:
+    from PIL import Image
+
+    raw = out.with_suffix(".raw.png")
+    page.screenshot(path=str(raw))
+    Image.open(raw).convert("RGB").quantize(256).save(out, optimize=True)
+    raw.unlink()
+    print(f"{out} ({out.stat().st_size // 1000} KB)")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("file", nargs="?", help="sequence file (default: the bundled demo)")
+    ap.add_argument("--param", action="append", default=[], help="NAME=VALUE, a LaavParams field")
+    ap.add_argument("--out-dir", default=str(REPO / "docs"))
+    args = ap.parse_args(argv)
+
+    import panel as pn
+    from playwright.sync_api import sync_playwright
+
+    import laav
+    from explorer.cli import app_factory
+    from explorer.demo import demo_sequence
+    from explorer.state import parse_value
+
+    seq = laav.load_sequence(args.file) if args.file else demo_sequence()
+    params = laav.LaavParams(**{k: parse_value(k, v) for k, v in (p.split("=", 1) for p in args.param)})
+    out = Path(args.out_dir)
+    created: list = []
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    server = pn.serve({"/": app_factory(seq, None, params=params, created=created, viser=False)}, port=port,
+                      address="127.0.0.1", show=False, threaded=True, verbose=False)
+    outside: list[str] = []
+    try:
+        for _ in range(300):
+            try:
+                socket.create_connection(("127.0.0.1", port), 0.2).close()
+                break
+            except OSError:
+                time.sleep(0.1)
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=ARGS)
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+
+            def route(r):
+                if r.request.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")):
+                    r.continue_()
+                else:
+                    outside.append(r.request.url)
+                    r.abort()
+
+            page.route("**/*", route)
+            page.goto(f"http://127.0.0.1:{port}/")
+            page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=60000)
+            while not created:
+                time.sleep(0.1)
+            ex = created[0]
+            ex.wait(120, plain_rv=True)
+            run = page.locator("button", has_text="Run seeds 0-9")
+            run.wait_for(timeout=60000)
+            run.click()
+            page.get_by_text("seeds in").first.wait_for(timeout=600000)
+            page.locator(".card-header", has_text="Seed sweep").first.evaluate(
+                "el => el.scrollIntoView({block: 'start'})")
+            page.wait_for_timeout(800)
+            _save(page, out / "explorer_sweep.png")
+
+            page.locator("button", has_text="Guided tour").first.click()
+            for n in (2, 3):
+                page.get_by_text(f"step {n - 1} of 5").first.wait_for(timeout=20000)
+                page.keyboard.press("ArrowRight")
+            page.get_by_text("step 3 of 5").first.wait_for(timeout=20000)
+            page.wait_for_timeout(1500)
+            _save(page, out / "explorer_tour.png")
+            browser.close()
+    finally:
+        server.stop()
+        for e in created:
+            e.close()
+    if outside:
+        print(f"requests that left 127.0.0.1 (blocked): {outside}")
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,192 @@
+"""The guided tour: stages 1-5 one at a time, for a class (the texts: :mod:`explorer.tour`).
+
+A button in the sidebar starts it. The tour panel at the top of the page shows the step's
+title and two sentences in large type, Back / Next (and the keyboard: ← → or a presenter's
+Page Up / Page Down; Esc ends the tour); the cards of other stages are hidden, the step's
+card is outlined, the sidebar folds away (the whole width for a projector) and the page
+scrolls to the panel. Ending the tour brings every card, the sidebar and the colour-by
+choice back as they were.
+"""
+
+from __future__ import annotations
+
+import panel as pn
+
+from ..tour import TOUR
+from .base import Host
+
+#: Outline of the card a step is about (the header's navy: a page colour, not a motion's).
+HIGHLIGHT = {"outline": "4px solid #2c4a66", "outline-offset": "2px"}
+
+_BIG_BUTTON = [":host .bk-btn { font-size: 22px; padding: 6px 22px; }"]
+
+# Runs in the browser when the server writes a command into the hidden ``w_js`` box:
+# ``on:N`` / ``off:N`` (arrow keys step the tour or not; the sidebar folded away for it and
+# back), ``scroll:N`` (the panel to the top).
+# Keys go back through the hidden ``w_key`` box as ``next:T`` / ``back:T`` / ``end:T``; keys
+# typed into a box or on a slider stay there.
+_TOUR_JS = """
+const cmd = String(cb_obj.value);
+if (!window._laavTour) {
+  window._laavTour = {on: false, out: out};
+  document.addEventListener('keydown', (e) => {
+    const t = window._laavTour;
+    if (!t.on || e.altKey || e.ctrlKey || e.metaKey) return;
+    let a = document.activeElement;
+    while (a && a.shadowRoot && a.shadowRoot.activeElement) a = a.shadowRoot.activeElement;
+    if (a && (['INPUT', 'TEXTAREA', 'SELECT'].includes(a.tagName) || a.isContentEditable ||
+              (a.getAttribute && a.getAttribute('role') === 'slider'))) return;
+    const k = {ArrowRight: 'next', PageDown: 'next', ArrowLeft: 'back', PageUp: 'back',
+               Escape: 'end'}[e.key];
+    if (!k) return;
+    e.preventDefault();
+    t.out.value = k + ':' + Date.now();
+  });
+}
+const t = window._laavTour;
+t.out = out;
+const side = document.getElementById('sidebar');
+const toggle = document.getElementById('sidebar-toggle');
+const shown = () => side != null && side.offsetWidth > 0;
+if (cmd.startsWith('on:')) {
+  t.on = true;
+  // the whole width for the tour (a projector): the sidebar folds away, and back afterwards
+  if (toggle && shown()) { toggle.click(); t.folded = true; }
+}
+if (cmd.startsWith('off:')) {
+  t.on = false;
+  if (toggle && t.folded && !shown()) toggle.click();
+  t.folded = false;
+}
+if (cmd.startsWith('scroll:')) {
+  const find = (root) => {
+    for (const el of root.querySelectorAll('*')) {
+      if (el.classList && el.classList.contains('laav-tour-panel')) return el;
+      if (el.shadowRoot) { const f = find(el.shadowRoot); if (f) return f; }
+    }
+    return null;
+  };
+  setTimeout(() => { const el = find(document); if (el) el.scrollIntoView({block: 'start'}); }, 150);
+}
+"""
+
+
+class TourView:
+    """The tour's panel and its sidebar button. ``cards`` maps the names of
+    :attr:`explorer.tour.TourStep.cards` to the page's cards."""
+
+    def __init__(self, host: Host, controls, cards: dict) -> None:
+        self.host, self.controls, self.cards = host, controls, cards
+        self.step = 0
+        self.active = False
+        self._saved: dict = {}  # card name -> (visible, styles), colour mode, before the tour
+        self._n_js = 0
+        self.w_start = pn.widgets.Button(label="▶ Guided tour (for a class)", color="success",
+                                         width=265, margin=(8, 10))
+        self.w_start.on_click(lambda e: self.start())
+        self.w_back = pn.widgets.Button(label="◀ Back", width=150, height=50, margin=(6, 10),
+                                        stylesheets=_BIG_BUTTON)
+        self.w_next = pn.widgets.Button(label="Next ▶", color="primary", width=150, height=50,
+                                        margin=(6, 10), stylesheets=_BIG_BUTTON)
+        self.w_end = pn.widgets.Button(label="End tour", width=110, margin=(6, 10))
+        self.w_back.on_click(lambda e: self.go(self.step - 1))
+        self.w_next.on_click(lambda e: self.next())
+        self.w_end.on_click(lambda e: self.end())
+        self.step_md = pn.pane.Markdown("", margin=(6, 10), styles={"font-size": "18px", "color": "#444"})
+        self.title_md = pn.pane.Markdown("", margin=(0, 10), sizing_mode="stretch_width",
+                                         styles={"font-size": "32px", "font-weight": "bold",
+                                                 "line-height": "1.2", "color": "#2c4a66"})
+        self.text_md = pn.pane.Markdown("", margin=(0, 10), sizing_mode="stretch_width",
+                                        styles={"font-size": "25px", "line-height": "1.35"})
+        self.hint_md = pn.pane.Markdown("Keyboard: ← →  (Esc ends the tour)", margin=(18, 10),
+                                        styles={"font-size": "16px", "color": "#555"})
+        # commands to the page (scroll, keys on/off) and the keys it sends back
+        self.w_js = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
+        self.w_key = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
+        self.w_js.jscallback(args={"out": self.w_key}, value=_TOUR_JS)
+        self.w_key.param.watch(self._on_key, "value")
+        self.panel = pn.Column(
+            pn.Row(self.step_md, pn.layout.HSpacer(), self.w_end, sizing_mode="stretch_width"),
+            self.title_md, self.text_md,
+            pn.Row(self.w_back, self.w_next, self.hint_md),
+            self.w_js, self.w_key,
+            visible=False, sizing_mode="stretch_width", margin=(6, 6), css_classes=["laav-tour-panel"],
+            styles={"background": "#f3f5f8", "border-left": "8px solid #2c4a66", "padding": "6px 8px"})
+
+    # ------------------------------------------------------------------ navigation
+    def start(self, step: int = 0) -> None:
+        """Enter the tour at ``step`` (0-based)."""
+        if not self.active:
+            self._saved = {name: (c.visible, dict(c.styles or {})) for name, c in self.cards.items()}
+            self._saved["__color"] = self.controls.color_mode
+            self.active = True
+            self.panel.visible = True
+            self._js("on")
+        self.go(step)
+
+    def next(self) -> None:
+        if self.step >= len(TOUR) - 1:
+            self.end()
+        else:
+            self.go(self.step + 1)
+
+    def go(self, step: int) -> None:
+        """Show step ``step`` (clamped to the tour)."""
+        if not self.active:
+            return
+        self.step = max(0, min(int(step), len(TOUR) - 1))
+        s = TOUR[self.step]
+        seq = self.host.sequence
+        color = s.color if seq is None or seq.labels is not None else s.color_no_truth
+        with self.host.hold():
+            for name, c in self.cards.items():
+                c.visible = name in s.cards
+                c.styles = {**self._saved[name][1], **(HIGHLIGHT if name == s.cards[0] else {})}
+            self.step_md.object = f"Guided tour · step {self.step + 1} of {len(TOUR)}"
+            self.title_md.object = s.title
+            res = self.host.result
+            self.text_md.object = (s.text_for(res.params, res.n_motions) if res is not None
+                                   else s.text_for(self.controls.state.target.params,
+                                                   self.controls.state.target.n_motions))
+            self.w_back.disabled = self.step == 0
+            self.w_next.label = "Next ▶" if self.step < len(TOUR) - 1 else "Finish"
+        if color is not None and self.controls.color_mode != color:
+            self.controls.set_color_mode(color)
+        self._js("scroll")
+
+    def end(self) -> None:
+        """Leave the tour: every card and the colour-by as before it."""
+        if not self.active:
+            return
+        self.active = False
+        with self.host.hold():
+            for name, c in self.cards.items():
+                visible, styles = self._saved[name]
+                c.visible, c.styles = visible, styles
+            self.panel.visible = False
+        color = self._saved.get("__color")
+        if color is not None and self.controls.color_mode != color:
+            self.controls.set_color_mode(color)
+        self._js("off")
+
+    @property
+    def texts(self) -> tuple[str, str]:
+        """The title and text shown."""
+        return self.title_md.object, self.text_md.object
+
+    # ------------------------------------------------------------------ the page's keys
+    def _js(self, cmd: str) -> None:
+        self._n_js += 1
+        self.w_js.value = f"{cmd}:{self._n_js}"
+
+    def _on_key(self, event) -> None:
+        key = str(event.new).split(":")[0]
+        if not self.active:
+            return
+        if key == "next":
+            if self.step < len(TOUR) - 1:  # the last step ends by its button only
+                self.go(self.step + 1)
+        elif key == "back":
+            self.go(self.step - 1)
+        elif key == "end":
+            self.end()

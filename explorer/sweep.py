@@ -1,0 +1,294 @@
+"""The seed sweep: LAAV on one sequence with seeds 0-9, in the background (no GUI imports).
+
+LAAV's random stages (atoms, the fine-to-coarse merge, Random Voting) draw from the seed,
+so one result can be a typical one or a bad draw. :class:`SeedSweep` runs
+:func:`laav.segment` with the sequence, C and parameters shown and one seed after another
+on its own worker thread, and reports each seed's :class:`SeedRow` as it is done: every
+stage's error against the ground truth (fine models, coarse, final; the same measures as
+the Numbers card, :func:`explorer.views.stage_numbers`) or, without ground truth, the
+share of points on which the seed agrees with the first seed's final labels, and how
+Random Voting converged.
+
+A newer sweep, :meth:`SeedSweep.cancel` or :meth:`SeedSweep.close` stops the one running
+at its next Python step (the seed being computed is dropped); the explorer cancels it when
+the parameters, C or the sequence change (a seed change keeps it: the rows stay valid).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+import laav
+from laav import LaavParams
+
+from .state import Cancelled, _interrupt
+from .views import stage_numbers
+
+__all__ = ["SEEDS", "SeedRow", "SweepKey", "SeedSweep", "seed_row", "worst_seed", "table_columns",
+           "header_line", "row_line"]
+
+#: The seeds one sweep runs.
+SEEDS = tuple(range(10))
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepKey:
+    """What a sweep's rows depend on: the sequence (by identity), C and the parameters."""
+
+    sequence: laav.Sequence
+    n_motions: int
+    params: LaavParams
+
+    def __eq__(self, other) -> bool:
+        return (isinstance(other, SweepKey) and self.sequence is other.sequence
+                and self.n_motions == other.n_motions and self.params == other.params)
+
+    def __hash__(self) -> int:
+        return hash((id(self.sequence), self.n_motions, self.params))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SeedRow:
+    """One seed's outcome.
+
+    Attributes
+    ----------
+    seed : int
+    error_fine, error_coarse, error_final : float or None
+        Misclassification rates (fractions) of the stages against the ground truth, as the
+        Numbers card measures them (fine and coarse on the points in atoms, a fine model
+        counted as its majority true motion); None without ground truth.
+    agreement : float
+        Share of points whose final motion is the same as with the sweep's first seed
+        (after the best matching of motions, ``1 - misclassification_rate``).
+    converged : bool
+        Whether the returned Random Voting trial converged.
+    iterations : int
+        Random Voting iterations of the run (every trial's).
+    seconds : float
+        Time of this seed's :func:`laav.segment`.
+    labels : numpy.ndarray
+        The final labels.
+    """
+
+    seed: int
+    error_fine: float | None
+    error_coarse: float | None
+    error_final: float | None
+    agreement: float
+    converged: bool
+    iterations: int
+    seconds: float
+    labels: np.ndarray
+
+
+def seed_row(seq: laav.Sequence, result: laav.LaavResult, reference: np.ndarray | None,
+             seconds: float = 0.0) -> SeedRow:
+    """The :class:`SeedRow` of ``result`` (``reference``: the first seed's final labels,
+    None when this is the first seed)."""
+    num = stage_numbers(seq, result)
+    labels = np.asarray(result.labels)
+    agree = 1.0 if reference is None else 1.0 - float(laav.misclassification_rate(reference, labels))
+
+    def f(v):
+        return None if v is None else float(v)
+
+    return SeedRow(int(result.seed), f(num["error_fine"]), f(num["error_coarse"]), f(num["error_final"]),
+                   agree, bool(result.voting.converged), int(result.voting.n_iterations), float(seconds),
+                   labels)
+
+
+def worst_seed(rows: Sequence[SeedRow]) -> int | None:
+    """The seed of the worst row: with ground truth the highest final error, then coarse,
+    then fine; without, the least agreement with the first seed, then unconverged; among
+    equals the most iterations. None for no rows, or when every row scores the same."""
+    if not rows:
+        return None
+    if rows[0].error_final is not None:
+        def key(r):
+            return (r.error_final, r.error_coarse or 0.0, r.error_fine or 0.0)
+    else:
+        def key(r):
+            return (-r.agreement, not r.converged)
+    if len({key(r) for r in rows}) == 1:
+        return None  # every seed scores the same: none is worse
+    return max(rows, key=lambda r: (*key(r), r.iterations)).seed
+
+
+def _pct(v: float | None) -> str:
+    return "–" if v is None else f"{100 * v:.1f} %"
+
+
+def table_columns(rows: Sequence[SeedRow]) -> dict:
+    """The rows as table columns of text (and the worst row's marks): ``seed`` (int),
+    ``fine``, ``coarse``, ``final``, ``agreement``, ``converged``, ``iterations``, ``time``,
+    ``note`` ("◀ worst" on the worst row)."""
+    worst = worst_seed(rows) if len(rows) > 1 else None
+    return {
+        "seed": [r.seed for r in rows],
+        "fine": [_pct(r.error_fine) for r in rows],
+        "coarse": [_pct(r.error_coarse) for r in rows],
+        "final": [_pct(r.error_final) for r in rows],
+        "agreement": [_pct(r.agreement) for r in rows],
+        "converged": ["yes" if r.converged else "no (cap)" for r in rows],
+        "iterations": [str(r.iterations) for r in rows],
+        "time": [f"{1000 * r.seconds:.0f} ms" for r in rows],
+        "note": ["◀ worst" if r.seed == worst else "" for r in rows],
+    }
+
+
+#: The table's columns, with and without ground truth: (key of :func:`table_columns`, title).
+_COLUMNS = {True: (("seed", "seed"), ("fine", "fine models"), ("coarse", "coarse"), ("final", "final"),
+                   ("converged", "converged"), ("iterations", "iterations"), ("time", "time")),
+            False: (("seed", "seed"), ("agreement", "same as seed 0"), ("converged", "converged"),
+                    ("iterations", "iterations"), ("time", "time"))}
+
+
+def _widths(has_truth: bool) -> list[int]:
+    return [max(len(title), 6) for _, title in _COLUMNS[has_truth]]
+
+
+def header_line(has_truth: bool) -> str:
+    """The table's header as one line of fixed-width text (see :func:`row_line`)."""
+    return "  ".join(t.rjust(w) for (_, t), w in zip(_COLUMNS[has_truth], _widths(has_truth)))
+
+
+def row_line(table: dict, i: int, has_truth: bool) -> str:
+    """Row ``i`` of :func:`table_columns` as one line of fixed-width text, aligned under
+    :func:`header_line`, ending in its note ("◀ worst")."""
+    cells = [str(table[k][i]).rjust(w) for (k, _), w in zip(_COLUMNS[has_truth], _widths(has_truth))]
+    return "  ".join(cells) + ("  " + table["note"][i] if table["note"][i] else "")
+
+
+class SeedSweep:
+    """Runs seed sweeps on a worker thread of its own, one at a time.
+
+    ``on_row(sweep_id, row, done, total)`` is called after each seed and
+    ``on_end(sweep_id, rows, cancelled)`` once at the end, both **from the worker thread**.
+    """
+
+    def __init__(self, on_row: Callable | None = None, on_end: Callable | None = None) -> None:
+        self.on_row, self.on_end = on_row, on_end
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-sweep")
+        self._lock = threading.Lock()
+        self._id = 0  # the newest sweep; an older one stops at its next check
+        self._running_tid: int | None = None  # the worker's thread id inside segment()
+        self._active = False
+        self.key: SweepKey | None = None  # the newest sweep's settings
+        self.rows: list[SeedRow] = []
+        self.closed = False
+
+    @property
+    def sweep_id(self) -> int:
+        return self._id
+
+    @property
+    def running(self) -> bool:
+        return self._active
+
+    def start(self, seq: laav.Sequence, n_motions: int, params: LaavParams,
+              seeds: Sequence[int] = SEEDS) -> int:
+        """Sweep ``seeds`` on ``seq`` with C = ``n_motions`` and ``params`` (a sweep still
+        running is cancelled). Returns the sweep's id, as passed to the callbacks."""
+        if self.closed:
+            raise RuntimeError("the sweep was closed")
+        self.cancel()
+        with self._lock:
+            self._id += 1
+            sid = self._id
+            self.key = SweepKey(seq, int(n_motions), params)
+            self.rows = []
+            self._active = True
+        self._worker.submit(self._run, sid, seq, int(n_motions), params, tuple(int(s) for s in seeds))
+        return sid
+
+    def cancel(self) -> bool:
+        """Stop the sweep running (its next seed is not started, the one computing is
+        interrupted). Returns False when none was running."""
+        with self._lock:
+            if not self._active:
+                return False
+            self._id += 1
+            self._active = False
+            if self._running_tid is not None:
+                _interrupt(self._running_tid, Cancelled)
+        return True
+
+    def matches(self, seq: laav.Sequence, n_motions: int, params: LaavParams) -> bool:
+        """The newest sweep was made with these settings."""
+        return self.key is not None and self.key == SweepKey(seq, int(n_motions), params)
+
+    def _computing(self, sid: int, on: bool) -> bool:
+        """Mark the worker as inside segment() (cancel() may interrupt it) or not (and
+        withdraw an interruption that came too late). Returns whether ``sid`` is current."""
+        tid = threading.get_ident()
+        while True:
+            try:
+                with self._lock:
+                    self._running_tid = tid if on else None
+                    if not on:
+                        _interrupt(tid, None)
+                    return sid == self._id
+            except Cancelled:  # raised just before the lock: the sweep is stale anyway
+                continue
+
+    def _run(self, sid: int, seq, C: int, params, seeds) -> None:
+        rows: list[SeedRow] = []
+        cancelled = False
+        reference = None
+        try:
+            for i, seed in enumerate(seeds):
+                try:
+                    if not self._computing(sid, True):
+                        raise Cancelled
+                    t0 = time.perf_counter()
+                    result = laav.segment(seq, C, params, seed)
+                    dt = time.perf_counter() - t0
+                finally:
+                    current = self._computing(sid, False)
+                if not current:
+                    raise Cancelled
+                row = seed_row(seq, result, reference, dt)
+                if reference is None:
+                    reference = row.labels
+                rows.append(row)
+                with self._lock:
+                    if sid != self._id:
+                        raise Cancelled
+                    self.rows = list(rows)
+                if self.on_row is not None:
+                    self.on_row(sid, row, i + 1, len(seeds))
+        except Cancelled:
+            cancelled = True
+        except Exception:  # an algorithm bug must not kill the worker
+            traceback.print_exc()
+            cancelled = True
+        with self._lock:
+            if sid == self._id:
+                self._active = False
+        if self.on_end is not None:
+            try:
+                self.on_end(sid, rows, cancelled)
+            except Exception:
+                traceback.print_exc()
+
+    def wait(self, timeout: float = 60.0) -> bool:
+        """Block until no sweep is running (tests)."""
+        deadline = time.monotonic() + timeout
+        while self._active or self._running_tid is not None:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.02)
+        return True
+
+    def close(self) -> None:
+        self.closed = True
+        self.cancel()
+        self._worker.shutdown(wait=False, cancel_futures=True)

@@ -1,0 +1,293 @@
+"""The seed sweep's GUI-free logic (explorer/sweep.py), its card's controller, and the guided
+tour's steps (explorer/tour.py, explorer/cards/tour.py), without a browser."""
+
+from __future__ import annotations
+
+import re
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import laav
+from explorer import sweep as S
+from explorer.tour import TOUR
+from explorer.views import COLOR_MODES, stage_numbers
+
+pytest.importorskip("panel")
+
+
+def _sequence(seed: int = 0, P: int = 120, F: int = 10) -> laav.Sequence:
+    """Two rigid motions, small: a LAAV run takes a few tens of ms."""
+    rng = np.random.default_rng(seed)
+    a = rng.uniform([40, 60], [260, 400], (P // 2, 2))
+    b = rng.uniform([360, 60], [600, 400], (P - P // 2, 2))
+    t = np.linspace(0, 1, F)[:, None, None]
+    pa = a[None] + t * np.array([60.0, 20.0]) + 0.05 * t * (a[None] - 150)
+    ang = 0.35 * t[..., 0]
+    rel = b[None] - b.mean(0)
+    pb = np.stack([np.cos(ang) * rel[..., 0] - np.sin(ang) * rel[..., 1],
+                   np.sin(ang) * rel[..., 0] + np.cos(ang) * rel[..., 1]], -1) + b.mean(0)
+    pb = pb + t * np.array([-30.0, 40.0])
+    pts = np.concatenate([pa, pb], axis=1) + rng.normal(0, 0.3, (F, P, 2))
+    labels = np.r_[np.zeros(P // 2, int), np.ones(P - P // 2, int)]
+    return laav.Sequence(pts, labels, name="sweep_test", image_size=(640, 480))
+
+
+class _Recorder:
+    def __init__(self):
+        self.rows, self.ends = [], []
+        self.ended = threading.Event()
+
+    def on_row(self, sid, row, done, total):
+        self.rows.append((sid, row.seed, done, total))
+
+    def on_end(self, sid, rows, cancelled):
+        self.ends.append((sid, [r.seed for r in rows], cancelled))
+        self.ended.set()
+
+
+def test_sweep_rows_equal_direct_segment_runs():
+    """Each seed's row comes from the same labels as ``laav.segment`` with that seed, and its
+    errors are the Numbers card's; progress is reported after every seed."""
+    seq = _sequence()
+    params = laav.LaavParams(r1=18.0)
+    rec = _Recorder()
+    sw = S.SeedSweep(rec.on_row, rec.on_end)
+    try:
+        sid = sw.start(seq, 2, params, seeds=(0, 1, 2))
+        assert rec.ended.wait(120)
+        assert rec.ends == [(sid, [0, 1, 2], False)]
+        assert [(s, d, t) for _, s, d, t in rec.rows] == [(0, 1, 3), (1, 2, 3), (2, 3, 3)]
+        assert not sw.running
+        ref = None
+        for row in sw.rows:
+            direct = laav.segment(seq, 2, params, seed=row.seed)
+            np.testing.assert_array_equal(row.labels, direct.labels)
+            num = stage_numbers(seq, direct)
+            assert (row.error_fine, row.error_coarse, row.error_final) == pytest.approx(
+                (num["error_fine"], num["error_coarse"], num["error_final"]))
+            assert row.converged == direct.voting.converged
+            assert row.iterations == direct.voting.n_iterations
+            ref = direct.labels if ref is None else ref
+            assert row.agreement == pytest.approx(1 - laav.misclassification_rate(ref, direct.labels))
+        assert sw.matches(seq, 2, params) and not sw.matches(seq, 2, laav.LaavParams())
+        assert not sw.matches(_sequence(), 2, params)  # another sequence object
+    finally:
+        sw.close()
+
+
+def test_sweep_cancel_stops_at_once_and_a_new_sweep_supersedes():
+    seq = _sequence()
+    rec = _Recorder()
+    sw = S.SeedSweep(rec.on_row, rec.on_end)
+    try:
+        sid = sw.start(seq, 2, laav.LaavParams(), seeds=range(10))
+        deadline = time.monotonic() + 60
+        while not rec.rows and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert sw.cancel()
+        assert not sw.running
+        assert rec.ended.wait(60)
+        end_sid, seeds, cancelled = rec.ends[0]
+        assert end_sid == sid and cancelled and len(seeds) < 10
+        assert not sw.cancel()  # nothing runs any more
+        n_rows = len(rec.rows)
+        time.sleep(0.3)
+        assert len(rec.rows) == n_rows  # no seed reported after the cancel
+
+        # a new sweep cancels the one running; only its rows are kept
+        rec2 = _Recorder()
+        sw.on_row, sw.on_end = rec2.on_row, rec2.on_end
+        first = sw.start(seq, 2, laav.LaavParams(), seeds=range(10))
+        second = sw.start(seq, 2, laav.LaavParams(r1=18.0), seeds=(3, 4))
+        assert second > first
+        deadline = time.monotonic() + 120
+        while not any(e[0] == second for e in rec2.ends) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert (second, [3, 4], False) in rec2.ends
+        assert all(c for s, _, c in rec2.ends if s == first)
+        assert [r.seed for r in sw.rows] == [3, 4] and sw.rows[0].labels is not None
+        assert sw.wait(10)
+    finally:
+        sw.close()
+    with pytest.raises(RuntimeError):
+        sw.start(seq, 2, laav.LaavParams())
+
+
+def _row(seed, fine=None, coarse=None, final=None, agreement=1.0, converged=True, iterations=50):
+    return S.SeedRow(seed, fine, coarse, final, agreement, converged, iterations, 0.01, np.zeros(3, int))
+
+
+def test_worst_seed_and_table():
+    rows = [_row(0, 0.0, 0.0, 0.0), _row(1, 0.0, 0.39, 0.0), _row(2, 0.0, 0.1, 0.02), _row(3, 0, 0.4, 0.0)]
+    assert S.worst_seed(rows) == 2  # the final error first
+    rows[2] = _row(2, 0.0, 0.1, 0.0)
+    assert S.worst_seed(rows) == 3  # then the coarse one
+    t = S.table_columns(rows)
+    assert t["seed"] == [0, 1, 2, 3] and t["coarse"][1] == "39.0 %" and t["final"][0] == "0.0 %"
+    assert t["note"] == ["", "", "", "◀ worst"]
+    assert S.row_line(t, 3, True).split() == ["3", "0.0", "%", "40.0", "%", "0.0", "%", "yes", "50", "10",
+                                              "ms", "◀", "worst"]
+    assert len(S.row_line(t, 0, True)) == len(S.header_line(True))  # aligned under the header
+    # without ground truth: the least agreement with the first seed, then unconverged
+    rows = [_row(0), _row(1, agreement=0.8), _row(2, agreement=0.8, converged=False), _row(3, agreement=0.95)]
+    assert S.worst_seed(rows) == 2
+    t = S.table_columns(rows)
+    assert t["fine"] == ["–"] * 4 and t["agreement"][1] == "80.0 %" and t["converged"][2] == "no (cap)"
+    assert S.worst_seed([]) is None and S.table_columns(rows[:1])["note"] == [""]
+    # all equal: no worst row, whatever the iterations
+    rows = [_row(0, 0.0, 0.0, 0.0, iterations=60), _row(1, 0.0, 0.0, 0.0, iterations=500)]
+    assert S.worst_seed(rows) is None and S.table_columns(rows)["note"] == ["", ""]
+
+
+def test_sweep_without_ground_truth_scores_agreement():
+    seq = _sequence()
+    bare = laav.Sequence(seq.points, None, name="no_truth")
+    rec = _Recorder()
+    sw = S.SeedSweep(rec.on_row, rec.on_end)
+    try:
+        sw.start(bare, 2, laav.LaavParams(), seeds=(0, 5))
+        assert rec.ended.wait(120) and not rec.ends[0][2]
+        r0, r5 = sw.rows
+        assert r0.error_final is None and r0.agreement == 1.0
+        assert r5.agreement == pytest.approx(
+            1 - laav.misclassification_rate(r0.labels, laav.segment(bare, 2, seed=5).labels))
+    finally:
+        sw.close()
+
+
+# ---------------------------------------------------------------------- the card in an explorer
+@pytest.fixture
+def explorer():
+    from explorer import Explorer
+
+    ex = Explorer(_sequence(), viser=False)
+    assert ex.wait(60)
+    yield ex
+    ex.close()
+
+
+def test_card_runs_loads_a_seed_and_is_cancelled_by_a_parameter_change(explorer):
+    ex = explorer
+    card = ex.sweep_view
+    card.w_run.clicks += 1  # the button
+    assert card.sweep.wait(120)
+    assert card.data["seed"] == list(S.SEEDS)
+    assert all(b.visible for b in card.row_buttons) and card.header.visible
+    assert card.progress_md.object.startswith("10 seeds in")
+    assert "Worst: seed" in card.caption.object or "Every seed gives the same" in card.caption.object
+    # a click on a row loads that seed (the seed slider moves, the page recomputes)
+    card.row_buttons[7].clicks += 1
+    assert ex.wait(60) and ex.result.seed == 7 and ex.w_seed.value == 7
+    assert card.row_buttons[7].color == "primary"
+    np.testing.assert_array_equal(ex.result.labels, card.sweep.rows[7].labels)
+    assert card.data["seed"] == list(S.SEEDS)  # a seed change keeps the rows
+
+    # a parameter change cancels a running sweep and clears its rows
+    card.run()
+    deadline = time.monotonic() + 60
+    while not card.sweep.rows and time.monotonic() < deadline:
+        time.sleep(0.005)
+    ex.w_params["lam"].value = 3.5
+    assert not card.sweep.running
+    assert card.progress_md.object.startswith("Cancelled: the settings changed")
+    assert card.data["seed"] == [] and not any(b.visible for b in card.row_buttons)
+    assert ex.wait(60)
+    # finished rows of other settings are cleared too
+    card.run()
+    assert card.sweep.wait(120) and len(card.data["seed"]) == 10
+    ex.w_params["r1"].value = 18.0
+    assert card.data["seed"] == [] and "settings changed" in card.caption.object
+    assert ex.wait(60)
+
+
+@pytest.mark.hopkins
+def test_three_cars_worst_seed_is_one_click_away(hopkins_root):
+    """Hopkins three-cars with the paper's epipolar merge (where its coarse stage errs on most
+    seeds): the sweep's worst seed is the worst of ten direct runs, and one click shows it."""
+    from explorer import Explorer
+
+    f = hopkins_root / "three-cars" / "three-cars_truth.mat"
+    if not f.is_file():
+        pytest.skip("three-cars is not in the Hopkins155 folder")
+    seq = laav.load_sequence(f)
+    params = laav.LaavParams(coarse_merge="epipolar")
+    ex = Explorer(seq, params=params, viser=False)
+    try:
+        assert ex.wait(60)
+        ex.sweep_view.run()
+        assert ex.sweep_view.sweep.wait(300)
+        rows = ex.sweep_view.sweep.rows
+        direct = [stage_numbers(seq, laav.segment(seq, 3, params, seed=s)) for s in S.SEEDS]
+        worst = max(S.SEEDS, key=lambda s: (direct[s]["error_final"], direct[s]["error_coarse"],
+                                            direct[s]["error_fine"], rows[s].iterations))
+        assert len({d["error_coarse"] for d in direct}) > 1  # the seeds differ here
+        assert S.worst_seed(rows) == worst
+        assert [r.error_coarse for r in rows] == pytest.approx([d["error_coarse"] for d in direct])
+        i = ex.sweep_view.data["note"].index("◀ worst")
+        assert ex.sweep_view.row_buttons[i].color == "warning"
+        ex.sweep_view.row_buttons[i].clicks += 1  # one click
+        assert ex.wait(60) and ex.result.seed == worst
+        assert stage_numbers(seq, ex.result)["error_coarse"] == pytest.approx(direct[worst]["error_coarse"])
+    finally:
+        ex.close()
+
+
+# ---------------------------------------------------------------------- the tour
+def test_tour_texts_are_two_sentences_each():
+    assert [s.title.split(" ·")[0] for s in TOUR] == ["1", "2", "3", "4", "5"]
+    for s in TOUR:
+        # sentence ends: a full stop, ! or ? followed by a space and a capital (or the end)
+        ends = re.findall(r"[.!?](?=\s+[A-Z]|\s*$)", s.text)
+        assert len(ends) == 2, (s.title, s.text)
+        assert set(s.cards) <= {"frame", "view3d", "graph", "coarse", "rv", "numbers"}
+        for c in (s.color, s.color_no_truth):
+            assert c is None or c in COLOR_MODES.values()
+    assert "coding length" in TOUR[2].text and "paper" in TOUR[2].text
+    coding, paper = laav.LaavParams(coarse_merge="coding"), laav.LaavParams.paper()
+    assert "coding length" in TOUR[2].text_for(coding, 3)
+    assert TOUR[2].text_for(paper, 3).startswith("Pairs of fine models vote with epipolar geometry")
+    assert "to 3C fine models" in TOUR[1].text_for(coding.replace(fine_per_motion=3), 3)
+    assert "to 2C fine models" in TOUR[1].text_for(paper, 2)
+    assert "to 7 fine models" in TOUR[1].text_for(coding.replace(fine_models=7), 3)
+    for s in TOUR:
+        for t in (s.text_for(coding, 3), s.text_for(paper, 3)):
+            assert len(re.findall(r"[.!?](?=\s+[A-Z]|\s*$)", t)) == 2 and "{" not in t
+
+
+def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
+    ex = explorer
+    tour = ex.tour
+    cards = tour.cards
+    before = ex.controls.color_mode
+    tour.w_start.clicks += 1
+    assert tour.active and tour.panel.visible and tour.step == 0
+    assert tour.texts == (TOUR[0].title, TOUR[0].text_for(ex.result.params, ex.result.n_motions))
+    assert [n for n, c in cards.items() if c.visible] == ["frame"]
+    assert cards["frame"].styles.get("outline") and ex.controls.color_mode == "atoms"
+    tour.w_next.clicks += 1
+    assert tour.step == 1 and tour.texts[0] == TOUR[1].title
+    assert [n for n, c in cards.items() if c.visible] == ["graph"] and cards["graph"].styles.get("outline")
+    assert not cards["frame"].styles.get("outline")
+    tour.w_back.clicks += 1
+    assert tour.step == 0 and tour.w_back.disabled
+    # the page's keys: → and ← (sent by the browser through the hidden box)
+    tour.w_key.value = "next:1"
+    tour.w_key.value = "next:2"
+    assert tour.step == 2 and tour.texts[1] == TOUR[2].text_for(ex.result.params, 2)
+    tour.w_key.value = "back:3"
+    assert tour.step == 1
+    for _ in range(5):
+        tour.w_key.value = f"next:{10 + _}"
+    assert tour.step == 4 and tour.active  # → stops at the last step
+    assert tour.w_next.label == "Finish" and ex.controls.color_mode == "errors"
+    assert {n for n, c in cards.items() if c.visible} == {"numbers", "frame"}
+    tour.w_next.clicks += 1  # Finish
+    assert not tour.active and not tour.panel.visible
+    assert all(c.visible for c in cards.values()) and not any(c.styles.get("outline") for c in cards.values())
+    assert ex.controls.color_mode == before
+    tour.start(3)
+    tour.w_key.value = "end:20"  # Esc
+    assert not tour.active and all(c.visible for c in cards.values())

@@ -1,0 +1,135 @@
+"""The seed sweep and the guided tour in headless Chromium (served with the shared
+:func:`test_explorer_browser._served`): the sweep runs from its button with progress on the
+page and a click on a row loads that seed; the tour steps forward and back with its buttons
+and the arrow keys, its text changing."""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+from test_explorer_browser import JS_CARD_TITLES, JS_SOURCES, _sequence, _served, _wait_for  # noqa: E402
+
+from explorer.sweep import SEEDS  # noqa: E402
+
+# every value the page's Markdown texts take about the sweep's progress (each change, as the
+# browser applies it)
+JS_RECORD_PROGRESS = """() => {
+  window._laavSeen = [];
+  for (const m of Bokeh.documents[0].all_models) {
+    if (typeof m.text !== 'string' || m.properties === undefined || m.properties.text === undefined)
+      continue;
+    m.properties.text.change.connect(() => {
+      if (/of 10 seeds|seeds in/.test(m.text)) window._laavSeen.push(m.text);
+    });
+  }
+}"""
+
+
+def _shots(tmp_path) -> Path:
+    d = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+def _open(browser, port, created, i=0):
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+    page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+    ex = _wait_for(lambda: created[i] if len(created) > i else None, 30, "the explorer")
+    assert ex.wait(60)
+    page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=30000)
+    return page, ex, errors
+
+
+def test_seed_sweep_in_the_page(tmp_path):
+    seq = _sequence()
+    with _served(seq, viser=False) as (port, browser, created):
+        page, ex, errors = _open(browser, port, created)
+        run = page.locator("button", has_text="Run seeds 0-9")
+        run.wait_for(timeout=30000)
+        run.scroll_into_view_if_needed()
+        page.evaluate(JS_RECORD_PROGRESS)
+        run.click()
+        # progress on the page while it runs, then the ten rows in the table
+        page.get_by_text("10 seeds in").first.wait_for(timeout=120000)
+        page.wait_for_function("window._laavSeen.some(t => t.includes('10 seeds in'))", timeout=10000)
+        seen = page.evaluate("window._laavSeen")
+        # the progress line counted the seeds as they finished
+        done = [int(m.group(1)) for t in seen if (m := re.search(r"(\d+) of 10 seeds \(", t))]
+        assert len(done) >= 3 and done == sorted(done) and min(done) < 10, seen
+        rows = page.locator("button", has_text=re.compile(r"^\s*\d+\s+\d+\.\d %"))
+        _wait_for(lambda: rows.count() == len(SEEDS), 30, "ten rows in the table", page=page)
+        page.get_by_text(re.compile("Worst: seed|Every seed gives the same")).first.wait_for(timeout=10000)
+        assert ex.sweep_view.data["seed"] == list(SEEDS)
+        assert ex.result.seed == 0
+        page.screenshot(path=str(_shots(tmp_path) / "sweep_done.png"))
+        # a click on a row loads that seed (the seed slider in the page follows)
+        page.locator("button", has_text=re.compile(r"^\s*4\s")).click()
+        _wait_for(lambda: ex.result.seed == 4 and ex.wait(1), 60, "seed 4 shown", page=page)
+        assert ex.w_seed.value == 4
+        page.wait_for_function("""() => { for (const m of Bokeh.documents[0].all_models)
+            if (m.type === 'Slider' && String(m.title).startsWith('seed')) return m.value === 4; }""",
+                               timeout=20000)
+        page.get_by_text("Showing browser_test").first.wait_for(timeout=20000)
+        assert rows.count() == len(SEEDS)  # the rows stay: only the seed changed
+        # a parameter change in the page cancels a running sweep
+        run.click()
+        _wait_for(lambda: ex.sweep_view.sweep.running, 30, "a second sweep", page=page)
+        ex.w_params["lam"].value = 4.0
+        page.get_by_text("Cancelled: the settings changed").first.wait_for(timeout=30000)
+        assert not ex.sweep_view.sweep.running
+    assert not errors, errors[:5]
+
+
+def test_guided_tour_in_the_page(tmp_path):
+    from explorer.tour import TOUR
+
+    seq = _sequence()
+    with _served(seq, viser=False) as (port, browser, created):
+        page, ex, errors = _open(browser, port, created)
+        page.wait_for_function(f"({JS_CARD_TITLES})().length >= 7", timeout=30000)  # every card
+        page.locator("button", has_text="Guided tour").first.click()
+        title = page.get_by_text(TOUR[0].title)
+        title.first.wait_for(timeout=20000)
+        page.get_by_text("step 1 of 5").first.wait_for(timeout=10000)
+        # large type for a projector
+        size = title.first.evaluate("el => parseFloat(getComputedStyle(el).fontSize)")
+        assert size >= 30, size
+        # only this stage's card: the multicut card is hidden at step 1
+        graph = page.locator(".card-header", has_text="2 · Multicut graph")
+        graph.first.wait_for(state="hidden", timeout=10000)
+        page.locator("#sidebar").wait_for(state="hidden", timeout=10000)  # the whole width
+        page.screenshot(path=str(_shots(tmp_path) / "tour_step1.png"))
+
+        # → (the keyboard), Next (the button), ← (the keyboard)
+        page.keyboard.press("ArrowRight")
+        page.get_by_text(TOUR[1].title).first.wait_for(timeout=20000)
+        _wait_for(lambda: ex.tour.step == 1, 10, "step 2", page=page)
+        graph.first.wait_for(state="visible", timeout=10000)
+        page.get_by_text(TOUR[1].text_for(ex.result.params, 2)[:60]).first.wait_for(timeout=10000)
+        page.locator("button", has_text="Next ▶").first.click()
+        page.get_by_text(TOUR[2].title).first.wait_for(timeout=20000)
+        page.get_by_text("step 3 of 5").first.wait_for(timeout=10000)
+        page.locator(".card-header", has_text="3 · Fine-to-coarse").first.wait_for(timeout=10000)
+        page.screenshot(path=str(_shots(tmp_path) / "tour_step3.png"))
+        page.keyboard.press("ArrowLeft")
+        page.get_by_text(TOUR[1].title).first.wait_for(timeout=20000)
+        assert ex.tour.step == 1
+        page.locator("button", has_text="◀ Back").first.click()
+        page.get_by_text(TOUR[0].title).first.wait_for(timeout=20000)
+        _wait_for(lambda: ex.tour.step == 0, 10, "step 1 again", page=page)
+        # Esc ends the tour: every card is back
+        page.keyboard.press("Escape")
+        _wait_for(lambda: not ex.tour.active, 10, "the tour to end", page=page)
+        graph.first.wait_for(state="visible", timeout=10000)
+        page.get_by_text(TOUR[0].title).first.wait_for(state="hidden", timeout=10000)
+        page.locator("#sidebar").wait_for(state="visible", timeout=10000)
+    assert not errors, errors[:5]
