@@ -18,8 +18,8 @@ PARAM_SLIDERS = {
     "r1": ("R1 — inner atom radius (px)", float, 2.0, 100.0, 1.0),
     "r2": ("R2 — outer atom radius (px)", float, 4.0, 160.0, 1.0),
     "fine_models": ("fine models of the multicut (paper: 2C)", int, 1, 12, 1),
-    "coding_eps": ("ε — coding distortion of the merge (px)", float, 1.0, 40.0, 0.5),
-    "lam": ("λ — epipolar voting strength (paper's merge, 1/px²)", float, 0.1, 10.0, 0.1),
+    "lam": ("λ — epipolar voting strength (1/px²)", float, 0.1, 10.0, 0.1),
+    "coding_eps": ("ε — coding merge distortion (px)", float, 1.0, 40.0, 0.5),
     "rv_alpha": ("RV α — forgetting factor", float, 0.5, 1.0, 0.01),
     "rv_max_iter": ("RV iteration cap", int, 10, 500, 10),
 }
