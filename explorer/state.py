@@ -8,13 +8,18 @@ Live recomputation
 Every request (a parameter change, a new sequence) validates the settings at once with
 :class:`laav.LaavParams` (an invalid combination is reported immediately and changes
 nothing), then bumps a *generation counter* and queues a job on a single worker thread.
-A job whose generation is no longer the newest when it starts is skipped, and a result
-whose generation is no longer the newest when it finishes is dropped, so a burst of
-slider moves computes at most the one in flight plus the newest one, and the views only
-ever receive whole results of the newest request.
+A newer request supersedes the computation running at once: it is interrupted at its next
+Python step (:class:`Superseded`, raised in the worker; :meth:`laav.Pipeline.update` rolls
+back to its last result, so the next job starts from a consistent pipeline). A job whose
+generation is no longer the newest when it starts is skipped, and a result whose
+generation is no longer the newest when it finishes is dropped, so a burst of slider moves
+computes only the newest one, and the views only ever receive whole results of the newest
+request.
 
 Plain Random Voting from a random start (the comparison shown beside LAAV's fine-tuning)
-runs on a second worker thread, once per sequence/seed/RV settings, and is cached.
+runs on a second worker thread, once per sequence/seed/RV settings, and is cached. It
+yields to LAAV: a new request interrupts it too (it is asked for again with the next
+result), so it never slows down the computation the user is waiting for.
 """
 
 from __future__ import annotations
@@ -35,9 +40,56 @@ from laav import LaavParams, LaavResult, Pipeline, Sequence
 
 from .views import COLOR_MODES, align_labels, stage_numbers
 
-__all__ = ["ExplorerState", "Settings", "RV_FIELDS", "Change", "describe_change", "non_defaults",
-           "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of", "settings_from_json",
-           "parse_value"]
+__all__ = ["ExplorerState", "Superseded", "Settings", "RV_FIELDS", "Change", "describe_change",
+           "non_defaults", "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of",
+           "settings_from_json", "parse_value"]
+
+class Superseded(Exception):
+    """Raised inside a worker's computation when a newer request makes it useless."""
+
+
+def _interrupt(thread_id: int, exc: type[BaseException] | None) -> None:
+    """Raise ``exc`` in thread ``thread_id`` at its next Python step (None: withdraw one not
+    raised yet). A thread inside one long C call sees it when that call returns."""
+    import ctypes
+
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread_id),
+                                               ctypes.py_object(exc) if exc is not None else None)
+
+
+class _Interruptible:
+    """The window in which a worker thread may be interrupted (``with window: compute``);
+    :meth:`interrupt` raises :class:`Superseded` in it, and never outside it."""
+
+    def __init__(self, lock: threading.Lock) -> None:
+        self._lock = lock
+        self.thread: int | None = None
+        self.interrupted = 0  # how many computations were interrupted (tests read it)
+
+    def __enter__(self):
+        with self._lock:
+            self.thread = threading.get_ident()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        tid = threading.get_ident()
+        while True:
+            try:
+                with self._lock:
+                    self.thread = None
+                    _interrupt(tid, None)  # one sent too late to be raised: withdrawn
+                return
+            except Superseded:  # raised just now, on the way out: the job is stale anyway
+                continue
+
+    def interrupt(self) -> bool:
+        """(Under the lock.) Interrupt the computation in the window, if any."""
+        if self.thread is None:
+            return False
+        _interrupt(self.thread, Superseded)
+        self.interrupted += 1
+        return True
+
 
 #: The parameters plain Random Voting depends on (its cache key).
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_"))
@@ -377,6 +429,9 @@ class ExplorerState:
         self._worker.submit(laav.preload)
         self._rv_cache: OrderedDict = OrderedDict()
         self._rv_key = None
+        #: the pipeline's and plain RV's computations, interruptible by a newer request
+        self.computing = _Interruptible(self._lock)
+        self.rv_computing = _Interruptible(self._lock)
         self._closed = False
         self._first = pipeline
         self._started = False
@@ -469,6 +524,10 @@ class ExplorerState:
             gen = self._gen
             self._target, self._target_seq = target, seq
             self._pending += 1
+            # the computation running now (and plain RV) is of no use any more: stop it
+            self.computing.interrupt()
+            self._rv_key = None
+            self.rv_computing.interrupt()
         self._notify_busy()
         try:
             self._worker.submit(self._job, gen, kind, seq, target, pipeline)
@@ -491,15 +550,20 @@ class ExplorerState:
                 return  # superseded before it started
             t0 = time.perf_counter()
             try:
-                if kind == "load" or self._pipe is None or self._pipe.seq is not seq:
-                    if isinstance(pipeline, Future):
-                        pipeline = pipeline.result()
-                    pipe = pipeline if pipeline is not None else Pipeline(
-                        seq, target.n_motions, target.params, target.seed)
-                    result = pipe.result
-                else:
-                    pipe = self._pipe
-                    result = pipe.update(**target.update_kwargs())
+                with self.computing:
+                    if gen != self._gen:
+                        return
+                    if kind == "load" or self._pipe is None or self._pipe.seq is not seq:
+                        if isinstance(pipeline, Future):
+                            pipeline = pipeline.result()
+                        pipe = pipeline if pipeline is not None else Pipeline(
+                            seq, target.n_motions, target.params, target.seed)
+                        result = pipe.result
+                    else:
+                        pipe = self._pipe
+                        result = pipe.update(**target.update_kwargs())
+            except Superseded:
+                return  # a newer request is queued: it starts now
             except ValueError as exc:  # includes laav.SequenceError
                 if gen == self._gen:
                     self._fail(kind, str(exc))
@@ -595,9 +659,14 @@ class ExplorerState:
 
     def _rv_job(self, key, seq, s: Settings) -> None:
         if key != self._rv_key:
-            return
+            return  # stale (a newer request came in: asked for again with its result)
         try:
-            voting = laav.random_voting(seq, s.n_motions, s.params, s.seed)
+            with self.rv_computing:
+                if key != self._rv_key:
+                    return
+                voting = laav.random_voting(seq, s.n_motions, s.params, s.seed)
+        except Superseded:
+            return
         except Exception:
             traceback.print_exc()
             return

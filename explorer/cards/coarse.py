@@ -9,7 +9,7 @@ from bokeh.palettes import Blues256
 from bokeh.plotting import figure
 
 from .. import views as V
-from .base import Host, card, flex
+from .base import Host, card, flex, set_data
 from .epipolar import EpipolarPanel
 
 
@@ -46,7 +46,7 @@ class CoarseView:
         data, factors = V.z_sources(res, seq)
         self.fig_z.x_range.factors = factors or ["–"]
         self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
-        self.src_z.data = data
+        set_data(self.src_z, data)
         self.fig_z.title.text = f"Affinity Z (λ = {res.params.lam:g}): {len(factors)} fine models"
         self.merge_md.object = ("**Which fine model joined which motion** (spectral clustering of Z):\n\n"
                                 + V.merge_table(seq, res))
