@@ -8,9 +8,10 @@ Live recomputation
 Every request (a parameter change, a new sequence) validates the settings at once with
 :class:`laav.LaavParams` (an invalid combination is reported immediately and changes
 nothing), then bumps a *generation counter* and queues a job on a single worker thread.
-A newer request supersedes the computation running at once: it is interrupted at its next
-Python step (:class:`Superseded`, raised in the worker; :meth:`laav.Pipeline.update` rolls
-back to its last result, so the next job starts from a consistent pipeline). A job whose
+A newer request supersedes the computation running at once: it stops at the pipeline's
+next check (between stages, once per voting iteration; :class:`Superseded`, see
+:mod:`laav._interrupt`) and :meth:`laav.Pipeline.update` rolls back to its last result, so
+the next job starts from a consistent pipeline. A job whose
 generation is no longer the newest when it starts is skipped, and a result whose
 generation is no longer the newest when it finishes is dropped, so a burst of slider moves
 computes only the newest one, and the views only ever receive whole results of the newest
@@ -32,11 +33,13 @@ import traceback
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
 
 import numpy as np
 
 import laav
 from laav import LaavParams, LaavResult, Pipeline, Sequence
+from laav._interrupt import Interrupted, interruptible
 
 from .views import COLOR_MODES, align_labels, stage_numbers
 
@@ -44,51 +47,26 @@ __all__ = ["ExplorerState", "Superseded", "Settings", "RV_FIELDS", "Change", "de
            "non_defaults", "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of",
            "settings_from_json", "parse_value"]
 
-class Superseded(Exception):
-    """Raised inside a worker's computation when a newer request makes it useless."""
-
-
-def _interrupt(thread_id: int, exc: type[BaseException] | None) -> None:
-    """Raise ``exc`` in thread ``thread_id`` at its next Python step (None: withdraw one not
-    raised yet). A thread inside one long C call sees it when that call returns."""
-    import ctypes
-
-    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread_id),
-                                               ctypes.py_object(exc) if exc is not None else None)
+#: Raised in the worker when a newer request made its computation useless
+#: (:mod:`laav._interrupt`: between stages and once per voting iteration, never in clean-up code).
+Superseded = Interrupted
 
 
 class _Interruptible:
-    """The window in which a worker thread may be interrupted (``with window: compute``);
-    :meth:`interrupt` raises :class:`Superseded` in it, and never outside it."""
+    """A worker's computation that a newer request stops (``with window(should_stop)``);
+    counts the computations stopped (tests read it)."""
 
-    def __init__(self, lock: threading.Lock) -> None:
-        self._lock = lock
-        self.thread: int | None = None
-        self.interrupted = 0  # how many computations were interrupted (tests read it)
+    def __init__(self) -> None:
+        self.interrupted = 0
 
-    def __enter__(self):
-        with self._lock:
-            self.thread = threading.get_ident()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        tid = threading.get_ident()
-        while True:
-            try:
-                with self._lock:
-                    self.thread = None
-                    _interrupt(tid, None)  # one sent too late to be raised: withdrawn
-                return
-            except Superseded:  # raised just now, on the way out: the job is stale anyway
-                continue
-
-    def interrupt(self) -> bool:
-        """(Under the lock.) Interrupt the computation in the window, if any."""
-        if self.thread is None:
-            return False
-        _interrupt(self.thread, Superseded)
-        self.interrupted += 1
-        return True
+    @contextmanager
+    def __call__(self, should_stop):
+        try:
+            with interruptible(should_stop):
+                yield
+        except Interrupted:
+            self.interrupted += 1
+            raise
 
 
 #: The parameters plain Random Voting depends on (its cache key).
@@ -430,8 +408,8 @@ class ExplorerState:
         self._rv_cache: OrderedDict = OrderedDict()
         self._rv_key = None
         #: the pipeline's and plain RV's computations, interruptible by a newer request
-        self.computing = _Interruptible(self._lock)
-        self.rv_computing = _Interruptible(self._lock)
+        self.computing = _Interruptible()
+        self.rv_computing = _Interruptible()
         self._closed = False
         self._first = pipeline
         self._started = False
@@ -524,10 +502,9 @@ class ExplorerState:
             gen = self._gen
             self._target, self._target_seq = target, seq
             self._pending += 1
-            # the computation running now (and plain RV) is of no use any more: stop it
-            self.computing.interrupt()
+            # the computation running now (its generation is no longer the newest) and plain
+            # RV stop at their next check: they are of no use any more
             self._rv_key = None
-            self.rv_computing.interrupt()
         self._notify_busy()
         try:
             self._worker.submit(self._job, gen, kind, seq, target, pipeline)
@@ -550,7 +527,7 @@ class ExplorerState:
                 return  # superseded before it started
             t0 = time.perf_counter()
             try:
-                with self.computing:
+                with self.computing(lambda: gen != self._gen):
                     if gen != self._gen:
                         return
                     if kind == "load" or self._pipe is None or self._pipe.seq is not seq:
@@ -661,7 +638,7 @@ class ExplorerState:
         if key != self._rv_key:
             return  # stale (a newer request came in: asked for again with its result)
         try:
-            with self.rv_computing:
+            with self.rv_computing(lambda: key != self._rv_key):
                 if key != self._rv_key:
                     return
                 voting = laav.random_voting(seq, s.n_motions, s.params, s.seed)

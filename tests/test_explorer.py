@@ -785,19 +785,22 @@ def test_raw_points_are_drawn_before_any_compute(seq):
 
 
 def test_a_newer_request_interrupts_the_running_computation(seq, monkeypatch):
-    """A request arriving while the worker computes stops that computation at once
-    (``Superseded`` in the worker; the pipeline rolls back) and computes the newest
-    settings; their labels are those of a fresh run."""
+    """A request arriving while the worker computes stops that computation at its next
+    check (the pipeline checks between stages and once per voting iteration: ``Superseded``;
+    the pipeline rolls back) and computes the newest settings; their labels are those of a
+    fresh run. The state's threads are left as they were (no clean-up is cut short)."""
     import laav.pipeline as LP
+    from laav._interrupt import check
 
     real = LP.build_atoms
     started, finished = threading.Event(), threading.Event()
 
     def slow_atoms(seq_, p, *a, **k):
-        if p.r1 == 22.0:  # the request to be superseded: a stage that would take 60 s
+        if p.r1 == 22.0:  # the request to be superseded: a stage of 60 s, checking as voting does
             started.set()
             deadline = time.monotonic() + 60
             while time.monotonic() < deadline:
+                check()
                 time.sleep(0.005)
             finished.set()
         return real(seq_, p, *a, **k)
@@ -815,5 +818,7 @@ def test_a_newer_request_interrupts_the_running_computation(seq, monkeypatch):
         fresh = laav.segment(seq, seq.n_motions, st.settings.params, seed=0)
         assert st.result.params.r1 == 18.0
         assert np.array_equal(st.result.labels, fresh.labels)
+        from laav import _threads
+        assert _threads._blas_users == 0  # every thread limit was given back
     finally:
         st.close()
