@@ -129,6 +129,7 @@ class Explorer:
         self.files = Files(self, self.state, self.controls, self.status_bar, seq, self._png_view,
                            max_upload=max_upload)
         self.frame_view = FrameView(self, ext)
+        self.frame_view.draw_raw(seq)  # in the first page already: the points before any compute
         # the 3-D view's server starts with the first computation (``start``)
         self.view3d = View3D(self, viser, viser_host, page_hosts,
                              iframe_host or (viser_host if viser_host not in ("0.0.0.0", "::") else None),

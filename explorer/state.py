@@ -8,13 +8,19 @@ Live recomputation
 Every request (a parameter change, a new sequence) validates the settings at once with
 :class:`laav.LaavParams` (an invalid combination is reported immediately and changes
 nothing), then bumps a *generation counter* and queues a job on a single worker thread.
-A job whose generation is no longer the newest when it starts is skipped, and a result
-whose generation is no longer the newest when it finishes is dropped, so a burst of
-slider moves computes at most the one in flight plus the newest one, and the views only
-ever receive whole results of the newest request.
+A newer request supersedes the computation running at once: it stops at the pipeline's
+next check (between stages, once per voting iteration; :class:`Superseded`, see
+:mod:`laav._interrupt`) and :meth:`laav.Pipeline.update` rolls back to its last result, so
+the next job starts from a consistent pipeline. A job whose
+generation is no longer the newest when it starts is skipped, and a result whose
+generation is no longer the newest when it finishes is dropped, so a burst of slider moves
+computes only the newest one, and the views only ever receive whole results of the newest
+request.
 
 Plain Random Voting from a random start (the comparison shown beside LAAV's fine-tuning)
-runs on a second worker thread, once per sequence/seed/RV settings, and is cached.
+runs on a second worker thread, once per sequence/seed/RV settings, and is cached. It
+yields to LAAV: a new request interrupts it too (it is asked for again with the next
+result), so it never slows down the computation the user is waiting for.
 """
 
 from __future__ import annotations
@@ -27,30 +33,45 @@ import traceback
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
 
 import numpy as np
 
 import laav
 from laav import LaavParams, LaavResult, Pipeline, Sequence
+from laav._interrupt import Interrupted, interruptible
 
 from .views import COLOR_MODES, align_labels, stage_numbers
 
-__all__ = ["ExplorerState", "Cancelled", "Settings", "RV_FIELDS", "Change", "describe_change", "non_defaults",
-           "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of", "settings_from_json",
-           "parse_value"]
+__all__ = ["ExplorerState", "Superseded", "Cancelled", "Settings", "RV_FIELDS", "Change", "describe_change",
+           "non_defaults", "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of",
+           "settings_from_json", "parse_value"]
 
-class Cancelled(Exception):
-    """Raised inside the worker's computation by :meth:`ExplorerState.cancel`."""
+#: Raised in the worker when a newer request made its computation useless
+#: (:mod:`laav._interrupt`: between stages and once per voting iteration, never in clean-up code).
+Superseded = Interrupted
 
 
-def _interrupt(thread_id: int, exc: type[BaseException] | None) -> None:
-    """Raise ``exc`` in thread ``thread_id`` at its next Python instruction (None: withdraw
-    one not raised yet). A thread inside one long C call (a large numpy operation) sees it
-    when that call returns."""
-    import ctypes
+class _Interruptible:
+    """A worker's computation that a newer request stops (``with window(should_stop)``);
+    counts the computations stopped (tests read it)."""
 
-    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread_id),
-                                               ctypes.py_object(exc) if exc is not None else None)
+    def __init__(self) -> None:
+        self.interrupted = 0
+
+    @contextmanager
+    def __call__(self, should_stop):
+        try:
+            with interruptible(should_stop):
+                yield
+        except Interrupted:
+            self.interrupted += 1
+            raise
+
+
+#: Raised in the worker when :meth:`ExplorerState.cancel` stopped its computation (the
+#: same cooperative stop as :data:`Superseded`).
+Cancelled = Interrupted
 
 
 #: The parameters plain Random Voting depends on (its cache key).
@@ -391,8 +412,10 @@ class ExplorerState:
         self._worker.submit(laav.preload)
         self._rv_cache: OrderedDict = OrderedDict()
         self._rv_key = None
+        #: the pipeline's and plain RV's computations, interruptible by a newer request
+        self.computing = _Interruptible()
+        self.rv_computing = _Interruptible()
         self._closed = False
-        self._running: int | None = None  # the worker's thread id while it computes
         self._first = pipeline
         self._started = False
         if autostart:
@@ -481,32 +504,16 @@ class ExplorerState:
     def cancel(self) -> bool:
         """Stop the computation running and drop every queued request: the views keep the
         last result, and the next request starts from its settings. Returns False when
-        nothing was running. The computation is interrupted at its next Python step
-        (:class:`Cancelled`; ``Pipeline.update`` rolls back); its result, if it still
-        finishes, is dropped."""
+        nothing was running. The computation stops at its next check (between stages,
+        once per voting iteration: :mod:`laav._interrupt`; ``Pipeline.update`` rolls
+        back); its result, if it still finishes, is dropped."""
         with self._lock:
             if self._pending == 0:
                 return False
-            self._gen += 1  # the running job's result is dropped, queued ones are skipped
+            self._gen += 1  # the running job stops and is dropped, queued ones are skipped
             if self.result is not None:
                 self._target_seq, self._target = self.sequence, self.settings
-            if self._running is not None:
-                _interrupt(self._running, Cancelled)
         return True
-
-    def _computing(self, on: bool) -> None:
-        """Mark the worker as computing (cancel() may interrupt it) or not (and withdraw an
-        interruption that arrived too late to be raised)."""
-        tid = threading.get_ident()
-        while True:
-            try:
-                with self._lock:
-                    self._running = tid if on else None
-                    if not on:
-                        _interrupt(tid, None)
-                return
-            except Cancelled:  # raised just now, before the lock: the job is stale anyway
-                continue
 
     def report(self, message: str) -> None:
         """Show a problem found outside the state (e.g. an unreadable upload)."""
@@ -523,6 +530,9 @@ class ExplorerState:
             gen = self._gen
             self._target, self._target_seq = target, seq
             self._pending += 1
+            # the computation running now (its generation is no longer the newest) and plain
+            # RV stop at their next check: they are of no use any more
+            self._rv_key = None
         self._notify_busy()
         try:
             self._worker.submit(self._job, gen, kind, seq, target, pipeline)
@@ -545,10 +555,9 @@ class ExplorerState:
                 return  # superseded before it started
             t0 = time.perf_counter()
             try:
-                self._computing(True)
-                try:
+                with self.computing(lambda: gen != self._gen):
                     if gen != self._gen:
-                        raise Cancelled
+                        return
                     if kind == "load" or self._pipe is None or self._pipe.seq is not seq:
                         if isinstance(pipeline, Future):
                             pipeline = pipeline.result()
@@ -558,10 +567,8 @@ class ExplorerState:
                     else:
                         pipe = self._pipe
                         result = pipe.update(**target.update_kwargs())
-                finally:
-                    self._computing(False)
-            except Cancelled:
-                return  # cancel() already fell back to the shown result
+            except Superseded:
+                return  # a newer request is queued: it starts now
             except ValueError as exc:  # includes laav.SequenceError
                 if gen == self._gen:
                     self._fail(kind, str(exc))
@@ -657,9 +664,14 @@ class ExplorerState:
 
     def _rv_job(self, key, seq, s: Settings) -> None:
         if key != self._rv_key:
-            return
+            return  # stale (a newer request came in: asked for again with its result)
         try:
-            voting = laav.random_voting(seq, s.n_motions, s.params, s.seed)
+            with self.rv_computing(lambda: key != self._rv_key):
+                if key != self._rv_key:
+                    return
+                voting = laav.random_voting(seq, s.n_motions, s.params, s.seed)
+        except Superseded:
+            return
         except Exception:
             traceback.print_exc()
             return

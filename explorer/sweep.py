@@ -27,8 +27,9 @@ import numpy as np
 
 import laav
 from laav import LaavParams
+from laav._interrupt import interruptible
 
-from .state import Cancelled, _interrupt
+from .state import Cancelled
 from .views import stage_numbers
 
 __all__ = ["SEEDS", "SeedRow", "SweepKey", "SeedSweep", "seed_row", "worst_seed", "table_columns",
@@ -179,8 +180,8 @@ class SeedSweep:
         self._worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-sweep")
         self._lock = threading.Lock()
         self._id = 0  # the newest sweep; an older one stops at its next check
-        self._running_tid: int | None = None  # the worker's thread id inside segment()
         self._active = False
+        self._busy = False  # the worker is inside a sweep
         self.key: SweepKey | None = None  # the newest sweep's settings
         self.rows: list[SeedRow] = []
         self.closed = False
@@ -215,45 +216,34 @@ class SeedSweep:
         with self._lock:
             if not self._active:
                 return False
-            self._id += 1
+            self._id += 1  # the seed computing stops at its next check (laav._interrupt)
             self._active = False
-            if self._running_tid is not None:
-                _interrupt(self._running_tid, Cancelled)
         return True
 
     def matches(self, seq: laav.Sequence, n_motions: int, params: LaavParams) -> bool:
         """The newest sweep was made with these settings."""
         return self.key is not None and self.key == SweepKey(seq, int(n_motions), params)
 
-    def _computing(self, sid: int, on: bool) -> bool:
-        """Mark the worker as inside segment() (cancel() may interrupt it) or not (and
-        withdraw an interruption that came too late). Returns whether ``sid`` is current."""
-        tid = threading.get_ident()
-        while True:
-            try:
-                with self._lock:
-                    self._running_tid = tid if on else None
-                    if not on:
-                        _interrupt(tid, None)
-                    return sid == self._id
-            except Cancelled:  # raised just before the lock: the sweep is stale anyway
-                continue
-
     def _run(self, sid: int, seq, C: int, params, seeds) -> None:
+        self._busy = True
+        try:
+            self._sweep(sid, seq, C, params, seeds)
+        finally:
+            self._busy = False
+
+    def _sweep(self, sid: int, seq, C: int, params, seeds) -> None:
         rows: list[SeedRow] = []
         cancelled = False
         reference = None
         try:
             for i, seed in enumerate(seeds):
-                try:
-                    if not self._computing(sid, True):
-                        raise Cancelled
-                    t0 = time.perf_counter()
+                if sid != self._id:
+                    raise Cancelled
+                t0 = time.perf_counter()
+                with interruptible(lambda: sid != self._id):  # raises Cancelled when stale
                     result = laav.segment(seq, C, params, seed)
-                    dt = time.perf_counter() - t0
-                finally:
-                    current = self._computing(sid, False)
-                if not current:
+                dt = time.perf_counter() - t0
+                if sid != self._id:
                     raise Cancelled
                 row = seed_row(seq, result, reference, dt)
                 if reference is None:
@@ -282,7 +272,7 @@ class SeedSweep:
     def wait(self, timeout: float = 60.0) -> bool:
         """Block until no sweep is running (tests)."""
         deadline = time.monotonic() + timeout
-        while self._active or self._running_tid is not None:
+        while self._active or self._busy:
             if time.monotonic() > deadline:
                 return False
             time.sleep(0.02)

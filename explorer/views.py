@@ -19,7 +19,8 @@ __all__ = [
     "COLOR_MODES", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS",
     "UNLABELLED", "ERROR_MARK",
     "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
-    "align_labels", "point_style", "frame_sources", "graph_sources", "replay_labels",
+    "align_labels", "point_style", "raw_style", "points_source", "frame_sources", "graph_sources",
+    "replay_labels",
     "replay_caption", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
     "space_time", "cost_limit", "md_text",
@@ -299,6 +300,33 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
             "note": note}
 
 
+def raw_style(seq: laav.Sequence) -> dict:
+    """The points' style before any result: the ground truth's colours and shapes (grey
+    circles without one), as :func:`point_style` colours them in the ``gt`` mode."""
+    P = seq.n_points
+    if seq.labels is None:
+        return {"color": np.full(P, UNLABELLED, dtype="U7"), "marker": np.full(P, "circle", dtype=object),
+                "label": np.full(P, "not segmented yet").astype(str)}
+    lab = np.asarray(seq.labels, dtype=np.int64)
+    color, marker = _motion_palette(lab)
+    return {"color": np.asarray(color, dtype="U7"), "marker": np.asarray(marker, dtype=object),
+            "label": np.asarray(np.char.add("motion ", (lab + 1).astype("U3"))).astype(str)}
+
+
+def points_source(seq: laav.Sequence, frame: int, style: dict) -> dict:
+    """The frame view's points at ``frame`` (x, y, color, marker, label, index), in label
+    order so that the legend lists "motion 1, motion 2, ..." in order. Needs no result:
+    with :func:`raw_style` it draws the raw points before anything is computed."""
+    f = int(np.clip(frame, 0, seq.n_frames - 1))
+    xy = seq.points[f]
+    color = style["color"]
+    order = np.argsort(style["label"], kind="stable")
+    marker = style.get("marker")
+    marker = np.full(color.shape, "circle", dtype=object) if marker is None else marker
+    return {"x": xy[order, 0], "y": xy[order, 1], "color": color[order],
+            "marker": marker[order], "label": style["label"][order], "index": order}
+
+
 def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style: dict,
                   trail: int = 5, moved=None) -> dict:
     """Data of the frame view at ``frame``.
@@ -315,12 +343,7 @@ def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style
     f = int(np.clip(frame, 0, F - 1))
     xy = pts[f]
     color = style["color"]
-    # points in label order, so the legend lists "motion 1, motion 2, ..." in order
-    order = np.argsort(style["label"], kind="stable")
-    marker = style.get("marker")
-    marker = np.full(color.shape, "circle", dtype=object) if marker is None else marker
-    out = {"points": {"x": xy[order, 0], "y": xy[order, 1], "color": color[order],
-                      "marker": marker[order], "label": style["label"][order], "index": order}}
+    out = {"points": points_source(seq, f, style)}
     f0 = max(0, f - trail)
     if f > f0:
         seg = pts[f0:f + 1]  # (t+1, P, 2)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._interrupt import check as check_interrupt
 from ._random import resolve_seed
 from ._sequence import LaavWarning, Sequence, check_degenerate, require_complete
 from ._threads import single_threaded
@@ -171,6 +172,7 @@ class Pipeline:
             self._distances = Neighbourhoods(seq.points)
             timings["atoms"] += time.perf_counter() - t
         for stage in todo:
+            check_interrupt()  # a caller's stop request (laav._interrupt), between stages
             t = time.perf_counter()
             if stage == "atoms":
                 st["atoms"] = build_atoms(seq, p, self._rng("atoms"), self._distances)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._interrupt import check as check_interrupt
 from .geometry import fit_fundamental, sampson_distance
 
 __all__ = ["vote", "run_trials", "consensus", "RESET_AT"]
@@ -241,6 +242,7 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None):
         return len(plain) < n_plain and not any(t.converged for t in plain)
 
     while True:
+        check_interrupt()  # a caller's stop request (laav._interrupt), once per iteration
         while len(active) < width and may_start_plain():
             trial_rng = streams[1 + len(plain)]
             t = _Trial(trial_rng.integers(0, C, P), np.zeros((P, C)), True, "plain", trial_rng)

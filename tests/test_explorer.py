@@ -373,7 +373,13 @@ def test_viser_view_follows_the_frame(seq):
     try:
         assert ex.wait(60)
         assert ex.viser is not None and ex.viser.port > 0
+        # the 3-D card starts folded: no iframe, and the scene is not updated meanwhile
+        assert ex.v_viser.collapsed and "<iframe" not in ex.viser_pane.object
+        ex.w_frame.value = 5
+        assert ex.viser._frame != 5
+        ex.v_viser.collapsed = False  # unfolded: the iframe, and the scene catches up
         assert f":{ex.viser.port}/" in ex.viser_pane.object and "127.0.0.1" in ex.viser_pane.object
+        assert ex.viser._frame == 5 and ex.viser._result is ex.result
         ex.w_frame.value = 7
         assert ex.viser._frame == 7
         assert abs(ex.viser._plane.position[2] - 7 * ex.viser._map.dz) < 1e-5
@@ -748,3 +754,93 @@ def test_stage_errors_plain_rv_numbers_and_replay_reset():
         assert len(ex.src_pair.data["x"]) == 0
     finally:
         ex.close()
+
+
+def test_a_change_sends_only_what_it_changed(seq):
+    """A λ change reruns stages 4-5 only: the frame view's atoms and the multicut graph are
+    not sent again, the figures are the same objects (never rebuilt), and a frame move
+    sends only the points' coordinates, not their colours, shapes or labels."""
+    from explorer.cards import base
+
+    ex = Explorer(seq, viser=False)
+    try:
+        assert ex.wait(120)
+        figs = [ex.fig_frame, ex.fig_graph, ex.fig_z]
+        renderers = [list(f.renderers) for f in figs]
+        sent: dict = {}
+        real = base.set_data
+
+        def spy(src, data):
+            cols = real(src, data)
+            sent.setdefault(id(src), []).extend(cols)
+            return cols
+
+        for mod in ("frame", "graph", "coarse", "epipolar", "rv"):
+            pytest.MonkeyPatch().setattr(f"explorer.cards.{mod}.set_data", spy)
+        before = ex.result
+        ex.w_params["lam"].value = 3.5
+        assert ex.wait(60) and ex.result is not before
+        assert ex.result.atoms is before.atoms  # the pipeline reused stages 1-3
+        assert sent.get(id(ex.src_atoms), []) == []
+        assert sent.get(id(ex.src_nodes), []) == []
+        assert [f for f in (ex.fig_frame, ex.fig_graph, ex.fig_z)] == figs
+        assert [list(f.renderers) for f in figs] == renderers
+        ex.w_frame.value = 5  # five frames of trails from here on
+        sent.clear()
+        ex.w_frame.value = 6
+        assert set(sent[id(ex.src_points)]) == {"x", "y"}
+        assert set(sent[id(ex.frame_view.src_trails)]) == {"x0", "y0", "x1", "y1"}
+        assert np.allclose(np.sort(ex.src_points.data["x"]), np.sort(seq.points[6, :, 0]))
+    finally:
+        pytest.MonkeyPatch().undo()
+        ex.close()
+
+
+def test_raw_points_are_drawn_before_any_compute(seq):
+    ex = Explorer(seq, viser=False, start=False)
+    try:
+        assert ex.result is None
+        assert len(ex.src_points.data["x"]) == seq.n_points
+        assert set(ex.src_points.data["color"]) == {V.motion_color(0), V.motion_color(1)}
+    finally:
+        ex.close()
+
+
+def test_a_newer_request_interrupts_the_running_computation(seq, monkeypatch):
+    """A request arriving while the worker computes stops that computation at its next
+    check (the pipeline checks between stages and once per voting iteration: ``Superseded``;
+    the pipeline rolls back) and computes the newest settings; their labels are those of a
+    fresh run. The state's threads are left as they were (no clean-up is cut short)."""
+    import laav.pipeline as LP
+    from laav._interrupt import check
+
+    real = LP.build_atoms
+    started, finished = threading.Event(), threading.Event()
+
+    def slow_atoms(seq_, p, *a, **k):
+        if p.r1 == 22.0:  # the request to be superseded: a stage of 60 s, checking as voting does
+            started.set()
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline:
+                check()
+                time.sleep(0.005)
+            finished.set()
+        return real(seq_, p, *a, **k)
+
+    monkeypatch.setattr(LP, "build_atoms", slow_atoms)
+    st = ExplorerState(seq, autostart=True)
+    try:
+        assert st.wait(60)
+        st.request(params={"r1": 22.0})
+        assert started.wait(30)
+        gen = st.request(params={"r1": 18.0, "lam": 3.0})
+        assert st.wait(30)
+        assert st.computing.interrupted >= 1 and not finished.is_set()
+        assert st.published_generation == gen
+        fresh = laav.segment(seq, seq.n_motions, st.settings.params, seed=0)
+        assert st.result.params.r1 == 18.0
+        assert np.array_equal(st.result.labels, fresh.labels)
+        from laav import _threads
+        assert _threads._blas_users == 0  # every thread limit was given back
+    finally:
+        st.close()

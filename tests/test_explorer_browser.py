@@ -196,8 +196,11 @@ def test_explorer_in_chromium(tmp_path):
         page.get_by_text("Cannot use these settings").first.wait_for(timeout=20000)
         assert ex.result is res
 
-        # the 3-D view is served by this process on 127.0.0.1 and connects
+        # the 3-D view is served by this process on 127.0.0.1 and connects once its card
+        # is unfolded (it starts folded)
         viser = _wait_for(lambda: ex.viser, 60, "the 3-D view's server")
+        assert "<iframe" not in ex.viser_pane.object
+        page.locator(".card-header", has_text="3-D space-time view").first.click()
         # (its origin check lets its own page in: the scene arrives). Its client loads
         # with the first result and renders in software: slow on a loaded machine
         _wait_for(lambda: any(f":{viser.port}" in u for u in received), 90, "viser's scene",
@@ -362,6 +365,8 @@ def test_layout_fits_a_projector(tmp_path):
             page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=30000)
             page.wait_for_function(f"({JS_CARD_TITLES})().length >= 6", timeout=30000)
             viser = _wait_for(lambda ex=ex: ex.viser, 60, "the 3-D view's server")
+            # the 3-D card starts folded; unfolded, its iframe must fit as well
+            page.locator(".card-header", has_text="3-D space-time view").first.click()
             page.frame_locator("iframe").locator("body").wait_for(timeout=60000)
             m = _settled(page, JS_OVERFLOW)
             page.screenshot(path=str(shots / f"layout_{w}x{h}.png"))

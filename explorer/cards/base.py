@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
+import numpy as np
 import panel as pn
 from bokeh.models import Legend, Range1d
 from bokeh.plotting import figure
@@ -36,6 +37,38 @@ class Host(Protocol):
     def schedule(self, fn, *args, now_if_on_doc_thread: bool = False) -> None: ...
 
     def hold(self): ...  # context manager: the model changes inside go out as one batch
+
+
+def _same(a, b) -> bool:
+    try:
+        a, b = np.asarray(a), np.asarray(b)
+        return a.shape == b.shape and (a.dtype == b.dtype or a.dtype.kind in "UO" and b.dtype.kind in "UO"
+                                       or a.dtype.kind in "fiub" and b.dtype.kind in "fiub") \
+            and bool(np.array_equal(a, b, equal_nan=a.dtype.kind == "f" and b.dtype.kind == "f"))
+    except (TypeError, ValueError):
+        return False
+
+
+def set_data(src, data: dict) -> list[str]:
+    """Put ``data`` on the ColumnDataSource ``src``, sending the browser only what changed.
+
+    Columns equal to the ones shown are not sent at all; when the row count is the same
+    only the changed columns go out (``data.update``: bokeh sends just those); a new row
+    count replaces the whole data. Returns the names of the columns sent (empty: nothing
+    changed, nothing was sent)."""
+    old = src.data
+    if set(old) != set(data):
+        src.data = dict(data)
+        return list(data)
+    n_old = {len(v) for v in old.values()}
+    n_new = {len(v) for v in data.values()}
+    if n_old != n_new or len(n_new) > 1:
+        src.data = dict(data)
+        return list(data)
+    changed = {k: v for k, v in data.items() if not _same(old[k], v)}
+    if changed:
+        src.data.update(changed)
+    return list(changed)
 
 
 def card(title: str, *objs, **kw) -> pn.Card:

@@ -9,7 +9,7 @@ from bokeh.palettes import Blues256
 from bokeh.plotting import figure
 
 from .. import views as V
-from .base import Host, card, flex
+from .base import Host, card, flex, set_data
 from .epipolar import EpipolarPanel
 
 
@@ -47,7 +47,7 @@ class CoarseView:
         data, factors = V.z_sources(res, seq)
         self.fig_z.x_range.factors = factors or ["–"]
         self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
-        self.src_z.data = data
+        set_data(self.src_z, data)
         if res.coarse.method == "coding":
             self.fig_z.title.text = (f"Coding affinity exp(−ΔL), ε = {res.params.coding_eps:g} px: "
                                      f"{len(factors)} fine models")

@@ -11,7 +11,7 @@ import panel as pn
 from bokeh.models import ColumnDataSource, Legend
 
 from .. import views as V
-from .base import Host, fit_image_figure, flex, image_figure
+from .base import Host, fit_image_figure, flex, image_figure, set_data
 
 
 class EpipolarPanel:
@@ -75,9 +75,9 @@ class EpipolarPanel:
     def draw(self, seq, res) -> None:
         j, k = self.pair()
         d = V.epipolar_sources(seq, res, j, k)
-        self.src_epi_l.data = d["left"]
-        self.src_epi_r.data = d["right"]
-        self.src_epi_lines.data = d["lines"]
+        set_data(self.src_epi_l, d["left"])
+        set_data(self.src_epi_r, d["right"])
+        set_data(self.src_epi_lines, d["lines"])
         fl, fr = d["frames"]
         self.fig_l.title.text = f"frame l = {fl}: f{j + 1} and f{k + 1}"
         self.fig_r.title.text = f"frame r = {fr}: lines of F(f{j + 1}, f{k + 1})"

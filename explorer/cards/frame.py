@@ -11,7 +11,7 @@ from bokeh.core.properties import value
 from bokeh.models import ColumnDataSource, HoverTool
 
 from .. import views as V
-from .base import Host, card, fit_image_figure, image_figure, move_legend
+from .base import Host, card, fit_image_figure, image_figure, move_legend, set_data
 
 EMPTY_POINTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "index": []}
 #: The layers a checkbox shows or hides, in the sidebar's order.
@@ -67,18 +67,24 @@ class FrameView:
     def fit(self, seq) -> None:
         fit_image_figure(self.fig, seq.extent())
 
+    def draw_raw(self, seq, frame: int = 0) -> None:
+        """The raw points of ``seq`` at ``frame`` (ground-truth colours, or grey), before any
+        result: the page shows the trajectories while the first computation runs."""
+        set_data(self.src_points, V.points_source(seq, frame, V.raw_style(seq)))
+        self.fig.title.text = f"frame {int(frame)} of {seq.n_frames - 1} · segmenting…"
+
     def draw(self, seq, res, frame: int, style: dict, moved, color_label: str) -> None:
         """Show ``res`` at ``frame``, coloured by ``style`` (:func:`views.point_style`)."""
         if res is None:
             return
         f = int(frame)
         d = V.frame_sources(seq, res, f, style, moved=moved)
-        self.src_points.data = d["points"]
-        self.src_trails.data = d["trails"]
-        self.src_atoms.data = d["atoms"]
-        self.src_unassigned.data = d["unassigned"]
-        self.src_errors.data = d["errors"]
-        self.src_changed.data = d["changed"]
+        set_data(self.src_points, d["points"])
+        set_data(self.src_trails, d["trails"])
+        set_data(self.src_atoms, d["atoms"])
+        set_data(self.src_unassigned, d["unassigned"])
+        set_data(self.src_errors, d["errors"])
+        set_data(self.src_changed, d["changed"])
         self.fig.title.text = f"frame {f} of {seq.n_frames - 1} · colour: {color_label}"
         n_un, n_bad = len(d["unassigned"]["x"]), len(d["errors"]["x"])
         if self._item_unassigned is not None:

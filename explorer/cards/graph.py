@@ -11,7 +11,7 @@ from bokeh.models import ColorBar, ColumnDataSource, HoverTool, LinearColorMappe
 from bokeh.palettes import RdBu11
 
 from .. import views as V
-from .base import Host, card, fit_image_figure, image_figure, move_legend
+from .base import Host, card, fit_image_figure, image_figure, move_legend, set_data
 
 
 class GraphView:
@@ -82,11 +82,11 @@ class GraphView:
         d = V.graph_sources(res, f, step, fine_colors)
         lim = V.cost_limit(res)
         self.cost_mapper.low, self.cost_mapper.high = -lim, lim
-        self.src_nodes.data = d["nodes"]
-        self.src_joined.data = d["joined"]
-        self.src_cut.data = d["cut"]
-        self.src_step.data = d["step_edge"]
-        self.src_pair.data = d["pair"]
+        set_data(self.src_nodes, d["nodes"])
+        set_data(self.src_joined, d["joined"])
+        set_data(self.src_cut, d["cut"])
+        set_data(self.src_step, d["step_edge"])
+        set_data(self.src_pair, d["pair"])
         self.fig.title.text = (f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {f} · "
                                f"{len(np.unique(d['nodes']['cluster']))} clusters")
         self.caption.object = V.replay_caption(res, step)

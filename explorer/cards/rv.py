@@ -8,7 +8,7 @@ from bokeh.models import ColumnDataSource, LogAxis
 from bokeh.plotting import figure
 
 from .. import views as V
-from .base import card, flex
+from .base import card, flex, set_data
 
 RV_TOOLS = "pan,wheel_zoom,reset"
 
@@ -44,7 +44,7 @@ class RVView:
                          self.rv_md)
 
     def draw(self, laav_voting, plain) -> None:
-        self.src_rv_laav.data = V.rv_sources(laav_voting)
-        self.src_rv_plain.data = V.rv_sources(plain)
+        set_data(self.src_rv_laav, V.rv_sources(laav_voting))
+        set_data(self.src_rv_plain, V.rv_sources(plain))
         self.plain = plain
         self.rv_md.object = V.rv_summary(laav_voting, plain)

@@ -2,9 +2,12 @@
 an iframe in a collapsible card.
 
 The server starts with the first computation, in its own thread: importing viser and
-starting its server (~0.4 s) stays off the page's load. The iframe is set with the first
-result: the 3-D client's WebGL loop then does not compete with the first computation (it is
-costly in software-rendered browsers).
+starting its server (~0.4 s) stays off the page's load. The card starts folded, and the
+iframe is on the page only while the card is unfolded (and a result is shown): a 3-D client
+redraws its WebGL scene at least once a second, and in a software-rendered browser every
+redraw holds the page's main thread for hundreds of milliseconds (the 2-D views then wait;
+docs/bench/explorer_browser_latency.md). While folded, the scene is not updated either;
+unfolding sends it the result, colours and frame shown.
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ class View3D:
         self._iframe_host = iframe_host
         self._on_frame = on_frame
         self.iframe_shown = False
+        self.stale = False  # folded: the scene has not been given the shown result/colours/frame
         if self.want:
             self.pane = pn.pane.HTML(PLACEHOLDER, height=440, margin=0, sizing_mode="stretch_width",
                                      max_width=900)
@@ -48,8 +52,27 @@ class View3D:
             self.pane = pn.pane.Markdown(f"*{V.md_text('the 3-D view is switched off')}*",
                                          sizing_mode="stretch_width", height=60)
         self.card = pn.Card(self.pane, title="3-D space-time view (viser): trajectories along the "
-                            "frame axis, atoms and their graph", collapsible=True, collapsed=False,
+                            "frame axis, atoms and their graph", collapsible=True, collapsed=True,
                             margin=(6, 6), sizing_mode="stretch_width")
+        self.card.param.watch(self._on_fold, "collapsed")
+
+    @property
+    def unfolded(self) -> bool:
+        return not self.card.collapsed
+
+    def _on_fold(self, event=None) -> None:
+        self.host.schedule(self._fold_now, now_if_on_doc_thread=True)
+
+    def _fold_now(self) -> None:
+        """(Document thread.) Unfolded: the iframe and the shown state; folded: no iframe
+        (its client stops drawing) and no scene updates."""
+        if not self.want or self.closed:
+            return
+        if self.unfolded:
+            self.show()
+        elif self.iframe_shown:
+            self.iframe_shown = False
+            self.pane.object = PLACEHOLDER.replace("opens with the first result", "is folded away")
 
     def start(self) -> None:
         """Start the server in its thread (idempotent; nothing when the view is off)."""
@@ -79,7 +102,7 @@ class View3D:
         """(Document thread.) Put the 3-D view on the page once its server has started (or
         failed) and a result is shown; with ``send``, also give it the shown result."""
         h = self.host
-        if not self.want or h.result is None or self.closed:
+        if not self.want or h.result is None or self.closed or not self.unfolded:
             return
         if self.viser is None and self.thread is not None and self.thread.is_alive():
             return  # still starting: _start_server calls again when done
@@ -87,18 +110,22 @@ class View3D:
             self.iframe_shown = True
             self.pane.object = self.iframe_html() if self.viser is not None else (
                 f"<p><i>{html.escape(self.error or 'the 3-D view did not start')}</i></p>")
-        if send and self.viser is not None and self.viser._result is not h.result:
+        if send and self.viser is not None and (self.stale or self.viser._result is not h.result):
+            self.stale = False
             self.viser.set_result(h.sequence, h.result, h.style["color"], h.frame)
 
     def show_first(self) -> None:
         """(Document thread, with the first result.) The iframe, once the server is up."""
-        if self.want and not self.iframe_shown:
+        if self.want and not self.iframe_shown and self.unfolded:
             self.wait(5.0)  # normally done long before; else show() follows
             self.show(send=False)
 
     def draw(self, seq, res, colors, frame: int, new_seq: bool) -> None:
         """Give the server a new result (the whole scene for a new sequence, else the colours)."""
         if self.viser is None:
+            return
+        if not self.unfolded:
+            self.stale = True
             return
         if new_seq or self.viser._result is None:
             self.viser.set_result(seq, res, colors, frame)
@@ -109,10 +136,16 @@ class View3D:
 
     def set_frame(self, frame: int) -> None:
         if self.viser is not None:
+            if not self.unfolded:
+                self.stale = True
+                return
             self.viser.set_frame(int(frame))
 
     def set_colors(self, colors) -> None:
         if self.viser is not None:
+            if not self.unfolded:
+                self.stale = True
+                return
             self.viser.set_colors(colors)
 
     def reattach(self) -> None:
