@@ -4,9 +4,10 @@ Builds >= 5,000 mutants from the bundled ``explorer/assets/*.mat`` and a few Hop
 files (bit flips, truncation, wrong MAT tags and dimensions, extension/content mismatch,
 pickles, NaN/Inf, wrong shapes, random bytes; the same sequences with tracks hidden, as
 KT3DMoSeg ``.mat`` and tracks CSV, bit-flipped, truncated, duplicated rows and text in
-numeric fields) and loads each with ``laav.load_sequence(path, isolated=True)`` in a
-worker process. Prints the count of each
-outcome:
+numeric fields) and loads each with ``laav.load_sequence(path, isolated=True)`` (``--mode
+isolated``, the default) or ``laav.load_sequence(path)`` (``--mode inprocess``: MAT content
+parsed in the worker itself, after :mod:`laav._matvalidate` checked its structure) in a
+worker process. Prints the count of each outcome:
 
 * ok: a Sequence came back;
 * clean error: a ``SequenceError`` whose message names the file;
@@ -16,7 +17,7 @@ outcome:
 
 ::
 
-    python benchmarks/fuzz_loader.py [--hopkins DIR] [--per-source N] [--limit N]
+    python benchmarks/fuzz_loader.py [--mode isolated|inprocess] [--hopkins DIR] [--per-source N] [--limit N]
 
 Mutants are rebuilt from their index (fixed seeds), so a reported index reproduces with
 ``--only INDEX``. Nothing is written outside a temporary folder. The worker's address
@@ -256,7 +257,8 @@ def make_mutant(spec: tuple, sources: list[tuple[str, bytes]], npz_cache: dict) 
     raise ValueError(kind)
 
 
-def worker(hopkins: Path | None, per_source: int) -> None:  # pragma: no cover - child process
+def worker(hopkins: Path | None, per_source: int,
+           isolated: bool = True) -> None:  # pragma: no cover - child process
     try:
         import resource
 
@@ -276,7 +278,7 @@ def worker(hopkins: Path | None, per_source: int) -> None:  # pragma: no cover -
             path.write_bytes(data)
             t0 = time.monotonic()
             try:
-                laav.load_sequence(path, isolated=True)
+                laav.load_sequence(path, isolated=isolated)
                 outcome, msg = "ok", ""
             except laav.SequenceError as exc:
                 msg = str(exc)
@@ -295,18 +297,21 @@ def main(argv=None) -> int:
     ap.add_argument("--per-source", type=int, default=720, help="generated mutants per source file")
     ap.add_argument("--limit", type=int, default=0, help="only the first N mutants (0: all)")
     ap.add_argument("--only", type=int, action="append", default=[], help="only mutant INDEX")
+    ap.add_argument("--mode", choices=("isolated", "inprocess"), default="isolated",
+                    help="isolated: load_sequence(path, isolated=True); inprocess: load_sequence(path)")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
-        worker(args.hopkins, args.per_source)
+        worker(args.hopkins, args.per_source, isolated=args.mode == "isolated")
         return 0
     MARKER.unlink(missing_ok=True)
     sources = _sources(args.hopkins)
     specs = build_specs(len(sources), args.per_source)
     todo = args.only or list(range(len(specs)))[: args.limit or None]
-    print(f"{len(todo)} mutants of {len(sources)} files: {', '.join(n for n, _ in sources)}", flush=True)
+    print(f"{len(todo)} mutants of {len(sources)} files ({args.mode}): "
+          f"{', '.join(n for n, _ in sources)}", flush=True)
     cmd = [sys.executable, __file__, "--worker", "--hopkins", str(args.hopkins),
-           "--per-source", str(args.per_source)]
+           "--per-source", str(args.per_source), "--mode", args.mode]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
     counts: Counter = Counter()
     by_kind: dict = {}

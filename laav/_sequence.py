@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["Sequence", "SequenceError", "IncompleteSequenceError", "LaavWarning", "MIN_POINTS",
-           "MIN_FRAMES", "check_degenerate", "require_complete"]
+           "MIN_FRAMES", "check_degenerate", "require_complete", "warn_single_label"]
 
 #: Fewest trajectories a sequence may hold (the 8-point algorithm needs eight).
 MIN_POINTS = 8
@@ -74,7 +74,7 @@ PIXEL_SPREAD = (1.0, 1e6)
 TOLERANCE = 1e-9
 
 
-def check_degenerate(seq: Sequence, n_motions: int) -> None:
+def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int = 3) -> None:
     """Refuse inputs that cannot hold ``n_motions`` motions; warn about degenerate ones.
 
     Raises :class:`ValueError` when there are fewer distinct trajectories than motions;
@@ -82,9 +82,12 @@ def check_degenerate(seq: Sequence, n_motions: int) -> None:
     motion (the 8-point algorithm fits each motion's fundamental matrices), when no point
     moves, when the points are collinear in every frame, or when the coordinates span
     less than 1 or more than 1e6 pixels. Reads the coordinates only: results never change.
+    ``seq`` is a :class:`Sequence` or an (F, P, 2) array of finite coordinates; LAAV
+    (:class:`laav.Pipeline`, :func:`laav.segment`) and plain Random Voting
+    (:func:`laav.random_voting`) both call it.
     """
-    src, pts = seq.source, seq.points
-    P = seq.n_points
+    src, pts = getattr(seq, "source", "<array>"), as_points(seq)
+    P = pts.shape[1]
     warn = []
     if n_motions > 1 and P < MIN_POINTS * n_motions:
         warn.append(f"{P} points are too few for {n_motions} motions (the 8-point algorithm "
@@ -109,7 +112,18 @@ def check_degenerate(seq: Sequence, n_motions: int) -> None:
         import warnings
 
         warnings.warn(f"{src}: " + "; ".join(warn) + " - the labels are probably meaningless",
-                      LaavWarning, stacklevel=3)
+                      LaavWarning, stacklevel=stacklevel)
+
+
+def warn_single_label(seq, labels: np.ndarray, n_motions: int, stacklevel: int = 3) -> None:
+    """Warn (:class:`LaavWarning`) when ``labels`` give every point one motion though
+    ``n_motions`` > 1 were asked for (after LAAV or plain Random Voting)."""
+    if n_motions > 1 and np.unique(labels).size == 1:
+        import warnings
+
+        warnings.warn(f"{getattr(seq, 'source', '<array>')}: every point got the same label "
+                      f"though {n_motions} motions were asked for", LaavWarning,
+                      stacklevel=stacklevel)
 
 
 @dataclass(frozen=True, eq=False)

@@ -313,7 +313,7 @@ def _matches(name: str, only: SeqT[str] | None) -> bool:
 
 
 def discover(data: str | os.PathLike, only: SeqT[str] | None = None,
-             log: Callable[[str], None] = print) -> list[BenchSequence]:
+             log: Callable[[str], None] = print, max_points: int | None = None) -> list[BenchSequence]:
     """The benchmark sequences of a Hopkins155-style folder, sorted by name.
 
     Parameters
@@ -324,7 +324,12 @@ def discover(data: str | os.PathLike, only: SeqT[str] | None = None,
     only : list of str, optional
         Glob patterns on sequence names; only matching sequences are used.
     log : callable
-        Receives one message per skipped entry.
+        Receives one message per skipped entry: a folder without a sequence, a file that
+        cannot be read (parsed in a child process, so even a file crashing the MAT reader
+        is only skipped), one with more than ``max_points`` points, or without labels.
+    max_points : int, optional
+        Most points a sequence may have (default :data:`laav.io.MAX_POINTS`); a larger
+        one is skipped with a message.
 
     Raises
     ------
@@ -354,7 +359,8 @@ def discover(data: str | os.PathLike, only: SeqT[str] | None = None,
             log(f"skipping {name}: no {name}_truth.mat in the folder")
             continue
         try:
-            seq = load_sequence(truth, isolated=True)  # a damaged file can't crash the bench
+            # isolated: a damaged file can't crash the bench
+            seq = load_sequence(truth, isolated=True, max_points=max_points)
         except SequenceError as exc:
             log(f"skipping {name}: {exc}")
             continue
@@ -621,6 +627,7 @@ def run_bench(
     max_batch: int = 8,
     log: Callable[[str], None] | None = None,
     allow_mixed: bool = False,
+    max_points: int | None = None,
 ) -> BenchSummary:
     """Run (or resume) a benchmark and write ``runs.csv`` and the report into ``out``.
 
@@ -655,6 +662,9 @@ def run_bench(
     allow_mixed : bool
         Resume even when ``runs.csv`` holds rows made by another package version or git
         commit than the running code (refused by default).
+    max_points : int, optional
+        Most points a sequence may have (default :data:`laav.io.MAX_POINTS`); larger ones
+        are skipped with a message (see :func:`discover`).
 
     Returns
     -------
@@ -671,7 +681,8 @@ def run_bench(
     noise = parse_noise(noise)
     params = LaavParams() if params is None else params
 
-    items = {s.name: s for s in discover(data, only, say)}  # inputs first, then the output
+    # inputs first, then the output
+    items = {s.name: s for s in discover(data, only, say, max_points=max_points)}
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -351,7 +351,6 @@ def _check_out_folder(out: Path) -> None:
 
 
 def _cmd_bench(args) -> int:
-    from . import io
     from .bench import params_from_assignments, parse_noise, run_bench
 
     params = params_from_assignments(args.param, args.preset)
@@ -359,18 +358,12 @@ def _cmd_bench(args) -> int:
     methods = _split([args.methods])
     _check_out_folder(Path(args.out))
 
-    default_max = io.MAX_POINTS  # the bench loads its sequences with the module's default
-    if args.max_points is not None:
-        io.MAX_POINTS = args.max_points
-    try:
-        summary = run_bench(
-            data=args.data, out=args.out, methods=methods, seeds=args.seeds, noise=noise,
-            only=_split(args.only) or None, jobs=args.jobs, scheduler=args.scheduler,
-            params=params, progress=not args.quiet, report=not args.no_report,
-            allow_mixed=args.allow_mixed,
-        )
-    finally:
-        io.MAX_POINTS = default_max
+    summary = run_bench(
+        data=args.data, out=args.out, methods=methods, seeds=args.seeds, noise=noise,
+        only=_split(args.only) or None, jobs=args.jobs, scheduler=args.scheduler,
+        params=params, progress=not args.quiet, report=not args.no_report,
+        allow_mixed=args.allow_mixed, max_points=args.max_points,
+    )
     err = sys.stderr
     if summary.interrupted:
         print(f"interrupted: {summary.completed} new runs kept in {summary.runs_csv}; "

@@ -123,7 +123,8 @@ class LaavParams:
     type (numpy scalars are accepted and stored as Python numbers; ``True``/``False``
     are not numbers; NaN and infinity are rejected) and its range. Distances and
     strengths (``r1``, ``r2``, ``affine_threshold``, ``edge_scale``, ``lam``,
-    ``rv_lambda``) lie in (0, 1e6], ``cut_prior`` in [-1e6, 1e6], the other weights in
+    ``rv_lambda``) lie in (0, 1e6] (the strengths, in 1/px^2, in (0, 1e12]: coordinates in
+    thousandths of a pixel need 1e6 times the default), ``cut_prior`` in [-1e6, 1e6], the other weights in
     [0, 1e6] (``pairwise_weight`` and ``rv_alpha`` in [0, 1] and (0, 1]). Counts have
     upper bounds that keep one run within seconds and memory within a laptop:
     ``ransac_hypotheses`` <= 1000, ``graph_neighbors`` <= 100, ``fine_models`` <= 1000,
@@ -215,6 +216,9 @@ class LaavParams:
 
 
 _BIG = 1e6  # px or 1/px^2: far beyond any image, small enough that squares stay finite
+#: Upper bound of the strengths in 1/px^2 (lam, rv_lambda): 1e6 / s^2 for coordinates
+#: scaled by s = 1e-3 with the parameters scaled along (issue 16 item 8).
+_BIG_STRENGTH = 1e12
 
 #: (field, kind, low, high) for every field, checked by LaavParams.__post_init__. Kinds:
 #: "int" / "float" in [low, high]; "float>" in (low, high]; "int|None" also allows None;
@@ -234,13 +238,13 @@ _BOUNDS = (
     ("fine_per_motion", "int", 1, 100),
     ("coarse_merge", "choice", ("coding", "epipolar"), None),
     ("coding_eps", "float>", 0, _BIG),
-    ("lam", "float>", 0, _BIG),
+    ("lam", "float>", 0, _BIG_STRENGTH),
     ("coarse_frames", "int", 1, 100),
     ("coarse_samples", "int", 1, 1000),
     ("motion_weight", "float", 0, _BIG),
     ("pooled_trials", "int", 0, 100),
     ("pairwise_weight", "float", 0, 1),
-    ("rv_lambda", "float>", 0, _BIG),
+    ("rv_lambda", "float>", 0, _BIG_STRENGTH),
     ("rv_alpha", "float>", 0, 1),
     ("rv_max_iter", "int", 1, 10_000),
     ("rv_trials", "int", 1, 100),

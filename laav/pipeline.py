@@ -19,7 +19,7 @@ import numpy as np
 
 from ._interrupt import check as check_interrupt
 from ._random import resolve_seed
-from ._sequence import LaavWarning, Sequence, check_degenerate, require_complete
+from ._sequence import Sequence, check_degenerate, require_complete, warn_single_label
 from ._threads import single_threaded
 from .atoms import Atoms, Neighbourhoods, build_atoms
 from .coarse import Coarse, merge_models
@@ -299,10 +299,6 @@ def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: i
         from dataclasses import replace
 
         result = replace(result, motion_count=count)
-    if result.n_motions > 1 and np.unique(result.labels).size == 1:
-        import warnings
-
-        warnings.warn(f"{getattr(seq, 'source', '<array>')}: every point got the same label "
-                      f"though {result.n_motions} motions were asked for", LaavWarning, stacklevel=2)
+    warn_single_label(seq, result.labels, result.n_motions)  # points at segment's caller
     return result
 

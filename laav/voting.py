@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._random import resolve_seed
-from ._sequence import Sequence, as_points, require_complete
+from ._sequence import Sequence, as_points, check_degenerate, require_complete, warn_single_label
 from ._threads import single_threaded
 from .metrics import misclassification_rate
 from .params import LaavParams
@@ -166,6 +166,8 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if C > 1 and params.rv_sample_size > P:
         raise ValueError(f"rv_sample_size ({params.rv_sample_size}) exceeds the number of "
                          f"points ({P})")
+    if init_labels is None:  # plain RV, an entry point: the checks LAAV's segment() makes
+        check_degenerate(seq, C, stacklevel=4)  # 4: the caller of the single_threaded wrapper
     seed = resolve_seed(seed, random_state)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     if C == 1 or F < 2:
@@ -177,11 +179,14 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if init_labels is None:  # plain RV
         _, best, trials, ended = run_trials(points, C, params, rng)
         if best is not None:
-            return _finish(points, C, params, best, trials, False, "trial")
-        if select:  # no trial converged: the consensus or one of the trials
-            return _select(points, C, params, _plain_candidates(None, ended, C, rng), trials,
-                           initialised=False)
-        return _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus")
+            out = _finish(points, C, params, best, trials, False, "trial")
+        elif select:  # no trial converged: the consensus or one of the trials
+            out = _select(points, C, params, _plain_candidates(None, ended, C, rng), trials,
+                          initialised=False)
+        else:
+            out = _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus")
+        warn_single_label(seq, out.labels, C, stacklevel=4)
+        return out
 
     init = np.asarray(init_labels, dtype=np.int64)
     if init.shape != (P,):

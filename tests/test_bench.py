@@ -368,3 +368,57 @@ def test_bench_max_points(data_dir, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "60 points exceed the limit of 50" in err and "no benchmark sequences" in err
     assert io.MAX_POINTS == 20_000  # restored for the rest of the process
+
+
+def test_two_benches_with_different_max_points_do_not_interfere(data_dir, tmp_path, monkeypatch):
+    """--max-points is a parameter of run_bench / discover, not module state: two benches in
+    one process, interleaved at their first load, each keep their own limit."""
+    import threading
+
+    from laav import io
+
+    real = bench.load_sequence
+    arrived = threading.Barrier(2, timeout=60)
+    seen = {}
+
+    def load(path, **kw):  # both benches load their first file only when both got there
+        name = threading.current_thread().name
+        if name not in seen:
+            seen[name] = kw.get("max_points")
+            arrived.wait()
+        return real(path, **kw)
+
+    monkeypatch.setattr(bench, "load_sequence", load)
+    results, messages = {}, {"strict": [], "default": []}
+
+    def run(name, max_points):
+        try:
+            results[name] = run_bench(data_dir, tmp_path / name, methods=("rv",), seeds=1,
+                                      noise=(0.0,), jobs=1, params=SMALL, progress=False,
+                                      report=False, log=messages[name].append,
+                                      max_points=max_points)
+        except BenchError as exc:
+            results[name] = exc
+
+    threads = [threading.Thread(target=run, args=("strict", 50), name="strict"),
+               threading.Thread(target=run, args=("default", None), name="default")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(300)
+    assert seen == {"strict": 50, "default": None}
+    assert isinstance(results["strict"], BenchError)
+    assert "no benchmark sequences" in str(results["strict"])
+    assert sum("60 points exceed the limit of 50" in m for m in messages["strict"]) == len(SEQS)
+    assert not any("exceed the limit" in m for m in messages["default"])
+    assert results["default"].completed == len(SEQS)
+    assert io.MAX_POINTS == 20_000
+
+
+def test_discover_max_points(data_dir):
+    msgs = []
+    assert [s.name for s in bench.discover(data_dir, log=msgs.append, max_points=60)] == sorted(SEQS)
+    assert bench.discover(data_dir, log=lambda m: None, max_points=None)
+    with pytest.raises(BenchError):
+        bench.discover(data_dir, log=msgs.append, max_points=59)
+    assert any("60 points exceed the limit of 59" in m for m in msgs)

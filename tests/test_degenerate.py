@@ -75,3 +75,77 @@ def test_single_label_result_warns():
     messages = [str(w.message) for w in caught if w.category is LaavWarning]
     assert np.unique(res.labels).size == 1  # what LAAV does at this scale (pixel radii)
     assert any("every point got the same label though 2 motions" in m for m in messages)
+
+
+# --- plain Random Voting and `laav segment --method rv` check like LAAV (issue 16 item 8) ---
+
+def _static():
+    return np.repeat(np.random.default_rng(0).uniform(0, 500, (1, 40, 2)), 6, axis=0)
+
+
+def _nine():
+    return np.random.default_rng(0).uniform(0, 500, (5, 9, 2))
+
+
+@pytest.mark.parametrize("run", [segment, laav.random_voting], ids=["laav", "rv"])
+@pytest.mark.parametrize("case, match", [
+    (_nine, "9 points are too few for 2 motions"),
+    (_static, "no point moves"),
+    (lambda: _scene().points * 1e9, "px, outside 1-1e"),
+], ids=["nine", "static", "huge"])
+def test_both_methods_warn_alike(run, case, match):
+    with pytest.warns(LaavWarning, match=match):
+        run(Sequence(case(), source="odd.npz"), 2, FAST)
+
+
+@pytest.mark.parametrize("run", [segment, laav.random_voting], ids=["laav", "rv"])
+def test_both_methods_refuse_identical_trajectories(run):
+    one = np.random.default_rng(0).uniform(0, 500, (5, 1, 2))
+    with pytest.raises(ValueError, match="only 1 distinct trajectory for 2 motions"):
+        run(np.repeat(one, 40, axis=1), 2, FAST)
+
+
+def test_random_voting_warns_on_a_single_label(monkeypatch):
+    import laav.voting as voting
+
+    real = voting._finish
+
+    def one_label(points, C, params, best, *args, **kw):
+        res = real(points, C, params, best, *args, **kw)
+        import dataclasses
+
+        return dataclasses.replace(res, labels=np.zeros_like(res.labels))
+
+    monkeypatch.setattr(voting, "_finish", one_label)
+    monkeypatch.setattr(voting, "_select", lambda points, C, params, cands, *a, **k: one_label(
+        points, C, params, cands[0][1], (), False, "x"))
+    with pytest.warns(LaavWarning, match="every point got the same label though 2 motions"):
+        laav.random_voting(_scene(), 2, FAST)
+
+
+def test_ordinary_input_gives_no_warning_rv():
+    seq = _scene()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LaavWarning)
+        res = laav.random_voting(seq, 2, FAST)
+    assert laav.misclassification_rate(seq.labels, res.labels) < 0.05
+
+
+@pytest.mark.parametrize("method", ["laav", "rv"])
+def test_cli_methods_check_alike(tmp_path, capsys, method):
+    from laav.cli import main
+
+    small = ["--param", "rv_max_iter=30", "--param", "rv_trials=2"]
+    path = tmp_path / "still.npz"
+    np.savez(path, points=_static())
+    with pytest.warns(LaavWarning, match="still.npz: no point moves"):
+        code = main(["segment", str(path), "--motions", "2", "--method", method,
+                     "--out", str(tmp_path / "l.csv"), *small])
+    assert code == 0
+    one = np.random.default_rng(0).uniform(0, 500, (5, 1, 2))
+    np.savez(path, points=np.repeat(one, 40, axis=1))
+    code = main(["segment", str(path), "--motions", "2", "--method", method,
+                 "--out", str(tmp_path / "l.csv"), *small])
+    err = capsys.readouterr().err
+    assert code == 2 and "only 1 distinct trajectory for 2 motions" in err
+    assert len(err.strip().splitlines()) == 1

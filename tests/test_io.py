@@ -588,24 +588,39 @@ def test_mat_content_named_npz_is_parsed_in_the_child(tmp_path, monkeypatch):
     mat = save_sequence(seq, tmp_path / "real_truth.mat")
     fake = tmp_path / "looks_like.npz"
     fake.write_bytes(mat.read_bytes())
-    monkeypatch.setattr(laav.io, "_read_mat_here", lambda p: pytest.fail("MAT parsed in-process"))
+    monkeypatch.setattr(laav.io, "_read_mat_here", lambda *a: pytest.fail("MAT parsed in-process"))
     back = load_sequence(fake, isolated=True)
     np.testing.assert_array_equal(back.points, seq.points)
     np.testing.assert_array_equal(back.labels, seq.labels)
 
 
-def test_a_mat_file_crashing_the_reader_is_a_clean_error(tmp_path):
+def test_a_mat_file_crashing_scipy_is_refused_in_and_out_of_process(tmp_path):
     bad = _segfaulting_mat(tmp_path / "crash.npz")
-    # the file really crashes an in-process read...
-    code = "import sys, laav; laav.load_sequence(sys.argv[1])"
+    # the file really crashes scipy's reader...
+    code = "import sys, scipy.io; scipy.io.loadmat(sys.argv[1])"
     run = subprocess.run([sys.executable, "-c", code, str(bad)], capture_output=True, timeout=120)
     assert run.returncode == -signal.SIGSEGV
-    # ...and only the reader's child process when isolated
-    with pytest.raises(SequenceError, match=r"crash\.npz: corrupt MAT file \(the reader crashed: "
-                                            r"signal SIGSEGV\)"):
-        load_sequence(bad, isolated=True)
-    # the next file gets a fresh reader
+    # ...but its structure is checked first: refused in-process and in the child alike
+    for isolated in (False, True):
+        with pytest.raises(SequenceError, match=r"crash\.npz: corrupt MAT file: real part has "
+                                                r"element type 15 \(byte \d+\)"):
+            load_sequence(bad, isolated=isolated)
+
+
+def test_a_crash_of_the_reader_child_is_a_clean_error(tmp_path, monkeypatch):
+    """A crash the structure check did not foresee costs only the isolated reader's child."""
+    script = tmp_path / "crashing_child.py"
+    script.write_text("import os, signal, sys\nsys.stdin.readline()\nos.kill(os.getpid(), signal.SIGSEGV)\n")
+    reader = laav.io._MatReader()
+    monkeypatch.setattr(reader, "script", script)
+    monkeypatch.setattr(laav.io, "_READER", reader)
     good = save_sequence(_random_sequence(), tmp_path / "good_truth.mat")
+    with pytest.raises(SequenceError, match=r"good_truth\.mat: corrupt MAT file \(the reader "
+                                            r"crashed: signal SIGSEGV\)"):
+        load_sequence(good, isolated=True)
+    reader.close()
+    monkeypatch.undo()
+    # the next file gets a fresh (real) reader
     assert laav.load_sequence_isolated(good).n_points == 12
 
 
@@ -639,7 +654,7 @@ def test_cli_and_bench_survive_a_crashing_mat(tmp_path, capsys):
     bad = _segfaulting_mat(tmp_path / "bad_truth.mat")
     assert main(["segment", str(bad)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "bad_truth.mat: corrupt MAT file (the reader crashed" in err
+    assert err.count("\n") == 0 and "bad_truth.mat: corrupt MAT file: real part" in err
     data = tmp_path / "data"
     for name in ("bad", "good"):
         (data / name).mkdir(parents=True)
@@ -648,7 +663,7 @@ def test_cli_and_bench_survive_a_crashing_mat(tmp_path, capsys):
     msgs: list[str] = []
     found = bench.discover(data, log=msgs.append)
     assert [s.name for s in found] == ["good"]
-    assert len(msgs) == 1 and msgs[0].startswith("skipping bad: ") and "reader crashed" in msgs[0]
+    assert len(msgs) == 1 and msgs[0].startswith("skipping bad: ") and "corrupt MAT" in msgs[0]
 
 
 # --------------------------------------------------------------------------- size limits
