@@ -77,6 +77,7 @@ def session_text(url: str, timeout: float = 60.0) -> str:
     import time
 
     import panel.models  # noqa: F401 - registers the models the client receives
+    import panel.models.file_dropper  # noqa: F401 - the upload box (not in panel.models)
     from bokeh.client import pull_session
 
     with pull_session(url=url) as session:

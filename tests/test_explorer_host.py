@@ -59,6 +59,7 @@ def test_host_all_interfaces_prints_a_reachable_url_and_a_warning(tmp_path):
         assert "3-D view is served on another free port" in out
         # a session (a script client, as a browser tab would) starts its 3-D view: its address
         import panel.models  # noqa: F401 - registers the models the client receives
+        import panel.models.file_dropper  # noqa: F401 - the upload box (not in panel.models)
         from bokeh.client import pull_session
 
         with pull_session(url=f"http://127.0.0.1:{port}/"):
