@@ -88,3 +88,23 @@ def session_text(url: str, timeout: float = 60.0) -> str:
             if joined.strip() or time.monotonic() > deadline:
                 return joined
             time.sleep(0.5)
+
+
+def two_motion_sequence(seed: int = 0, P: int = 140, F: int = 12, name: str = "two_motions") -> laav.Sequence:
+    """A small two-motion sequence (a translating, slightly scaling object and a rotating
+    one), fast to segment: explorer and browser tests use it so they stay short."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    a = rng.uniform([40, 60], [260, 400], (P // 2, 2))
+    b = rng.uniform([360, 60], [600, 400], (P - P // 2, 2))
+    t = np.linspace(0, 1, F)[:, None, None]
+    pa = a[None] + t * np.array([60.0, 20.0]) + 0.05 * t * (a[None] - 150)
+    ang = 0.35 * t[..., 0]
+    rel = b[None] - b.mean(0)
+    pb = np.stack([np.cos(ang) * rel[..., 0] - np.sin(ang) * rel[..., 1],
+                   np.sin(ang) * rel[..., 0] + np.cos(ang) * rel[..., 1]], -1) + b.mean(0)
+    pb = pb + t * np.array([-30.0, 40.0])
+    pts = np.concatenate([pa, pb], axis=1) + rng.normal(0, 0.3, (F, P, 2))
+    labels = np.r_[np.zeros(P // 2, int), np.ones(P - P // 2, int)]
+    return laav.Sequence(pts, labels, name=name, image_size=(640, 480))

@@ -25,6 +25,8 @@ if not CHROMIUM.exists():
 sync_api = pytest.importorskip("playwright.sync_api")
 pn = pytest.importorskip("panel")
 
+from conftest import two_motion_sequence  # noqa: E402
+
 import laav  # noqa: E402
 from explorer.cli import app_factory, serve_options  # noqa: E402
 
@@ -74,22 +76,7 @@ def _wait_listening(port: int, timeout: float = 30.0) -> None:
 
 def _sequence() -> laav.Sequence:
     """A small two-motion sequence (fast to segment, so the test stays short)."""
-    import numpy as np
-
-    rng = np.random.default_rng(0)
-    F, P = 12, 140
-    a = rng.uniform([40, 60], [260, 400], (P // 2, 2))
-    b = rng.uniform([360, 60], [600, 400], (P - P // 2, 2))
-    t = np.linspace(0, 1, F)[:, None, None]
-    pa = a[None] + t * np.array([60.0, 20.0]) + 0.05 * t * (a[None] - 150)
-    ang = 0.35 * t[..., 0]
-    rel = b[None] - b.mean(0)
-    pb = np.stack([np.cos(ang) * rel[..., 0] - np.sin(ang) * rel[..., 1],
-                   np.sin(ang) * rel[..., 0] + np.cos(ang) * rel[..., 1]], -1) + b.mean(0)
-    pb = pb + t * np.array([-30.0, 40.0])
-    pts = np.concatenate([pa, pb], axis=1) + rng.normal(0, 0.3, (F, P, 2))
-    labels = np.r_[np.zeros(P // 2, int), np.ones(P - P // 2, int)]
-    return laav.Sequence(pts, labels, name="browser_test", image_size=(640, 480))
+    return two_motion_sequence(0, P=140, F=12, name="browser_test")
 
 
 def _wait_for(pred, timeout: float, what: str, page=None):

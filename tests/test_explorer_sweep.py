@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import two_motion_sequence
 
 import laav
 from explorer import sweep as S
@@ -18,21 +19,9 @@ from explorer.views import COLOR_MODES, stage_numbers
 pytest.importorskip("panel")
 
 
-def _sequence(seed: int = 0, P: int = 120, F: int = 10) -> laav.Sequence:
+def _sequence(seed: int = 0) -> laav.Sequence:
     """Two rigid motions, small: a LAAV run takes a few tens of ms."""
-    rng = np.random.default_rng(seed)
-    a = rng.uniform([40, 60], [260, 400], (P // 2, 2))
-    b = rng.uniform([360, 60], [600, 400], (P - P // 2, 2))
-    t = np.linspace(0, 1, F)[:, None, None]
-    pa = a[None] + t * np.array([60.0, 20.0]) + 0.05 * t * (a[None] - 150)
-    ang = 0.35 * t[..., 0]
-    rel = b[None] - b.mean(0)
-    pb = np.stack([np.cos(ang) * rel[..., 0] - np.sin(ang) * rel[..., 1],
-                   np.sin(ang) * rel[..., 0] + np.cos(ang) * rel[..., 1]], -1) + b.mean(0)
-    pb = pb + t * np.array([-30.0, 40.0])
-    pts = np.concatenate([pa, pb], axis=1) + rng.normal(0, 0.3, (F, P, 2))
-    labels = np.r_[np.zeros(P // 2, int), np.ones(P - P // 2, int)]
-    return laav.Sequence(pts, labels, name="sweep_test", image_size=(640, 480))
+    return two_motion_sequence(seed, P=120, F=10, name="sweep_test")
 
 
 class _Recorder:
