@@ -68,7 +68,7 @@ class Coarse:
         Coding length (nats per point) that merging each pair of fine models adds
         (:func:`laav.coding.merge_cost`; computed in both methods, for comparison).
     coding_length : float
-        Total coding length of the chosen partition (nats).
+        Total coding length of the chosen partition (nats); NaN with the epipolar merge.
     """
 
     fine_to_coarse: np.ndarray
@@ -268,8 +268,9 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     Z = Z * np.exp(-params.motion_weight * Mdist)
     np.fill_diagonal(Z, 1.0)
 
-    assign, length = best_partition(stats, n_motions, params.coding_eps)
-    if coding:
+    length = float("nan")
+    if coding:  # the partition is searched only when it decides
+        assign, length = best_partition(stats, n_motions, params.coding_eps)
         Z = np.exp(-np.maximum(gain, 0.0))
     if n <= n_motions:
         f2c = np.arange(n, dtype=np.int64)

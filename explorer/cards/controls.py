@@ -102,10 +102,11 @@ class Controls:
         if event is not None and event.obj is self.w_motions:
             fm = self.w_params["fine_models"]
             old = event.old if isinstance(event.old, int) else None
-            if old is not None and fm.value == 2 * old:
+            k = self.defaults.fine_per_motion  # the fine models follow C (k C by default)
+            if old is not None and fm.value == k * old:
                 with self.host.quiet():
                     fm.end = max(fm.end, 4 * int(event.new or 1))
-                    fm.value = 2 * int(event.new or 1)
+                    fm.value = k * int(event.new or 1)
         self.state.request(params=self.widget_params(), seed=int(self.w_seed.value),
                            n_motions=self._motions())
 
