@@ -30,10 +30,42 @@ from .multicut import Multicut
 from .params import LaavParams
 from .voting import frame_pairs
 
-__all__ = ["Coarse", "merge_models", "point_labels_from_atoms", "pooled_voting"]
+__all__ = ["Coarse", "VoteSamples", "merge_models", "point_labels_from_atoms", "pooled_voting"]
 
 _PER_ATOM = 6  # features drawn from each atom for one fit
 _POOLED_ALPHA = 0.9  # forgetting factor of pooled voting
+
+
+@dataclass(frozen=True, eq=False)
+class VoteSamples:
+    """For every pair of fine models, one of the samples their pairwise epipolar vote was
+    built from: the sample of median distance among the ``K x S`` drawn (K frame pairs,
+    S four-atom samples each), so that a viewer sees a typical F the vote used, not one
+    refitted for drawing. Entries ``[j, j]`` are empty (frames -1, F zero).
+
+    Attributes
+    ----------
+    frames : ndarray of shape (n_fine, n_fine, 2), int64
+        The sample's frame pair (l, r).
+    fundamental : ndarray of shape (n_fine, n_fine, 3, 3)
+        Its F, fitted (normalised 8-point) on ``points``: ``x_r^T F x_l = 0``.
+    points : ndarray of shape (n_fine, n_fine, 4 m), int64
+        The features it was fitted on: two atoms of model j (first half of ``[j, k]``),
+        two of model k (m features drawn from each atom, with repeats for small atoms).
+    distance : ndarray of shape (n_fine, n_fine)
+        Its distance: the larger of the two models' mean Sampson distances (px^2); the
+        vote it cast is ``exp(-lam * distance)``.
+    """
+
+    frames: np.ndarray
+    fundamental: np.ndarray
+    points: np.ndarray
+    distance: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int, width: int) -> VoteSamples:
+        return cls(np.full((n, n, 2), -1, dtype=np.int64), np.zeros((n, n, 3, 3)),
+                   np.full((n, n, width), -1, dtype=np.int64), np.zeros((n, n)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +101,14 @@ class Coarse:
         (:func:`laav.coding.merge_cost`; computed in both methods, for comparison).
     coding_length : float
         Total coding length of the chosen partition (nats); NaN with the epipolar merge.
+    vote_samples : VoteSamples or None
+        One typical sample of every pair's epipolar vote (what the explorer draws).
+    pairwise_vote, coassociation : ndarray of shape (n_fine, n_fine) or None
+        The two terms of the epipolar merge's Z, apart: the paper's pairwise vote (mean of
+        ``exp(-lam d)`` over the samples) and the co-association of the pooled-voting
+        trials (identity when pooled voting does not run). ``affinity`` is
+        ``(1 - w) coassociation + w pairwise_vote`` times the motion term, w =
+        ``pairwise_weight`` (1 without pooled voting).
     """
 
     fine_to_coarse: np.ndarray
@@ -83,6 +123,9 @@ class Coarse:
     method: str = "epipolar"
     merge_cost: np.ndarray | None = None
     coding_length: float = float("nan")
+    vote_samples: VoteSamples | None = None
+    pairwise_vote: np.ndarray | None = None
+    coassociation: np.ndarray | None = None
 
     def pair_fundamental(self, points: np.ndarray, j: int, k: int) -> np.ndarray:
         """F fitted (normalised 8-point) on every feature of fine models ``j`` and ``k``
@@ -222,7 +265,9 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     if n == 0:
         e = np.zeros((0, 0))
         return Coarse(np.zeros(0, np.int64), e, e, e, np.zeros(0, np.int64), fine_pts,
-                      fine_pts.copy(), pairs, widest, params.coarse_merge, e)
+                      fine_pts.copy(), pairs, widest, params.coarse_merge, e,
+                      vote_samples=VoteSamples.empty(0, 4 * _PER_ATOM), pairwise_vote=e,
+                      coassociation=e)
 
     model_atoms = [np.flatnonzero(multicut.atom_labels == j) for j in range(n)]
     groups = [np.flatnonzero(fine_pts == j) for j in range(n)]
@@ -250,8 +295,10 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         depi = np.maximum(dj, dk)  # (pairs, K, S)
         vote = np.exp(-params.lam * depi).mean(axis=(1, 2))
         D[jj, kk] = D[kk, jj] = depi.mean(axis=(1, 2))
+        samples = _median_samples(depi, Fm, idx, pairs, jj, kk, n)
     else:
         vote = np.zeros(0)
+        samples = VoteSamples.empty(n, 4 * _PER_ATOM)
     Mdist = _motion_distance(points, groups) if params.motion_weight > 0 else np.zeros((n, n))
     pairwise = np.eye(n)
     pairwise[jj, kk] = pairwise[kk, jj] = vote
@@ -300,7 +347,31 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         method=params.coarse_merge,
         merge_cost=gain,
         coding_length=length,
+        vote_samples=samples,
+        pairwise_vote=pairwise,
+        coassociation=coassoc,
     )
+
+
+def _median_samples(depi, Fm, idx, pairs, jj, kk, n) -> VoteSamples:
+    """The sample of median distance of every model pair (j < k, mirrored to k > j).
+
+    ``depi`` (n_pairs, K, S), ``Fm`` (n_pairs, K, S, 3, 3), ``idx`` (n_pairs, K, S, 4 m)
+    feature indices, ``pairs`` (K, 2) frame pairs.
+    """
+    flat = depi.reshape(depi.shape[0], -1)
+    mid = np.argsort(flat, axis=1, kind="stable")[:, flat.shape[1] // 2]
+    ki, si = np.unravel_index(mid, depi.shape[1:])
+    p = np.arange(depi.shape[0])
+    out = VoteSamples.empty(n, idx.shape[-1])
+    pts = idx[p, ki, si]
+    half = pts.shape[-1] // 2
+    for a, b, first_a in ((jj, kk, pts), (kk, jj, np.roll(pts, half, axis=-1))):
+        out.frames[a, b] = pairs[ki]
+        out.fundamental[a, b] = Fm[p, ki, si]
+        out.points[a, b] = first_a  # [a, b]: model a's features first
+        out.distance[a, b] = depi[p, ki, si]
+    return out
 
 
 def _canonical(labels: np.ndarray) -> np.ndarray:
