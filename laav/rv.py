@@ -33,7 +33,7 @@ import numpy as np
 from ._interrupt import check as check_interrupt
 from .geometry import fit_fundamental, sampson_distance
 
-__all__ = ["vote", "run_trials", "consensus", "RESET_AT"]
+__all__ = ["vote", "run_trials", "consensus", "consensus_seed", "RESET_AT"]
 
 #: Plain RV resets its votes once, at this iteration (RV paper).
 RESET_AT = 15
@@ -191,7 +191,7 @@ def _step(points, trials, params):
             t.done = True
 
 
-def run_trials(points, C, params, rng, informed=None, n_plain=None):
+def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None):
     """Run LAAV's informed trial and plain RV's random-start trials, ``rv_batch`` side by side.
 
     Trials advance in lockstep, one batched numpy call per iteration, each with its own
@@ -213,6 +213,10 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None):
         Start labels (P,) and votes (P, C) of LAAV's informed trial.
     n_plain : int, optional
         Most plain trials to start (default ``rv_trials``).
+    streams : sequence of numpy.random.Generator, optional
+        The trials' generators, ``[informed, plain 0, plain 1, ...]`` (``1 + n_plain`` of
+        them), instead of spawning them from ``rng``: a trial's result depends only on its
+        own generator, so a caller may run LAAV's trial and plain RV's apart.
 
     Returns
     -------
@@ -228,7 +232,8 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None):
     P = points.shape[1]
     width = params.rv_batch
     n_plain = params.rv_trials if n_plain is None else n_plain
-    streams = rng.spawn(1 + n_plain)  # [informed, plain 0, plain 1, ...]
+    if streams is None:
+        streams = rng.spawn(1 + n_plain)  # [informed, plain 0, plain 1, ...]
     active: list = []
     if informed is not None:
         labels0, votes0 = informed
@@ -272,12 +277,17 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None):
             [t.result() for t in started], plain_ended)
 
 
+def consensus_seed(rng: np.random.Generator) -> int:
+    """The one draw :func:`consensus` makes from ``rng``."""
+    return int(rng.integers(2**31 - 1))
+
+
 def consensus(trials, C, rng):
     """Combine the labellings of unconverged trials by spectral clustering of their
     co-association (+ 1e-6), without the P x P matrix (:mod:`laav._spectral`)."""
     from ._spectral import coassociation_clustering
 
     labs = np.stack([t[0] for t in trials])  # (T, P)
-    labels = coassociation_clustering(labs, C, int(rng.integers(2**31 - 1)))
+    labels = coassociation_clustering(labs, C, consensus_seed(rng))
     last = trials[-1]
     return labels, last[1], last[2], last[3], last[4], False

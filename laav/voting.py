@@ -44,7 +44,7 @@ from .refine import (
     refine_labels,
     subspace_cost,
 )
-from .rv import consensus, run_trials, vote
+from .rv import consensus, consensus_seed, run_trials, vote
 
 __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances", "frame_pairs",
            "labelling_cost", "subspace_cost", "reassign_labels"]
@@ -70,8 +70,9 @@ class Voting:
     margin : ndarray of shape (T,)
         Mean normalised vote margin (best minus second best over their sum) per iteration.
     n_iterations : int
-        Every voting iteration the call performed: summed over all trials of every run
-        (LAAV's informed trial, plain RV's trials, cancelled ones included).
+        Every voting iteration the result rests on: summed over all trials of every run
+        (LAAV's informed trial, plain RV's trials, cancelled ones included; with
+        ``plain_memo``, plain RV's were performed by the call that filled it).
     n_trials : int
         Trials run.
     converged : bool
@@ -122,7 +123,8 @@ class Voting:
 @single_threaded  # one BLAS/OpenMP thread, restored after (laav/_threads.py)
 def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams | None = None,
                   seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
-                  weights: np.ndarray | None = None, *, random_state=None) -> Voting:
+                  weights: np.ndarray | None = None, *, random_state=None,
+                  plain_memo: dict | None = None) -> Voting:
     """Segment trajectories into ``n_motions`` rigid motions by Random Voting.
 
     Parameters
@@ -143,6 +145,12 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     weights : ndarray of shape (P,), optional
         Initial votes of each point for its start label (default ``rv_label_weight`` for
         labelled points, 0 otherwise). Only with ``init_labels``.
+    plain_memo : dict, optional
+        Speed only, for callers that rerun the fine-tuning with new ``init_labels`` (as
+        :class:`laav.Pipeline` does when λ or the radii change): an empty dict at first,
+        then the same dict again for the same points, C, seed and ``rv_*`` settings. Plain
+        RV's runs and their polished candidates (which do not depend on ``init_labels``)
+        are kept in it and reused; the labels are identical to a run without it.
 
     Returns
     -------
@@ -206,16 +214,49 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
         first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0)
         return _with_informed(_finish(points, C, params, first, trials, True, "informed"), first)
-    # LAAV's start against plain RV: keep the labelling of lower selection score
-    first, plain, trials, ended = run_trials(points, C, params, rng, (labels0, votes0))
-    cands = [("informed", first)] + _plain_candidates(plain, ended, C, rng, "plain ")
+    # LAAV's start against plain RV: keep the labelling of lower selection score. The
+    # informed trial and plain RV's trials each draw from their own generator, so they run
+    # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
+    streams = rng.spawn(1 + params.rv_trials)  # [informed, plain 0, plain 1, ...]
+    first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
+                                     streams=streams[:1])
+    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1)
+    trials, cands = trials + more, [("informed", first)] + cands
     if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
         # LAAV's start and plain RV disagree: two more plain RV runs arbitrate
         for k in (2, 3):
-            _, conv, more, ended = run_trials(points, C, params, rng)
-            trials = trials + more
-            cands += _plain_candidates(conv, ended, C, rng, f"plain {k} ")
-    return _with_informed(_select(points, C, params, cands, trials, initialised=True), first)
+            _, more, kc = _plain_run(points, C, params, rng, rng.spawn(1 + params.rv_trials),
+                                     plain_memo, k)
+            trials, cands = trials + more, cands + kc
+    polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
+    return _with_informed(_select(points, C, params, cands, trials, initialised=True,
+                                  polished=polished), first)
+
+
+def _plain_run(points, C, params, rng, streams, memo, k):
+    """Plain RV's k-th run of LAAV's fine-tuning on ``streams`` (``[unused, plain 0, ...]``):
+    (its converged trial or None, every trial it ran, its candidate labellings).
+
+    With ``memo`` (a dict kept by the caller for one sequence, C, seed and ``rv_*``
+    settings) a run is computed once: plain RV does not depend on LAAV's start. Its one
+    draw from ``rng`` (the consensus's seed) is then made again, so that every later draw
+    is what a fresh run would make: the labels are identical either way.
+    """
+    hit = None if memo is None else memo.get(("run", k))
+    if hit is None:
+        _, conv, trials, ended = run_trials(points, C, params, None, streams=streams)
+        cons = consensus(ended, C, rng) if conv is None else None
+        hit = (conv, trials, ended, cons)
+        if memo is not None:
+            memo[("run", k)] = hit
+    elif hit[0] is None:
+        consensus_seed(rng)
+    conv, trials, ended, cons = hit
+    prefix = "plain " if k == 1 else f"plain {k} "
+    if conv is not None:
+        return conv, trials, [(prefix + "trial", conv)]
+    return None, trials, ([(prefix + "consensus", cons)]
+                          + [(f"{prefix}trial {i}", t) for i, t in enumerate(ended)])
 
 
 def _with_informed(voting: Voting, first: tuple) -> Voting:
@@ -289,7 +330,7 @@ def _partition_key(labels: np.ndarray) -> bytes:
     return order[inverse].astype(np.int64).tobytes()
 
 
-def _select(points, C, params, candidates, trials, initialised) -> Voting:
+def _select(points, C, params, candidates, trials, initialised, polished=None) -> Voting:
     """Polish every candidate labelling and return the one of lowest selection score.
 
     Every candidate is refined (:func:`refine_labels`) and, when the agreement term needs
@@ -310,8 +351,13 @@ def _select(points, C, params, candidates, trials, initialised) -> Voting:
     for name, cand in candidates:
         key = _partition_key(cand[0])
         if key not in done:
-            pol = _Polished(points, C, params, cand[0])
-            done[key] = (pol, pol.cost())
+            if polished is not None and key in polished:
+                done[key] = polished[key]
+            else:
+                pol = _Polished(points, C, params, cand[0])
+                done[key] = (pol, pol.cost())
+                if polished is not None and name.startswith("plain"):
+                    polished[key] = done[key]  # plain RV's: the same on every rerun
         entries.append((name, cand) + done[key])
     scores = np.array([e[3] for e in entries])
     if n > 2 and params.rv_select_agreement > 0:
