@@ -8,7 +8,8 @@ by side, in one batched call); every point receives, from each group's matrix, t
 which then decays by the forgetting factor ``alpha``. A trial starts from a random
 partition (plain RV) or from given labels (LAAV's fine-tuning, see
 :func:`laav.voting.random_voting`), and has converged when no label changed for
-``rv_patience`` iterations; plain RV resets its votes once, at iteration 15.
+``rv_patience`` iterations (at most ``floor(rv_tolerance * P)`` of them with
+``rv_tolerance`` > 0); plain RV resets its votes once, at iteration 15.
 
 Choices where the RV paper is vague (measured on Hopkins155, ``benchmarks/TUNING.md``):
 
@@ -175,6 +176,7 @@ def _step(points, trials, params):
     n_changed = (new != labels).sum(axis=-1)
     votes *= params.rv_alpha
     margins = _margins(votes)
+    allowed = int(params.rv_tolerance * P)  # changes that still count as "no change"
     for b, t in enumerate(trials):
         t.it += 1
         t.labels, t.votes = new[b], votes[b]
@@ -184,7 +186,7 @@ def _step(points, trials, params):
             t.votes = np.zeros_like(t.votes)
             t.still = 0
         else:
-            t.still = t.still + 1 if n_changed[b] == 0 else 0
+            t.still = t.still + 1 if n_changed[b] <= allowed else 0
             if t.still >= params.rv_patience and (not t.reset or t.it > RESET_AT):
                 t.converged = t.done = True
         if t.it >= params.rv_max_iter:
