@@ -1,5 +1,7 @@
-"""Regenerate ``docs/explorer_sweep.png`` and ``docs/explorer_tour.png`` (1280x800, a projector):
-the seed sweep run to the end, and step 3 of the guided tour, in headless Debian Chromium.
+"""Regenerate ``docs/explorer_sweep.png``, ``docs/explorer_tour.png`` and
+``docs/explorer_compare.png`` (1280x800, a projector): the seed sweep run to the end, step 3
+of the guided tour, and the A/B compare (the result pinned as A, then λ moved to 3.5 and the
+points coloured by their coarse motion), in headless Debian Chromium.
 
 Usage: ``python docs/make_mode_screenshots.py [SEQUENCE_FILE] [--param NAME=VALUE ...]``
 (default: the bundled demo with the default parameters). Needs ``/usr/bin/chromium`` and
@@ -97,6 +99,37 @@ def main(argv=None) -> int:
             page.get_by_text("step 3 of 5").first.wait_for(timeout=20000)
             page.wait_for_timeout(1500)
             _save(page, out / "explorer_tour.png")
+
+            # A/B compare, in a new tab (its own session): pin what is shown, move λ, colour
+            # by the coarse motions
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            page.route("**/*", route)
+            page.goto(f"http://127.0.0.1:{port}/")
+            page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=60000)
+            while len(created) < 2:
+                time.sleep(0.1)
+            ex = created[1]
+            ex.wait(120, plain_rv=True)
+            pin = page.locator("button", has_text="Pin as A")
+            pin.wait_for(timeout=60000)
+            pin.click()
+            page.locator(".card-header", has_text="A/B compare").first.wait_for(timeout=20000)
+            lam = ex.result.params.lam
+            page.evaluate("""([v]) => { for (const m of Bokeh.documents[0].all_models)
+              if (m.type === 'Slider' && String(m.title).startsWith('λ')) {
+                m.value = v; m.value_throttled = v; } }""", [lam + 1.5])
+            while not (ex.result.params.lam == lam + 1.5 and ex.wait(1)):
+                time.sleep(0.2)
+            coarse = "coarse (atoms merged)"
+            page.locator(f"select:has(option[value='{coarse}'])").select_option(coarse)
+            ex.wait(120, plain_rv=True)
+            page.get_by_text(f"lam: {lam:g} → {lam + 1.5:g}").first.wait_for(timeout=60000)
+            page.wait_for_function("""() => Array.from(Bokeh.documents[0].all_models).some(
+              m => m.type === 'Title' && m.text.startsWith('B (live)') && m.text.includes('coarse'))""",
+                                   timeout=60000)
+            page.evaluate("window.scrollTo(0, 0)")
+            page.wait_for_timeout(1500)
+            _save(page, out / "explorer_compare.png")
             browser.close()
     finally:
         server.stop()

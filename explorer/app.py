@@ -29,8 +29,10 @@ import laav
 from laav import LaavParams
 
 from . import views as V
+from .cards.advanced import AdvancedPanel
 from .cards.base import SIDE_W
 from .cards.coarse import CoarseView
+from .cards.compare import CompareView
 from .cards.controls import PARAM_SLIDERS, Controls
 from .cards.files import DEFAULT_MAX_UPLOAD, Files
 from .cards.frame import FrameView
@@ -117,6 +119,7 @@ class Explorer:
         # (views.point_style), the fine models' colours, the points whose motion changed
         self.result: laav.LaavResult | None = None
         self.sequence: laav.Sequence = seq
+        self.settings = self.state.target  # (of the result shown, once there is one)
         self.style = None
         self.fine_colors = None
         self.moved = None
@@ -139,10 +142,12 @@ class Explorer:
         self.rv_view = RVView()
         self.numbers_view = NumbersView()
         self.sweep_view = SweepView(self, self.state, self.controls)
+        self.advanced = AdvancedPanel(self, self.state, self.controls)
+        self.compare = CompareView(self, self.state, self.controls, ext)
         self.tour = TourView(self, self.controls, {
             "frame": self.frame_view.card, "view3d": self.view3d.card, "graph": self.graph_view.card,
             "coarse": self.coarse_view.card, "rv": self.rv_view.card, "numbers": self.numbers_view.card,
-            "sweep": self.sweep_view.card})
+            "sweep": self.sweep_view.card, "compare": self.compare.card})
         # the view controls that redraw more than one card
         self.controls.w_frame.param.watch(self._on_frame, "value")
         self.controls.w_color.param.watch(self._on_color, "value")
@@ -154,6 +159,7 @@ class Explorer:
         self.state.on_error = self._on_error
         self.state.on_busy = self._on_busy
         self.state.on_plain_rv = self._on_plain_rv
+        self.state.on_target = self._on_target
         if start:
             self.start()
 
@@ -208,7 +214,8 @@ class Explorer:
                              "exported here:", margin=(0, 10)),
             f.w_upload, f.upload_hint, c.w_motions,
             heading("View"), self.tour.w_start, c.w_frame, c.w_color, self.frame_view.w_layers,
-            heading("Parameters"), *c.w_params.values(), c.w_seed, c.w_reset,
+            heading("Parameters"), *c.w_params.values(), c.w_seed, c.w_reset, self.advanced.card,
+            heading("Compare"), *self.compare.sidebar,
             heading("Export"), *f.downloads,
             s.tab_title, f.w_refused,
         ]
@@ -216,7 +223,7 @@ class Explorer:
         # cards in the order of the stages; each lays its parts out in a wrapping FlexBox, so
         # they sit side by side on a wide screen and stack on a projector (1024 px)
         self.main = [
-            s.line, s.alert, s.url_alert, s.note, self.tour.panel,
+            s.line, s.alert, s.url_alert, s.note, self.tour.panel, self.compare.card,
             self.frame_view.card, self.view3d.card, self.graph_view.card, self.coarse_view.card,
             self.rv_view.card, self.numbers_view.card, self.sweep_view.card,
         ]
@@ -333,6 +340,9 @@ class Explorer:
     def _on_plain_rv(self, voting, key) -> None:
         self.schedule(self._apply_plain_rv, voting, key)
 
+    def _on_target(self, settings) -> None:
+        self.schedule(self.advanced.show, settings, now_if_on_doc_thread=True)
+
     def _frame_from_viser(self, frame: int) -> None:
         self.schedule(setattr, self.controls.w_frame, "value", int(frame))
 
@@ -344,9 +354,11 @@ class Explorer:
         new_seq = seq is not self._seq_shown
         with self.quiet():
             with self.hold():
+                unpinned = None
                 if new_seq:
                     self._set_sequence(seq, settings)
-                self.result, self.sequence = result, seq
+                    unpinned = self.compare.sequence_changed(seq)
+                self.result, self.sequence, self.settings = result, seq, settings
                 self.change = self.state.change_of(result) if not new_seq else None
                 self.moved = None if self.change is None else self.change.moved
                 plain = self.state.plain_rv()
@@ -362,7 +374,7 @@ class Explorer:
                 num = self.numbers_view.draw(seq, result, plain)
                 s = self.status_bar
                 s.alert.visible = self.state.error is not None
-                notes = [n for n in (self.style["note"],) if n]
+                notes = [n for n in (self.style["note"], unpinned) if n]
                 if seq.labels is None:
                     notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; C = "
                                  f"{settings.n_motions} is taken from the C box.")
@@ -370,6 +382,7 @@ class Explorer:
                 s.show_result(seq, num["error_final"], self.state.compute_seconds,
                               non_defaults(settings, self.state.default_motions(seq)), self.change)
                 self.view3d.show_first()
+                self.compare.redraw()
             self.view3d.draw(seq, result, self.style["color"], self.controls.w_frame.value, new_seq)
             self._seq_shown = seq
             self._sync_url()
@@ -408,6 +421,8 @@ class Explorer:
             self.numbers_view.draw(self.sequence, self.result, voting)
             if self.controls.color_mode in ("plain", "errors_plain"):
                 self._color_now()
+            else:
+                self.compare.redraw()  # plain RV's error in the compare table
         with self._applied:
             self.applied_plain_key = key
             self._applied.notify_all()
@@ -436,6 +451,7 @@ class Explorer:
         with self.hold():
             self._draw_frame()
             self.graph_view.draw(self.result, self.frame, self.fine_colors)
+            self.compare.redraw()
             self._sync_url()
         self.view3d.set_frame(self.frame)
 
@@ -449,6 +465,7 @@ class Explorer:
                                    self.state.plain_rv())
         with self.hold():
             self._draw_frame()
+            self.compare.redraw()
             self.status_bar.show_note(self.style["note"])
             self._sync_url()
         self.view3d.set_colors(self.style["color"])
