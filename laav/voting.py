@@ -35,7 +35,7 @@ from ._random import resolve_seed
 from ._sequence import Sequence, as_points, check_degenerate, require_complete, warn_single_label
 from ._threads import single_threaded
 from .metrics import misclassification_rate
-from .params import LaavParams
+from .params import FINE_TUNING_TOLERANCE, LaavParams
 from .refine import (
     frame_pairs,
     labelling_cost,
@@ -185,7 +185,8 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     select = params.rv_select == "subspace"
 
     if init_labels is None:  # plain RV
-        _, best, trials, ended = run_trials(points, C, params, rng)
+        tol = 0.0 if params.rv_tolerance is None else params.rv_tolerance
+        _, best, trials, ended = run_trials(points, C, params, rng, tolerance=tol)
         if best is not None:
             out = _finish(points, C, params, best, trials, False, "trial")
         elif select:  # no trial converged: the consensus or one of the trials
@@ -208,32 +209,34 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (P,):
             raise ValueError(f"weights must have shape ({P},), got {w.shape}")
+    tol = FINE_TUNING_TOLERANCE if params.rv_tolerance is None else params.rv_tolerance
     labels0 = np.where(known, init, rng.integers(0, C, P))
     votes0 = np.zeros((P, C))
     votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
-        first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0)
+        first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,
+                                         tolerance=tol)
         return _with_informed(_finish(points, C, params, first, trials, True, "informed"), first)
     # LAAV's start against plain RV: keep the labelling of lower selection score. The
     # informed trial and plain RV's trials each draw from their own generator, so they run
     # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
     streams = rng.spawn(1 + params.rv_trials)  # [informed, plain 0, plain 1, ...]
     first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
-                                     streams=streams[:1])
-    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1)
+                                     streams=streams[:1], tolerance=tol)
+    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, tol)
     trials, cands = trials + more, [("informed", first)] + cands
     if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
         # LAAV's start and plain RV disagree: two more plain RV runs arbitrate
         for k in (2, 3):
             _, more, kc = _plain_run(points, C, params, rng, rng.spawn(1 + params.rv_trials),
-                                     plain_memo, k)
+                                     plain_memo, k, tol)
             trials, cands = trials + more, cands + kc
     polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
                                   polished=polished), first)
 
 
-def _plain_run(points, C, params, rng, streams, memo, k):
+def _plain_run(points, C, params, rng, streams, memo, k, tolerance):
     """Plain RV's k-th run of LAAV's fine-tuning on ``streams`` (``[unused, plain 0, ...]``):
     (its converged trial or None, every trial it ran, its candidate labellings).
 
@@ -244,7 +247,8 @@ def _plain_run(points, C, params, rng, streams, memo, k):
     """
     hit = None if memo is None else memo.get(("run", k))
     if hit is None:
-        _, conv, trials, ended = run_trials(points, C, params, None, streams=streams)
+        _, conv, trials, ended = run_trials(points, C, params, None, streams=streams,
+                                            tolerance=tolerance)
         cons = consensus(ended, C, rng) if conv is None else None
         hit = (conv, trials, ended, cons)
         if memo is not None:
