@@ -29,7 +29,8 @@ class Field:
     """One ``LaavParams`` field.
 
     ``kind`` is the validation table's: ``"int"``, ``"float"`` ([low, high]),
-    ``"float>"`` ((low, high]), ``"int|None"`` (None allowed: ``fine_models``, "auto"),
+    ``"float>"`` ((low, high]), ``"int|None"`` / ``"float|None"`` (None allowed, "auto":
+    ``fine_models``, ``rv_tolerance``),
     ``"bool"`` or ``"choice"`` (one of ``choices``).
     """
 
@@ -49,14 +50,18 @@ class Field:
         if self.kind == "choice":
             return "one of: " + ", ".join(self.choices)
         text = f"{'(' if self.kind == 'float>' else '['}{self.low:g}, {self.high:g}]"
-        if self.kind == "int|None":
-            text += ", or empty for auto (fine_per_motion × C)"
+        if self.kind.endswith("|None"):
+            text += f", or empty for auto ({AUTO.get(self.name, 'auto')})"
         return text
 
     def tooltip(self) -> str:
         """The widget's tooltip (plain text): the docstring's description, range, default."""
         return f"{self.name}: {self.doc} Allowed: {self.range_text()}. Default: {fmt_value(self.default)}."
 
+
+#: What "auto" (None) means for the fields that allow it.
+AUTO = {"fine_models": "fine_per_motion × C",
+        "rv_tolerance": "2 % in LAAV's fine-tuning, 0 in plain RV"}
 
 _RST = [
     (re.compile(r":(?:mod|func|meth|class|data|attr):`~?([^`]+)`"), r"\1"),  # :mod:`laav.coding`
@@ -145,7 +150,7 @@ def widget_value(field: Field, value):
         return None
     if field.kind in ("int", "int|None"):
         return int(value) if float(value).is_integer() else float(value)
-    if field.kind in ("float", "float>"):
+    if field.kind in ("float", "float>", "float|None"):
         return float(value)
     if field.kind == "bool":
         return bool(value)

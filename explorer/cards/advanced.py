@@ -20,7 +20,7 @@ from functools import partial
 import panel as pn
 
 from .. import views as V
-from ..fields import FIELDS, STAGE_TITLES, changed_fields, fmt_value, widget_value
+from ..fields import AUTO, FIELDS, STAGE_TITLES, changed_fields, fmt_value, widget_value
 from .base import SIDE_W, Host
 
 #: Width of a field's widget inside the card (the card's padding and border fit the sidebar).
@@ -30,10 +30,10 @@ MARK = "●"
 
 
 def _step(default) -> float:
-    """A number box's arrow step: a tenth of the default's order of magnitude (0.1 for 0):
+    """A number box's arrow step: a tenth of the default's order of magnitude (0.01 for 0 or auto):
     1 for R1 = 20, 0.1 for λ = 2, 0.01 for 0.25."""
     d = abs(float(default or 0))
-    return 0.1 if d == 0 else 10.0 ** (math.floor(math.log10(d)) - 1)
+    return 0.01 if d == 0 else 10.0 ** (math.floor(math.log10(d)) - 1)
 
 
 def label_of(field, value) -> str:
@@ -89,11 +89,11 @@ class AdvancedPanel:
             return w, w
         kw = dict(label=label_of(f, value), value=value, start=f.low, end=f.high, description=tip,
                   width=FIELD_W, margin=(4, 5))
+        auto = f"auto ({AUTO.get(f.name, 'auto')})" if f.kind.endswith("|None") else ""
         if f.kind in ("int", "int|None"):
-            w = pn.widgets.IntInput(step=1, placeholder="auto (fine_per_motion × C)"
-                                    if f.kind == "int|None" else "", **kw)
+            w = pn.widgets.IntInput(step=1, placeholder=auto, **kw)
         else:
-            w = pn.widgets.FloatInput(step=_step(f.default), **kw)
+            w = pn.widgets.FloatInput(step=_step(f.default), placeholder=auto, **kw)
         return w, w
 
     # ------------------------------------------------------------------ widgets -> request
@@ -123,7 +123,7 @@ class AdvancedPanel:
         with self.host.quiet():
             for f in FIELDS:
                 w, v = self.widgets[f.name], getattr(p, f.name)
-                if f.kind in ("int", "int|None", "float", "float>") and v is not None:
+                if f.kind in ("int", "int|None", "float", "float>", "float|None") and v is not None:
                     # a value past the box's bounds (cannot come from LaavParams, but stay safe)
                     w.start = min(w.start, v) if w.start is not None else None
                     w.end = max(w.end, v) if w.end is not None else None
