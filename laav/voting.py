@@ -96,6 +96,9 @@ class Voting:
         whichever candidate was returned; None for plain RV.
     informed_converged : bool or None
         Whether LAAV's informed trial met the convergence test; None for plain RV.
+    tolerance : float
+        The convergence test's tolerance used (share of the points that may change in an
+        iteration that counts as unchanged; 0 = Random Voting's zero-change test).
     costs : dict of str -> float
         Selection score of each candidate compared (empty without ``rv_select``): its
         subspace cost plus ``rv_select_agreement`` times its mean disagreement with the
@@ -118,6 +121,7 @@ class Voting:
     informed_changed: np.ndarray | None = None
     informed_margin: np.ndarray | None = None
     informed_converged: bool | None = None
+    tolerance: float = 0.0
 
 
 @single_threaded  # one BLAS/OpenMP thread, restored after (laav/_threads.py)
@@ -187,16 +191,28 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if init_labels is None:  # plain RV
         tol = 0.0 if params.rv_tolerance is None else params.rv_tolerance
         _, best, trials, ended = run_trials(points, C, params, rng, tolerance=tol)
-        if best is not None:
-            out = _finish(points, C, params, best, trials, False, "trial")
-        elif select:  # no trial converged: the consensus or one of the trials
-            out = _select(points, C, params, _plain_candidates(None, ended, C, rng), trials,
-                          initialised=False)
-        else:
-            out = _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus")
-        warn_single_label(seq, out.labels, C, stacklevel=4)
-        return out
+        return _plain_result(seq, points, C, params, rng, best, trials, ended, select, tol)
+    return _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo)
 
+
+def _plain_result(seq, points, C, params, rng, best, trials, ended, select, tol) -> Voting:
+    """Plain RV's result from its trials: the converged one, else a selection or the
+    consensus."""
+    if best is not None:
+        out = _finish(points, C, params, best, trials, False, "trial")
+    elif select:  # no trial converged: the consensus or one of the trials
+        out = _select(points, C, params, _plain_candidates(None, ended, C, rng), trials,
+                      initialised=False)
+    else:
+        out = _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus")
+    warn_single_label(seq, out.labels, C, stacklevel=5)
+    return dataclasses.replace(out, tolerance=tol)
+
+
+def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo) -> Voting:
+    """LAAV's fine-tuning: the informed trial started from ``init_labels`` and, with the
+    selection, plain RV's runs beside it (see the module docstring)."""
+    F, P, _ = points.shape
     init = np.asarray(init_labels, dtype=np.int64)
     if init.shape != (P,):
         raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
@@ -216,7 +232,8 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
         first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,
                                          tolerance=tol)
-        return _with_informed(_finish(points, C, params, first, trials, True, "informed"), first)
+        return _with_informed(_finish(points, C, params, first, trials, True, "informed"), first,
+                              tol)
     # LAAV's start against plain RV: keep the labelling of lower selection score. The
     # informed trial and plain RV's trials each draw from their own generator, so they run
     # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
@@ -233,7 +250,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
             trials, cands = trials + more, cands + kc
     polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
-                                  polished=polished), first)
+                                  polished=polished), first, tol)
 
 
 def _plain_run(points, C, params, rng, streams, memo, k, tolerance):
@@ -263,10 +280,10 @@ def _plain_run(points, C, params, rng, streams, memo, k, tolerance):
                           + [(f"{prefix}trial {i}", t) for i, t in enumerate(ended)])
 
 
-def _with_informed(voting: Voting, first: tuple) -> Voting:
-    """``voting`` with LAAV's informed trial's own trace attached."""
+def _with_informed(voting: Voting, first: tuple, tolerance: float) -> Voting:
+    """``voting`` with LAAV's informed trial's own trace and the test's tolerance attached."""
     return dataclasses.replace(voting, informed_changed=first[2], informed_margin=first[3],
-                               informed_converged=bool(first[5]))
+                               informed_converged=bool(first[5]), tolerance=tolerance)
 
 
 class _Polished:
