@@ -177,7 +177,7 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
     from .multicut import solve_multicut
     from .params import LaavParams
     from .pipeline import _stage_rngs
-    from .refine import frame_pairs
+    from .refine import frame_pairs, trajectory_matrix
     from .voting import unit2
 
     if not isinstance(seq, Sequence):
@@ -196,7 +196,7 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
     point_fine = point_labels_from_atoms(atoms, fine) if M else np.full(P, -1)
     res = [np.ravel(r) for r in atoms.residuals if np.size(r)]
     noise2 = float(np.median(np.concatenate(res)) ** 2) if res else 0.0
-    W = np.transpose(pts, (0, 2, 1)).reshape(2 * F, P)
+    W = trajectory_matrix(pts)  # origin at the points' corner: translation-free
     norm2 = np.einsum("ij,ij->j", W, W)
     # merge costs in the span of the leading directions (C motions span at most 4C)
     d = min(2 * F, rank * (max_motions + 1) + rank)
