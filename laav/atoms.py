@@ -168,8 +168,9 @@ class Neighbourhoods:
     def _query(self, radius: float):
         P = self.n_points
         r = float(radius)
-        # a slightly larger max-norm ball: only a superset is needed, the exact test follows
-        pairs = self.tree.query_pairs(r * (1.0 + 1e-9) + 1e-12, p=np.inf, output_type="ndarray")
+        # a slightly larger max-norm ball (relative margin: any scale of the coordinates):
+        # only a superset is needed, the exact test follows
+        pairs = self.tree.query_pairs(r * (1.0 + 1e-9), p=np.inf, output_type="ndarray")
         keys, dists = [np.arange(P, dtype=np.int64) * (P + 1)], [np.zeros(P)]  # i itself
         for s in range(0, pairs.shape[0], 1 << 20):  # bounded temporaries
             i = pairs[s:s + (1 << 20), 0].astype(np.int64)
@@ -323,7 +324,10 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     sol = np.linalg.solve(X[samp], Y[samp])  # (B, 3, 2F)
     res = _rms_rows(X, sol, Y, Fn)  # (B, n)
     inl = res < params.affine_threshold
-    best = int(np.argmax(inl.sum(1) - 1e-6 * (np.add.reduce(res, 1) / n)))
+    # most inliers; among equals the smallest mean residual, in units of the threshold
+    # (1e-6 px at the default 2 px: never worth one inlier, at any scale of the coordinates)
+    tie = 1e-6 * (params.affine_threshold / LaavParams.affine_threshold)
+    best = int(np.argmax(inl.sum(1) - tie * (np.add.reduce(res, 1) / n)))
     mask = inl[best]
     for _ in range(4):
         if mask.sum() < 4:

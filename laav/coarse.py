@@ -167,9 +167,12 @@ def point_labels_from_atoms(atoms: Atoms, atom_labels: np.ndarray) -> np.ndarray
     return out
 
 
-def _motion_distance(points: np.ndarray, groups: list) -> np.ndarray:
+def _motion_distance(points: np.ndarray, groups: list, floor: float = 1e-3) -> np.ndarray:
+    """Largest velocity difference of the groups' mean trajectories over the frames, in
+    units of the spread of all velocities at that frame (plus ``floor``, px per frame, so
+    a frame where nothing moves divides by no zero): (n, n) for ``n`` groups."""
     v_all = np.diff(points, axis=0)  # (F-1, P, 2)
-    sigma = np.sqrt(v_all.var(axis=1).sum(-1)) + 1e-3  # (F-1,)
+    sigma = np.sqrt(v_all.var(axis=1).sum(-1)) + floor  # (F-1,)
     means = np.stack([np.diff(points[:, g].mean(axis=1), axis=0) for g in groups])  # (n, F-1, 2)
     diff = np.linalg.norm(means[:, None] - means[None, :], axis=-1) / sigma  # (n, n, F-1)
     return diff.max(axis=-1) if diff.shape[-1] else np.zeros(diff.shape[:2])
@@ -299,7 +302,10 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     else:
         vote = np.zeros(0)
         samples = VoteSamples.empty(n, 4 * _PER_ATOM)
-    Mdist = _motion_distance(points, groups) if params.motion_weight > 0 else np.zeros((n, n))
+    if params.motion_weight > 0:  # floor: 1e-3 px at the default lam, in units of 1 / sqrt(lam)
+        Mdist = _motion_distance(points, groups, 1e-3 * np.sqrt(LaavParams.lam / params.lam))
+    else:
+        Mdist = np.zeros((n, n))
     pairwise = np.eye(n)
     pairwise[jj, kk] = pairwise[kk, jj] = vote
     coding = params.coarse_merge == "coding"

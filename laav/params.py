@@ -8,7 +8,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LaavParams", "STAGE_PARAMS", "stages_affected"]
+__all__ = ["LaavParams", "STAGE_PARAMS", "stages_affected", "PIXEL_PARAMS", "STRENGTH_PARAMS"]
+
+#: Lengths in pixels: for coordinates ``s`` times pixels, multiply these by ``s`` ...
+PIXEL_PARAMS = ("r1", "r2", "affine_threshold", "edge_scale", "coding_eps")
+#: ... and these strengths (1/px^2) by ``1 / s^2`` (:meth:`LaavParams.scaled`). Every
+#: other field is a count, a share or a weight of dimensionless terms.
+STRENGTH_PARAMS = ("lam", "rv_lambda")
 
 
 @dataclass(frozen=True)
@@ -17,6 +23,11 @@ class LaavParams:
 
     Distances are in pixels of the input coordinates. Defaults were chosen on Hopkins155
     (see ``benchmarks/TUNING.md`` for the sweeps that chose them).
+
+    Units: the lengths :data:`PIXEL_PARAMS` are in pixels, the strengths
+    :data:`STRENGTH_PARAMS` in 1/px^2, every other field is dimensionless. The stages'
+    own constants are expressed in these parameters, so coordinates scaled by ``s`` with
+    :meth:`scaled` ``(s)`` give the same labels (``docs/ALGORITHM.md``, "Units and scale").
 
     Parameters
     ----------
@@ -203,6 +214,21 @@ class LaavParams:
         return cls(atom_frames="pair", fine_per_motion=2, coarse_merge="epipolar", pooled_trials=0,
                    pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
                    rv_select="none", rv_tolerance=0.0).replace(**changes)
+
+    def scaled(self, s: float) -> LaavParams:
+        """The parameters for coordinates ``s`` times larger: lengths (:data:`PIXEL_PARAMS`)
+        times ``s``, strengths (:data:`STRENGTH_PARAMS`) divided by ``s^2``.
+
+        ``segment(points * s, C, params.scaled(s))`` gives the labels of
+        ``segment(points, C, params)`` (exactly when ``s`` is a power of two; otherwise up to
+        rounding, which noise-free data with degenerate samples can amplify).
+        """
+        if isinstance(s, bool) or not isinstance(s, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(s) and s > 0):
+            raise ValueError(f"scale must be a positive finite number, got {s!r}")
+        changes = {name: getattr(self, name) * s for name in PIXEL_PARAMS}
+        changes.update({name: getattr(self, name) / s ** 2 for name in STRENGTH_PARAMS})
+        return self.replace(**changes)
 
     def replace(self, **changes) -> LaavParams:
         """A copy with some fields changed (validated like the original)."""

@@ -22,6 +22,11 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
   and chooses among all. With ``rv_select="none"`` (:meth:`LaavParams.paper`) the
   fine-tuning is the informed trial alone, converged or not, and plain RV ends with the
   consensus when no trial converged.
+
+The refinement, reassignment and selection compare squared distances with a few absolute
+constants (:mod:`laav.refine`); they are in units of ``1 / rv_lambda`` (the squared
+distance at which a vote fades), so that scaling the coordinates by ``s`` and
+``rv_lambda`` by ``1 / s^2`` gives the same labels (:func:`unit2`).
 """
 
 from __future__ import annotations
@@ -53,6 +58,16 @@ __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances
 #: converged trial disagree on more than this share of the points, two more plain RV
 #: runs join the candidates, so that the selection's agreement term can arbitrate.
 _ARBITRATE_ABOVE = 0.05
+
+
+def unit2(params: LaavParams) -> float:
+    """Squared pixel of :mod:`laav.refine`'s constants, in squared coordinate units.
+
+    ``default rv_lambda / rv_lambda``: 1.0 exactly at the default ``rv_lambda`` (2 / px^2,
+    tuned on Hopkins155 pixels), so there the constants are the tuned ones;
+    ``s^2`` when ``rv_lambda`` is scaled by ``1 / s^2`` for coordinates scaled by ``s``.
+    """
+    return LaavParams.rv_lambda / params.rv_lambda
 
 
 @dataclass(frozen=True, eq=False)
@@ -295,13 +310,13 @@ class _Polished:
         self.points, self.C, self.params = points, C, params
         self.refined, self._distances = 0, None
         if params.rv_refine:
-            labels, self.refined, self._distances = refine_labels(points, labels, C,
-                                                                  return_distances=True)
+            labels, self.refined, self._distances = refine_labels(
+                points, labels, C, return_distances=True, unit2=unit2(params))
         self.refined_labels = labels
         self._final = None
 
     def cost(self) -> float:
-        return subspace_cost(self.points, self.refined_labels, self.C)
+        return subspace_cost(self.points, self.refined_labels, self.C, unit2=unit2(self.params))
 
     def final(self) -> tuple[np.ndarray, int, int]:
         """(labels, points moved by the refinement, points moved by the reassignment)."""
@@ -309,7 +324,8 @@ class _Polished:
             labels, moved = self.refined_labels, 0
             if self.params.rv_reassign:
                 labels, moved = reassign_labels(self.points, labels, self.C,
-                                                distances=self._distances)
+                                                distances=self._distances,
+                                                unit2=unit2(self.params))
             self._final = (labels, self.refined, moved)
         return self._final
 
