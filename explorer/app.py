@@ -95,16 +95,23 @@ class Explorer:
         once the page is on screen, so the first page is not slowed down by the pipeline).
     max_upload : int
         Largest upload accepted, in bytes (``laav-explore --max-upload``).
+    video : explorer.video.Video, optional
+        The tracked video ``seq`` comes from (:func:`explorer.video.open_video`): its frames
+        are drawn behind the points, and the page says how the tracks were made.
 
     Examples
     --------
     >>> Explorer.from_file("cars1_truth.mat")        # doctest: +SKIP  (displays in Jupyter)
+    >>> Explorer.from_file("clip.mp4")               # doctest: +SKIP  (tracks it first)
     """
 
     def __init__(self, seq: laav.Sequence, n_motions: int | None = None,
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
-                 start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD):
+                 start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD, video=None):
+        if video is not None and video.sequence is not seq:
+            raise ValueError("video must be the one seq was tracked from (video.sequence is seq)")
+        self.video = video
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False)
         self._session_doc = None
         self._doc_thread = threading.get_ident()
@@ -132,7 +139,10 @@ class Explorer:
         self.files = Files(self, self.state, self.controls, self.status_bar, seq, self._png_view,
                            max_upload=max_upload)
         self.frame_view = FrameView(self, ext)
+        self.frame_view.set_video(video)
         self.frame_view.draw_raw(seq)  # in the first page already: the points before any compute
+        if video is not None:  # how the tracks were made, from the first page on
+            self.status_bar.show_note(V.md_text(video.summary()))
         # the 3-D view's server starts with the first computation (``start``)
         self.view3d = View3D(self, viser, viser_host, page_hosts,
                              iframe_host or (viser_host if viser_host not in ("0.0.0.0", "::") else None),
@@ -192,8 +202,32 @@ class Explorer:
     # ------------------------------------------------------------------ constructors
     @classmethod
     def from_file(cls, path, n_motions: int | None = None, **kw) -> Explorer:
-        """Explorer for a Hopkins ``*_truth.mat`` or ``.npz`` file (see :func:`laav.load_sequence`)."""
+        """Explorer for a sequence file (Hopkins ``*_truth.mat``, KT3DMoSeg ``.mat``, ``.npz``,
+        tracks ``.csv``: see :func:`laav.load_sequence`), or for a video or a folder of frames
+        (told apart by content, :func:`explorer.video.is_video`), which
+        :meth:`from_video` tracks first."""
+        from .video import is_video
+
+        if is_video(path):
+            return cls.from_video(path, n_motions, **kw)
         return cls(laav.load_sequence(path), n_motions, **kw)
+
+    @classmethod
+    def from_video(cls, path, n_motions: int | str | None = None, *, track: dict | None = None,
+                   progress: bool | None = True, **kw) -> Explorer:
+        """Track a video (or a folder of frames), keep the tracks seen in every frame, and explore
+        them with the video's frames behind the points.
+
+        ``n_motions``: C, or None / ``"auto"`` to estimate it (:func:`laav.estimate_motions`).
+        ``track``: keyword arguments of :func:`laav.track.track` (``stride``, ``max_points``,
+        ``max_frames``, ...). ``progress``: the tracker's progress bar (in a notebook, in the
+        cell). Raises :class:`explorer.video.VideoError` (one line) for a video that cannot be
+        used. Tracking runs here, before the explorer is built.
+        """
+        from .video import open_video
+
+        video = open_video(path, n_motions, track_options=track, progress=progress)
+        return cls(video.sequence, video.n_motions, video=video, **kw)
 
     @classmethod
     def demo(cls, **kw) -> Explorer:
@@ -211,9 +245,11 @@ class Explorer:
         self.sidebar = [
             heading("Sequence"), f.seq_info,
             pn.pane.Markdown("Open another sequence (`.mat`, `.npz` or tracks `.csv`), or a `params.json` "
-                             "exported here:", margin=(0, 10)),
+                             "exported here (a video is tracked on the command line only: "
+                             "`laav-explore VIDEO`):", margin=(0, 10)),
             f.w_upload, f.upload_hint, c.w_motions,
             heading("View"), self.tour.w_start, c.w_frame, c.w_color, self.frame_view.w_layers,
+            self.frame_view.w_background,
             heading("Parameters"), *c.w_params.values(), c.w_seed, c.w_reset, self.advanced.card,
             heading("Compare"), *self.compare.sidebar,
             heading("Export"), *f.downloads,
@@ -375,7 +411,10 @@ class Explorer:
                 s = self.status_bar
                 s.alert.visible = self.state.error is not None
                 notes = [n for n in (self.style["note"], unpinned) if n]
-                if seq.labels is None:
+                if self.video is not None and seq is self.video.sequence:
+                    notes.append(V.md_text(self.video.summary()) + " No ground truth: errors cannot be "
+                                 "scored.")
+                elif seq.labels is None:
                     notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; C = "
                                  f"{settings.n_motions} is taken from the C box.")
                 s.show_note("  \n".join(notes))
