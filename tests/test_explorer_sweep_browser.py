@@ -31,6 +31,13 @@ JS_RECORD_PROGRESS = """() => {
 }"""
 
 
+
+#: Elements (shadow roots included) drawn with the tour's 4 px outline.
+JS_OUTLINED = """() => { let n = 0; const walk = root => { for (const el of root.querySelectorAll('*')) {
+  const cs = getComputedStyle(el);
+  if (cs.outlineStyle !== 'none' && cs.outlineWidth === '4px') n++;
+  if (el.shadowRoot) walk(el.shadowRoot); } }; walk(document); return n; }"""
+
 def _shots(tmp_path) -> Path:
     d = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
     d.mkdir(parents=True, exist_ok=True)
@@ -107,6 +114,7 @@ def test_guided_tour_in_the_page(tmp_path):
         graph = page.locator(".card-header", has_text="2 · Multicut graph")
         graph.first.wait_for(state="hidden", timeout=10000)
         page.locator("#sidebar").wait_for(state="hidden", timeout=10000)  # the whole width
+        page.wait_for_function(f"({JS_OUTLINED})() >= 1", timeout=10000)  # the stage's card
         page.screenshot(path=str(_shots(tmp_path) / "tour_step1.png"))
 
         # → (the keyboard), Next (the button), ← (the keyboard)
@@ -132,4 +140,6 @@ def test_guided_tour_in_the_page(tmp_path):
         graph.first.wait_for(state="visible", timeout=10000)
         page.get_by_text(TOUR[0].title).first.wait_for(state="hidden", timeout=10000)
         page.locator("#sidebar").wait_for(state="visible", timeout=10000)
+        # and no outline is left on any card in the page (the server's styles are not enough)
+        page.wait_for_function(f"({JS_OUTLINED})() === 0", timeout=10000)
     assert not errors, errors[:5]

@@ -17,6 +17,9 @@ from .base import Host
 
 #: Outline of the card a step is about (the header's navy: a page colour, not a motion's).
 HIGHLIGHT = {"outline": "4px solid #2c4a66", "outline-offset": "2px"}
+#: Not highlighted, said explicitly: styles set back to {} leave the page's outline in
+#: place (the browser keeps a CSS property that is no longer sent).
+NO_HIGHLIGHT = {"outline": "none", "outline-offset": "0px"}
 
 _BIG_BUTTON = [":host .bk-btn { font-size: 22px; padding: 6px 22px; }"]
 
@@ -141,7 +144,8 @@ class TourView:
         with self.host.hold():
             for name, c in self.cards.items():
                 c.visible = name in s.cards
-                c.styles = {**self._saved[name][1], **(HIGHLIGHT if name == s.cards[0] else {})}
+                c.styles = {**self._saved[name][1],
+                            **(HIGHLIGHT if name == s.cards[0] else NO_HIGHLIGHT)}
             self.step_md.object = f"Guided tour · step {self.step + 1} of {len(TOUR)}"
             self.title_md.object = s.title
             res = self.host.result
@@ -162,7 +166,7 @@ class TourView:
         with self.host.hold():
             for name, c in self.cards.items():
                 visible, styles = self._saved[name]
-                c.visible, c.styles = visible, styles
+                c.visible, c.styles = visible, {**styles, **NO_HIGHLIGHT}
             self.panel.visible = False
         color = self._saved.get("__color")
         if color is not None and self.controls.color_mode != color:
