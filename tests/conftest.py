@@ -108,3 +108,45 @@ def two_motion_sequence(seed: int = 0, P: int = 140, F: int = 12, name: str = "t
     pts = np.concatenate([pa, pb], axis=1) + rng.normal(0, 0.3, (F, P, 2))
     labels = np.r_[np.zeros(P // 2, int), np.ones(P - P // 2, int)]
     return laav.Sequence(pts, labels, name=name, image_size=(640, 480))
+
+
+class FakeServer:
+    """Stands in for ``panel.serve``'s server: ``laav-explore``'s ``main`` returns at once."""
+
+    class io_loop:  # noqa: N801
+        @staticmethod
+        def add_callback(fn):
+            pass
+
+        @staticmethod
+        def start():
+            pass
+
+    def start(self):
+        pass
+
+    def stop(self):
+        pass
+
+
+def fake_serving(monkeypatch) -> dict:
+    """``explorer.cli``'s page factory and ``panel.serve`` replaced by stand-ins: ``main``
+    sets everything up and returns; the factory's arguments land in the returned dict
+    (``n_motions``, ``seed``, ``params``)."""
+    import panel as pn
+
+    import explorer.cli as cli
+
+    seen: dict = {}
+
+    def fake_factory(seq, n_motions, seed=0, host="127.0.0.1", **kw):
+        seen.update(n_motions=n_motions, seed=seed, params=kw.get("params"))
+
+        def make():
+            pass
+        make.close_unclaimed = lambda: None
+        return make
+
+    monkeypatch.setattr(cli, "app_factory", fake_factory)
+    monkeypatch.setattr(pn, "serve", lambda panels, **kw: FakeServer())
+    return seen

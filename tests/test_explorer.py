@@ -22,6 +22,7 @@ pn = pytest.importorskip("panel")
 
 from explorer import Explorer, ExplorerState  # noqa: E402
 from explorer import views as V  # noqa: E402
+from conftest import fake_serving  # noqa: E402
 from explorer.cli import build_parser, main  # noqa: E402
 from explorer.demo import demo_path, demo_sequence  # noqa: E402
 
@@ -673,36 +674,7 @@ def test_query_and_params_json_set_the_state(seq, tmp_path):
 
 
 def test_cli_loads_params_json_and_param(monkeypatch, tmp_path, capsys):
-    import explorer.cli as cli
-
-    seen = {}
-
-    def fake_factory(seq, n_motions, seed=0, host="127.0.0.1", **kw):
-        seen.update(n_motions=n_motions, seed=seed, params=kw.get("params"))
-
-        def make():
-            pass
-        make.close_unclaimed = lambda: None
-        return make
-
-    class FakeServer:
-        class io_loop:  # noqa: N801
-            @staticmethod
-            def add_callback(fn):
-                pass
-
-            @staticmethod
-            def start():
-                pass
-
-        def start(self):
-            pass
-
-        def stop(self):
-            pass
-
-    monkeypatch.setattr(cli, "app_factory", fake_factory)
-    monkeypatch.setattr(pn, "serve", lambda panels, **kw: FakeServer())
+    seen = fake_serving(monkeypatch)
     s = _two_motion_sequence()
     f = laav.save_sequence(s, tmp_path / "s.npz")
     pj = tmp_path / "p.json"
@@ -852,36 +824,7 @@ def test_a_newer_request_interrupts_the_running_computation(seq, monkeypatch):
 def test_cli_estimates_c_for_a_file_without_ground_truth(monkeypatch, tmp_path, capsys):
     """No labels and no --motions: C is estimated (laav.estimate_motions), said on the
     terminal, and the page opens with it (issue 14 item 7)."""
-    import explorer.cli as cli
-
-    seen = {}
-
-    def fake_factory(seq, n_motions, seed=0, host="127.0.0.1", **kw):
-        seen.update(n_motions=n_motions)
-
-        def make():
-            pass
-        make.close_unclaimed = lambda: None
-        return make
-
-    class FakeServer:
-        class io_loop:  # noqa: N801
-            @staticmethod
-            def add_callback(fn):
-                pass
-
-            @staticmethod
-            def start():
-                pass
-
-        def start(self):
-            pass
-
-        def stop(self):
-            pass
-
-    monkeypatch.setattr(cli, "app_factory", fake_factory)
-    monkeypatch.setattr(pn, "serve", lambda panels, **kw: FakeServer())
+    seen = fake_serving(monkeypatch)
     s = _two_motion_sequence()
     f = tmp_path / "nolabels.npz"
     np.savez(f, points=s.points)

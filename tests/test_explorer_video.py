@@ -23,6 +23,7 @@ pn = pytest.importorskip("panel")
 
 import laav  # noqa: E402
 from explorer import Explorer  # noqa: E402
+from conftest import FakeServer  # noqa: E402
 from explorer.cli import main  # noqa: E402
 from explorer.video import MAX_WIDTH, FrameCache, VideoError, is_video, open_video  # noqa: E402
 from laav.synthetic_video import load_clip, render_clip  # noqa: E402
@@ -249,23 +250,6 @@ def test_a_video_uploaded_to_the_page_is_refused_with_a_clear_message(tmp_path):
 
 
 # ---------------------------------------------------------------------------- the command
-class _FakeServer:
-    class io_loop:  # noqa: N801
-        @staticmethod
-        def add_callback(fn):
-            pass
-
-        @staticmethod
-        def start():
-            pass
-
-    def start(self):
-        pass
-
-    def stop(self):
-        pass
-
-
 def test_cli_tracks_a_folder_of_frames_then_serves_it(monkeypatch, capsys):
     import explorer.cli as cli
 
@@ -278,7 +262,7 @@ def test_cli_tracks_a_folder_of_frames_then_serves_it(monkeypatch, capsys):
         return real_factory(seq, n_motions, seed, host, **kw)
 
     monkeypatch.setattr(cli, "app_factory", factory)
-    monkeypatch.setattr(pn, "serve", lambda panels, **kw: seen.update(title=kw["title"]) or _FakeServer())
+    monkeypatch.setattr(pn, "serve", lambda panels, **kw: seen.update(title=kw["title"]) or FakeServer())
     assert main([str(CLIP), "--no-browser", "--port", "0", "--stride", "2", "--track-points", "400"]) == 0
     out = capsys.readouterr().out
     v = seen["video"]
