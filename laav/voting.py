@@ -379,7 +379,9 @@ def _select(points, C, params, candidates, trials, initialised, polished=None) -
     for name, cand in candidates:
         key = _partition_key(cand[0])
         if key not in done:
-            if polished is not None and key in polished:
+            # plain RV's candidates from the memo; LAAV's own is polished afresh, so that a
+            # plain one of the same partition takes its label names, as in a fresh run
+            if polished is not None and key in polished and name.startswith("plain"):
                 done[key] = polished[key]
             else:
                 pol = _Polished(points, C, params, cand[0])

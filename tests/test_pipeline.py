@@ -319,3 +319,16 @@ def test_update_checks_the_sequence_again_only_for_a_new_number_of_motions(monke
     assert calls == [2]
     pipe.update(n_motions=3)
     assert calls == [2, 3]
+
+
+@pytest.mark.parametrize("change", [{"r2": 45.0}, {"lam": 3.0}], ids=lambda d: ",".join(d))
+def test_update_gives_fresh_label_names_when_plain_rv_is_kept(change):
+    """Plain RV's runs are kept across these changes (``random_voting(plain_memo=...)``):
+    the returned labels must be a fresh run's bit for bit, label names included (a kept
+    plain candidate of the same partition as LAAV's own once lent it its names; measured on
+    this scene before the fix)."""
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+    pipe = Pipeline(seq, seq.n_motions)
+    res = pipe.update(**change)
+    fresh = segment(seq, seq.n_motions, LaavParams(**change), seed=0)
+    np.testing.assert_array_equal(res.labels, fresh.labels)
