@@ -51,14 +51,26 @@ def _assign(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return linear_sum_assignment(-counts)
 
 
+def _matchable(counts: np.ndarray, tv: np.ndarray, pv: np.ndarray) -> np.ndarray:
+    """``counts`` with the rows and columns of negative labels (-1: unlabelled) zeroed, so
+    that the assignment never matches them (their points count as errors)."""
+    if (tv.size and tv[0] < 0) or (pv.size and pv[0] < 0):  # sorted: a negative label comes first
+        counts = counts.copy()
+        counts[tv < 0] = 0
+        counts[:, pv < 0] = 0
+    return counts
+
+
 def best_label_map(true, pred) -> dict:
     """The one-to-one map from predicted to true labels that agrees on the most points.
 
-    Predicted labels left without a partner (more predicted than true groups) are absent.
+    Predicted labels left without a partner (more predicted than true groups) are absent,
+    and so are negative labels (-1: a point left unlabelled), which are never matched.
     """
     counts, tv, pv = confusion_matrix(true, pred)
-    rows, cols = _assign(counts)
-    return {pv[c].item(): tv[r].item() for r, c in zip(rows, cols)}
+    rows, cols = _assign(_matchable(counts, tv, pv))
+    return {pv[c].item(): tv[r].item() for r, c in zip(rows, cols)
+            if pv[c] >= 0 and tv[r] >= 0}
 
 
 def misclassification_rate(true, pred) -> float:
@@ -66,9 +78,12 @@ def misclassification_rate(true, pred) -> float:
 
     The matching (Hungarian assignment on the confusion matrix) pairs each predicted
     group with at most one true group; points of unmatched groups count as errors. This
-    is the Hopkins155 error measure. It is symmetric (swapping ``true`` and ``pred`` gives
-    the same value), invariant to renaming labels, 0 for identical partitions and in
-    ``[0, 1 - 1/P]`` otherwise.
+    is the Hopkins155 error measure. A negative label (-1: a point LAAV left unlabelled,
+    see ``LaavResult.unlabelled_reason``) is never matched: such points always count as
+    errors. It is symmetric (swapping ``true`` and ``pred`` gives the same value),
+    invariant to renaming the non-negative labels, 0 for identical partitions without
+    negative labels, in ``[0, 1 - 1/P]`` for other partitions without them, and 1 when
+    every point is unlabelled.
 
     Parameters
     ----------
@@ -78,9 +93,10 @@ def misclassification_rate(true, pred) -> float:
     -------
     float
     """
-    counts, _, _ = confusion_matrix(true, pred)
+    counts, tv, pv = confusion_matrix(true, pred)
     total = counts.sum()
     if total == 0:
         raise ValueError("cannot score an empty labelling")
+    counts = _matchable(counts, tv, pv)
     rows, cols = _assign(counts)
     return float(1.0 - counts[rows, cols].sum() / total)
