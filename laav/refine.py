@@ -19,7 +19,7 @@ import numpy as np
 from .geometry import fit_fundamental, sampson_distance
 
 __all__ = ["labelling_cost", "subspace_cost", "motion_distances", "refine_labels",
-           "subspace_residuals", "reassign_labels", "frame_pairs"]
+           "subspace_residuals", "reassign_labels", "frame_pairs", "epipolar_cost"]
 
 #: Rank of the trajectory subspaces of :func:`subspace_cost` (affine camera: 4, plus one
 #: for perspective and tracking noise; 5 measured best of 4..8, see benchmarks/TUNING.md).
@@ -107,8 +107,46 @@ def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
     return float(np.mean(np.log1p(own / scale2)))
 
 
+def _masked_median(x: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Median over the last axis of the entries with ``mask``; (..., n) -> (..., 1); 0 for
+    rows without any."""
+    out = np.zeros(x.shape[:-1] + (1,))
+    rows = mask.any(axis=-1)
+    if rows.any():
+        out[rows, 0] = np.nanmedian(np.where(mask[rows], x[rows], np.nan), axis=-1)
+    return out
+
+
+def _motion_distances_masked(points, labels, n_motions, pairs, visible):
+    """:func:`motion_distances` on incomplete data (see there)."""
+    x1 = points[pairs[:, 0]]  # (K, P, 2), hidden entries filled
+    x2 = points[pairs[:, 1]]
+    V = visible[pairs[:, 0]] & visible[pairs[:, 1]]  # (K, P)
+    D = np.full((n_motions, points.shape[1]), np.inf)
+    for g in range(n_motions):
+        mem = np.flatnonzero(labels == g)
+        if mem.size < 8:
+            continue
+        m1, m2, mv = x1[:, mem], x2[:, mem], V[:, mem]
+        fit = mv.sum(axis=1) >= 8  # the frame pairs this motion has a matrix for
+        if not fit.any():
+            continue
+        m1, m2, mv = m1[fit], m2[fit], mv[fit]
+        Fm = fit_fundamental(m1, m2, mask=mv)
+        for _ in range(2):
+            dm = sampson_distance(Fm, m1, m2)
+            w = 1.0 / (1.0 + dm / (_masked_median(dm, mv) * 4.0 + 1e-9))
+            Fm = fit_fundamental(m1, m2, w, mask=mv)
+        d = np.minimum(sampson_distance(Fm, x1[fit], x2[fit]), 1e4)  # (K', P)
+        use = V[fit]
+        n = use.sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            D[g] = np.where(n > 0, np.where(use, d, 0.0).sum(axis=0) / n, np.inf)
+    return D
+
+
 def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                     pairs: np.ndarray) -> np.ndarray:
+                     pairs: np.ndarray, visible: np.ndarray | None = None) -> np.ndarray:
     """Mean Sampson distance (px^2) of every point to every motion's fundamental matrices.
 
     Each motion fits one F per frame pair on its own points by iteratively reweighted
@@ -120,11 +158,18 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
     labels : ndarray of shape (P,)
     n_motions : int
     pairs : ndarray of shape (K, 2)
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data (``points`` finite everywhere, hidden entries filled): a motion
+        fits its matrix for a frame pair on its members visible in both frames, and only
+        where there are 8 or more; a point's distance is the mean over the frame pairs it
+        is visible in and the motion has a matrix for (``inf`` when there is none).
 
     Returns
     -------
     D : ndarray of shape (C, P); ``inf`` for a motion with fewer than 8 points.
     """
+    if visible is not None:
+        return _motion_distances_masked(points, labels, n_motions, pairs, visible)
     x1 = points[pairs[:, 0]]  # (K, P, 2)
     x2 = points[pairs[:, 1]]
     D = np.full((n_motions, points.shape[1]), np.inf)
@@ -144,7 +189,8 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
 
 def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
                   n_pairs: int = 12, rounds: int = 3, outlier: float = 6.0,
-                  return_distances: bool = False) -> tuple:
+                  return_distances: bool = False, *, visible: np.ndarray | None = None,
+                  pairs: np.ndarray | None = None) -> tuple:
     """Move points that their own motion does not explain to the motion that does.
 
     A point moves only when its distance to its own motion (:func:`motion_distances`,
@@ -163,6 +209,12 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         Frame pairs (a deterministic spread, see :func:`frame_pairs`).
     rounds : int
     outlier : float
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data: :func:`motion_distances` with the mask, over ``pairs`` (then
+        required: :func:`laav._visibility.cover_pairs`, which every point is visible in
+        one of); a motion's scale is the median over its members' finite distances.
+    pairs : ndarray of shape (K, 2), optional
+        The frame pairs (default: ``frame_pairs(F, n_pairs)``).
 
     Returns
     -------
@@ -172,15 +224,19 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         Only with ``return_distances``: :func:`motion_distances` of the returned labels
         (None when the last round moved points), for :func:`reassign_labels` to reuse.
     """
-    pairs = frame_pairs(points.shape[0], n_pairs)
+    if pairs is None:
+        pairs = frame_pairs(points.shape[0], n_pairs)
     D = None
     start = labels.copy()
     cur = labels.copy()
     idx = np.arange(cur.size)
     for _ in range(rounds):
-        D = motion_distances(points, cur, n_motions, pairs)
-        scale = np.array([np.median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
-                          for g in range(n_motions)]) + 1e-9
+        D = motion_distances(points, cur, n_motions, pairs, visible)
+        if visible is None:
+            scale = np.array([np.median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
+                              for g in range(n_motions)]) + 1e-9
+        else:
+            scale = np.array([_finite_median(D[g, cur == g]) for g in range(n_motions)]) + 1e-9
         with np.errstate(invalid="ignore"):  # inf / inf for a motion too small to fit
             N = np.where(np.isfinite(D), D / scale[:, None], np.inf)
         own = N[cur, idx]
@@ -193,6 +249,40 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     if return_distances:
         return cur, int((cur != start).sum()), D
     return cur, int((cur != start).sum())
+
+
+def _finite_median(x: np.ndarray) -> float:
+    """Median of the finite entries of ``x``; inf when there is none."""
+    x = x[np.isfinite(x)]
+    return float(np.median(x)) if x.size else np.inf
+
+
+def epipolar_cost(points: np.ndarray, labels: np.ndarray, n_motions: int, pairs: np.ndarray,
+                  visible: np.ndarray | None = None, scale2: float = SUBSPACE_SCALE2,
+                  distances: np.ndarray | None = None) -> float:
+    """How badly the motions' fundamental matrices explain a labelling (lower is better):
+    the model-selection cost on incomplete data, where :func:`subspace_cost` needs whole
+    trajectories.
+
+    The mean over points of ``log(1 + d / scale2)``, ``d`` the point's mean Sampson
+    distance (px^2) to its own motion's robust matrices over ``pairs``
+    (:func:`motion_distances`, with ``visible``), in the form of :func:`subspace_cost`;
+    ``inf`` when a motion has fewer than 8 points or a point no distance.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (P,)
+    n_motions : int
+    pairs : ndarray of shape (K, 2)
+    visible : ndarray of shape (F, P), bool, optional
+    scale2 : float
+    distances : ndarray of shape (C, P), optional
+        :func:`motion_distances` of ``labels`` over ``pairs``, when already known.
+    """
+    D = motion_distances(points, labels, n_motions, pairs, visible) if distances is None else distances
+    own = D[labels, np.arange(labels.size)]
+    return float(np.mean(np.log1p(own / scale2))) if np.isfinite(own).all() else float("inf")
 
 
 def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
@@ -242,7 +332,8 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
 def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
                     rank: int = REASSIGN_RANK, epipolar_weight: float = REASSIGN_EPIPOLAR_WEIGHT,
                     rounds: int = 2, min_size: int = 8,
-                    distances: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                    distances: np.ndarray | None = None, *, visible: np.ndarray | None = None,
+                    pairs: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Move every point to the motion that its trajectory subspace and epipolar fit favour.
 
     The score of point ``p`` for motion ``g`` is ``log(r_gp + eps) + epipolar_weight *
@@ -274,6 +365,12 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     distances : ndarray of shape (C, P), optional
         :func:`motion_distances` of ``labels`` over ``frame_pairs(F, 12)``, when already
         known (from :func:`refine_labels`); saves the first round's fits.
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data: the subspace term is left out (it needs whole trajectories) and a
+        point goes to the motion of least :func:`motion_distances` over ``pairs`` (with
+        the mask; a point without any finite distance keeps its label).
+    pairs : ndarray of shape (K, 2), optional
+        The frame pairs of the epipolar term (default ``frame_pairs(F, 12)``).
 
     Returns
     -------
@@ -284,6 +381,9 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     cur = start
     if n_motions < 2:
         return cur.copy(), 0
+    if visible is not None:
+        return _reassign_masked(points, start, n_motions, rounds, min_size, distances,
+                                visible, pairs)
     pairs = frame_pairs(points.shape[0], 12)
     for _ in range(rounds):
         R = subspace_residuals(points, cur, n_motions, rank)
@@ -295,6 +395,22 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
             break
         score = np.log(R + 1e-4) + epipolar_weight * np.log(D + 1e-4)
         new = score.argmin(axis=0)
+        if (new == cur).all() or np.bincount(new, minlength=n_motions).min() < min_size:
+            break
+        cur = new
+    return cur.copy(), int((cur != start).sum())
+
+
+def _reassign_masked(points, start, n_motions, rounds, min_size, distances, visible, pairs):
+    """:func:`reassign_labels` on incomplete data: the epipolar term alone."""
+    cur = start
+    for _ in range(rounds):
+        D = distances if distances is not None and cur is start else motion_distances(
+            points, cur, n_motions, pairs, visible)
+        known = np.isfinite(D).any(axis=0)
+        if not np.isfinite(D[:, known]).any(axis=0).all():
+            break
+        new = np.where(known, np.where(np.isfinite(D), D, np.inf).argmin(axis=0), cur)
         if (new == cur).all() or np.bincount(new, minlength=n_motions).min() < min_size:
             break
         cur = new
