@@ -40,12 +40,12 @@ class IncompleteSequenceError(SequenceError):
         self.n_complete = n_complete
 
 
-def require_complete(seq: Sequence) -> None:
+def require_complete(seq: Sequence, what: str = "the explorer") -> None:
     """Raise :class:`IncompleteSequenceError` unless every point of ``seq`` is visible in every frame.
 
-    LAAV's stages (atoms, graph, fine-to-coarse, voting) do not handle missing data yet
-    (issue 14, item 3); until they do, they refuse an incomplete sequence with this message
-    rather than reading the NaN that stands in for the missing coordinates.
+    LAAV's stages handle missing data (``docs/ALGORITHM.md``, "Missing data"); what does not
+    yet calls this, naming itself in ``what``: the explorer, and the estimate of the
+    number of motions (:func:`laav.estimate_motions`), which fits whole trajectories.
     """
     if seq.is_complete:
         return
@@ -59,7 +59,7 @@ def require_complete(seq: Sequence) -> None:
         keep += f", though {n_full} are fewer than the {MIN_POINTS} points LAAV needs"
     raise IncompleteSequenceError(
         f"{seq.source}: the sequence has {pct_text} % missing entries ({seq.n_points} points x "
-        f"{seq.n_frames} frames); incomplete tracks are not supported yet by LAAV's stages: {keep}",
+        f"{seq.n_frames} frames); incomplete tracks are not supported yet by {what}: {keep}",
         missing_share=missing, n_complete=n_full)
 
 

@@ -74,7 +74,8 @@ def labelling_cost(points: np.ndarray, labels: np.ndarray, n_motions: int, n_pai
 
 
 def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                  rank: int = SUBSPACE_RANK, scale2: float = SUBSPACE_SCALE2) -> float:
+                  rank: int = SUBSPACE_RANK, scale2: float = SUBSPACE_SCALE2, *,
+                  visible: np.ndarray | None = None) -> float:
     """How badly low-rank trajectory subspaces explain a labelling (lower is better).
 
     Under an affine camera the trajectories of one rigid motion, each stacked as a 2F
@@ -94,13 +95,16 @@ def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
     rank : int
     scale2 : float
         px^2.
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data: the subspaces and residuals of :func:`subspace_residuals` with the
+        mask (one round, unweighted).
 
     Returns
     -------
     float
         ``inf`` when a motion has ``rank + 1`` points or fewer.
     """
-    R = subspace_residuals(points, labels, n_motions, rank, rounds=1)
+    R = subspace_residuals(points, labels, n_motions, rank, rounds=1, visible=visible)
     if R is None:
         return float("inf")
     own = R[labels, np.arange(labels.size)]
@@ -286,7 +290,8 @@ def epipolar_cost(points: np.ndarray, labels: np.ndarray, n_motions: int, pairs:
 
 
 def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                       rank: int = REASSIGN_RANK, rounds: int = 5) -> np.ndarray | None:
+                       rank: int = REASSIGN_RANK, rounds: int = 5, *,
+                       visible: np.ndarray | None = None) -> np.ndarray | None:
     """Squared distance (px^2, mean over frames) of every point to every motion's subspace.
 
     Each motion's trajectories (2F vectors) get a rank-``rank`` linear subspace fitted by
@@ -303,11 +308,21 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
     n_motions : int
     rank : int
     rounds : int
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data (``points`` finite everywhere, hidden entries filled): each
+        motion's subspace is fitted on the visible entries of its members only, by
+        alternating least squares (per-point coefficients, per-row basis), started from
+        the principal subspace with unseen entries set to their row's mean, with the
+        same reweighting; a point's residual is that of its least-squares fit on its
+        visible rows, per visible frame. A point seen in ``rank / 2`` frames or fewer is
+        fitted exactly by every subspace (residual 0 everywhere: no evidence).
 
     Returns
     -------
     R : ndarray of shape (C, P), or None when a motion has ``rank + 1`` points or fewer.
     """
+    if visible is not None:
+        return _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible)
     F, P, _ = points.shape
     W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)
     norm2 = np.einsum("ij,ij->j", W, W)  # |x|^2 per point; residual^2 = |x|^2 - |U^T x|^2
@@ -326,6 +341,69 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
                 Xw = X * (1.0 / (1.0 + (r / (2.0 * np.median(r) + 1e-9)) ** 2)) ** 2
         proj = U.T @ W
         R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F
+    return R
+
+
+#: Alternating least-squares sweeps of the masked subspace fits: on the unweighted fit, and
+#: (warm-started) in each reweighting round after it.
+_ALS_FIRST, _ALS_ROUND = 12, 4
+
+
+def _project_masked(U: np.ndarray, X: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares coefficients ``V`` (n, r) of columns ``X`` (D, n) on the basis ``U``
+    (D, r) over each column's rows ``M`` (D, n), and the squared residuals (n,)."""
+    G = np.einsum("dn,da,db->nab", M, U, U)
+    G[:, np.arange(U.shape[1]), np.arange(U.shape[1])] += 1e-9 * (np.trace(G, axis1=1, axis2=2)[:, None] + 1e-12)
+    b = np.einsum("dn,da->na", M * X, U)
+    V = np.linalg.solve(G, b[..., None])[..., 0]
+    r = M * (X - U @ V.T)
+    return V, np.einsum("dn,dn->n", r, r)
+
+
+def _fit_subspace_masked(X, M, rank, rounds, sweeps_first=_ALS_FIRST, sweeps=_ALS_ROUND):
+    """Robust rank-``rank`` linear subspace of columns ``X`` (D, n) seen on rows ``M``
+    (D, n, 0/1): alternating least squares (coefficients per column, basis per row) on the
+    seen entries only, started from the principal subspace of ``X`` with each row's unseen
+    entries set to that row's mean; then ``rounds - 1`` reweighting rounds as
+    :func:`subspace_residuals` (weights ``1 / (1 + (r / 2 median r)^2)``, squared).
+    Returns the basis (D, rank), orthonormal."""
+    D, n = X.shape
+    seen = M.sum(axis=1)
+    mean = np.where(seen > 0, (M * X).sum(axis=1) / np.maximum(seen, 1), 0.0)
+    X0 = np.where(M > 0, X, mean[:, None])
+    U = np.linalg.eigh(X0 @ X0.T)[1][:, -rank:]
+    cnt = np.maximum(M.sum(axis=0) / 2.0, 1.0)  # frames seen per column
+    w = np.ones(n)
+    eye = np.eye(rank)
+    for k in range(rounds):
+        for _ in range(sweeps_first if k == 0 else sweeps):
+            V, _ = _project_masked(U, X, M)
+            WM = M * w  # (D, n)
+            H = np.einsum("dn,na,nb->dab", WM, V, V) + 1e-9 * eye
+            c = np.einsum("dn,na->da", WM * X, V)
+            U = np.linalg.solve(H, c[..., None])[..., 0]
+            U = np.linalg.qr(U)[0]
+        if k + 1 < rounds:
+            _, r2 = _project_masked(U, X, M)
+            r = np.sqrt(r2 / cnt)
+            w = (1.0 / (1.0 + (r / (2.0 * np.median(r) + 1e-9)) ** 2)) ** 2
+    return U
+
+
+def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible):
+    """:func:`subspace_residuals` on incomplete data (see there)."""
+    F, P, _ = points.shape
+    W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)
+    M = np.repeat(visible, 2, axis=0).astype(np.float64)  # (2F, P): x and y rows of a frame
+    cnt = visible.sum(axis=0)
+    R = np.empty((n_motions, P))
+    for g in range(n_motions):
+        mem = labels == g
+        if mem.sum() <= rank + 1:
+            return None
+        U = _fit_subspace_masked(W[:, mem], M[:, mem], rank, rounds)
+        _, r2 = _project_masked(U, W, M)
+        R[g] = np.maximum(r2, 0.0) / cnt
     return R
 
 
@@ -366,9 +444,10 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         :func:`motion_distances` of ``labels`` over ``frame_pairs(F, 12)``, when already
         known (from :func:`refine_labels`); saves the first round's fits.
     visible : ndarray of shape (F, P), bool, optional
-        Missing data: the subspace term is left out (it needs whole trajectories) and a
-        point goes to the motion of least :func:`motion_distances` over ``pairs`` (with
-        the mask; a point without any finite distance keeps its label).
+        Missing data: both terms with the mask (:func:`subspace_residuals` fitted on the
+        visible entries, :func:`motion_distances` over ``pairs``); a motion without a
+        finite epipolar distance for a point is not a choice for it, and a point without
+        any keeps its label.
     pairs : ndarray of shape (K, 2), optional
         The frame pairs of the epipolar term (default ``frame_pairs(F, 12)``).
 
@@ -382,8 +461,8 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     if n_motions < 2:
         return cur.copy(), 0
     if visible is not None:
-        return _reassign_masked(points, start, n_motions, rounds, min_size, distances,
-                                visible, pairs)
+        return _reassign_masked(points, start, n_motions, rank, epipolar_weight, rounds,
+                                min_size, distances, visible, pairs)
     pairs = frame_pairs(points.shape[0], 12)
     for _ in range(rounds):
         R = subspace_residuals(points, cur, n_motions, rank)
@@ -401,16 +480,19 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     return cur.copy(), int((cur != start).sum())
 
 
-def _reassign_masked(points, start, n_motions, rounds, min_size, distances, visible, pairs):
-    """:func:`reassign_labels` on incomplete data: the epipolar term alone."""
+def _reassign_masked(points, start, n_motions, rank, epipolar_weight, rounds, min_size,
+                     distances, visible, pairs):
+    """:func:`reassign_labels` on incomplete data (see there)."""
     cur = start
     for _ in range(rounds):
+        R = subspace_residuals(points, cur, n_motions, rank, visible=visible)
+        if R is None:
+            break
         D = distances if distances is not None and cur is start else motion_distances(
             points, cur, n_motions, pairs, visible)
-        known = np.isfinite(D).any(axis=0)
-        if not np.isfinite(D[:, known]).any(axis=0).all():
-            break
-        new = np.where(known, np.where(np.isfinite(D), D, np.inf).argmin(axis=0), cur)
+        score = np.log(R + 1e-4) + epipolar_weight * np.log(D + 1e-4)  # inf where D is
+        known = np.isfinite(score).any(axis=0)
+        new = np.where(known, score.argmin(axis=0), cur)
         if (new == cur).all() or np.bincount(new, minlength=n_motions).min() < min_size:
             break
         cur = new

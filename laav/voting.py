@@ -338,9 +338,9 @@ class _Polished:
         self._final = None
 
     def cost(self) -> float:
-        if self.mk is not None:  # missing data: the subspace needs whole trajectories
-            return epipolar_cost(self.points, self.refined_labels, self.C, self.mk.pairs,
-                                 self.mk.visible, distances=self._distances)
+        if self.mk is not None:  # missing data: subspaces fitted on the visible entries
+            return subspace_cost(self.points, self.refined_labels, self.C,
+                                 visible=self.mk.visible)
         return subspace_cost(self.points, self.refined_labels, self.C)
 
     def final(self) -> tuple[np.ndarray, int, int]:
