@@ -351,13 +351,14 @@ _ALS_FIRST, _ALS_ROUND = 12, 4
 
 def _project_masked(U: np.ndarray, X: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares coefficients ``V`` (n, r) of columns ``X`` (D, n) on the basis ``U``
-    (D, r) over each column's rows ``M`` (D, n), and the squared residuals (n,)."""
-    G = np.einsum("dn,da,db->nab", M, U, U)
-    G[:, np.arange(U.shape[1]), np.arange(U.shape[1])] += 1e-9 * (np.trace(G, axis1=1, axis2=2)[:, None] + 1e-12)
-    b = np.einsum("dn,da->na", M * X, U)
-    V = np.linalg.solve(G, b[..., None])[..., 0]
-    r = M * (X - U @ V.T)
-    return V, np.einsum("dn,dn->n", r, r)
+    (D, r) over each column's rows ``M`` (D, n, 0/1), and the squared residuals (n,)."""
+    r = U.shape[1]
+    G = (M.T @ (U[:, :, None] * U[:, None, :]).reshape(-1, r * r)).reshape(-1, r, r)
+    G[:, np.arange(r), np.arange(r)] += 1e-9 * (np.trace(G, axis1=1, axis2=2)[:, None] + 1e-12)
+    MX = M * X
+    V = np.linalg.solve(G, (MX.T @ U)[..., None])[..., 0]
+    res = MX - M * (U @ V.T)
+    return V, np.einsum("dn,dn->n", res, res)
 
 
 def _fit_subspace_masked(X, M, rank, rounds, sweeps_first=_ALS_FIRST, sweeps=_ALS_ROUND):
@@ -379,8 +380,8 @@ def _fit_subspace_masked(X, M, rank, rounds, sweeps_first=_ALS_FIRST, sweeps=_AL
         for _ in range(sweeps_first if k == 0 else sweeps):
             V, _ = _project_masked(U, X, M)
             WM = M * w  # (D, n)
-            H = np.einsum("dn,na,nb->dab", WM, V, V) + 1e-9 * eye
-            c = np.einsum("dn,na->da", WM * X, V)
+            H = (WM @ (V[:, :, None] * V[:, None, :]).reshape(n, -1)).reshape(D, rank, rank) + 1e-9 * eye
+            c = (WM * X) @ V
             U = np.linalg.solve(H, c[..., None])[..., 0]
             U = np.linalg.qr(U)[0]
         if k + 1 < rounds:

@@ -164,7 +164,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     ------
     ValueError
         For bad arguments; on incomplete data also when no two frames share enough
-        visible points, or too few points are seen in a usable frame pair.
+        visible points (``max(8, rv_sample_size)`` per motion).
     """
     from ._visibility import visibility
 
@@ -288,11 +288,8 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights) -> Vo
     from ._visibility import NO_FRAME_PAIR, decidable, filled, pair_pool
 
     P = points.shape[1]
-    pool = pair_pool(vis, max(8, params.rv_sample_size) * C)
-    keep = decidable(vis, pool)
-    if keep.sum() < max(8, params.rv_sample_size) * C:
-        raise ValueError(f"only {int(keep.sum())} of {P} points are seen in a frame pair the "
-                         f"voting can use; {C} motions need {max(8, params.rv_sample_size) * C}")
+    pool = pair_pool(vis, max(8, params.rv_sample_size) * C)  # ValueError when none qualifies
+    keep = decidable(vis, pool)  # at least the points of one pool pair: enough to vote
     idx = np.flatnonzero(keep)
     sub_vis = vis[:, idx]
     sub = filled(points[:, idx], sub_vis)
