@@ -380,7 +380,8 @@ def _fit_subspace_masked(X, M, rank, rounds, sweeps_first=_ALS_FIRST, sweeps=_AL
         for _ in range(sweeps_first if k == 0 else sweeps):
             V, _ = _project_masked(U, X, M)
             WM = M * w  # (D, n)
-            H = (WM @ (V[:, :, None] * V[:, None, :]).reshape(n, -1)).reshape(D, rank, rank) + 1e-9 * eye
+            H = (WM @ (V[:, :, None] * V[:, None, :]).reshape(n, -1)).reshape(D, rank, rank)
+            H += 1e-9 * (np.trace(H, axis1=1, axis2=2)[:, None, None] + 1e-12) * eye
             c = (WM * X) @ V
             U = np.linalg.solve(H, c[..., None])[..., 0]
             U = np.linalg.qr(U)[0]
