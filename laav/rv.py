@@ -19,7 +19,8 @@ Choices where the RV paper is vague (measured on Hopkins155, ``benchmarks/TUNING
 * **Frame pairs.** The two frames are at least ``max(1, F // 3)`` apart. On incomplete
   data a pair is drawn uniformly from those that also share enough visible points
   (:func:`laav._visibility.pair_pool`), only the points visible in both frames are
-  sampled and receive votes, and a point not voted on keeps its label.
+  sampled and receive votes, and a point not voted on keeps its label and its votes (they
+  decay only when it is voted on).
 * **No converged trial.** The labellings of all trials are combined into a
   co-association affinity and split by spectral clustering (:func:`consensus`).
 * **Trials side by side** (``rv_batch``): speed only; the plain trial kept is the first
@@ -208,7 +209,10 @@ def _step(points, trials, params, masks=None):
         seen = masks[0][pairs[:, 0]] & masks[0][pairs[:, 1]]  # (B, P)
         new = np.where(seen, new, labels)
     n_changed = (new != labels).sum(axis=-1)
-    votes *= params.rv_alpha
+    if masks is None:
+        votes *= params.rv_alpha
+    else:  # each point's votes decay on its own clock: by the iterations that voted on it
+        votes *= np.where(seen, params.rv_alpha, 1.0)[..., None]
     margins = _margins(votes)
     for b, t in enumerate(trials):
         t.it += 1
@@ -252,8 +256,9 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, masks=None):
         Missing data: ``visible`` (F, P) bool and the frame pairs ``pool`` (K, 2) of
         :func:`laav._visibility.pair_pool`; each iteration draws its pair from the pool
         (uniformly, in random order), fits and votes on the points visible in both frames
-        only (:func:`vote`), and a point not voted on keeps its label. ``points`` must be
-        finite everywhere (hidden entries filled).
+        only (:func:`vote`), and a point not voted on keeps its label and its votes (the
+        forgetting factor applies to the points voted on: each point's histogram decays
+        by its own votes). ``points`` must be finite everywhere (hidden entries filled).
 
     Returns
     -------
