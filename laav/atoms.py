@@ -30,6 +30,12 @@ Choices where the paper is vague (measured on Hopkins155):
   features by their *leave-one-out* residual (residual / (1 - leverage)): a feature of
   another motion far from the others otherwise drags the fit onto itself. An atom is
   kept only if its final least-squares model holds every member within the threshold.
+
+**Missing data** (a sequence with hidden entries): :class:`MaskedNeighbourhoods` compares
+two tracks over the frames both are seen in (at least ``min_overlap(F)`` of them), and
+each atom's maps start from a reference frame its members are seen in, fitted frame by
+frame on the members visible there (``_build_atoms_masked``; ``docs/ALGORITHM.md``,
+"Missing data").
 """
 
 from __future__ import annotations
@@ -61,9 +67,11 @@ class Atoms:
     owner : ndarray of shape (P,), int64
         Atom that owns each feature (member within ``r1`` of that atom's seed), -1 if none.
     affines : ndarray of shape (N, F, 2, 3)
-        Each atom's affine map from frame 0 to every frame, fitted on its members.
+        Each atom's affine map from frame 0 (on incomplete data: from its reference frame,
+        ``ref_frames``) to every frame, fitted on its members.
     residuals : tuple of N ndarrays
-        RMS residual (px) over all frames of each member under its atom's affine model.
+        RMS residual (px) over all frames (on incomplete data: the frames it is seen in
+        where its atom has a map) of each member under its atom's affine model.
     unassigned : ndarray of shape (K,), int64
         Features that belong to no atom.
     r1, r2 : float

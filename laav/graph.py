@@ -20,6 +20,10 @@ with ``g = max(1, F // 3)``, then symmetrised as the larger of a->b and b->a.
 (``s = edge_scale``), the multicut cost is the log-odds minus a cut prior, as in Keuper
 et al. (ICCV 2015): ``w = log(p / (1 - p)) - cut_prior = 2 log(s / err) - cut_prior``.
 Positive costs pull atoms together, negative ones push them apart.
+
+**Missing data**: :func:`forward_backward_error_masked` (every pair ``(f, f + g)`` both
+atoms have maps in, each member where it is seen in both frames); an edge without such a
+pair carries no evidence: error NaN, cost 0.
 """
 
 from __future__ import annotations
