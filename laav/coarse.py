@@ -14,6 +14,10 @@ with ``m_jk`` the motion difference of the models' mean trajectories (largest fr
 frame velocity difference over the sequence, divided by the spread of all velocities at
 that frame, as in Keuper et al.). The diagonal is 1. Spectral clustering
 (scikit-learn, ``assign_labels="cluster_qr"``) of Z gives C groups.
+
+**Missing data** (``docs/ALGORITHM.md``, "Missing data"): frame pairs come from
+:func:`laav._visibility.pair_pool`; the pairwise votes and pooled voting use only the
+features seen in both frames of a pair; the coding merge falls back to this epipolar one.
 """
 
 from __future__ import annotations
