@@ -574,28 +574,39 @@ def _clip_lines(lines: np.ndarray, extent) -> tuple[np.ndarray, ...]:
 
 def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int,
                      max_lines: int = 30, rng_seed: int = 0) -> dict:
-    """Epipolar check of fine models ``j`` and ``k`` on ``Coarse.pair_frames``.
+    """Epipolar check of fine models ``j`` and ``k`` with a fundamental matrix the merge
+    itself used: the pair's sample of median distance (``Coarse.vote_samples``).
 
-    Keys: ``left`` and ``right`` (x, y, color, model: the two models' points in frame l and
-    frame r), ``lines`` (x0, y0, x1, y1, color: epipolar lines in frame r of up to
-    ``max_lines`` frame-l points, from ``Coarse.pair_fundamental(points, j, k)``), ``frames``
-    (l, r), ``distance`` (``Coarse.epipolar_distance[j, k]``), ``residual`` (mean distance
-    in px of the drawn frame-r points to their lines; ``residual_j`` / ``residual_k`` per
-    model), ``ok`` (False when no F exists).
+    Keys: ``left`` and ``right`` (x, y, color, model: the two models' points in the
+    sample's frame l and frame r), ``sample_left`` / ``sample_right`` (x, y: the features
+    the F was fitted on), ``lines`` (x0, y0, x1, y1, color: epipolar lines in frame r of
+    the sample's features and of up to ``max_lines`` other points of the two models),
+    ``frames`` (l, r), ``distance`` (``Coarse.epipolar_distance[j, k]``, mean over every
+    sample), ``sample_distance`` (this sample's: the larger of the two models' mean Sampson
+    distances over its features, px^2), ``sample_vote`` (``exp(-lam sample_distance)``),
+    ``pairwise`` / ``coassociation`` / ``affinity`` (the terms of Z for the pair),
+    ``n_samples``, ``residual`` (mean distance in px of the drawn frame-r points to their
+    lines; ``residual_j`` / ``residual_k`` per model), ``ok`` (False for j == k — a model
+    is never voted against itself — or when the pair has no sample).
     """
     co = result.coarse
     n = np.asarray(co.fine_to_coarse).size
     e = np.zeros(0)
     empty = {"x": e, "y": e, "color": np.zeros(0, "U7"), "model": np.zeros(0, object)}
-    blank = {"left": empty, "right": empty,
+    nan = float("nan")
+    blank = {"left": empty, "right": empty, "sample_left": {"x": e, "y": e},
+             "sample_right": {"x": e, "y": e},
              "lines": {"x0": e, "y0": e, "x1": e, "y1": e, "color": np.zeros(0, "U7")},
-             "frames": (0, seq.n_frames - 1), "distance": float("nan"), "residual": float("nan"),
-             "residual_j": float("nan"), "residual_k": float("nan"),
+             "frames": (0, seq.n_frames - 1), "distance": nan, "sample_distance": nan,
+             "sample_vote": nan, "pairwise": nan, "coassociation": nan, "affinity": nan,
+             "n_samples": 0, "residual": nan, "residual_j": nan, "residual_k": nan,
              "ok": False}
-    if not (0 <= j < n and 0 <= k < n):
+    vs = co.vote_samples
+    if not (0 <= j < n and 0 <= k < n) or j == k or vs is None:
         return blank
-    fl, fr = (int(v) for v in np.asarray(co.pair_frames).tolist())
-    blank["frames"] = (fl, fr)
+    fl, fr = (int(v) for v in vs.frames[j, k])
+    if fl < 0:
+        return blank
     fine = np.asarray(co.fine_point_labels)
     idx = np.flatnonzero((fine == j) | (fine == k))
     fc = fine_colors(seq, result)
@@ -603,31 +614,44 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     cols = np.where(fine[idx] == j, cj, ck).astype("U7")
     model = np.where(fine[idx] == j, f"fine model f{j + 1}", f"fine model f{k + 1}").astype(object)
     pts = seq.points
-    left = {"x": pts[fl, idx, 0], "y": pts[fl, idx, 1], "color": cols, "model": model}
-    right = {"x": pts[fr, idx, 0], "y": pts[fr, idx, 1], "color": cols, "model": model}
-    F = co.pair_fundamental(seq.points, j, k)
-    out = dict(blank, left=left, right=right,
-               distance=float(np.asarray(co.epipolar_distance)[j, k]))
-    if idx.size == 0 or not np.any(F):
-        return out
+    F = np.asarray(vs.fundamental[j, k])
+    sample = np.asarray(vs.points[j, k])
+    half = sample.size // 2
+    u = np.unique(sample)
+
+    def term(a):
+        return nan if a is None else float(np.asarray(a)[j, k])
+
+    out = dict(blank, frames=(fl, fr),
+               left={"x": pts[fl, idx, 0], "y": pts[fl, idx, 1], "color": cols, "model": model},
+               right={"x": pts[fr, idx, 0], "y": pts[fr, idx, 1], "color": cols, "model": model},
+               sample_left={"x": pts[fl, u, 0], "y": pts[fl, u, 1]},
+               sample_right={"x": pts[fr, u, 0], "y": pts[fr, u, 1]},
+               distance=term(co.epipolar_distance), sample_distance=float(vs.distance[j, k]),
+               sample_vote=float(np.exp(-result.params.lam * vs.distance[j, k])),
+               pairwise=term(co.pairwise_vote), coassociation=term(co.coassociation),
+               affinity=term(co.affinity),
+               n_samples=int(len(co.frame_pairs) * result.params.coarse_samples))
+    # lines: the sample's own features, then others of both models, the same number each
     rng = np.random.default_rng(rng_seed)
-    # the same number of lines from each model, so both are checked
-    pick = []
-    for m in (j, k) if j != k else (j,):
-        cand = idx[fine[idx] == m]
-        take = min(cand.size, max_lines // (2 if j != k else 1))
+    own_model = np.concatenate([np.full(half, j), np.full(sample.size - half, k)])
+    first = {int(f): int(m) for f, m in zip(sample, own_model)}
+    pick = [u]
+    for m in (j, k):
+        cand = np.setdiff1d(idx[fine[idx] == m], u)
+        take = min(cand.size, max(0, (max_lines - u.size) // 2))
         pick.append(rng.choice(cand, take, replace=False))
-    sel = np.sort(np.concatenate(pick))
+    sel = np.concatenate(pick)
+    line_model = np.array([first.get(int(f), fine[f]) for f in sel])
     lines = epipolar_lines(F, pts[fl, sel])
-    ext = seq.extent()
-    X0, Y0, X1, Y1 = _clip_lines(lines, ext)
+    X0, Y0, X1, Y1 = _clip_lines(lines, seq.extent())
     resid = np.abs(lines[:, 0] * pts[fr, sel, 0] + lines[:, 1] * pts[fr, sel, 1] + lines[:, 2])
-    lc = np.where(fine[sel] == j, cj, ck).astype("U7")
-    out["lines"] = {"x0": X0, "y0": Y0, "x1": X1, "y1": Y1, "color": lc}
-    out["residual"] = float(resid.mean()) if resid.size else float("nan")
-    in_j = fine[sel] == j
-    out["residual_j"] = float(resid[in_j].mean()) if in_j.any() else float("nan")
-    out["residual_k"] = float(resid[~in_j].mean()) if (~in_j).any() else out["residual_j"]
+    out["lines"] = {"x0": X0, "y0": Y0, "x1": X1, "y1": Y1,
+                    "color": np.where(line_model == j, cj, ck).astype("U7")}
+    out["residual"] = float(resid.mean()) if resid.size else nan
+    in_j = line_model == j
+    out["residual_j"] = float(resid[in_j].mean()) if in_j.any() else nan
+    out["residual_k"] = float(resid[~in_j].mean()) if (~in_j).any() else nan
     out["ok"] = True
     return out
 

@@ -34,10 +34,42 @@ from .multicut import Multicut
 from .params import LaavParams
 from .voting import frame_pairs
 
-__all__ = ["Coarse", "merge_models", "point_labels_from_atoms", "pooled_voting"]
+__all__ = ["Coarse", "VoteSamples", "merge_models", "point_labels_from_atoms", "pooled_voting"]
 
 _PER_ATOM = 6  # features drawn from each atom for one fit
 _POOLED_ALPHA = 0.9  # forgetting factor of pooled voting
+
+
+@dataclass(frozen=True, eq=False)
+class VoteSamples:
+    """For every pair of fine models, one of the samples their pairwise epipolar vote was
+    built from: the sample of median distance among the ``K x S`` drawn (K frame pairs,
+    S four-atom samples each), so that a viewer sees a typical F the vote used, not one
+    refitted for drawing. Entries ``[j, j]`` are empty (frames -1, F zero).
+
+    Attributes
+    ----------
+    frames : ndarray of shape (n_fine, n_fine, 2), int64
+        The sample's frame pair (l, r).
+    fundamental : ndarray of shape (n_fine, n_fine, 3, 3)
+        Its F, fitted (normalised 8-point) on ``points``: ``x_r^T F x_l = 0``.
+    points : ndarray of shape (n_fine, n_fine, 4 m), int64
+        The features it was fitted on: two atoms of model j (first half of ``[j, k]``),
+        two of model k (m features drawn from each atom, with repeats for small atoms).
+    distance : ndarray of shape (n_fine, n_fine)
+        Its distance: the larger of the two models' mean Sampson distances (px^2); the
+        vote it cast is ``exp(-lam * distance)``.
+    """
+
+    frames: np.ndarray
+    fundamental: np.ndarray
+    points: np.ndarray
+    distance: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int, width: int) -> VoteSamples:
+        return cls(np.full((n, n, 2), -1, dtype=np.int64), np.zeros((n, n, 3, 3)),
+                   np.full((n, n, width), -1, dtype=np.int64), np.zeros((n, n)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,6 +105,14 @@ class Coarse:
         (:func:`laav.coding.merge_cost`; computed in both methods, for comparison).
     coding_length : float
         Total coding length of the chosen partition (nats); NaN with the epipolar merge.
+    vote_samples : VoteSamples or None
+        One typical sample of every pair's epipolar vote (what the explorer draws).
+    pairwise_vote, coassociation : ndarray of shape (n_fine, n_fine) or None
+        The two terms of the epipolar merge's Z, apart: the paper's pairwise vote (mean of
+        ``exp(-lam d)`` over the samples) and the co-association of the pooled-voting
+        trials (identity when pooled voting does not run). ``affinity`` is
+        ``(1 - w) coassociation + w pairwise_vote`` times the motion term, w =
+        ``pairwise_weight`` (1 without pooled voting).
     """
 
     fine_to_coarse: np.ndarray
@@ -87,6 +127,9 @@ class Coarse:
     method: str = "epipolar"
     merge_cost: np.ndarray | None = None
     coding_length: float = float("nan")
+    vote_samples: VoteSamples | None = None
+    pairwise_vote: np.ndarray | None = None
+    coassociation: np.ndarray | None = None
 
     def pair_fundamental(self, points: np.ndarray, j: int, k: int) -> np.ndarray:
         """F fitted (normalised 8-point) on every feature of fine models ``j`` and ``k``
@@ -152,15 +195,16 @@ def _motion_distance_masked(points: np.ndarray, vis: np.ndarray, groups: list) -
     return np.nan_to_num(np.fmax.reduce(diff, axis=-1), nan=0.0)
 
 
-def _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj, kk, S, lam, rng):
+def _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj, kk, S, lam, rng, n):
     """The paper's pairwise votes on incomplete data.
 
     For each frame pair, an atom takes part when at least 3 of its members are visible in
     both frames, and its ``_PER_ATOM`` features are drawn among those; a sample draws two
     such atoms from each model, and the mean Sampson distances of each model are taken as
     on complete data. A model pair with no taking-part atom in a model for a frame pair
-    has no sample there. Returns (vote (pairs,), distance (pairs,)), NaN where a model
-    pair has no sample at all.
+    has no sample there. Returns (vote (pairs,), distance (pairs,), VoteSamples), the
+    first two NaN where a model pair has no sample at all (and its VoteSamples entry
+    empty); the sample kept is the one of median distance among the valid ones.
     """
     K = pairs.shape[0]
     n_pairs = jj.size
@@ -190,11 +234,21 @@ def _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj, kk, S, la
     d = sampson_distance(Fm, x1, x2)
     half = 2 * _PER_ATOM
     depi = np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))  # (pairs, K, S)
-    n = valid.sum(axis=(1, 2))
+    cnt = valid.sum(axis=(1, 2))
     with np.errstate(invalid="ignore", divide="ignore"):
-        vote = np.where(valid, np.exp(-lam * depi), 0.0).sum(axis=(1, 2)) / n
-        dist = np.where(valid, depi, 0.0).sum(axis=(1, 2)) / n
-    return np.where(n > 0, vote, np.nan), np.where(n > 0, dist, np.nan)
+        vote = np.where(valid, np.exp(-lam * depi), 0.0).sum(axis=(1, 2)) / cnt
+        dist = np.where(valid, depi, 0.0).sum(axis=(1, 2)) / cnt
+    samples = VoteSamples.empty(n, 4 * _PER_ATOM)
+    for p in np.flatnonzero(cnt > 0):
+        ks, ss = np.nonzero(valid[p])
+        order = np.argsort(depi[p, ks, ss], kind="stable")
+        k, s_ = ks[order[order.size // 2]], ss[order[order.size // 2]]
+        for a, b, feats in ((jj[p], kk[p], idx[p, k, s_]), (kk[p], jj[p], np.roll(idx[p, k, s_], half))):
+            samples.frames[a, b] = pairs[k]
+            samples.fundamental[a, b] = Fm[p, k, s_]
+            samples.points[a, b] = feats
+            samples.distance[a, b] = depi[p, k, s_]
+    return np.where(cnt > 0, vote, np.nan), np.where(cnt > 0, dist, np.nan), samples
 
 
 def _motion_distance(points: np.ndarray, groups: list) -> np.ndarray:
@@ -367,7 +421,9 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     if n == 0:
         e = np.zeros((0, 0))
         return Coarse(np.zeros(0, np.int64), e, e, e, np.zeros(0, np.int64), fine_pts,
-                      fine_pts.copy(), pairs, widest, method, e)
+                      fine_pts.copy(), pairs, widest, method, e,
+                      vote_samples=VoteSamples.empty(0, 4 * _PER_ATOM), pairwise_vote=e,
+                      coassociation=e)
 
     model_atoms = [np.flatnonzero(multicut.atom_labels == j) for j in range(n)]
     groups = [np.flatnonzero(fine_pts == j) for j in range(n)]
@@ -378,8 +434,8 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     K, S = pairs.shape[0], params.coarse_samples
     D = np.zeros((n, n))
     if jj.size and vis is not None:
-        vote, dist = _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj, kk, S,
-                                            params.lam, rng)
+        vote, dist, samples = _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj,
+                                                     kk, S, params.lam, rng, n)
         D[jj, kk] = D[kk, jj] = dist
     elif jj.size:
         pick = np.empty((jj.size, K, S, 4), dtype=np.int64)
@@ -399,8 +455,10 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         depi = np.maximum(dj, dk)  # (pairs, K, S)
         vote = np.exp(-params.lam * depi).mean(axis=(1, 2))
         D[jj, kk] = D[kk, jj] = depi.mean(axis=(1, 2))
+        samples = _median_samples(depi, Fm, idx, pairs, jj, kk, n)
     else:
         vote = np.zeros(0)
+        samples = VoteSamples.empty(n, 4 * _PER_ATOM)
     if params.motion_weight <= 0:
         Mdist = np.zeros((n, n))
     elif vis is None:
@@ -469,7 +527,31 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         method=method,
         merge_cost=gain,
         coding_length=length,
+        vote_samples=samples,
+        pairwise_vote=pairwise,
+        coassociation=coassoc,
     )
+
+
+def _median_samples(depi, Fm, idx, pairs, jj, kk, n) -> VoteSamples:
+    """The sample of median distance of every model pair (j < k, mirrored to k > j).
+
+    ``depi`` (n_pairs, K, S), ``Fm`` (n_pairs, K, S, 3, 3), ``idx`` (n_pairs, K, S, 4 m)
+    feature indices, ``pairs`` (K, 2) frame pairs.
+    """
+    flat = depi.reshape(depi.shape[0], -1)
+    mid = np.argsort(flat, axis=1, kind="stable")[:, flat.shape[1] // 2]
+    ki, si = np.unravel_index(mid, depi.shape[1:])
+    p = np.arange(depi.shape[0])
+    out = VoteSamples.empty(n, idx.shape[-1])
+    pts = idx[p, ki, si]
+    half = pts.shape[-1] // 2
+    for a, b, first_a in ((jj, kk, pts), (kk, jj, np.roll(pts, half, axis=-1))):
+        out.frames[a, b] = pairs[ki]
+        out.fundamental[a, b] = Fm[p, ki, si]
+        out.points[a, b] = first_a  # [a, b]: model a's features first
+        out.distance[a, b] = depi[p, ki, si]
+    return out
 
 
 def _canonical(labels: np.ndarray) -> np.ndarray:

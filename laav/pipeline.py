@@ -144,6 +144,10 @@ class Pipeline:
     settings, C and the seed), for instance a λ change that does not alter the merge,
     its previous result is reused (its timing is then only that of the check). The
     result is identical to a recomputation: the stage's generator depends only on the seed.
+    When the coarse labels do change, the default fine-tuning reruns LAAV's informed
+    trial only: plain Random Voting's runs beside it (and their polished candidates) do not
+    depend on the coarse labels and are kept while the seed, C and the ``rv_*`` settings
+    stay (``plain_memo`` of :func:`laav.random_voting`; labels identical).
 
     Examples
     --------
@@ -160,6 +164,7 @@ class Pipeline:
         self._distances = None
         self._stages: dict = {}
         self._voting_memo: tuple | None = None
+        self._plain_memo: tuple | None = None  # (seed, C, rv_* settings) -> plain RV's runs
         self.result = self._run("atoms")
 
     def _voting_key(self, init) -> tuple:
@@ -208,7 +213,10 @@ class Pipeline:
                 if self._voting_memo is not None and self._same_voting_inputs(key):
                     st["voting"] = self._voting_memo[1]  # same inputs, same result
                 else:
-                    st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init)
+                    if self._plain_memo is None or self._plain_memo[0] != key[:3]:
+                        self._plain_memo = (key[:3], {})  # new seed, C or rv_* settings
+                    st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
+                                                 plain_memo=self._plain_memo[1])
                     self._voting_memo = (key, st["voting"])
             timings[stage] += time.perf_counter() - t
         return LaavResult(

@@ -19,7 +19,7 @@ import numpy as np
 from .geometry import fit_fundamental, sampson_distance
 
 __all__ = ["labelling_cost", "subspace_cost", "motion_distances", "refine_labels",
-           "subspace_residuals", "reassign_labels", "frame_pairs", "epipolar_cost"]
+           "subspace_residuals", "reassign_labels", "frame_pairs"]
 
 #: Rank of the trajectory subspaces of :func:`subspace_cost` (affine camera: 4, plus one
 #: for perspective and tracking noise; 5 measured best of 4..8, see benchmarks/TUNING.md).
@@ -259,34 +259,6 @@ def _finite_median(x: np.ndarray) -> float:
     """Median of the finite entries of ``x``; inf when there is none."""
     x = x[np.isfinite(x)]
     return float(np.median(x)) if x.size else np.inf
-
-
-def epipolar_cost(points: np.ndarray, labels: np.ndarray, n_motions: int, pairs: np.ndarray,
-                  visible: np.ndarray | None = None, scale2: float = SUBSPACE_SCALE2,
-                  distances: np.ndarray | None = None) -> float:
-    """How badly the motions' fundamental matrices explain a labelling (lower is better):
-    the model-selection cost on incomplete data, where :func:`subspace_cost` needs whole
-    trajectories.
-
-    The mean over points of ``log(1 + d / scale2)``, ``d`` the point's mean Sampson
-    distance (px^2) to its own motion's robust matrices over ``pairs``
-    (:func:`motion_distances`, with ``visible``), in the form of :func:`subspace_cost`;
-    ``inf`` when a motion has fewer than 8 points or a point no distance.
-
-    Parameters
-    ----------
-    points : ndarray of shape (F, P, 2)
-    labels : ndarray of shape (P,)
-    n_motions : int
-    pairs : ndarray of shape (K, 2)
-    visible : ndarray of shape (F, P), bool, optional
-    scale2 : float
-    distances : ndarray of shape (C, P), optional
-        :func:`motion_distances` of ``labels`` over ``pairs``, when already known.
-    """
-    D = motion_distances(points, labels, n_motions, pairs, visible) if distances is None else distances
-    own = D[labels, np.arange(labels.size)]
-    return float(np.mean(np.log1p(own / scale2))) if np.isfinite(own).all() else float("inf")
 
 
 def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,

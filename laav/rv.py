@@ -8,7 +8,8 @@ by side, in one batched call); every point receives, from each group's matrix, t
 which then decays by the forgetting factor ``alpha``. A trial starts from a random
 partition (plain RV) or from given labels (LAAV's fine-tuning, see
 :func:`laav.voting.random_voting`), and has converged when no label changed for
-``rv_patience`` iterations; plain RV resets its votes once, at iteration 15.
+``rv_patience`` iterations (at most ``floor(rv_tolerance * P)`` of them with
+``rv_tolerance`` > 0); plain RV resets its votes once, at iteration 15.
 
 Choices where the RV paper is vague (measured on Hopkins155, ``benchmarks/TUNING.md``):
 
@@ -37,7 +38,7 @@ import numpy as np
 from ._interrupt import check as check_interrupt
 from .geometry import fit_fundamental, sampson_distance
 
-__all__ = ["vote", "run_trials", "consensus", "RESET_AT"]
+__all__ = ["vote", "run_trials", "consensus", "consensus_seed", "RESET_AT"]
 
 #: Plain RV resets its votes once, at this iteration (RV paper).
 RESET_AT = 15
@@ -214,6 +215,7 @@ def _step(points, trials, params, masks=None):
     else:  # each point's votes decay on its own clock: by the iterations that voted on it
         votes *= np.where(seen, params.rv_alpha, 1.0)[..., None]
     margins = _margins(votes)
+    allowed = int(params.rv_tolerance * P)  # changes that still count as "no change"
     for b, t in enumerate(trials):
         t.it += 1
         t.labels, t.votes = new[b], votes[b]
@@ -223,14 +225,14 @@ def _step(points, trials, params, masks=None):
             t.votes = np.zeros_like(t.votes)
             t.still = 0
         else:
-            t.still = t.still + 1 if n_changed[b] == 0 else 0
+            t.still = t.still + 1 if n_changed[b] <= allowed else 0
             if t.still >= params.rv_patience and (not t.reset or t.it > RESET_AT):
                 t.converged = t.done = True
         if t.it >= params.rv_max_iter:
             t.done = True
 
 
-def run_trials(points, C, params, rng, informed=None, n_plain=None, masks=None):
+def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None, masks=None):
     """Run LAAV's informed trial and plain RV's random-start trials, ``rv_batch`` side by side.
 
     Trials advance in lockstep, one batched numpy call per iteration, each with its own
@@ -252,6 +254,10 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, masks=None):
         Start labels (P,) and votes (P, C) of LAAV's informed trial.
     n_plain : int, optional
         Most plain trials to start (default ``rv_trials``).
+    streams : sequence of numpy.random.Generator, optional
+        The trials' generators, ``[informed, plain 0, plain 1, ...]`` (``1 + n_plain`` of
+        them), instead of spawning them from ``rng``: a trial's result depends only on its
+        own generator, so a caller may run LAAV's trial and plain RV's apart.
     masks : (visible, pool) or None
         Missing data: ``visible`` (F, P) bool and the frame pairs ``pool`` (K, 2) of
         :func:`laav._visibility.pair_pool`; each iteration draws its pair from the pool
@@ -274,7 +280,8 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, masks=None):
     P = points.shape[1]
     width = params.rv_batch
     n_plain = params.rv_trials if n_plain is None else n_plain
-    streams = rng.spawn(1 + n_plain)  # [informed, plain 0, plain 1, ...]
+    if streams is None:
+        streams = rng.spawn(1 + n_plain)  # [informed, plain 0, plain 1, ...]
     active: list = []
     if informed is not None:
         labels0, votes0 = informed
@@ -318,12 +325,17 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, masks=None):
             [t.result() for t in started], plain_ended)
 
 
+def consensus_seed(rng: np.random.Generator) -> int:
+    """The one draw :func:`consensus` makes from ``rng``."""
+    return int(rng.integers(2**31 - 1))
+
+
 def consensus(trials, C, rng):
     """Combine the labellings of unconverged trials by spectral clustering of their
     co-association (+ 1e-6), without the P x P matrix (:mod:`laav._spectral`)."""
     from ._spectral import coassociation_clustering
 
     labs = np.stack([t[0] for t in trials])  # (T, P)
-    labels = coassociation_clustering(labs, C, int(rng.integers(2**31 - 1)))
+    labels = coassociation_clustering(labs, C, consensus_seed(rng))
     last = trials[-1]
     return labels, last[1], last[2], last[3], last[4], False

@@ -37,7 +37,6 @@ from ._threads import single_threaded
 from .metrics import misclassification_rate
 from .params import LaavParams
 from .refine import (
-    epipolar_cost,
     frame_pairs,
     labelling_cost,
     motion_distances,
@@ -45,7 +44,7 @@ from .refine import (
     refine_labels,
     subspace_cost,
 )
-from .rv import consensus, run_trials, vote
+from .rv import consensus, consensus_seed, run_trials, vote
 
 __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances", "frame_pairs",
            "labelling_cost", "subspace_cost", "reassign_labels"]
@@ -71,8 +70,9 @@ class Voting:
     margin : ndarray of shape (T,)
         Mean normalised vote margin (best minus second best over their sum) per iteration.
     n_iterations : int
-        Every voting iteration the call performed: summed over all trials of every run
-        (LAAV's informed trial, plain RV's trials, cancelled ones included).
+        Every voting iteration the result rests on: summed over all trials of every run
+        (LAAV's informed trial, plain RV's trials, cancelled ones included; with
+        ``plain_memo``, plain RV's were performed by the call that filled it).
     n_trials : int
         Trials run.
     converged : bool
@@ -129,7 +129,7 @@ class Voting:
 def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams | None = None,
                   seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
                   weights: np.ndarray | None = None, *, random_state=None,
-                  visible: np.ndarray | None = None) -> Voting:
+                  plain_memo: dict | None = None, visible: np.ndarray | None = None) -> Voting:
     """Segment trajectories into ``n_motions`` rigid motions by Random Voting.
 
     Parameters
@@ -150,6 +150,12 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     weights : ndarray of shape (P,), optional
         Initial votes of each point for its start label (default ``rv_label_weight`` for
         labelled points, 0 otherwise). Only with ``init_labels``.
+    plain_memo : dict, optional
+        Speed only, for callers that rerun the fine-tuning with new ``init_labels`` (as
+        :class:`laav.Pipeline` does when λ or the radii change): an empty dict at first,
+        then the same dict again for the same points, C, seed and ``rv_*`` settings. Plain
+        RV's runs and their polished candidates (which do not depend on ``init_labels``)
+        are kept in it and reused; the labels are identical to a run without it.
     visible : ndarray of shape (F, P), bool, optional
         For an array ``seq`` with missing entries (a :class:`Sequence` carries its own).
         When an entry is hidden, the missing-data variant runs (``docs/ALGORITHM.md``,
@@ -198,11 +204,11 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
                       (), init_labels is not None, 0,
                       unlabelled_code=None if vis is None else np.zeros(P, np.int8))
     if vis is not None:
-        return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights)
-    return _voting(seq, points, C, params, rng, init_labels, weights)
+        return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo)
+    return _voting(seq, points, C, params, rng, init_labels, weights, plain_memo)
 
 
-def _voting(seq, points, C, params, rng, init_labels, weights, mk=None) -> Voting:
+def _voting(seq, points, C, params, rng, init_labels, weights, plain_memo, mk=None) -> Voting:
     """:func:`random_voting` after its checks; ``mk`` (missing data): a :class:`_Masks`."""
     P = points.shape[1]
     masks = None if mk is None else (mk.visible, mk.pool)
@@ -242,16 +248,50 @@ def _voting(seq, points, C, params, rng, init_labels, weights, mk=None) -> Votin
                                          masks=masks)
         return _with_informed(_finish(points, C, params, first, trials, True, "informed", mk=mk),
                               first)
-    # LAAV's start against plain RV: keep the labelling of lower selection score
-    first, plain, trials, ended = run_trials(points, C, params, rng, (labels0, votes0), masks=masks)
-    cands = [("informed", first)] + _plain_candidates(plain, ended, C, rng, "plain ")
+    # LAAV's start against plain RV: keep the labelling of lower selection score. The
+    # informed trial and plain RV's trials each draw from their own generator, so they run
+    # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
+    streams = rng.spawn(1 + params.rv_trials)  # [informed, plain 0, plain 1, ...]
+    first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
+                                     streams=streams[:1], masks=masks)
+    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, masks)
+    trials, cands = trials + more, [("informed", first)] + cands
     if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
         # LAAV's start and plain RV disagree: two more plain RV runs arbitrate
         for k in (2, 3):
-            _, conv, more, ended = run_trials(points, C, params, rng, masks=masks)
-            trials = trials + more
-            cands += _plain_candidates(conv, ended, C, rng, f"plain {k} ")
-    return _with_informed(_select(points, C, params, cands, trials, initialised=True, mk=mk), first)
+            _, more, kc = _plain_run(points, C, params, rng, rng.spawn(1 + params.rv_trials),
+                                     plain_memo, k, masks)
+            trials, cands = trials + more, cands + kc
+    polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
+    return _with_informed(_select(points, C, params, cands, trials, initialised=True,
+                                  polished=polished, mk=mk), first)
+
+
+def _plain_run(points, C, params, rng, streams, memo, k, masks=None):
+    """Plain RV's k-th run of LAAV's fine-tuning on ``streams`` (``[unused, plain 0, ...]``):
+    (its converged trial or None, every trial it ran, its candidate labellings).
+
+    With ``memo`` (a dict kept by the caller for one sequence, C, seed and ``rv_*``
+    settings) a run is computed once: plain RV does not depend on LAAV's start. Its one
+    draw from ``rng`` (the consensus's seed) is then made again, so that every later draw
+    is what a fresh run would make: the labels are identical either way. ``masks``:
+    missing data, as :func:`laav.rv.run_trials` takes them.
+    """
+    hit = None if memo is None else memo.get(("run", k))
+    if hit is None:
+        _, conv, trials, ended = run_trials(points, C, params, None, streams=streams, masks=masks)
+        cons = consensus(ended, C, rng) if conv is None else None
+        hit = (conv, trials, ended, cons)
+        if memo is not None:
+            memo[("run", k)] = hit
+    elif hit[0] is None:
+        consensus_seed(rng)
+    conv, trials, ended, cons = hit
+    prefix = "plain " if k == 1 else f"plain {k} "
+    if conv is not None:
+        return conv, trials, [(prefix + "trial", conv)]
+    return None, trials, ([(prefix + "consensus", cons)]
+                          + [(f"{prefix}trial {i}", t) for i, t in enumerate(ended)])
 
 
 class _Masks:
@@ -274,7 +314,7 @@ class _Masks:
         self.pairs = cover_pairs(visible, pool, 12)
 
 
-def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights) -> Voting:
+def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo) -> Voting:
     """:func:`random_voting` on incomplete data (``docs/ALGORITHM.md``, "Missing data").
 
     The frame pairs are :func:`laav._visibility.pair_pool`'s (at least ``max(8,
@@ -282,8 +322,8 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights) -> Vo
     get label -1 (code 1 of :data:`laav._visibility.UNLABELLED_REASONS`) and take no
     part; the others are segmented as on complete data, with every step masked: voting
     (:func:`laav.rv.run_trials` with ``masks``), refinement and reassignment over
-    :func:`laav._visibility.cover_pairs` (epipolar only), and model selection by
-    :func:`laav.refine.epipolar_cost` in place of the subspace cost.
+    :func:`laav._visibility.cover_pairs`, subspaces (reassignment, model selection)
+    fitted on the visible entries (:func:`laav.refine.subspace_residuals` with the mask).
     """
     from ._visibility import NO_FRAME_PAIR, decidable, filled, pair_pool
 
@@ -300,7 +340,7 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights) -> Vo
     if w is not None and w.shape != (P,):
         raise ValueError(f"weights must have shape ({P},), got {w.shape}")
     out = _voting(seq, sub, C, params, rng, None if init is None else init[idx],
-                  None if w is None else w[idx], _Masks(sub_vis, pool))
+                  None if w is None else w[idx], plain_memo, _Masks(sub_vis, pool))
     labels = np.full(P, -1, dtype=np.int64)
     labels[idx] = out.labels
     votes = np.zeros((P, C))
@@ -388,7 +428,7 @@ def _partition_key(labels: np.ndarray) -> bytes:
     return order[inverse].astype(np.int64).tobytes()
 
 
-def _select(points, C, params, candidates, trials, initialised, mk=None) -> Voting:
+def _select(points, C, params, candidates, trials, initialised, polished=None, mk=None) -> Voting:
     """Polish every candidate labelling and return the one of lowest selection score.
 
     Every candidate is refined (:func:`refine_labels`) and, when the agreement term needs
@@ -409,8 +449,13 @@ def _select(points, C, params, candidates, trials, initialised, mk=None) -> Voti
     for name, cand in candidates:
         key = _partition_key(cand[0])
         if key not in done:
-            pol = _Polished(points, C, params, cand[0], mk)
-            done[key] = (pol, pol.cost())
+            if polished is not None and key in polished:
+                done[key] = polished[key]
+            else:
+                pol = _Polished(points, C, params, cand[0], mk)
+                done[key] = (pol, pol.cost())
+                if polished is not None and name.startswith("plain"):
+                    polished[key] = done[key]  # plain RV's: the same on every rerun
         entries.append((name, cand) + done[key])
     scores = np.array([e[3] for e in entries])
     if n > 2 and params.rv_select_agreement > 0:

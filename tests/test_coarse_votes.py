@@ -172,3 +172,60 @@ def test_direct_computation_detects_a_wrong_vote(monkeypatch):
     co = merge_models(seq, atoms, mc, seq.n_motions, params, np.random.default_rng(0))
     D, _ = direct_pair_votes(seq.points, members, co.frame_pairs, params.lam)
     assert not np.allclose(co.epipolar_distance, D, rtol=1e-6, atol=1e-9)
+
+
+def test_vote_samples_are_fits_the_vote_used():
+    """``Coarse.vote_samples`` (what the explorer's epipolar panel draws) is a sample the
+    vote was built from: refitting its features on its frames gives its F and its
+    distance, its frames are among the stage's frame pairs, its first half is model j's."""
+    from laav import build_atoms
+
+    seq = synthetic.make_sequence(n_objects=1, n_frames=15, n_points=240, noise=0.5, rng=6)
+    atoms = build_atoms(seq, LaavParams(), np.random.default_rng(0))
+    n = 4
+    fine = np.arange(atoms.n_atoms, dtype=np.int64) % n
+    mc = Multicut(atom_labels=fine, n_models=n, multicut_labels=fine, n_segments=n,
+                  cut=np.zeros(0, bool), objective=0.0, contractions=np.zeros((0, 2), np.int64),
+                  contraction_costs=np.zeros(0))
+    co = merge_models(seq, atoms, mc, 2, LaavParams(), np.random.default_rng(3))
+    vs = co.vote_samples
+    owner_model = np.full(seq.n_points, -1)
+    for i, m in enumerate(atoms.members):
+        owner_model[m] = fine[i]
+    pairs = {tuple(p) for p in co.frame_pairs.tolist()}
+    for j in range(n):
+        assert np.all(vs.frames[j, j] == -1) and not np.any(vs.fundamental[j, j])
+        for k in range(n):
+            if j == k:
+                continue
+            fl, fr = vs.frames[j, k]
+            assert (fl, fr) in pairs
+            g = vs.points[j, k]
+            half = g.size // 2
+            F = direct_fundamental(seq.points[fl, g], seq.points[fr, g])
+            Fs = vs.fundamental[j, k]
+            assert min(np.abs(F - Fs).max(), np.abs(F + Fs).max()) < 1e-6
+            d = direct_sampson(F, seq.points[fl, g], seq.points[fr, g])
+            assert vs.distance[j, k] == pytest.approx(max(d[:half].mean(), d[half:].mean()),
+                                                      rel=1e-6)
+            # the features come from atoms of the two models (a shared ring feature may
+            # be owned by another model's atom: compare by atom membership)
+            in_j = [any(f in atoms.members[a] for a in np.flatnonzero(fine == j)) for f in g[:half]]
+            in_k = [any(f in atoms.members[a] for a in np.flatnonzero(fine == k)) for f in g[half:]]
+            assert all(in_j) and all(in_k)
+            assert vs.distance[j, k] == vs.distance[k, j]
+
+
+def test_terms_of_z_are_returned_apart():
+    """``Coarse.pairwise_vote`` is the directly computed pairwise vote and ``affinity`` is
+    its blend with ``Coarse.coassociation`` (the default preset)."""
+    seq = synthetic.make_sequence(n_objects=2, n_frames=12, n_points=240, noise=0.5, rng=4)
+    atoms, mc, members = one_atom_models(seq, 2, np.random.default_rng(4))
+    params = LaavParams(coarse_frames=3, coarse_samples=2)
+    co = merge_models(seq, atoms, mc, seq.n_motions, params, np.random.default_rng(4))
+    _, pair = direct_pair_votes(seq.points, members, co.frame_pairs, params.lam)
+    np.testing.assert_allclose(co.pairwise_vote, pair, rtol=1e-6, atol=1e-9)
+    w = params.pairwise_weight
+    Z = (1 - w) * co.coassociation + w * co.pairwise_vote
+    np.fill_diagonal(Z, 1.0)
+    np.testing.assert_allclose(co.affinity, Z, rtol=1e-12)

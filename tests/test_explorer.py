@@ -94,10 +94,13 @@ def test_views_are_pure_functions_of_the_result(seq):
     z, factors = V.z_sources(res, seq)
     n = res.multicut.n_models
     assert len(factors) == n and len(z["z"]) == n * n
-    # a model's own F puts its frame-r points on their epipolar lines
-    e = V.epipolar_sources(seq, res, 0, 0)
-    if e["ok"]:
-        assert e["residual"] < 5.0
+    # no self-pair; a pair is drawn with a fundamental matrix the merge itself used
+    assert not V.epipolar_sources(seq, res, 0, 0)["ok"]
+    e = V.epipolar_sources(seq, res, 0, 1)
+    assert e["ok"] and list(e["frames"]) in res.coarse.frame_pairs.tolist()
+    assert e["sample_vote"] == pytest.approx(np.exp(-res.params.lam * e["sample_distance"]))
+    assert e["pairwise"] == pytest.approx(res.coarse.pairwise_vote[0, 1])
+    assert len(e["sample_left"]["x"]) == np.unique(res.coarse.vote_samples.points[0, 1]).size
     num = V.stage_numbers(seq, res)
     assert 0 <= num["error_final"] <= 1 and num["n_atoms"] == res.atoms.n_atoms
     assert "Random Voting" in V.numbers_markdown(num)

@@ -51,7 +51,7 @@ def test_segment_and_random_voting_run_single_threaded(two_threads, monkeypatch)
     assert _threads() == two_threads
     pipe.update(lam=3.0)
     random_voting(seq, 2, FAST)
-    assert len(seen) == 6
+    assert len(seen) >= 6  # merge_models 2x, run_trials at least once per voting call
     assert all(set(s.values()) == {1} for s in seen), seen
     assert _threads() == two_threads  # restored after every call
 

@@ -385,3 +385,40 @@ def test_fine_tuning_keeps_laavs_own_trial_trace_whatever_it_returns():
     assert plain.informed_changed is None and plain.informed_converged is None
     paper = random_voting(seq, seq.n_motions, LaavParams.paper(), seed=0, init_labels=seq.labels)
     assert np.array_equal(paper.informed_changed, paper.changed) and paper.selected == "informed"
+
+
+@pytest.mark.parametrize("max_iter", [40, 25])  # 25: no plain trial can converge (consensus)
+def test_plain_memo_reuses_plain_rv_and_keeps_the_labels(monkeypatch, max_iter):
+    """With ``plain_memo`` (what Pipeline passes on a λ or radius change) plain RV's runs
+    are computed once and the labels equal those of a run without it, for several starts
+    (at 40 iterations one of them makes plain RV's arbitration runs happen; at 25 plain RV
+    ends with its consensus, whose random draw the memo replays)."""
+    import laav.voting as voting_module
+    from laav import synthetic
+
+    seq = synthetic.make_sequence(n_objects=2, n_frames=12, n_points=150, rng=3)
+    p = LaavParams(rv_max_iter=max_iter, rv_trials=3)
+    rng = np.random.default_rng(0)
+    starts = [seq.labels.copy(), (seq.labels + 1) % 3, rng.integers(0, 3, seq.n_points),
+              np.where(rng.random(seq.n_points) < 0.5, seq.labels, -1)]
+    calls = []
+    orig = voting_module.run_trials
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs.get("n_plain"))
+        return orig(*args, **kwargs)
+
+    memo: dict = {}
+    for init in starts:
+        fresh = random_voting(seq, 3, p, 5, init_labels=init)
+        monkeypatch.setattr(voting_module, "run_trials", spy)
+        kept = random_voting(seq, 3, p, 5, init_labels=init, plain_memo=memo)
+        monkeypatch.setattr(voting_module, "run_trials", orig)
+        np.testing.assert_array_equal(kept.labels, fresh.labels)
+        assert kept.selected == fresh.selected
+    # every plain run after the first call came from the memo: of the calls made with the
+    # memo, only the informed trials (n_plain=0) and each plain run's first time remain
+    plain_calls = [c for c in calls if c != 0]
+    assert len(plain_calls) == len({k for k in memo if isinstance(k, tuple)})
+    assert calls.count(0) == len(starts)
+    assert (("run", 2) in memo) == (max_iter == 40)  # both paths really ran

@@ -1,5 +1,6 @@
-"""The epipolar check of card 3: two fine models' points in frames l and r, and the lines a
-fundamental matrix fitted on both draws in frame r.
+"""The epipolar check of card 3: two fine models' points in frames l and r, and the lines
+in frame r of a fundamental matrix the merge itself used for the pair (its sample of median
+distance, ``Coarse.vote_samples``), with the sample's features ringed.
 
 Its own controls: the pair of fine models (j, k).
 """
@@ -28,6 +29,8 @@ class EpipolarPanel:
         self.src_epi_l = ColumnDataSource(dict(empty_p))
         self.src_epi_r = ColumnDataSource(dict(empty_p))
         self.src_epi_lines = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": []})
+        self.src_sample_l = ColumnDataSource({"x": [], "y": []})
+        self.src_sample_r = ColumnDataSource({"x": [], "y": []})
         self.fig_l = image_figure("frame l", 200, extent, toolbar_location=None, tools="")
         self.fig_r = image_figure("frame r with epipolar lines", 200, extent, toolbar_location=None,
                                   tools="")
@@ -46,6 +49,9 @@ class EpipolarPanel:
             fig.title.text_font_size = "10pt"
         self.fig_r.segment("x0", "y0", "x1", "y1", source=self.src_epi_lines, line_color="color",
                            line_alpha=0.55, line_width=1)
+        for fig, src in ((self.fig_l, self.src_sample_l), (self.fig_r, self.src_sample_r)):
+            fig.scatter("x", "y", source=src, size=10, fill_alpha=0, line_color="black",
+                        line_width=1.5)
 
         self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=800, margin=(0, 10))
         self.layout = pn.Column(pn.Row(self.w_pair_j, self.w_pair_k),
@@ -77,21 +83,13 @@ class EpipolarPanel:
         d = V.epipolar_sources(seq, res, j, k)
         set_data(self.src_epi_l, d["left"])
         set_data(self.src_epi_r, d["right"])
+        set_data(self.src_sample_l, d["sample_left"])
+        set_data(self.src_sample_r, d["sample_right"])
         set_data(self.src_epi_lines, d["lines"])
         fl, fr = d["frames"]
         self.fig_l.title.text = f"frame l = {fl}: f{j + 1} and f{k + 1}"
-        self.fig_r.title.text = f"frame r = {fr}: lines of F(f{j + 1}, f{k + 1})"
-        if not d["ok"]:
-            self.caption.object = "No fundamental matrix for this pair (too few points)."
-            return
-        f2c = np.asarray(res.coarse.fine_to_coarse)
-        same = "the same motion" if f2c[j] == f2c[k] else "different motions"
-        self.caption.object = (
-            f"One F is fitted on all points of f{j + 1} and f{k + 1} between frames {fl} and {fr}; each "
-            f"frame-l point gives a line in frame r. If one rigid motion explains both models, their "
-            f"frame-r points lie on their lines. Mean distance to the lines: f{j + 1} "
-            f"**{d['residual_j']:.1f} px**, f{k + 1} **{d['residual_k']:.1f} px** (mean epipolar distance "
-            f"behind Z: {d['distance']:.1f} px²). Spectral clustering put them in {same}.")
+        self.fig_r.title.text = f"frame r = {fr}: the vote's F"
+        self.caption.object = epipolar_caption(d, res, j, k)
 
     # ------------------------------------------------------------------ callbacks
     def _on_pair(self, event=None) -> None:
@@ -103,3 +101,35 @@ class EpipolarPanel:
             return
         with h.hold():
             self.draw(h.sequence, h.result)
+
+
+def epipolar_caption(d: dict, res, j: int, k: int) -> str:
+    """What the panel shows and how the merge used it, with its numbers."""
+    if j == k:
+        return "Pick two different fine models: a model is never voted against itself."
+    if not d["ok"]:
+        return "No vote for this pair (too few atoms)."
+    f2c = np.asarray(res.coarse.fine_to_coarse)
+    same = "the same motion" if f2c[j] == f2c[k] else "different motions"
+    a, b = f"f{j + 1}", f"f{k + 1}"
+    text = (
+        f"The vote for {a}–{b} drew {d['n_samples']} samples: two atoms of each model, one F "
+        f"per sample fitted on their features between two frames, distance d = the larger "
+        f"of the two models' mean Sampson distances, vote exp(−λ d). **Shown: the sample of "
+        f"median d** (frames {d['frames'][0]} → {d['frames'][1]}, its features ringed): "
+        f"d = **{d['sample_distance']:.2f} px²**, vote **{d['sample_vote']:.2f}**; lines of "
+        f"{a} points lie {d['residual_j']:.1f} px, of {b} points {d['residual_k']:.1f} px from "
+        f"their points. Over all samples: mean d = {d['distance']:.2f} px², pairwise vote "
+        f"**{d['pairwise']:.2f}**")
+    method = getattr(res.coarse, "method", "epipolar")
+    w = res.params.pairwise_weight if res.params.pooled_trials > 0 else 1.0
+    if method == "coding":
+        g = float(np.asarray(res.coarse.merge_cost)[j, k])
+        return text + (f". The coding-length merge decided, not this vote: joining {a} and "
+                       f"{b} adds {g:+.2f} nats per point; they went to {same}.")
+    if w < 1.0:
+        text += (f"; co-association of the pooled-voting trials {d['coassociation']:.2f}; "
+                 f"Z = {1 - w:.2f} × co-association + {w:.2f} × vote = **{d['affinity']:.2f}**")
+    else:
+        text += f" = Z {d['affinity']:.2f}"
+    return text + f". Spectral clustering of Z put them in {same}."
