@@ -379,7 +379,8 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         drawn from :func:`laav._visibility.pair_pool`; the pairwise votes use, per frame
         pair, the atoms with 3 or more members seen in both frames and only those members
         (a model pair without any sample gets no pairwise term: Z is then the
-        co-association alone there); pooled voting is :func:`pooled_voting` with the
+        co-association alone there, ``pairwise_vote`` and ``epipolar_distance`` NaN);
+        pooled voting is :func:`pooled_voting` with the
         mask; the motion term uses the frames where the models are seen. The coding
         length needs whole trajectories: ``merge_cost`` is NaN and
         ``coarse_merge="coding"`` falls back to the epipolar merge, with a
