@@ -278,3 +278,19 @@ def test_paper_preset_runs_on_missing_data():
     res = _quiet_segment(occl, 2, LaavParams.paper())
     assert res.labels.shape == (seq.n_points,)
     assert (res.atoms.ref_frames >= 0).all()
+
+
+def test_degenerate_input_checks_read_only_visible_entries():
+    """check_degenerate on incomplete data: hidden entries (NaN) never enter its tests."""
+    rng = np.random.default_rng(0)
+    F, P = 6, 30
+    still = np.broadcast_to(rng.uniform(0, 300, (1, P, 2)), (F, P, 2)).copy()
+    vis = np.ones((F, P), bool)
+    vis[4:, :5] = False
+    with pytest.warns(laav.LaavWarning, match="no point moves"):
+        laav.random_voting(Sequence(still, visible=vis), 2, LaavParams(rv_max_iter=5), seed=0)
+    same = np.broadcast_to(still[:, :1], (F, P, 2)).copy()  # one trajectory P times,
+    common = np.ones((F, P), bool)
+    common[4:] = False  # ... all hidden in the same frames (else they differ in where)
+    with pytest.raises(ValueError, match="only 1 distinct trajectory"):
+        laav.segment(Sequence(same, visible=common), 2)
