@@ -110,6 +110,10 @@ def test_same_seed_same_labels_and_the_seed_matters_only_through_its_streams():
     assert np.array_equal(pipe.result.labels, a.labels)
     res = pipe.update(lam=5.0)
     assert np.array_equal(res.labels, _quiet_segment(occl, 3, LaavParams(lam=5.0), seed=5).labels)
+    res = pipe.update(r1=15.0, r2=30.0)  # the masked neighbourhoods answer a smaller radius
+    fresh = _quiet_segment(occl, 3, LaavParams(lam=5.0, r1=15.0, r2=30.0), seed=5)
+    assert np.array_equal(res.labels, fresh.labels)
+    assert all(np.array_equal(x, y) for x, y in zip(res.atoms.members, fresh.atoms.members))
 
 
 def test_plain_random_voting_runs_on_missing_data():
