@@ -49,16 +49,21 @@ DEFAULT_CONFIGS = {"default": {}, "paper": "paper", "no-plain-rv": {"rv_select":
 
 
 def make_params(spec) -> laav.LaavParams:
+    if isinstance(spec, tuple):  # ("rv", fields): plain Random Voting with these fields
+        spec = spec[1]
     return laav.LaavParams.paper() if spec == "paper" else laav.LaavParams(**spec)
 
 
 def parse_config(text: str) -> tuple[str, object]:
-    """``NAME=field=value,field=value`` (or ``NAME=paper``) -> (NAME, spec)."""
+    """``NAME=field=value,field=value`` (or ``NAME=paper``; ``NAME=rv:field=value,...`` runs
+    plain Random Voting with those fields instead of LAAV) -> (NAME, spec)."""
     name, _, rest = text.partition("=")
     if not name or not rest:
         raise argparse.ArgumentTypeError(f"--config wants NAME=field=value,..., got {text!r}")
     if rest == "paper":
         return name, "paper"
+    if rest.startswith("rv:"):
+        return name, ("rv", dict(_assignment(item) for item in rest[3:].split(",") if item))
     return name, dict(_assignment(item) for item in rest.split(","))
 
 
@@ -92,6 +97,10 @@ def run_sequence(path: str, seeds: list[int], configs: dict, plain_rv: bool = Tr
             rows.append(_row("plain-rv", seq, seed, v.labels, None, v, time.perf_counter() - t))
         for name, spec in configs.items():
             t = time.perf_counter()
+            if isinstance(spec, tuple):  # plain RV under other settings
+                v = laav.random_voting(seq, C, make_params(spec), seed=seed)
+                rows.append(_row(name, seq, seed, v.labels, None, v, time.perf_counter() - t))
+                continue
             res = laav.segment(seq, C, make_params(spec), seed=seed)
             rows.append(_row(name, seq, seed, res.labels, res.coarse.point_labels, res.voting,
                              time.perf_counter() - t))

@@ -20,7 +20,13 @@ Each control is moved ``--repeats`` times between two values. Prints ONE JSON li
 writes it, with date, machine and commit, to ``--out`` (default
 ``bench-out/explorer_browser_latency.md``). Usage::
 
-    python benchmarks/explorer_browser_latency.py [--repeats 3] [--out REPORT.md] [FILE]
+    python benchmarks/explorer_browser_latency.py [--repeats 3] [--out REPORT.md] [--only frame,...]
+        [FILE] [-- COMMAND OPTIONS]
+
+``FILE`` may be a video or a folder of frames (``laav-explore`` tracks it first; its frames
+are then drawn behind the points, which a frame move sends along). ``--only`` measures some
+controls only (names as in the JSON: lambda, radius, seed, frame); options after ``--`` go to
+the command (e.g. ``-- --motions 3`` for tracks without ground truth).
 """
 
 from __future__ import annotations
@@ -88,14 +94,16 @@ CONTROLS = [
 ]
 
 
-def measure(file: str | None, repeats: int) -> dict:
+def measure(file: str | None, repeats: int, only: list[str] | None = None,
+            extra: list[str] | None = None) -> dict:
     from playwright import sync_api
 
     port = _free_port("127.0.0.1")
     cmd = [sys.executable, "-m", "explorer.cli", *([file] if file else []), "--no-browser",
-           "--port", str(port)]
+           "--port", str(port), *(extra or [])]
+    controls = [c for c in CONTROLS if only is None or c[0] in only]
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    out: dict = {"file": file or "bundled demo"}
+    out: dict = {"file": file or "bundled demo", **({"options": " ".join(extra)} if extra else {})}
     with sync_api.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
         proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL,
@@ -103,7 +111,7 @@ def measure(file: str | None, repeats: int) -> dict:
         t_cmd = time.monotonic()
         try:
             page = browser.new_page(viewport={"width": 1280, "height": 800})
-            deadline = t_cmd + 120
+            deadline = t_cmd + 300  # a video is tracked before the server starts
             while True:
                 try:
                     page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
@@ -120,7 +128,7 @@ def measure(file: str | None, repeats: int) -> dict:
             page.wait_for_timeout(1000)  # the lazily added cards arrive after the first result
             runs: dict = {}
             for _ in range(repeats):
-                for name, prefix, kind, values, marker in CONTROLS:
+                for name, prefix, kind, values, marker in controls:
                     for v in values:
                         ms = page.evaluate(JS_MOVE, [prefix, v, kind, marker(v)])
                         if ms < 0:
@@ -141,8 +149,12 @@ def main(argv=None) -> int:
     ap.add_argument("file", nargs="?", help="sequence file (default: the bundled demo)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", default="bench-out/explorer_browser_latency.md")
-    args = ap.parse_args(argv)
-    result = measure(args.file, args.repeats)
+    ap.add_argument("--only", default=None, help="comma-separated controls: lambda,radius,seed,frame")
+    argv = sys.argv[1:] if argv is None else list(argv)
+    extra = argv[argv.index("--") + 1:] if "--" in argv else []
+    args = ap.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
+    only = args.only.split(",") if args.only else None
+    result = measure(args.file, args.repeats, only, extra)
     write_json_report(args.out, "Explorer latency in Chromium, control release to views redrawn",
                       f"{result['file']}, {args.repeats} moves of each control between two values, "
                       "viewport 1280x800, headless Chromium (software WebGL)", result)

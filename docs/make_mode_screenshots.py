@@ -1,9 +1,14 @@
-"""Regenerate ``docs/explorer_sweep.png`` and ``docs/explorer_tour.png`` (1280x800, a projector):
-the seed sweep run to the end, and step 3 of the guided tour, in headless Debian Chromium.
+"""Regenerate ``docs/explorer_sweep.png``, ``docs/explorer_tour.png`` and
+``docs/explorer_compare.png`` (1280x800, a projector): the seed sweep run to the end, step 3
+of the guided tour, and the A/B compare (the result pinned as A, then λ moved to 3.5 and the
+points coloured by their coarse motion), in headless Debian Chromium; and
+``docs/explorer_video.png``: ``laav-explore assets/two_objects`` (the synthetic clip tracked,
+its complete tracks segmented, the video's frame 12 behind the points).
 
-Usage: ``python docs/make_mode_screenshots.py [SEQUENCE_FILE] [--param NAME=VALUE ...]``
-(default: the bundled demo with the default parameters). Needs ``/usr/bin/chromium`` and
-the playwright package; no request leaves 127.0.0.1. PNGs quantised to 256 colours.
+Usage: ``python docs/make_mode_screenshots.py [SEQUENCE_FILE] [--param NAME=VALUE ...]
+[--video FOLDER_OR_VIDEO] [--only modes|video]`` (default: the bundled demo with the default
+parameters, and the clip). Needs ``/usr/bin/chromium``, the playwright package and OpenCV
+(to track the video); no request leaves 127.0.0.1. PNGs quantised to 256 colours.
 """
 
 from __future__ import annotations
@@ -36,7 +41,86 @@ def main(argv=None) -> int:
     ap.add_argument("file", nargs="?", help="sequence file (default: the bundled demo)")
     ap.add_argument("--param", action="append", default=[], help="NAME=VALUE, a LaavParams field")
     ap.add_argument("--out-dir", default=str(REPO / "docs"))
+    ap.add_argument("--video", default=str(REPO / "assets" / "two_objects"),
+                    help="video or folder of frames for explorer_video.png (default: the synthetic clip)")
+    ap.add_argument("--only", choices=("modes", "video"), default=None, help="make only these shots")
     args = ap.parse_args(argv)
+    outside: list[str] = []
+    if args.only != "video":
+        _modes(args, outside)
+    if args.only != "modes":
+        _video(args, outside)
+    if outside:
+        print(f"requests that left 127.0.0.1 (blocked): {outside}")
+        return 1
+    return 0
+
+
+def _wait_listening(port: int) -> None:
+    for _ in range(300):
+        try:
+            socket.create_connection(("127.0.0.1", port), 0.2).close()
+            return
+        except OSError:
+            time.sleep(0.1)
+
+
+def _page(p, outside: list):
+    browser = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=ARGS)
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+
+    def route(r):
+        if r.request.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")):
+            r.continue_()
+        else:
+            outside.append(r.request.url)
+            r.abort()
+
+    page.route("**/*", route)
+    return browser, page
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _video(args, outside: list) -> None:
+    """explorer_video.png: the clip tracked and segmented, frame 12 behind the points (the
+    top of the page: the note saying how the tracks were made, and the frame view)."""
+    import panel as pn
+    from playwright.sync_api import sync_playwright
+
+    from explorer.cli import app_factory
+    from explorer.video import open_video
+
+    video = open_video(args.video, progress=False)
+    created: list = []
+    port = _free_port()
+    server = pn.serve({"/": app_factory(video.sequence, video.n_motions, created=created, viser=False,
+                                        video=video)}, port=port, address="127.0.0.1", show=False,
+                      threaded=True, verbose=False)
+    try:
+        _wait_listening(port)
+        with sync_playwright() as p:
+            browser, page = _page(p, outside)
+            page.goto(f"http://127.0.0.1:{port}/?frame=12")
+            page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=60000)
+            while not created:
+                time.sleep(0.1)
+            created[0].wait(120, plain_rv=True)
+            page.get_by_text("Showing").first.wait_for(timeout=60000)
+            page.wait_for_timeout(2000)
+            _save(page, Path(args.out_dir) / "explorer_video.png")
+            browser.close()
+    finally:
+        server.stop()
+        for e in created:
+            e.close()
+
+
+def _modes(args, outside: list) -> None:
 
     import panel as pn
     from playwright.sync_api import sync_playwright
@@ -55,26 +139,10 @@ def main(argv=None) -> int:
         port = s.getsockname()[1]
     server = pn.serve({"/": app_factory(seq, None, params=params, created=created, viser=False)}, port=port,
                       address="127.0.0.1", show=False, threaded=True, verbose=False)
-    outside: list[str] = []
     try:
-        for _ in range(300):
-            try:
-                socket.create_connection(("127.0.0.1", port), 0.2).close()
-                break
-            except OSError:
-                time.sleep(0.1)
+        _wait_listening(port)
         with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=ARGS)
-            page = browser.new_page(viewport={"width": 1280, "height": 800})
-
-            def route(r):
-                if r.request.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")):
-                    r.continue_()
-                else:
-                    outside.append(r.request.url)
-                    r.abort()
-
-            page.route("**/*", route)
+            browser, page = _page(p, outside)
             page.goto(f"http://127.0.0.1:{port}/")
             page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=60000)
             while not created:
@@ -97,15 +165,42 @@ def main(argv=None) -> int:
             page.get_by_text("step 3 of 5").first.wait_for(timeout=20000)
             page.wait_for_timeout(1500)
             _save(page, out / "explorer_tour.png")
+
+            # A/B compare, in a new tab (its own session): pin what is shown, move λ, colour
+            # by the coarse motions
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            page.route("**/*", route)
+            page.goto(f"http://127.0.0.1:{port}/")
+            page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=60000)
+            while len(created) < 2:
+                time.sleep(0.1)
+            ex = created[1]
+            ex.wait(120, plain_rv=True)
+            pin = page.locator("button", has_text="Pin as A")
+            pin.wait_for(timeout=60000)
+            pin.click()
+            page.locator(".card-header", has_text="A/B compare").first.wait_for(timeout=20000)
+            lam = ex.result.params.lam
+            page.evaluate("""([v]) => { for (const m of Bokeh.documents[0].all_models)
+              if (m.type === 'Slider' && String(m.title).startsWith('λ')) {
+                m.value = v; m.value_throttled = v; } }""", [lam + 1.5])
+            while not (ex.result.params.lam == lam + 1.5 and ex.wait(1)):
+                time.sleep(0.2)
+            coarse = "coarse (atoms merged)"
+            page.locator(f"select:has(option[value='{coarse}'])").select_option(coarse)
+            ex.wait(120, plain_rv=True)
+            page.get_by_text(f"lam: {lam:g} → {lam + 1.5:g}").first.wait_for(timeout=60000)
+            page.wait_for_function("""() => Array.from(Bokeh.documents[0].all_models).some(
+              m => m.type === 'Title' && m.text.startsWith('B (live)') && m.text.includes('coarse'))""",
+                                   timeout=60000)
+            page.evaluate("window.scrollTo(0, 0)")
+            page.wait_for_timeout(1500)
+            _save(page, out / "explorer_compare.png")
             browser.close()
     finally:
         server.stop()
         for e in created:
             e.close()
-    if outside:
-        print(f"requests that left 127.0.0.1 (blocked): {outside}")
-        return 1
-    return 0
 
 
 if __name__ == "__main__":

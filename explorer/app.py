@@ -29,8 +29,10 @@ import laav
 from laav import LaavParams
 
 from . import views as V
+from .cards.advanced import AdvancedPanel
 from .cards.base import SIDE_W
 from .cards.coarse import CoarseView
+from .cards.compare import CompareView
 from .cards.controls import PARAM_SLIDERS, Controls
 from .cards.files import DEFAULT_MAX_UPLOAD, Files
 from .cards.frame import FrameView
@@ -93,16 +95,23 @@ class Explorer:
         once the page is on screen, so the first page is not slowed down by the pipeline).
     max_upload : int
         Largest upload accepted, in bytes (``laav-explore --max-upload``).
+    video : explorer.video.Video, optional
+        The tracked video ``seq`` comes from (:func:`explorer.video.open_video`): its frames
+        are drawn behind the points, and the page says how the tracks were made.
 
     Examples
     --------
     >>> Explorer.from_file("cars1_truth.mat")        # doctest: +SKIP  (displays in Jupyter)
+    >>> Explorer.from_file("clip.mp4")               # doctest: +SKIP  (tracks it first)
     """
 
     def __init__(self, seq: laav.Sequence, n_motions: int | None = None,
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
-                 start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD):
+                 start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD, video=None):
+        if video is not None and video.sequence is not seq:
+            raise ValueError("video must be the one seq was tracked from (video.sequence is seq)")
+        self.video = video
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False)
         self._session_doc = None
         self._doc_thread = threading.get_ident()
@@ -117,6 +126,7 @@ class Explorer:
         # (views.point_style), the fine models' colours, the points whose motion changed
         self.result: laav.LaavResult | None = None
         self.sequence: laav.Sequence = seq
+        self.settings = self.state.target  # (of the result shown, once there is one)
         self.style = None
         self.fine_colors = None
         self.moved = None
@@ -129,7 +139,10 @@ class Explorer:
         self.files = Files(self, self.state, self.controls, self.status_bar, seq, self._png_view,
                            max_upload=max_upload)
         self.frame_view = FrameView(self, ext)
+        self.frame_view.set_video(video)
         self.frame_view.draw_raw(seq)  # in the first page already: the points before any compute
+        if video is not None:  # how the tracks were made, from the first page on
+            self.status_bar.show_note(V.md_text(video.summary()))
         # the 3-D view's server starts with the first computation (``start``)
         self.view3d = View3D(self, viser, viser_host, page_hosts,
                              iframe_host or (viser_host if viser_host not in ("0.0.0.0", "::") else None),
@@ -139,10 +152,12 @@ class Explorer:
         self.rv_view = RVView()
         self.numbers_view = NumbersView()
         self.sweep_view = SweepView(self, self.state, self.controls)
+        self.advanced = AdvancedPanel(self, self.state, self.controls)
+        self.compare = CompareView(self, self.state, self.controls, ext)
         self.tour = TourView(self, self.controls, {
             "frame": self.frame_view.card, "view3d": self.view3d.card, "graph": self.graph_view.card,
             "coarse": self.coarse_view.card, "rv": self.rv_view.card, "numbers": self.numbers_view.card,
-            "sweep": self.sweep_view.card})
+            "sweep": self.sweep_view.card, "compare": self.compare.card})
         # the view controls that redraw more than one card
         self.controls.w_frame.param.watch(self._on_frame, "value")
         self.controls.w_color.param.watch(self._on_color, "value")
@@ -154,6 +169,7 @@ class Explorer:
         self.state.on_error = self._on_error
         self.state.on_busy = self._on_busy
         self.state.on_plain_rv = self._on_plain_rv
+        self.state.on_target = self._on_target
         if start:
             self.start()
 
@@ -186,8 +202,32 @@ class Explorer:
     # ------------------------------------------------------------------ constructors
     @classmethod
     def from_file(cls, path, n_motions: int | None = None, **kw) -> Explorer:
-        """Explorer for a Hopkins ``*_truth.mat`` or ``.npz`` file (see :func:`laav.load_sequence`)."""
+        """Explorer for a sequence file (Hopkins ``*_truth.mat``, KT3DMoSeg ``.mat``, ``.npz``,
+        tracks ``.csv``: see :func:`laav.load_sequence`), or for a video or a folder of frames
+        (told apart by content, :func:`explorer.video.is_video`), which
+        :meth:`from_video` tracks first."""
+        from .video import is_video
+
+        if is_video(path):
+            return cls.from_video(path, n_motions, **kw)
         return cls(laav.load_sequence(path), n_motions, **kw)
+
+    @classmethod
+    def from_video(cls, path, n_motions: int | str | None = None, *, track: dict | None = None,
+                   progress: bool | None = True, **kw) -> Explorer:
+        """Track a video (or a folder of frames), keep the tracks seen in every frame, and explore
+        them with the video's frames behind the points.
+
+        ``n_motions``: C, or None / ``"auto"`` to estimate it (:func:`laav.estimate_motions`).
+        ``track``: keyword arguments of :func:`laav.track.track` (``stride``, ``max_points``,
+        ``max_frames``, ...). ``progress``: the tracker's progress bar (in a notebook, in the
+        cell). Raises :class:`explorer.video.VideoError` (one line) for a video that cannot be
+        used. Tracking runs here, before the explorer is built.
+        """
+        from .video import open_video
+
+        video = open_video(path, n_motions, track_options=track, progress=progress)
+        return cls(video.sequence, video.n_motions, video=video, **kw)
 
     @classmethod
     def demo(cls, **kw) -> Explorer:
@@ -205,10 +245,13 @@ class Explorer:
         self.sidebar = [
             heading("Sequence"), f.seq_info,
             pn.pane.Markdown("Open another sequence (`.mat`, `.npz` or tracks `.csv`), or a `params.json` "
-                             "exported here:", margin=(0, 10)),
+                             "exported here (a video is tracked on the command line only: "
+                             "`laav-explore VIDEO`):", margin=(0, 10)),
             f.w_upload, f.upload_hint, c.w_motions,
             heading("View"), self.tour.w_start, c.w_frame, c.w_color, self.frame_view.w_layers,
-            heading("Parameters"), *c.w_params.values(), c.w_seed, c.w_reset,
+            self.frame_view.w_background,
+            heading("Parameters"), *c.w_params.values(), c.w_seed, c.w_reset, self.advanced.card,
+            heading("Compare"), *self.compare.sidebar,
             heading("Export"), *f.downloads,
             s.tab_title, f.w_refused,
         ]
@@ -216,7 +259,7 @@ class Explorer:
         # cards in the order of the stages; each lays its parts out in a wrapping FlexBox, so
         # they sit side by side on a wide screen and stack on a projector (1024 px)
         self.main = [
-            s.line, s.alert, s.url_alert, s.note, self.tour.panel,
+            s.line, s.alert, s.url_alert, s.note, self.tour.panel, self.compare.card,
             self.frame_view.card, self.view3d.card, self.graph_view.card, self.coarse_view.card,
             self.rv_view.card, self.numbers_view.card, self.sweep_view.card,
         ]
@@ -333,6 +376,9 @@ class Explorer:
     def _on_plain_rv(self, voting, key) -> None:
         self.schedule(self._apply_plain_rv, voting, key)
 
+    def _on_target(self, settings) -> None:
+        self.schedule(self.advanced.show, settings, now_if_on_doc_thread=True)
+
     def _frame_from_viser(self, frame: int) -> None:
         self.schedule(setattr, self.controls.w_frame, "value", int(frame))
 
@@ -344,9 +390,11 @@ class Explorer:
         new_seq = seq is not self._seq_shown
         with self.quiet():
             with self.hold():
+                unpinned = None
                 if new_seq:
                     self._set_sequence(seq, settings)
-                self.result, self.sequence = result, seq
+                    unpinned = self.compare.sequence_changed(seq)
+                self.result, self.sequence, self.settings = result, seq, settings
                 self.change = self.state.change_of(result) if not new_seq else None
                 self.moved = None if self.change is None else self.change.moved
                 plain = self.state.plain_rv()
@@ -362,14 +410,18 @@ class Explorer:
                 num = self.numbers_view.draw(seq, result, plain)
                 s = self.status_bar
                 s.alert.visible = self.state.error is not None
-                notes = [n for n in (self.style["note"],) if n]
-                if seq.labels is None:
+                notes = [n for n in (self.style["note"], unpinned) if n]
+                if self.video is not None and seq is self.video.sequence:
+                    notes.append(V.md_text(self.video.summary()) + " No ground truth: errors cannot be "
+                                 "scored.")
+                elif seq.labels is None:
                     notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; C = "
                                  f"{settings.n_motions} is taken from the C box.")
                 s.show_note("  \n".join(notes))
                 s.show_result(seq, num["error_final"], self.state.compute_seconds,
                               non_defaults(settings, self.state.default_motions(seq)), self.change)
                 self.view3d.show_first()
+                self.compare.redraw()
             self.view3d.draw(seq, result, self.style["color"], self.controls.w_frame.value, new_seq)
             self._seq_shown = seq
             self._sync_url()
@@ -408,6 +460,8 @@ class Explorer:
             self.numbers_view.draw(self.sequence, self.result, voting)
             if self.controls.color_mode in ("plain", "errors_plain"):
                 self._color_now()
+            else:
+                self.compare.redraw()  # plain RV's error in the compare table
         with self._applied:
             self.applied_plain_key = key
             self._applied.notify_all()
@@ -436,6 +490,7 @@ class Explorer:
         with self.hold():
             self._draw_frame()
             self.graph_view.draw(self.result, self.frame, self.fine_colors)
+            self.compare.redraw()
             self._sync_url()
         self.view3d.set_frame(self.frame)
 
@@ -449,6 +504,7 @@ class Explorer:
                                    self.state.plain_rv())
         with self.hold():
             self._draw_frame()
+            self.compare.redraw()
             self.status_bar.show_note(self.style["note"])
             self._sync_url()
         self.view3d.set_colors(self.style["color"])

@@ -1,5 +1,14 @@
-"""``laav-explore [FILE] [--motions C] [--params P.JSON] [--param NAME=VALUE ...] [--port N] [--host H]
-[--max-upload SIZE] [--no-browser]``.
+"""``laav-explore [FILE | VIDEO] [--motions C|auto] [--params P.JSON] [--param NAME=VALUE ...] [--port N]
+[--host H] [--max-upload SIZE] [--no-browser] [tracking options]``.
+
+A VIDEO (anything OpenCV opens) or a folder of frames, told apart from a sequence file by
+content (:func:`explorer.video.is_video`), is tracked first, before the server starts (the
+tracker's progress bar on a terminal; ``laav track``'s options: ``--stride``,
+``--track-points`` for its ``--max-points``, ``--max-frames``, ...): the tracks seen in every
+frame are kept (LAAV's stages take complete tracks only), C is ``--motions`` or estimated
+(``laav.estimate_motions``), and the frame view draws the video's frames behind the points.
+A video that cannot be used (unreadable, no features, too few complete tracks for C) exits
+with code 2 and one line on stderr.
 
 The page address carries its state: ``/?r1=25&seed=3`` opens with R1 = 25 and seed 3 (keys:
 every :class:`laav.LaavParams` field, ``seed``, ``motions``, ``frame``, ``color``), and moving
@@ -87,17 +96,34 @@ def _size(text: str) -> int:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _motions(text: str):
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or 'auto', got {text!r}")
+    return v
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from laav.cli import add_track_arguments
+
     p = argparse.ArgumentParser(
         prog="laav-explore",
         description="Explore every stage of LAAV motion segmentation live in the browser.",
         epilog="Without FILE the bundled demo sequence is shown. A FILE without ground-truth labels "
-               "needs --motions.")
-    p.add_argument("file", nargs="?", metavar="FILE",
+               "needs --motions (C, or auto to estimate it). A VIDEO is tracked first (C estimated "
+               "unless --motions gives it).")
+    p.add_argument("file", nargs="?", metavar="FILE | VIDEO",
                    help="Hopkins155 *_truth.mat, KT3DMoSeg .mat, a .npz with points (F, P, 2) [and "
-                        "labels, visible], a tracks CSV (track,frame,x,y[,label]), or a folder holding one")
-    p.add_argument("--motions", "-C", type=int, metavar="C",
-                   help="number of motions C (default: from the ground truth)")
+                        "labels, visible], a tracks CSV (track,frame,x,y[,label]), or a folder holding one; "
+                        "or a video (anything OpenCV opens) or a folder of frames, to track first")
+    p.add_argument("--motions", "-C", type=_motions, metavar="C",
+                   help="number of motions C, or auto to estimate it (default: from the ground truth; "
+                        "for a video: auto)")
     p.add_argument("--port", type=int, metavar="N",
                    help=f"port of the page (default {DEFAULT_PORT}, or a free one if it is taken)")
     p.add_argument("--host", default="127.0.0.1",
@@ -119,6 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--complete-only", action="store_true",
                    help="keep only the tracks visible in every frame (the explorer does not handle "
                         "missing entries yet); the page then numbers the kept points 0..K-1")
+    tr = p.add_argument_group("tracking a VIDEO (the options of laav track; the tracks seen in every "
+                              "frame are kept)")
+    add_track_arguments(tr, rename={"--max-points": "--track-points"})
     return p
 
 
@@ -165,7 +194,7 @@ def _reachable_name(host: str) -> str:
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
                 hosts: list[str] | None = None, announce_viser: bool = False,
-                params: laav.LaavParams | None = None, max_upload: int | None = None):
+                params: laav.LaavParams | None = None, max_upload: int | None = None, video=None):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
@@ -178,7 +207,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     A session whose address carries settings (``/?r1=25&seed=3``) starts with them
     (validated; problems shown on the page as text). ``max_upload``: the largest upload in
     bytes (default :data:`explorer.cards.files.DEFAULT_MAX_UPLOAD`); serve with
-    :func:`serve_options`.
+    :func:`serve_options`. ``video``: the :class:`explorer.video.Video` ``seq`` was tracked
+    from (its frames, shared read-only by every tab, go behind the points).
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
@@ -191,7 +221,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
 
         return Explorer(seq, n_motions, params=params, seed=seed, viser=viser, viser_host=host,
                         iframe_host=iframe_host, start=False, page_hosts=hosts,
-                        max_upload=DEFAULT_MAX_UPLOAD if max_upload is None else max_upload)
+                        max_upload=DEFAULT_MAX_UPLOAD if max_upload is None else max_upload,
+                        video=video)
 
     if prebuild:
         fut: Future = Future()
@@ -259,10 +290,16 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     return make_app
 
 
-def _fail(parser: argparse.ArgumentParser, msg: str) -> int:
-    parser.print_usage(sys.stderr)
+def _fail(parser: argparse.ArgumentParser | None, msg: str) -> int:
+    """Exit code 2 with the message (after the usage line when ``parser`` is given: bad arguments)."""
+    if parser is not None:
+        parser.print_usage(sys.stderr)
     print(f"laav-explore: error: {msg}", file=sys.stderr)
     return 2
+
+
+def _say(text: str) -> None:
+    print(f"laav-explore: {text}", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -275,10 +312,36 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(parser, f"--port must be between 0 and 65535, got {args.port}")
     if args.max_points is not None and args.max_points < 1:
         return _fail(parser, f"--max-points must be at least 1, got {args.max_points}")
-    if args.motions is not None and args.motions < 1:
-        return _fail(parser, f"--motions must be at least 1, got {args.motions}")
+    # before any tracking: a busy port is said at once
+    if args.port is None:
+        port = DEFAULT_PORT if _port_free(args.host, DEFAULT_PORT) else _free_port(args.host)
+    else:
+        port = args.port if args.port else _free_port(args.host)
+        if not _port_free(args.host, port):
+            return _fail(parser, f"port {port} on {args.host} is already in use; pick another with --port")
+    video = None
+    if args.file is not None:
+        from .video import is_video
+
+        if is_video(args.file):
+            import os
+
+            from laav.cli import track_options
+
+            from .video import VideoError, open_video
+
+            # FFmpeg's own log lines (e.g. "moov atom not found") would add to the one-line error
+            os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+            try:
+                video = open_video(args.file, args.motions, track_options=track_options(args),
+                                   progress=None, max_points=args.max_points, log=_say)
+            except VideoError as exc:
+                return _fail(None, str(exc))
+            _say(video.frames.describe() + " (drawn behind the points)")
     try:
-        if args.file is None:
+        if video is not None:
+            seq = video.sequence
+        elif args.file is None:
             from .demo import demo_sequence
             seq = demo_sequence()
         else:
@@ -292,10 +355,20 @@ def main(argv: list[str] | None = None) -> int:
         laav.require_complete(seq)
     except (laav.SequenceError, FileNotFoundError) as exc:
         return _fail(parser, str(exc))
-    if args.motions is None and seq.labels is None:
+    if video is None and args.motions is None and seq.labels is None:
         return _fail(parser, f"{args.file or seq.name} has no ground-truth labels, so the number of "
-                             "motions is unknown: pass --motions C")
-    C = args.motions if args.motions is not None else seq.n_motions
+                             "motions is unknown: pass --motions C (or --motions auto)")
+    if video is not None:
+        C = video.n_motions
+    elif args.motions == "auto":
+        try:
+            count = laav.estimate_motions(seq)
+        except ValueError as exc:
+            return _fail(None, f"--motions auto: {exc}")
+        C = count.n_motions
+        _say(f"C = {C} estimated ({count.reason})")
+    else:
+        C = args.motions if args.motions is not None else seq.n_motions
     if C > seq.n_points:
         return _fail(parser, f"--motions {C} exceeds the {seq.n_points} points of {seq.name}")
     from .state import Settings, parse_settings, settings_from_json
@@ -325,12 +398,6 @@ def main(argv: list[str] | None = None) -> int:
         if problems:
             return _fail(parser, "--param: " + "; ".join(problems))
     C = settings.n_motions
-    if args.port is None:
-        port = DEFAULT_PORT if _port_free(args.host, DEFAULT_PORT) else _free_port(args.host)
-    else:
-        port = args.port if args.port else _free_port(args.host)
-        if not _port_free(args.host, port):
-            return _fail(parser, f"port {port} on {args.host} is already in use; pick another with --port")
 
     import panel as pn
 
@@ -339,7 +406,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
                               announce_viser=not _is_loopback(args.host), params=settings.params,
-                              max_upload=args.max_upload)
+                              max_upload=args.max_upload, video=video)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False, **serve_options())

@@ -389,6 +389,9 @@ class ExplorerState:
         self.on_error: Callable[[str], None] | None = None
         self.on_busy: Callable[[bool], None] | None = None
         self.on_plain_rv: Callable[[laav.Voting, tuple], None] | None = None
+        #: called with the new :attr:`target` whenever it changes (a request, a load, a
+        #: cancel or a failed load falling back): the Advanced panel shows it
+        self.on_target: Callable[[Settings], None] | None = None
         self.sequence = seq
         self.settings = target
         self.result: LaavResult | None = None
@@ -430,6 +433,7 @@ class ExplorerState:
         if settings != self._target:
             self._target = self.settings = settings
             self._first = None
+            self._notify_target()
 
     def start(self) -> None:
         """Queue the first computation (call after setting the ``on_*`` hooks)."""
@@ -513,6 +517,7 @@ class ExplorerState:
             self._gen += 1  # the running job stops and is dropped, queued ones are skipped
             if self.result is not None:
                 self._target_seq, self._target = self.sequence, self.settings
+        self._notify_target()
         return True
 
     def report(self, message: str) -> None:
@@ -533,6 +538,7 @@ class ExplorerState:
             # the computation running now (its generation is no longer the newest) and plain
             # RV stop at their next check: they are of no use any more
             self._rv_key = None
+        self._notify_target()
         self._notify_busy()
         try:
             self._worker.submit(self._job, gen, kind, seq, target, pipeline)
@@ -540,6 +546,13 @@ class ExplorerState:
             with self._lock:
                 self._pending -= 1
         return gen
+
+    def _notify_target(self):
+        if self.on_target is not None:
+            try:
+                self.on_target(self._target)
+            except Exception:  # a GUI hook must never kill the worker
+                traceback.print_exc()
 
     def _notify_busy(self):
         if self.on_busy is not None:
@@ -613,6 +626,7 @@ class ExplorerState:
                 self._target_seq = self.sequence
                 if kind == "load":
                     self._target = self.settings
+        self._notify_target()
         self._report(message + (" — still showing the last valid result" if self.result else ""))
 
     def change_of(self, result: LaavResult) -> Change | None:
@@ -638,13 +652,16 @@ class ExplorerState:
         return True
 
     # ------------------------------------------------------------------ plain RV
-    def plain_rv_key(self) -> tuple:
-        s = self.settings
-        return (id(self.sequence), s.seed, s.n_motions) + tuple(getattr(s.params, f) for f in RV_FIELDS)
+    def plain_rv_key(self, seq: Sequence | None = None, settings: Settings | None = None) -> tuple:
+        """Plain RV's cache key for ``seq`` / ``settings`` (default: the shown ones)."""
+        seq = self.sequence if seq is None else seq
+        s = self.settings if settings is None else settings
+        return (id(seq), s.seed, s.n_motions) + tuple(getattr(s.params, f) for f in RV_FIELDS)
 
-    def plain_rv(self) -> laav.Voting | None:
-        """Cached plain RV for the shown sequence/settings, or None if not computed yet."""
-        return self._rv_cache.get(self.plain_rv_key())
+    def plain_rv(self, seq: Sequence | None = None, settings: Settings | None = None) -> laav.Voting | None:
+        """Cached plain RV for the shown sequence/settings (or ``seq`` / ``settings``, e.g. a
+        pinned result's), or None if not computed (yet, or any more)."""
+        return self._rv_cache.get(self.plain_rv_key(seq, settings))
 
     def request_plain_rv(self) -> Future | None:
         """Compute plain RV (random start) for the shown settings off the UI thread."""

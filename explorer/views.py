@@ -19,7 +19,8 @@ __all__ = [
     "COLOR_MODES", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS",
     "UNLABELLED", "ERROR_MARK",
     "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
-    "align_labels", "point_style", "raw_style", "points_source", "frame_sources", "graph_sources",
+    "align_labels", "shown_labels", "point_style", "raw_style", "points_source", "frame_sources",
+    "graph_sources",
     "replay_labels",
     "replay_caption", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
@@ -159,21 +160,31 @@ def align_labels(pred: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
     return out
 
 
-def _aligned(seq: laav.Sequence, result: laav.LaavResult) -> dict:
-    """Coarse and final labels renamed to match the ground truth (or each other)."""
+def _aligned(seq: laav.Sequence, result: laav.LaavResult, ref=None) -> dict:
+    """Coarse and final labels renamed to match the ground truth (or, without one, ``ref``
+    when given, else each other)."""
     gt = seq.labels
-    coarse = align_labels(result.coarse.point_labels, gt)
-    final = align_labels(result.labels, gt if gt is not None else coarse)
+    base = gt if gt is not None else ref
+    coarse = align_labels(result.coarse.point_labels, base)
+    final = align_labels(result.labels, base if base is not None else coarse)
     return {"gt": gt, "coarse": coarse, "final": final}
 
 
-def fine_motions(seq: laav.Sequence, result: laav.LaavResult) -> np.ndarray:
+def shown_labels(seq: laav.Sequence, result: laav.LaavResult, ref=None) -> dict:
+    """The coarse and final labels as the views number (and colour) them: matched to the
+    ground truth; without one to ``ref`` (another result's shown final labels, so two
+    results side by side use the same colour for the same motion), else the final labels
+    to the coarse ones. Keys ``gt``, ``coarse``, ``final``."""
+    return _aligned(seq, result, ref)
+
+
+def fine_motions(seq: laav.Sequence, result: laav.LaavResult, ref=None) -> np.ndarray:
     """The (0-based) motion each fine model joined, numbered like the coarse colours
-    (the coarse labels aligned with the ground truth)."""
+    (the coarse labels aligned with the ground truth, or ``ref``: :func:`shown_labels`)."""
     f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
     if f2c.size == 0:
         return f2c
-    coarse_al = _aligned(seq, result)["coarse"]
+    coarse_al = _aligned(seq, result, ref)["coarse"]
     raw = np.asarray(result.coarse.point_labels)
     ren = {}
     for m in np.unique(raw[raw >= 0]).tolist():
@@ -181,10 +192,10 @@ def fine_motions(seq: laav.Sequence, result: laav.LaavResult) -> np.ndarray:
     return np.array([ren.get(int(m), int(m)) for m in f2c.tolist()], dtype=np.int64)
 
 
-def fine_colors(seq: laav.Sequence, result: laav.LaavResult) -> np.ndarray:
+def fine_colors(seq: laav.Sequence, result: laav.LaavResult, ref=None) -> np.ndarray:
     """Colour of each fine model: a shade of the colour of the motion it joined (the first
     fine model of a motion gets the motion's own colour, the next ones lighter / darker)."""
-    mot = fine_motions(seq, result)
+    mot = fine_motions(seq, result, ref)
     out = np.empty(mot.size, dtype="U7")
     seen: dict = {}
     for j, m in enumerate(mot.tolist()):
@@ -233,7 +244,7 @@ def stage_errors(seq: laav.Sequence, result: laav.LaavResult, stage: str,
 
 
 def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
-                plain: laav.Voting | None = None) -> dict:
+                plain: laav.Voting | None = None, ref=None) -> dict:
     """Colour, marker and legend label of every point for a colour-by ``mode`` (see COLOR_MODES).
 
     Motions have one colour and marker shape each (:data:`MOTION_COLORS`,
@@ -246,9 +257,11 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
     legend strings, ``misclassified`` (P,) bool: the points the mode's stage got wrong
     (:data:`ERROR_STAGE`, :func:`stage_errors`; all False without ground truth), ``stage``
     (that stage), ``note`` (str, empty unless the mode cannot be shown as asked).
+    ``ref``: without ground truth, the labels the motions are matched to (their colours;
+    see :func:`shown_labels`).
     """
     P = seq.n_points
-    al = _aligned(seq, result)
+    al = _aligned(seq, result, ref)
     gt = al["gt"]
     note = ""
     marker = np.full(P, "circle", dtype=object)
@@ -275,7 +288,7 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
         label = np.where(first >= 0, "in an atom (colour = atom)", "in no atom")
     elif mode == "fine":
         lab = np.asarray(result.coarse.fine_point_labels, dtype=np.int64)
-        fc, mot = fine_colors(seq, result), fine_motions(seq, result)
+        fc, mot = fine_colors(seq, result, ref), fine_motions(seq, result, ref)
         ok = lab >= 0
         joined = np.full(P, -1, dtype=np.int64)
         joined[ok] = mot[lab[ok]]
@@ -678,7 +691,9 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
     own = voting.informed_changed is not None  # LAAV: describe its own informed trial
     done = voting.informed_converged if own else voting.converged
     n_it = len(voting.informed_changed) if own else len(voting.changed)
-    conv = "converged" if done else "**not converged** (hit the iteration cap)"
+    test = (f" (test: at most {100 * voting.tolerance:g} % of the points change per iteration)"
+            if getattr(voting, "tolerance", 0.0) > 0 else " (test: no label changes)")
+    conv = ("converged" if done else "**not converged** (hit the iteration cap)") + test
     trials = ""
     if voting.n_trials > 1:
         if per and len(set(per)) == 1:

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .params import PIXEL_PARAMS, STRENGTH_PARAMS
+
 __all__ = ["Sequence", "SequenceError", "IncompleteSequenceError", "LaavWarning", "MIN_POINTS",
            "MIN_FRAMES", "check_degenerate", "require_complete", "warn_single_label"]
 
@@ -68,8 +70,14 @@ class LaavWarning(UserWarning):
 
 
 #: Spread (px) of the coordinates outside which a warning says the scale is unusual: the
-#: distances of :class:`laav.LaavParams` (``r1``, ``r2``, thresholds, lambda) are in pixels.
+#: lengths of :class:`laav.LaavParams` are in pixels and its strengths in 1/px^2
+#: (:data:`laav.params.PIXEL_PARAMS`, :data:`laav.params.STRENGTH_PARAMS`).
 PIXEL_SPREAD = (1.0, 1e6)
+#: Largest distance of the coordinates from their origin, in units of their spread, above
+#: which a warning says rounding costs precision: the fundamental matrices and affine maps
+#: are in the input's coordinates (the epipolar distances of the three-motion demo are
+#: 0.6 % off at 1e9 px from the origin, 1.6e6 spreads, and meaningless at 1e10).
+ORIGIN_RATIO = 1e6
 #: Relative tolerance under which trajectories count as identical, static or collinear.
 TOLERANCE = 1e-9
 
@@ -82,7 +90,9 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int
     warns (:class:`LaavWarning`) when there are fewer than :data:`MIN_POINTS` points per
     motion (the 8-point algorithm fits each motion's fundamental matrices), when no point
     moves, when the points are collinear in every frame, or when the coordinates span
-    less than 1 or more than 1e6 pixels. Reads the coordinates only: results never change.
+    less than 1 or more than 1e6 pixels (the message names the parameters to scale), or
+    lie farther from their origin than :data:`ORIGIN_RATIO` times their spread.
+    Reads the coordinates only: results never change.
     ``seq`` is a :class:`Sequence` or an (F, P, 2) array of finite coordinates; LAAV
     (:class:`laav.Pipeline`, :func:`laav.segment`) and plain Random Voting
     (:func:`laav.random_voting`) both call it. On incomplete data (an incomplete
@@ -118,7 +128,15 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int
         warn.append("the points are collinear in every frame (epipolar geometry is degenerate)")
     if not PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]:
         warn.append(f"the coordinates span {spread:.3g} px, outside {PIXEL_SPREAD[0]:g}-"
-                    f"{PIXEL_SPREAD[1]:g}: LaavParams distances are in pixels, rescale the input")
+                    f"{PIXEL_SPREAD[1]:g}: LaavParams lengths are in pixels and strengths in "
+                    f"1/px^2, so rescale the coordinates to pixels or, for coordinates s times "
+                    f"pixels, multiply {', '.join(PIXEL_PARAMS)} by s and "
+                    f"{', '.join(STRENGTH_PARAMS)} by 1/s^2 (LaavParams.scaled(s))")
+    far = float(np.abs(pts).max()) if pts.size else 0.0
+    if spread > 0 and far > ORIGIN_RATIO * spread:
+        warn.append(f"the points lie up to {far:.3g} px from the coordinates' origin, "
+                    f"{far / spread:.3g} times their spread, where rounding costs the "
+                    f"epipolar fits their precision: subtract an offset (the image corner, say)")
     if warn:
         import warnings
 
@@ -157,9 +175,17 @@ def _check_degenerate_masked(src, pts, vis, n_motions, stacklevel) -> None:
             break
     if collinear:
         warn.append("the points are collinear in every frame (epipolar geometry is degenerate)")
-    if not PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]:
+    if not PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]:  # as check_degenerate
         warn.append(f"the coordinates span {spread:.3g} px, outside {PIXEL_SPREAD[0]:g}-"
-                    f"{PIXEL_SPREAD[1]:g}: LaavParams distances are in pixels, rescale the input")
+                    f"{PIXEL_SPREAD[1]:g}: LaavParams lengths are in pixels and strengths in "
+                    f"1/px^2, so rescale the coordinates to pixels or, for coordinates s times "
+                    f"pixels, multiply {', '.join(PIXEL_PARAMS)} by s and "
+                    f"{', '.join(STRENGTH_PARAMS)} by 1/s^2 (LaavParams.scaled(s))")
+    far = float(np.abs(seen).max()) if seen.size else 0.0
+    if spread > 0 and far > ORIGIN_RATIO * spread:
+        warn.append(f"the points lie up to {far:.3g} px from the coordinates' origin, "
+                    f"{far / spread:.3g} times their spread, where rounding costs the "
+                    f"epipolar fits their precision: subtract an offset (the image corner, say)")
     if warn:
         import warnings
 

@@ -198,8 +198,9 @@ class Neighbourhoods:
     def _query(self, radius: float):
         P = self.n_points
         r = float(radius)
-        # a slightly larger max-norm ball: only a superset is needed, the exact test follows
-        pairs = self.tree.query_pairs(r * (1.0 + 1e-9) + 1e-12, p=np.inf, output_type="ndarray")
+        # a slightly larger max-norm ball (relative margin: any scale of the coordinates):
+        # only a superset is needed, the exact test follows
+        pairs = self.tree.query_pairs(r * (1.0 + 1e-9), p=np.inf, output_type="ndarray")
         keys, dists = [np.arange(P, dtype=np.int64) * (P + 1)], [np.zeros(P)]  # i itself
         for s in range(0, pairs.shape[0], 1 << 20):  # bounded temporaries
             i = pairs[s:s + (1 << 20), 0].astype(np.int64)
@@ -261,10 +262,10 @@ class _DenseNeighbourhoods:
         return indptr, cols.astype(np.int64), self.D[rows, cols]
 
 
-#: Distance (px) :class:`MaskedNeighbourhoods` gives two trajectories that share too few
-#: frames to be compared: farther than any radius, finite so that nearest-neighbour and
-#: spanning-tree searches still order them.
-FAR = 1e12
+#: Distance :class:`MaskedNeighbourhoods` gives two trajectories that share too few
+#: frames to be compared: farther than any radius at any scale of the coordinates, finite
+#: so that nearest-neighbour and spanning-tree searches still order them.
+FAR = 1e300
 
 
 class MaskedNeighbourhoods:
@@ -320,7 +321,8 @@ class MaskedNeighbourhoods:
             idx = np.flatnonzero(self.visible[f])
             if idx.size < 2:
                 continue
-            pairs = cKDTree(self.points[f, idx]).query_pairs(r * (1.0 + 1e-9) + 1e-12,
+            # a slightly larger ball (relative margin): a superset, the exact test follows
+            pairs = cKDTree(self.points[f, idx]).query_pairs(r * (1.0 + 1e-9),
                                                               output_type="ndarray")
             if pairs.size:
                 a, b = idx[pairs[:, 0]], idx[pairs[:, 1]]
@@ -438,7 +440,10 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     sol = np.linalg.solve(X[samp], Y[samp])  # (B, 3, 2F)
     res = _rms_rows(X, sol, Y, Fn)  # (B, n)
     inl = res < params.affine_threshold
-    best = int(np.argmax(inl.sum(1) - 1e-6 * (np.add.reduce(res, 1) / n)))
+    # most inliers; among equals the smallest mean residual, in units of the threshold
+    # (1e-6 px at the default 2 px: never worth one inlier, at any scale of the coordinates)
+    tie = 1e-6 * (params.affine_threshold / LaavParams.affine_threshold)
+    best = int(np.argmax(inl.sum(1) - tie * (np.add.reduce(res, 1) / n)))
     mask = inl[best]
     for _ in range(4):
         if mask.sum() < 4:
@@ -521,7 +526,8 @@ def _ransac_affine_masked(points, vis, cand, seed_pos, ref, params, rng, min_fra
     with np.errstate(invalid="ignore", divide="ignore"):
         res = np.sqrt(np.where(judged, e2f, 0.0).sum(-1) / cnt)  # (B, n)
     inl = (cnt >= 2) & (res < params.affine_threshold)
-    best = int(np.argmax(inl.sum(1) - 1e-6 * (np.where(inl, res, 0.0).sum(1) / n)))
+    tie = 1e-6 * (params.affine_threshold / LaavParams.affine_threshold)  # as _ransac_affine
+    best = int(np.argmax(inl.sum(1) - tie * (np.where(inl, res, 0.0).sum(1) / n)))
     mask = inl[best]
     for _ in range(4):
         if mask.sum() < 4:

@@ -26,7 +26,7 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "add_track_arguments", "track_options", "TRACK_OPTIONS"]
 
 
 class _UsageError(Exception):
@@ -215,6 +215,57 @@ def _positive_float(text: str) -> float:
     return v
 
 
+def _int_at_least(lo: int):
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {lo}, got {text!r}") from None
+        if v < lo:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {lo}, got {text!r}")
+        return v
+
+    return parse
+
+
+#: The tracker's options, shared by ``laav track`` and ``laav-explore VIDEO``:
+#: (flag, keyword of :func:`laav.track.track`, argparse keywords).
+TRACK_OPTIONS = (
+    ("--max-points", "max_points", dict(type=_positive_int, default=1000, metavar="N",
+                                        help="most tracks alive at once (default 1000)")),
+    ("--max-tracks", "max_tracks", dict(type=_positive_int, default=None, metavar="N",
+                                        help="keep only the N longest tracks (default: all)")),
+    ("--min-length", "min_length", dict(type=_int_at_least(2), default=5, metavar="L",
+                                        help="drop tracks seen in fewer than L tracked frames (default 5)")),
+    ("--stride", "stride", dict(type=_positive_int, default=1, metavar="S",
+                                help="track every S-th frame (default 1)")),
+    ("--redetect-every", "redetect_every", dict(
+        type=_positive_int, default=5, metavar="K",
+        help="look for new corners every K frames where no track is (default 5)")),
+    ("--fb-max", "fb_max", dict(type=_positive_float, default=1.0, metavar="PX",
+                                help="largest forward-backward error of a step, pixels (default 1)")),
+    ("--max-frames", "max_frames", dict(type=_int_at_least(2), default=None, metavar="N",
+                                        help="stop after N tracked frames")),
+)
+
+
+def add_track_arguments(parser, rename: dict[str, str] | None = None) -> None:
+    """Add the tracker's options (those of ``laav track``) to ``parser`` (or an argument group).
+
+    ``rename`` maps a flag to another where the parser has one of that name already
+    (``laav-explore`` has its own ``--max-points``). Read them back with :func:`track_options`.
+    """
+    rename = rename or {}
+    for flag, key, kw in TRACK_OPTIONS:
+        parser.add_argument(rename.get(flag, flag), dest=f"track_{key}", **kw)
+
+
+def track_options(args) -> dict:
+    """The keyword arguments of :func:`laav.track.track` that :func:`add_track_arguments`'s
+    options hold in ``args``."""
+    return {key: getattr(args, f"track_{key}") for _, key, _ in TRACK_OPTIONS}
+
+
 def _add_track(sub) -> None:
     tr = sub.add_parser(
         "track", help="track features through a video and write tracks.npz",
@@ -225,20 +276,7 @@ def _add_track(sub) -> None:
     tr.add_argument("video", metavar="VIDEO", help="video file or folder of frames")
     tr.add_argument("--out", "-o", metavar="NPZ",
                     help="output file (default: <video name>_tracks.npz in the current folder)")
-    tr.add_argument("--max-points", type=_positive_int, default=1000, metavar="N",
-                    help="most tracks alive at once (default 1000)")
-    tr.add_argument("--max-tracks", type=_positive_int, default=None, metavar="N",
-                    help="keep only the N longest tracks (default: all)")
-    tr.add_argument("--min-length", type=_positive_int, default=5, metavar="L",
-                    help="drop tracks seen in fewer than L tracked frames (default 5)")
-    tr.add_argument("--stride", type=_positive_int, default=1, metavar="S",
-                    help="track every S-th frame (default 1)")
-    tr.add_argument("--redetect-every", type=_positive_int, default=5, metavar="K",
-                    help="look for new corners every K frames where no track is (default 5)")
-    tr.add_argument("--fb-max", type=_positive_float, default=1.0, metavar="PX",
-                    help="largest forward-backward error of a step, pixels (default 1)")
-    tr.add_argument("--max-frames", type=_positive_int, default=None, metavar="N",
-                    help="stop after N tracked frames")
+    add_track_arguments(tr)
     tr.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
 
 
@@ -246,17 +284,10 @@ def _cmd_track(args) -> int:
     from . import safe_name
     from .track import TrackError, save_tracks, track
 
-    if args.min_length < 2:
-        raise _UsageError("--min-length must be at least 2")
-    if args.max_frames is not None and args.max_frames < 2:
-        raise _UsageError("--max-frames must be at least 2")
     # FFmpeg's own log (e.g. "moov atom not found") would add lines to our one-line errors
     os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
     try:
-        tracks = track(args.video, max_points=args.max_points, max_tracks=args.max_tracks,
-                       min_length=args.min_length, stride=args.stride,
-                       redetect_every=args.redetect_every, fb_max=args.fb_max,
-                       max_frames=args.max_frames, progress=False if args.quiet else None)
+        tracks = track(args.video, **track_options(args), progress=False if args.quiet else None)
     except TrackError as exc:
         raise _UsageError(str(exc)) from None
     default = f"{safe_name(tracks.name)}_tracks.npz"

@@ -171,7 +171,8 @@ def point_labels_from_atoms(atoms: Atoms, atom_labels: np.ndarray) -> np.ndarray
     return out
 
 
-def _motion_distance_masked(points: np.ndarray, vis: np.ndarray, groups: list) -> np.ndarray:
+def _motion_distance_masked(points: np.ndarray, vis: np.ndarray, groups: list,
+                            floor: float = 1e-3) -> np.ndarray:
     """:func:`_motion_distance` on incomplete data: velocities of the points visible in
     both frames of a step; a model's mean trajectory over its members seen in each frame;
     the largest difference over the steps where both models have one."""
@@ -180,7 +181,7 @@ def _motion_distance_masked(points: np.ndarray, vis: np.ndarray, groups: list) -
     k = np.maximum(v.sum(axis=1), 1)[:, None]
     mean = vel.sum(axis=1) / k
     var = (np.where(v[..., None], (vel - mean[:, None]) ** 2, 0.0).sum(axis=1) / k).sum(-1)
-    sigma = np.sqrt(var) + 1e-3  # (F-1,)
+    sigma = np.sqrt(var) + floor  # (F-1,)
     means = []
     for g in groups:
         vg = vis[:, g]
@@ -251,9 +252,12 @@ def _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj, kk, S, la
     return np.where(cnt > 0, vote, np.nan), np.where(cnt > 0, dist, np.nan), samples
 
 
-def _motion_distance(points: np.ndarray, groups: list) -> np.ndarray:
+def _motion_distance(points: np.ndarray, groups: list, floor: float = 1e-3) -> np.ndarray:
+    """Largest velocity difference of the groups' mean trajectories over the frames, in
+    units of the spread of all velocities at that frame (plus ``floor``, px per frame, so
+    a frame where nothing moves divides by no zero): (n, n) for ``n`` groups."""
     v_all = np.diff(points, axis=0)  # (F-1, P, 2)
-    sigma = np.sqrt(v_all.var(axis=1).sum(-1)) + 1e-3  # (F-1,)
+    sigma = np.sqrt(v_all.var(axis=1).sum(-1)) + floor  # (F-1,)
     means = np.stack([np.diff(points[:, g].mean(axis=1), axis=0) for g in groups])  # (n, F-1, 2)
     diff = np.linalg.norm(means[:, None] - means[None, :], axis=-1) / sigma  # (n, n, F-1)
     return diff.max(axis=-1) if diff.shape[-1] else np.zeros(diff.shape[:2])
@@ -460,12 +464,13 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     else:
         vote = np.zeros(0)
         samples = VoteSamples.empty(n, 4 * _PER_ATOM)
+    floor = 1e-3 * np.sqrt(LaavParams.lam / params.lam)  # 1e-3 px at the default lam
     if params.motion_weight <= 0:
         Mdist = np.zeros((n, n))
     elif vis is None:
-        Mdist = _motion_distance(points, groups)
+        Mdist = _motion_distance(points, groups, floor)
     else:
-        Mdist = _motion_distance_masked(points, vis, groups)
+        Mdist = _motion_distance_masked(points, vis, groups, floor)
     pairwise = np.eye(n)
     pairwise[jj, kk] = pairwise[kk, jj] = vote
     if vis is None:

@@ -13,6 +13,9 @@ data via lossy data compression"), used here over whole fine models:
     L(W) = (N + D) / 2 * logdet(I + D / (eps^2 N) * Wc Wc^T) + N / 2 * log(1 + |mu|^2 / eps^2)
 
 for N trajectories W (D = 2F rows) with mean mu and centred Wc, distortion ``eps`` (px).
+The trajectories are taken from the corner of the points' bounding box
+(:func:`laav.refine.trajectory_matrix`), so that ``mu`` does not depend on where the
+coordinates' origin is.
 The merge chooses the partition of the fine models into C groups of least total length.
 
 Everything needed is a few sufficient statistics per fine model (count, sum, scatter), in
@@ -29,6 +32,8 @@ import functools
 import itertools
 
 import numpy as np
+
+from .refine import trajectory_matrix
 
 __all__ = ["ModelStats", "model_stats", "coding_lengths", "best_partition", "merge_cost"]
 
@@ -82,7 +87,7 @@ def model_stats(points: np.ndarray, fine_labels: np.ndarray, n_models: int,
     """
     F, P, _ = points.shape
     cov = fine_labels >= 0
-    W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)[:, cov]
+    W = trajectory_matrix(points)[:, cov]  # origin at the points' corner: translation-free
     f = fine_labels[cov]
     k = min(rank, *W.shape)
     U = np.linalg.svd(W, full_matrices=False)[0][:, :k]

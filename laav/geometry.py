@@ -86,7 +86,9 @@ def fit_fundamental(x1: np.ndarray, x2: np.ndarray, weights: np.ndarray | None =
     Returns
     -------
     F : ndarray of shape (..., 3, 3)
-        Fundamental matrices with unit Frobenius norm, ``x2^T F x1 = 0``.
+        Fundamental matrices, ``x2^T F x1 = 0``, divided by the power of two that brings
+        their Frobenius norm into [0.5, 1) (exact, unlike dividing by the norm: see the
+        code).
     """
     # both views at once: one normalisation, one design product (fewer numpy calls: this
     # runs once per voting iteration, where call overhead is most of the cost)
@@ -113,8 +115,13 @@ def fit_fundamental(x1: np.ndarray, x2: np.ndarray, weights: np.ndarray | None =
     f = (U * S[..., None, :]) @ Vt
     T = _similarity(c, s)  # (2, ..., 3, 3)
     F = np.swapaxes(T[1], -1, -2) @ f @ T[0]
-    F /= np.linalg.norm(F, axis=(-2, -1), keepdims=True) + 1e-300
-    return F
+    # Frobenius norm brought into [0.5, 1) by a power of two, not to exactly 1. Scaling the
+    # coordinates by a power of two s scales T's entries by powers of two, so F's entries
+    # change by exact powers of two and Sampson distances by exactly s^2, bit for bit;
+    # dividing by the norm itself would round differently at every scale (noise-free data,
+    # whose degenerate 8-point samples make the fit ill-posed, turn that into other labels).
+    _, e = np.frexp(np.linalg.norm(F, axis=(-2, -1), keepdims=True))
+    return np.ldexp(F, -e)
 
 
 def sampson_distance(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:

@@ -231,8 +231,8 @@ def _seed_graph(nb, seeds: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` nearest seeds of every seed, and the minimum spanning tree of all seeds.
 
     Distances are those of :class:`~laav.atoms.Neighbourhoods` (the largest over the
-    sampled frames); the tree spans the complete graph with weights ``distance + 1e-9``
-    (so that coincident seeds are still joined). One pass of Prim's algorithm computes
+    sampled frames); the tree spans the complete graph with these distances as weights
+    (coincident seeds, at distance 0, are joined too). One pass of Prim's algorithm computes
     every seed's distance row once, in the order the seeds join the tree, and takes its
     ``k`` nearest from the same row: no N x N array.
 
@@ -272,9 +272,8 @@ def _seed_graph(nb, seeds: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         nn[u] = np.argpartition(knn, k - 1)[:k]
         if step == N - 1:
             break
-        w = row + 1e-9
-        better = outside & (w < key)
-        key[better] = w[better]
+        better = outside & (row < key)
+        key[better] = row[better]
         parent[better] = u
         u = int(np.argmin(np.where(outside, key, np.inf)))
         tree[step] = (parent[u], u)
@@ -338,13 +337,16 @@ def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | No
     edges = np.stack([i, j], axis=1).astype(np.int64)
     overlap = np.zeros(keys.size, dtype=np.int64)
     overlap[np.searchsorted(keys, sh_i * N + sh_j)] = sh_n
+    # errors floored at 1e-6 px at the default edge_scale (2 px), scaled with it: the
+    # largest cost, 2 log(2e6), is then the same at every scale of the coordinates
+    floor = 1e-6 * (params.edge_scale / LaavParams.edge_scale)
     if vis is None:
         errors = forward_backward_error(points, atoms, edges)
-        costs = 2.0 * np.log(params.edge_scale / np.maximum(errors, 1e-6)) - params.cut_prior
+        costs = 2.0 * np.log(params.edge_scale / np.maximum(errors, floor)) - params.cut_prior
     else:
         errors = forward_backward_error_masked(points, vis, atoms, edges)
         with np.errstate(invalid="ignore"):
-            costs = 2.0 * np.log(params.edge_scale / np.maximum(errors, 1e-6)) - params.cut_prior
+            costs = 2.0 * np.log(params.edge_scale / np.maximum(errors, floor)) - params.cut_prior
         costs = np.where(np.isfinite(errors), costs, 0.0)
     return AtomGraph(edges=edges, errors=errors, costs=costs,
                      overlap=overlap, positions=positions, n_nodes=N)

@@ -69,9 +69,11 @@ def _tail_sum(S: np.ndarray, rank: int) -> float:
     return float(max(ev[:-rank].sum(), 0.0)) if ev.size > rank else 0.0
 
 
-def _group_residuals(W, norm2, labels, n_groups, rank, rounds=3, min_size=MIN_POINTS):
+def _group_residuals(W, norm2, labels, n_groups, rank, rounds=3, min_size=MIN_POINTS, unit2=1.0):
     """(n_groups, P) squared residuals (px^2, per frame) to each group's robust subspace;
-    inf rows for groups with fewer than ``min_size`` points."""
+    inf rows for groups with fewer than ``min_size`` points. ``unit2``: as in
+    :mod:`laav.refine` (the IRLS median's floor is 1e-12 px times ``sqrt(unit2)``)."""
+    tiny = 1e-12 * np.sqrt(unit2)
     F2, P = W.shape
     R = np.full((n_groups, P), np.inf)
     for g in range(n_groups):
@@ -85,16 +87,16 @@ def _group_residuals(W, norm2, labels, n_groups, rank, rounds=3, min_size=MIN_PO
             if k + 1 < rounds:
                 proj = U.T @ X
                 r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0))
-                Xw = X * (1.0 / (1.0 + (r / (2.0 * np.median(r) + 1e-12)) ** 2)) ** 2
+                Xw = X * (1.0 / (1.0 + (r / (2.0 * np.median(r) + tiny)) ** 2)) ** 2
         proj = U.T @ W
         R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / (F2 / 2)
     return R
 
 
-def _polish(W, norm2, labels, n_groups, rank, rounds=3):
+def _polish(W, norm2, labels, n_groups, rank, rounds=3, unit2=1.0):
     """k-subspaces from ``labels`` (-1 = unlabelled): every point to its nearest subspace."""
     cur = labels
-    R = _group_residuals(W, norm2, cur, n_groups, rank)
+    R = _group_residuals(W, norm2, cur, n_groups, rank, unit2=unit2)
     for _ in range(rounds):
         if not np.isfinite(R).any():
             break
@@ -102,7 +104,7 @@ def _polish(W, norm2, labels, n_groups, rank, rounds=3):
         if np.array_equal(new, cur):
             break
         cur = new
-        R = _group_residuals(W, norm2, cur, n_groups, rank)
+        R = _group_residuals(W, norm2, cur, n_groups, rank, unit2=unit2)
     if not np.isfinite(R).any():
         return cur, np.full(labels.size, np.inf)
     return cur, R.min(axis=0)
@@ -160,6 +162,7 @@ class _Context:
     fine_sizes: np.ndarray
     rank: int
     pairs: np.ndarray
+    unit2: float
 
     @property
     def P(self) -> int:
@@ -174,7 +177,8 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
     from .multicut import solve_multicut
     from .params import LaavParams
     from .pipeline import _stage_rngs
-    from .refine import frame_pairs
+    from .refine import frame_pairs, trajectory_matrix
+    from .voting import unit2
 
     if not isinstance(seq, Sequence):
         seq = Sequence(np.asarray(seq, dtype=np.float64))
@@ -192,14 +196,14 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
     point_fine = point_labels_from_atoms(atoms, fine) if M else np.full(P, -1)
     res = [np.ravel(r) for r in atoms.residuals if np.size(r)]
     noise2 = float(np.median(np.concatenate(res)) ** 2) if res else 0.0
-    W = np.transpose(pts, (0, 2, 1)).reshape(2 * F, P)
+    W = trajectory_matrix(pts)  # origin at the points' corner: translation-free
     norm2 = np.einsum("ij,ij->j", W, W)
     # merge costs in the span of the leading directions (C motions span at most 4C)
     d = min(2 * F, rank * (max_motions + 1) + rank)
     U0 = np.linalg.svd(W, full_matrices=False)[0][:, :d]
     states, paid, fine_cost, sizes = _greedy_merge(U0.T @ W, point_fine, M, rank, max_motions + 1)
     return _Context(pts, W, norm2, point_fine, states, paid, noise2, mc.n_segments,
-                    atoms.n_atoms, fine_cost, sizes, rank, frame_pairs(F, 12))
+                    atoms.n_atoms, fine_cost, sizes, rank, frame_pairs(F, 12), unit2(p))
 
 
 def _evaluate(ctx: _Context, C: int):
@@ -212,11 +216,11 @@ def _evaluate(ctx: _Context, C: int):
     lab0 = np.full(ctx.P, -1, dtype=np.int64)
     for k, fines in enumerate(ctx.states[C]):
         lab0[np.isin(ctx.point_fine, fines)] = k
-    lab, _ = _polish(ctx.W, ctx.norm2, lab0, C, ctx.rank)
+    lab, _ = _polish(ctx.W, ctx.norm2, lab0, C, ctx.rank, unit2=ctx.unit2)
     if C > 1 and np.bincount(lab, minlength=C).min() >= MIN_POINTS:
-        lab, _ = reassign_labels(ctx.pts, lab, C, rounds=2, min_size=MIN_POINTS)
-    R = _group_residuals(ctx.W, ctx.norm2, lab, C, ctx.rank).min(axis=0)
-    Dm = motion_distances(ctx.pts, lab, C, ctx.pairs)
+        lab, _ = reassign_labels(ctx.pts, lab, C, rounds=2, min_size=MIN_POINTS, unit2=ctx.unit2)
+    R = _group_residuals(ctx.W, ctx.norm2, lab, C, ctx.rank, unit2=ctx.unit2).min(axis=0)
+    Dm = motion_distances(ctx.pts, lab, C, ctx.pairs, ctx.unit2)
     E = np.where(np.isfinite(Dm), Dm, np.inf).min(axis=0)
     return lab, R, E
 
@@ -267,15 +271,16 @@ def _greedy_merge(Wp, point_fine, n_fine, rank, n_keep):
     return states, paid, fine_cost, sizes
 
 
-def profile_levels(residuals: np.ndarray, epipolar: np.ndarray) -> np.ndarray:
+def profile_levels(residuals: np.ndarray, epipolar: np.ndarray, unit2: float = 1.0) -> np.ndarray:
     """(2, K) log of the trimmed mean of each candidate's subspace and epipolar residuals
-    (NaN where a candidate could not be formed)."""
+    (NaN where a candidate could not be formed), floored at 1e-6 px^2 times ``unit2``
+    (:mod:`laav.refine`)."""
     out = np.full((2, residuals.shape[0]), np.nan)
     for i, rows in enumerate((residuals, epipolar)):
         for c, r in enumerate(rows):
             if np.isfinite(r).all() and r.size:
                 k = max(1, int(TRIM * r.size))
-                out[i, c] = np.log(np.mean(np.sort(r)[:k]) + 1e-6)
+                out[i, c] = np.log(np.mean(np.sort(r)[:k]) + 1e-6 * unit2)
     return out
 
 
@@ -305,14 +310,15 @@ def step_features(levels, C: int) -> np.ndarray:
 
 
 def decide(levels, noise2: float, max_motions: int, weights=None, bias=None,
-           one_motion_ratio=None) -> tuple[int, np.ndarray, str]:
+           one_motion_ratio=None, unit2: float = 1.0) -> tuple[int, np.ndarray, str]:
     """The sequential test: (C, score of each step C -> C + 1, why).
 
     ``levels``: (2, K) array of :func:`profile_levels` (K >= ``max_motions`` + 1), or a
     function of C giving its column, called only for the candidates a step needs (C, C + 1
     and C + 2). Step scores are > 0 where the test adds a motion: for 1 -> 2 the log of one
     motion's epipolar level over ``one_motion_ratio`` x ``noise2``, for later steps the
-    linear score; NaN for steps not reached.
+    linear score; NaN for steps not reached. ``unit2`` scales the 1e-12 px^2 floors of
+    the first step's logs (:mod:`laav.refine`).
     """
     col = _column(levels)
     w = np.asarray(STEP_WEIGHTS if weights is None else weights, dtype=float)
@@ -322,7 +328,8 @@ def decide(levels, noise2: float, max_motions: int, weights=None, bias=None,
     if max_motions < 2:
         return 1, scores, "max_motions is 1"
     e1 = float(np.exp(col(1)[1]))
-    scores[0] = float(np.log(e1 + 1e-12) - np.log(k1 * noise2 + 1e-12))
+    tiny = 1e-12 * unit2
+    scores[0] = float(np.log(e1 + tiny) - np.log(k1 * noise2 + tiny))
     if scores[0] <= 0:
         return 1, scores, (f"one motion explains the points: epipolar level {e1:.3g} px^2 <= "
                            f"{k1:g} x noise {noise2:.3g} px^2")
@@ -445,8 +452,8 @@ def _estimate(seq, max_motions, params, seed):
             done.add(c)
             got = _evaluate(ctx, c)
             if got is not None:
-                levels[:, c - 1] = profile_levels(got[1][None], got[2][None])[:, 0]
+                levels[:, c - 1] = profile_levels(got[1][None], got[2][None], ctx.unit2)[:, 0]
         return levels[:, c - 1]
 
-    C, scores, why = decide(col, ctx.noise2, max_motions)
+    C, scores, why = decide(col, ctx.noise2, max_motions, unit2=ctx.unit2)
     return C, scores, levels, float(ctx.noise2), why

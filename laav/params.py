@@ -8,7 +8,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LaavParams", "STAGE_PARAMS", "stages_affected"]
+__all__ = ["LaavParams", "STAGE_PARAMS", "stages_affected", "PIXEL_PARAMS", "STRENGTH_PARAMS"]
+
+#: Lengths in pixels: for coordinates ``s`` times pixels, multiply these by ``s`` ...
+PIXEL_PARAMS = ("r1", "r2", "affine_threshold", "edge_scale", "coding_eps")
+#: ... and these strengths (1/px^2) by ``1 / s^2`` (:meth:`LaavParams.scaled`). Every
+#: other field is a count, a share or a weight of dimensionless terms.
+STRENGTH_PARAMS = ("lam", "rv_lambda")
 
 
 @dataclass(frozen=True)
@@ -17,6 +23,11 @@ class LaavParams:
 
     Distances are in pixels of the input coordinates. Defaults were chosen on Hopkins155
     (see ``benchmarks/TUNING.md`` for the sweeps that chose them).
+
+    Units: the lengths :data:`PIXEL_PARAMS` are in pixels, the strengths
+    :data:`STRENGTH_PARAMS` in 1/px^2, every other field is dimensionless. The stages'
+    own constants are expressed in these parameters, so coordinates scaled by ``s`` with
+    :meth:`scaled` ``(s)`` give the same labels (``docs/ALGORITHM.md``, "Units and scale").
 
     Parameters
     ----------
@@ -87,12 +98,15 @@ class LaavParams:
         Points per group used to fit each fundamental matrix (>= 8).
     rv_patience : int
         A trial has converged when labels stay (nearly) unchanged this many iterations.
-    rv_tolerance : float
+    rv_tolerance : float or None
         "Nearly": the share of the points that may change label in an iteration that still
         counts as unchanged (at most ``floor(rv_tolerance * P)`` points; 0 = none, Random
-        Voting's own test). At hundreds of points and more a few boundary points flip on
-        RV's own sampling noise at every iteration, so that 0 rarely holds however right
-        the labels are (``benchmarks/TUNING.md``).
+        Voting's own test), for every trial of the call. None (default): 0.02 in LAAV's
+        fine-tuning (a :func:`laav.random_voting` call with ``init_labels``, as
+        :func:`laav.segment` makes), 0 in plain Random Voting, which so stays the published
+        algorithm. At hundreds of points and more a few boundary points flip on RV's own
+        sampling noise at every iteration, so that 0 rarely holds however right the labels
+        are (``benchmarks/TUNING.md``).
     rv_label_weight : float
         Initial votes given to atom-labelled features when LAAV initialises Random Voting.
     rv_batch : int
@@ -165,7 +179,7 @@ class LaavParams:
     rv_trials: int = 10
     rv_sample_size: int = 8
     rv_patience: int = 15
-    rv_tolerance: float = 0.0
+    rv_tolerance: float | None = None
     rv_label_weight: float = 5.0
     rv_batch: int = 2
     rv_refine: bool = True
@@ -195,11 +209,26 @@ class LaavParams:
         epipolar votes alone (``coarse_merge="epipolar"``, no pooled voting), and a
         fine-tuning that is Random Voting started from the coarse labels: one informed
         trial, no plain RV run, no model selection, no refinement and no joint
-        reassignment. ``changes`` override fields as in :meth:`replace`.
+        reassignment, Random Voting's own convergence test (``rv_tolerance=0``). ``changes`` override fields as in :meth:`replace`.
         """
         return cls(atom_frames="pair", fine_per_motion=2, coarse_merge="epipolar", pooled_trials=0,
                    pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
-                   rv_select="none").replace(**changes)
+                   rv_select="none", rv_tolerance=0.0).replace(**changes)
+
+    def scaled(self, s: float) -> LaavParams:
+        """The parameters for coordinates ``s`` times larger: lengths (:data:`PIXEL_PARAMS`)
+        times ``s``, strengths (:data:`STRENGTH_PARAMS`) divided by ``s^2``.
+
+        ``segment(points * s, C, params.scaled(s))`` gives the labels of
+        ``segment(points, C, params)`` (exactly when ``s`` is a power of two; otherwise up to
+        rounding, which noise-free data with degenerate samples can amplify).
+        """
+        if isinstance(s, bool) or not isinstance(s, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(s) and s > 0):
+            raise ValueError(f"scale must be a positive finite number, got {s!r}")
+        changes = {name: getattr(self, name) * s for name in PIXEL_PARAMS}
+        changes.update({name: getattr(self, name) / s ** 2 for name in STRENGTH_PARAMS})
+        return self.replace(**changes)
 
     def replace(self, **changes) -> LaavParams:
         """A copy with some fields changed (validated like the original)."""
@@ -257,7 +286,7 @@ _BOUNDS = (
     ("rv_trials", "int", 1, 100),
     ("rv_sample_size", "int", 8, 1000),
     ("rv_patience", "int", 1, 10_000),
-    ("rv_tolerance", "float", 0, 0.5),
+    ("rv_tolerance", "float|None", 0, 0.5),
     ("rv_label_weight", "float", 0, _BIG),
     ("rv_batch", "int", 1, 32),
     ("rv_refine", "bool", None, None),
@@ -274,10 +303,10 @@ def _check(value, kind: str, low, high):
         return (bool(value), "") if ok else (value, "must be True or False")
     if kind == "choice":
         return value, "" if isinstance(value, str) and value in low else f"must be one of {low}"
-    if kind == "int|None":
+    if kind in ("int|None", "float|None"):
         if value is None:
             return None, ""
-        kind = "int"
+        kind = kind[:-5]
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         return value, "must be " + ("an integer" if kind == "int" else "a number")
     if kind == "int" and not isinstance(value, (int, np.integer)):
@@ -292,6 +321,9 @@ def _check(value, kind: str, low, high):
         return value, f"must be in {'(' if kind == 'float>' else '['}{low:g}, {high:g}]"
     return value, ""
 
+
+#: ``rv_tolerance=None`` in LAAV's fine-tuning (see :class:`LaavParams`).
+FINE_TUNING_TOLERANCE = 0.02
 
 #: Which parameters each stage reads; a change reruns that stage and all after it.
 STAGE_PARAMS: dict[str, frozenset] = {

@@ -10,6 +10,18 @@ frame at once:
   to choose between candidate labellings, see :mod:`laav.voting`).
 * :func:`subspace_residuals` / :func:`reassign_labels`: every point goes to the motion
   whose robust trajectory subspace *and* fundamental matrices explain it best together.
+
+**Units.** Residuals here are squared distances (Sampson distances, squared subspace
+residuals), so the few absolute constants (a cap, floors, the scale inside a log) are in
+px^2 of the pixel scale the defaults were tuned on (Hopkins155). Every function takes
+``unit2``, the square of one such pixel in the coordinates' units, and multiplies those
+constants by it: scaling the coordinates by ``s`` and ``unit2`` by ``s^2`` gives the same
+result. :mod:`laav.voting` passes ``unit2 = 2 / rv_lambda`` (1 at the default
+``rv_lambda = 2 / px^2``, where the constants are unchanged).
+
+**Missing data.** :func:`motion_distances`, :func:`refine_labels`, :func:`subspace_cost`,
+:func:`subspace_residuals` and :func:`reassign_labels` take ``visible`` (F, P): every fit
+then uses the visible entries only (``docs/ALGORITHM.md``, "Missing data").
 """
 
 from __future__ import annotations
@@ -19,21 +31,65 @@ import numpy as np
 from .geometry import fit_fundamental, sampson_distance
 
 __all__ = ["labelling_cost", "subspace_cost", "motion_distances", "refine_labels",
-           "subspace_residuals", "reassign_labels", "frame_pairs"]
+           "subspace_residuals", "reassign_labels", "frame_pairs", "trajectory_matrix"]
 
 #: Rank of the trajectory subspaces of :func:`subspace_cost` (affine camera: 4, plus one
 #: for perspective and tracking noise; 5 measured best of 4..8, see benchmarks/TUNING.md).
 SUBSPACE_RANK = 5
-#: Squared residual scale (px^2) inside the log of :func:`subspace_cost`: 0.1 px, below
-#: Hopkins155's tracking noise, so the cost is close to a mean log residual (measured
-#: against 0.001..16 px^2, see benchmarks/TUNING.md).
+#: Squared residual scale (px^2, times ``unit2``) inside the log of :func:`subspace_cost`:
+#: 0.1 px, below Hopkins155's tracking noise, so the cost is close to a mean log residual
+#: (measured against 0.001..16 px^2, see benchmarks/TUNING.md).
 SUBSPACE_SCALE2 = 0.01
+#: Cap (px^2, times ``unit2``) on one frame pair's Sampson distance in
+#: :func:`motion_distances`: a point 100 px off counts as 100 px off, whatever the pair.
+SAMPSON_CAP = 1e4
+#: Floor (px^2, times ``unit2``) added to both distances inside the logs of
+#: :func:`reassign_labels`: keeps a perfect fit's log finite.
+REASSIGN_FLOOR = 1e-4
+#: Floor (px^2, times ``unit2``; px, times ``sqrt(unit2)``, for RMS residuals) added to
+#: medians before dividing by them: keeps a perfect fit from dividing by zero.
+TINY2 = 1e-9
 #: Rank of the robust trajectory subspaces of :func:`reassign_labels` (the affine
 #: camera's 4; 5 and 6 measured worse there, see benchmarks/TUNING.md).
 REASSIGN_RANK = 4
 #: Weight of the epipolar term against the subspace term in :func:`reassign_labels`
 #: (0.3 / 0.5 / 0.7 / 1.0 measured, 0.5 best, see benchmarks/TUNING.md).
 REASSIGN_EPIPOLAR_WEIGHT = 0.5
+
+
+def trajectory_matrix(points: np.ndarray) -> np.ndarray:
+    """The trajectories as columns, relative to the corner of their bounding box.
+
+    Linear subspace fits through an origin (:func:`subspace_residuals`, the coding length
+    of :mod:`laav.coding`, :mod:`laav.motions`) depend on where the origin is. It is put
+    at the smallest x and the smallest y of all points over all frames: it moves with the
+    points, so translating the coordinates changes nothing (and a distant origin costs no
+    digits), and for tracks that fill the image it is about the image corner, the origin
+    of the pixel coordinates the defaults were tuned on (Hopkins155). Against the image
+    corner itself (the input's origin), on Hopkins155 with the defaults, seed 0: 149 of
+    155 sequences keep their labels, mean error 0.577 % -> 0.572 %; the centroid of all
+    points as origin measured worse (0.780 %, 46 sequences changed).
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+
+    Returns
+    -------
+    W : ndarray of shape (2F, P)
+        Rows ``x_0, y_0, x_1, y_1, ...``; column ``p`` is point ``p``'s trajectory.
+    """
+    F, P, _ = points.shape
+    return np.transpose(points - points.min(axis=(0, 1)), (0, 2, 1)).reshape(2 * F, P)
+
+
+def _trajectory_matrix_masked(points: np.ndarray, visible: np.ndarray) -> np.ndarray:
+    """:func:`trajectory_matrix` on incomplete data: the origin at the corner of the
+    visible points' bounding box; hidden entries 0 (never read: the fits mask them)."""
+    F, P, _ = points.shape
+    corner = np.where(visible[..., None], points, np.inf).min(axis=(0, 1))
+    W = np.where(visible[..., None], points - corner, 0.0)
+    return np.transpose(W, (0, 2, 1)).reshape(2 * F, P)
 
 
 def frame_pairs(n_frames: int, n_pairs: int, rng: np.random.Generator | None = None) -> np.ndarray:
@@ -62,27 +118,29 @@ def frame_pairs(n_frames: int, n_pairs: int, rng: np.random.Generator | None = N
     return pairs.astype(np.int64)
 
 
-def labelling_cost(points: np.ndarray, labels: np.ndarray, n_motions: int, n_pairs: int = 8) -> float:
+def labelling_cost(points: np.ndarray, labels: np.ndarray, n_motions: int, n_pairs: int = 8,
+                   unit2: float = 1.0) -> float:
     """How badly the motions' fundamental matrices explain a labelling (lower is better).
 
-    Mean over points of ``log(1 + d)``, with ``d`` the point's mean Sampson distance (px^2)
-    to its own motion (:func:`motion_distances`); ``inf`` when a motion has < 8 points.
+    Mean over points of ``log(1 + d / unit2)``, with ``d`` the point's mean Sampson
+    distance (px^2) to its own motion (:func:`motion_distances`); ``inf`` when a motion
+    has < 8 points.
     """
-    D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], n_pairs))
+    D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], n_pairs), unit2)
     own = D[labels, np.arange(labels.size)]
-    return float(np.mean(np.log1p(own))) if np.isfinite(own).all() else float("inf")
+    return float(np.mean(np.log1p(own / unit2))) if np.isfinite(own).all() else float("inf")
 
 
 def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                  rank: int = SUBSPACE_RANK, scale2: float = SUBSPACE_SCALE2, *,
-                  visible: np.ndarray | None = None) -> float:
+                  rank: int = SUBSPACE_RANK, scale2: float = SUBSPACE_SCALE2,
+                  unit2: float = 1.0, *, visible: np.ndarray | None = None) -> float:
     """How badly low-rank trajectory subspaces explain a labelling (lower is better).
 
     Under an affine camera the trajectories of one rigid motion, each stacked as a 2F
     vector, span a linear subspace of dimension at most 4. Every motion's points get
     their best rank-``rank`` subspace (:func:`subspace_residuals` with one, unweighted,
     round); a point's residual ``r`` is its distance to that subspace as an RMS over
-    frames (px). The cost is the mean over points of ``log(1 + r^2 / scale2)``. Unlike
+    frames (px). The cost is the mean over points of ``log(1 + r^2 / (scale2 unit2))``. Unlike
     :func:`labelling_cost` (epipolar), it uses every frame at once and tells a static
     background from a translating object, which the same fundamental matrix can both
     satisfy.
@@ -95,6 +153,8 @@ def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
     rank : int
     scale2 : float
         px^2.
+    unit2 : float
+        Squared pixel in the coordinates' units (see the module docstring).
     visible : ndarray of shape (F, P), bool, optional
         Missing data: the subspaces and residuals of :func:`subspace_residuals` with the
         mask (one round, unweighted).
@@ -104,11 +164,12 @@ def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
     float
         ``inf`` when a motion has ``rank + 1`` points or fewer.
     """
-    R = subspace_residuals(points, labels, n_motions, rank, rounds=1, visible=visible)
+    R = subspace_residuals(points, labels, n_motions, rank, rounds=1, unit2=unit2,
+                           visible=visible)
     if R is None:
         return float("inf")
     own = R[labels, np.arange(labels.size)]
-    return float(np.mean(np.log1p(own / scale2)))
+    return float(np.mean(np.log1p(own / (scale2 * unit2))))
 
 
 def _masked_median(x: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -121,7 +182,7 @@ def _masked_median(x: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def _motion_distances_masked(points, labels, n_motions, pairs, visible):
+def _motion_distances_masked(points, labels, n_motions, pairs, visible, unit2):
     """:func:`motion_distances` on incomplete data (see there)."""
     x1 = points[pairs[:, 0]]  # (K, P, 2), hidden entries filled
     x2 = points[pairs[:, 1]]
@@ -139,9 +200,9 @@ def _motion_distances_masked(points, labels, n_motions, pairs, visible):
         Fm = fit_fundamental(m1, m2, mask=mv)
         for _ in range(2):
             dm = sampson_distance(Fm, m1, m2)
-            w = 1.0 / (1.0 + dm / (_masked_median(dm, mv) * 4.0 + 1e-9))
+            w = 1.0 / (1.0 + dm / (_masked_median(dm, mv) * 4.0 + TINY2 * unit2))
             Fm = fit_fundamental(m1, m2, w, mask=mv)
-        d = np.minimum(sampson_distance(Fm, x1[fit], x2[fit]), 1e4)  # (K', P)
+        d = np.minimum(sampson_distance(Fm, x1[fit], x2[fit]), SAMPSON_CAP * unit2)  # (K', P)
         use = V[fit]
         n = use.sum(axis=0)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -150,11 +211,13 @@ def _motion_distances_masked(points, labels, n_motions, pairs, visible):
 
 
 def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                     pairs: np.ndarray, visible: np.ndarray | None = None) -> np.ndarray:
+                     pairs: np.ndarray, unit2: float = 1.0,
+                     visible: np.ndarray | None = None) -> np.ndarray:
     """Mean Sampson distance (px^2) of every point to every motion's fundamental matrices.
 
     Each motion fits one F per frame pair on its own points by iteratively reweighted
-    least squares (weights ``1 / (1 + d / (4 median d))``, three rounds).
+    least squares (weights ``1 / (1 + d / (4 median d))``, three rounds). A frame pair's
+    distance counts at most :data:`SAMPSON_CAP` ``unit2``.
 
     Parameters
     ----------
@@ -162,6 +225,8 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
     labels : ndarray of shape (P,)
     n_motions : int
     pairs : ndarray of shape (K, 2)
+    unit2 : float
+        Squared pixel in the coordinates' units (see the module docstring).
     visible : ndarray of shape (F, P), bool, optional
         Missing data (``points`` finite everywhere, hidden entries filled): a motion
         fits its matrix for a frame pair on its members visible in both frames, and only
@@ -173,7 +238,7 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
     D : ndarray of shape (C, P); ``inf`` for a motion with fewer than 8 points.
     """
     if visible is not None:
-        return _motion_distances_masked(points, labels, n_motions, pairs, visible)
+        return _motion_distances_masked(points, labels, n_motions, pairs, visible, unit2)
     x1 = points[pairs[:, 0]]  # (K, P, 2)
     x2 = points[pairs[:, 1]]
     D = np.full((n_motions, points.shape[1]), np.inf)
@@ -185,16 +250,17 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
         Fm = fit_fundamental(m1, m2)  # (K, 3, 3)
         for _ in range(2):
             dm = sampson_distance(Fm, m1, m2)  # (K, n)
-            w = 1.0 / (1.0 + dm / (np.median(dm, axis=1, keepdims=True) * 4.0 + 1e-9))
+            w = 1.0 / (1.0 + dm / (np.median(dm, axis=1, keepdims=True) * 4.0 + TINY2 * unit2))
             Fm = fit_fundamental(m1, m2, w)
-        D[g] = np.add.reduce(np.minimum(sampson_distance(Fm, x1, x2), 1e4), axis=0) / len(pairs)
+        D[g] = np.add.reduce(np.minimum(sampson_distance(Fm, x1, x2), SAMPSON_CAP * unit2),
+                             axis=0) / len(pairs)
     return D
 
 
 def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
                   n_pairs: int = 12, rounds: int = 3, outlier: float = 6.0,
-                  return_distances: bool = False, *, visible: np.ndarray | None = None,
-                  pairs: np.ndarray | None = None) -> tuple:
+                  return_distances: bool = False, unit2: float = 1.0, *,
+                  visible: np.ndarray | None = None, pairs: np.ndarray | None = None) -> tuple:
     """Move points that their own motion does not explain to the motion that does.
 
     A point moves only when its distance to its own motion (:func:`motion_distances`,
@@ -213,6 +279,9 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         Frame pairs (a deterministic spread, see :func:`frame_pairs`).
     rounds : int
     outlier : float
+    return_distances : bool
+    unit2 : float
+        Squared pixel in the coordinates' units (see the module docstring).
     visible : ndarray of shape (F, P), bool, optional
         Missing data: :func:`motion_distances` with the mask, over ``pairs`` (then
         required: :func:`laav._visibility.cover_pairs`, which every point is visible in
@@ -235,12 +304,13 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     cur = labels.copy()
     idx = np.arange(cur.size)
     for _ in range(rounds):
-        D = motion_distances(points, cur, n_motions, pairs, visible)
+        D = motion_distances(points, cur, n_motions, pairs, unit2, visible)
         if visible is None:
             scale = np.array([np.median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
-                              for g in range(n_motions)]) + 1e-9
+                              for g in range(n_motions)]) + TINY2 * unit2
         else:
-            scale = np.array([_finite_median(D[g, cur == g]) for g in range(n_motions)]) + 1e-9
+            scale = np.array([_finite_median(D[g, cur == g])
+                              for g in range(n_motions)]) + TINY2 * unit2
         with np.errstate(invalid="ignore"):  # inf / inf for a motion too small to fit
             N = np.where(np.isfinite(D), D / scale[:, None], np.inf)
         own = N[cur, idx]
@@ -262,7 +332,8 @@ def _finite_median(x: np.ndarray) -> float:
 
 
 def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                       rank: int = REASSIGN_RANK, rounds: int = 5, *,
+                       rank: int = REASSIGN_RANK, rounds: int = 5,
+                       unit2: float = 1.0, *,
                        visible: np.ndarray | None = None) -> np.ndarray | None:
     """Squared distance (px^2, mean over frames) of every point to every motion's subspace.
 
@@ -271,7 +342,8 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
     with weights ``1 / (1 + (r / 2 median r)^2)`` from the residuals ``r`` of the
     previous fit, so the few points wrongly labelled into the motion barely tilt it
     (an unweighted fit is pulled towards them, and moving points by it is worse than
-    not moving them, see benchmarks/TUNING.md).
+    not moving them, see benchmarks/TUNING.md). The subspaces pass through the corner of
+    the points' bounding box (:func:`trajectory_matrix`), not the coordinates' origin.
 
     Parameters
     ----------
@@ -280,23 +352,27 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
     n_motions : int
     rank : int
     rounds : int
+    unit2 : float
+        Squared pixel in the coordinates' units (see the module docstring).
     visible : ndarray of shape (F, P), bool, optional
         Missing data (``points`` finite everywhere, hidden entries filled): each
         motion's subspace is fitted on the visible entries of its members only, by
         alternating least squares (per-point coefficients, per-row basis), started from
         the principal subspace with unseen entries set to their row's mean, with the
-        same reweighting; a point's residual is that of its least-squares fit on its
-        visible rows, per visible frame. A point seen in ``rank / 2`` frames or fewer is
-        fitted exactly by every subspace (residual 0 everywhere: no evidence).
+        same reweighting; the origin is the corner of the visible points' bounding box;
+        a point's residual is that of its least-squares fit on its visible rows, per
+        visible frame. A point seen in ``rank / 2`` frames or fewer is fitted exactly by
+        every subspace (residual 0 everywhere: no evidence).
 
     Returns
     -------
     R : ndarray of shape (C, P), or None when a motion has ``rank + 1`` points or fewer.
     """
     if visible is not None:
-        return _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible)
+        return _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible, unit2)
     F, P, _ = points.shape
-    W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)
+    tiny = TINY2 * np.sqrt(unit2)  # px: the IRLS residuals are RMS distances
+    W = trajectory_matrix(points)  # the origin at the points' corner (see there)
     norm2 = np.einsum("ij,ij->j", W, W)  # |x|^2 per point; residual^2 = |x|^2 - |U^T x|^2
     R = np.empty((n_motions, P))
     for g in range(n_motions):
@@ -310,7 +386,7 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
             if k + 1 < rounds:
                 proj = U.T @ X
                 r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F)
-                Xw = X * (1.0 / (1.0 + (r / (2.0 * np.median(r) + 1e-9)) ** 2)) ** 2
+                Xw = X * (1.0 / (1.0 + (r / (2.0 * np.median(r) + tiny)) ** 2)) ** 2
         proj = U.T @ W
         R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F
     return R
@@ -333,7 +409,7 @@ def _project_masked(U: np.ndarray, X: np.ndarray, M: np.ndarray) -> tuple[np.nda
     return V, np.einsum("dn,dn->n", res, res)
 
 
-def _fit_subspace_masked(X, M, rank, rounds, sweeps_first=_ALS_FIRST, sweeps=_ALS_ROUND):
+def _fit_subspace_masked(X, M, rank, rounds, tiny, sweeps_first=_ALS_FIRST, sweeps=_ALS_ROUND):
     """Robust rank-``rank`` linear subspace of columns ``X`` (D, n) seen on rows ``M``
     (D, n, 0/1): alternating least squares (coefficients per column, basis per row) on the
     seen entries only, started from the principal subspace of ``X`` with each row's unseen
@@ -360,14 +436,14 @@ def _fit_subspace_masked(X, M, rank, rounds, sweeps_first=_ALS_FIRST, sweeps=_AL
         if k + 1 < rounds:
             _, r2 = _project_masked(U, X, M)
             r = np.sqrt(r2 / cnt)
-            w = (1.0 / (1.0 + (r / (2.0 * np.median(r) + 1e-9)) ** 2)) ** 2
+            w = (1.0 / (1.0 + (r / (2.0 * np.median(r) + tiny)) ** 2)) ** 2
     return U
 
 
-def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible):
+def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible, unit2):
     """:func:`subspace_residuals` on incomplete data (see there)."""
     F, P, _ = points.shape
-    W = np.transpose(points, (0, 2, 1)).reshape(2 * F, P)
+    W = _trajectory_matrix_masked(points, visible)  # the origin at the visible points' corner
     M = np.repeat(visible, 2, axis=0).astype(np.float64)  # (2F, P): x and y rows of a frame
     cnt = visible.sum(axis=0)
     R = np.empty((n_motions, P))
@@ -375,7 +451,7 @@ def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible)
         mem = labels == g
         if mem.sum() <= rank + 1:
             return None
-        U = _fit_subspace_masked(W[:, mem], M[:, mem], rank, rounds)
+        U = _fit_subspace_masked(W[:, mem], M[:, mem], rank, rounds, TINY2 * np.sqrt(unit2))
         _, r2 = _project_masked(U, W, M)
         R[g] = np.maximum(r2, 0.0) / cnt
     return R
@@ -384,7 +460,8 @@ def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible)
 def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
                     rank: int = REASSIGN_RANK, epipolar_weight: float = REASSIGN_EPIPOLAR_WEIGHT,
                     rounds: int = 2, min_size: int = 8,
-                    distances: np.ndarray | None = None, *, visible: np.ndarray | None = None,
+                    distances: np.ndarray | None = None,
+                    unit2: float = 1.0, *, visible: np.ndarray | None = None,
                     pairs: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Move every point to the motion that its trajectory subspace and epipolar fit favour.
 
@@ -392,7 +469,8 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     log(d_gp + eps)``, with ``r`` its squared distance to ``g``'s robust rank-``rank``
     trajectory subspace (:func:`subspace_residuals`), ``d`` its mean Sampson distance to
     ``g``'s robust fundamental matrices over 12 frame pairs (:func:`motion_distances`),
-    and ``eps = 1e-4`` px^2; the point takes the motion of lowest score. Repeated
+    and ``eps`` = :data:`REASSIGN_FLOOR` ``unit2`` (1e-4 px^2); the point takes the
+    motion of lowest score. Repeated
     ``rounds`` times (or until nothing moves).
 
     Why both: either alone errs where the other does not. Under perspective the subspace
@@ -416,7 +494,10 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         A round that would leave a motion with fewer points is not taken.
     distances : ndarray of shape (C, P), optional
         :func:`motion_distances` of ``labels`` over ``frame_pairs(F, 12)``, when already
-        known (from :func:`refine_labels`); saves the first round's fits.
+        known (from :func:`refine_labels`, with the same ``unit2``); saves the first
+        round's fits.
+    unit2 : float
+        Squared pixel in the coordinates' units (see the module docstring).
     visible : ndarray of shape (F, P), bool, optional
         Missing data: both terms with the mask (:func:`subspace_residuals` fitted on the
         visible entries, :func:`motion_distances` over ``pairs``); a motion without a
@@ -436,17 +517,18 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         return cur.copy(), 0
     if visible is not None:
         return _reassign_masked(points, start, n_motions, rank, epipolar_weight, rounds,
-                                min_size, distances, visible, pairs)
+                                min_size, distances, visible, pairs, unit2)
     pairs = frame_pairs(points.shape[0], 12)
     for _ in range(rounds):
-        R = subspace_residuals(points, cur, n_motions, rank)
+        R = subspace_residuals(points, cur, n_motions, rank, unit2=unit2)
         if R is None:
             break
         D = distances if distances is not None and cur is start else motion_distances(
-            points, cur, n_motions, pairs)
+            points, cur, n_motions, pairs, unit2)
         if not np.isfinite(D).all():
             break
-        score = np.log(R + 1e-4) + epipolar_weight * np.log(D + 1e-4)
+        eps = REASSIGN_FLOOR * unit2
+        score = np.log(R + eps) + epipolar_weight * np.log(D + eps)
         new = score.argmin(axis=0)
         if (new == cur).all() or np.bincount(new, minlength=n_motions).min() < min_size:
             break
@@ -455,16 +537,17 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
 
 
 def _reassign_masked(points, start, n_motions, rank, epipolar_weight, rounds, min_size,
-                     distances, visible, pairs):
+                     distances, visible, pairs, unit2):
     """:func:`reassign_labels` on incomplete data (see there)."""
     cur = start
     for _ in range(rounds):
-        R = subspace_residuals(points, cur, n_motions, rank, visible=visible)
+        R = subspace_residuals(points, cur, n_motions, rank, unit2=unit2, visible=visible)
         if R is None:
             break
         D = distances if distances is not None and cur is start else motion_distances(
-            points, cur, n_motions, pairs, visible)
-        score = np.log(R + 1e-4) + epipolar_weight * np.log(D + 1e-4)  # inf where D is
+            points, cur, n_motions, pairs, unit2, visible)
+        eps = REASSIGN_FLOOR * unit2
+        score = np.log(R + eps) + epipolar_weight * np.log(D + eps)  # inf where D is
         known = np.isfinite(score).any(axis=0)
         new = np.where(known, score.argmin(axis=0), cur)
         if (new == cur).all() or np.bincount(new, minlength=n_motions).min() < min_size:

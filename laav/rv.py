@@ -186,7 +186,7 @@ def _pool_pair(pool: np.ndarray, rng: np.random.Generator) -> tuple[int, int]:
     return (right, left) if rng.random() < 0.5 else (left, right)
 
 
-def _step(points, trials, params, masks=None):
+def _step(points, trials, params, allowed=0, masks=None):
     """One voting iteration of every trial in ``trials``, in one batched call; every
     random draw of a trial comes from its own generator. ``masks`` (missing data): the
     ``(visible, pool)`` of :func:`run_trials`."""
@@ -215,7 +215,6 @@ def _step(points, trials, params, masks=None):
     else:  # each point's votes decay on its own clock: by the iterations that voted on it
         votes *= np.where(seen, params.rv_alpha, 1.0)[..., None]
     margins = _margins(votes)
-    allowed = int(params.rv_tolerance * P)  # changes that still count as "no change"
     for b, t in enumerate(trials):
         t.it += 1
         t.labels, t.votes = new[b], votes[b]
@@ -225,14 +224,15 @@ def _step(points, trials, params, masks=None):
             t.votes = np.zeros_like(t.votes)
             t.still = 0
         else:
-            t.still = t.still + 1 if n_changed[b] <= allowed else 0
+            t.still = t.still + 1 if n_changed[b] <= allowed else 0  # "unchanged"
             if t.still >= params.rv_patience and (not t.reset or t.it > RESET_AT):
                 t.converged = t.done = True
         if t.it >= params.rv_max_iter:
             t.done = True
 
 
-def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None, masks=None):
+def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None,
+               tolerance=0.0, masks=None):
     """Run LAAV's informed trial and plain RV's random-start trials, ``rv_batch`` side by side.
 
     Trials advance in lockstep, one batched numpy call per iteration, each with its own
@@ -258,6 +258,9 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
         The trials' generators, ``[informed, plain 0, plain 1, ...]`` (``1 + n_plain`` of
         them), instead of spawning them from ``rng``: a trial's result depends only on its
         own generator, so a caller may run LAAV's trial and plain RV's apart.
+    tolerance : float
+        Share of the points that may change label in an iteration that still counts as
+        unchanged for the convergence test (0: none).
     masks : (visible, pool) or None
         Missing data: ``visible`` (F, P) bool and the frame pairs ``pool`` (K, 2) of
         :func:`laav._visibility.pair_pool`; each iteration draws its pair from the pool
@@ -304,7 +307,7 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
             plain.append(t)
         if not active:
             break
-        _step(points, active, params, masks)
+        _step(points, active, params, int(tolerance * P), masks)
         active = [t for t in active if not t.done]
         # the kept plain trial is the first *in start order* to converge, as if the trials
         # ran one after another: a trial that converges sooner than an earlier one is not

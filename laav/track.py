@@ -217,6 +217,7 @@ def track(
     max_frames: int | None = None,
     name: str | None = None,
     progress: bool | None = False,
+    on_frame=None,
 ) -> Tracks:
     """Track corners through a video with pyramidal Lucas-Kanade and a forward-backward check.
 
@@ -255,6 +256,12 @@ def track(
         Name stored with the tracks (default: the file or folder stem).
     progress : bool or None
         Show a progress bar on stderr (None: only when stderr is a terminal).
+    on_frame : callable or None
+        Called as ``on_frame(t, image)`` with every tracked frame as it is read: ``t`` its
+        number among the tracked frames (0 .. F-1, the ``points`` axis) and ``image`` the
+        grey uint8 (H, W) array tracked (read-only: the tracker keeps using it). Lets a
+        caller keep what it needs of the frames (e.g. small copies to draw the points on)
+        without decoding the video twice or holding it at full size.
 
     Raises
     ------
@@ -310,6 +317,9 @@ def track(
                                  f"was {size[1]}x{size[0]} (all frames must have one size)")
             index.append(src_i)
             H, W = size
+            if on_frame is not None:
+                img.flags.writeable = False
+                on_frame(t, img)
             if prev is not None and len(live):
                 nxt, st, res = cv2.calcOpticalFlowPyrLK(prev, img, pos, None, **lk)
                 back, st2, _ = cv2.calcOpticalFlowPyrLK(img, prev, nxt, None, **lk)

@@ -22,6 +22,11 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
   and chooses among all. With ``rv_select="none"`` (:meth:`LaavParams.paper`) the
   fine-tuning is the informed trial alone, converged or not, and plain RV ends with the
   consensus when no trial converged.
+
+The refinement, reassignment and selection compare squared distances with a few absolute
+constants (:mod:`laav.refine`); they are in units of ``1 / rv_lambda`` (the squared
+distance at which a vote fades), so that scaling the coordinates by ``s`` and
+``rv_lambda`` by ``1 / s^2`` gives the same labels (:func:`unit2`).
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ from ._random import resolve_seed
 from ._sequence import Sequence, as_points, check_degenerate, warn_single_label
 from ._threads import single_threaded
 from .metrics import misclassification_rate
-from .params import LaavParams
+from .params import FINE_TUNING_TOLERANCE, LaavParams
 from .refine import (
     frame_pairs,
     labelling_cost,
@@ -53,6 +58,16 @@ __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances
 #: converged trial disagree on more than this share of the points, two more plain RV
 #: runs join the candidates, so that the selection's agreement term can arbitrate.
 _ARBITRATE_ABOVE = 0.05
+
+
+def unit2(params: LaavParams) -> float:
+    """Squared pixel of :mod:`laav.refine`'s constants, in squared coordinate units.
+
+    ``default rv_lambda / rv_lambda``: 1.0 exactly at the default ``rv_lambda`` (2 / px^2,
+    tuned on Hopkins155 pixels), so there the constants are the tuned ones;
+    ``s^2`` when ``rv_lambda`` is scaled by ``1 / s^2`` for coordinates scaled by ``s``.
+    """
+    return LaavParams.rv_lambda / params.rv_lambda
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,6 +111,9 @@ class Voting:
         whichever candidate was returned; None for plain RV.
     informed_converged : bool or None
         Whether LAAV's informed trial met the convergence test; None for plain RV.
+    tolerance : float
+        The convergence test's tolerance used (share of the points that may change in an
+        iteration that counts as unchanged; 0 = Random Voting's zero-change test).
     unlabelled_code : ndarray of shape (P,), int8, or None
         Missing data only (None on complete data): why each point has label -1, a key of
         :data:`laav._visibility.UNLABELLED_REASONS` (1: seen too briefly, no voting frame
@@ -122,6 +140,7 @@ class Voting:
     informed_changed: np.ndarray | None = None
     informed_margin: np.ndarray | None = None
     informed_converged: bool | None = None
+    tolerance: float = 0.0
     unlabelled_code: np.ndarray | None = None
 
 
@@ -205,29 +224,39 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
                       unlabelled_code=None if vis is None else np.zeros(P, np.int8))
     if vis is not None:
         return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo)
-    return _voting(seq, points, C, params, rng, init_labels, weights, plain_memo)
-
-
-def _voting(seq, points, C, params, rng, init_labels, weights, plain_memo, mk=None) -> Voting:
-    """:func:`random_voting` after its checks; ``mk`` (missing data): a :class:`_Masks`."""
-    P = points.shape[1]
-    masks = None if mk is None else (mk.visible, mk.pool)
     select = params.rv_select == "subspace"
 
     if init_labels is None:  # plain RV
-        _, best, trials, ended = run_trials(points, C, params, rng, masks=masks)
-        if best is not None:
-            out = _finish(points, C, params, best, trials, False, "trial", mk=mk)
-        elif select:  # no trial converged: the consensus or one of the trials
-            out = _select(points, C, params, _plain_candidates(None, ended, C, rng), trials,
-                          initialised=False, mk=mk)
-        else:
-            out = _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus",
-                          mk=mk)
-        if mk is None:
-            warn_single_label(seq, out.labels, C, stacklevel=5)
-        return out
+        tol = 0.0 if params.rv_tolerance is None else params.rv_tolerance
+        _, best, trials, ended = run_trials(points, C, params, rng, tolerance=tol)
+        return _plain_result(seq, points, C, params, rng, best, trials, ended, select, tol)
+    return _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo)
 
+
+def _plain_result(seq, points, C, params, rng, best, trials, ended, select, tol,
+                  mk=None) -> Voting:
+    """Plain RV's result from its trials: the converged one, else a selection or the
+    consensus. ``mk`` (missing data): a :class:`_Masks`; the caller then warns."""
+    if best is not None:
+        out = _finish(points, C, params, best, trials, False, "trial", mk=mk)
+    elif select:  # no trial converged: the consensus or one of the trials
+        out = _select(points, C, params, _plain_candidates(None, ended, C, rng), trials,
+                      initialised=False, mk=mk)
+    else:
+        out = _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus",
+                      mk=mk)
+    if mk is None:
+        warn_single_label(seq, out.labels, C, stacklevel=5)
+    return dataclasses.replace(out, tolerance=tol)
+
+
+def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo,
+                 mk=None) -> Voting:
+    """LAAV's fine-tuning: the informed trial started from ``init_labels`` and, with the
+    selection, plain RV's runs beside it (see the module docstring). ``mk`` (missing
+    data): a :class:`_Masks`."""
+    masks = None if mk is None else (mk.visible, mk.pool)
+    F, P, _ = points.shape
     init = np.asarray(init_labels, dtype=np.int64)
     if init.shape != (P,):
         raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
@@ -240,46 +269,47 @@ def _voting(seq, points, C, params, rng, init_labels, weights, plain_memo, mk=No
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (P,):
             raise ValueError(f"weights must have shape ({P},), got {w.shape}")
+    tol = FINE_TUNING_TOLERANCE if params.rv_tolerance is None else params.rv_tolerance
     labels0 = np.where(known, init, rng.integers(0, C, P))
     votes0 = np.zeros((P, C))
     votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
         first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,
-                                         masks=masks)
+                                         tolerance=tol, masks=masks)
         return _with_informed(_finish(points, C, params, first, trials, True, "informed", mk=mk),
-                              first)
+                              first, tol)
     # LAAV's start against plain RV: keep the labelling of lower selection score. The
     # informed trial and plain RV's trials each draw from their own generator, so they run
     # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
     streams = rng.spawn(1 + params.rv_trials)  # [informed, plain 0, plain 1, ...]
     first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
-                                     streams=streams[:1], masks=masks)
-    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, masks)
+                                     streams=streams[:1], tolerance=tol, masks=masks)
+    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, tol, masks)
     trials, cands = trials + more, [("informed", first)] + cands
     if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
         # LAAV's start and plain RV disagree: two more plain RV runs arbitrate
         for k in (2, 3):
             _, more, kc = _plain_run(points, C, params, rng, rng.spawn(1 + params.rv_trials),
-                                     plain_memo, k, masks)
+                                     plain_memo, k, tol, masks)
             trials, cands = trials + more, cands + kc
     polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
-                                  polished=polished, mk=mk), first)
+                                  polished=polished, mk=mk), first, tol)
 
 
-def _plain_run(points, C, params, rng, streams, memo, k, masks=None):
+def _plain_run(points, C, params, rng, streams, memo, k, tolerance, masks=None):
     """Plain RV's k-th run of LAAV's fine-tuning on ``streams`` (``[unused, plain 0, ...]``):
     (its converged trial or None, every trial it ran, its candidate labellings).
 
     With ``memo`` (a dict kept by the caller for one sequence, C, seed and ``rv_*``
     settings) a run is computed once: plain RV does not depend on LAAV's start. Its one
     draw from ``rng`` (the consensus's seed) is then made again, so that every later draw
-    is what a fresh run would make: the labels are identical either way. ``masks``:
-    missing data, as :func:`laav.rv.run_trials` takes them.
+    is what a fresh run would make: the labels are identical either way.
     """
     hit = None if memo is None else memo.get(("run", k))
     if hit is None:
-        _, conv, trials, ended = run_trials(points, C, params, None, streams=streams, masks=masks)
+        _, conv, trials, ended = run_trials(points, C, params, None, streams=streams,
+                                            tolerance=tolerance, masks=masks)
         cons = consensus(ended, C, rng) if conv is None else None
         hit = (conv, trials, ended, cons)
         if memo is not None:
@@ -339,8 +369,16 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
         raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
     if w is not None and w.shape != (P,):
         raise ValueError(f"weights must have shape ({P},), got {w.shape}")
-    out = _voting(seq, sub, C, params, rng, None if init is None else init[idx],
-                  None if w is None else w[idx], plain_memo, _Masks(sub_vis, pool))
+    mk = _Masks(sub_vis, pool)
+    select = params.rv_select == "subspace"
+    if init is None:  # plain RV
+        tol = 0.0 if params.rv_tolerance is None else params.rv_tolerance
+        _, best, trials, ended = run_trials(sub, C, params, rng, tolerance=tol,
+                                            masks=(mk.visible, mk.pool))
+        out = _plain_result(seq, sub, C, params, rng, best, trials, ended, select, tol, mk)
+    else:
+        out = _fine_tuning(sub, C, params, rng, init[idx], None if w is None else w[idx], select,
+                           plain_memo, mk)
     labels = np.full(P, -1, dtype=np.int64)
     labels[idx] = out.labels
     votes = np.zeros((P, C))
@@ -352,10 +390,10 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     return result
 
 
-def _with_informed(voting: Voting, first: tuple) -> Voting:
-    """``voting`` with LAAV's informed trial's own trace attached."""
+def _with_informed(voting: Voting, first: tuple, tolerance: float) -> Voting:
+    """``voting`` with LAAV's informed trial's own trace and the test's tolerance attached."""
     return dataclasses.replace(voting, informed_changed=first[2], informed_margin=first[3],
-                               informed_converged=bool(first[5]))
+                               informed_converged=bool(first[5]), tolerance=tolerance)
 
 
 class _Polished:
@@ -368,17 +406,16 @@ class _Polished:
         self._kw = {} if mk is None else {"visible": mk.visible, "pairs": mk.pairs}
         self.refined, self._distances = 0, None
         if params.rv_refine:
-            labels, self.refined, self._distances = refine_labels(points, labels, C,
-                                                                  return_distances=True,
-                                                                  **self._kw)
+            labels, self.refined, self._distances = refine_labels(
+                points, labels, C, return_distances=True, unit2=unit2(params), **self._kw)
         self.refined_labels = labels
         self._final = None
 
     def cost(self) -> float:
         if self.mk is not None:  # missing data: subspaces fitted on the visible entries
             return subspace_cost(self.points, self.refined_labels, self.C,
-                                 visible=self.mk.visible)
-        return subspace_cost(self.points, self.refined_labels, self.C)
+                                 unit2=unit2(self.params), visible=self.mk.visible)
+        return subspace_cost(self.points, self.refined_labels, self.C, unit2=unit2(self.params))
 
     def final(self) -> tuple[np.ndarray, int, int]:
         """(labels, points moved by the refinement, points moved by the reassignment)."""
@@ -386,7 +423,8 @@ class _Polished:
             labels, moved = self.refined_labels, 0
             if self.params.rv_reassign:
                 labels, moved = reassign_labels(self.points, labels, self.C,
-                                                distances=self._distances, **self._kw)
+                                                distances=self._distances,
+                                                unit2=unit2(self.params), **self._kw)
             self._final = (labels, self.refined, moved)
         return self._final
 

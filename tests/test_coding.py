@@ -40,7 +40,9 @@ def test_coding_lengths_match_the_formula_on_raw_trajectories():
     F, P, _ = pts.shape
     fine = np.r_[rng.integers(0, 3, 60), 3 + rng.integers(0, 2, 30)]  # 5 fine models
     st = coding.model_stats(pts, fine, 5, rank=2 * F)  # no projection: exact
-    W = np.transpose(pts, (0, 2, 1)).reshape(2 * F, P)
+    # the raw trajectories, from the corner of the points' bounding box (the origin the
+    # statistics use: the mean term would otherwise depend on the coordinates' origin)
+    W = np.transpose(pts - pts.min(axis=(0, 1)), (0, 2, 1)).reshape(2 * F, P)
     for group in ([0], [1, 2], [0, 3], [0, 1, 2, 3, 4]):
         m = np.isin(np.arange(5), group).astype(float)[None]
         got = coding.coding_lengths(*st.union(m), st.dim, eps=3.0)[0]

@@ -96,14 +96,16 @@ def _wait_for(pred, timeout: float, what: str, page=None):
 
 
 @contextmanager
-def _served(seq, viser: bool = True, max_upload: int | None = None):
+def _served(seq, viser: bool = True, max_upload: int | None = None, video=None):
     """The app for ``seq`` on a free loopback port and a headless Chromium:
     ``(port, browser, created)``, ``created`` listing each session's Explorer; the server
     stopped, the browser and the explorers closed afterwards. Served as ``laav-explore``
-    serves it (:func:`explorer.cli.serve_options`)."""
+    serves it (:func:`explorer.cli.serve_options`). ``video``: the tracked video ``seq`` is."""
     created: list = []
     port = _free_port()
-    server = pn.serve({"/": app_factory(seq, None, created=created, viser=viser, max_upload=max_upload)},
+    C = None if video is None else video.n_motions
+    server = pn.serve({"/": app_factory(seq, C, created=created, viser=viser, max_upload=max_upload,
+                                        video=video)},
                       port=port, address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
                       threaded=True, verbose=False, **serve_options())
     try:
@@ -578,3 +580,95 @@ def test_uploads_past_the_limit_and_long_work(tmp_path):
         _wait_for(lambda: ex.result.params.lam == 2.5 and ex.wait(1), 60, "a result after cancelling")
         assert ex.sequence.name == "padded_22MB"
     assert not js_errors, js_errors[:5]
+
+
+#: Where the frame view draws the points ``pts`` ([[x, y], ...], image coordinates), in page
+#: pixels (from the plot's own scales), and the shape of the background image it holds.
+JS_PROJECT = """(pts) => {
+  let plot = null, shape = null;
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.type === 'Figure' && m.title && /^frame \\d+ of/.test(m.title.text)) plot = m;
+    if (m.type === 'ColumnDataSource' && m.data.image !== undefined && m.data.dw !== undefined
+        && m.data.image.length) shape = Array.from(m.data.image[0].shape);
+  }
+  const view = Bokeh.index.find_one(plot);
+  const r = view.el.getBoundingClientRect();
+  const fx = view.frame.x_scale, fy = view.frame.y_scale;
+  return {shape: shape, pts: pts.map(([x, y]) => [r.left + fx.compute(x), r.top + fy.compute(y)])};
+}"""
+
+JS_SET_FRAME = """(value) => {
+  for (const m of Bokeh.documents[0].all_models)
+    if (m.type.endsWith('Player') && m.title === 'frame') {
+      m.value = value; m.value_throttled = value; return true;
+    }
+  return false;
+}"""
+
+
+def test_video_frames_lie_under_their_points_in_chromium(tmp_path):
+    """The frame view's background in the page: frames coded by layer (the clip's masks:
+    background, rectangle, disc as three grey levels), downscaled 2x, drawn behind the real
+    tracks. With every other layer hidden, the screenshot's pixel under each complete track
+    (projected by the plot's own scales) has its true layer's grey, at frame 0 and after
+    scrubbing to frame 12: the image is not flipped (the y axis points down) nor offset, and
+    it follows the frame."""
+    import dataclasses
+
+    import numpy as np
+    from PIL import Image
+
+    from explorer.video import FrameCache, open_video
+    from laav.synthetic_video import load_clip
+
+    clip_dir = Path(__file__).resolve().parents[1] / "assets" / "two_objects"
+    clip = load_clip(clip_dir)
+    video = open_video(clip_dir, 3, progress=False)
+    coded = FrameCache(max_width=160)
+    for t, m in enumerate(clip.masks):
+        coded.add(t, m.astype(np.uint8) * 127)
+    video = dataclasses.replace(video, frames=coded)
+    seq = video.sequence
+    from explorer.cards.frame import BACKGROUND_ALPHA
+
+    level = 255 - BACKGROUND_ALPHA * (255 - np.array([0, 127, 254]))  # over the white figure
+    outside: list[str] = []
+    with _served(seq, viser=False, video=video) as (port, browser, created):
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.route("**/*", lambda r: r.continue_() if r.request.url.startswith(LOCAL)
+                   else (outside.append(r.request.url), r.abort()))
+        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=60000)
+        ex = _wait_for(lambda: created[0] if created else None, 30, "the session's explorer")
+        assert ex.wait(120), "the first result did not arrive"
+        fv = ex.frame_view
+
+        def background_only():
+            for r in fv.fig.renderers:
+                r.visible = r is fv.r_background
+
+        for frame in (0, 12):
+            if frame:
+                assert page.evaluate(JS_SET_FRAME, frame)
+                _wait_for(lambda f=frame: ex.frame == f, 30, "the frame to change on the server")
+            ex.schedule(background_only)  # a redraw shows the points again
+            page.wait_for_function(
+                f"(() => {{ for (const m of Bokeh.documents[0].all_models) if (m.type === 'Figure' && "
+                f"m.title && m.title.text.startsWith('frame {frame} of')) return m.renderers.filter("
+                "r => r.visible).length === 1; return false; })()", timeout=30000)
+            page.wait_for_timeout(800)  # drawn
+            got = page.evaluate(JS_PROJECT, seq.points[frame].tolist())
+            assert got["shape"] == [120, 160]
+            shot = tmp_path / f"video_frame_{frame}.png"
+            page.screenshot(path=str(shot))
+            grey = np.asarray(Image.open(shot).convert("L"), dtype=float)
+            xy = np.floor(np.array(got["pts"])).astype(int)
+            seen = grey[xy[:, 1], xy[:, 0]]
+            layer = clip.masks[frame][np.round(seq.points[frame, :, 1]).astype(int),
+                                      np.round(seq.points[frame, :, 0]).astype(int)]
+            for k in range(3):
+                ok = np.abs(seen[layer == k] - level[k]) <= 12
+                assert (layer == k).sum() >= 10 and ok.mean() >= 0.95, (frame, k, ok.mean(),
+                                                                        seen[layer == k][:8])
+        page.close()
+    assert not outside, f"requests left 127.0.0.1: {outside}"

@@ -56,7 +56,7 @@ def test_eight_point_on_exact_rigid_correspondences(seed):
     x1, x2, F_true = two_view_scene(40, seed)
     F = fit_fundamental(x1, x2)
     assert F.shape == (3, 3)
-    assert np.linalg.norm(F) == pytest.approx(1.0)
+    assert 0.5 <= np.linalg.norm(F) < 1.0  # scaled by a power of two (exact), see fit_fundamental
     d = sampson_distance(F, x1, x2)
     assert d.max() < 1e-6, f"max Sampson distance {d.max():.3g} px^2"
     s = np.linalg.svd(F, compute_uv=False)

@@ -183,3 +183,16 @@ def test_frames_of_different_sizes_are_refused(tmp_path):
     with pytest.raises(TrackError, match="all frames must have one size"):
         track(d)
 
+
+
+def test_track_options_are_shared_with_laav_explore():
+    # one definition of the tracker's options (laav.cli.TRACK_OPTIONS) for both commands
+    from explorer.cli import build_parser as explore_parser
+    from laav.cli import build_parser, track_options
+
+    mine = track_options(build_parser().parse_args(["track", "v.mp4", "--max-points", "7", "--stride", "2"]))
+    assert mine["max_points"] == 7 and mine["stride"] == 2 and mine["min_length"] == 5
+    theirs = track_options(explore_parser().parse_args(["v.mp4", "--track-points", "7", "--stride", "2"]))
+    assert theirs == mine
+    with pytest.raises(SystemExit):  # --min-length 1 is refused by both
+        build_parser().parse_args(["track", "v.mp4", "--min-length", "1"])

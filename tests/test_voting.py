@@ -250,7 +250,7 @@ def test_selection_prefers_the_labelling_the_other_candidates_agree_with(monkeyp
     # the odd labelling gets a slightly lower subspace cost; three copies of the good one
     # (as renamed trials) disagree with it
     monkeypatch.setattr(V, "subspace_cost",
-                        lambda p, lab, c: 1.0 if np.array_equal(lab, odd) else 1.01)
+                        lambda p, lab, c, **k: 1.0 if np.array_equal(lab, odd) else 1.01)
     monkeypatch.setattr(V, "refine_labels", lambda p, lab, c, **k: (lab.copy(), 0, None))
     trial = lambda lab: (lab, np.zeros((seq.n_points, C)), np.zeros(1, np.int64),  # noqa: E731
                          np.zeros(1), 1, False)

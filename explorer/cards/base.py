@@ -25,6 +25,7 @@ class Host(Protocol):
 
     result: object  # the laav.LaavResult shown (None before the first)
     sequence: object  # the laav.Sequence shown
+    settings: object  # the explorer.state.Settings of the result shown
     style: dict  # the points' colours and marks (views.point_style)
     fine_colors: object  # the fine models' colours (views.fine_colors)
 

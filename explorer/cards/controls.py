@@ -77,14 +77,25 @@ class Controls:
         self.w_color.value = {v: k for k, v in V.COLOR_MODES.items()}[mode]
 
     # ------------------------------------------------------------------ widgets -> request
+    def _fine_models(self, v: int, C: int):
+        """The ``fine_models`` field for the slider's number ``v`` of fine models with C
+        motions: what is asked for now when it gives ``v`` (an explicit number typed in the
+        Advanced card stays one), None (auto) when ``v`` is ``fine_per_motion`` C, else ``v``."""
+        tp = self.state.target.params
+        try:
+            if v == tp.n_fine(C):
+                return tp.fine_models
+        except ValueError:  # the fine models asked for are fewer than this C
+            pass
+        return None if self.defaults.fine_models is None and v == tp.fine_per_motion * C else v
+
     def widget_params(self) -> dict:
         out = {}
         C = int(self.w_motions.value or 1)
         for name, w in self.w_params.items():
             v = w.value
             if name == "fine_models":
-                v = (None if self.defaults.fine_models is None and C >= 1
-                     and int(v) == self.defaults.fine_per_motion * C else int(v))
+                v = self._fine_models(int(v), C)
             elif isinstance(getattr(self.defaults, name), float):
                 v = float(v)
             else:
@@ -102,7 +113,7 @@ class Controls:
         if event is not None and event.obj is self.w_motions:
             fm = self.w_params["fine_models"]
             old = event.old if isinstance(event.old, int) else None
-            k = self.defaults.fine_per_motion  # the fine models follow C (k C by default)
+            k = self.state.target.params.fine_per_motion  # the fine models follow C (k C by default)
             if old is not None and fm.value == k * old:
                 with self.host.quiet():
                     fm.end = max(fm.end, 4 * int(event.new or 1))

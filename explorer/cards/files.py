@@ -110,6 +110,21 @@ hook();
 """
 
 
+def _refusal(message: str, name: str, path: Path) -> str:
+    """The page's message for an upload that is not a sequence; for binary content that no
+    sequence format has (a video, most likely: :func:`explorer.video.is_video`) it says that
+    videos are not tracked in the page (tracking a video takes a while, and an uploaded
+    video is never handed to FFmpeg in the server), and how to open one."""
+    from ..video import is_video
+
+    if is_video(path):
+        return (f"{name} is not a sequence file (.mat, .npz or tracks .csv): if it is a video, the page "
+                f"does not track uploaded videos — open it with laav-explore {name} on the command line "
+                "(it tracks, then segments), or upload the tracks.npz that laav track writes — still "
+                "showing the last valid result")
+    return message + " — still showing the last valid result"
+
+
 def seq_text(seq: laav.Sequence) -> str:
     gt = f"{seq.n_motions} motions in the ground truth" if seq.labels is not None else \
         "**no ground truth** (set C below)"
@@ -295,8 +310,7 @@ class Files:
                     laav.require_complete(seq)  # the last good result stays (issue 14)
                 except laav.SequenceError as exc:
                     if token is None or self._reading is not None and self._reading[0] is token:
-                        self.state.report(str(exc).replace(str(p), base)
-                                          + " — still showing the last valid result")
+                        self.state.report(_refusal(str(exc).replace(str(p), base), base, p))
                     return False
         except Exception as exc:  # never let an upload kill the session
             self.state.report(f"{base}: could not be read ({type(exc).__name__}: {exc})")

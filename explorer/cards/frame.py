@@ -1,6 +1,9 @@
 """Card 1 · Atoms: the points of one frame with their trails, atoms, error and change rings.
 
-Its own control: which layers are drawn (the checkboxes sit in the sidebar's View section).
+Its own controls: which layers are drawn (the checkboxes sit in the sidebar's View section)
+and, for a sequence tracked from a video (:mod:`explorer.video`), whether that frame of the
+video is drawn behind the points (a small grey copy, one byte per pixel over the wire, sent
+only when the frame changes).
 """
 
 from __future__ import annotations
@@ -8,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 import panel as pn
 from bokeh.core.properties import value
-from bokeh.models import ColumnDataSource, HoverTool
+from bokeh.models import ColumnDataSource, HoverTool, LinearColorMapper
+from bokeh.palettes import Greys256
 
 from .. import views as V
 from .base import Host, card, fit_image_figure, image_figure, move_legend, set_data
@@ -17,6 +21,9 @@ EMPTY_POINTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "index
 #: The layers a checkbox shows or hides, in the sidebar's order.
 LAYERS = ["trails (last 5 frames)", "atom circles (R1 solid, R2 dashed)",
           "features in no atom (×)", "misclassified (black ring)", "changed motion (purple ring)"]
+EMPTY_IMAGE = {"image": [], "x": [], "y": [], "dw": [], "dh": []}
+#: Opacity of the video frame over the white figure: light enough for the motion colours.
+BACKGROUND_ALPHA = 0.55
 
 
 class FrameView:
@@ -33,7 +40,16 @@ class FrameView:
         self.src_unassigned = ColumnDataSource({"x": [], "y": []})
         self.src_errors = ColumnDataSource({"x": [], "y": []})
         self.src_changed = ColumnDataSource({"x": [], "y": []})
+        self.src_background = ColumnDataSource(dict(EMPTY_IMAGE))
+        self.video = None  # explorer.video.Video whose frames go behind its sequence's points
+        self.w_background = pn.widgets.Checkbox(label="video frame behind the points", value=True,
+                                                visible=False)
+        self.w_background.param.watch(self._on_background, "value")
         f = self.fig = image_figure("Points at frame 0", 410, extent)
+        # row 0 of the image at y = -0.5 (the top: the y axis points down), under everything
+        self.r_background = f.image("image", x="x", y="y", dw="dw", dh="dh", source=self.src_background,
+                                    color_mapper=LinearColorMapper(Greys256, low=0, high=255),
+                                    global_alpha=BACKGROUND_ALPHA, level="image", visible=False)
         self.r_trails = f.segment("x0", "y0", "x1", "y1", source=self.src_trails, line_color="color",
                                   line_alpha="alpha", line_width=1.5)
         self.r_r2 = f.circle("x", "y", radius="r2", source=self.src_atoms, fill_alpha=0, line_color="color",
@@ -60,17 +76,53 @@ class FrameView:
         self._item_errors = items.get("misclassified")
         self._item_changed = items.get("changed motion")
 
+        self._caption = ""  # the caption of the last result, without the background's sentence
         self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=900, margin=(0, 10))
         self.card = card("1 · Atoms: points, trails and atoms in one frame", pn.pane.Bokeh(self.fig),
                          self.caption)
 
     def fit(self, seq) -> None:
         fit_image_figure(self.fig, seq.extent())
+        self.w_background.visible = self._frames_of(seq) is not None
+
+    def set_video(self, video) -> None:
+        """Draw ``video``'s frames (an :class:`explorer.video.Video`) behind its sequence's points."""
+        self.video = video
+        self.w_background.visible = video is not None
+
+    def _frames_of(self, seq):
+        v = self.video
+        return v.frames if v is not None and seq is v.sequence else None
+
+    def draw_background(self, seq, frame: int) -> bool:
+        """The video's frame ``frame`` behind the points (when ``seq`` is the video's and the
+        toggle is on); only the image column changes, so only it is sent. True when drawn."""
+        frames = self._frames_of(seq)
+        img = frames.get(frame) if frames is not None and self.w_background.value else None
+        shown = img is not None
+        if shown:
+            set_data(self.src_background, {"image": [img], **{k: [v] for k, v in frames.placement.items()}})
+        self.r_background.visible = shown
+        self.fig.xgrid.visible = self.fig.ygrid.visible = not shown
+        return shown
+
+    def _background_text(self, seq, frame: int) -> str:
+        frames = self._frames_of(seq)
+        if frames is None:
+            return ""
+        if not self.w_background.value:
+            return " The video frame behind the points is hidden (View: video frame)."
+        if frames.get(frame) is None:
+            return (f" No copy of video frame {int(frame)} is kept (one frame in {frames.step}, to bound "
+                    "memory), so none is drawn behind the points.")
+        h, w = frames.shape
+        return f" Behind the points: the video's frame {int(frame)}, grey, at {w}x{h} px."
 
     def draw_raw(self, seq, frame: int = 0) -> None:
         """The raw points of ``seq`` at ``frame`` (ground-truth colours, or grey), before any
         result: the page shows the trajectories while the first computation runs."""
         set_data(self.src_points, V.points_source(seq, frame, V.raw_style(seq)))
+        self.draw_background(seq, frame)
         self.fig.title.text = f"frame {int(frame)} of {seq.n_frames - 1} · segmenting…"
 
     def draw(self, seq, res, frame: int, style: dict, moved, color_label: str) -> None:
@@ -85,6 +137,7 @@ class FrameView:
         set_data(self.src_unassigned, d["unassigned"])
         set_data(self.src_errors, d["errors"])
         set_data(self.src_changed, d["changed"])
+        self.draw_background(seq, f)
         self.fig.title.text = f"frame {f} of {seq.n_frames - 1} · colour: {color_label}"
         n_un, n_bad = len(d["unassigned"]["x"]), len(d["errors"]["x"])
         if self._item_unassigned is not None:
@@ -96,13 +149,24 @@ class FrameView:
         if self._item_errors is not None:
             self._item_errors.label = value(f"misclassified ({stage}): {n_bad}" if seq.labels is not None
                                             else "misclassified: (no truth)")
-        self.caption.object = (
+        self._caption = (
             f"{res.atoms.n_atoms} atoms (R1 = {res.atoms.r1:g} px solid, R2 = {res.atoms.r2:g} px dashed, "
             f"drawn at their seeds); {np.asarray(res.atoms.unassigned).size} features in no atom (×); "
             f"{int(style['misclassified'].sum())} points misclassified by the {stage} stage (black "
             "ring; the colour-by choice picks the stage). Click legend entries to hide them.")
+        self.caption.object = self._caption + self._background_text(seq, f)
 
     # ------------------------------------------------------------------ callbacks
+    def _on_background(self, event=None) -> None:
+        self.host.schedule(self._background_now, now_if_on_doc_thread=True)
+
+    def _background_now(self) -> None:
+        seq = self.host.sequence
+        with self.host.hold():
+            self.draw_background(seq, self.host.frame)
+            if self._caption:
+                self.caption.object = self._caption + self._background_text(seq, self.host.frame)
+
     def _on_layers(self, event=None) -> None:
         self.host.schedule(self._layers_now, now_if_on_doc_thread=True)
 

@@ -1,0 +1,150 @@
+"""The sidebar's Advanced card: every :class:`laav.LaavParams` field, grouped by stage.
+
+Folded at first. One widget per field (:data:`explorer.fields.FIELDS`): a number box with
+the field's bounds, a select for a choice (``coarse_merge``, ``atom_frames``,
+``rv_select``), a checkbox for a switch; its tooltip is the field's description from the
+``LaavParams`` docstring, its range and its default. A field off its default is marked
+(``● name · default X``). A change only requests (:meth:`ExplorerState.request`, which
+validates through ``LaavParams``): an invalid value is named in the card and in the page's
+alert, and the last good result stays. The card always shows the settings asked for last
+(:attr:`ExplorerState.target`, through the state's ``on_target`` hook), so the sliders, a
+URL, a ``params.json`` and the reset buttons move it too; its own changes move the sliders
+(:meth:`Controls.show_settings`).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import partial
+
+import panel as pn
+
+from .. import views as V
+from ..fields import AUTO, FIELDS, STAGE_TITLES, changed_fields, fmt_value, widget_value
+from .base import SIDE_W, Host
+
+#: Width of a field's widget inside the card (the card's padding and border fit the sidebar).
+FIELD_W = SIDE_W - 30
+#: Marks a field off its default, in its label.
+MARK = "●"
+
+
+def _step(default) -> float:
+    """A number box's arrow step: a tenth of the default's order of magnitude (0.01 for 0 or auto):
+    1 for R1 = 20, 0.1 for λ = 2, 0.01 for 0.25."""
+    d = abs(float(default or 0))
+    return 0.01 if d == 0 else 10.0 ** (math.floor(math.log10(d)) - 1)
+
+
+def label_of(field, value) -> str:
+    """The widget's label: the field name, marked with its default when ``value`` differs."""
+    if value == field.default:
+        return field.name
+    return f"{MARK} {field.name} · default {fmt_value(field.default)}"
+
+
+class AdvancedPanel:
+    """Every LaavParams field for ``state``; ``controls`` are the sidebar's sliders (kept in step)."""
+
+    def __init__(self, host: Host, state, controls) -> None:
+        self.host, self.state, self.controls = host, state, controls
+        p = state.target.params
+        self.widgets: dict = {}
+        rows = []
+        stage = None
+        for f in FIELDS:
+            if f.stage != stage:
+                stage = f.stage
+                rows.append(pn.pane.Markdown(f"**{STAGE_TITLES[stage]}**", margin=(8, 5, 0, 5)))
+            w, row = self._widget(f, getattr(p, f.name))
+            w.param.watch(partial(self._on_field, f), "value")
+            self.widgets[f.name] = w
+            rows.append(row)
+        self.message = pn.pane.Alert("", alert_type="danger", visible=False, width=FIELD_W, margin=(4, 5))
+        self.summary = pn.pane.Markdown("", width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
+        self.w_reset = pn.widgets.Button(label="Reset every field to its default", color="warning",
+                                         width=FIELD_W, margin=(8, 5))
+        self.w_reset.on_click(self._on_reset)
+        intro = pn.pane.Markdown(
+            "Every `LaavParams` field (hover the **?** for its meaning, range and default); a field "
+            f"off its default is marked {MARK}. Seed and C stay in the sliders above.",
+            width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
+        self.card = pn.Card(intro, self.summary, self.message, *rows, self.w_reset,
+                            title="Advanced: every parameter", collapsed=True, collapsible=True,
+                            sizing_mode="stretch_width", margin=(6, 10))
+        self._mark(p)
+
+    @staticmethod
+    def _widget(f, value):
+        """The widget of field ``f`` and what goes in the card (the widget, or a checkbox
+        with its tooltip icon beside it)."""
+        tip = V.md_text(f.tooltip())  # rendered as Markdown: every character literal
+        if f.kind == "bool":
+            w = pn.widgets.Checkbox(label=label_of(f, value), value=bool(value), width=FIELD_W - 30,
+                                    margin=(6, 5))
+            return w, pn.Row(w, pn.widgets.TooltipIcon(value=f.tooltip(), margin=(4, 0)), margin=0)
+        if f.kind == "choice":
+            w = pn.widgets.Select(label=label_of(f, value), options=list(f.choices), value=value,
+                                  description=tip, width=FIELD_W, margin=(4, 5))
+            return w, w
+        kw = dict(label=label_of(f, value), value=value, start=f.low, end=f.high, description=tip,
+                  width=FIELD_W, margin=(4, 5))
+        auto = f"auto ({AUTO.get(f.name, 'auto')})" if f.kind.endswith("|None") else ""
+        if f.kind in ("int", "int|None"):
+            w = pn.widgets.IntInput(step=1, placeholder=auto, **kw)
+        else:
+            w = pn.widgets.FloatInput(step=_step(f.default), placeholder=auto, **kw)
+        return w, w
+
+    # ------------------------------------------------------------------ widgets -> request
+    def _on_field(self, field, event) -> None:
+        if self.host.quieted:
+            return
+        self.request({field.name: widget_value(field, event.new)})
+
+    def request(self, changes: dict) -> bool:
+        """Ask for ``changes`` (LaavParams fields). False, and the message in the card, when
+        ``LaavParams`` refuses them (nothing else changes; the last good result stays)."""
+        if self.state.request(params=changes) is None:
+            self.message.object = f"**Not applied:** {V.md_text(self.state.error or 'invalid value')}"
+            self.message.visible = True
+            return False
+        self.message.visible = False
+        self.controls.show_settings(self.state.target)  # the sliders follow
+        return True
+
+    def _on_reset(self, event=None) -> None:
+        self.request({f.name: f.default for f in FIELDS})
+
+    # ------------------------------------------------------------------ settings -> widgets
+    def show(self, settings) -> None:
+        """(Document thread.) Put ``settings``' parameters on the widgets without requesting."""
+        p = settings.params
+        with self.host.quiet():
+            for f in FIELDS:
+                w, v = self.widgets[f.name], getattr(p, f.name)
+                if f.kind in ("int", "int|None", "float", "float>", "float|None") and v is not None:
+                    # a value past the box's bounds (cannot come from LaavParams, but stay safe)
+                    w.start = min(w.start, v) if w.start is not None else None
+                    w.end = max(w.end, v) if w.end is not None else None
+                if w.value != v:
+                    w.value = v
+        self.message.visible = False  # what is shown was accepted
+        self._mark(p)
+
+    def _mark(self, params) -> None:
+        """Mark the fields off their defaults (their labels) and count them."""
+        for f in FIELDS:
+            name = label_of(f, getattr(params, f.name))
+            w = self.widgets[f.name]
+            if w.label != name:
+                w.label = name
+        off = changed_fields(params)
+        self.summary.object = ("All fields at their defaults." if not off else
+                               f"{len(off)} field{'s' if len(off) != 1 else ''} off the defaults: "
+                               + ", ".join(V.md_text(n) for n in off) + ".")
+
+    @property
+    def marked(self) -> list[str]:
+        """The fields whose labels carry the mark."""
+        return [n for n, w in self.widgets.items() if w.label.startswith(MARK)]
