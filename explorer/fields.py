@@ -61,7 +61,7 @@ class Field:
 
 #: What "auto" (None) means for the fields that allow it.
 AUTO = {"fine_models": "fine_per_motion × C",
-        "rv_tolerance": "2 % in LAAV's fine-tuning, 0 in plain RV"}
+        "rv_tolerance": "2 % for LAAV's informed trial, 0 for random starts"}
 
 _RST = [
     (re.compile(r":(?:mod|func|meth|class|data|attr):`~?([^`]+)`"), r"\1"),  # :mod:`laav.coding`

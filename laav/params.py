@@ -101,10 +101,11 @@ class LaavParams:
     rv_tolerance : float or None
         "Nearly": the share of the points that may change label in an iteration that still
         counts as unchanged (at most ``floor(rv_tolerance * P)`` points; 0 = none, Random
-        Voting's own test), for every trial of the call. None (default): 0.02 in LAAV's
-        fine-tuning (a :func:`laav.random_voting` call with ``init_labels``, as
-        :func:`laav.segment` makes), 0 in plain Random Voting, which so stays the published
-        algorithm. At hundreds of points and more a few boundary points flip on RV's own
+        Voting's own test), for every trial of the call. None (default): 0.02 for LAAV's
+        informed trial (started from the coarse labels, in a :func:`laav.random_voting`
+        call with ``init_labels`` as :func:`laav.segment` makes), 0 for every trial from a
+        random start (plain Random Voting, also beside LAAV's trial), which so stays the
+        published algorithm. At hundreds of points and more a few boundary points flip on RV's own
         sampling noise at every iteration, so that 0 rarely holds however right the labels
         are (``benchmarks/TUNING.md``).
     rv_label_weight : float

@@ -112,8 +112,9 @@ class Voting:
     informed_converged : bool or None
         Whether LAAV's informed trial met the convergence test; None for plain RV.
     tolerance : float
-        The convergence test's tolerance used (share of the points that may change in an
-        iteration that counts as unchanged; 0 = Random Voting's zero-change test).
+        The convergence test's tolerance of the trial described (share of the points that
+        may change in an iteration that counts as unchanged; 0 = Random Voting's
+        zero-change test): LAAV's informed trial's in a fine-tuning.
     unlabelled_code : ndarray of shape (P,), int8, or None
         Missing data only (None on complete data): why each point has label -1, a key of
         :data:`laav._visibility.UNLABELLED_REASONS` (1: seen too briefly, no voting frame
@@ -269,7 +270,11 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (P,):
             raise ValueError(f"weights must have shape ({P},), got {w.shape}")
+    # auto (None): LAAV's start is nearly complete, its trial may count a few flips as
+    # unchanged; random starts keep RV's zero-change test, which rejects a random start's
+    # wrong but stable partition (benchmarks/TUNING.md)
     tol = FINE_TUNING_TOLERANCE if params.rv_tolerance is None else params.rv_tolerance
+    tol_plain = 0.0 if params.rv_tolerance is None else params.rv_tolerance
     labels0 = np.where(known, init, rng.integers(0, C, P))
     votes0 = np.zeros((P, C))
     votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
@@ -284,13 +289,14 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     streams = rng.spawn(1 + params.rv_trials)  # [informed, plain 0, plain 1, ...]
     first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
                                      streams=streams[:1], tolerance=tol, masks=masks)
-    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, tol, masks)
+    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, tol_plain,
+                                    masks)
     trials, cands = trials + more, [("informed", first)] + cands
     if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
         # LAAV's start and plain RV disagree: two more plain RV runs arbitrate
         for k in (2, 3):
             _, more, kc = _plain_run(points, C, params, rng, rng.spawn(1 + params.rv_trials),
-                                     plain_memo, k, tol, masks)
+                                     plain_memo, k, tol_plain, masks)
             trials, cands = trials + more, cands + kc
     polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
