@@ -303,3 +303,23 @@ def test_degenerate_input_checks_read_only_visible_entries():
     common[4:] = False  # ... all hidden in the same frames (else they differ in where)
     with pytest.raises(ValueError, match="only 1 distinct trajectory"):
         laav.segment(Sequence(same, visible=common), 2)
+
+
+def test_missing_data_labels_follow_the_units_of_the_parameters():
+    """Scaling the coordinates by s with ``LaavParams.scaled(s)``, or shifting them, leaves
+    the labels of an incomplete sequence as they were (the masked code's constants are in
+    the parameters' units, its subspaces pass through the visible points' corner; see
+    tests/test_scale_invariance.py for complete data). A noisy scene: its labels are not
+    decided by rounding."""
+    from laav.synthetic import add_noise
+
+    seq = add_noise(make_sequence(2, n_frames=20, n_points=200, rng=1), 0.5, 1)
+    occl = occlude(seq, 0.3, 1)
+    base = _quiet_segment(occl, 3)
+    assert laav.misclassification_rate(seq.labels, base.labels) <= 0.01
+    for s in (1e-3, 0.125, 10.0):
+        scaled = Sequence(occl.points * s, occl.labels, visible=occl.visible)
+        assert np.array_equal(_quiet_segment(scaled, 3, LaavParams().scaled(s)).labels, base.labels), s
+    for t in (1e3, -5e4):
+        shifted = Sequence(occl.points + t, occl.labels, visible=occl.visible)
+        assert np.array_equal(_quiet_segment(shifted, 3).labels, base.labels), t
