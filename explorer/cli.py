@@ -114,16 +114,16 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="laav-explore",
         description="Explore every stage of LAAV motion segmentation live in the browser.",
-        epilog="Without FILE the bundled demo sequence is shown. A FILE without ground-truth labels "
-               "needs --motions (C, or auto to estimate it). A VIDEO is tracked first (C estimated "
-               "unless --motions gives it).")
+        epilog="Without FILE the bundled demo sequence is shown. For a FILE without ground-truth "
+               "labels C is estimated unless --motions gives it. A VIDEO is tracked first (C "
+               "estimated unless --motions gives it).")
     p.add_argument("file", nargs="?", metavar="FILE | VIDEO",
                    help="Hopkins155 *_truth.mat, KT3DMoSeg .mat, a .npz with points (F, P, 2) [and "
                         "labels, visible], a tracks CSV (track,frame,x,y[,label]), or a folder holding one; "
                         "or a video (anything OpenCV opens) or a folder of frames, to track first")
     p.add_argument("--motions", "-C", type=_motions, metavar="C",
                    help="number of motions C, or auto to estimate it (default: from the ground truth; "
-                        "for a video: auto)")
+                        "without one, and for a video: auto)")
     p.add_argument("--port", type=int, metavar="N",
                    help=f"port of the page (default {DEFAULT_PORT}, or a free one if it is taken)")
     p.add_argument("--host", default="127.0.0.1",
@@ -355,12 +355,10 @@ def main(argv: list[str] | None = None) -> int:
         laav.require_complete(seq)
     except (laav.SequenceError, FileNotFoundError) as exc:
         return _fail(parser, str(exc))
-    if video is None and args.motions is None and seq.labels is None:
-        return _fail(parser, f"{args.file or seq.name} has no ground-truth labels, so the number of "
-                             "motions is unknown: pass --motions C (or --motions auto)")
     if video is not None:
         C = video.n_motions
-    elif args.motions == "auto":
+    elif args.motions == "auto" or (args.motions is None and seq.labels is None):
+        # no ground truth and no --motions: C is estimated (issue 14 item 7)
         try:
             count = laav.estimate_motions(seq)
         except ValueError as exc:

@@ -29,8 +29,7 @@ class Field:
     """One ``LaavParams`` field.
 
     ``kind`` is the validation table's: ``"int"``, ``"float"`` ([low, high]),
-    ``"float>"`` ((low, high]), ``"int|None"`` / ``"float|None"`` (None allowed, "auto":
-    ``fine_models``, ``rv_tolerance``),
+    ``"float>"`` ((low, high]), ``"int|None"`` (None allowed: ``fine_models``, "auto"),
     ``"bool"`` or ``"choice"`` (one of ``choices``).
     """
 
@@ -60,8 +59,7 @@ class Field:
 
 
 #: What "auto" (None) means for the fields that allow it.
-AUTO = {"fine_models": "fine_per_motion × C",
-        "rv_tolerance": "2 % for LAAV's informed trial, 0 for random starts"}
+AUTO = {"fine_models": "fine_per_motion × C"}
 
 _RST = [
     (re.compile(r":(?:mod|func|meth|class|data|attr):`~?([^`]+)`"), r"\1"),  # :mod:`laav.coding`
@@ -150,7 +148,7 @@ def widget_value(field: Field, value):
         return None
     if field.kind in ("int", "int|None"):
         return int(value) if float(value).is_integer() else float(value)
-    if field.kind in ("float", "float>", "float|None"):
+    if field.kind in ("float", "float>"):
         return float(value)
     if field.kind == "bool":
         return bool(value)

@@ -691,9 +691,8 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
     own = voting.informed_changed is not None  # LAAV: describe its own informed trial
     done = voting.informed_converged if own else voting.converged
     n_it = len(voting.informed_changed) if own else len(voting.changed)
-    test = (f" (test: at most {100 * voting.tolerance:g} % of the points change per iteration)"
-            if getattr(voting, "tolerance", 0.0) > 0 else " (test: no label changes)")
-    conv = ("converged" if done else "**not converged** (hit the iteration cap)") + test
+    conv = ("converged (no label changed for the patience window)" if done
+            else "**not converged** (hit the iteration cap)")
     trials = ""
     if voting.n_trials > 1:
         if per and len(set(per)) == 1:

@@ -97,17 +97,7 @@ class LaavParams:
     rv_sample_size : int
         Points per group used to fit each fundamental matrix (>= 8).
     rv_patience : int
-        A trial has converged when labels stay (nearly) unchanged this many iterations.
-    rv_tolerance : float or None
-        "Nearly": the share of the points that may change label in an iteration that still
-        counts as unchanged (at most ``floor(rv_tolerance * P)`` points; 0 = none, Random
-        Voting's own test), for every trial of the call. None (default): 0.02 for LAAV's
-        informed trial (started from the coarse labels, in a :func:`laav.random_voting`
-        call with ``init_labels`` as :func:`laav.segment` makes), 0 for every trial from a
-        random start (plain Random Voting, also beside LAAV's trial), which so stays the
-        published algorithm. At hundreds of points and more a few boundary points flip on RV's own
-        sampling noise at every iteration, so that 0 rarely holds however right the labels
-        are (``benchmarks/TUNING.md``).
+        A trial has converged when no label changed for this many iterations.
     rv_label_weight : float
         Initial votes given to atom-labelled features when LAAV initialises Random Voting.
     rv_batch : int
@@ -180,7 +170,6 @@ class LaavParams:
     rv_trials: int = 10
     rv_sample_size: int = 8
     rv_patience: int = 15
-    rv_tolerance: float | None = None
     rv_label_weight: float = 5.0
     rv_batch: int = 2
     rv_refine: bool = True
@@ -210,11 +199,11 @@ class LaavParams:
         epipolar votes alone (``coarse_merge="epipolar"``, no pooled voting), and a
         fine-tuning that is Random Voting started from the coarse labels: one informed
         trial, no plain RV run, no model selection, no refinement and no joint
-        reassignment, Random Voting's own convergence test (``rv_tolerance=0``). ``changes`` override fields as in :meth:`replace`.
+        reassignment. ``changes`` override fields as in :meth:`replace`.
         """
         return cls(atom_frames="pair", fine_per_motion=2, coarse_merge="epipolar", pooled_trials=0,
                    pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
-                   rv_select="none", rv_tolerance=0.0).replace(**changes)
+                   rv_select="none").replace(**changes)
 
     def scaled(self, s: float) -> LaavParams:
         """The parameters for coordinates ``s`` times larger: lengths (:data:`PIXEL_PARAMS`)
@@ -287,7 +276,6 @@ _BOUNDS = (
     ("rv_trials", "int", 1, 100),
     ("rv_sample_size", "int", 8, 1000),
     ("rv_patience", "int", 1, 10_000),
-    ("rv_tolerance", "float|None", 0, 0.5),
     ("rv_label_weight", "float", 0, _BIG),
     ("rv_batch", "int", 1, 32),
     ("rv_refine", "bool", None, None),
@@ -304,10 +292,10 @@ def _check(value, kind: str, low, high):
         return (bool(value), "") if ok else (value, "must be True or False")
     if kind == "choice":
         return value, "" if isinstance(value, str) and value in low else f"must be one of {low}"
-    if kind in ("int|None", "float|None"):
+    if kind == "int|None":
         if value is None:
             return None, ""
-        kind = kind[:-5]
+        kind = "int"
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         return value, "must be " + ("an integer" if kind == "int" else "a number")
     if kind == "int" and not isinstance(value, (int, np.integer)):
@@ -322,9 +310,6 @@ def _check(value, kind: str, low, high):
         return value, f"must be in {'(' if kind == 'float>' else '['}{low:g}, {high:g}]"
     return value, ""
 
-
-#: ``rv_tolerance=None`` in LAAV's fine-tuning (see :class:`LaavParams`).
-FINE_TUNING_TOLERANCE = 0.02
 
 #: Which parameters each stage reads; a change reruns that stage and all after it.
 STAGE_PARAMS: dict[str, frozenset] = {

@@ -8,8 +8,7 @@ by side, in one batched call); every point receives, from each group's matrix, t
 which then decays by the forgetting factor ``alpha``. A trial starts from a random
 partition (plain RV) or from given labels (LAAV's fine-tuning, see
 :func:`laav.voting.random_voting`), and has converged when no label changed for
-``rv_patience`` iterations (at most ``floor(rv_tolerance * P)`` of them with
-``rv_tolerance`` > 0); plain RV resets its votes once, at iteration 15.
+``rv_patience`` iterations; plain RV resets its votes once, at iteration 15.
 
 Choices where the RV paper is vague (measured on Hopkins155, ``benchmarks/TUNING.md``):
 
@@ -186,7 +185,7 @@ def _pool_pair(pool: np.ndarray, rng: np.random.Generator) -> tuple[int, int]:
     return (right, left) if rng.random() < 0.5 else (left, right)
 
 
-def _step(points, trials, params, allowed=0, masks=None):
+def _step(points, trials, params, masks=None):
     """One voting iteration of every trial in ``trials``, in one batched call; every
     random draw of a trial comes from its own generator. ``masks`` (missing data): the
     ``(visible, pool)`` of :func:`run_trials`."""
@@ -224,15 +223,14 @@ def _step(points, trials, params, allowed=0, masks=None):
             t.votes = np.zeros_like(t.votes)
             t.still = 0
         else:
-            t.still = t.still + 1 if n_changed[b] <= allowed else 0  # "unchanged"
+            t.still = t.still + 1 if n_changed[b] == 0 else 0
             if t.still >= params.rv_patience and (not t.reset or t.it > RESET_AT):
                 t.converged = t.done = True
         if t.it >= params.rv_max_iter:
             t.done = True
 
 
-def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None,
-               tolerance=0.0, masks=None):
+def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None, masks=None):
     """Run LAAV's informed trial and plain RV's random-start trials, ``rv_batch`` side by side.
 
     Trials advance in lockstep, one batched numpy call per iteration, each with its own
@@ -258,9 +256,6 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
         The trials' generators, ``[informed, plain 0, plain 1, ...]`` (``1 + n_plain`` of
         them), instead of spawning them from ``rng``: a trial's result depends only on its
         own generator, so a caller may run LAAV's trial and plain RV's apart.
-    tolerance : float
-        Share of the points that may change label in an iteration that still counts as
-        unchanged for the convergence test (0: none).
     masks : (visible, pool) or None
         Missing data: ``visible`` (F, P) bool and the frame pairs ``pool`` (K, 2) of
         :func:`laav._visibility.pair_pool`; each iteration draws its pair from the pool
@@ -307,7 +302,7 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
             plain.append(t)
         if not active:
             break
-        _step(points, active, params, int(tolerance * P), masks)
+        _step(points, active, params, masks)
         active = [t for t in active if not t.done]
         # the kept plain trial is the first *in start order* to converge, as if the trials
         # ran one after another: a trial that converges sooner than an earlier one is not

@@ -40,7 +40,7 @@ from ._random import resolve_seed
 from ._sequence import Sequence, as_points, check_degenerate, warn_single_label
 from ._threads import single_threaded
 from .metrics import misclassification_rate
-from .params import FINE_TUNING_TOLERANCE, LaavParams
+from .params import LaavParams
 from .refine import (
     frame_pairs,
     labelling_cost,
@@ -111,10 +111,6 @@ class Voting:
         whichever candidate was returned; None for plain RV.
     informed_converged : bool or None
         Whether LAAV's informed trial met the convergence test; None for plain RV.
-    tolerance : float
-        The convergence test's tolerance of the trial described (share of the points that
-        may change in an iteration that counts as unchanged; 0 = Random Voting's
-        zero-change test): LAAV's informed trial's in a fine-tuning.
     unlabelled_code : ndarray of shape (P,), int8, or None
         Missing data only (None on complete data): why each point has label -1, a key of
         :data:`laav._visibility.UNLABELLED_REASONS` (1: seen too briefly, no voting frame
@@ -141,7 +137,6 @@ class Voting:
     informed_changed: np.ndarray | None = None
     informed_margin: np.ndarray | None = None
     informed_converged: bool | None = None
-    tolerance: float = 0.0
     unlabelled_code: np.ndarray | None = None
 
 
@@ -228,14 +223,12 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     select = params.rv_select == "subspace"
 
     if init_labels is None:  # plain RV
-        tol = 0.0 if params.rv_tolerance is None else params.rv_tolerance
-        _, best, trials, ended = run_trials(points, C, params, rng, tolerance=tol)
-        return _plain_result(seq, points, C, params, rng, best, trials, ended, select, tol)
+        _, best, trials, ended = run_trials(points, C, params, rng)
+        return _plain_result(seq, points, C, params, rng, best, trials, ended, select)
     return _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo)
 
 
-def _plain_result(seq, points, C, params, rng, best, trials, ended, select, tol,
-                  mk=None) -> Voting:
+def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=None) -> Voting:
     """Plain RV's result from its trials: the converged one, else a selection or the
     consensus. ``mk`` (missing data): a :class:`_Masks`; the caller then warns."""
     if best is not None:
@@ -248,7 +241,7 @@ def _plain_result(seq, points, C, params, rng, best, trials, ended, select, tol,
                       mk=mk)
     if mk is None:
         warn_single_label(seq, out.labels, C, stacklevel=5)
-    return dataclasses.replace(out, tolerance=tol)
+    return out
 
 
 def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo,
@@ -270,52 +263,46 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (P,):
             raise ValueError(f"weights must have shape ({P},), got {w.shape}")
-    # auto (None): LAAV's start is nearly complete, its trial may count a few flips as
-    # unchanged; random starts keep RV's zero-change test, which rejects a random start's
-    # wrong but stable partition (benchmarks/TUNING.md)
-    tol = FINE_TUNING_TOLERANCE if params.rv_tolerance is None else params.rv_tolerance
-    tol_plain = 0.0 if params.rv_tolerance is None else params.rv_tolerance
     labels0 = np.where(known, init, rng.integers(0, C, P))
     votes0 = np.zeros((P, C))
     votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
         first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,
-                                         tolerance=tol, masks=masks)
+                                         masks=masks)
         return _with_informed(_finish(points, C, params, first, trials, True, "informed", mk=mk),
-                              first, tol)
+                              first)
     # LAAV's start against plain RV: keep the labelling of lower selection score. The
     # informed trial and plain RV's trials each draw from their own generator, so they run
     # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
     streams = rng.spawn(1 + params.rv_trials)  # [informed, plain 0, plain 1, ...]
     first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
-                                     streams=streams[:1], tolerance=tol, masks=masks)
-    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, tol_plain,
-                                    masks)
+                                     streams=streams[:1], masks=masks)
+    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, masks)
     trials, cands = trials + more, [("informed", first)] + cands
     if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
         # LAAV's start and plain RV disagree: two more plain RV runs arbitrate
         for k in (2, 3):
             _, more, kc = _plain_run(points, C, params, rng, rng.spawn(1 + params.rv_trials),
-                                     plain_memo, k, tol_plain, masks)
+                                     plain_memo, k, masks)
             trials, cands = trials + more, cands + kc
     polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
-                                  polished=polished, mk=mk), first, tol)
+                                  polished=polished, mk=mk), first)
 
 
-def _plain_run(points, C, params, rng, streams, memo, k, tolerance, masks=None):
+def _plain_run(points, C, params, rng, streams, memo, k, masks=None):
     """Plain RV's k-th run of LAAV's fine-tuning on ``streams`` (``[unused, plain 0, ...]``):
     (its converged trial or None, every trial it ran, its candidate labellings).
 
     With ``memo`` (a dict kept by the caller for one sequence, C, seed and ``rv_*``
     settings) a run is computed once: plain RV does not depend on LAAV's start. Its one
     draw from ``rng`` (the consensus's seed) is then made again, so that every later draw
-    is what a fresh run would make: the labels are identical either way.
+    is what a fresh run would make: the labels are identical either way. ``masks``:
+    missing data, as :func:`laav.rv.run_trials` takes them.
     """
     hit = None if memo is None else memo.get(("run", k))
     if hit is None:
-        _, conv, trials, ended = run_trials(points, C, params, None, streams=streams,
-                                            tolerance=tolerance, masks=masks)
+        _, conv, trials, ended = run_trials(points, C, params, None, streams=streams, masks=masks)
         cons = consensus(ended, C, rng) if conv is None else None
         hit = (conv, trials, ended, cons)
         if memo is not None:
@@ -378,10 +365,8 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     mk = _Masks(sub_vis, pool)
     select = params.rv_select == "subspace"
     if init is None:  # plain RV
-        tol = 0.0 if params.rv_tolerance is None else params.rv_tolerance
-        _, best, trials, ended = run_trials(sub, C, params, rng, tolerance=tol,
-                                            masks=(mk.visible, mk.pool))
-        out = _plain_result(seq, sub, C, params, rng, best, trials, ended, select, tol, mk)
+        _, best, trials, ended = run_trials(sub, C, params, rng, masks=(mk.visible, mk.pool))
+        out = _plain_result(seq, sub, C, params, rng, best, trials, ended, select, mk)
     else:
         out = _fine_tuning(sub, C, params, rng, init[idx], None if w is None else w[idx], select,
                            plain_memo, mk)
@@ -396,10 +381,10 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     return result
 
 
-def _with_informed(voting: Voting, first: tuple, tolerance: float) -> Voting:
-    """``voting`` with LAAV's informed trial's own trace and the test's tolerance attached."""
+def _with_informed(voting: Voting, first: tuple) -> Voting:
+    """``voting`` with LAAV's informed trial's own trace attached."""
     return dataclasses.replace(voting, informed_changed=first[2], informed_margin=first[3],
-                               informed_converged=bool(first[5]), tolerance=tolerance)
+                               informed_converged=bool(first[5]))
 
 
 class _Polished:

@@ -48,7 +48,7 @@ def test_advanced_card_has_every_field_folded_with_tooltips(ex):
         assert w.value == getattr(d, f.name) and w.label == f.name
         kind = {"bool": pn.widgets.Checkbox, "choice": pn.widgets.Select, "int": pn.widgets.IntInput,
                 "int|None": pn.widgets.IntInput, "float": pn.widgets.FloatInput,
-                "float>": pn.widgets.FloatInput, "float|None": pn.widgets.FloatInput}[f.kind]
+                "float>": pn.widgets.FloatInput}[f.kind]
         assert type(w) is kind, f.name
         if f.kind == "choice":
             assert w.options == list(f.choices)

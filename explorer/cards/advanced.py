@@ -30,10 +30,10 @@ MARK = "●"
 
 
 def _step(default) -> float:
-    """A number box's arrow step: a tenth of the default's order of magnitude (0.01 for 0 or auto):
+    """A number box's arrow step: a tenth of the default's order of magnitude (0.1 for 0):
     1 for R1 = 20, 0.1 for λ = 2, 0.01 for 0.25."""
     d = abs(float(default or 0))
-    return 0.01 if d == 0 else 10.0 ** (math.floor(math.log10(d)) - 1)
+    return 0.1 if d == 0 else 10.0 ** (math.floor(math.log10(d)) - 1)
 
 
 def label_of(field, value) -> str:
@@ -123,7 +123,7 @@ class AdvancedPanel:
         with self.host.quiet():
             for f in FIELDS:
                 w, v = self.widgets[f.name], getattr(p, f.name)
-                if f.kind in ("int", "int|None", "float", "float>", "float|None") and v is not None:
+                if f.kind in ("int", "int|None", "float", "float>") and v is not None:
                     # a value past the box's bounds (cannot come from LaavParams, but stay safe)
                     w.start = min(w.start, v) if w.start is not None else None
                     w.end = max(w.end, v) if w.end is not None else None
