@@ -143,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"refuse a FILE with more than N points (default {laav.io.MAX_POINTS:,}; "
                         "time and memory grow about linearly; docs/bench/scale.md)")
     p.add_argument("--complete-only", action="store_true",
-                   help="keep only the tracks visible in every frame (LAAV's stages do not handle "
+                   help="keep only the tracks visible in every frame (the explorer does not handle "
                         "missing entries yet); the page then numbers the kept points 0..K-1")
     tr = p.add_argument_group("tracking a VIDEO (the options of laav track; the tracks seen in every "
                               "frame are kept)")

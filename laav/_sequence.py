@@ -42,12 +42,12 @@ class IncompleteSequenceError(SequenceError):
         self.n_complete = n_complete
 
 
-def require_complete(seq: Sequence) -> None:
+def require_complete(seq: Sequence, what: str = "the explorer") -> None:
     """Raise :class:`IncompleteSequenceError` unless every point of ``seq`` is visible in every frame.
 
-    LAAV's stages (atoms, graph, fine-to-coarse, voting) do not handle missing data yet
-    (issue 14, item 3); until they do, they refuse an incomplete sequence with this message
-    rather than reading the NaN that stands in for the missing coordinates.
+    LAAV's stages handle missing data (``docs/ALGORITHM.md``, "Missing data"); what does not
+    yet calls this, naming itself in ``what``: the explorer, and the estimate of the
+    number of motions (:func:`laav.estimate_motions`), which fits whole trajectories.
     """
     if seq.is_complete:
         return
@@ -61,7 +61,7 @@ def require_complete(seq: Sequence) -> None:
         keep += f", though {n_full} are fewer than the {MIN_POINTS} points LAAV needs"
     raise IncompleteSequenceError(
         f"{seq.source}: the sequence has {pct_text} % missing entries ({seq.n_points} points x "
-        f"{seq.n_frames} frames); incomplete tracks are not supported yet by LAAV's stages: {keep}",
+        f"{seq.n_frames} frames); incomplete tracks are not supported yet by {what}: {keep}",
         missing_share=missing, n_complete=n_full)
 
 
@@ -82,7 +82,8 @@ ORIGIN_RATIO = 1e6
 TOLERANCE = 1e-9
 
 
-def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int = 3) -> None:
+def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int = 3, *,
+                     visible: np.ndarray | None = None) -> None:
     """Refuse inputs that cannot hold ``n_motions`` motions; warn about degenerate ones.
 
     Raises :class:`ValueError` when there are fewer distinct trajectories than motions;
@@ -94,9 +95,19 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int
     Reads the coordinates only: results never change.
     ``seq`` is a :class:`Sequence` or an (F, P, 2) array of finite coordinates; LAAV
     (:class:`laav.Pipeline`, :func:`laav.segment`) and plain Random Voting
-    (:func:`laav.random_voting`) both call it.
+    (:func:`laav.random_voting`) both call it. On incomplete data (an incomplete
+    :class:`Sequence`, or an array and its ``visible`` (F, P) mask) only the visible
+    entries are read: two trajectories are distinct when they differ in a coordinate or
+    in where they are visible; a point moves when it does over its visible frames; the
+    collinearity test looks at the frames where 3 or more points are visible.
     """
     src, pts = getattr(seq, "source", "<array>"), as_points(seq)
+    if isinstance(seq, Sequence) and not seq.is_complete:
+        visible = seq.visible
+    if visible is not None and not np.all(visible):
+        _check_degenerate_masked(src, pts, np.asarray(visible, dtype=bool), n_motions,
+                                 stacklevel + 1)
+        return
     P = pts.shape[1]
     warn = []
     if n_motions > 1 and P < MIN_POINTS * n_motions:
@@ -133,10 +144,61 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int
                       LaavWarning, stacklevel=stacklevel)
 
 
+def _check_degenerate_masked(src, pts, vis, n_motions, stacklevel) -> None:
+    """:func:`check_degenerate` on incomplete data (see there)."""
+    P = pts.shape[1]
+    warn = []
+    if n_motions > 1 and P < MIN_POINTS * n_motions:
+        warn.append(f"{P} points are too few for {n_motions} motions (the 8-point algorithm "
+                    f"fits each motion with at least {MIN_POINTS})")
+    seen = pts[vis]  # (n, 2)
+    spread = float(np.ptp(seen)) if seen.size else 0.0
+    tol = TOLERANCE * max(spread, np.abs(seen).max() if seen.size else 0.0)
+    hidden = np.where(vis[..., None], pts, np.inf)  # the same value wherever hidden
+    traj = np.concatenate([hidden.transpose(1, 0, 2).reshape(P, -1), vis.T], axis=1)
+    distinct = np.unique(traj, axis=0).shape[0] if spread > tol else 1
+    if distinct < n_motions:
+        raise ValueError(f"{src}: only {distinct} distinct trajector{'y' if distinct == 1 else 'ies'}"
+                         f" for {n_motions} motions")
+    hi = np.where(vis[..., None], pts, -np.inf).max(axis=0)  # (P, 2)
+    lo = np.where(vis[..., None], pts, np.inf).min(axis=0)
+    if (hi - lo).max() <= tol:
+        warn.append("no point moves (every trajectory is static)")
+    collinear = True
+    for f in range(pts.shape[0]):
+        x = pts[f, vis[f]]
+        if x.shape[0] < 3:
+            continue
+        sv = np.linalg.svd(x - x.mean(axis=0), compute_uv=False)
+        if sv[1] > TOLERANCE * sv[0] + tol:
+            collinear = False
+            break
+    if collinear:
+        warn.append("the points are collinear in every frame (epipolar geometry is degenerate)")
+    if not PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]:  # as check_degenerate
+        warn.append(f"the coordinates span {spread:.3g} px, outside {PIXEL_SPREAD[0]:g}-"
+                    f"{PIXEL_SPREAD[1]:g}: LaavParams lengths are in pixels and strengths in "
+                    f"1/px^2, so rescale the coordinates to pixels or, for coordinates s times "
+                    f"pixels, multiply {', '.join(PIXEL_PARAMS)} by s and "
+                    f"{', '.join(STRENGTH_PARAMS)} by 1/s^2 (LaavParams.scaled(s))")
+    far = float(np.abs(seen).max()) if seen.size else 0.0
+    if spread > 0 and far > ORIGIN_RATIO * spread:
+        warn.append(f"the points lie up to {far:.3g} px from the coordinates' origin, "
+                    f"{far / spread:.3g} times their spread, where rounding costs the "
+                    f"epipolar fits their precision: subtract an offset (the image corner, say)")
+    if warn:
+        import warnings
+
+        warnings.warn(f"{src}: " + "; ".join(warn) + " - the labels are probably meaningless",
+                      LaavWarning, stacklevel=stacklevel)
+
+
 def warn_single_label(seq, labels: np.ndarray, n_motions: int, stacklevel: int = 3) -> None:
-    """Warn (:class:`LaavWarning`) when ``labels`` give every point one motion though
-    ``n_motions`` > 1 were asked for (after LAAV or plain Random Voting)."""
-    if n_motions > 1 and np.unique(labels).size == 1:
+    """Warn (:class:`LaavWarning`) when ``labels`` give every labelled point one motion
+    though ``n_motions`` > 1 were asked for (after LAAV or plain Random Voting; points
+    left unlabelled, -1, do not count)."""
+    labels = np.asarray(labels)
+    if n_motions > 1 and np.unique(labels[labels >= 0]).size <= 1:
         import warnings
 
         warnings.warn(f"{getattr(seq, 'source', '<array>')}: every point got the same label "

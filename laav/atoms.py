@@ -30,6 +30,12 @@ Choices where the paper is vague (measured on Hopkins155):
   features by their *leave-one-out* residual (residual / (1 - leverage)): a feature of
   another motion far from the others otherwise drags the fit onto itself. An atom is
   kept only if its final least-squares model holds every member within the threshold.
+
+**Missing data** (a sequence with hidden entries): :class:`MaskedNeighbourhoods` compares
+two tracks over the frames both are seen in (at least ``min_overlap(F)`` of them), and
+each atom's maps start from a reference frame its members are seen in, fitted frame by
+frame on the members visible there (``_build_atoms_masked``; ``docs/ALGORITHM.md``,
+"Missing data").
 """
 
 from __future__ import annotations
@@ -39,10 +45,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._sequence import Sequence, as_points
-from .geometry import affine_residuals, fit_affine, fit_affine_leverage
+from .geometry import affine_residuals, fit_affine, fit_affine_leverage, fit_affine_masked
 from .params import LaavParams
 
-__all__ = ["Atoms", "Neighbourhoods", "build_atoms", "trajectory_distances"]
+__all__ = ["Atoms", "Neighbourhoods", "MaskedNeighbourhoods", "build_atoms",
+           "trajectory_distances"]
 
 _NEIGHBOURHOOD_FRAMES = 6
 
@@ -60,15 +67,24 @@ class Atoms:
     owner : ndarray of shape (P,), int64
         Atom that owns each feature (member within ``r1`` of that atom's seed), -1 if none.
     affines : ndarray of shape (N, F, 2, 3)
-        Each atom's affine map from frame 0 to every frame, fitted on its members.
+        Each atom's affine map from frame 0 (on incomplete data: from its reference frame,
+        ``ref_frames``) to every frame, fitted on its members.
     residuals : tuple of N ndarrays
-        RMS residual (px) over all frames of each member under its atom's affine model.
+        RMS residual (px) over all frames (on incomplete data: the frames it is seen in
+        where its atom has a map) of each member under its atom's affine model.
     unassigned : ndarray of shape (K,), int64
         Features that belong to no atom.
     r1, r2 : float
         The radii used (px).
     n_points : int
         P.
+    ref_frames : ndarray of shape (N,), int64, or None
+        Missing data only (None on complete data, where every map starts at frame 0):
+        the frame each atom's affine maps start from (``affines[i, f]`` maps atom i's
+        members from frame ``ref_frames[i]`` to frame f); every member is seen there.
+    seen : ndarray of shape (N, F), bool, or None
+        Missing data only: the frames each atom has a map for (at least 3 members
+        visible); ``affines`` is NaN elsewhere. None on complete data (every frame).
     """
 
     members: tuple
@@ -80,6 +96,8 @@ class Atoms:
     r1: float
     r2: float
     n_points: int
+    ref_frames: np.ndarray | None = None
+    seen: np.ndarray | None = None
 
     @property
     def n_atoms(self) -> int:
@@ -97,11 +115,23 @@ class Atoms:
             M[i, m] = True
         return M
 
-    def centers(self, points: np.ndarray) -> np.ndarray:
-        """Mean position of each atom's members in every frame, shape (F, N, 2)."""
+    def centers(self, points: np.ndarray, visible: np.ndarray | None = None) -> np.ndarray:
+        """Mean position of each atom's members in every frame, shape (F, N, 2).
+
+        With ``visible`` (F, P) (missing data) the mean of the members visible in each
+        frame, NaN where none is."""
         if self.n_atoms == 0:
             return np.zeros((points.shape[0], 0, 2))
-        return np.stack([points[:, m].mean(axis=1) for m in self.members], axis=1)
+        if visible is None:
+            return np.stack([points[:, m].mean(axis=1) for m in self.members], axis=1)
+        out = []
+        for m in self.members:
+            v = visible[:, m]  # (F, n)
+            k = v.sum(axis=1)[:, None]
+            tot = np.where(v[..., None], points[:, m], 0.0).sum(axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                out.append(np.where(k > 0, tot / k, np.nan))
+        return np.stack(out, axis=1)
 
 
 def _sampled_frames(F: int, n_frames: int = _NEIGHBOURHOOD_FRAMES) -> np.ndarray:
@@ -232,11 +262,97 @@ class _DenseNeighbourhoods:
         return indptr, cols.astype(np.int64), self.D[rows, cols]
 
 
-def as_neighbourhoods(points: np.ndarray, distances=None):
+#: Distance :class:`MaskedNeighbourhoods` gives two trajectories that share too few
+#: frames to be compared: farther than any radius at any scale of the coordinates, finite
+#: so that nearest-neighbour and spanning-tree searches still order them.
+FAR = 1e300
+
+
+class MaskedNeighbourhoods:
+    """:class:`Neighbourhoods` for missing data.
+
+    The distance of two trajectories is the largest distance between them over **every
+    frame both are visible in**, when they share at least :func:`laav._visibility.min_overlap`
+    frames, and :data:`FAR` otherwise (they are never neighbours). A pair within ``r`` in
+    all its shared frames is within ``r`` in at least that many single frames, so per-frame
+    KD-tree pair queries on the visible points, counted, propose a superset, and the exact
+    distance decides.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+        Hidden entries are never read.
+    visible : ndarray of shape (F, P), bool
+    """
+
+    def __init__(self, points: np.ndarray, visible: np.ndarray):
+        from ._visibility import filled, min_overlap
+
+        self.visible = np.asarray(visible, dtype=bool)
+        self.points = filled(points, self.visible)
+        F, P, _ = self.points.shape
+        self.n_points = P
+        self.min_overlap = min_overlap(F)
+        self._cache = None
+
+    def distances(self, i, j) -> np.ndarray:
+        """Distances of the pairs ``(i[k], j[k])``: the largest over their shared frames
+        (:data:`FAR` when they share fewer than ``min_overlap``)."""
+        i, j = np.broadcast_arrays(np.asarray(i), np.asarray(j))
+        out = np.empty(i.shape)
+        fi, fj = i.ravel(), j.ravel()
+        flat = out.reshape(-1)
+        step = max(1, (1 << 22) // max(self.points.shape[0], 1))
+        for s in range(0, fi.size, step):  # bounded (F, chunk) temporaries
+            a, b = fi[s:s + step], fj[s:s + step]
+            both = self.visible[:, a] & self.visible[:, b]  # (F, n)
+            d = self.points[:, a] - self.points[:, b]
+            d2 = np.where(both, (d * d).sum(-1), 0.0).max(axis=0, initial=0.0)
+            flat[s:s + step] = np.where(both.sum(axis=0) >= self.min_overlap, np.sqrt(d2), FAR)
+        return out
+
+    def _query(self, radius: float):
+        from scipy.spatial import cKDTree
+
+        P = self.n_points
+        r = float(radius)
+        keys = []
+        for f in range(self.points.shape[0]):
+            idx = np.flatnonzero(self.visible[f])
+            if idx.size < 2:
+                continue
+            # a slightly larger ball (relative margin): a superset, the exact test follows
+            pairs = cKDTree(self.points[f, idx]).query_pairs(r * (1.0 + 1e-9),
+                                                              output_type="ndarray")
+            if pairs.size:
+                a, b = idx[pairs[:, 0]], idx[pairs[:, 1]]
+                keys.append(np.minimum(a, b).astype(np.int64) * P + np.maximum(a, b))
+        keys = np.concatenate(keys) if keys else np.zeros(0, np.int64)
+        uniq, count = np.unique(keys, return_counts=True)
+        uniq = uniq[count >= self.min_overlap]  # within r in every shared frame: that often
+        i, j = uniq // P, uniq % P
+        d = self.distances(i, j)
+        keep = d <= r
+        i, j, d = i[keep], j[keep], d[keep]
+        allk = np.concatenate([np.arange(P, dtype=np.int64) * (P + 1), i * P + j, j * P + i])
+        alld = np.concatenate([np.zeros(P), d, d])
+        order = np.argsort(allk)
+        allk, alld = allk[order], alld[order]
+        self._cache = (r, np.bincount(allk // P, minlength=P), allk % P, alld)
+
+    within = Neighbourhoods.within
+
+    def row(self, i: int, others: np.ndarray) -> np.ndarray:
+        """Distances of trajectory ``i`` to ``others`` (1-D), as :meth:`distances`."""
+        return self.distances(np.full(others.shape, i), others)
+
+
+def as_neighbourhoods(points: np.ndarray, distances=None, visible: np.ndarray | None = None):
     """``distances`` (a :class:`Neighbourhoods`, a dense :func:`trajectory_distances`
-    matrix, or None: built from ``points``) as a :class:`Neighbourhoods`-like object."""
+    matrix, or None: built from ``points``, a :class:`MaskedNeighbourhoods` with
+    ``visible``) as a :class:`Neighbourhoods`-like object."""
     if distances is None:
-        return Neighbourhoods(points)
+        return Neighbourhoods(points) if visible is None else MaskedNeighbourhoods(points, visible)
     if isinstance(distances, np.ndarray):
         return _DenseNeighbourhoods(distances)
     return distances
@@ -345,9 +461,191 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     return mask
 
 
+def _masked_rms(A, defined, src, dst, vis, loo=None):
+    """RMS over frames of ``|A_f src - dst_f|``, each point over the frames it is visible
+    in and ``A`` defined; with ``loo`` (F, n) the per-frame residuals are divided by it
+    (leave-one-out). A (F, 2, 3) (NaN where not ``defined`` (F,)), src (n, 2), dst and
+    vis (F, n, 2) / (F, n). Returns (rms (n,), frames judged (n,))."""
+    A0 = np.where(defined[:, None, None], A, 0.0)
+    ex, ey = affine_residuals(A0, src, dst)  # (F, n)
+    e2 = ex * ex + ey * ey
+    if loo is not None:
+        e2 = e2 / (loo * loo)
+    ok = vis & defined[:, None]
+    cnt = ok.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt(np.where(ok, e2, 0.0).sum(axis=0) / cnt)
+    return rms, cnt
+
+
+def _ransac_affine_masked(points, vis, cand, seed_pos, ref, params, rng, min_frames):
+    """:func:`_ransac_affine` on incomplete data (``atom_frames="all"``).
+
+    ``points`` (F, P, 2) with hidden entries 0, ``vis`` (F, P); every candidate is visible
+    in the reference frame ``ref``, which the maps start from. A hypothesis (the seed and
+    two candidates, drawn as on complete data) has a map in the frames all three are seen
+    in; a candidate's residual is its RMS over the frames it is seen in where the map is
+    defined, and it is an inlier below ``affine_threshold`` when judged on at least 2
+    frames. The least-squares refits (:func:`laav.geometry.fit_affine_masked`) fit each
+    frame on the members visible there (no map with fewer than 3) and judge fitted points
+    by their per-frame leave-one-out residuals; a candidate needs ``min_frames`` judged
+    frames to be a member.
+    """
+    n = cand.size
+    src = points[ref, cand]
+    F = points.shape[0]
+    dst = points[:, cand]  # (F, n, 2), 0 where hidden
+    V = vis[:, cand]  # (F, n)
+    X = np.concatenate([src, np.ones((n, 1))], axis=1)
+    Y = np.transpose(dst, (1, 0, 2)).reshape(n, 2 * F)
+    others = np.arange(n - 1)
+    others[seed_pos:] += 1
+    B = params.ransac_hypotheses
+    if others.size * (others.size - 1) // 2 <= B:
+        iu = np.triu_indices(others.size, 1)
+        pairs = np.stack([others[iu[0]], others[iu[1]]], axis=1)
+    else:
+        a = rng.integers(0, others.size, size=(B, 2))
+        a[:, 1] = (a[:, 0] + 1 + rng.integers(0, others.size - 1, size=B)) % others.size
+        pairs = others[a]
+    samp = np.concatenate([np.full((pairs.shape[0], 1), seed_pos), pairs], axis=1)  # (B, 3)
+    S = src[samp]
+    e1 = S[:, 1] - S[:, 0]
+    e2 = S[:, 2] - S[:, 0]
+    area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    ok = area2 > 0.05 * params.r2 ** 2
+    if not ok.any():
+        return None
+    samp = samp[ok]
+    sol = np.linalg.solve(X[samp], Y[samp])  # (B, 3, 2F)
+    r = X @ sol - Y  # (B, n, 2F)
+    e2f = r[..., 0::2] ** 2 + r[..., 1::2] ** 2  # (B, n, F)
+    hyp = V.T[samp].all(axis=1)  # (B, F): frames all three sampled points are seen in
+    judged = hyp[:, None, :] & V.T[None]  # (B, n, F)
+    cnt = judged.sum(-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        res = np.sqrt(np.where(judged, e2f, 0.0).sum(-1) / cnt)  # (B, n)
+    inl = (cnt >= 2) & (res < params.affine_threshold)
+    tie = 1e-6 * (params.affine_threshold / LaavParams.affine_threshold)  # as _ransac_affine
+    best = int(np.argmax(inl.sum(1) - tie * (np.where(inl, res, 0.0).sum(1) / n)))
+    mask = inl[best]
+    for _ in range(4):
+        if mask.sum() < 4:
+            break
+        A, h, defined = fit_affine_masked(src[mask], dst[:, mask], V[:, mask])
+        if not defined.any():
+            return None
+        # leverage of every candidate under the fit (the fitted ones: leave-one-out)
+        loo = np.ones((F, n))
+        loo[:, mask] = np.maximum(1.0 - np.nan_to_num(h, nan=0.0), 1e-3)
+        rms, cnt = _masked_rms(A, defined, src, dst, V, loo)
+        new = (cnt >= min_frames) & (rms < params.affine_threshold)
+        if np.array_equal(new, mask):
+            break
+        mask = new
+    return mask
+
+
+def _build_atoms_masked(points, vis, params, rng, nb) -> Atoms:
+    """:func:`build_atoms` on incomplete data (see ``docs/ALGORITHM.md``, "Missing data").
+
+    As on complete data, with three changes: neighbourhoods are those of
+    :class:`MaskedNeighbourhoods` (within the radius over the frames both are seen in,
+    which must be at least ``min_overlap``); an atom's maps start from a **reference
+    frame**, the frame among the seed's where most of its free neighbours are seen (ties:
+    the earliest), and only neighbours seen there are candidates; RANSAC and the fits are
+    those of :func:`_ransac_affine_masked`. With ``atom_frames="pair"`` the frame pair is
+    drawn among the seed's visible frames, ``F // 3`` apart when it can be, and the
+    candidates are the neighbours seen in both.
+    """
+    from ._visibility import filled, min_overlap
+
+    F, P, _ = points.shape
+    pts = filled(points, vis)
+    m = min_overlap(F)
+    indptr, near, near_d = nb.within(params.r2)
+    pair_mode = params.atom_frames == "pair" and F > 2
+    gap = max(1, F // 3)
+    owner = np.full(P, -1, dtype=np.int64)
+    tried = np.zeros(P, dtype=bool)
+    members, seeds, affines, residuals, refs, seen = [], [], [], [], [], []
+    for s in rng.permutation(P):
+        if owner[s] >= 0 or tried[s]:
+            continue
+        tried[s] = True
+        row = slice(indptr[s], indptr[s + 1])
+        free = owner[near[row]] < 0
+        cand = near[row][free]
+        cand_d = near_d[row][free]
+        if cand.size < params.atom_min_size:
+            continue
+        if pair_mode:
+            fs = np.flatnonzero(vis[:, s])
+            far = fs[fs <= fs[-1] - gap]
+            g = gap
+            if far.size == 0:  # the seed is not seen F // 3 apart: its widest pair
+                far, g = fs[:1], fs[-1] - fs[0]
+            left = int(far[rng.integers(far.size)])
+            rights = fs[fs >= left + g]
+            right = int(rights[rng.integers(rights.size)])
+            keep = vis[left, cand] & vis[right, cand]
+            cand, cand_d = cand[keep], cand_d[keep]
+            if cand.size < params.atom_min_size:
+                continue
+            seed_pos = int(np.searchsorted(cand, s))
+            mask = _ransac_affine(pts[[left, right]], cand, seed_pos, params, rng, skip_first=True)
+            ref = left
+        else:
+            counts = vis[:, cand].sum(axis=1) * vis[:, s]  # candidates seen in each seed frame
+            ref = int(np.argmax(counts))
+            keep = vis[ref, cand]
+            cand, cand_d = cand[keep], cand_d[keep]
+            if cand.size < params.atom_min_size:
+                continue
+            seed_pos = int(np.searchsorted(cand, s))
+            mask = _ransac_affine_masked(pts, vis, cand, seed_pos, ref, params, rng, m)
+        if mask is None or not mask[seed_pos] or mask.sum() < params.atom_min_size:
+            continue
+        mem = cand[mask]
+        A, _, defined = fit_affine_masked(pts[ref, mem], pts[:, mem], vis[:, mem])
+        res, cnt = _masked_rms(A, defined, pts[ref, mem], pts[:, mem], vis[:, mem])
+        if not pair_mode and ((res >= params.affine_threshold).any() or (cnt < m).any()):
+            continue  # the final model does not hold all its members: no atom here
+        if not (np.abs(np.linalg.det(A[defined][:, :, :2])) > 1e-9).all():
+            continue  # a degenerate map (members on a line): the graph must invert it
+        atom = len(members)
+        members.append(mem)
+        seeds.append(s)
+        affines.append(A)
+        residuals.append(res)
+        refs.append(ref)
+        seen.append(defined)
+        inner = mem[cand_d[mask] <= params.r1]
+        owner[inner] = atom
+        tried[inner] = True
+    covered = np.zeros(P, dtype=bool)
+    for mm in members:
+        covered[mm] = True
+    N = len(members)
+    return Atoms(
+        members=tuple(members),
+        seeds=np.asarray(seeds, dtype=np.int64),
+        owner=owner,
+        affines=np.asarray(affines).reshape(N, F, 2, 3),
+        residuals=tuple(residuals),
+        unassigned=np.flatnonzero(~covered).astype(np.int64),
+        r1=float(params.r1),
+        r2=float(params.r2),
+        n_points=P,
+        ref_frames=np.asarray(refs, dtype=np.int64),
+        seen=np.asarray(seen, dtype=bool).reshape(N, F),
+    )
+
+
 def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
                 rng: np.random.Generator | None = None,
-                distances: Neighbourhoods | np.ndarray | None = None) -> Atoms:
+                distances: Neighbourhoods | np.ndarray | None = None, *,
+                visible: np.ndarray | None = None) -> Atoms:
     """Group neighbouring trajectories into overlapping locally affine atoms.
 
     Parameters
@@ -359,15 +657,26 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
         Seed order and RANSAC samples.
     distances : Neighbourhoods, optional
         Precomputed :class:`Neighbourhoods` of ``seq`` (reused when only the radii change);
-        a dense :func:`trajectory_distances` matrix is accepted too.
+        a dense :func:`trajectory_distances` matrix is accepted too. On incomplete data a
+        :class:`MaskedNeighbourhoods`.
+    visible : ndarray of shape (F, P), bool, optional
+        For an array ``seq`` with missing entries (a :class:`Sequence` carries its own).
+        When some entry is hidden the missing-data variant runs (``docs/ALGORITHM.md``,
+        "Missing data"); hidden coordinates are never read.
 
     Returns
     -------
     Atoms
     """
+    from ._visibility import visibility
+
+    vis = visibility(seq, visible)
     points = as_points(seq)
     params = LaavParams() if params is None else params
     rng = np.random.default_rng(0) if rng is None else rng
+    if vis is not None:
+        return _build_atoms_masked(points, vis, params, rng,
+                                   as_neighbourhoods(points, distances, vis))
     F, P, _ = points.shape
     indptr, near, near_d = as_neighbourhoods(points, distances).within(params.r2)
     pair_mode = params.atom_frames == "pair" and F > 2

@@ -151,8 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_complete_only(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--complete-only", action="store_true",
-                        help="keep only the tracks visible in every frame (LAAV's stages do not "
-                             "handle missing entries yet); output rows keep the file's point numbers")
+                        help="keep only the tracks visible in every frame (without it, tracks with "
+                             "missing entries are segmented too, those seen too briefly labelled "
+                             "-1); output rows keep the file's point numbers")
 
 
 def _add_convert(sub) -> None:
@@ -306,10 +307,8 @@ def _cmd_track(args) -> int:
 
 def _cmd_segment(args) -> int:
     from . import (
-        SequenceError,
         misclassification_rate,
         random_voting,
-        require_complete,
         safe_name,
         segment,
     )
@@ -317,10 +316,6 @@ def _cmd_segment(args) -> int:
 
     params = params_from_assignments(args.param, args.preset)
     seq, kept = _load_for_command(args)
-    try:
-        require_complete(seq)
-    except SequenceError as exc:
-        raise _UsageError(str(exc)) from None
     C = args.motions if args.motions is not None else seq.n_motions
     if C is None:
         raise _UsageError(f"{args.file}: no ground-truth labels in the file; give the number "
@@ -354,6 +349,10 @@ def _cmd_segment(args) -> int:
     except OSError as exc:
         raise _UsageError(f"{out}: cannot write labels ({exc.strerror or exc})") from None
     print(f"labels: {out}")
+    unlabelled = int((labels < 0).sum())
+    if unlabelled:
+        print(f"unlabelled: {unlabelled} of {len(labels)} points (label -1: seen too briefly to "
+              "decide; they count as errors below)")
     if seq.labels is not None:
         err = 100.0 * misclassification_rate(seq.labels, labels)
         print(f"misclassification: {err:.2f} % ({seq.name}, {seq.n_points} points, "

@@ -14,6 +14,10 @@ with ``m_jk`` the motion difference of the models' mean trajectories (largest fr
 frame velocity difference over the sequence, divided by the spread of all velocities at
 that frame, as in Keuper et al.). The diagonal is 1. Spectral clustering
 (scikit-learn, ``assign_labels="cluster_qr"``) of Z gives C groups.
+
+**Missing data** (``docs/ALGORITHM.md``, "Missing data"): frame pairs come from
+:func:`laav._visibility.pair_pool`; the pairwise votes and pooled voting use only the
+features seen in both frames of a pair; the coding merge falls back to this epipolar one.
 """
 
 from __future__ import annotations
@@ -167,6 +171,87 @@ def point_labels_from_atoms(atoms: Atoms, atom_labels: np.ndarray) -> np.ndarray
     return out
 
 
+def _motion_distance_masked(points: np.ndarray, vis: np.ndarray, groups: list,
+                            floor: float = 1e-3) -> np.ndarray:
+    """:func:`_motion_distance` on incomplete data: velocities of the points visible in
+    both frames of a step; a model's mean trajectory over its members seen in each frame;
+    the largest difference over the steps where both models have one."""
+    v = vis[1:] & vis[:-1]  # (F-1, P)
+    vel = np.where(v[..., None], np.diff(points, axis=0), 0.0)
+    k = np.maximum(v.sum(axis=1), 1)[:, None]
+    mean = vel.sum(axis=1) / k
+    var = (np.where(v[..., None], (vel - mean[:, None]) ** 2, 0.0).sum(axis=1) / k).sum(-1)
+    sigma = np.sqrt(var) + floor  # (F-1,)
+    means = []
+    for g in groups:
+        vg = vis[:, g]
+        n = vg.sum(axis=1)[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = np.where(vg[..., None], points[:, g], 0.0).sum(axis=1) / n  # (F, 2), NaN unseen
+        means.append(np.diff(c, axis=0))
+    means = np.stack(means)  # (n, F-1, 2)
+    diff = np.linalg.norm(means[:, None] - means[None, :], axis=-1) / sigma
+    if not diff.shape[-1]:
+        return np.zeros(diff.shape[:2])
+    return np.nan_to_num(np.fmax.reduce(diff, axis=-1), nan=0.0)
+
+
+def _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj, kk, S, lam, rng, n):
+    """The paper's pairwise votes on incomplete data.
+
+    For each frame pair, an atom takes part when at least 3 of its members are visible in
+    both frames, and its ``_PER_ATOM`` features are drawn among those; a sample draws two
+    such atoms from each model, and the mean Sampson distances of each model are taken as
+    on complete data. A model pair with no taking-part atom in a model for a frame pair
+    has no sample there. Returns (vote (pairs,), distance (pairs,), VoteSamples), the
+    first two NaN where a model pair has no sample at all (and its VoteSamples entry
+    empty); the sample kept is the one of median distance among the valid ones.
+    """
+    K = pairs.shape[0]
+    n_pairs = jj.size
+    idx = np.zeros((n_pairs, K, S, 4 * _PER_ATOM), dtype=np.int64)
+    valid = np.zeros((n_pairs, K, S), dtype=bool)
+    for k, (fl, fr) in enumerate(pairs):
+        both = vis[fl] & vis[fr]
+        table = np.full((atoms.n_atoms, _PER_ATOM), -1, dtype=np.int64)
+        for i, m in enumerate(atoms.members):
+            vm = m[both[m]]
+            if vm.size >= 3:
+                table[i] = rng.choice(vm, _PER_ATOM, replace=vm.size < _PER_ATOM)
+        ok_atom = table[:, 0] >= 0
+        for p, (j, kk_) in enumerate(zip(jj, kk)):
+            aj = model_atoms[j][ok_atom[model_atoms[j]]]
+            ak = model_atoms[kk_][ok_atom[model_atoms[kk_]]]
+            if aj.size == 0 or ak.size == 0:
+                continue
+            pick = np.concatenate([rng.choice(aj, size=(S, 2)), rng.choice(ak, size=(S, 2))], axis=1)
+            idx[p, k] = table[pick].reshape(S, 4 * _PER_ATOM)
+            valid[p, k] = True
+    fl = np.broadcast_to(pairs[None, :, None, 0], idx.shape[:3])
+    fr = np.broadcast_to(pairs[None, :, None, 1], idx.shape[:3])
+    x1 = points[fl[..., None], idx]
+    x2 = points[fr[..., None], idx]
+    Fm = fit_fundamental(x1, x2)
+    d = sampson_distance(Fm, x1, x2)
+    half = 2 * _PER_ATOM
+    depi = np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))  # (pairs, K, S)
+    cnt = valid.sum(axis=(1, 2))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        vote = np.where(valid, np.exp(-lam * depi), 0.0).sum(axis=(1, 2)) / cnt
+        dist = np.where(valid, depi, 0.0).sum(axis=(1, 2)) / cnt
+    samples = VoteSamples.empty(n, 4 * _PER_ATOM)
+    for p in np.flatnonzero(cnt > 0):
+        ks, ss = np.nonzero(valid[p])
+        order = np.argsort(depi[p, ks, ss], kind="stable")
+        k, s_ = ks[order[order.size // 2]], ss[order[order.size // 2]]
+        for a, b, feats in ((jj[p], kk[p], idx[p, k, s_]), (kk[p], jj[p], np.roll(idx[p, k, s_], half))):
+            samples.frames[a, b] = pairs[k]
+            samples.fundamental[a, b] = Fm[p, k, s_]
+            samples.points[a, b] = feats
+            samples.distance[a, b] = depi[p, k, s_]
+    return np.where(cnt > 0, vote, np.nan), np.where(cnt > 0, dist, np.nan), samples
+
+
 def _motion_distance(points: np.ndarray, groups: list, floor: float = 1e-3) -> np.ndarray:
     """Largest velocity difference of the groups' mean trajectories over the frames, in
     units of the spread of all velocities at that frame (plus ``floor``, px per frame, so
@@ -180,7 +265,8 @@ def _motion_distance(points: np.ndarray, groups: list, floor: float = 1e-3) -> n
 
 def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_motions: int,
                   params: LaavParams, rng: np.random.Generator, n_trials: int = 8,
-                  max_iter: int = 80, patience: int = 10) -> np.ndarray:
+                  max_iter: int = 80, patience: int = 10,
+                  visible: np.ndarray | None = None) -> np.ndarray:
     """Random Voting in which every fine model votes as one unit.
 
     Each trial starts from a random assignment of the fine models to ``n_motions``
@@ -203,6 +289,12 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
         Uses ``lam``.
     rng : numpy.random.Generator
     n_trials, max_iter, patience : int
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data: each iteration's frame pair is drawn from the pairs of
+        :func:`laav._visibility.pair_pool` over the atom features (8 per motion seen in
+        both frames), only features seen in both frames are sampled and vote
+        (:func:`laav.rv.vote`), and a model none of whose features has voted yet keeps
+        its motion. Raises ValueError (from the pool) when no frame pair qualifies.
 
     Returns
     -------
@@ -212,6 +304,9 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
     from .voting import vote
 
     cov = np.flatnonzero(fine_labels >= 0)
+    if visible is not None:
+        return _pooled_voting_masked(points, visible, fine_labels, cov, n_models, n_motions,
+                                     params, rng, n_trials, max_iter, patience)
     pts = points[:, cov]
     f = fine_labels[cov]
     F = points.shape[0]
@@ -237,9 +332,39 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
     return out
 
 
+def _pooled_voting_masked(points, visible, fine_labels, cov, n_models, n_motions, params, rng,
+                          n_trials, max_iter, patience):
+    """:func:`pooled_voting` on incomplete data (see there)."""
+    from ._visibility import filled, pair_pool
+    from .voting import vote
+
+    vis = visible[:, cov]
+    pts = filled(points[:, cov], vis)
+    pool = pair_pool(vis, 8 * n_motions)
+    f = fine_labels[cov]
+    onehot = np.zeros((n_models, cov.size))
+    onehot[f, np.arange(cov.size)] = 1.0
+    onehot /= np.maximum(onehot.sum(1, keepdims=True), 1.0)
+    ml = np.stack([rng.permutation(np.arange(n_models) % n_motions) for _ in range(n_trials)])
+    hv = np.zeros((n_trials, cov.size, n_motions))
+    still = np.zeros(n_trials, dtype=np.int64)
+    for _ in range(max_iter):
+        left, right = pool[int(rng.integers(pool.shape[0]))]
+        hv += vote(pts, ml[:, f], hv, (left, right), params.lam, 8, rng, visible=vis)
+        mv = onehot @ hv  # (trials, models, motions)
+        new = np.where(np.abs(mv).sum(-1) > 0, mv.argmax(-1), ml)  # no vote yet: stays
+        still = np.where((new == ml).all(axis=1), still + 1, 0)
+        ml = new
+        hv *= _POOLED_ALPHA
+        if (still >= patience).all():
+            break
+    return ml
+
+
 def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n_motions: int,
                  params: LaavParams | None = None,
-                 rng: np.random.Generator | None = None) -> Coarse:
+                 rng: np.random.Generator | None = None, *,
+                 visible: np.ndarray | None = None) -> Coarse:
     """Merge the fine models of the multicut into ``n_motions`` motions.
 
     Parameters
@@ -252,23 +377,56 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     params : LaavParams
         Uses ``lam``, ``coarse_frames``, ``coarse_samples``, ``motion_weight``.
     rng : numpy.random.Generator
+    visible : ndarray of shape (F, P), bool, optional
+        For an array ``seq`` with missing entries (a :class:`Sequence` carries its own).
+        On incomplete data (``docs/ALGORITHM.md``, "Missing data"): the frame pairs are
+        drawn from :func:`laav._visibility.pair_pool`; the pairwise votes use, per frame
+        pair, the atoms with 3 or more members seen in both frames and only those members
+        (a model pair without any sample gets no pairwise term: Z is then the
+        co-association alone there, ``pairwise_vote`` and ``epipolar_distance`` NaN);
+        pooled voting is :func:`pooled_voting` with the
+        mask; the motion term uses the frames where the models are seen. The coding
+        length needs whole trajectories: ``merge_cost`` is NaN and
+        ``coarse_merge="coding"`` falls back to the epipolar merge, with a
+        :class:`laav.LaavWarning` (``method`` then says ``"epipolar"``).
 
     Returns
     -------
     Coarse
     """
+    from ._visibility import filled, pair_pool, visibility
+
+    vis = visibility(seq, visible)
     points = as_points(seq)
     params = LaavParams() if params is None else params
     rng = np.random.default_rng(0) if rng is None else rng
     F, P, _ = points.shape
     n = multicut.n_models
     fine_pts = point_labels_from_atoms(atoms, multicut.atom_labels)
-    pairs = frame_pairs(F, params.coarse_frames, rng)
+    if vis is None:
+        pairs = frame_pairs(F, params.coarse_frames, rng)
+    else:
+        points = filled(points, vis)
+        pool = pair_pool(vis, 8 * max(n_motions, 1))
+        pairs = pool[rng.integers(0, pool.shape[0], size=params.coarse_frames)]
+        flip = rng.random(params.coarse_frames) < 0.5
+        pairs[flip] = pairs[flip][:, ::-1]
     widest = np.array([0, F - 1], dtype=np.int64)
+    coding = params.coarse_merge == "coding"
+    if coding and vis is not None:
+        import warnings
+
+        from ._sequence import LaavWarning
+
+        warnings.warn(f"{getattr(seq, 'source', '<array>')}: coarse_merge='coding' needs "
+                      "complete trajectories; the epipolar merge was used on this incomplete "
+                      "sequence", LaavWarning, stacklevel=2)
+        coding = False
+    method = "coding" if coding else "epipolar"
     if n == 0:
         e = np.zeros((0, 0))
         return Coarse(np.zeros(0, np.int64), e, e, e, np.zeros(0, np.int64), fine_pts,
-                      fine_pts.copy(), pairs, widest, params.coarse_merge, e,
+                      fine_pts.copy(), pairs, widest, method, e,
                       vote_samples=VoteSamples.empty(0, 4 * _PER_ATOM), pairwise_vote=e,
                       coassociation=e)
 
@@ -280,7 +438,11 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     jj, kk = np.triu_indices(n, 1)
     K, S = pairs.shape[0], params.coarse_samples
     D = np.zeros((n, n))
-    if jj.size:
+    if jj.size and vis is not None:
+        vote, dist, samples = _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj,
+                                                     kk, S, params.lam, rng, n)
+        D[jj, kk] = D[kk, jj] = dist
+    elif jj.size:
         pick = np.empty((jj.size, K, S, 4), dtype=np.int64)
         for p, (j, k) in enumerate(zip(jj, kk)):
             pick[p, :, :, :2] = rng.choice(model_atoms[j], size=(K, S, 2))
@@ -302,22 +464,40 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     else:
         vote = np.zeros(0)
         samples = VoteSamples.empty(n, 4 * _PER_ATOM)
-    if params.motion_weight > 0:  # floor: 1e-3 px at the default lam, in units of 1 / sqrt(lam)
-        Mdist = _motion_distance(points, groups, 1e-3 * np.sqrt(LaavParams.lam / params.lam))
-    else:
+    floor = 1e-3 * np.sqrt(LaavParams.lam / params.lam)  # 1e-3 px at the default lam
+    if params.motion_weight <= 0:
         Mdist = np.zeros((n, n))
+    elif vis is None:
+        Mdist = _motion_distance(points, groups, floor)
+    else:
+        Mdist = _motion_distance_masked(points, vis, groups, floor)
     pairwise = np.eye(n)
     pairwise[jj, kk] = pairwise[kk, jj] = vote
-    coding = params.coarse_merge == "coding"
-    stats = model_stats(points, fine_pts, n)
-    gain = merge_cost(stats, params.coding_eps)
-    if n > n_motions and params.pooled_trials > 0 and not coding:
+    if vis is None:
+        stats = model_stats(points, fine_pts, n)
+        gain = merge_cost(stats, params.coding_eps)
+    else:  # the coding length needs whole trajectories (see the docstring)
+        gain = np.full((n, n), np.nan)
+        np.fill_diagonal(gain, 0.0)
+    pooled = n > n_motions and params.pooled_trials > 0 and not coding
+    if pooled and vis is not None:
+        try:
+            assign = pooled_voting(points, fine_pts, n, n_motions, params, rng,
+                                   params.pooled_trials, visible=vis)
+        except ValueError:  # no frame pair shares enough atom features: pairwise votes only
+            pooled = False
+    elif pooled:
         assign = pooled_voting(points, fine_pts, n, n_motions, params, rng, params.pooled_trials)
+    if pooled:
         coassoc = (assign[:, :, None] == assign[:, None, :]).mean(axis=0)
     else:
         coassoc = np.eye(n)
     w = params.pairwise_weight if params.pooled_trials > 0 else 1.0
+    if vis is not None and not pooled:
+        w = 1.0
     Z = (1.0 - w) * coassoc + w * pairwise
+    if vis is not None:  # no pairwise sample: the co-association alone (0 without it)
+        Z = np.where(np.isnan(pairwise), coassoc if pooled else 0.0, Z)
     Z = Z * np.exp(-params.motion_weight * Mdist)
     np.fill_diagonal(Z, 1.0)
 
@@ -350,7 +530,7 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         point_labels=coarse_pts,
         frame_pairs=pairs,
         pair_frames=widest,
-        method=params.coarse_merge,
+        method=method,
         merge_cost=gain,
         coding_length=length,
         vote_samples=samples,

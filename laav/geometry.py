@@ -14,6 +14,7 @@ __all__ = [
     "sampson_distance",
     "fit_affine",
     "fit_affine_leverage",
+    "fit_affine_masked",
     "apply_affine",
     "affine_residuals",
     "epipolar_lines",
@@ -57,7 +58,18 @@ def hartley_normalization(x: np.ndarray) -> np.ndarray:
     return _similarity(*_centre_scale(x))
 
 
-def fit_fundamental(x1: np.ndarray, x2: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+def _centre_scale_masked(x: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_centre_scale` over the points with ``mask`` (..., n) True only."""
+    m = mask.astype(np.float64)
+    n = np.maximum(np.add.reduce(m, axis=-1), 1.0)
+    c = np.add.reduce(x * m[..., None], axis=-2) / n[..., None]
+    diff = x - c[..., None, :]
+    d = np.sqrt(np.add.reduce(np.add.reduce(diff * diff, axis=-1) * m, axis=-1) / n)
+    return c, np.sqrt(2.0) / np.maximum(d, 1e-12)
+
+
+def fit_fundamental(x1: np.ndarray, x2: np.ndarray, weights: np.ndarray | None = None,
+                    mask: np.ndarray | None = None) -> np.ndarray:
     """Normalised 8-point algorithm (Hartley), batched, with rank-2 enforcement.
 
     Parameters
@@ -66,6 +78,10 @@ def fit_fundamental(x1: np.ndarray, x2: np.ndarray, weights: np.ndarray | None =
         Corresponding pixel coordinates in the first and second view, n >= 8.
     weights : ndarray of shape (..., n), optional
         Non-negative weights of the equations (weighted least squares).
+    mask : ndarray of shape (..., n), bool, optional
+        Missing data: only the correspondences with ``mask`` True are used, for the
+        Hartley normalisation too (the others must hold finite values, e.g. 0; they are
+        never read otherwise). None (default): all.
 
     Returns
     -------
@@ -79,7 +95,12 @@ def fit_fundamental(x1: np.ndarray, x2: np.ndarray, weights: np.ndarray | None =
     if x1.shape != x2.shape:
         x1, x2 = np.broadcast_arrays(x1, x2)
     xs = np.stack([x1, x2])  # (2, ..., n, 2)
-    c, s = _centre_scale(xs)
+    if mask is None:
+        c, s = _centre_scale(xs)
+    else:
+        mask = np.broadcast_to(mask, x1.shape[:-1])
+        c, s = _centre_scale_masked(xs, np.stack([mask, mask]))
+        weights = mask if weights is None else np.where(mask, weights, 0.0)
     ab = xs * s[..., None, None] + (-s[..., None] * c)[..., None, :]  # T x, written out
     h = np.concatenate([ab, np.ones(ab.shape[:-1] + (1,))], axis=-1)  # homogeneous (2, ..., n, 3)
     # rows of the design: (bx ax, bx ay, bx, by ax, by ay, by, ax, ay, 1)
@@ -189,6 +210,59 @@ def fit_affine_leverage(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, n
     out[..., :2] = lin
     out[..., 2] = sol[..., 2] - lin @ c
     return out, np.einsum("ik,ki->i", X, P)
+
+
+def fit_affine_masked(src: np.ndarray, dst: np.ndarray, weights: np.ndarray,
+                      min_points: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`fit_affine_leverage` for missing data: each frame on its own points.
+
+    The map to frame ``f`` is fitted by least squares on the points with ``weights[f]``
+    True only (the same centring and scaling of ``src`` as :func:`fit_affine_leverage`,
+    from all ``n`` points); a frame with fewer than ``min_points`` of them has no map.
+
+    Parameters
+    ----------
+    src : ndarray of shape (n, 2)
+        Coordinates in the reference frame (every point must have them).
+    dst : ndarray of shape (F, n, 2)
+        Coordinates in every frame; entries with ``weights`` False are never read (give
+        finite values there, e.g. 0, so that the products stay finite).
+    weights : ndarray of shape (F, n), bool
+        Which points each frame's map is fitted on (visible and wanted).
+    min_points : int
+
+    Returns
+    -------
+    A : ndarray of shape (F, 2, 3)
+        NaN in the frames without a map.
+    h : ndarray of shape (F, n)
+        Leverage of each point in each frame's fit (the hat matrix's diagonal for a point
+        fitted there; for the others, what it would add); NaN in frames without a map.
+    defined : ndarray of shape (F,), bool
+        The frames with a map.
+    """
+    n = src.shape[0]
+    c = np.add.reduce(src, axis=0) / n
+    d = np.sqrt(np.add.reduce(((src - c) ** 2).sum(-1)) / n)
+    s = 1.0 / max(d, 1e-12)
+    X = np.hstack([(src - c) * s, np.ones((n, 1))])  # (n, 3)
+    w = np.asarray(weights, dtype=np.float64)  # (F, n)
+    G = np.einsum("fn,ni,nj->fij", w, X, X)  # (F, 3, 3)
+    tr = np.trace(G, axis1=1, axis2=2)
+    G[:, np.arange(3), np.arange(3)] += 1e-12 * (tr + 1.0)[:, None]
+    defined = w.sum(axis=1) >= min_points
+    Ginv = np.linalg.inv(G)
+    dst = np.where(w[..., None] > 0, dst, 0.0)
+    rhs = np.einsum("fn,ni,fnd->fid", w, X, dst)  # (F, 3, 2)
+    sol = np.swapaxes(Ginv @ rhs, 1, 2)  # (F, 2, 3), normalised src
+    lin = sol[..., :2] * s
+    out = np.empty_like(sol)
+    out[..., :2] = lin
+    out[..., 2] = sol[..., 2] - lin @ c
+    h = np.einsum("ni,fij,nj->fn", X, Ginv, X)
+    out[~defined] = np.nan
+    h[~defined] = np.nan
+    return out, h, defined
 
 
 def apply_affine(A: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -20,6 +20,10 @@ with ``g = max(1, F // 3)``, then symmetrised as the larger of a->b and b->a.
 (``s = edge_scale``), the multicut cost is the log-odds minus a cut prior, as in Keuper
 et al. (ICCV 2015): ``w = log(p / (1 - p)) - cut_prior = 2 log(s / err) - cut_prior``.
 Positive costs pull atoms together, negative ones push them apart.
+
+**Missing data**: :func:`forward_backward_error_masked` (every pair ``(f, f + g)`` both
+atoms have maps in, each member where it is seen in both frames); an edge without such a
+pair carries no evidence: error NaN, cost 0.
 """
 
 from __future__ import annotations
@@ -29,11 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._sequence import Sequence, as_points
-from .atoms import Atoms, Neighbourhoods, _DenseNeighbourhoods, as_neighbourhoods
+from .atoms import Atoms, MaskedNeighbourhoods, Neighbourhoods, _DenseNeighbourhoods, as_neighbourhoods
 from .geometry import affine_residuals
 from .params import LaavParams
 
-__all__ = ["AtomGraph", "atom_graph", "forward_backward_error"]
+__all__ = ["AtomGraph", "atom_graph", "forward_backward_error", "forward_backward_error_masked"]
 
 _GRAPH_PAIRS = 8  # frame pairs (f, f + g) the forward-backward error is averaged over
 
@@ -47,9 +51,10 @@ class AtomGraph:
     edges : ndarray of shape (E, 2), int64
         Atom index pairs ``(i, j)`` with ``i < j``.
     errors : ndarray of shape (E,)
-        Symmetric forward-backward affine error of each edge (px).
+        Symmetric forward-backward affine error of each edge (px); on incomplete data NaN
+        for an edge whose atoms share too few frames.
     costs : ndarray of shape (E,)
-        Signed multicut cost (positive = join, negative = cut).
+        Signed multicut cost (positive = join, negative = cut); 0 where ``errors`` is NaN.
     overlap : ndarray of shape (E,), int64
         Features the two atoms share.
     positions : ndarray of shape (F, N, 2)
@@ -141,6 +146,81 @@ def forward_backward_error(points: np.ndarray, atoms: Atoms, edges: np.ndarray) 
     return out
 
 
+def forward_backward_error_masked(points: np.ndarray, visible: np.ndarray, atoms: Atoms,
+                                  edges: np.ndarray) -> np.ndarray:
+    """:func:`forward_backward_error` on incomplete data.
+
+    The frame pairs are **all** ``(f, f + g)``, ``g = max(1, F // 3)`` (not 8 of them, so
+    that atoms seen over part of the sequence still share some); for the edge (a, b) a
+    pair counts when **both** atoms have a map in both its frames (``atoms.seen``), and
+    in it a member of b (of a) counts when it is visible in both frames. The error of a
+    direction is the mean over those (pair, member) entries; the edge's the larger of
+    the two directions; NaN when a direction has no entry (the atoms share too few
+    frames: no evidence).
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+        Hidden entries are never read.
+    visible : ndarray of shape (F, P), bool
+    atoms : Atoms
+        With ``seen`` (built on the incomplete data).
+    edges : ndarray of shape (E, 2)
+
+    Returns
+    -------
+    errors : ndarray of shape (E,)
+    """
+    from ._visibility import filled
+
+    F = points.shape[0]
+    E = edges.shape[0]
+    if E == 0:
+        return np.zeros(0)
+    pts = filled(points, visible)
+    g = max(1, F // 3)
+    left = np.arange(F - g, dtype=np.int64)
+    right = left + g
+    A = np.nan_to_num(atoms.affines, nan=0.0)
+    H = _homogeneous(A)  # (N, F, 3, 3)
+    H[~atoms.seen] = np.eye(3)  # frames without a map: never used (masked below)
+    Hinv = np.linalg.inv(H)
+    fwd = H[:, right] @ Hinv[:, left]  # (N, K, 3, 3)
+    bwd = np.linalg.inv(fwd)
+    both_seen = atoms.seen[:, left] & atoms.seen[:, right]  # (N, K)
+    sizes = np.array([m.size for m in atoms.members])
+    mmax = int(sizes.max())
+    pad = np.zeros((atoms.n_atoms, mmax), dtype=np.int64)
+    mask = np.zeros((atoms.n_atoms, mmax), dtype=bool)
+    for i, m in enumerate(atoms.members):
+        pad[i, : m.size] = m
+        mask[i, : m.size] = True
+    pl, pr = pts[left], pts[right]  # (K, P, 2)
+    vlr = visible[left] & visible[right]  # (K, P)
+
+    def directed(a, b):
+        idx = pad[b]  # (E, m)
+        xl = pl[:, idx]  # (K, E, m, 2)
+        xr = pr[:, idx]
+        Tf = np.transpose(fwd[a], (1, 0, 2, 3))  # (K, E, 3, 3)
+        Tb = np.transpose(bwd[a], (1, 0, 2, 3))
+        e = 0.5 * (_transfer_error(Tf, xl, xr) + _transfer_error(Tb, xr, xl))  # (K, E, m)
+        ok = (vlr[:, idx] & mask[b][None]
+              & (both_seen[a] & both_seen[b]).T[:, :, None])  # (K, E, m)
+        n = ok.sum(axis=(0, 2))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(n > 0, np.where(ok, e, 0.0).sum(axis=(0, 2)) / n, np.nan)
+
+    out = np.empty(E)
+    chunk = int(np.clip(2**17 // max(left.size * mmax, 1), 16, 256))
+    for s in range(0, E, chunk):
+        a = edges[s : s + chunk, 0]
+        b = edges[s : s + chunk, 1]
+        ab, ba = directed(a, b), directed(b, a)
+        out[s : s + chunk] = np.maximum(ab, ba)  # NaN when either direction has no entry
+    return out
+
+
 def _transfer_error(T: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """``|T x - y|`` per point; T (K, E, 3, 3) affine maps, x and y (K, E, m, 2)."""
     dx, dy = affine_residuals(T, x, y)
@@ -166,6 +246,9 @@ def _seed_graph(nb, seeds: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(nb, _DenseNeighbourhoods):
         def row_of(u):
             return nb.D[seeds[u], seeds]
+    elif isinstance(nb, MaskedNeighbourhoods):  # missing data: FAR for seeds sharing too few frames
+        def row_of(u):
+            return nb.row(seeds[u], seeds)
     else:
         # per coordinate rows (2K, N): a row is a few contiguous vector operations
         Xt = np.ascontiguousarray(nb.coords[seeds].T)
@@ -198,7 +281,8 @@ def _seed_graph(nb, seeds: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | None = None,
-               distances: Neighbourhoods | np.ndarray | None = None) -> AtomGraph:
+               distances: Neighbourhoods | np.ndarray | None = None, *,
+               visible: np.ndarray | None = None) -> AtomGraph:
     """Build the atom graph with forward-backward edge errors and signed costs.
 
     Parameters
@@ -209,16 +293,26 @@ def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | No
         Uses ``graph_neighbors``, ``edge_scale``, ``cut_prior``.
     distances : Neighbourhoods, optional
         Precomputed :class:`~laav.atoms.Neighbourhoods` (a dense
-        :func:`~laav.atoms.trajectory_distances` matrix is accepted too).
+        :func:`~laav.atoms.trajectory_distances` matrix is accepted too; on incomplete
+        data a :class:`~laav.atoms.MaskedNeighbourhoods`).
+    visible : ndarray of shape (F, P), bool, optional
+        For an array ``seq`` with missing entries (a :class:`Sequence` carries its own).
+        On incomplete data the errors are :func:`forward_backward_error_masked`; an edge
+        whose atoms share too few frames (error NaN) gets cost 0, which is the same as no
+        edge in the multicut objective (kept so that the count adjustment can still merge
+        an atom that has no other edge with its nearest neighbour).
 
     Returns
     -------
     AtomGraph
     """
+    from ._visibility import visibility
+
+    vis = visibility(seq, visible)
     points = as_points(seq)
     params = LaavParams() if params is None else params
     N = atoms.n_atoms
-    positions = atoms.centers(points)
+    positions = atoms.centers(points, vis)
     if N < 2:
         return AtomGraph(np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0),
                          np.zeros(0, np.int64), positions, N)
@@ -232,7 +326,7 @@ def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | No
     up = shared.row < shared.col
     sh_i, sh_j = shared.row[up].astype(np.int64), shared.col[up].astype(np.int64)
     sh_n = np.rint(shared.data[up]).astype(np.int64)
-    nb = as_neighbourhoods(points, distances)
+    nb = as_neighbourhoods(points, distances, vis)
     k = min(params.graph_neighbors, N - 1)
     nn, tree = _seed_graph(nb, atoms.seeds, k)
     a = np.concatenate([sh_i, np.repeat(np.arange(N), k), tree[:, 0]])
@@ -243,10 +337,16 @@ def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | No
     edges = np.stack([i, j], axis=1).astype(np.int64)
     overlap = np.zeros(keys.size, dtype=np.int64)
     overlap[np.searchsorted(keys, sh_i * N + sh_j)] = sh_n
-    errors = forward_backward_error(points, atoms, edges)
     # errors floored at 1e-6 px at the default edge_scale (2 px), scaled with it: the
     # largest cost, 2 log(2e6), is then the same at every scale of the coordinates
     floor = 1e-6 * (params.edge_scale / LaavParams.edge_scale)
-    costs = 2.0 * np.log(params.edge_scale / np.maximum(errors, floor)) - params.cut_prior
+    if vis is None:
+        errors = forward_backward_error(points, atoms, edges)
+        costs = 2.0 * np.log(params.edge_scale / np.maximum(errors, floor)) - params.cut_prior
+    else:
+        errors = forward_backward_error_masked(points, vis, atoms, edges)
+        with np.errstate(invalid="ignore"):
+            costs = 2.0 * np.log(params.edge_scale / np.maximum(errors, floor)) - params.cut_prior
+        costs = np.where(np.isfinite(errors), costs, 0.0)
     return AtomGraph(edges=edges, errors=errors, costs=costs,
                      overlap=overlap, positions=positions, n_nodes=N)

@@ -51,14 +51,31 @@ def _assign(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return linear_sum_assignment(-counts)
 
 
+#: The label of a point left unlabelled (``LaavResult.unlabelled_reason``): never matched.
+UNLABELLED = -1
+
+
+def _matchable(counts: np.ndarray, tv: np.ndarray, pv: np.ndarray) -> np.ndarray:
+    """``counts`` with the row and column of label -1 (unlabelled) zeroed, so that the
+    assignment never matches them (their points count as errors)."""
+    rows, cols = tv == UNLABELLED, pv == UNLABELLED
+    if rows.any() or cols.any():
+        counts = counts.copy()
+        counts[rows] = 0
+        counts[:, cols] = 0
+    return counts
+
+
 def best_label_map(true, pred) -> dict:
     """The one-to-one map from predicted to true labels that agrees on the most points.
 
-    Predicted labels left without a partner (more predicted than true groups) are absent.
+    Predicted labels left without a partner (more predicted than true groups) are absent,
+    and so is -1 (a point left unlabelled), which is never matched.
     """
     counts, tv, pv = confusion_matrix(true, pred)
-    rows, cols = _assign(counts)
-    return {pv[c].item(): tv[r].item() for r, c in zip(rows, cols)}
+    rows, cols = _assign(_matchable(counts, tv, pv))
+    return {pv[c].item(): tv[r].item() for r, c in zip(rows, cols)
+            if pv[c] != UNLABELLED and tv[r] != UNLABELLED}
 
 
 def misclassification_rate(true, pred) -> float:
@@ -66,21 +83,26 @@ def misclassification_rate(true, pred) -> float:
 
     The matching (Hungarian assignment on the confusion matrix) pairs each predicted
     group with at most one true group; points of unmatched groups count as errors. This
-    is the Hopkins155 error measure. It is symmetric (swapping ``true`` and ``pred`` gives
-    the same value), invariant to renaming labels, 0 for identical partitions and in
-    ``[0, 1 - 1/P]`` otherwise.
+    is the Hopkins155 error measure. The label -1 is reserved: it marks a point LAAV left
+    unlabelled (``LaavResult.unlabelled_reason``) and is never matched, so such points
+    always count as errors. It is symmetric (swapping ``true`` and ``pred`` gives the
+    same value), invariant to renaming labels (other than -1), 0 for identical
+    partitions without -1, in ``[0, 1 - 1/P]`` for other partitions without it, and 1
+    when every point is unlabelled.
 
     Parameters
     ----------
     true, pred : array-like of shape (P,)
+        Integer labels; -1 means unlabelled.
 
     Returns
     -------
     float
     """
-    counts, _, _ = confusion_matrix(true, pred)
+    counts, tv, pv = confusion_matrix(true, pred)
     total = counts.sum()
     if total == 0:
         raise ValueError("cannot score an empty labelling")
+    counts = _matchable(counts, tv, pv)
     rows, cols = _assign(counts)
     return float(1.0 - counts[rows, cols].sum() / total)

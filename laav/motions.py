@@ -417,11 +417,10 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     max_motions = int(max_motions)
     if not isinstance(seq_or_points, Sequence):
         seq_or_points = Sequence(np.asarray(seq_or_points, dtype=np.float64))
-    from . import _sequence
+    from ._sequence import require_complete
 
-    require_complete = getattr(_sequence, "require_complete", None)  # with visible masks
-    if require_complete is not None:
-        require_complete(seq_or_points)  # incomplete tracks: refused as segment() does
+    # the profile fits whole trajectories (rank-4 subspaces): incomplete tracks are refused
+    require_complete(seq_or_points, "the estimate of the number of motions (segment with a given C)")
     P = seq_or_points.n_points
     if P < 2 * MIN_POINTS:
         raise ValueError(f"{seq_or_points.source}: {P} points are too few to estimate the number "

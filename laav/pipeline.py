@@ -19,9 +19,9 @@ import numpy as np
 
 from ._interrupt import check as check_interrupt
 from ._random import resolve_seed
-from ._sequence import Sequence, check_degenerate, require_complete, warn_single_label
+from ._sequence import Sequence, check_degenerate, warn_single_label
 from ._threads import single_threaded
-from .atoms import Atoms, Neighbourhoods, build_atoms
+from .atoms import Atoms, MaskedNeighbourhoods, Neighbourhoods, build_atoms
 from .coarse import Coarse, merge_models
 from .graph import AtomGraph, atom_graph
 from .multicut import Multicut, solve_multicut
@@ -38,7 +38,8 @@ class LaavResult:
     Attributes
     ----------
     labels : ndarray of shape (P,), int64
-        Final motion of every point.
+        Final motion of every point; -1 for a point seen too briefly to decide (missing
+        data only, see :attr:`unlabelled_code`).
     atoms, graph, multicut, coarse, voting
         The stage results, in pipeline order.
     timings : dict of str -> float
@@ -63,6 +64,22 @@ class LaavResult:
     seed: int = 0
     motion_count: object = None
 
+    @property
+    def unlabelled_code(self) -> np.ndarray:
+        """(P,) int8: why each point has label -1, a key of
+        :data:`laav.UNLABELLED_REASONS` (1: seen too briefly, no voting frame pair sees
+        it), 0 for a labelled point. All 0 on complete data."""
+        code = self.voting.unlabelled_code
+        return np.zeros(self.labels.size, np.int8) if code is None else code
+
+    @property
+    def unlabelled_reason(self) -> dict:
+        """``{point: sentence}`` for every point with label -1 (empty on complete data)."""
+        from ._visibility import UNLABELLED_REASONS
+
+        code = self.unlabelled_code
+        return {int(q): UNLABELLED_REASONS[int(code[q])] for q in np.flatnonzero(code)}
+
     def stage_labels(self) -> dict:
         """Point labels after each stage (-1 where a stage leaves a point unlabelled).
 
@@ -85,7 +102,6 @@ def _check_inputs(seq, n_motions, degenerate: bool = True):
     also :func:`check_degenerate` (reads every coordinate: once per sequence and C)."""
     if not isinstance(seq, Sequence):
         seq = Sequence(np.asarray(seq, dtype=np.float64))
-    require_complete(seq)  # until the stages handle missing data (issue 14)
     if not isinstance(n_motions, (int, np.integer)) or isinstance(n_motions, bool):
         raise ValueError(f"n_motions must be an integer, got {n_motions!r}")
     if n_motions < 1:
@@ -109,8 +125,8 @@ class Pipeline:
     Parameters
     ----------
     seq : Sequence or ndarray of shape (F, P, 2)
-        Complete (every point visible in every frame): an incomplete sequence raises
-        :class:`laav.IncompleteSequenceError` until the stages handle missing data.
+        May have missing entries (``Sequence(..., visible=mask)``): every stage then runs
+        its missing-data variant (``docs/ALGORITHM.md``, "Missing data").
     n_motions : int
         C.
     params : LaavParams, optional
@@ -174,7 +190,8 @@ class Pipeline:
         st = self._stages
         if self._distances is None:  # kept for every later run: R1/R2 changes reuse it
             t = time.perf_counter()
-            self._distances = Neighbourhoods(seq.points)
+            self._distances = (Neighbourhoods(seq.points) if seq.is_complete
+                               else MaskedNeighbourhoods(seq.points, seq.visible))
             timings["atoms"] += time.perf_counter() - t
         for stage in todo:
             check_interrupt()  # a caller's stop request (laav._interrupt), between stages
@@ -286,11 +303,13 @@ def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: i
     -------
     LaavResult
 
-    Raises
-    ------
-    IncompleteSequenceError
-        When ``seq`` has missing entries (``not seq.is_complete``): the stages do not handle
-        them yet; ``seq.complete()`` keeps the points visible in every frame.
+    Notes
+    -----
+    A sequence with missing entries (``not seq.is_complete``) is segmented by every
+    stage's missing-data variant (``docs/ALGORITHM.md``, "Missing data"); a point seen too
+    briefly to decide gets label -1, with the reason in ``result.unlabelled_reason``.
+    ``"auto"`` still needs a complete sequence (the estimate of C fits whole
+    trajectories): it raises :class:`laav.IncompleteSequenceError` otherwise.
     """
     seed = resolve_seed(seed, random_state)
     count = None

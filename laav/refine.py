@@ -18,6 +18,10 @@ px^2 of the pixel scale the defaults were tuned on (Hopkins155). Every function 
 constants by it: scaling the coordinates by ``s`` and ``unit2`` by ``s^2`` gives the same
 result. :mod:`laav.voting` passes ``unit2 = 2 / rv_lambda`` (1 at the default
 ``rv_lambda = 2 / px^2``, where the constants are unchanged).
+
+**Missing data.** :func:`motion_distances`, :func:`refine_labels`, :func:`subspace_cost`,
+:func:`subspace_residuals` and :func:`reassign_labels` take ``visible`` (F, P): every fit
+then uses the visible entries only (``docs/ALGORITHM.md``, "Missing data").
 """
 
 from __future__ import annotations
@@ -79,6 +83,15 @@ def trajectory_matrix(points: np.ndarray) -> np.ndarray:
     return np.transpose(points - points.min(axis=(0, 1)), (0, 2, 1)).reshape(2 * F, P)
 
 
+def _trajectory_matrix_masked(points: np.ndarray, visible: np.ndarray) -> np.ndarray:
+    """:func:`trajectory_matrix` on incomplete data: the origin at the corner of the
+    visible points' bounding box; hidden entries 0 (never read: the fits mask them)."""
+    F, P, _ = points.shape
+    corner = np.where(visible[..., None], points, np.inf).min(axis=(0, 1))
+    W = np.where(visible[..., None], points - corner, 0.0)
+    return np.transpose(W, (0, 2, 1)).reshape(2 * F, P)
+
+
 def frame_pairs(n_frames: int, n_pairs: int, rng: np.random.Generator | None = None) -> np.ndarray:
     """Frame pairs ``(l, r)`` at least ``max(1, F // 3)`` frames apart.
 
@@ -120,7 +133,7 @@ def labelling_cost(points: np.ndarray, labels: np.ndarray, n_motions: int, n_pai
 
 def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
                   rank: int = SUBSPACE_RANK, scale2: float = SUBSPACE_SCALE2,
-                  unit2: float = 1.0) -> float:
+                  unit2: float = 1.0, *, visible: np.ndarray | None = None) -> float:
     """How badly low-rank trajectory subspaces explain a labelling (lower is better).
 
     Under an affine camera the trajectories of one rigid motion, each stacked as a 2F
@@ -142,21 +155,64 @@ def subspace_cost(points: np.ndarray, labels: np.ndarray, n_motions: int,
         px^2.
     unit2 : float
         Squared pixel in the coordinates' units (see the module docstring).
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data: the subspaces and residuals of :func:`subspace_residuals` with the
+        mask (one round, unweighted).
 
     Returns
     -------
     float
         ``inf`` when a motion has ``rank + 1`` points or fewer.
     """
-    R = subspace_residuals(points, labels, n_motions, rank, rounds=1, unit2=unit2)
+    R = subspace_residuals(points, labels, n_motions, rank, rounds=1, unit2=unit2,
+                           visible=visible)
     if R is None:
         return float("inf")
     own = R[labels, np.arange(labels.size)]
     return float(np.mean(np.log1p(own / (scale2 * unit2))))
 
 
+def _masked_median(x: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Median over the last axis of the entries with ``mask``; (..., n) -> (..., 1); 0 for
+    rows without any."""
+    out = np.zeros(x.shape[:-1] + (1,))
+    rows = mask.any(axis=-1)
+    if rows.any():
+        out[rows, 0] = np.nanmedian(np.where(mask[rows], x[rows], np.nan), axis=-1)
+    return out
+
+
+def _motion_distances_masked(points, labels, n_motions, pairs, visible, unit2):
+    """:func:`motion_distances` on incomplete data (see there)."""
+    x1 = points[pairs[:, 0]]  # (K, P, 2), hidden entries filled
+    x2 = points[pairs[:, 1]]
+    V = visible[pairs[:, 0]] & visible[pairs[:, 1]]  # (K, P)
+    D = np.full((n_motions, points.shape[1]), np.inf)
+    for g in range(n_motions):
+        mem = np.flatnonzero(labels == g)
+        if mem.size < 8:
+            continue
+        m1, m2, mv = x1[:, mem], x2[:, mem], V[:, mem]
+        fit = mv.sum(axis=1) >= 8  # the frame pairs this motion has a matrix for
+        if not fit.any():
+            continue
+        m1, m2, mv = m1[fit], m2[fit], mv[fit]
+        Fm = fit_fundamental(m1, m2, mask=mv)
+        for _ in range(2):
+            dm = sampson_distance(Fm, m1, m2)
+            w = 1.0 / (1.0 + dm / (_masked_median(dm, mv) * 4.0 + TINY2 * unit2))
+            Fm = fit_fundamental(m1, m2, w, mask=mv)
+        d = np.minimum(sampson_distance(Fm, x1[fit], x2[fit]), SAMPSON_CAP * unit2)  # (K', P)
+        use = V[fit]
+        n = use.sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            D[g] = np.where(n > 0, np.where(use, d, 0.0).sum(axis=0) / n, np.inf)
+    return D
+
+
 def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                     pairs: np.ndarray, unit2: float = 1.0) -> np.ndarray:
+                     pairs: np.ndarray, unit2: float = 1.0,
+                     visible: np.ndarray | None = None) -> np.ndarray:
     """Mean Sampson distance (px^2) of every point to every motion's fundamental matrices.
 
     Each motion fits one F per frame pair on its own points by iteratively reweighted
@@ -171,11 +227,18 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
     pairs : ndarray of shape (K, 2)
     unit2 : float
         Squared pixel in the coordinates' units (see the module docstring).
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data (``points`` finite everywhere, hidden entries filled): a motion
+        fits its matrix for a frame pair on its members visible in both frames, and only
+        where there are 8 or more; a point's distance is the mean over the frame pairs it
+        is visible in and the motion has a matrix for (``inf`` when there is none).
 
     Returns
     -------
     D : ndarray of shape (C, P); ``inf`` for a motion with fewer than 8 points.
     """
+    if visible is not None:
+        return _motion_distances_masked(points, labels, n_motions, pairs, visible, unit2)
     x1 = points[pairs[:, 0]]  # (K, P, 2)
     x2 = points[pairs[:, 1]]
     D = np.full((n_motions, points.shape[1]), np.inf)
@@ -196,7 +259,8 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
 
 def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
                   n_pairs: int = 12, rounds: int = 3, outlier: float = 6.0,
-                  return_distances: bool = False, unit2: float = 1.0) -> tuple:
+                  return_distances: bool = False, unit2: float = 1.0, *,
+                  visible: np.ndarray | None = None, pairs: np.ndarray | None = None) -> tuple:
     """Move points that their own motion does not explain to the motion that does.
 
     A point moves only when its distance to its own motion (:func:`motion_distances`,
@@ -218,6 +282,12 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     return_distances : bool
     unit2 : float
         Squared pixel in the coordinates' units (see the module docstring).
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data: :func:`motion_distances` with the mask, over ``pairs`` (then
+        required: :func:`laav._visibility.cover_pairs`, which every point is visible in
+        one of); a motion's scale is the median over its members' finite distances.
+    pairs : ndarray of shape (K, 2), optional
+        The frame pairs (default: ``frame_pairs(F, n_pairs)``).
 
     Returns
     -------
@@ -227,15 +297,20 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         Only with ``return_distances``: :func:`motion_distances` of the returned labels
         (None when the last round moved points), for :func:`reassign_labels` to reuse.
     """
-    pairs = frame_pairs(points.shape[0], n_pairs)
+    if pairs is None:
+        pairs = frame_pairs(points.shape[0], n_pairs)
     D = None
     start = labels.copy()
     cur = labels.copy()
     idx = np.arange(cur.size)
     for _ in range(rounds):
-        D = motion_distances(points, cur, n_motions, pairs, unit2)
-        scale = np.array([np.median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
-                          for g in range(n_motions)]) + TINY2 * unit2
+        D = motion_distances(points, cur, n_motions, pairs, unit2, visible)
+        if visible is None:
+            scale = np.array([np.median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
+                              for g in range(n_motions)]) + TINY2 * unit2
+        else:
+            scale = np.array([_finite_median(D[g, cur == g])
+                              for g in range(n_motions)]) + TINY2 * unit2
         with np.errstate(invalid="ignore"):  # inf / inf for a motion too small to fit
             N = np.where(np.isfinite(D), D / scale[:, None], np.inf)
         own = N[cur, idx]
@@ -250,9 +325,16 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     return cur, int((cur != start).sum())
 
 
+def _finite_median(x: np.ndarray) -> float:
+    """Median of the finite entries of ``x``; inf when there is none."""
+    x = x[np.isfinite(x)]
+    return float(np.median(x)) if x.size else np.inf
+
+
 def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
                        rank: int = REASSIGN_RANK, rounds: int = 5,
-                       unit2: float = 1.0) -> np.ndarray | None:
+                       unit2: float = 1.0, *,
+                       visible: np.ndarray | None = None) -> np.ndarray | None:
     """Squared distance (px^2, mean over frames) of every point to every motion's subspace.
 
     Each motion's trajectories (2F vectors) get a rank-``rank`` linear subspace fitted by
@@ -272,11 +354,22 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
     rounds : int
     unit2 : float
         Squared pixel in the coordinates' units (see the module docstring).
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data (``points`` finite everywhere, hidden entries filled): each
+        motion's subspace is fitted on the visible entries of its members only, by
+        alternating least squares (per-point coefficients, per-row basis), started from
+        the principal subspace with unseen entries set to their row's mean, with the
+        same reweighting; the origin is the corner of the visible points' bounding box;
+        a point's residual is that of its least-squares fit on its visible rows, per
+        visible frame. A point seen in ``rank / 2`` frames or fewer is fitted exactly by
+        every subspace (residual 0 everywhere: no evidence).
 
     Returns
     -------
     R : ndarray of shape (C, P), or None when a motion has ``rank + 1`` points or fewer.
     """
+    if visible is not None:
+        return _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible, unit2)
     F, P, _ = points.shape
     tiny = TINY2 * np.sqrt(unit2)  # px: the IRLS residuals are RMS distances
     W = trajectory_matrix(points)  # the origin at the points' corner (see there)
@@ -299,11 +392,77 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
     return R
 
 
+#: Alternating least-squares sweeps of the masked subspace fits: on the unweighted fit, and
+#: (warm-started) in each reweighting round after it.
+_ALS_FIRST, _ALS_ROUND = 12, 4
+
+
+def _project_masked(U: np.ndarray, X: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares coefficients ``V`` (n, r) of columns ``X`` (D, n) on the basis ``U``
+    (D, r) over each column's rows ``M`` (D, n, 0/1), and the squared residuals (n,)."""
+    r = U.shape[1]
+    G = (M.T @ (U[:, :, None] * U[:, None, :]).reshape(-1, r * r)).reshape(-1, r, r)
+    G[:, np.arange(r), np.arange(r)] += 1e-9 * (np.trace(G, axis1=1, axis2=2)[:, None] + 1e-12)
+    MX = M * X
+    V = np.linalg.solve(G, (MX.T @ U)[..., None])[..., 0]
+    res = MX - M * (U @ V.T)
+    return V, np.einsum("dn,dn->n", res, res)
+
+
+def _fit_subspace_masked(X, M, rank, rounds, tiny, sweeps_first=_ALS_FIRST, sweeps=_ALS_ROUND):
+    """Robust rank-``rank`` linear subspace of columns ``X`` (D, n) seen on rows ``M``
+    (D, n, 0/1): alternating least squares (coefficients per column, basis per row) on the
+    seen entries only, started from the principal subspace of ``X`` with each row's unseen
+    entries set to that row's mean; then ``rounds - 1`` reweighting rounds as
+    :func:`subspace_residuals` (weights ``1 / (1 + (r / 2 median r)^2)``, squared).
+    Returns the basis (D, rank), orthonormal."""
+    D, n = X.shape
+    seen = M.sum(axis=1)
+    mean = np.where(seen > 0, (M * X).sum(axis=1) / np.maximum(seen, 1), 0.0)
+    X0 = np.where(M > 0, X, mean[:, None])
+    U = np.linalg.eigh(X0 @ X0.T)[1][:, -rank:]
+    cnt = np.maximum(M.sum(axis=0) / 2.0, 1.0)  # frames seen per column
+    w = np.ones(n)
+    eye = np.eye(rank)
+    for k in range(rounds):
+        for _ in range(sweeps_first if k == 0 else sweeps):
+            V, _ = _project_masked(U, X, M)
+            WM = M * w  # (D, n)
+            H = (WM @ (V[:, :, None] * V[:, None, :]).reshape(n, -1)).reshape(D, rank, rank)
+            H += 1e-9 * (np.trace(H, axis1=1, axis2=2)[:, None, None] + 1e-12) * eye
+            c = (WM * X) @ V
+            U = np.linalg.solve(H, c[..., None])[..., 0]
+            U = np.linalg.qr(U)[0]
+        if k + 1 < rounds:
+            _, r2 = _project_masked(U, X, M)
+            r = np.sqrt(r2 / cnt)
+            w = (1.0 / (1.0 + (r / (2.0 * np.median(r) + tiny)) ** 2)) ** 2
+    return U
+
+
+def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible, unit2):
+    """:func:`subspace_residuals` on incomplete data (see there)."""
+    F, P, _ = points.shape
+    W = _trajectory_matrix_masked(points, visible)  # the origin at the visible points' corner
+    M = np.repeat(visible, 2, axis=0).astype(np.float64)  # (2F, P): x and y rows of a frame
+    cnt = visible.sum(axis=0)
+    R = np.empty((n_motions, P))
+    for g in range(n_motions):
+        mem = labels == g
+        if mem.sum() <= rank + 1:
+            return None
+        U = _fit_subspace_masked(W[:, mem], M[:, mem], rank, rounds, TINY2 * np.sqrt(unit2))
+        _, r2 = _project_masked(U, W, M)
+        R[g] = np.maximum(r2, 0.0) / cnt
+    return R
+
+
 def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
                     rank: int = REASSIGN_RANK, epipolar_weight: float = REASSIGN_EPIPOLAR_WEIGHT,
                     rounds: int = 2, min_size: int = 8,
                     distances: np.ndarray | None = None,
-                    unit2: float = 1.0) -> tuple[np.ndarray, int]:
+                    unit2: float = 1.0, *, visible: np.ndarray | None = None,
+                    pairs: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Move every point to the motion that its trajectory subspace and epipolar fit favour.
 
     The score of point ``p`` for motion ``g`` is ``log(r_gp + eps) + epipolar_weight *
@@ -339,6 +498,13 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         round's fits.
     unit2 : float
         Squared pixel in the coordinates' units (see the module docstring).
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data: both terms with the mask (:func:`subspace_residuals` fitted on the
+        visible entries, :func:`motion_distances` over ``pairs``); a motion without a
+        finite epipolar distance for a point is not a choice for it, and a point without
+        any keeps its label.
+    pairs : ndarray of shape (K, 2), optional
+        The frame pairs of the epipolar term (default ``frame_pairs(F, 12)``).
 
     Returns
     -------
@@ -349,6 +515,9 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     cur = start
     if n_motions < 2:
         return cur.copy(), 0
+    if visible is not None:
+        return _reassign_masked(points, start, n_motions, rank, epipolar_weight, rounds,
+                                min_size, distances, visible, pairs, unit2)
     pairs = frame_pairs(points.shape[0], 12)
     for _ in range(rounds):
         R = subspace_residuals(points, cur, n_motions, rank, unit2=unit2)
@@ -361,6 +530,26 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         eps = REASSIGN_FLOOR * unit2
         score = np.log(R + eps) + epipolar_weight * np.log(D + eps)
         new = score.argmin(axis=0)
+        if (new == cur).all() or np.bincount(new, minlength=n_motions).min() < min_size:
+            break
+        cur = new
+    return cur.copy(), int((cur != start).sum())
+
+
+def _reassign_masked(points, start, n_motions, rank, epipolar_weight, rounds, min_size,
+                     distances, visible, pairs, unit2):
+    """:func:`reassign_labels` on incomplete data (see there)."""
+    cur = start
+    for _ in range(rounds):
+        R = subspace_residuals(points, cur, n_motions, rank, unit2=unit2, visible=visible)
+        if R is None:
+            break
+        D = distances if distances is not None and cur is start else motion_distances(
+            points, cur, n_motions, pairs, unit2, visible)
+        eps = REASSIGN_FLOOR * unit2
+        score = np.log(R + eps) + epipolar_weight * np.log(D + eps)  # inf where D is
+        known = np.isfinite(score).any(axis=0)
+        new = np.where(known, score.argmin(axis=0), cur)
         if (new == cur).all() or np.bincount(new, minlength=n_motions).min() < min_size:
             break
         cur = new

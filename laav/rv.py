@@ -16,7 +16,11 @@ Choices where the RV paper is vague (measured on Hopkins155, ``benchmarks/TUNING
   probability proportional to their current vote margin for the group (weighted
   reservoir keys ``log(u) / w``), so confident members dominate but the sample stays
   spread; a group with fewer than ``m`` members samples from all points.
-* **Frame pairs.** The two frames are at least ``max(1, F // 3)`` apart.
+* **Frame pairs.** The two frames are at least ``max(1, F // 3)`` apart. On incomplete
+  data a pair is drawn uniformly from those that also share enough visible points
+  (:func:`laav._visibility.pair_pool`), only the points visible in both frames are
+  sampled and receive votes, and a point not voted on keeps its label and its votes (they
+  decay only when it is voted on).
 * **No converged trial.** The labellings of all trials are combined into a
   co-association affinity and split by spectral clustering (:func:`consensus`).
 * **Trials side by side** (``rv_batch``): speed only; the plain trial kept is the first
@@ -39,12 +43,16 @@ __all__ = ["vote", "run_trials", "consensus", "consensus_seed", "RESET_AT"]
 RESET_AT = 15
 
 
-def _sample_groups(labels, votes, C, m, rng):
+def _sample_groups(labels, votes, C, m, rng, avail=None):
     """Indices (..., C, m) of the points each group fits its fundamental matrix to.
 
     ``labels`` (..., P) and ``votes`` (..., P, C) may carry leading batch axes (trials).
+    ``avail`` (..., P) bool (missing data): only these points are drawn, and a group with
+    fewer than ``m`` of them samples from all available points (there must be ``m``).
     """
     member = labels[..., None, :] == np.arange(C)[:, None]  # (..., C, P)
+    if avail is not None:
+        member = member & avail[..., None, :]
     # contiguous rows: numpy's reductions over P of the strided view were ~20x slower
     vt = np.ascontiguousarray(np.swapaxes(votes, -1, -2))  # (..., C, P)
     if C == 2:  # the margin over the other group, as below but without the sort
@@ -62,7 +70,7 @@ def _sample_groups(labels, votes, C, m, rng):
     w = np.where(member, w, 0.0)
     small = member.sum(axis=-1) < m
     if small.any():
-        w = np.where(small[..., None], 1.0, w)
+        w = np.where(small[..., None], 1.0 if avail is None else avail[..., None, :] * 1.0, w)
     # weighted sampling without replacement (Efraimidis-Spirakis): the m largest keys
     # log(u) / w, i.e. the m smallest of -log(u) / w; non-members never drawn
     if isinstance(rng, np.random.Generator):
@@ -74,7 +82,7 @@ def _sample_groups(labels, votes, C, m, rng):
 
 
 def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: float,
-         m: int, rng: np.random.Generator) -> np.ndarray:
+         m: int, rng: np.random.Generator, visible: np.ndarray | None = None) -> np.ndarray:
     """One voting step on frame pair ``pair``: one F per group, the votes of every point.
 
     Parameters
@@ -92,16 +100,26 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
     rng : numpy.random.Generator, or a sequence of B of them
         With ``labels`` (B, P), one generator per trial makes every trial's sample
         independent of which other trials share the batch.
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data: only the points visible in both frames of the pair are sampled for
+        the fits and receive votes (the others get 0); ``points`` must be finite
+        everywhere (hidden entries filled, e.g. with 0) and at least ``m`` points must be
+        visible in both frames.
 
     Returns
     -------
     ndarray of shape (..., P, C)
         ``exp(-lam d)`` for the point's vote for a group, ``1 - exp(-lam d)`` from every
-        other group's matrix.
+        other group's matrix (0 for points not visible in the pair).
     """
     C = votes.shape[-1]
-    idx = _sample_groups(labels, votes, C, m, rng)  # (..., C, m)
     pair = np.asarray(pair)
+    avail = None
+    if visible is not None:
+        avail = visible[pair[..., 0]] & visible[pair[..., 1]]  # (P,) or (B, P)
+        if pair.ndim == 1 and labels.ndim > 1:
+            avail = np.broadcast_to(avail, labels.shape)
+    idx = _sample_groups(labels, votes, C, m, rng, avail)  # (..., C, m)
     x1 = points[pair[..., 0]]  # (P, 2), or (B, P, 2) with a pair per trial
     x2 = points[pair[..., 1]]
     if pair.ndim == 1:
@@ -116,6 +134,8 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
     total_other = np.add.reduce(other, axis=-2, keepdims=True)  # (..., 1, P)
     v -= other
     v += total_other
+    if avail is not None:
+        v *= avail[..., None, :]
     return np.swapaxes(v, -1, -2)
 
 
@@ -159,21 +179,40 @@ def _frame_pair(F: int, rng: np.random.Generator) -> tuple[int, int]:
     return (right, left) if rng.random() < 0.5 else (left, right)
 
 
-def _step(points, trials, params):
+def _pool_pair(pool: np.ndarray, rng: np.random.Generator) -> tuple[int, int]:
+    """Missing data: a pair of ``pool`` (K, 2) drawn uniformly, in random order."""
+    left, right = (int(v) for v in pool[int(rng.integers(pool.shape[0]))])
+    return (right, left) if rng.random() < 0.5 else (left, right)
+
+
+def _step(points, trials, params, masks=None):
     """One voting iteration of every trial in ``trials``, in one batched call; every
-    random draw of a trial comes from its own generator."""
+    random draw of a trial comes from its own generator. ``masks`` (missing data): the
+    ``(visible, pool)`` of :func:`run_trials`."""
     F, P, _ = points.shape
     labels = np.stack([t.labels for t in trials])  # (B, P)
     votes = np.stack([t.votes for t in trials])  # (B, P, C)
-    pairs = np.array([_frame_pair(F, t.rng) for t in trials])  # (B, 2)
-    votes += vote(points, labels, votes, pairs, params.rv_lambda, params.rv_sample_size,
-                  [t.rng for t in trials])
+    if masks is None:
+        pairs = np.array([_frame_pair(F, t.rng) for t in trials])  # (B, 2)
+        votes += vote(points, labels, votes, pairs, params.rv_lambda, params.rv_sample_size,
+                      [t.rng for t in trials])
+    else:
+        visible, pool = masks
+        pairs = np.array([_pool_pair(pool, t.rng) for t in trials])  # (B, 2)
+        votes += vote(points, labels, votes, pairs, params.rv_lambda, params.rv_sample_size,
+                      [t.rng for t in trials], visible=visible)
     if votes.shape[-1] == 2:  # argmax, without numpy's slow reduction over 2 columns
         new = (votes[..., 1] > votes[..., 0]).astype(np.intp)
     else:
         new = votes.argmax(axis=-1)
+    if masks is not None:  # a point not voted on this iteration keeps its label
+        seen = masks[0][pairs[:, 0]] & masks[0][pairs[:, 1]]  # (B, P)
+        new = np.where(seen, new, labels)
     n_changed = (new != labels).sum(axis=-1)
-    votes *= params.rv_alpha
+    if masks is None:
+        votes *= params.rv_alpha
+    else:  # each point's votes decay on its own clock: by the iterations that voted on it
+        votes *= np.where(seen, params.rv_alpha, 1.0)[..., None]
     margins = _margins(votes)
     for b, t in enumerate(trials):
         t.it += 1
@@ -191,7 +230,7 @@ def _step(points, trials, params):
             t.done = True
 
 
-def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None):
+def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None, masks=None):
     """Run LAAV's informed trial and plain RV's random-start trials, ``rv_batch`` side by side.
 
     Trials advance in lockstep, one batched numpy call per iteration, each with its own
@@ -217,6 +256,13 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
         The trials' generators, ``[informed, plain 0, plain 1, ...]`` (``1 + n_plain`` of
         them), instead of spawning them from ``rng``: a trial's result depends only on its
         own generator, so a caller may run LAAV's trial and plain RV's apart.
+    masks : (visible, pool) or None
+        Missing data: ``visible`` (F, P) bool and the frame pairs ``pool`` (K, 2) of
+        :func:`laav._visibility.pair_pool`; each iteration draws its pair from the pool
+        (uniformly, in random order), fits and votes on the points visible in both frames
+        only (:func:`vote`), and a point not voted on keeps its label and its votes (the
+        forgetting factor applies to the points voted on: each point's histogram decays
+        by its own votes). ``points`` must be finite everywhere (hidden entries filled).
 
     Returns
     -------
@@ -256,7 +302,7 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
             plain.append(t)
         if not active:
             break
-        _step(points, active, params)
+        _step(points, active, params, masks)
         active = [t for t in active if not t.done]
         # the kept plain trial is the first *in start order* to converge, as if the trials
         # ran one after another: a trial that converges sooner than an earlier one is not

@@ -26,7 +26,9 @@ points hidden behind a nearer object in some frame are dropped, so every traject
 complete, as in Hopkins155. The random generator is the only source of variation: the same
 seed gives bit-identical arrays.
 
-:func:`add_noise` perturbs an existing sequence with isotropic Gaussian pixel noise.
+:func:`add_noise` perturbs an existing sequence with isotropic Gaussian pixel noise;
+:func:`occlude` hides a share of its entries the way trackers lose points (tracks that
+start late, end early and have a gap), for the missing-data stages.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ import numpy as np
 from ._sequence import MIN_FRAMES, Sequence
 
 __all__ = [
-    "make_sequence", "make_family", "affine_residual", "add_noise", "FAMILIES",
+    "make_sequence", "make_family", "affine_residual", "add_noise", "occlude", "FAMILIES",
     "MIN_POINTS_PER_MOTION", "MAX_OBJECTS",
 ]
 
@@ -915,6 +917,76 @@ def add_noise(
     gen = _as_generator(rng)
     noisy = seq.points + gen.normal(0.0, sigma, size=seq.points.shape)
     return seq.with_points(noisy)
+
+
+def occlude(seq: Sequence, fraction: float, rng: np.random.Generator | int | None = None,
+            spread: float = 0.5) -> Sequence:
+    """Copy of ``seq`` with a share ``fraction`` of its (frame, point) entries hidden.
+
+    The occlusion model of the missing-data tests and ``benchmarks/missing.py``: every
+    track loses ``n_p`` frames, ``n_p`` about ``fraction x (1 + spread u_p) x F`` with
+    ``u_p`` uniform in [-1, 1] (so tracks differ in how much they lose), split at random
+    into three runs: the track **starts late** (its first frames hidden), **ends early**
+    (its last ones hidden), and has **one gap** of the rest at a random place in between.
+    Every track keeps at least 2 frames, visible on both sides of its gap. The counts are
+    then adjusted one frame at a time (on random tracks with room) so that exactly
+    ``round(fraction F P)`` entries are hidden. Hidden entries are independent of the
+    tracks' positions and motions (no occluder moves across the image).
+
+    Parameters
+    ----------
+    seq : Sequence
+        A complete sequence (every point visible in every frame).
+    fraction : float in [0, 1 - 2 / F]
+        Share of the F x P entries to hide.
+    rng : numpy.random.Generator, int or None
+        Source of randomness (an int is a seed): the same seed hides the same entries.
+    spread : float in [0, 1]
+        How much the tracks' losses differ: 0 every track loses the same share, 1 from
+        none to twice ``fraction``.
+
+    Returns
+    -------
+    Sequence
+        Same points, labels, name and image size, with ``visible`` (F, P) set; ``seq``
+        itself when ``fraction`` rounds to no entry.
+
+    Raises
+    ------
+    ValueError
+        When ``seq`` is not a complete Sequence or an argument is out of range.
+    """
+    if not isinstance(seq, Sequence):
+        raise ValueError(f"seq must be a laav.Sequence, got {type(seq).__name__}")
+    if not seq.is_complete:
+        raise ValueError(f"{seq.source}: occlude() needs a complete sequence (every point "
+                         "visible in every frame)")
+    F, P = seq.n_frames, seq.n_points
+    top = 1.0 - MIN_FRAMES / F
+    fraction = _check_float(fraction, "fraction", 0.0, top, hi_open=False)
+    spread = _check_float(spread, "spread", 0.0, 1.0, hi_open=False)
+    gen = _as_generator(rng)
+    total = int(round(fraction * F * P))
+    if total == 0:
+        return seq
+    cap = F - MIN_FRAMES
+    share = fraction * (1.0 + spread * gen.uniform(-1.0, 1.0, P))
+    n = np.clip(np.round(share * F), 0, cap).astype(np.int64)
+    while n.sum() != total:  # exact total: one frame more (or less) on a random track with room
+        more = n.sum() < total
+        room = np.flatnonzero(n < cap if more else n > 0)
+        n[room[gen.integers(room.size)]] += 1 if more else -1
+    cuts = np.sort(gen.uniform(0.0, 1.0, (P, 2)), axis=1)  # n split into start, gap, end
+    start = np.floor(cuts[:, 0] * n).astype(np.int64)
+    gap = np.floor(cuts[:, 1] * n).astype(np.int64) - start
+    end = n - start - gap
+    # the gap lies inside the track's window [start, F - end), one visible frame each side
+    window = F - start - end
+    where = start + 1 + np.floor(gen.uniform(0.0, 1.0, P) * (window - gap - 1)).astype(np.int64)
+    f = np.arange(F)[:, None]
+    vis = (f >= start) & (f < F - end) & ~((f >= where) & (f < where + gap))
+    return Sequence(seq.points, labels=seq.labels, name=seq.name, image_size=seq.image_size,
+                    source=seq.source, visible=vis)
 
 
 # --------------------------------------------------------------------------- hard families

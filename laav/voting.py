@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._random import resolve_seed
-from ._sequence import Sequence, as_points, check_degenerate, require_complete, warn_single_label
+from ._sequence import Sequence, as_points, check_degenerate, warn_single_label
 from ._threads import single_threaded
 from .metrics import misclassification_rate
 from .params import LaavParams
@@ -111,6 +111,10 @@ class Voting:
         whichever candidate was returned; None for plain RV.
     informed_converged : bool or None
         Whether LAAV's informed trial met the convergence test; None for plain RV.
+    unlabelled_code : ndarray of shape (P,), int8, or None
+        Missing data only (None on complete data): why each point has label -1, a key of
+        :data:`laav._visibility.UNLABELLED_REASONS` (1: seen too briefly, no voting frame
+        pair sees it); 0 for a labelled point.
     costs : dict of str -> float
         Selection score of each candidate compared (empty without ``rv_select``): its
         subspace cost plus ``rv_select_agreement`` times its mean disagreement with the
@@ -133,13 +137,14 @@ class Voting:
     informed_changed: np.ndarray | None = None
     informed_margin: np.ndarray | None = None
     informed_converged: bool | None = None
+    unlabelled_code: np.ndarray | None = None
 
 
 @single_threaded  # one BLAS/OpenMP thread, restored after (laav/_threads.py)
 def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams | None = None,
                   seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
                   weights: np.ndarray | None = None, *, random_state=None,
-                  plain_memo: dict | None = None) -> Voting:
+                  plain_memo: dict | None = None, visible: np.ndarray | None = None) -> Voting:
     """Segment trajectories into ``n_motions`` rigid motions by Random Voting.
 
     Parameters
@@ -166,19 +171,33 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         then the same dict again for the same points, C, seed and ``rv_*`` settings. Plain
         RV's runs and their polished candidates (which do not depend on ``init_labels``)
         are kept in it and reused; the labels are identical to a run without it.
+    visible : ndarray of shape (F, P), bool, optional
+        For an array ``seq`` with missing entries (a :class:`Sequence` carries its own).
+        When an entry is hidden, the missing-data variant runs (``docs/ALGORITHM.md``,
+        "Missing data"): points that no usable frame pair sees get label -1, with the
+        reason in ``unlabelled_code``; hidden coordinates are never read.
 
     Returns
     -------
     Voting
+
+    Raises
+    ------
+    ValueError
+        For bad arguments; on incomplete data also when no two frames share enough
+        visible points (``max(8, rv_sample_size)`` per motion).
     """
-    if isinstance(seq, Sequence):
-        require_complete(seq)  # until the stages handle missing data (issue 14)
+    from ._visibility import visibility
+
     points = as_points(seq)
     if points.ndim != 3 or points.shape[2] != 2:
         raise ValueError(f"points must have shape (F, P, 2), got {points.shape}")
     F, P, _ = points.shape
-    if not np.isfinite(points).all():
+    vis = visibility(seq, visible)
+    if vis is None and not np.isfinite(points).all():
         raise ValueError("points contain NaN or infinite coordinates")
+    if vis is not None and not np.isfinite(points[vis]).all():
+        raise ValueError("points contain NaN or infinite coordinates where they are visible")
     if (not isinstance(n_motions, (int, np.integer)) or isinstance(n_motions, bool)
             or n_motions < 1):
         raise ValueError(f"n_motions must be a positive integer, got {n_motions!r}")
@@ -190,13 +209,17 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         raise ValueError(f"rv_sample_size ({params.rv_sample_size}) exceeds the number of "
                          f"points ({P})")
     if init_labels is None:  # plain RV, an entry point: the checks LAAV's segment() makes
-        check_degenerate(seq, C, stacklevel=4)  # 4: the caller of the single_threaded wrapper
+        # 4: the caller of the single_threaded wrapper
+        check_degenerate(seq, C, stacklevel=4, visible=None if isinstance(seq, Sequence) else vis)
     seed = resolve_seed(seed, random_state)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     if C == 1 or F < 2:
         lab = np.zeros(P, dtype=np.int64)
         return Voting(lab, np.ones((P, 1)), np.zeros(0, np.int64), np.zeros(0), 0, 0, True,
-                      (), init_labels is not None, 0)
+                      (), init_labels is not None, 0,
+                      unlabelled_code=None if vis is None else np.zeros(P, np.int8))
+    if vis is not None:
+        return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo)
     select = params.rv_select == "subspace"
 
     if init_labels is None:  # plain RV
@@ -205,23 +228,28 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     return _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo)
 
 
-def _plain_result(seq, points, C, params, rng, best, trials, ended, select) -> Voting:
+def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=None) -> Voting:
     """Plain RV's result from its trials: the converged one, else a selection or the
-    consensus."""
+    consensus. ``mk`` (missing data): a :class:`_Masks`; the caller then warns."""
     if best is not None:
-        out = _finish(points, C, params, best, trials, False, "trial")
+        out = _finish(points, C, params, best, trials, False, "trial", mk=mk)
     elif select:  # no trial converged: the consensus or one of the trials
         out = _select(points, C, params, _plain_candidates(None, ended, C, rng), trials,
-                      initialised=False)
+                      initialised=False, mk=mk)
     else:
-        out = _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus")
-    warn_single_label(seq, out.labels, C, stacklevel=5)
+        out = _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus",
+                      mk=mk)
+    if mk is None:
+        warn_single_label(seq, out.labels, C, stacklevel=5)
     return out
 
 
-def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo) -> Voting:
+def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo,
+                 mk=None) -> Voting:
     """LAAV's fine-tuning: the informed trial started from ``init_labels`` and, with the
-    selection, plain RV's runs beside it (see the module docstring)."""
+    selection, plain RV's runs beside it (see the module docstring). ``mk`` (missing
+    data): a :class:`_Masks`."""
+    masks = None if mk is None else (mk.visible, mk.pool)
     F, P, _ = points.shape
     init = np.asarray(init_labels, dtype=np.int64)
     if init.shape != (P,):
@@ -239,39 +267,42 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     votes0 = np.zeros((P, C))
     votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
-        first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0)
-        return _with_informed(_finish(points, C, params, first, trials, True, "informed"), first)
+        first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,
+                                         masks=masks)
+        return _with_informed(_finish(points, C, params, first, trials, True, "informed", mk=mk),
+                              first)
     # LAAV's start against plain RV: keep the labelling of lower selection score. The
     # informed trial and plain RV's trials each draw from their own generator, so they run
     # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
     streams = rng.spawn(1 + params.rv_trials)  # [informed, plain 0, plain 1, ...]
     first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
-                                     streams=streams[:1])
-    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1)
+                                     streams=streams[:1], masks=masks)
+    plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, masks)
     trials, cands = trials + more, [("informed", first)] + cands
     if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
         # LAAV's start and plain RV disagree: two more plain RV runs arbitrate
         for k in (2, 3):
             _, more, kc = _plain_run(points, C, params, rng, rng.spawn(1 + params.rv_trials),
-                                     plain_memo, k)
+                                     plain_memo, k, masks)
             trials, cands = trials + more, cands + kc
     polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
-                                  polished=polished), first)
+                                  polished=polished, mk=mk), first)
 
 
-def _plain_run(points, C, params, rng, streams, memo, k):
+def _plain_run(points, C, params, rng, streams, memo, k, masks=None):
     """Plain RV's k-th run of LAAV's fine-tuning on ``streams`` (``[unused, plain 0, ...]``):
     (its converged trial or None, every trial it ran, its candidate labellings).
 
     With ``memo`` (a dict kept by the caller for one sequence, C, seed and ``rv_*``
     settings) a run is computed once: plain RV does not depend on LAAV's start. Its one
     draw from ``rng`` (the consensus's seed) is then made again, so that every later draw
-    is what a fresh run would make: the labels are identical either way.
+    is what a fresh run would make: the labels are identical either way. ``masks``:
+    missing data, as :func:`laav.rv.run_trials` takes them.
     """
     hit = None if memo is None else memo.get(("run", k))
     if hit is None:
-        _, conv, trials, ended = run_trials(points, C, params, None, streams=streams)
+        _, conv, trials, ended = run_trials(points, C, params, None, streams=streams, masks=masks)
         cons = consensus(ended, C, rng) if conv is None else None
         hit = (conv, trials, ended, cons)
         if memo is not None:
@@ -286,6 +317,70 @@ def _plain_run(points, C, params, rng, streams, memo, k):
                           + [(f"{prefix}trial {i}", t) for i, t in enumerate(ended)])
 
 
+class _Masks:
+    """Missing data, for the voting of the points some frame pair can decide.
+
+    Attributes
+    ----------
+    visible : ndarray of shape (F, K), bool
+    pool : ndarray of shape (M, 2), int64
+        The frame pairs voting draws from (:func:`laav._visibility.pair_pool`).
+    pairs : ndarray of shape (L, 2), int64
+        The refinement's and the selection's frame pairs
+        (:func:`laav._visibility.cover_pairs`, 12 spread + cover).
+    """
+
+    def __init__(self, visible, pool):
+        from ._visibility import cover_pairs
+
+        self.visible, self.pool = visible, pool
+        self.pairs = cover_pairs(visible, pool, 12)
+
+
+def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo) -> Voting:
+    """:func:`random_voting` on incomplete data (``docs/ALGORITHM.md``, "Missing data").
+
+    The frame pairs are :func:`laav._visibility.pair_pool`'s (at least ``max(8,
+    rv_sample_size)`` points per motion seen in both frames); the points no pool pair sees
+    get label -1 (code 1 of :data:`laav._visibility.UNLABELLED_REASONS`) and take no
+    part; the others are segmented as on complete data, with every step masked: voting
+    (:func:`laav.rv.run_trials` with ``masks``), refinement and reassignment over
+    :func:`laav._visibility.cover_pairs`, subspaces (reassignment, model selection)
+    fitted on the visible entries (:func:`laav.refine.subspace_residuals` with the mask).
+    """
+    from ._visibility import NO_FRAME_PAIR, decidable, filled, pair_pool
+
+    P = points.shape[1]
+    pool = pair_pool(vis, max(8, params.rv_sample_size) * C)  # ValueError when none qualifies
+    keep = decidable(vis, pool)  # at least the points of one pool pair: enough to vote
+    idx = np.flatnonzero(keep)
+    sub_vis = vis[:, idx]
+    sub = filled(points[:, idx], sub_vis)
+    init = None if init_labels is None else np.asarray(init_labels, dtype=np.int64)
+    w = None if weights is None else np.asarray(weights, dtype=np.float64)
+    if init is not None and init.shape != (P,):
+        raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
+    if w is not None and w.shape != (P,):
+        raise ValueError(f"weights must have shape ({P},), got {w.shape}")
+    mk = _Masks(sub_vis, pool)
+    select = params.rv_select == "subspace"
+    if init is None:  # plain RV
+        _, best, trials, ended = run_trials(sub, C, params, rng, masks=(mk.visible, mk.pool))
+        out = _plain_result(seq, sub, C, params, rng, best, trials, ended, select, mk)
+    else:
+        out = _fine_tuning(sub, C, params, rng, init[idx], None if w is None else w[idx], select,
+                           plain_memo, mk)
+    labels = np.full(P, -1, dtype=np.int64)
+    labels[idx] = out.labels
+    votes = np.zeros((P, C))
+    votes[idx] = out.votes
+    code = np.where(keep, 0, NO_FRAME_PAIR).astype(np.int8)
+    result = dataclasses.replace(out, labels=labels, votes=votes, unlabelled_code=code)
+    if init_labels is None:
+        warn_single_label(seq, labels, C, stacklevel=5)
+    return result
+
+
 def _with_informed(voting: Voting, first: tuple) -> Voting:
     """``voting`` with LAAV's informed trial's own trace attached."""
     return dataclasses.replace(voting, informed_changed=first[2], informed_margin=first[3],
@@ -297,16 +392,20 @@ class _Polished:
     reassigned (:func:`reassign_labels`); its :func:`subspace_cost` is taken after the
     refinement, before the reassignment (see :func:`_select`)."""
 
-    def __init__(self, points, C, params, labels):
-        self.points, self.C, self.params = points, C, params
+    def __init__(self, points, C, params, labels, mk=None):
+        self.points, self.C, self.params, self.mk = points, C, params, mk
+        self._kw = {} if mk is None else {"visible": mk.visible, "pairs": mk.pairs}
         self.refined, self._distances = 0, None
         if params.rv_refine:
             labels, self.refined, self._distances = refine_labels(
-                points, labels, C, return_distances=True, unit2=unit2(params))
+                points, labels, C, return_distances=True, unit2=unit2(params), **self._kw)
         self.refined_labels = labels
         self._final = None
 
     def cost(self) -> float:
+        if self.mk is not None:  # missing data: subspaces fitted on the visible entries
+            return subspace_cost(self.points, self.refined_labels, self.C,
+                                 unit2=unit2(self.params), visible=self.mk.visible)
         return subspace_cost(self.points, self.refined_labels, self.C, unit2=unit2(self.params))
 
     def final(self) -> tuple[np.ndarray, int, int]:
@@ -316,15 +415,15 @@ class _Polished:
             if self.params.rv_reassign:
                 labels, moved = reassign_labels(self.points, labels, self.C,
                                                 distances=self._distances,
-                                                unit2=unit2(self.params))
+                                                unit2=unit2(self.params), **self._kw)
             self._final = (labels, self.refined, moved)
         return self._final
 
 
 def _finish(points, C, params, best, trials, initialised, selected, polished=None,
-            costs=None) -> Voting:
+            costs=None, mk=None) -> Voting:
     labels, votes, changed, margin, _its, conv = best
-    labels, refined, reassigned = (_Polished(points, C, params, labels) if polished is None
+    labels, refined, reassigned = (_Polished(points, C, params, labels, mk) if polished is None
                                    else polished).final()
     return Voting(
         labels=np.asarray(labels, dtype=np.int64),
@@ -358,7 +457,7 @@ def _partition_key(labels: np.ndarray) -> bytes:
     return order[inverse].astype(np.int64).tobytes()
 
 
-def _select(points, C, params, candidates, trials, initialised, polished=None) -> Voting:
+def _select(points, C, params, candidates, trials, initialised, polished=None, mk=None) -> Voting:
     """Polish every candidate labelling and return the one of lowest selection score.
 
     Every candidate is refined (:func:`refine_labels`) and, when the agreement term needs
@@ -384,7 +483,7 @@ def _select(points, C, params, candidates, trials, initialised, polished=None) -
             if polished is not None and key in polished and name.startswith("plain"):
                 done[key] = polished[key]
             else:
-                pol = _Polished(points, C, params, cand[0])
+                pol = _Polished(points, C, params, cand[0], mk)
                 done[key] = (pol, pol.cost())
                 if polished is not None and name.startswith("plain"):
                     polished[key] = done[key]  # plain RV's: the same on every rerun
@@ -402,4 +501,4 @@ def _select(points, C, params, candidates, trials, initialised, polished=None) -
     name, cand, pol, _ = entries[k]
     costs = {e[0]: float(v) for e, v in zip(entries, scores)}
     return _finish(points, C, params, cand, trials, initialised, selected=name,
-                   polished=pol, costs=costs)
+                   polished=pol, costs=costs, mk=mk)

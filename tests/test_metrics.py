@@ -26,10 +26,12 @@ def _labelings(max_points: int = 40, max_labels: int = 5):
 
 
 def _rename(labels, seed: int) -> list[int]:
-    """Apply a random bijection to the label names (arbitrary, non-contiguous integers)."""
+    """Apply a random bijection to the label names (arbitrary, non-contiguous integers;
+    never -1, which marks an unlabelled point)."""
     rng = np.random.default_rng(seed)
     values = sorted(set(labels))
-    names = rng.choice(np.arange(-1000, 1000), size=len(values), replace=False)
+    pool = np.setdiff1d(np.arange(-1000, 1000), [-1])
+    names = rng.choice(pool, size=len(values), replace=False)
     mapping = dict(zip(values, names.tolist()))
     return [mapping[v] for v in labels]
 
@@ -173,3 +175,34 @@ def test_confusion_matrix_counts(pair):
     assert (counts >= 0).all()
     transposed, _, _ = confusion_matrix(b, a)
     assert np.array_equal(transposed, counts.T)
+
+
+# --------------------------------------------------------------------------- -1: unlabelled
+
+
+@pytest.mark.parametrize("true, pred, rate", [
+    ([0, 0, 1, 1], [0, 0, -1, -1], 0.5),   # -1 would otherwise be matched to motion 1
+    ([0, 0, 1, 1], [1, 1, -1, 0], 0.25),
+    ([0, 0, 1, 1], [-1, -1, -1, -1], 1.0),
+    ([0, 1, 2, 2], [5, 6, 7, -1], 0.25),
+    ([0, 0, 0, 1], [-1, 0, 0, 1], 0.25),
+])
+def test_unlabelled_points_always_count_as_errors(true, pred, rate):
+    assert misclassification_rate(true, pred) == pytest.approx(rate, abs=1e-15)
+    assert misclassification_rate(pred, true) == pytest.approx(rate, abs=1e-15)  # symmetric
+
+
+@PROPS
+@given(pair=_labelings(), data=st.data())
+def test_unlabelling_a_point_never_lowers_the_error(pair, data):
+    """Setting labels to -1 adds exactly those points' errors, at most: it never helps."""
+    a, b = pair
+    k = data.draw(st.integers(0, len(b)))
+    hidden = list(b)
+    for q in range(k):
+        hidden[q] = -1
+    r = misclassification_rate(a, b)
+    rh = misclassification_rate(a, hidden)
+    assert rh >= r - 1e-12
+    assert rh >= k / len(a) - 1e-12  # every unlabelled point is an error
+    assert -1 not in best_label_map(a, hidden)

@@ -1,0 +1,325 @@
+"""Missing data (issue 14 item 3): every stage segments tracks that start late, end early
+and have gaps; points seen too briefly get label -1 with a reason; -1 counts as an error.
+
+The strategy per stage is in ``docs/ALGORITHM.md``, "Missing data". The scenes here are
+:func:`laav.synthetic.make_sequence` scenes occluded by :func:`laav.synthetic.occlude`.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import laav
+from laav import LaavParams, Sequence
+from laav._visibility import NO_FRAME_PAIR, UNLABELLED_REASONS, decidable, min_overlap, pair_pool
+from laav.atoms import build_atoms
+from laav.coarse import merge_models
+from laav.graph import atom_graph
+from laav.multicut import solve_multicut
+from laav.synthetic import make_sequence, occlude
+
+
+def _scene(seed: int, n_frames: int = 20, n_points: int = 200) -> Sequence:
+    """Two motions for even seeds, three for odd ones (noise free)."""
+    return make_sequence(1 + seed % 2, n_frames=n_frames, n_points=n_points, rng=seed)
+
+
+def _quiet_segment(seq, C, params=None, seed=0):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", laav.LaavWarning)
+        return laav.segment(seq, C, params, seed=seed)
+
+
+# ------------------------------------------------------------------ the occlusion model
+
+
+def test_occlude_hides_the_share_asked_for_as_late_starts_early_ends_and_one_gap():
+    seq = _scene(0)
+    F = seq.n_frames
+    for fraction in (0.2, 0.4, 0.6):
+        occl = occlude(seq, fraction, 7)
+        vis = occl.visible
+        assert not occl.is_complete
+        assert np.count_nonzero(~vis) == round(fraction * vis.size)  # exactly
+        assert occl.track_lengths.min() >= 2
+        assert np.isnan(occl.points[~vis]).all() and np.array_equal(occl.points[vis], seq.points[vis])
+        assert np.array_equal(occl.labels, seq.labels)
+        # the visible frames of a track: at most two runs (one gap), inside [first, last]
+        runs = (np.diff(vis.astype(np.int8), axis=0) == 1).sum(axis=0) + vis[0]
+        assert runs.max() <= 2
+        first = vis.argmax(axis=0)
+        last = F - 1 - vis[::-1].argmax(axis=0)
+        assert (first > 0).any() and (last < F - 1).any() and (runs == 2).any()
+    assert np.array_equal(occlude(seq, 0.4, 3).visible, occlude(seq, 0.4, 3).visible)
+    assert not np.array_equal(occlude(seq, 0.4, 3).visible, occlude(seq, 0.4, 4).visible)
+    even = occlude(seq, 0.3, 0, spread=0.0).track_lengths
+    assert np.ptp(even) <= 2  # spread 0: every track loses the same share (+-1 to hit it exactly)
+    assert occlude(seq, 0.0, 0) is seq
+
+
+def test_occlude_refuses_bad_input():
+    seq = _scene(0)
+    with pytest.raises(ValueError, match="complete sequence"):
+        occlude(occlude(seq, 0.2, 0), 0.2, 0)
+    with pytest.raises(ValueError, match="fraction"):
+        occlude(seq, 0.95, 0)  # more than 1 - 2 / F
+    with pytest.raises(ValueError, match="fraction"):
+        occlude(seq, -0.1, 0)
+    with pytest.raises(ValueError, match="spread"):
+        occlude(seq, 0.2, 0, spread=2.0)
+    with pytest.raises(ValueError, match="Sequence"):
+        occlude(seq.points, 0.2, 0)
+
+
+# ------------------------------------------------------------------ end to end
+
+#: Scenes and levels of the accuracy test (seconds: about 1 s per run).
+SCENES = (0, 1, 4, 5)
+
+
+@pytest.mark.parametrize("fraction, limit", [(0.2, 0.01), (0.4, 0.02)])
+def test_segment_with_missing_data_is_accurate(fraction, limit):
+    """Measured (2026-12, seeds 0-7 of ``_scene``, occlusion seed = scene seed, LAAV seed 0):
+    20 % missing: 0 points wrong in all 8 scenes; 40 %: 0 in 6, 1 of 200 (0.5 %, scene 1)
+    and 2 of 200 (1.0 %, scene 5). The limits, 1 % and 2 % per scene (2 and 4 points of
+    200), are the issue's target at 40 % (2 % mean on Hopkins155) applied per scene, and
+    half of it at 20 %; noise-free scenes should be no harder than Hopkins155."""
+    errors = []
+    for s in SCENES:
+        seq = _scene(s)
+        occl = occlude(seq, fraction, s)
+        res = _quiet_segment(occl, seq.n_motions)
+        assert res.labels.shape == (seq.n_points,)
+        errors.append(laav.misclassification_rate(seq.labels, res.labels))
+    assert max(errors) <= limit, errors
+
+
+def test_same_seed_same_labels_and_the_seed_matters_only_through_its_streams():
+    seq = _scene(1)
+    occl = occlude(seq, 0.4, 1)
+    a = _quiet_segment(occl, 3, seed=5)
+    b = _quiet_segment(occl, 3, seed=5)
+    assert np.array_equal(a.labels, b.labels)
+    assert np.array_equal(a.coarse.point_labels, b.coarse.point_labels)
+    assert np.array_equal(a.voting.unlabelled_code, b.voting.unlabelled_code)
+    # the staged pipeline reruns only what a change touches and equals a fresh run
+    pipe = laav.Pipeline(occl, 3, seed=5)
+    assert np.array_equal(pipe.result.labels, a.labels)
+    res = pipe.update(lam=5.0)
+    assert np.array_equal(res.labels, _quiet_segment(occl, 3, LaavParams(lam=5.0), seed=5).labels)
+    res = pipe.update(r1=15.0, r2=30.0)  # the masked neighbourhoods answer a smaller radius
+    fresh = _quiet_segment(occl, 3, LaavParams(lam=5.0, r1=15.0, r2=30.0), seed=5)
+    assert res.atoms.n_atoms == fresh.atoms.n_atoms
+    assert all(np.array_equal(x, y) for x, y in zip(res.atoms.members, fresh.atoms.members))
+    assert np.array_equal(res.coarse.point_labels, fresh.coarse.point_labels)
+    # the same partition; its label names may differ: Pipeline's plain_memo reuses a polished
+    # plain-RV candidate under its own names when LAAV's start is the same partition (also on
+    # complete data, main ffbc4e1, this scene without occlusion)
+    assert laav.misclassification_rate(res.labels, fresh.labels) == 0.0
+
+
+def test_plain_random_voting_runs_on_missing_data():
+    seq = _scene(2)
+    occl = occlude(seq, 0.3, 2)
+    v = laav.random_voting(occl, 2, seed=0)
+    assert v.unlabelled_code is not None and v.unlabelled_code.shape == (seq.n_points,)
+    assert laav.misclassification_rate(seq.labels, v.labels) <= 0.02
+    again = laav.random_voting(occl, 2, seed=0)
+    assert np.array_equal(v.labels, again.labels)
+
+
+def test_complete_data_runs_the_complete_code():
+    """An all-visible mask is the complete-data path: the same labels as no mask at all
+    (the masked code would differ: its neighbourhoods use every shared frame)."""
+    seq = _scene(0)
+    masked = Sequence(seq.points, seq.labels, visible=np.ones((seq.n_frames, seq.n_points), bool))
+    assert masked.is_complete
+    a = _quiet_segment(seq, 2)
+    b = _quiet_segment(masked, 2)
+    assert np.array_equal(a.labels, b.labels)
+    assert a.voting.unlabelled_code is None and not a.unlabelled_reason
+    assert np.array_equal(a.unlabelled_code, np.zeros(seq.n_points, np.int8))
+    full = np.ones((seq.n_frames, seq.n_points), bool)
+    rng = np.random.default_rng(0)
+    at = build_atoms(seq.points, rng=rng, visible=full)
+    ref = build_atoms(seq.points, rng=np.random.default_rng(0))
+    assert at.ref_frames is None and at.seen is None
+    assert all(np.array_equal(x, y) for x, y in zip(at.members, ref.members))
+
+
+# ------------------------------------------------------------------ hidden entries are never read
+
+
+def _junk(points: np.ndarray, vis: np.ndarray, seed: int) -> np.ndarray:
+    junk = np.random.default_rng(seed).choice([np.nan, np.inf, -np.inf, 1e300, 0.0, -7.0],
+                                              size=points.shape)
+    return np.where(vis[..., None], points, junk)
+
+
+def test_every_stage_ignores_what_hidden_entries_hold():
+    """Each stage, given arrays and a mask, gives the same result whether the hidden entries
+    hold the true coordinates or junk (NaN, inf, 1e300, 0): the visibility handling is what
+    every stage reads, never the hidden coordinates."""
+    seq = _scene(1)
+    occl = occlude(seq, 0.4, 1)
+    vis = occl.visible
+    true_pts = seq.points  # hidden entries: the real coordinates
+    junk_pts = _junk(true_pts, vis, 0)
+    p, C = LaavParams(), seq.n_motions
+    out = []
+    for pts in (true_pts, junk_pts):
+        atoms = build_atoms(pts, p, np.random.default_rng(0), visible=vis)
+        graph = atom_graph(pts, atoms, p, visible=vis)
+        mc = solve_multicut(graph, p.n_fine(C))
+        co = merge_models(pts, atoms, mc, C, p, np.random.default_rng(1), visible=vis)
+        v = laav.random_voting(pts, C, p, np.random.default_rng(2),
+                               init_labels=co.point_labels, visible=vis)
+        out.append((atoms, graph, co, v))
+    (a1, g1, c1, v1), (a2, g2, c2, v2) = out
+    assert a1.n_atoms > 10
+    assert all(np.array_equal(x, y) for x, y in zip(a1.members, a2.members))
+    assert np.array_equal(a1.affines, a2.affines, equal_nan=True)
+    assert np.array_equal(a1.seen, a2.seen) and not a1.seen.all()
+    assert np.array_equal(g1.edges, g2.edges)
+    assert np.array_equal(g1.errors, g2.errors, equal_nan=True)
+    assert np.array_equal(c1.affinity, c2.affinity)
+    assert np.array_equal(c1.point_labels, c2.point_labels)
+    assert np.array_equal(v1.labels, v2.labels)
+    # and through a Sequence (which stores NaN there) the labels are those of the arrays
+    res = _quiet_segment(Sequence(junk_pts, seq.labels, visible=vis), C)
+    assert np.array_equal(res.labels, _quiet_segment(occl, C).labels)
+
+
+def test_neighbourhoods_need_enough_shared_frames():
+    """Two tracks that share fewer than min_overlap frames are never neighbours, however
+    close they are where both are seen."""
+    seq = _scene(0)
+    F, P = seq.n_frames, seq.n_points
+    vis = np.ones((F, P), bool)
+    m = min_overlap(F)
+    vis[m - 1:, 0] = False  # point 0: frames 0 .. m-2
+    vis[:1, 1] = False  # point 1: frames 1 .. F-1 -> shares m - 2 frames with point 0
+    pts = seq.points.copy()
+    pts[:, 1] = pts[:, 0] + 0.5  # half a pixel from point 0 wherever both are seen
+    from laav.atoms import FAR, MaskedNeighbourhoods
+
+    nb = MaskedNeighbourhoods(pts, vis)
+    assert nb.distances(np.array([0]), np.array([1]))[0] == FAR
+    indptr, near, _ = nb.within(40.0)
+    assert 1 not in near[indptr[0]:indptr[1]]
+    vis[m - 1, 0] = True  # now m - 1 shared frames... one more makes m
+    vis[m, 0] = True
+    nb = MaskedNeighbourhoods(pts, vis)
+    assert nb.distances(np.array([0]), np.array([1]))[0] == pytest.approx(0.5 * np.sqrt(2))
+
+
+# ------------------------------------------------------------------ -1: seen too briefly
+
+
+def test_points_seen_too_briefly_get_minus_one_with_a_reason_and_count_as_errors():
+    seq = make_sequence(1, n_frames=21, n_points=160, rng=3)
+    F, P = seq.n_frames, seq.n_points
+    gap = F // 3
+    vis = np.ones((F, P), bool)
+    brief = np.arange(0, P, 20)  # 8 points, seen in frames 10 .. 10 + gap - 1 only
+    vis[:, brief] = False
+    vis[10:10 + gap, brief] = True
+    occl = Sequence(seq.points, seq.labels, visible=vis, name="brief")
+    pool = pair_pool(vis, 16)
+    assert not decidable(vis, pool)[brief].any() and decidable(vis, pool).sum() == P - brief.size
+    res = _quiet_segment(occl, 2)
+    assert np.array_equal(np.flatnonzero(res.labels == -1), brief)
+    assert np.array_equal(np.flatnonzero(res.unlabelled_code), brief)
+    assert (res.unlabelled_code[brief] == NO_FRAME_PAIR).all()
+    assert set(res.unlabelled_reason) == set(brief.tolist())
+    assert res.unlabelled_reason[int(brief[0])] == UNLABELLED_REASONS[NO_FRAME_PAIR]
+    assert "seen too briefly" in res.unlabelled_reason[int(brief[0])]
+    assert laav.UNLABELLED_REASONS is UNLABELLED_REASONS
+    # -1 counts as an error: the rest is right, so the error is exactly their share
+    err = laav.misclassification_rate(seq.labels, res.labels)
+    rest = np.setdiff1d(np.arange(P), brief)
+    assert laav.misclassification_rate(seq.labels[rest], res.labels[rest]) == 0.0
+    assert err == pytest.approx(brief.size / P)
+    assert (res.voting.votes[brief] == 0).all()
+
+
+def test_too_little_seen_together_is_a_clear_error():
+    """Every track seen in two consecutive frames only: no two frames share the 16 points
+    two motions' fundamental matrices need."""
+    seq = _scene(0, n_points=60)
+    F, P = seq.n_frames, seq.n_points
+    vis = np.zeros((F, P), bool)
+    q = np.arange(P)
+    vis[q % (F - 1), q] = True
+    vis[q % (F - 1) + 1, q] = True
+    occl = Sequence(seq.points, seq.labels, visible=vis)
+    with pytest.raises(ValueError, match="no two frames share 16 visible points"):
+        laav.random_voting(occl, 2, seed=0)
+    with pytest.raises(ValueError, match="no two frames share"):
+        laav.segment(occl, 2)
+
+
+# ------------------------------------------------------------------ what stays refused or falls back
+
+
+def test_estimating_the_number_of_motions_still_needs_complete_tracks():
+    occl = occlude(_scene(0), 0.2, 0)
+    with pytest.raises(laav.IncompleteSequenceError, match="estimate of the number of motions"):
+        laav.segment(occl, "auto")
+
+
+def test_the_coding_merge_falls_back_to_the_epipolar_merge_with_a_warning():
+    seq = _scene(0)
+    occl = occlude(seq, 0.2, 0)
+    with pytest.warns(laav.LaavWarning, match="coding"):
+        res = laav.segment(occl, 2, LaavParams(coarse_merge="coding", fine_per_motion=3))
+    assert res.coarse.method == "epipolar"
+    assert np.isnan(res.coarse.merge_cost[0, 1])
+    assert laav.misclassification_rate(seq.labels, res.labels) <= 0.02
+
+
+def test_paper_preset_runs_on_missing_data():
+    seq = _scene(0)
+    occl = occlude(seq, 0.2, 0)
+    res = _quiet_segment(occl, 2, LaavParams.paper())
+    assert res.labels.shape == (seq.n_points,)
+    assert (res.atoms.ref_frames >= 0).all()
+
+
+def test_degenerate_input_checks_read_only_visible_entries():
+    """check_degenerate on incomplete data: hidden entries (NaN) never enter its tests."""
+    rng = np.random.default_rng(0)
+    F, P = 6, 30
+    still = np.broadcast_to(rng.uniform(0, 300, (1, P, 2)), (F, P, 2)).copy()
+    vis = np.ones((F, P), bool)
+    vis[4:, :5] = False
+    with pytest.warns(laav.LaavWarning, match="no point moves"):
+        laav.random_voting(Sequence(still, visible=vis), 2, LaavParams(rv_max_iter=5), seed=0)
+    same = np.broadcast_to(still[:, :1], (F, P, 2)).copy()  # one trajectory P times,
+    common = np.ones((F, P), bool)
+    common[4:] = False  # ... all hidden in the same frames (else they differ in where)
+    with pytest.raises(ValueError, match="only 1 distinct trajectory"):
+        laav.segment(Sequence(same, visible=common), 2)
+
+
+def test_missing_data_labels_follow_the_units_of_the_parameters():
+    """Scaling the coordinates by s with ``LaavParams.scaled(s)``, or shifting them, leaves
+    the labels of an incomplete sequence as they were (the masked code's constants are in
+    the parameters' units, its subspaces pass through the visible points' corner; see
+    tests/test_scale_invariance.py for complete data). A noisy scene: its labels are not
+    decided by rounding."""
+    from laav.synthetic import add_noise
+
+    seq = add_noise(make_sequence(2, n_frames=20, n_points=200, rng=1), 0.5, 1)
+    occl = occlude(seq, 0.3, 1)
+    base = _quiet_segment(occl, 3)
+    assert laav.misclassification_rate(seq.labels, base.labels) <= 0.01
+    for s in (1e-3, 0.125, 10.0):
+        scaled = Sequence(occl.points * s, occl.labels, visible=occl.visible)
+        assert np.array_equal(_quiet_segment(scaled, 3, LaavParams().scaled(s)).labels, base.labels), s
+    for t in (1e3, -5e4):
+        shifted = Sequence(occl.points + t, occl.labels, visible=occl.visible)
+        assert np.array_equal(_quiet_segment(shifted, 3).labels, base.labels), t
