@@ -65,18 +65,21 @@ def _wait_listening(port: int) -> None:
             time.sleep(0.1)
 
 
-def _page(p, outside: list):
-    browser = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=ARGS)
-    page = browser.new_page(viewport={"width": 1280, "height": 800})
-
+def _blocker(outside: list):
+    """A route handler that lets only 127.0.0.1 (and data:/blob:) through and notes the rest."""
     def route(r):
         if r.request.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")):
             r.continue_()
         else:
             outside.append(r.request.url)
             r.abort()
+    return route
 
-    page.route("**/*", route)
+
+def _page(p, outside: list):
+    browser = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=ARGS)
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page.route("**/*", _blocker(outside))
     return browser, page
 
 
@@ -169,7 +172,7 @@ def _modes(args, outside: list) -> None:
             # A/B compare, in a new tab (its own session): pin what is shown, move λ, colour
             # by the coarse motions
             page = browser.new_page(viewport={"width": 1280, "height": 800})
-            page.route("**/*", route)
+            page.route("**/*", _blocker(outside))
             page.goto(f"http://127.0.0.1:{port}/")
             page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=60000)
             while len(created) < 2:

@@ -11,8 +11,8 @@ uses only the public API exported here.
 """
 
 from ._sequence import IncompleteSequenceError, LaavWarning, Sequence, SequenceError, require_complete
-from .io import find_truth_files, load_sequence, load_sequence_isolated, safe_name, save_sequence
 from ._visibility import UNLABELLED_REASONS
+from .io import find_truth_files, load_sequence, load_sequence_isolated, safe_name, save_sequence
 from .metrics import best_label_map, confusion_matrix, misclassification_rate
 
 __version__ = "0.1.0"

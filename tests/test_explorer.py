@@ -20,9 +20,10 @@ import laav
 
 pn = pytest.importorskip("panel")
 
+from conftest import fake_serving  # noqa: E402
+
 from explorer import Explorer, ExplorerState  # noqa: E402
 from explorer import views as V  # noqa: E402
-from conftest import fake_serving  # noqa: E402
 from explorer.cli import build_parser, main  # noqa: E402
 from explorer.demo import demo_path, demo_sequence  # noqa: E402
 

@@ -21,9 +21,10 @@ import pytest
 cv2 = pytest.importorskip("cv2")
 pn = pytest.importorskip("panel")
 
+from conftest import FakeServer  # noqa: E402
+
 import laav  # noqa: E402
 from explorer import Explorer  # noqa: E402
-from conftest import FakeServer  # noqa: E402
 from explorer.cli import main  # noqa: E402
 from explorer.video import MAX_WIDTH, FrameCache, VideoError, is_video, open_video  # noqa: E402
 from laav.synthetic_video import load_clip, render_clip  # noqa: E402
