@@ -62,8 +62,8 @@ from .synthetic import BENCH_SPREAD, occlude, occlusion_rng
 __all__ = [
     "COLUMNS", "KEY", "METHODS", "BenchError", "BenchSequence", "BenchSummary",
     "parse_param", "params_from_assignments", "parse_noise", "format_noise", "noise_rng",
-    "add_pixel_noise", "parse_missing", "MAX_MISSING", "hide_entries", "run_one", "discover", "plan_runs", "read_runs", "run_key",
-    "run_bench",
+    "add_pixel_noise", "parse_missing", "MAX_MISSING", "hide_entries", "run_one", "discover",
+    "plan_runs", "read_runs", "run_key", "run_bench",
 ]
 
 #: Columns of ``runs.csv``, in order. ``missing`` is the share of the F x P entries hidden
