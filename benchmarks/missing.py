@@ -31,7 +31,6 @@ import platform  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
-import zlib  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -40,17 +39,11 @@ from _machine import cpu_model, git_commit  # noqa: E402 - this folder, on sys.p
 from speed import data_dir, truth_files  # noqa: E402
 
 import laav  # noqa: E402
-from laav.synthetic import occlude  # noqa: E402
+from laav.synthetic import BENCH_SPREAD, occlude, occlusion_rng  # noqa: E402
 
 FIELDS = ["sequence", "motions", "points", "frames", "level", "seed", "missing", "error",
           "unlabelled", "coarse", "coverage", "selected", "seconds"]
-SPREAD = 0.5  # occlude()'s spread: how much the tracks' losses differ
-
-
-def occlusion_rng(seed: int, name: str, level: float) -> np.random.Generator:
-    """The generator of the occlusion of run ``(name, seed, level)``."""
-    entropy = [int(seed), zlib.crc32(name.encode("utf-8")), int(round(float(level) * 1e6))]
-    return np.random.default_rng(np.random.SeedSequence(entropy))
+SPREAD = BENCH_SPREAD  # occlude()'s spread: how much the tracks' losses differ
 
 
 def run_sequence(path: str, levels: list[float], seed: int) -> list[dict]:

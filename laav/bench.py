@@ -1,4 +1,5 @@
-"""Benchmark runner: every sequence x method x seed x noise level of a Hopkins155-style folder.
+"""Benchmark runner: every sequence x method x seed x noise level x missing share of a
+Hopkins155-style folder.
 
 The results go to ``runs.csv`` (one row per run, :data:`COLUMNS`), which is the single
 source of every number in the report (:mod:`laav.report`). The runner
@@ -9,11 +10,16 @@ source of every number in the report (:mod:`laav.report`). The runner
 * adds zero-mean Gaussian pixel noise ``N(0, sigma^2 I)`` to every trajectory point from a
   generator seeded by ``(seed, crc32(sequence name), round(sigma * 1e6))`` only, so a run
   gives the same result wherever and in whatever order it executes;
+* then, for a missing share ``m > 0``, hides ``round(m F P)`` of the (frame, point) entries
+  with the seeded occlusion model :func:`laav.synthetic.occlude` (tracks start late, end
+  early and have one gap; ``spread`` :data:`laav.synthetic.BENCH_SPREAD`) and the generator
+  :func:`laav.synthetic.occlusion_rng` ``(seed, sequence name, m)``: the same entries as
+  ``benchmarks/missing.py`` hides;
 * runs LAAV (:func:`laav.segment`) and/or plain Random Voting (:func:`laav.random_voting`)
   with the run's seed;
 * appends each batch of rows to ``runs.csv`` as soon as it arrives (so an interrupted
   bench keeps what finished) and skips, on a rerun with the same output folder, every run
-  whose key ``(sequence, method, seed, noise)`` is already there;
+  whose key ``(sequence, method, seed, noise, missing)`` is already there;
 * runs batches in parallel processes with joblib, or on a Dask distributed cluster;
 * records which code made every row (``version``, ``commit``: :mod:`laav._provenance`,
   taken where the run executes) and in ``bench.json``; a resume under another commit or
@@ -51,22 +57,31 @@ from . import (
     segment,
 )
 from ._provenance import provenance
+from .synthetic import BENCH_SPREAD, occlude, occlusion_rng
 
 __all__ = [
     "COLUMNS", "KEY", "METHODS", "BenchError", "BenchSequence", "BenchSummary",
     "parse_param", "params_from_assignments", "parse_noise", "format_noise", "noise_rng",
-    "add_pixel_noise", "run_one", "discover", "plan_runs", "read_runs", "run_key",
-    "run_bench",
+    "add_pixel_noise", "parse_missing", "MAX_MISSING", "hide_entries", "run_one", "discover",
+    "plan_runs", "read_runs", "run_key", "run_bench",
 ]
 
-#: Columns of ``runs.csv``, in order. ``version`` and ``commit`` name the code that made the
-#: row (package version; git short hash with ``-dirty``, or ``unknown``).
+#: Columns of ``runs.csv``, in order. ``missing`` is the share of the F x P entries hidden
+#: (0: the complete sequence); ``unlabelled`` the share (%) of points the method left
+#: without a label (-1; counted as errors in ``error``). ``version`` and ``commit`` name the
+#: code that made the row (package version; git short hash with ``-dirty``, or ``unknown``).
 COLUMNS = ("sequence", "category", "motions", "points", "frames", "method", "seed", "noise",
-           "error", "seconds", "iterations", "trials", "converged", "version", "commit")
+           "missing", "error", "unlabelled", "seconds", "iterations", "trials", "converged",
+           "version", "commit")
+#: The columns of files written before ``missing`` and ``unlabelled`` existed (still read:
+#: missing 0, unlabelled unknown (NaN); rewritten with them by a resume).
+NO_MISSING_COLUMNS = tuple(c for c in COLUMNS if c not in ("missing", "unlabelled"))
 #: The columns of files written before the provenance columns (still read; "" for them).
-LEGACY_COLUMNS = COLUMNS[:-2]
+LEGACY_COLUMNS = NO_MISSING_COLUMNS[:-2]
 #: Columns that identify a run (resume key).
-KEY = ("sequence", "method", "seed", "noise")
+KEY = ("sequence", "method", "seed", "noise", "missing")
+#: Missing shares must lie in [0, MAX_MISSING).
+MAX_MISSING = 0.95
 #: Methods the bench knows: LAAV and plain Random Voting.
 METHODS = ("laav", "rv")
 
@@ -76,6 +91,8 @@ FAILURES_LOG = "failures.log"
 
 _INT_COLS = ("motions", "points", "frames", "seed", "iterations", "trials")
 _FLOAT_COLS = ("noise", "error", "seconds")
+_OLD_HEADERS = {COLUMNS: "current", NO_MISSING_COLUMNS: "no-missing",
+                LEGACY_COLUMNS: "legacy"}
 _NOT_IN_BENCHMARK = ("dancing",)
 _METADATA_FILES = ("README.md", "sequences.csv")
 
@@ -178,6 +195,39 @@ def parse_noise(text: str | Iterable[float]) -> tuple[float, ...]:
     return tuple(sorted(set(out)))
 
 
+def parse_missing(text: str | Iterable[float]) -> tuple[float, ...]:
+    """Missing shares from ``"0,0.2,0.4"`` or a sequence of numbers, each in [0, 0.95);
+    sorted, unique."""
+    items = text.split(",") if isinstance(text, str) else list(text)
+    out = []
+    for item in items:
+        if isinstance(item, str) and not item.strip():
+            continue
+        try:
+            v = float(item)
+        except (TypeError, ValueError):
+            raise BenchError(f"missing share {item!r} is not a number (e.g. --missing 0,0.2,0.4)") from None
+        if not math.isfinite(v) or not 0.0 <= v < MAX_MISSING:
+            raise BenchError(f"missing share must be a number in [0, {MAX_MISSING:g}) "
+                             f"(a share of the entries, not a percentage), got {item!r}")
+        out.append(float(format_noise(v)))
+    if not out:
+        raise BenchError("no missing share given (e.g. --missing 0,0.2,0.4)")
+    return tuple(sorted(set(out)))
+
+
+def hide_entries(seq: Sequence, missing: float, seed: int) -> Sequence:
+    """``seq`` with a share ``missing`` of its entries hidden by the seeded occlusion model.
+
+    ``missing == 0`` returns ``seq`` unchanged. The hidden entries depend only on ``(seed,
+    seq.name, missing)`` (:func:`laav.synthetic.occlusion_rng`), as in
+    ``benchmarks/missing.py``.
+    """
+    if missing == 0:
+        return seq
+    return occlude(seq, missing, occlusion_rng(seed, seq.name, missing), spread=BENCH_SPREAD)
+
+
 def noise_rng(seed: int, name: str, sigma: float) -> np.random.Generator:
     """The generator of the noise of run ``(name, seed, sigma)``; independent of method."""
     entropy = [int(seed), zlib.crc32(name.encode("utf-8")), int(round(float(sigma) * 1e6))]
@@ -214,14 +264,18 @@ class BenchSequence:
 
 
 def run_one(item: BenchSequence, method: str, seed: int, sigma: float,
-            params: LaavParams | None = None) -> dict:
-    """Run one method on one (noisy) sequence and score it; a ``runs.csv`` row (typed).
+            params: LaavParams | None = None, missing: float = 0.0) -> dict:
+    """Run one method on one (noisy, occluded) sequence and score it; a ``runs.csv`` row
+    (typed).
 
-    ``error`` is the misclassification rate in percent; ``seconds`` the wall time of the
-    segmentation call alone; ``iterations``, ``trials`` and ``converged`` come from the
-    Random Voting stage (LAAV's fine-tuning, or plain RV).
+    The noise is added first, then a share ``missing`` of the entries hidden
+    (:func:`hide_entries`). ``error`` is the misclassification rate in percent over all
+    points (a point left unlabelled counts as wrong); ``unlabelled`` the share (%) of such
+    points; ``seconds`` the wall time of the segmentation call alone; ``iterations``,
+    ``trials`` and ``converged`` come from the Random Voting stage (LAAV's fine-tuning, or
+    plain RV).
     """
-    seq = add_pixel_noise(item.seq, sigma, seed)
+    seq = hide_entries(add_pixel_noise(item.seq, sigma, seed), missing, seed)
     C = item.motions
     t0 = time.perf_counter()
     if method == "laav":
@@ -235,7 +289,9 @@ def run_one(item: BenchSequence, method: str, seed: int, sigma: float,
     return {
         "sequence": item.name, "category": item.category, "motions": C,
         "points": item.seq.n_points, "frames": item.seq.n_frames, "method": method,
-        "seed": int(seed), "noise": float(sigma), "error": float(error), "seconds": seconds,
+        "seed": int(seed), "noise": float(sigma), "missing": float(missing),
+        "error": float(error), "unlabelled": 100.0 * float(np.mean(voting.labels < 0)),
+        "seconds": seconds,
         "iterations": int(voting.n_iterations), "trials": int(voting.n_trials),
         "converged": bool(voting.converged), **provenance(),
     }
@@ -281,18 +337,18 @@ def _warm_up(params: LaavParams) -> None:
 @dataclass(frozen=True, eq=False)
 class _Batch:
     item: BenchSequence
-    runs: tuple  # of (method, seed, sigma)
+    runs: tuple  # of (method, seed, sigma, missing)
 
 
 def _run_batch(batch: _Batch, params: LaavParams) -> list:
     """Run a batch (worker side); a failure becomes a ``("failed", key, message)`` record."""
     _warm_up(params)
     out = []
-    for method, seed, sigma in batch.runs:
+    for method, seed, sigma, missing in batch.runs:
         try:
-            out.append(("ok", run_one(batch.item, method, seed, sigma, params)))
+            out.append(("ok", run_one(batch.item, method, seed, sigma, params, missing)))
         except Exception as exc:  # one bad run must not stop the bench
-            key = (batch.item.name, method, int(seed), float(sigma))
+            key = (batch.item.name, method, int(seed), float(sigma), float(missing))
             out.append(("failed", key, f"{type(exc).__name__}: {exc}"))
     return out
 
@@ -376,18 +432,20 @@ def discover(data: str | os.PathLike, only: SeqT[str] | None = None,
 
 
 def plan_runs(sequences: SeqT[BenchSequence], methods: SeqT[str], seeds: int,
-              noise: SeqT[float]) -> list[tuple]:
-    """Every ``(sequence name, method, seed, sigma)``: sequences x methods x seeds x noise."""
-    return [(s.name, m, seed, float(sigma)) for s in sequences for sigma in noise
-            for seed in range(seeds) for m in methods]
+              noise: SeqT[float], missing: SeqT[float] = (0.0,)) -> list[tuple]:
+    """Every ``(sequence name, method, seed, sigma, missing)``: sequences x methods x seeds x
+    noise x missing shares."""
+    return [(s.name, m, seed, float(sigma), float(share)) for s in sequences for share in missing
+            for sigma in noise for seed in range(seeds) for m in methods]
 
 
 # --------------------------------------------------------------------------- runs.csv
 
 
 def run_key(row: dict) -> tuple:
-    """``(sequence, method, seed, noise)`` of a typed row."""
-    return (row["sequence"], row["method"], int(row["seed"]), float(row["noise"]))
+    """``(sequence, method, seed, noise, missing)`` of a typed row (missing 0 when absent)."""
+    return (row["sequence"], row["method"], int(row["seed"]), float(row["noise"]),
+            float(row.get("missing", 0.0)))
 
 
 def _parse_row(raw: dict) -> dict | None:
@@ -405,6 +463,12 @@ def _parse_row(raw: dict) -> dict | None:
         row["converged"] = conv == "true"
     except (KeyError, ValueError, TypeError, AttributeError):
         return None
+    try:  # files from before these columns: complete data, unlabelled share not recorded
+        row["missing"] = float(raw.get("missing") or 0.0)
+        unl = raw.get("unlabelled")
+        row["unlabelled"] = float(unl) if unl not in (None, "") else float("nan")
+    except (ValueError, TypeError):
+        return None
     row["version"] = raw.get("version") or ""  # "" in files from before these columns
     row["commit"] = raw.get("commit") or ""
     return row
@@ -413,7 +477,10 @@ def _parse_row(raw: dict) -> dict | None:
 def _format_row(row: dict) -> dict:
     out = dict(row)
     out["noise"] = format_noise(row["noise"])
+    out["missing"] = format_noise(row.get("missing", 0.0))
     out["error"] = repr(float(row["error"]))
+    unl = float(row.get("unlabelled", float("nan")))
+    out["unlabelled"] = f"{unl:.4f}" if math.isfinite(unl) else ""
     out["seconds"] = f"{row['seconds']:.4f}"
     out["converged"] = "True" if row["converged"] else "False"
     return out
@@ -425,18 +492,21 @@ def read_runs(path: str | os.PathLike, repair: bool = False) -> list[dict]:
     A row that cannot be parsed (e.g. a line cut short when the bench was killed) and a
     repeated key are dropped; with ``repair=True`` the file is then rewritten without
     them. A file with the columns of before ``version`` and ``commit`` existed
-    (:data:`LEGACY_COLUMNS`) is read with "" there, and rewritten with them by ``repair``.
+    (:data:`LEGACY_COLUMNS`) is read with "" there, one from before ``missing`` and
+    ``unlabelled`` (:data:`NO_MISSING_COLUMNS`) with missing 0 (complete data) and
+    unlabelled NaN (not recorded); ``repair`` rewrites either with the current columns.
 
     Raises
     ------
     BenchError
-        When the file's header is not :data:`COLUMNS`.
+        When the file's header is none of these.
     """
     path = Path(path)
     with open(path, newline="") as fh:
         reader = csv.DictReader(fh)
-        legacy = tuple(reader.fieldnames or ()) == LEGACY_COLUMNS
-        if tuple(reader.fieldnames or ()) != COLUMNS and not legacy:
+        header = tuple(reader.fieldnames or ())
+        legacy = header in _OLD_HEADERS and header != COLUMNS
+        if header not in _OLD_HEADERS:
             raise BenchError(
                 f"{path}: unexpected columns {reader.fieldnames}; expected {','.join(COLUMNS)} "
                 "(use a new --out folder)"
@@ -464,7 +534,7 @@ def _write_rows(path: Path, rows: list[dict]) -> None:
 
 
 def _sort_key(row: dict) -> tuple:
-    return (row["sequence"], row["method"], row["noise"], row["seed"])
+    return (row["sequence"], row["method"], row.get("missing", 0.0), row["noise"], row["seed"])
 
 
 # --------------------------------------------------------------------------- meta
@@ -562,8 +632,8 @@ def _batches(items: dict, todo: list[tuple], n_workers: int, max_batch: int) -> 
     enough that every worker gets several batches."""
     size = max(1, min(max_batch, math.ceil(len(todo) / max(1, 4 * n_workers))))
     by_seq: dict = {}
-    for name, method, seed, sigma in todo:
-        by_seq.setdefault(name, []).append((method, seed, sigma))
+    for name, method, seed, sigma, share in todo:
+        by_seq.setdefault(name, []).append((method, seed, sigma, share))
     out = []
     for name, runs in by_seq.items():
         for i in range(0, len(runs), size):
@@ -628,6 +698,7 @@ def run_bench(
     log: Callable[[str], None] | None = None,
     allow_mixed: bool = False,
     max_points: int | None = None,
+    missing: SeqT[float] = (0.0,),
 ) -> BenchSummary:
     """Run (or resume) a benchmark and write ``runs.csv`` and the report into ``out``.
 
@@ -642,6 +713,10 @@ def run_bench(
         Seeds ``0 .. seeds-1`` per sequence, method and noise level.
     noise : sequence of float
         Noise levels sigma in pixels.
+    missing : sequence of float
+        Shares in [0, 0.95) of the F x P entries to hide after the noise (0: complete
+        data); see :func:`hide_entries`. A share a sequence cannot lose (every track keeps
+        2 frames, so at most 1 - 2 / F) makes its runs fail with a message.
     only : sequence of str, optional
         Glob patterns on sequence names.
     jobs : int, optional
@@ -679,6 +754,7 @@ def run_bench(
     if not isinstance(seeds, int) or seeds < 1:
         raise BenchError(f"--seeds must be a positive integer, got {seeds!r}")
     noise = parse_noise(noise)
+    missing = parse_missing(missing)
     params = LaavParams() if params is None else params
 
     # inputs first, then the output
@@ -688,18 +764,18 @@ def run_bench(
     out.mkdir(parents=True, exist_ok=True)
     with _OutLock(out):
         return _run_locked(items, out, methods, seeds, noise, jobs, scheduler, params, progress,
-                           report, max_batch, say, allow_mixed)
+                           report, max_batch, say, allow_mixed, missing)
 
 
 def _run_locked(items, out, methods, seeds, noise, jobs, scheduler, params, progress, report,
-                max_batch, say, allow_mixed) -> BenchSummary:
+                max_batch, say, allow_mixed, missing=(0.0,)) -> BenchSummary:
     runs_csv = out / RUNS_CSV
     if runs_csv.is_file() and runs_csv.stat().st_size == 0:
         runs_csv.unlink()
     existing = read_runs(runs_csv, repair=True) if runs_csv.is_file() else []
     _check_meta(out, params, existing, allow_mixed)
 
-    planned = plan_runs(list(items.values()), methods, seeds, noise)
+    planned = plan_runs(list(items.values()), methods, seeds, noise, missing)
     done = {run_key(r) for r in existing}
     todo = [k for k in planned if k not in done]
     summary = BenchSummary(out=out, runs_csv=runs_csv, sequences=len(items),
@@ -711,7 +787,8 @@ def _run_locked(items, out, methods, seeds, noise, jobs, scheduler, params, prog
     if todo:
         where = f"Dask scheduler {scheduler}" if scheduler else f"{_n_workers(jobs)} process(es)"
         say(f"running {len(todo)} of {len(planned)} runs ({len(items)} sequence(s) x "
-            f"{len(methods)} method(s) x {seeds} seed(s) x {len(noise)} noise level(s)) "
+            f"{len(methods)} method(s) x {seeds} seed(s) x {len(noise)} noise level(s) x "
+            f"{len(missing)} missing share(s)) "
             f"on {where}")
     from tqdm import tqdm
 

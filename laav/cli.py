@@ -3,7 +3,8 @@
 ::
 
     laav segment FILE [--motions C|auto] [--method laav|rv] [--seed S] [--out labels.csv]
-    laav bench --data DIR [--methods laav,rv] [--seeds N] [--noise 0,0.5,1,2] [--only GLOB]
+    laav bench --data DIR [--methods laav,rv] [--seeds N] [--noise 0,0.5,1,2]
+               [--missing 0,0.2,0.4] [--only GLOB]
                [--jobs N] [--scheduler tcp://HOST:PORT] [--out DIR]
     laav report DIR
     laav convert IN OUT [--format hopkins|kt3d|npz|csv] [--complete-only]
@@ -119,6 +120,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="seeds 0..N-1 per sequence, method and noise level (default 1)")
     bench.add_argument("--noise", default="0", metavar="LIST",
                        help="comma-separated pixel noise levels sigma (default 0), e.g. 0,0.5,1,2")
+    bench.add_argument("--missing", default="0", metavar="LIST",
+                       help="comma-separated shares in [0, 0.95) of the entries to hide with the "
+                       "seeded occlusion model (tracks start late, end early, one gap; after the "
+                       "noise); default 0 (complete data), e.g. 0,0.2,0.4,0.6")
     bench.add_argument("--only", action="append", default=[], metavar="GLOB",
                        help="only sequences whose name matches the glob (repeatable, or "
                             "comma-separated)")
@@ -381,10 +386,11 @@ def _check_out_folder(out: Path) -> None:
 
 
 def _cmd_bench(args) -> int:
-    from .bench import params_from_assignments, parse_noise, run_bench
+    from .bench import params_from_assignments, parse_missing, parse_noise, run_bench
 
     params = params_from_assignments(args.param, args.preset)
     noise = parse_noise(args.noise)
+    missing = parse_missing(args.missing)
     methods = _split([args.methods])
     _check_out_folder(Path(args.out))
 
@@ -392,7 +398,7 @@ def _cmd_bench(args) -> int:
         data=args.data, out=args.out, methods=methods, seeds=args.seeds, noise=noise,
         only=_split(args.only) or None, jobs=args.jobs, scheduler=args.scheduler,
         params=params, progress=not args.quiet, report=not args.no_report,
-        allow_mixed=args.allow_mixed, max_points=args.max_points,
+        allow_mixed=args.allow_mixed, max_points=args.max_points, missing=missing,
     )
     err = sys.stderr
     if summary.interrupted:

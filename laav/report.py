@@ -8,6 +8,11 @@ Aggregation: for each method and noise level the error of a sequence is first av
 over its seeds; means and medians are then taken over sequences, so a sequence counts
 once whatever the number of seeds. Errors are misclassification rates in percent.
 
+Missing data (``laav bench --missing``): the sections of the complete-data report (Table 1,
+noise, convergence, repetitions, time; Figs. 2-4) use the runs at missing share 0, or at
+the smallest share when there is none; when the CSV holds more than one share, a table
+and a figure of the error against the missing share (at the smallest noise level) follow.
+
 matplotlib is imported only inside :func:`write_figures` and draws on Agg canvases
 without pyplot (no global backend state is touched).
 """
@@ -22,8 +27,8 @@ import numpy as np
 
 from .bench import RUNS_CSV, format_noise, read_runs
 
-__all__ = ["PUBLISHED", "FIGURES", "report_from_csv", "write_report", "write_figures",
-           "table1", "per_sequence_errors", "method_label"]
+__all__ = ["PUBLISHED", "FIGURES", "MISSING_FIGURE", "report_from_csv", "write_report",
+           "write_figures", "table1", "per_sequence_errors", "method_label", "missing_table"]
 
 #: Mean misclassification (%) reported in Table 1 of the LAAV paper: two, three motions, all.
 PUBLISHED = {
@@ -36,6 +41,8 @@ FIGURES = {
     "convergence": "fig3_convergence.png",
     "repetitions": "fig4_repetitions.png",
 }
+#: File name of the error-vs-missing-share figure (only when runs.csv holds several shares).
+MISSING_FIGURE = "fig5_error_vs_missing.png"
 _LABELS = {"laav": "LAAV", "rv": "RV"}
 _COLORS = {"laav": "#1f77b4", "rv": "#d62728"}
 
@@ -98,6 +105,44 @@ def table1(rows, sigma: float = 0.0) -> dict:
             "all": _stats(v[2] for v in seqs.values()),
         }
     return out
+
+
+def _shares(rows) -> list[float]:
+    return sorted({r.get("missing", 0.0) for r in rows})
+
+
+def _base(rows) -> tuple[list, float]:
+    """The runs of the complete-data sections: missing share 0 (else the smallest); the share."""
+    shares = _shares(rows)
+    share = 0.0 if not shares or 0.0 in shares else shares[0]
+    return [r for r in rows if r.get("missing", 0.0) == share], share
+
+
+def _pct(share: float) -> str:
+    return f"{100 * share:.4g} %"
+
+
+def missing_table(rows) -> tuple[float, dict]:
+    """Error against the missing share, at the smallest noise level of ``rows``.
+
+    Returns
+    -------
+    (sigma, dict)
+        ``{method: {share: {"two": (mean, median, n), "three": ..., "all": ...,
+        "unlabelled": mean unlabelled % over runs (NaN when not recorded)}}}``; errors
+        averaged over seeds per sequence first, as in :func:`table1`.
+    """
+    sigma = min(r["noise"] for r in rows)
+    at = [r for r in rows if r["noise"] == sigma]
+    out = {}
+    for share in _shares(at):
+        rs = [r for r in at if r.get("missing", 0.0) == share]
+        for m, t in table1(rs, sigma).items():
+            unl = [r.get("unlabelled", float("nan")) for r in rs if r["method"] == m]
+            known = [u for u in unl if np.isfinite(u)]
+            t["unlabelled"] = float(np.mean(known)) if known else float("nan")
+            out.setdefault(m, {})[share] = t
+    return sigma, out
 
 
 def _f(v: float, nd: int = 2) -> str:
@@ -177,10 +222,12 @@ def _code_line(rows) -> str:
 def report_from_csv(path: str | os.PathLike) -> str:
     """The Markdown report of a ``runs.csv`` (every number computed from the CSV)."""
     path = Path(path)
-    rows = read_runs(path)
+    all_rows = read_runs(path)
     lines = ["# LAAV benchmark report", ""]
-    if not rows:
+    if not all_rows:
         return "\n".join(lines + [f"`{path.name}` holds no runs yet.", ""])
+    shares = _shares(all_rows)
+    rows, base_share = _base(all_rows)
     methods = _methods(rows)
     levels = _levels(rows)
     seqs = sorted({r["sequence"] for r in rows})
@@ -188,23 +235,37 @@ def report_from_csv(path: str | os.PathLike) -> str:
     seeds = sorted({r["seed"] for r in rows})
     n2 = sum(1 for s in seqs if motions[s] == 2)
     n3 = sum(1 for s in seqs if motions[s] == 3)
+    if shares == [0.0]:
+        where = ""
+    elif len(shares) == 1:
+        where = (f" All runs at {_pct(base_share)} of the entries missing (seeded occlusion "
+                 "model: tracks start late, end early and have one gap).")
+    else:
+        where = (f" Missing shares {', '.join(_pct(s) for s in shares)} (seeded occlusion "
+                 "model: tracks start late, end early and have one gap); the sections up to "
+                 f"*Run time* use the {_pct(base_share)} runs ({len(rows)} of {len(all_rows)}),"
+                 " the last section all of them.")
     lines += [
-        f"Computed from `{path.name}`: {len(rows)} runs of {len(seqs)} sequences "
+        f"Computed from `{path.name}`: {len(all_rows)} runs of {len(seqs)} sequences "
         f"({n2} with two motions, {n3} with three, {len(seqs) - n2 - n3} other), "
-        f"methods {', '.join(method_label(m) for m in methods)}, "
+        f"methods {', '.join(method_label(m) for m in _methods(all_rows))}, "
         f"seeds {', '.join(map(str, seeds))}, noise σ = {', '.join(map(_sigma, levels))} px. "
-        "Parameters: `bench.json`.",
+        "Parameters: `bench.json`." + where,
         "",
-        _code_line(rows),
+        _code_line(all_rows),
         "",
-        "Errors are misclassification rates in percent. Each sequence's error is first "
-        "averaged over its seeds; means and medians are over sequences.",
+        "Errors are misclassification rates in percent (a point left unlabelled counts as "
+        "wrong). Each sequence's error is first averaged over its seeds; means and medians "
+        "are over sequences.",
         "",
     ]
     lines += _balance(rows, seqs, methods, levels)
 
     # Table 1
-    lines += ["## Table 1: misclassification rate (%) without added noise", ""]
+    title = "## Table 1: misclassification rate (%) without added noise"
+    if base_share:
+        title += f", {_pct(base_share)} of the entries missing"
+    lines += [title, ""]
     t1 = table1(rows, 0.0)
     head = ("| Method | 2 motions mean | 2 motions median | 3 motions mean | 3 motions median "
             "| All mean | All median | Sequences |")
@@ -294,7 +355,34 @@ def report_from_csv(path: str | os.PathLike) -> str:
         lines.append(f"| {method_label(m)} | {t.size} | {t.mean():.3f} | {np.median(t):.3f} "
                      f"| {t.max():.3f} |")
     lines.append("")
+    if len(shares) > 1:
+        lines += _missing_section(all_rows)
     return "\n".join(lines)
+
+
+def _missing_section(rows) -> list[str]:
+    sigma, mt = missing_table(rows)
+    shares = _shares([r for r in rows if r["noise"] == sigma])
+    out = ["## Error vs. missing share (Fig. 5)", "",
+           f"Misclassification (%) with a share of the F x P entries hidden by the seeded "
+           f"occlusion model (`laav.synthetic.occlude`, spread 0.5, generator "
+           f"`occlusion_rng(seed, sequence, share)` as in `benchmarks/missing.py`), at noise "
+           f"σ = {_sigma(sigma)} px. A point left unlabelled counts as wrong; *Unlabelled* is "
+           "the mean share of such points per run.", "",
+           "| Method | Missing | 2 motions mean | 2 motions median | 3 motions mean "
+           "| 3 motions median | All mean | All median | Sequences | Unlabelled (%) |",
+           "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for m, by in mt.items():
+        for share in shares:
+            if share not in by:
+                continue
+            t = by[share]
+            out.append(f"| {method_label(m)} | {_pct(share)} | {_f(t['two'][0])} "
+                       f"| {_f(t['two'][1])} | {_f(t['three'][0])} | {_f(t['three'][1])} "
+                       f"| {_f(t['all'][0])} | {_f(t['all'][1])} | {t['all'][2]} "
+                       f"| {_f(t['unlabelled'])} |")
+    out += ["", f"![error vs missing share]({MISSING_FIGURE})", ""]
+    return out
 
 
 # --------------------------------------------------------------------------- figures
@@ -347,10 +435,16 @@ def _grouped_boxes(ax, data: dict, methods, levels, ylabel: str, title: str) -> 
 
 
 def write_figures(rows, out_dir: str | os.PathLike) -> list[Path]:
-    """Write the three PNG figures of :data:`FIGURES` into ``out_dir``; their paths."""
+    """Write the three PNG figures of :data:`FIGURES` into ``out_dir`` (from the runs at
+    missing share 0, or the smallest share), and :data:`MISSING_FIGURE` when ``rows`` hold
+    more than one missing share; their paths."""
     out_dir = Path(out_dir)
+    all_rows = rows
+    rows, _ = _base(all_rows)
     methods, levels = _methods(rows), _levels(rows)
     paths = []
+    if len(_shares(all_rows)) > 1:
+        paths.append(_missing_figure(all_rows, out_dir / MISSING_FIGURE))
 
     # Fig. 2: mean error vs noise
     fig, (ax,) = _new_figure(6.4, 4.4)
@@ -413,6 +507,45 @@ def write_figures(rows, out_dir: str | os.PathLike) -> list[Path]:
     paths.append(out_dir / FIGURES["repetitions"])
     fig.savefig(paths[-1])
     return paths
+
+
+def _missing_figure(rows, path: Path) -> Path:
+    """Fig. 5: mean (and median) error against the missing share, 2 and 3 motions."""
+    sigma, mt = missing_table(rows)
+    fig, axes = _new_figure(11.0, 4.4, 2)
+    top = 0.0
+    for ax, key, name in zip(axes, ("two", "three"), ("two motions", "three motions")):
+        for m, by in mt.items():
+            xs = [s for s in sorted(by) if by[s][key][2]]
+            if not xs:
+                continue
+            x100 = [100 * s for s in xs]
+            means = [by[s][key][0] for s in xs]
+            meds = [by[s][key][1] for s in xs]
+            n = by[xs[-1]][key][2]
+            first = m == next(iter(mt))  # LAAV on top, RV drawn thinner with other markers
+            z, lw = (3, 2.2) if first else (2, 1.4)
+            ax.plot(x100, means, "o-" if first else "^-", color=_COLORS.get(m), lw=lw, zorder=z,
+                    markersize=7 if first else 6, label=f"{method_label(m)} mean ({n} seq.)")
+            ax.plot(x100, meds, "s--" if first else "v--", color=_COLORS.get(m), alpha=0.55,
+                    lw=lw * 0.7, markersize=4, zorder=z, label=f"{method_label(m)} median")
+            top = max(top, *means, *meds)
+        shares = sorted({s for by in mt.values() for s in by})
+        ax.set_xticks([100 * s for s in shares], [f"{100 * s:.4g}" for s in shares])
+        ax.set_xlabel("entries missing (%)")
+        ax.set_ylabel("misclassification (%)")
+        ax.set_title(name.capitalize())
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper left")
+        else:
+            ax.text(0.5, 0.5, f"no {name} sequences", ha="center", va="center",
+                    transform=ax.transAxes)
+    for ax in axes:  # one scale, so that the panels compare
+        ax.set_ylim(0, max(1.0, top) * 1.15)
+    fig.suptitle(f"Misclassification vs. missing entries (σ = {_sigma(sigma)} px; Fig. 5)")
+    fig.savefig(path)
+    return path
 
 
 def write_report(out_dir: str | os.PathLike, csv_path: str | os.PathLike | None = None) -> Path:

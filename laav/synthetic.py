@@ -34,6 +34,7 @@ start late, end early and have a gap), for the missing-data stages.
 from __future__ import annotations
 
 import numbers
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,8 +42,8 @@ import numpy as np
 from ._sequence import MIN_FRAMES, Sequence
 
 __all__ = [
-    "make_sequence", "make_family", "affine_residual", "add_noise", "occlude", "FAMILIES",
-    "MIN_POINTS_PER_MOTION", "MAX_OBJECTS",
+    "make_sequence", "make_family", "affine_residual", "add_noise", "occlude", "occlusion_rng",
+    "FAMILIES", "MIN_POINTS_PER_MOTION", "MAX_OBJECTS", "BENCH_SPREAD",
 ]
 
 #: Fewest trajectories :func:`make_sequence` gives any motion (background included).
@@ -917,6 +918,22 @@ def add_noise(
     gen = _as_generator(rng)
     noisy = seq.points + gen.normal(0.0, sigma, size=seq.points.shape)
     return seq.with_points(noisy)
+
+
+#: :func:`occlude`'s ``spread`` in the missing-data benchmarks (``laav bench --missing``,
+#: ``benchmarks/missing.py``).
+BENCH_SPREAD = 0.5
+
+
+def occlusion_rng(seed: int, name: str, level: float) -> np.random.Generator:
+    """The generator of the occlusion of benchmark run ``(name, seed, level)``.
+
+    Seeded by ``(seed, crc32(name), round(level * 1e6))`` only, so ``laav bench --missing``
+    and ``benchmarks/missing.py`` hide the same entries of a sequence wherever and in
+    whatever order they run; it does not depend on the method or the pixel noise.
+    """
+    entropy = [int(seed), zlib.crc32(name.encode("utf-8")), int(round(float(level) * 1e6))]
+    return np.random.default_rng(np.random.SeedSequence(entropy))
 
 
 def occlude(seq: Sequence, fraction: float, rng: np.random.Generator | int | None = None,

@@ -422,3 +422,153 @@ def test_discover_max_points(data_dir):
     with pytest.raises(BenchError):
         bench.discover(data_dir, log=msgs.append, max_points=59)
     assert any("60 points exceed the limit of 59" in m for m in msgs)
+
+
+# --------------------------------------------------------------------------- missing data
+
+
+def _load_missing_script():
+    """benchmarks/missing.py as a module (its folder on sys.path, as when run as a script)."""
+    import importlib.util
+    import sys
+
+    folder = Path(__file__).resolve().parent.parent / "benchmarks"
+    if str(folder) not in sys.path:
+        sys.path.insert(0, str(folder))
+    spec = importlib.util.spec_from_file_location("_bench_missing_script", folder / "missing.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def missing_run(data_dir, tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench-missing") / "out"
+    summary = run_bench(data_dir, out, methods=("laav", "rv"), seeds=1, noise=(0.0,),
+                        missing=(0.0, 0.3), only=["syn_a", "syn_b"], jobs=1, params=SMALL,
+                        progress=False, log=lambda m: None)
+    return out, summary
+
+
+def test_missing_share_is_a_column_and_part_of_the_key(missing_run, data_dir, monkeypatch):
+    out, summary = missing_run
+    assert bench.KEY == ("sequence", "method", "seed", "noise", "missing")
+    rows = _csv_rows(out / "runs.csv")
+    assert tuple(rows[0]) == COLUMNS and not summary.failed
+    keys = {(r["sequence"], r["method"], r["seed"], r["noise"], r["missing"]) for r in rows}
+    assert keys == {(s, m, "0", "0", share) for s in ("syn_a", "syn_b") for m in ("laav", "rv")
+                    for share in ("0", "0.3")}
+    for r in rows:
+        assert 0.0 <= float(r["unlabelled"]) <= float(r["error"]) + 1e-9
+    # a row is the direct API call on the noisy, then occluded sequence
+    typed = read_runs(out / "runs.csv")
+    row = next(r for r in typed if (r["sequence"], r["method"], r["missing"]) == ("syn_b", "laav", 0.3))
+    seq = laav.load_sequence(data_dir / "syn_b" / "syn_b_truth.mat")
+    occl = bench.hide_entries(seq, 0.3, seed=0)
+    assert not occl.is_complete and 1 - occl.visible_share == pytest.approx(0.3, abs=1e-3)
+    res = laav.segment(occl, 3, SMALL, 0)
+    assert row["error"] == pytest.approx(100 * laav.misclassification_rate(seq.labels, res.labels))
+    assert row["unlabelled"] == pytest.approx(100 * np.mean(res.labels < 0))
+    # another share later: only its runs run
+    calls = []
+    real = bench.run_one
+    monkeypatch.setattr(bench, "run_one", lambda *a, **k: calls.append(a[5]) or real(*a, **k))
+    more = run_bench(data_dir, out, methods=("laav", "rv"), seeds=1, noise=(0.0,),
+                     missing=(0.0, 0.3, 0.5), only=["syn_a", "syn_b"], jobs=1, params=SMALL,
+                     progress=False, report=False, log=lambda m: None)
+    assert (more.already_done, more.completed, calls) == (8, 4, [0.5] * 4)
+
+
+def test_runs_csv_without_the_missing_columns_still_loads_and_resumes(bench_run, data_dir, tmp_path):
+    out, _, _ = bench_run
+    new = _csv_rows(out / "runs.csv")
+    old_dir = tmp_path / "old"
+    old_dir.mkdir()
+    (old_dir / "bench.json").write_text((out / "bench.json").read_text())
+    for cols, name in ((bench.NO_MISSING_COLUMNS, "runs.csv"), (bench.LEGACY_COLUMNS, "legacy.csv")):
+        with open(old_dir / name, "w", newline="") as fh:
+            w = csv.DictWriter(fh, cols, extrasaction="ignore")
+            w.writeheader()
+            w.writerows(new)
+        rows = read_runs(old_dir / name)
+        assert len(rows) == len(new) and all(r["missing"] == 0.0 for r in rows)
+        assert all(np.isnan(r["unlabelled"]) for r in rows)
+        assert {bench.run_key(r) for r in rows} == {bench.run_key(r) for r in read_runs(out / "runs.csv")}
+        assert "Error vs. missing share" not in report_from_csv(old_dir / name)
+    # a resume of the old folder runs nothing and rewrites the file with the new columns
+    again = run_bench(data_dir, old_dir, methods=("laav", "rv"), seeds=2, noise=(0.0, 1.0), jobs=1,
+                      params=SMALL, progress=False, log=lambda m: None)
+    assert (again.already_done, again.completed) == (24, 0)
+    rewritten = _csv_rows(old_dir / "runs.csv")
+    assert tuple(rewritten[0]) == COLUMNS
+    assert {r["missing"] for r in rewritten} == {"0"} and {r["unlabelled"] for r in rewritten} == {""}
+    assert read_runs(old_dir / "runs.csv") and not list(old_dir.glob("fig5*"))
+
+
+def test_occlusion_is_seeded_and_the_same_as_benchmarks_missing_py(data_dir):
+    import zlib
+
+    from laav.synthetic import BENCH_SPREAD, occlude, occlusion_rng
+
+    script = _load_missing_script()
+    assert script.occlusion_rng is occlusion_rng and script.SPREAD == BENCH_SPREAD == 0.5
+    seq = make_sequence(n_objects=1, n_frames=12, n_points=80, rng=5, name="occl")
+    a = bench.hide_entries(seq, 0.4, seed=3)
+    np.testing.assert_array_equal(a.visible, bench.hide_entries(seq, 0.4, seed=3).visible)
+    assert not np.array_equal(a.visible, bench.hide_entries(seq, 0.4, seed=4).visible)
+    other = laav.Sequence(seq.points, seq.labels, name="other")
+    assert not np.array_equal(a.visible, bench.hide_entries(other, 0.4, seed=3).visible)
+    # the seeding of docs/bench/missing.md's runs: (seed, crc32(name), round(level * 1e6))
+    gen = np.random.default_rng(np.random.SeedSequence([3, zlib.crc32(b"occl"), 400000]))
+    np.testing.assert_array_equal(a.visible, occlude(seq, 0.4, gen, spread=0.5).visible)
+    # noise first, then the same entries hidden whatever the noise
+    noisy = bench.hide_entries(add_pixel_noise(seq, 1.0, seed=3), 0.4, seed=3)
+    np.testing.assert_array_equal(noisy.visible, a.visible)
+    assert bench.hide_entries(seq, 0.0, seed=3) is seq
+    # the whole run: the script's row and the bench's row agree (default parameters)
+    item = bench.discover(data_dir, ["syn_a"], log=lambda m: None)[0]
+    row = bench.run_one(item, "laav", 0, 0.0, None, 0.3)
+    theirs = script.run_sequence(item.path, [0.3], 0)[0]
+    assert row["error"] == pytest.approx(float(theirs["error"]), abs=1e-3)
+    assert row["unlabelled"] == pytest.approx(float(theirs["unlabelled"]), abs=1e-3)
+
+
+def test_report_has_the_missing_table_and_figure(missing_run):
+    from PIL import Image
+
+    from laav.report import MISSING_FIGURE, missing_table
+
+    out, _ = missing_run
+    text = (out / "report.md").read_text()
+    assert "## Error vs. missing share (Fig. 5)" in text and f"({MISSING_FIGURE})" in text
+    rows = read_runs(out / "runs.csv")
+    _, mt = missing_table(rows)
+    for m, label in (("laav", "LAAV"), ("rv", "RV")):
+        for share, pct in ((0.0, "0 %"), (0.3, "30 %")):
+            line = next(ln for ln in text.split("Error vs. missing share", 1)[1].splitlines()
+                        if ln.startswith(f"| {label} | {pct} |"))
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            errs = [r["error"] for r in rows if r["method"] == m and r["missing"] == share]
+            assert cells[6] == f"{np.mean(errs):.2f}" == f"{mt[m][share]['all'][0]:.2f}"
+            assert cells[8] == "2"
+    # the complete-data sections use the share-0 runs only
+    t1 = _table_line(text, "LAAV", "## Table 1")
+    zero = [r["error"] for r in rows if r["method"] == "laav" and r["missing"] == 0.0]
+    assert t1[4] == f"{np.mean(zero):.2f}"
+    png = out / MISSING_FIGURE
+    assert png.read_bytes()[:8] == PNG_MAGIC
+    with Image.open(png) as im:
+        assert im.size[0] > 400 and im.size[1] > 300
+
+
+def test_cli_rejects_bad_missing_shares(data_dir, tmp_path, capsys):
+    assert bench.parse_missing("0.4,0, 0.2,0") == (0.0, 0.2, 0.4)
+    assert bench.parse_missing("0.94") == (0.94,)
+    for bad, what in (("1.2", "in [0, 0.95)"), ("x", "is not a number"), ("0.95", "in [0, 0.95)"),
+                      ("-0.1", "in [0, 0.95)"), ("nan", "in [0, 0.95)"), ("", "no missing share")):
+        out = tmp_path / f"o{len(what)}"
+        assert main(["bench", "--data", str(data_dir), "--missing", bad, "--out", str(out),
+                     "-q"]) == 2, bad
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("laav bench: error: ") and what in err[0], err
+        assert not out.exists()
