@@ -214,9 +214,10 @@ class Explorer:
 
     @classmethod
     def from_video(cls, path, n_motions: int | str | None = None, *, track: dict | None = None,
-                   progress: bool | None = True, **kw) -> Explorer:
-        """Track a video (or a folder of frames), keep the tracks seen in every frame, and explore
-        them with the video's frames behind the points.
+                   progress: bool | None = True, complete_only: bool = False, **kw) -> Explorer:
+        """Track a video (or a folder of frames), keep every track the tracker keeps (only those
+        seen in every frame with ``complete_only``), and explore them with the video's frames
+        behind the points.
 
         ``n_motions``: C, or None / ``"auto"`` to estimate it (:func:`laav.estimate_motions`).
         ``track``: keyword arguments of :func:`laav.track.track` (``stride``, ``max_points``,
@@ -226,7 +227,8 @@ class Explorer:
         """
         from .video import open_video
 
-        video = open_video(path, n_motions, track_options=track, progress=progress)
+        video = open_video(path, n_motions, track_options=track, progress=progress,
+                           complete_only=complete_only)
         return cls(video.sequence, video.n_motions, video=video, **kw)
 
     @classmethod
@@ -417,6 +419,10 @@ class Explorer:
                 elif seq.labels is None:
                     notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; C = "
                                  f"{settings.n_motions} is taken from the C box.")
+                if not seq.is_complete:
+                    notes.append(V.incomplete_note(seq, result, counts=not (
+                        self.video is not None and seq is self.video.sequence)))
+                    notes = [n for n in notes if n]
                 s.show_note("  \n".join(notes))
                 s.show_result(seq, num["error_final"], self.state.compute_seconds,
                               non_defaults(settings, self.state.default_motions(seq)), self.change)

@@ -18,6 +18,7 @@ from laav.geometry import epipolar_lines
 __all__ = [
     "COLOR_MODES", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS",
     "UNLABELLED", "ERROR_MARK", "UNSEEN", "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at",
+    "incomplete_note",
     "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "raw_style", "points_source", "frame_sources",
     "graph_sources",
@@ -111,6 +112,28 @@ def visible_at(seq: laav.Sequence, frame: int) -> np.ndarray:
 def _unlabelled(result: laav.LaavResult) -> np.ndarray:
     """(P,) bool: the points the final stage left unlabelled (seen too briefly)."""
     return np.asarray(result.unlabelled_code) > 0
+
+
+def incomplete_note(seq: laav.Sequence, result: laav.LaavResult | None = None,
+                    counts: bool = True) -> str:
+    """Markdown for the page note on an incomplete sequence ("" when complete): how many
+    tracks, what share of the entries is visible (unless ``counts`` is False: a video's
+    summary says it already), how many points the final stage left unlabelled (seen too
+    briefly; counted as errors)."""
+    if seq.is_complete:
+        return ""
+    n_full = int(np.count_nonzero(seq.visible.all(axis=0)))
+    text = ""
+    if counts:
+        text = (f"Incomplete tracks: {seq.n_points} tracks over {seq.n_frames} frames, "
+                f"{100 * seq.visible_share:.1f} % of the entries visible ({n_full} tracks seen in every "
+                "frame); every view draws a point only where it is seen.")
+    if result is not None:
+        n_un = int(np.count_nonzero(result.unlabelled_code))
+        if n_un:
+            text += (f"{' ' if text else ''}{n_un} point{'s' if n_un != 1 else ''} {'are' if n_un != 1 else 'is'} "
+                     f"*{UNSEEN_LABEL}* (label -1, grey ⊗; counted as errors).")
+    return text
 
 
 def _palette(labels: np.ndarray, palette) -> np.ndarray:
