@@ -101,7 +101,7 @@ def test_incomplete_sequence_estimated_on_its_complete_tracks():
     few = np.ones((F, P), dtype=bool)
     few[-1, 12:] = False
     with pytest.raises(ValueError, match=r"only 12 of the \d+ tracks are seen in every frame.*--motions N"):
-        estimate_motions(laav.Sequence(pts, visible=few))
+        estimate_motions(laav.Sequence(seq.points, visible=few))
 
 
 def test_decide_sequential_test():

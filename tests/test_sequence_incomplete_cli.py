@@ -71,8 +71,8 @@ def test_segment_auto_on_an_incomplete_file_estimates_c_on_its_complete_tracks(t
 
 
 def test_segment_auto_with_too_few_complete_tracks_is_one_clear_line(tmp_path, capsys):
-    seq, _ = _occluded_scene()
-    vis = seq.visible.copy()
+    seq = make_sequence(1, n_frames=10, n_points=80, rng=4)
+    vis = np.ones((10, 80), bool)
     vis[8:, 10:] = False  # only 10 tracks seen in every frame
     path = laav.save_sequence(laav.Sequence(seq.points, seq.labels, name="few", visible=vis),
                               tmp_path / "few.npz")
@@ -159,9 +159,10 @@ def test_explorer_cli_estimates_c_of_an_incomplete_file_without_truth(tmp_path, 
     out = capsys.readouterr().out
     assert "C = 2 estimated" in out and "seen in every frame" in out and seen["n_motions"] == 2
     # too few complete tracks to estimate C: one clear line, exit 2
-    vis = occl.visible.copy()
-    vis[8:, 10:] = False
-    few = laav.save_sequence(laav.Sequence(occl.points, name="few", visible=vis), tmp_path / "few.npz")
+    vis = np.ones((10, 80), bool)
+    vis[8:, 10:] = False  # only 10 tracks seen in every frame
+    base = make_sequence(1, n_frames=10, n_points=80, rng=4)
+    few = laav.save_sequence(laav.Sequence(base.points, name="few", visible=vis), tmp_path / "few.npz")
     assert explore([str(few), "--no-browser"]) == 2
     err = capsys.readouterr().err.strip()
     assert "Traceback" not in err and len(err.splitlines()) == 1
@@ -199,7 +200,7 @@ def test_explorer_upload_of_an_incomplete_file_replaces_the_sequence(tmp_path):
         occl, _ = _occluded_scene(path)
         assert ex.load_bytes(path.read_bytes(), "my tracks.csv")  # once refused
         assert ex.wait(120) and not ex.alert.visible
-        assert ex.sequence.name == "tracks" and not ex.sequence.is_complete
+        assert ex.sequence.name == "my_tracks" and not ex.sequence.is_complete
         assert ex.sequence.n_points == 80
         # the frame view: every point at frame 0, only the 60 complete tracks at frame 9
         ex.w_frame.value = 0
