@@ -356,7 +356,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"--complete-only: kept {kept.size} points (those visible in every frame; "
                   f"{missing:.1f} % of the entries were missing), numbered 0..{kept.size - 1}",
                   file=sys.stderr)
-        elif not seq.is_complete:
+        elif not seq.is_complete and video is None:  # (a video's own line says it)
             _say(f"{seq.n_points} tracks, {100 * seq.visible_share:.1f} % of the entries visible "
                  "(incomplete tracks: drawn only where seen; --complete-only keeps the full ones)")
     except (laav.SequenceError, FileNotFoundError) as exc:

@@ -241,7 +241,7 @@ def test_explorer_from_file_tracks_a_video_and_draws_its_frames(tmp_path):
         fv.w_background.value = True
         assert fv.r_background.visible and fv.src_background.data["image"][0] is frames.get(9)
         # another sequence (an upload) has no video behind it
-        other = laav.save_sequence(laav.Sequence(ex.sequence.points[:, :40], name="plain"),
+        other = laav.save_sequence(laav.Sequence(ex.sequence.complete()[0].points[:, :40], name="plain"),
                                    tmp_path / "plain.npz")
         assert ex.load_bytes(other.read_bytes(), "plain.npz") and ex.wait(120)
         assert ex.sequence.name == "plain" and not fv.r_background.visible
@@ -313,7 +313,7 @@ def test_cli_tracks_a_folder_of_frames_then_serves_it(monkeypatch, capsys):
     ("junk", "cannot open this video (not a format OpenCV reads)"),
     ("blank", "no features found"),
     ("short", "shorter than the minimum length of 30 frames"),
-    ("too_many_motions", "fewer than the 800 LAAV needs for C = 100"),
+    ("too_many_motions", "fewer than the 1600 LAAV needs for C = 200"),
 ])
 def test_cli_bad_video_exits_2_with_one_line(tmp_path, capsys, monkeypatch, case, needle):
     monkeypatch.setattr(pn, "serve", lambda *a, **k: pytest.fail("no server for a bad video"))
@@ -327,7 +327,7 @@ def test_cli_bad_video_exits_2_with_one_line(tmp_path, capsys, monkeypatch, case
     elif case == "short":
         args += ["--min-length", "30"]
     else:
-        args += ["--motions", "100"]
+        args += ["--motions", "200"]
     assert main([*args, "--no-browser", "--port", "0"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("laav-explore: error: ") and needle in err, err
