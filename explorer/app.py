@@ -214,9 +214,10 @@ class Explorer:
 
     @classmethod
     def from_video(cls, path, n_motions: int | str | None = None, *, track: dict | None = None,
-                   progress: bool | None = True, **kw) -> Explorer:
-        """Track a video (or a folder of frames), keep the tracks seen in every frame, and explore
-        them with the video's frames behind the points.
+                   progress: bool | None = True, complete_only: bool = False, **kw) -> Explorer:
+        """Track a video (or a folder of frames), keep every track the tracker keeps (only those
+        seen in every frame with ``complete_only``), and explore them with the video's frames
+        behind the points.
 
         ``n_motions``: C, or None / ``"auto"`` to estimate it (:func:`laav.estimate_motions`).
         ``track``: keyword arguments of :func:`laav.track.track` (``stride``, ``max_points``,
@@ -226,7 +227,8 @@ class Explorer:
         """
         from .video import open_video
 
-        video = open_video(path, n_motions, track_options=track, progress=progress)
+        video = open_video(path, n_motions, track_options=track, progress=progress,
+                           complete_only=complete_only)
         return cls(video.sequence, video.n_motions, video=video, **kw)
 
     @classmethod
@@ -410,13 +412,18 @@ class Explorer:
                 num = self.numbers_view.draw(seq, result, plain)
                 s = self.status_bar
                 s.alert.visible = self.state.error is not None
-                notes = [n for n in (self.style["note"], unpinned) if n]
+                data_notes = []  # about the data: kept when the colour mode changes
                 if self.video is not None and seq is self.video.sequence:
-                    notes.append(V.md_text(self.video.summary()) + " No ground truth: errors cannot be "
-                                 "scored.")
+                    data_notes.append(V.md_text(self.video.summary()) + " No ground truth: errors cannot be "
+                                      "scored.")
                 elif seq.labels is None:
-                    notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; C = "
-                                 f"{settings.n_motions} is taken from the C box.")
+                    data_notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; "
+                                      f"C = {settings.n_motions} is taken from the C box.")
+                if not seq.is_complete:
+                    data_notes.append(V.incomplete_note(seq, result, counts=not (
+                        self.video is not None and seq is self.video.sequence)))
+                self._data_notes = [n for n in data_notes if n]
+                notes = [n for n in (self.style["note"], unpinned) if n] + self._data_notes
                 s.show_note("  \n".join(notes))
                 s.show_result(seq, num["error_final"], self.state.compute_seconds,
                               non_defaults(settings, self.state.default_motions(seq)), self.change)
@@ -505,7 +512,8 @@ class Explorer:
         with self.hold():
             self._draw_frame()
             self.compare.redraw()
-            self.status_bar.show_note(self.style["note"])
+            self.status_bar.show_note("  \n".join(
+                [n for n in [self.style["note"]] if n] + getattr(self, "_data_notes", [])))
             self._sync_url()
         self.view3d.set_colors(self.style["color"])
 

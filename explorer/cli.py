@@ -4,10 +4,12 @@
 A VIDEO (anything OpenCV opens) or a folder of frames, told apart from a sequence file by
 content (:func:`explorer.video.is_video`), is tracked first, before the server starts (the
 tracker's progress bar on a terminal; ``laav track``'s options: ``--stride``,
-``--track-points`` for its ``--max-points``, ``--max-frames``, ...): the tracks seen in every
-frame are kept (LAAV's stages take complete tracks only), C is ``--motions`` or estimated
-(``laav.estimate_motions``), and the frame view draws the video's frames behind the points.
-A video that cannot be used (unreadable, no features, too few complete tracks for C) exits
+``--track-points`` for its ``--max-points``, ``--max-frames``, ...): every track it keeps is
+used, incomplete ones included (``--complete-only``: only those seen in every frame), C is
+``--motions`` or estimated (``laav.estimate_motions``, on the tracks seen in every frame), and
+the frame view draws the video's frames behind the points. A FILE with incomplete tracks is
+segmented as it is (``--complete-only`` keeps its full tracks). Every view draws a point only
+where it is seen. A video that cannot be used (unreadable, no features, too few tracks for C) exits
 with code 2 and one line on stderr.
 
 The page address carries its state: ``/?r1=25&seed=3`` opens with R1 = 25 and seed 3 (keys:
@@ -143,10 +145,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"refuse a FILE with more than N points (default {laav.io.MAX_POINTS:,}; "
                         "time and memory grow about linearly; docs/bench/scale.md)")
     p.add_argument("--complete-only", action="store_true",
-                   help="keep only the tracks visible in every frame (the explorer does not handle "
-                        "missing entries yet); the page then numbers the kept points 0..K-1")
-    tr = p.add_argument_group("tracking a VIDEO (the options of laav track; the tracks seen in every "
-                              "frame are kept)")
+                   help="keep only the tracks visible in every frame (by default incomplete tracks are "
+                        "segmented too and drawn only where seen); the page then numbers the kept "
+                        "points 0..K-1")
+    tr = p.add_argument_group("tracking a VIDEO (the options of laav track; every track it keeps is "
+                              "used, --complete-only: only those seen in every frame)")
     add_track_arguments(tr, rename={"--max-points": "--track-points"})
     return p
 
@@ -334,7 +337,8 @@ def main(argv: list[str] | None = None) -> int:
             os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
             try:
                 video = open_video(args.file, args.motions, track_options=track_options(args),
-                                   progress=None, max_points=args.max_points, log=_say)
+                                   progress=None, max_points=args.max_points, log=_say,
+                                   complete_only=args.complete_only)
             except VideoError as exc:
                 return _fail(None, str(exc))
             _say(video.frames.describe() + " (drawn behind the points)")
@@ -352,7 +356,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"--complete-only: kept {kept.size} points (those visible in every frame; "
                   f"{missing:.1f} % of the entries were missing), numbered 0..{kept.size - 1}",
                   file=sys.stderr)
-        laav.require_complete(seq)
+        elif not seq.is_complete and video is None:  # (a video's own line says it)
+            _say(f"{seq.n_points} tracks, {100 * seq.visible_share:.1f} % of the entries visible "
+                 "(incomplete tracks: drawn only where seen; --complete-only keeps the full ones)")
     except (laav.SequenceError, FileNotFoundError) as exc:
         return _fail(parser, str(exc))
     if video is not None:

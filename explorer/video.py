@@ -1,10 +1,11 @@
-"""A video (or a folder of frames) in the explorer: track it, keep the complete tracks, pick C,
+"""A video (or a folder of frames) in the explorer: track it, keep its tracks, pick C,
 and keep small copies of the frames to draw behind the points.
 
 ``laav-explore VIDEO`` and ``Explorer.from_file(VIDEO)`` call :func:`open_video`, which runs
-:func:`laav.track.track` (the same tracker and options as ``laav track``), keeps the tracks
-seen in every tracked frame (LAAV's stages do not handle incomplete tracks yet, issue 14:
-what ``--complete-only`` does for a file), takes C from the caller or estimates it
+:func:`laav.track.track` (the same tracker and options as ``laav track``), keeps every track
+that passes the tracker's own filters, incomplete ones included (LAAV's stages handle missing
+data, issue 14; ``complete_only`` keeps only the tracks seen in every tracked frame, what
+``--complete-only`` does for a file), takes C from the caller or estimates it
 (:func:`laav.estimate_motions`), and gathers the frames as the tracker reads them, so the
 video is decoded once. Tracking runs before the page exists (a progress bar on a terminal,
 or in the notebook cell), so the page never waits on a half-tracked video.
@@ -39,15 +40,15 @@ MAX_WIDTH = 410
 #: Most bytes the kept frames take together: 48 MB, 369 frames of 16:9 video at 410 x 231
 #: (37 MB for 300 frames), 284 frames of 4:3 at 410 x 308.
 MAX_BYTES = 48_000_000
-#: Complete tracks LAAV needs per motion (the 8-point algorithm fits each motion's
-#: fundamental matrices; ``laav.estimate_motions`` asks for two motions' worth).
+#: Tracks LAAV needs per motion (the 8-point algorithm fits each motion's fundamental
+#: matrices; ``laav.estimate_motions`` asks for two motions' worth of complete tracks).
 POINTS_PER_MOTION = 8
 
 _ZIP, _MAT, _HDF5 = b"PK\x03\x04", b"MATLAB", b"\x89HDF\r\n\x1a\n"
 
 
 class VideoError(ValueError):
-    """A video that cannot be used: unreadable, no features, too few complete tracks for C.
+    """A video that cannot be used: unreadable, no features, too few tracks for C.
     The message is one line and names the video."""
 
 
@@ -179,7 +180,8 @@ class Video:
     Attributes
     ----------
     sequence : laav.Sequence
-        The complete tracks (no ground truth), image size set.
+        The tracks kept (no ground truth), image size set; incomplete unless
+        ``complete_only`` (``visible`` says where each is seen).
     n_motions : int
         C: the caller's, or estimated (``motion_count``).
     frames : FrameCache
@@ -188,7 +190,7 @@ class Video:
     n_tracks : int
         Tracks the tracker kept (seen in at least its minimum length of frames).
     kept : ndarray
-        Indices of the complete tracks among them.
+        Indices of the kept tracks among them (all of them unless ``complete_only``).
     motion_count : laav.MotionCount or None
         The estimate of C (None: C was given).
     track_seconds : float
@@ -203,6 +205,7 @@ class Video:
     motion_count: object = None
     track_seconds: float = 0.0
     options: dict = field(default_factory=dict)
+    complete_only: bool = False
 
     def summary(self) -> str:
         """What was done, in plain text (the page shows it as text)."""
@@ -213,16 +216,21 @@ class Video:
             why = f"C = {self.n_motions} as given"
         src = Path(self.source)
         what = f"the frames in the folder {src.name}" if src.is_dir() else f"the video {src.name}"
-        return (f"{seq.name} was tracked from {what} (laav track): {self.n_tracks} tracks over "
-                f"{seq.n_frames} frames; kept {seq.n_points} of the {self.n_tracks}, those seen in every "
-                f"frame (LAAV's stages do not handle incomplete tracks yet; the other "
-                f"{self.n_tracks - seq.n_points} start late or end early); {why}.")
+        head = f"{seq.name} was tracked from {what} (laav track): {self.n_tracks} tracks over {seq.n_frames} frames; "
+        if self.complete_only:
+            kept = (f"kept {seq.n_points} of the {self.n_tracks}, those seen in every frame (--complete-only; "
+                    f"the other {self.n_tracks - seq.n_points} start late, end early or have gaps)")
+        else:
+            n_full = int(np.count_nonzero(seq.visible.all(axis=0)))
+            kept = (f"all {seq.n_points} kept, {100 * seq.visible_share:.1f} % of the track x frame entries "
+                    f"visible ({n_full} tracks seen in every frame; a point is drawn only where it is seen)")
+        return f"{head}{kept}; {why}."
 
 
 def open_video(path, n_motions: int | None = None, *, track_options: dict | None = None,
                progress: bool | None = None, max_points: int | None = None,
                max_width: int = MAX_WIDTH, max_bytes: int = MAX_BYTES,
-               log: Callable[[str], None] | None = None) -> Video:
+               log: Callable[[str], None] | None = None, complete_only: bool = False) -> Video:
     """Track a video (or a folder of frames) for the explorer.
 
     Parameters
@@ -237,7 +245,10 @@ def open_video(path, n_motions: int | None = None, *, track_options: dict | None
     progress : bool or None
         The tracker's progress bar (None: only when stderr is a terminal).
     max_points : int, optional
-        Refuse more complete tracks than this (``laav-explore --max-points``).
+        Refuse more tracks than this (``laav-explore --max-points``).
+    complete_only : bool
+        Keep only the tracks seen in every tracked frame (``--complete-only``); by default
+        every track the tracker kept (its own filters: minimum length and the rest).
     log : callable, optional
         Called with a line of text at every step (the command prints them).
 
@@ -245,7 +256,8 @@ def open_video(path, n_motions: int | None = None, *, track_options: dict | None
     ------
     VideoError
         One line naming the video: it cannot be opened, holds no features, every track is
-        too short, or too few tracks are seen in every frame for C.
+        too short, or too few tracks are kept for C (or, to estimate C, too few are seen in
+        every frame).
     """
     from laav.track import TrackError, track
 
@@ -263,23 +275,30 @@ def open_video(path, n_motions: int | None = None, *, track_options: dict | None
     except TrackError as exc:
         raise VideoError(str(exc)) from None
     seconds = time.perf_counter() - t0
-    kept = tracks.complete()
     F, n = tracks.n_frames, tracks.n_tracks
-    say(f"tracked {n} tracks over {F} frames in {seconds:.1f} s; keeping {kept.size} of them, those seen "
-        "in every frame (LAAV's stages take complete tracks only)")
+    kept = tracks.complete() if complete_only else np.arange(n, dtype=np.int64)
+    share = 100.0 * float(np.count_nonzero(tracks.visible)) / max(tracks.visible.size, 1)
+    if complete_only:
+        say(f"tracked {n} tracks over {F} frames in {seconds:.1f} s; keeping {kept.size} of them, those seen "
+            "in every frame (--complete-only)")
+    else:
+        say(f"tracked {n} tracks over {F} frames in {seconds:.1f} s; keeping all of them, {share:.1f} % of "
+            f"the entries visible ({tracks.complete().size} tracks seen in every frame)")
     need = POINTS_PER_MOTION * (2 if auto else int(n_motions))
     if kept.size < need:
         what = "to estimate the number of motions (two motions' worth)" if auto else \
             f"for C = {int(n_motions)}"
+        which = f"are seen in all {F} tracked frames" if complete_only else "were kept"
         raise VideoError(
-            f"{src}: only {kept.size} of the {n} tracks are seen in all {F} tracked frames, fewer than "
-            f"the {need} LAAV needs {what} ({POINTS_PER_MOTION} per motion; its stages take complete "
-            "tracks only): track fewer frames (--max-frames, --stride) or more points (--max-points)")
+            f"{src}: only {kept.size} of the {n} tracks {which}, fewer than the {need} LAAV needs {what} "
+            f"({POINTS_PER_MOTION} per motion): track fewer frames (--max-frames, --stride) or more points "
+            "(--max-points)")
     if max_points is not None and kept.size > max_points:
-        raise VideoError(f"{src}: {kept.size} complete tracks, more than --max-points {max_points}")
+        raise VideoError(f"{src}: {kept.size} tracks, more than --max-points {max_points}")
+    vis = tracks.visible[:, kept]
     try:
         seq = laav.Sequence(points=tracks.points[:, kept], name=tracks.name, image_size=tracks.image_size,
-                            source=src)
+                            source=src, visible=None if vis.all() else vis)
     except laav.SequenceError as exc:
         raise VideoError(str(exc)) from None
     count = None
@@ -294,4 +313,4 @@ def open_video(path, n_motions: int | None = None, *, track_options: dict | None
     else:
         C = int(n_motions)
     return Video(sequence=seq, n_motions=C, frames=frames, source=src, n_tracks=n, kept=kept,
-                 motion_count=count, track_seconds=seconds, options=opts)
+                 motion_count=count, track_seconds=seconds, options=opts, complete_only=bool(complete_only))

@@ -17,7 +17,8 @@ from laav.geometry import epipolar_lines
 
 __all__ = [
     "COLOR_MODES", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS",
-    "UNLABELLED", "ERROR_MARK",
+    "UNLABELLED", "ERROR_MARK", "UNSEEN", "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at",
+    "incomplete_note",
     "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "raw_style", "points_source", "frame_sources",
     "graph_sources",
@@ -59,6 +60,11 @@ ATOM_COLORS = ("#4D4D4D", "#8C8C8C", "#B07AA1", "#9C755F", "#76B7B2", "#BAB0AC",
 #: Shades of a motion colour for the fine models that joined it: >0 mixes in white, <0 black.
 FINE_SHADES = (0.0, 0.5, -0.45, 0.72, -0.65, 0.28, -0.25, 0.85)
 UNLABELLED = "#C7C7C7"
+#: Points the final stage leaves unlabelled (-1: seen too briefly to decide, missing data
+#: only; ``LaavResult.unlabelled_code``): a neutral grey, their own marker and legend entry.
+UNSEEN = "#9A9A9A"
+UNSEEN_MARKER = "circle_x"
+UNSEEN_LABEL = "unlabelled: seen too briefly"
 #: Misclassified points are ringed in black (not red: a red ring vanishes on green points
 #: for deuteranopes; black stays apart from every motion colour, ΔE >= 56 simulated).
 ERROR_MARK = "#000000"
@@ -93,6 +99,41 @@ def hex_to_rgb(colors) -> np.ndarray:
     raw = np.char.lstrip(arr, "#")
     ints = np.array([int(h, 16) for h in raw.tolist()], dtype=np.int64)
     return np.stack([(ints >> 16) & 255, (ints >> 8) & 255, ints & 255], axis=1).astype(np.uint8)
+
+
+def visible_at(seq: laav.Sequence, frame: int) -> np.ndarray:
+    """(P,) bool: the points ``seq`` sees in ``frame`` (all of them on complete data).
+    Every view draws only these; hidden coordinates (possibly NaN) are never read."""
+    if seq.is_complete:
+        return np.ones(seq.n_points, dtype=bool)
+    return np.asarray(seq.visible[int(frame)], dtype=bool)
+
+
+def _unlabelled(result: laav.LaavResult) -> np.ndarray:
+    """(P,) bool: the points the final stage left unlabelled (seen too briefly)."""
+    return np.asarray(result.unlabelled_code) > 0
+
+
+def incomplete_note(seq: laav.Sequence, result: laav.LaavResult | None = None,
+                    counts: bool = True) -> str:
+    """Markdown for the page note on an incomplete sequence ("" when complete): how many
+    tracks, what share of the entries is visible (unless ``counts`` is False: a video's
+    summary says it already), how many points the final stage left unlabelled (seen too
+    briefly; counted as errors)."""
+    if seq.is_complete:
+        return ""
+    n_full = int(np.count_nonzero(seq.visible.all(axis=0)))
+    text = ""
+    if counts:
+        text = (f"Incomplete tracks: {seq.n_points} tracks over {seq.n_frames} frames, "
+                f"{100 * seq.visible_share:.1f} % of the entries visible ({n_full} tracks seen in every "
+                "frame); every view draws a point only where it is seen.")
+    if result is not None:
+        n_un = int(np.count_nonzero(result.unlabelled_code))
+        if n_un:
+            text += (f"{' ' if text else ''}{n_un} point{'s' if n_un != 1 else ''} {'are' if n_un != 1 else 'is'} "
+                     f"*{UNSEEN_LABEL}* (label -1, grey ⊗; counted as errors).")
+    return text
 
 
 def _palette(labels: np.ndarray, palette) -> np.ndarray:
@@ -302,10 +343,20 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
                                                              else al["final"])
         color, marker = _motion_palette(lab)
         label = np.where(lab >= 0, np.char.add("motion ", (lab + 1).astype("U3")), "in no atom")
+        if mode != "coarse":  # -1 after the voting: seen too briefly to decide (missing data)
+            un = lab < 0
+            color = np.where(un, UNSEEN, color).astype("U7")
+            marker = np.where(un, UNSEEN_MARKER, marker).astype(object)
+            label = np.where(un, UNSEEN_LABEL, label)
     elif mode.startswith("errors"):
         color = np.where(wrong, ERROR_MARK, np.where(scored, CORRECT, "#EEEEEE")).astype("U7")
         label = np.where(wrong, f"misclassified ({stage})",
                          np.where(scored, f"correct ({stage})", "not labelled at this stage"))
+        un = _unlabelled(result) if stage == "final" else (
+            np.asarray(plain.labels) < 0 if stage == "plain" and plain is not None else None)
+        if un is not None and un.any():  # an error too (as the metrics count it), own marker
+            marker = np.where(un, UNSEEN_MARKER, marker).astype(object)
+            label = np.where(un, f"{UNSEEN_LABEL} (an error)", label)
     else:
         raise ValueError(f"unknown colour mode {mode!r}")
     return {"color": np.asarray(color, dtype="U7"), "marker": np.asarray(marker, dtype=object),
@@ -328,12 +379,14 @@ def raw_style(seq: laav.Sequence) -> dict:
 
 def points_source(seq: laav.Sequence, frame: int, style: dict) -> dict:
     """The frame view's points at ``frame`` (x, y, color, marker, label, index), in label
-    order so that the legend lists "motion 1, motion 2, ..." in order. Needs no result:
+    order so that the legend lists "motion 1, motion 2, ..." in order; only the points
+    visible in ``frame`` (:func:`visible_at`). Needs no result:
     with :func:`raw_style` it draws the raw points before anything is computed."""
     f = int(np.clip(frame, 0, seq.n_frames - 1))
     xy = seq.points[f]
     color = style["color"]
     order = np.argsort(style["label"], kind="stable")
+    order = order[visible_at(seq, f)[order]]  # only the points seen in this frame
     marker = style.get("marker")
     marker = np.full(color.shape, "circle", dtype=object) if marker is None else marker
     return {"x": xy[order, 0], "y": xy[order, 1], "color": color[order],
@@ -350,38 +403,49 @@ def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style
     Keys: ``points`` (x, y, color, label, index), ``trails`` (x0, y0, x1, y1, color,
     alpha: the last ``trail`` frames, fading), ``atoms`` (x, y at the seeds, r1, r2,
     color, atom), ``unassigned`` (x, y), ``errors`` (x, y: misclassified points).
+
+    On incomplete data everything is drawn only where it is seen: points, marks and atom
+    seeds visible in ``frame``, trail steps between two consecutive frames both visible
+    (a gap breaks the trail).
     """
     pts = seq.points
     F = seq.n_frames
     f = int(np.clip(frame, 0, F - 1))
     xy = pts[f]
     color = style["color"]
+    vis = visible_at(seq, f)
     out = {"points": points_source(seq, f, style)}
     f0 = max(0, f - trail)
     if f > f0:
         seg = pts[f0:f + 1]  # (t+1, P, 2)
         n = seg.shape[0] - 1
         age = np.repeat(np.arange(n, 0, -1), seq.n_points)  # n .. 1 frames back
+        both = np.ones(n * seq.n_points, dtype=bool) if seq.is_complete else (
+            seq.visible[f0:f] & seq.visible[f0 + 1:f + 1]).ravel()  # a step both ends of which are seen
         out["trails"] = {
-            "x0": seg[:-1, :, 0].ravel(), "y0": seg[:-1, :, 1].ravel(),
-            "x1": seg[1:, :, 0].ravel(), "y1": seg[1:, :, 1].ravel(),
-            "color": np.tile(color, n), "alpha": 0.85 - 0.7 * (age - 1) / max(trail, 1),
+            "x0": seg[:-1, :, 0].ravel()[both], "y0": seg[:-1, :, 1].ravel()[both],
+            "x1": seg[1:, :, 0].ravel()[both], "y1": seg[1:, :, 1].ravel()[both],
+            "color": np.tile(color, n)[both], "alpha": (0.85 - 0.7 * (age - 1) / max(trail, 1))[both],
         }
     else:
         e = np.zeros(0)
         out["trails"] = {"x0": e, "y0": e, "x1": e, "y1": e, "color": np.zeros(0, "U7"), "alpha": e}
     atoms = result.atoms
     seeds = np.asarray(atoms.seeds, dtype=np.int64)
+    ids = np.flatnonzero(vis[seeds])  # atoms whose seed is seen in this frame
+    seeds = seeds[ids]
     out["atoms"] = {"x": xy[seeds, 0], "y": xy[seeds, 1],
                     "r1": np.full(seeds.size, float(atoms.r1)),
                     "r2": np.full(seeds.size, float(atoms.r2)),
                     "color": color[seeds] if seeds.size else np.zeros(0, "U7"),
-                    "atom": np.arange(seeds.size)}
+                    "atom": ids}
     un = np.asarray(atoms.unassigned, dtype=np.int64)
+    un = un[vis[un]]
     out["unassigned"] = {"x": xy[un, 0], "y": xy[un, 1]}
-    bad = np.flatnonzero(style["misclassified"])
+    bad = np.flatnonzero(style["misclassified"] & vis)
     out["errors"] = {"x": xy[bad, 0], "y": xy[bad, 1]}
     mv = np.zeros(0, np.int64) if moved is None else np.asarray(moved, dtype=np.int64)
+    mv = mv[vis[mv]]
     out["changed"] = {"x": xy[mv, 0], "y": xy[mv, 1]}
     return out
 
@@ -464,7 +528,9 @@ def graph_sources(result: laav.LaavResult, frame: int, step: int, colors=None) -
     Keys: ``nodes`` (x, y, color, cluster, atom, size, members, label: the atom id),
     ``joined`` and ``cut`` edges (x0, y0, x1, y1, cost, error), ``step_edge`` (the
     contraction of this step), ``pair`` (x, y, color, size, atom: its two atoms; empty at
-    step 0 and after the last contraction).
+    step 0 and after the last contraction). On incomplete data only the atoms with a centre
+    in ``frame`` (a member seen there; ``AtomGraph.positions`` is NaN otherwise) and the
+    edges between two of them are drawn.
     """
     g = result.graph
     pos = np.asarray(g.positions)
@@ -490,14 +556,26 @@ def graph_sources(result: laav.LaavResult, frame: int, step: int, colors=None) -
                 "cost": np.asarray(g.costs)[mask], "error": np.asarray(g.errors)[mask],
                 "a": e[:, 0], "b": e[:, 1]}
 
-    out = {"nodes": nodes, "joined": edges(~cut), "cut": edges(cut)}
+    # missing data: an atom with no member seen in this frame has no centre there (NaN in
+    # ``AtomGraph.positions``): it and its edges are not drawn in this frame
+    shown = np.isfinite(xy).all(axis=1) if xy.size else np.zeros(0, bool)
+    E_ok = shown[E[:, 0]] & shown[E[:, 1]] if E.size else np.zeros(0, bool)
+    out = {"nodes": nodes, "joined": edges(~cut & E_ok), "cut": edges(cut & E_ok)}
     nodes["label"] = np.array([str(i) for i in range(g.n_nodes)], dtype=object)
+    if not shown.all():
+        for key in list(nodes):
+            nodes[key] = np.asarray(nodes[key])[shown]
     if 0 < step <= K:
         k, m = np.asarray(result.multicut.contractions[step - 1]).tolist()
-        out["step_edge"] = {"x0": xy[[k], 0], "y0": xy[[k], 1], "x1": xy[[m], 0], "y1": xy[[m], 1]}
+        both = [a for a in (k, m) if shown[a]]
+        if len(both) == 2:
+            out["step_edge"] = {"x0": xy[[k], 0], "y0": xy[[k], 1], "x1": xy[[m], 0], "y1": xy[[m], 1]}
+        else:
+            e = np.zeros(0)
+            out["step_edge"] = {"x0": e, "y0": e, "x1": e, "y1": e}
         # the two atoms joined at this step, drawn again on top of the others, ringed
-        out["pair"] = {"x": xy[[k, m], 0], "y": xy[[k, m], 1], "color": node_color[[k, m]],
-                       "size": nodes["size"][[k, m]] + 6, "atom": np.array([k, m])}
+        out["pair"] = {"x": xy[both, 0], "y": xy[both, 1], "color": node_color[both],
+                       "size": 7 + 2.0 * np.sqrt(sizes[both]) + 6, "atom": np.array(both, dtype=int)}
     else:
         e = np.zeros(0)
         out["step_edge"] = {"x0": e, "y0": e, "x1": e, "y1": e}
@@ -593,7 +671,8 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     Keys: ``left`` and ``right`` (x, y, color, model: the two models' points in the
     sample's frame l and frame r), ``sample_left`` / ``sample_right`` (x, y: the features
     the F was fitted on), ``lines`` (x0, y0, x1, y1, color: epipolar lines in frame r of
-    the sample's features and of up to ``max_lines`` other points of the two models),
+    the sample's features and of up to ``max_lines`` other points of the two models; on
+    incomplete data only points seen in both frames l and r),
     ``frames`` (l, r), ``distance`` (``Coarse.epipolar_distance[j, k]``, mean over every
     sample), ``sample_distance`` (this sample's: the larger of the two models' mean Sampson
     distances over its features, px^2), ``sample_vote`` (``exp(-lam sample_distance)``),
@@ -621,7 +700,8 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     if fl < 0:
         return blank
     fine = np.asarray(co.fine_point_labels)
-    idx = np.flatnonzero((fine == j) | (fine == k))
+    both = visible_at(seq, fl) & visible_at(seq, fr)  # missing data: only points seen in both frames
+    idx = np.flatnonzero(((fine == j) | (fine == k)) & both)
     fc = fine_colors(seq, result)
     cj, ck = fc[j], fc[k]
     cols = np.where(fine[idx] == j, cj, ck).astype("U7")
@@ -631,6 +711,7 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     sample = np.asarray(vs.points[j, k])
     half = sample.size // 2
     u = np.unique(sample)
+    u = u[both[u]]  # the stage samples only features seen in both frames; never draw others
 
     def term(a):
         return nan if a is None else float(np.asarray(a)[j, k])
@@ -756,7 +837,9 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Votin
     random start (``plain``, with the same sequence, C, seed and RV settings) on all points.
     Errors are None without ground truth (``error_plain`` also before plain RV is given).
     ``plain_iterations`` / ``plain_converged`` describe that run. ``timings_ms`` per stage,
-    ``total_ms``.
+    ``total_ms``. ``n_unlabelled``: points the final stage left unlabelled (-1, seen too
+    briefly; missing data only), counted as errors in ``error_final`` as
+    :func:`laav.misclassification_rate` does; ``visible_share`` of the sequence's entries.
     """
     gt = seq.labels
     st = result.stage_labels()
@@ -766,6 +849,8 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Votin
         "n_atoms": int(result.atoms.n_atoms), "coverage": float(result.atoms.coverage),
         "n_covered": int(covered.sum()), "n_unassigned": int(np.asarray(result.atoms.unassigned).size),
         "n_edges": int(result.graph.n_edges), "n_fine": int(result.multicut.n_models),
+        "n_unlabelled": int(np.count_nonzero(result.unlabelled_code)),
+        "visible_share": float(seq.visible_share),
         "error_fine": None, "error_coarse": None, "error_final": None,
         "timings_ms": {k: 1000.0 * float(v) for k, v in result.timings.items()},
     }
@@ -805,6 +890,13 @@ def numbers_markdown(num: dict) -> str:
     """The numbers view as a Markdown table (one row per stage)."""
     t = num["timings_ms"]
     cov = f"{num['n_covered']} of {num['n_points']} points in atoms ({100 * num['coverage']:.0f} %)"
+    n_un = int(num.get("n_unlabelled", 0))
+    if n_un:
+        labelled = (f"{num['n_points'] - n_un} of {num['n_points']} points labelled; **{n_un} "
+                    f"{UNSEEN_LABEL}** (label -1, counted as errors)")
+    else:
+        labelled = f"all {num['n_points']} points labelled"
+    final_note = "(all points; unlabelled ones count as errors)" if n_un else "(all points)"
     rows = [
         "| stage | result | error vs ground truth | time |",
         "|---|---|---|---|",
@@ -814,12 +906,16 @@ def numbers_markdown(num: dict) -> str:
         f"(points in atoms; a fine model counts as its majority motion) | {_ms(t, 'multicut')} |",
         f"| 4 fine → coarse | {num['n_motions']} motions | {_pct(num['error_coarse'])} (points in atoms) | "
         f"{_ms(t, 'coarse')} |",
-        f"| 5 Random Voting | all {num['n_points']} points labelled | **{_pct(num['error_final'])}** "
-        f"(all points) | {_ms(t, 'voting')} |",
+        f"| 5 Random Voting | {labelled} | **{_pct(num['error_final'])}** "
+        f"{final_note} | {_ms(t, 'voting')} |",
         f"| total (this update) | | | {num['total_ms']:.0f} ms |",
         f"| *plain RV* (random start; same C, seed, RV settings) | {_plain_result(num)} | "
         f"{_pct(num.get('error_plain'))} (all points) | |",
     ]
+    share = num.get("visible_share", 1.0)
+    if share < 1.0:
+        rows.append(f"| *input* | {num['n_points']} tracks x {num['n_frames']} frames, "
+                    f"{100 * share:.1f} % of the entries visible (incomplete tracks) | | |")
     return "\n".join(rows)
 
 
@@ -827,8 +923,8 @@ def labels_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
     """CSV text, one row per point; labels are 0-based like ``laav segment``'s file.
 
     Columns: ``point`` (0-based index), ``label`` (final motion: the same two columns as
-    ``laav segment --out``), ``x0``, ``y0`` (position in frame 0), ``ground_truth`` (empty
-    without), ``owner_atom``, ``fine_model``, ``coarse_motion`` (-1: the stage left the
+    ``laav segment --out``), ``x0``, ``y0`` (position in frame 0; empty when the point is
+    not seen there), ``ground_truth`` (empty without), ``owner_atom``, ``fine_model``, ``coarse_motion`` (-1: the stage left the
     point out, i.e. it is in no atom).
     """
     st = result.stage_labels()
@@ -836,9 +932,11 @@ def labels_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
     gt = seq.labels
     lines = ["point,label,x0,y0,ground_truth,owner_atom,fine_model,coarse_motion"]
     p0 = seq.points[0]
+    v0 = visible_at(seq, 0)
     for i in range(seq.n_points):
         g = "" if gt is None else str(int(gt[i]))
-        lines.append(f"{i},{int(st['final'][i])},{p0[i, 0]:.3f},{p0[i, 1]:.3f},{g},{int(owner[i])},"
+        xy0 = f"{p0[i, 0]:.3f},{p0[i, 1]:.3f}" if v0[i] else ","
+        lines.append(f"{i},{int(st['final'][i])},{xy0},{g},{int(owner[i])},"
                      f"{int(st['fine'][i])},{int(st['coarse'][i])}")
     return "\n".join(lines) + "\n"
 

@@ -197,6 +197,9 @@ class ViserView:
         xyz = m(seq.points, np.arange(F)[:, None])  # (F, P, 3)
         segs = np.stack([xyz[:-1], xyz[1:]], axis=2).reshape(-1, 2, 3)  # ((F-1)*P, 2, 3)
         cols = np.broadcast_to(np.tile(rgb, (F - 1, 1))[:, None, :], segs.shape).astype(np.uint8)
+        if not seq.is_complete:  # only the steps between two consecutive frames both seen
+            both = (seq.visible[:-1] & seq.visible[1:]).ravel()
+            segs, cols = segs[both], cols[both]
         self._colors = rgb
         self.server.scene.add_line_segments("/trajectories", segs.astype(np.float32), cols,
                                             thickness=1.5, thickness_units="screen")
@@ -215,19 +218,25 @@ class ViserView:
         seq, res, m, f = self._seq, self._result, self._map, self._frame
         scene = self.server.scene
         self._plane.position = (0.0, 0.0, float(f * m.dz))
-        scene.add_point_cloud("/points", m(seq.points[f], f), self._colors, point_size=0.05,
+        vis = V.visible_at(seq, f)  # only the points seen in this frame
+        scene.add_point_cloud("/points", m(seq.points[f, vis], f), self._colors[vis], point_size=0.05,
                               point_shape="circle", precision="float32")
         pos = np.asarray(res.graph.positions)
         if pos.size:
             centers = m(pos[f], f)
-            scene.add_point_cloud("/atoms", centers, np.full((len(centers), 3), 30, np.uint8),
+            shown = np.isfinite(centers).all(axis=1)  # an atom with no member seen here: not drawn
+            scene.add_point_cloud("/atoms", centers[shown], np.full((int(shown.sum()), 3), 30, np.uint8),
                                   point_size=0.09, point_shape="circle", precision="float32")
             E = np.asarray(res.graph.edges, dtype=np.int64).reshape(-1, 2)
+            keep = shown[E[:, 0]] & shown[E[:, 1]] if E.size else np.zeros(0, bool)
+            E = E[keep]
             if E.size:
                 segs = np.stack([centers[E[:, 0]], centers[E[:, 1]]], axis=1).astype(np.float32)
-                col = _for_webgl(np.where((np.asarray(res.graph.costs) >= 0)[:, None], _JOIN, _CUT))
+                col = _for_webgl(np.where((np.asarray(res.graph.costs)[keep] >= 0)[:, None], _JOIN, _CUT))
                 scene.add_line_segments("/graph_edges", segs, np.repeat(col[:, None], 2, axis=1),
                                         thickness=2.0, thickness_units="screen")
+            elif not seq.is_complete:  # no edge with both atoms seen here: none drawn
+                scene.remove_by_name("/graph_edges")
 
     def close(self) -> None:
         import contextlib

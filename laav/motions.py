@@ -405,8 +405,14 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     ------
     ValueError
         For a bad ``max_motions`` or too few points (fewer than 8 per motion of C = 2;
-        a smaller sequence has C = 1 only if said so); a sequence with missing entries
-        (where sequences carry a visibility mask) as :func:`laav.segment` refuses it.
+        a smaller sequence has C = 1 only if said so); on a sequence with missing entries,
+        when fewer than 16 tracks are seen in every frame.
+
+    Notes
+    -----
+    On incomplete data the estimate runs on the tracks seen in every frame
+    (:meth:`Sequence.complete`): the profile fits whole trajectories. The ``reason`` says
+    so and how many tracks that was; a motion none of whose tracks is complete is missed.
     """
     import time
 
@@ -417,10 +423,21 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     max_motions = int(max_motions)
     if not isinstance(seq_or_points, Sequence):
         seq_or_points = Sequence(np.asarray(seq_or_points, dtype=np.float64))
-    from ._sequence import require_complete
-
-    # the profile fits whole trajectories (rank-4 subspaces): incomplete tracks are refused
-    require_complete(seq_or_points, "the estimate of the number of motions (segment with a given C)")
+    basis = ""
+    if not seq_or_points.is_complete:
+        # the profile fits whole trajectories (rank-4 subspaces): on incomplete data it runs on
+        # the tracks seen in every frame, when they are enough (a motion every one of whose
+        # tracks is broken is then not counted: said in the reason)
+        full = np.flatnonzero(seq_or_points.visible.all(axis=0))
+        P_all = seq_or_points.n_points
+        if full.size < 2 * MIN_POINTS:
+            raise ValueError(
+                f"{seq_or_points.source}: only {full.size} of the {P_all} tracks are seen in every frame; "
+                f"estimating the number of motions fits whole trajectories and needs at least "
+                f"{2 * MIN_POINTS} complete tracks: give C (--motions N)")
+        seq_or_points = seq_or_points.subset(full)
+        basis = (f"; estimated on the {full.size} of {P_all} tracks seen in every frame (the estimate "
+                 "fits whole trajectories; a motion none of whose tracks is complete is not counted)")
     P = seq_or_points.n_points
     if P < 2 * MIN_POINTS:
         raise ValueError(f"{seq_or_points.source}: {P} points are too few to estimate the number "
@@ -433,7 +450,7 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
         n_motions=int(C), candidates=tuple(range(1, max_motions + 2)),
         subspace_level=tuple(float(v) for v in np.exp(levels[0])),
         epipolar_level=tuple(float(v) for v in np.exp(levels[1])),
-        step_scores=tuple(float(v) for v in scores), noise=noise2, reason=why,
+        step_scores=tuple(float(v) for v in scores), noise=noise2, reason=why + basis,
         seed=seed, seconds=time.perf_counter() - t)
 
 

@@ -308,8 +308,9 @@ def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: i
     A sequence with missing entries (``not seq.is_complete``) is segmented by every
     stage's missing-data variant (``docs/ALGORITHM.md``, "Missing data"); a point seen too
     briefly to decide gets label -1, with the reason in ``result.unlabelled_reason``.
-    ``"auto"`` still needs a complete sequence (the estimate of C fits whole
-    trajectories): it raises :class:`laav.IncompleteSequenceError` otherwise.
+    ``"auto"`` estimates C on the tracks seen in every frame (the estimate fits whole
+    trajectories; :func:`laav.estimate_motions`), and raises ValueError when fewer than 16
+    are.
     """
     seed = resolve_seed(seed, random_state)
     count = None

@@ -476,8 +476,8 @@ def test_notebook_runs_top_to_bottom():
     assert not [o for o in outs if o.output_type == "error"]
     text = "".join(o.get("text", "") for o in outs if o.output_type == "stream")
     assert "atoms reused: True" in text and "alert after fixing it: False" in text
-    # the video cell: tracked, its complete tracks kept, its frames kept for the frame view
-    assert "those seen in every frame" in text and "24 frames of 320x240 kept at 320x240 grey" in text
+    # the video cell: tracked, its tracks kept, its frames kept for the frame view
+    assert "of the track x frame entries visible" in text and "24 frames of 320x240 kept at 320x240 grey" in text
     html = [o for o in outs if o.output_type in ("display_data", "execute_result")
             and "application/vnd.holoviews_exec.v0+json" in o.get("data", {})]
     assert len(html) >= 2, "the explorers did not display"

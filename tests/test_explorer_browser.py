@@ -672,3 +672,61 @@ def test_video_frames_lie_under_their_points_in_chromium(tmp_path):
                                                                         seen[layer == k][:8])
         page.close()
     assert not outside, f"requests left 127.0.0.1: {outside}"
+
+
+# the frame view's points (the compare card's two sources of the same layout stay empty
+# until a result is pinned)
+JS_FRAME_POINTS = """() => {
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.type === 'ColumnDataSource' && m.data.index !== undefined && m.data.marker !== undefined
+        && m.data.index.length > 0)
+      return {n: m.data.index.length, index: Array.from(m.data.index), x: Array.from(m.data.x)};
+  }
+  return null;
+}"""
+
+JS_SET_PLAYER = """(value) => {
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.loop_policy !== undefined && m.value !== undefined) { m.value = value; return true; }
+  }
+  return false;
+}"""
+
+
+def _frame_reached(ex, f: int, page) -> bool:
+    try:
+        _wait_for(lambda: ex.w_frame.value == f, 5, "the frame", page=page)
+        return True
+    except AssertionError:
+        return False
+
+
+def test_incomplete_sequence_in_chromium_draws_only_visible_points(tmp_path):
+    """An occluded sequence (30 % hidden, NaN there): the frame view in the browser holds at
+    frames 1 and 6 exactly the points visible there, different numbers of them."""
+    from test_explorer_incomplete import occluded_sequence
+
+    shots = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
+    shots.mkdir(parents=True, exist_ok=True)
+    seq = occluded_sequence()
+    want = {f: int(seq.visible[f].sum()) for f in (1, 6)}
+    assert want[1] != want[6]
+    js_errors: list[str] = []
+    with _served(seq, viser=False) as (port, browser, created):
+        context = browser.new_context(viewport={"width": 1280, "height": 800})
+        context.route("**/*", lambda r: r.continue_() if r.request.url.startswith(LOCAL) else r.abort())
+        page = context.new_page()
+        page.on("pageerror", lambda e: js_errors.append(str(e)))
+        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+        ex = _wait_for(lambda: created[0] if created else None, 10, "the session's explorer")
+        assert ex.wait(120), "the first result did not arrive"
+        for f in (1, 6):
+            if not page.evaluate(JS_SET_PLAYER, f) or not _frame_reached(ex, f, page):
+                ex.w_frame.value = f  # the server's slider (panel values are thread-safe)
+            got = _wait_for(lambda: (lambda d: d if d and d["n"] == want[f] else None)(
+                page.evaluate(JS_FRAME_POINTS)), 30, f"the points of frame {f}", page=page)
+            assert seq.visible[f, got["index"]].all()
+            assert all(x == x for x in got["x"])  # no NaN reached the page
+            page.screenshot(path=str(shots / f"explorer_incomplete_frame{f}.png"))
+    assert not js_errors, js_errors

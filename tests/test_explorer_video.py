@@ -1,5 +1,5 @@
-"""``laav-explore VIDEO``: a video or a folder of frames is tracked, its complete tracks are
-segmented, and the frame view draws the video's frames behind the points.
+"""``laav-explore VIDEO``: a video or a folder of frames is tracked, every track the tracker
+keeps is segmented (incomplete ones included; ``--complete-only``: the full ones), and the frame view draws the video's frames behind the points.
 
 The project's synthetic clip (``assets/two_objects/``: 24 frames of 320 x 240 px and the mask
 of every frame) says which object lies under every pixel, so the frames' placement under the
@@ -139,7 +139,7 @@ def test_the_kept_frames_lie_under_their_tracked_points(clip, video):
     fc = FrameCache(max_width=160)
     for t, m in enumerate(clip.masks):
         fc.add(t, m.astype(np.uint8) * 100)
-    seq = video.sequence
+    seq = video.sequence.complete()[0]  # the tracks seen in every frame
     tracks_vis = np.ones((seq.n_frames, seq.n_points), bool)
     labels, _ = clip.track_truth(seq.points, tracks_vis)
     assert np.bincount(labels, minlength=3).min() >= 10  # every object has complete tracks
@@ -158,17 +158,31 @@ def test_the_kept_frames_lie_under_their_tracked_points(clip, video):
 
 
 # ---------------------------------------------------------------------------- tracking for the explorer
-def test_open_video_keeps_the_complete_tracks_and_estimates_c(video):
+def test_open_video_keeps_every_track_and_estimates_c(video):
+    """Every track laav track keeps (once only the complete ones); C estimated on the tracks
+    seen in every frame; ``complete_only`` still keeps only those."""
+    from laav.track import track
+
     seq = video.sequence
-    assert seq.is_complete and seq.labels is None and seq.image_size == (320, 240)
-    assert seq.n_frames == 24 and seq.n_points == video.kept.size and video.n_tracks > seq.n_points
+    tracks = track(CLIP, progress=False)  # laav track itself, its own filters
+    assert not seq.is_complete and seq.labels is None and seq.image_size == (320, 240)
+    assert seq.n_frames == 24 and seq.n_points == video.n_tracks == tracks.n_tracks
+    assert np.array_equal(video.kept, np.arange(tracks.n_tracks))
+    assert np.array_equal(seq.visible, tracks.visible)
+    n_full = int(tracks.visible.all(axis=0).sum())
+    assert 0 < n_full < seq.n_points
     assert video.n_motions == 3 and video.motion_count is not None  # background, rectangle, disc
+    assert f"estimated on the {n_full} of {seq.n_points} tracks seen in every frame" in video.motion_count.reason
     assert video.frames.n_kept == 24 and video.frames.shape == (240, 320)
     assert np.array_equal(video.frames.get(5), cv2.imread(str(CLIP / "frame_005.png"), cv2.IMREAD_GRAYSCALE))
     text = video.summary()
-    assert (f"{video.n_tracks} tracks over 24 frames; kept {seq.n_points} of the {video.n_tracks}, those "
-            "seen in every frame") in text
-    assert "do not handle incomplete tracks" in text and "C = 3 estimated" in text
+    assert (f"{video.n_tracks} tracks over 24 frames; all {seq.n_points} kept, "
+            f"{100 * seq.visible_share:.1f} % of the track x frame entries visible ({n_full} tracks seen "
+            "in every frame") in text
+    assert "C = 3 estimated" in text
+    full = open_video(CLIP, 3, progress=False, complete_only=True)
+    assert full.sequence.is_complete and full.sequence.n_points == n_full == full.kept.size
+    assert f"kept {n_full} of the {full.n_tracks}, those seen in every frame (--complete-only" in full.summary()
     given = open_video(CLIP, 2, progress=False, track_options={"stride": 2})
     assert given.n_motions == 2 and given.motion_count is None and given.sequence.n_frames == 12
     assert "C = 2 as given" in given.summary()
@@ -209,7 +223,9 @@ def test_explorer_from_file_tracks_a_video_and_draws_its_frames(tmp_path):
         assert fv.src_background.data["image"][0] is frames.get(0)
         assert {k: fv.src_background.data[k] for k in ("x", "y", "dw", "dh")} == \
             {"x": [-0.5], "y": [-0.5], "dw": [320.0], "dh": [240.0]}
-        assert "those seen in every frame" in ex.note.object and "Behind the points" in fv.caption.object
+        note = re.sub(r"\\(.)", r"\1", ex.note.object)
+        assert f"all {ex.sequence.n_points} kept" in note and "% of the track x frame entries visible" in note
+        assert "Behind the points" in fv.caption.object
         # scrubbing: the background follows the frame, and only its image column is sent
         sent = []
         fv.src_background.on_change("data", lambda attr, old, new: sent.append(set(new)))
@@ -226,7 +242,7 @@ def test_explorer_from_file_tracks_a_video_and_draws_its_frames(tmp_path):
         fv.w_background.value = True
         assert fv.r_background.visible and fv.src_background.data["image"][0] is frames.get(9)
         # another sequence (an upload) has no video behind it
-        other = laav.save_sequence(laav.Sequence(ex.sequence.points[:, :40], name="plain"),
+        other = laav.save_sequence(laav.Sequence(ex.sequence.complete()[0].points[:, :40], name="plain"),
                                    tmp_path / "plain.npz")
         assert ex.load_bytes(other.read_bytes(), "plain.npz") and ex.wait(120)
         assert ex.sequence.name == "plain" and not fv.r_background.visible
@@ -269,20 +285,36 @@ def test_cli_tracks_a_folder_of_frames_then_serves_it(monkeypatch, capsys):
     v = seen["video"]
     assert v is not None and seen["seq"] is v.sequence and seen["n_motions"] == v.n_motions
     assert v.sequence.n_frames == 12 and v.frames.n_kept == 12 and v.options["max_points"] == 400
-    assert re.search(r"tracked \d+ tracks over 12 frames in [\d.]+ s; keeping \d+ of them, those seen in "
-                     "every frame", out)
+    assert re.search(r"tracked \d+ tracks over 12 frames in [\d.]+ s; keeping all of them, [\d.]+ % of the "
+                     r"entries visible \(\d+ tracks seen in every frame\)", out)
+    assert v.sequence.n_points == v.n_tracks
     assert f"C = {v.n_motions} (" in out and "12 frames of 320x240 kept at 320x240 grey" in out
     assert f"two_objects ({v.sequence.n_points} points, 12 frames, C = {v.n_motions}) at http://" in out
     assert main([str(CLIP), "--no-browser", "--port", "0", "--motions", "2", "--max-frames", "10"]) == 0
     assert seen["n_motions"] == 2 and seen["video"].motion_count is None
     assert seen["seq"].n_frames == 10
+    # the whole clip, every track (laav-explore assets/two_objects): incomplete tracks kept
+    from laav.track import track
+
+    tracks = track(CLIP, progress=False)
+    assert main([str(CLIP), "--no-browser", "--port", "0"]) == 0
+    out = capsys.readouterr().out
+    seq = seen["seq"]
+    assert seq is seen["video"].sequence and seq.n_points == tracks.n_tracks and not seq.is_complete
+    assert np.array_equal(seq.visible, tracks.visible) and seen["n_motions"] == 3
+    share = 100 * seq.visible_share
+    assert f"keeping all of them, {share:.1f} % of the entries visible" in out
+    # --complete-only: only the tracks seen in every frame
+    assert main([str(CLIP), "--no-browser", "--port", "0", "--complete-only", "--motions", "3"]) == 0
+    assert seen["seq"].is_complete and seen["seq"].n_points == int(tracks.visible.all(axis=0).sum())
+    assert "those seen in every frame (--complete-only)" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("case, needle", [
     ("junk", "cannot open this video (not a format OpenCV reads)"),
     ("blank", "no features found"),
     ("short", "shorter than the minimum length of 30 frames"),
-    ("too_many_motions", "fewer than the 800 LAAV needs for C = 100"),
+    ("too_many_motions", "fewer than the 1600 LAAV needs for C = 200"),
 ])
 def test_cli_bad_video_exits_2_with_one_line(tmp_path, capsys, monkeypatch, case, needle):
     monkeypatch.setattr(pn, "serve", lambda *a, **k: pytest.fail("no server for a bad video"))
@@ -296,7 +328,7 @@ def test_cli_bad_video_exits_2_with_one_line(tmp_path, capsys, monkeypatch, case
     elif case == "short":
         args += ["--min-length", "30"]
     else:
-        args += ["--motions", "100"]
+        args += ["--motions", "200"]
     assert main([*args, "--no-browser", "--port", "0"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("laav-explore: error: ") and needle in err, err

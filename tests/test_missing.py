@@ -262,9 +262,11 @@ def test_too_little_seen_together_is_a_clear_error():
 # ------------------------------------------------------------------ what stays refused or falls back
 
 
-def test_estimating_the_number_of_motions_still_needs_complete_tracks():
+def test_estimating_the_number_of_motions_needs_enough_complete_tracks():
+    """The estimate fits whole trajectories: on incomplete data it runs on the tracks seen
+    in every frame, and says clearly when there are too few (occlude() breaks every track)."""
     occl = occlude(_scene(0), 0.2, 0)
-    with pytest.raises(laav.IncompleteSequenceError, match="estimate of the number of motions"):
+    with pytest.raises(ValueError, match="tracks are seen in every frame"):
         laav.segment(occl, "auto")
 
 

@@ -81,16 +81,27 @@ def test_too_few_points():
         estimate_motions(few)
 
 
-def test_incomplete_sequence_refused():
+def test_incomplete_sequence_estimated_on_its_complete_tracks():
+    """Once refused; now the estimate runs on the tracks seen in every frame (it fits whole
+    trajectories), says so, and equals the estimate on those tracks alone; hidden entries
+    (NaN) are never read."""
     seq = _scene(2, 0)
-    visible = np.ones(seq.points.shape[:2], dtype=bool)
-    visible[0, 0] = False
-    try:
-        incomplete = laav.Sequence(seq.points, visible=visible)
-    except TypeError:
-        pytest.skip("this version has no visibility masks")
-    with pytest.raises(laav.SequenceError, match="missing"):
-        estimate_motions(incomplete)
+    F, P = seq.points.shape[:2]
+    visible = np.ones((F, P), dtype=bool)
+    visible[: F // 3, ::5] = False  # every 5th track starts late
+    pts = seq.points.copy()
+    pts[~visible] = np.nan
+    incomplete = laav.Sequence(pts, visible=visible)
+    got = estimate_motions(incomplete)
+    n_full = int(visible.all(axis=0).sum())
+    assert f"estimated on the {n_full} of {P} tracks seen in every frame" in got.reason
+    alone = estimate_motions(laav.Sequence(seq.points[:, visible.all(axis=0)]))
+    assert got.n_motions == alone.n_motions == 2
+    # too few complete tracks: a clear error naming the way out
+    few = np.ones((F, P), dtype=bool)
+    few[-1, 12:] = False
+    with pytest.raises(ValueError, match=r"only 12 of the \d+ tracks are seen in every frame.*--motions N"):
+        estimate_motions(laav.Sequence(seq.points, visible=few))
 
 
 def test_decide_sequential_test():

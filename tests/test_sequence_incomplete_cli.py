@@ -1,8 +1,8 @@
 """Incomplete sequences on the command line and in the explorer: ``laav segment`` segments
 them (the stages handle missing data, issue 14 item 3), ``--complete-only`` keeps the tracks
-seen in every frame, ``laav convert`` converts formats; the explorer does not handle them
-yet: ``laav-explore`` refuses them with one clear message (exit 2), and an explorer upload
-of an incomplete file keeps the last good result.
+seen in every frame, ``laav convert`` converts formats; the explorer takes them too
+(``laav-explore FILE`` and an upload of an incomplete file segment and draw them), and
+``--motions auto`` estimates C on the tracks seen in every frame.
 """
 
 from __future__ import annotations
@@ -62,14 +62,24 @@ def test_segment_reports_unlabelled_points(tmp_path, capsys):
     assert (got[:3, 1] == -1).all() and (got[3:, 1] >= 0).all()
 
 
-def test_segment_auto_on_an_incomplete_file_is_one_clear_line(tmp_path, capsys):
+def test_segment_auto_on_an_incomplete_file_estimates_c_on_its_complete_tracks(tmp_path, capsys):
     path = tmp_path / "occluded.npz"
     _occluded_scene(path)
+    assert main(["segment", str(path), "--motions", "auto", "-o", str(tmp_path / "l.csv"), *SMALL]) == 0
+    out = capsys.readouterr().out
+    assert "motions: 2 (estimated:" in out and "estimated on the 60 of 80 tracks seen in every frame" in out
+
+
+def test_segment_auto_with_too_few_complete_tracks_is_one_clear_line(tmp_path, capsys):
+    seq = make_sequence(1, n_frames=10, n_points=80, rng=4)
+    vis = np.ones((10, 80), bool)
+    vis[8:, 10:] = False  # only 10 tracks seen in every frame
+    path = laav.save_sequence(laav.Sequence(seq.points, seq.labels, name="few", visible=vis),
+                              tmp_path / "few.npz")
     assert main(["segment", str(path), "--motions", "auto", "-o", str(tmp_path / "l.csv")]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "Traceback" not in err
-    assert "7.5 % missing entries" in err and "estimate of the number of motions" in err
-    assert "--complete-only" in err
+    assert "only 10 of the 80 tracks are seen in every frame" in err and "--motions N" in err
 
 
 @pytest.mark.parametrize("method", ["laav", "rv"])
@@ -119,50 +129,87 @@ def test_convert_between_formats(tmp_path, capsys):
 pn = pytest.importorskip("panel")
 
 
-def test_explorer_cli_refuses_an_incomplete_file(tmp_path, capsys):
+def test_explorer_cli_accepts_an_incomplete_file(tmp_path, capsys, monkeypatch):
+    """Once refused (exit 2); now served with every track, C from the file's truth."""
+    from conftest import fake_serving
     from explorer.cli import main as explore
 
+    seen = fake_serving(monkeypatch)
     path = tmp_path / "occluded.npz"
     _occluded_scene(path)
-    assert explore([str(path), "--no-browser"]) == 2
-    err = capsys.readouterr().err
-    assert "7.5 % missing entries" in err and "--complete-only" in err and "Traceback" not in err
+    assert explore([str(path), "--no-browser"]) == 0
+    out = capsys.readouterr().out
+    assert "80 tracks, 92.5 % of the entries visible" in out and "(80 points, 10 frames, C = 2)" in out
+    assert seen["n_motions"] == 2
+    # --complete-only keeps working: the 60 full tracks
+    assert explore([str(path), "--no-browser", "--complete-only"]) == 0
+    cap = capsys.readouterr()
+    assert "--complete-only: kept 60 points" in cap.err and "(60 points, 10 frames, C = 2)" in cap.out
 
 
-def test_explorer_state_refuses_and_keeps_the_last_result(tmp_path):
+def test_explorer_cli_estimates_c_of_an_incomplete_file_without_truth(tmp_path, capsys, monkeypatch):
+    from conftest import fake_serving
+    from explorer.cli import main as explore
+
+    seen = fake_serving(monkeypatch)
+    occl, _ = _occluded_scene()
+    path = laav.save_sequence(laav.Sequence(occl.points, name="no_truth", visible=occl.visible),
+                              tmp_path / "no_truth.npz")
+    assert explore([str(path), "--no-browser"]) == 0
+    out = capsys.readouterr().out
+    assert "C = 2 estimated" in out and "seen in every frame" in out and seen["n_motions"] == 2
+    # too few complete tracks to estimate C: one clear line, exit 2
+    vis = np.ones((10, 80), bool)
+    vis[8:, 10:] = False  # only 10 tracks seen in every frame
+    base = make_sequence(1, n_frames=10, n_points=80, rng=4)
+    few = laav.save_sequence(laav.Sequence(base.points, name="few", visible=vis), tmp_path / "few.npz")
+    assert explore([str(few), "--no-browser"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "Traceback" not in err and len(err.splitlines()) == 1
+    assert "only 10 of the 80 tracks are seen in every frame" in err and "--motions N" in err
+
+
+def test_explorer_state_accepts_an_incomplete_sequence(tmp_path):
     from explorer import ExplorerState
 
     occl, _ = _occluded_scene()
-    with pytest.raises(laav.IncompleteSequenceError):
-        ExplorerState(occl, autostart=False)
     full = make_sequence(1, n_frames=8, n_points=60, rng=2, name="full")
     state = ExplorerState(full, params=laav.LaavParams(rv_max_iter=30, rv_trials=2))
     try:
         assert state.wait(120) and state.result is not None
-        res = state.result
-        assert state.load(occl) is None
-        assert "missing entries" in state.error and "complete()" in state.error
-        assert state.result is res and state.sequence is full
+        assert state.load(occl) is not None  # once refused
+        assert state.wait(120) and state.error is None
+        assert state.sequence is occl and state.result.labels.shape == (80,)
     finally:
         state.close()
+    direct = ExplorerState(occl, params=laav.LaavParams(rv_max_iter=30, rv_trials=2))  # once raised
+    try:
+        assert direct.wait(120) and direct.result is not None and direct.sequence is occl
+    finally:
+        direct.close()
 
 
-def test_explorer_upload_of_an_incomplete_file_shows_the_message_and_keeps_the_result(tmp_path):
+def test_explorer_upload_of_an_incomplete_file_replaces_the_sequence(tmp_path):
     from explorer import Explorer
 
     full = make_sequence(1, n_frames=8, n_points=60, rng=2, name="full")
     ex = Explorer(full, params=laav.LaavParams(rv_max_iter=30, rv_trials=2), viser=False)
     try:
         assert ex.wait(120)
-        res = ex.result
         path = tmp_path / "tracks.csv"
-        _occluded_scene(path)
-        assert not ex.load_bytes(path.read_bytes(), "my tracks.csv")
-        shown = re.sub(r"\\(.)", r"\1", ex.alert.object)  # as the page shows it
-        assert ex.alert.visible and "my tracks.csv: the sequence has 7.5 % missing entries" in shown
-        assert "still showing the last valid result" in shown
-        assert "laav-explore-" not in shown  # the upload's temporary path is not shown
-        assert ex.result is res and ex.sequence is full
+        occl, _ = _occluded_scene(path)
+        assert ex.load_bytes(path.read_bytes(), "my tracks.csv")  # once refused
+        assert ex.wait(120) and not ex.alert.visible
+        assert ex.sequence.name == "my_tracks" and not ex.sequence.is_complete
+        assert ex.sequence.n_points == 80
+        # the frame view: every point at frame 0, only the 60 complete tracks at frame 9
+        ex.w_frame.value = 0
+        assert len(ex.src_points.data["x"]) == 80
+        ex.w_frame.value = 9
+        idx = np.asarray(ex.src_points.data["index"])
+        assert len(idx) == 60 and ex.sequence.visible[9, idx].all()
+        shown = re.sub(r"\\(.)", r"\1", ex.note.object)
+        assert "80 tracks over 10 frames, 92.5 % of the entries visible" in shown
         # a complete tracks CSV uploads like any other sequence
         laav.save_sequence(make_sequence(1, n_frames=9, n_points=50, rng=5), tmp_path / "ok.csv")
         assert ex.load_bytes((tmp_path / "ok.csv").read_bytes(), "ok.csv")

@@ -125,7 +125,9 @@ class CompareView:
         comp = self.comparison
         f = int(np.clip(self.host.frame, 0, seq.n_frames - 1))
         xy = seq.points[f]
-        ring = {"x": xy[comp.changed, 0], "y": xy[comp.changed, 1]}
+        changed = np.asarray(comp.changed, dtype=np.int64)
+        changed = changed[V.visible_at(seq, f)[changed]]  # only the points seen in this frame
+        ring = {"x": xy[changed, 0], "y": xy[changed, 1]}
         what = self.controls.w_color.value
         with self.host.hold():
             for k, style in zip(("A", "B"), self._styles):

@@ -306,8 +306,7 @@ class Files:
                     # the format comes from the content, whatever the name says; MAT content
                     # is parsed in a child process (scipy's reader can crash the interpreter
                     # on some damaged files, and an upload must never do that)
-                    seq = laav.load_sequence(p, isolated=True)
-                    laav.require_complete(seq)  # the last good result stays (issue 14)
+                    seq = laav.load_sequence(p, isolated=True)  # incomplete tracks too
                 except laav.SequenceError as exc:
                     if token is None or self._reading is not None and self._reading[0] is token:
                         self.state.report(_refusal(str(exc).replace(str(p), base), base, p))
