@@ -19,6 +19,7 @@ import laav
 pn = pytest.importorskip("panel")
 
 from conftest import two_motion_sequence  # noqa: E402
+
 from explorer import Explorer  # noqa: E402
 from explorer import views as V  # noqa: E402
 from laav.synthetic import occlude  # noqa: E402

@@ -132,6 +132,7 @@ pn = pytest.importorskip("panel")
 def test_explorer_cli_accepts_an_incomplete_file(tmp_path, capsys, monkeypatch):
     """Once refused (exit 2); now served with every track, C from the file's truth."""
     from conftest import fake_serving
+
     from explorer.cli import main as explore
 
     seen = fake_serving(monkeypatch)
@@ -149,6 +150,7 @@ def test_explorer_cli_accepts_an_incomplete_file(tmp_path, capsys, monkeypatch):
 
 def test_explorer_cli_estimates_c_of_an_incomplete_file_without_truth(tmp_path, capsys, monkeypatch):
     from conftest import fake_serving
+
     from explorer.cli import main as explore
 
     seen = fake_serving(monkeypatch)
