@@ -216,9 +216,11 @@ class Video:
             why = f"C = {self.n_motions} as given"
         src = Path(self.source)
         what = f"the frames in the folder {src.name}" if src.is_dir() else f"the video {src.name}"
-        head = f"{seq.name} was tracked from {what} (laav track): {self.n_tracks} tracks over {seq.n_frames} frames; "
+        head = (f"{seq.name} was tracked from {what} (laav track): {self.n_tracks} tracks over "
+                f"{seq.n_frames} frames; ")
         if self.complete_only:
-            kept = (f"kept {seq.n_points} of the {self.n_tracks}, those seen in every frame (--complete-only; "
+            kept = (f"kept {seq.n_points} of the {self.n_tracks}, those seen in every frame "
+                    f"(--complete-only; "
                     f"the other {self.n_tracks - seq.n_points} start late, end early or have gaps)")
         else:
             n_full = int(np.count_nonzero(seq.visible.all(axis=0)))

@@ -131,7 +131,8 @@ def incomplete_note(seq: laav.Sequence, result: laav.LaavResult | None = None,
     if result is not None:
         n_un = int(np.count_nonzero(result.unlabelled_code))
         if n_un:
-            text += (f"{' ' if text else ''}{n_un} point{'s' if n_un != 1 else ''} {'are' if n_un != 1 else 'is'} "
+            text += (f"{' ' if text else ''}{n_un} point{'s' if n_un != 1 else ''} "
+                     f"{'are' if n_un != 1 else 'is'} "
                      f"*{UNSEEN_LABEL}* (label -1, grey ⊗; counted as errors).")
     return text
 
@@ -924,7 +925,8 @@ def labels_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
 
     Columns: ``point`` (0-based index), ``label`` (final motion: the same two columns as
     ``laav segment --out``), ``x0``, ``y0`` (position in frame 0; empty when the point is
-    not seen there), ``ground_truth`` (empty without), ``owner_atom``, ``fine_model``, ``coarse_motion`` (-1: the stage left the
+    not seen there), ``ground_truth`` (empty without), ``owner_atom``, ``fine_model``,
+    ``coarse_motion`` (-1: the stage left the
     point out, i.e. it is in no atom).
     """
     st = result.stage_labels()

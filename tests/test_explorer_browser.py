@@ -724,7 +724,7 @@ def test_incomplete_sequence_in_chromium_draws_only_visible_points(tmp_path):
         for f in (1, 6):
             if not page.evaluate(JS_SET_PLAYER, f) or not _frame_reached(ex, f, page):
                 ex.w_frame.value = f  # the server's slider (panel values are thread-safe)
-            got = _wait_for(lambda: (lambda d: d if d and d["n"] == want[f] else None)(
+            got = _wait_for(lambda f=f: (lambda d: d if d and d["n"] == want[f] else None)(
                 page.evaluate(JS_FRAME_POINTS)), 30, f"the points of frame {f}", page=page)
             assert seq.visible[f, got["index"]].all()
             assert all(x == x for x in got["x"])  # no NaN reached the page

@@ -1,5 +1,6 @@
 """``laav-explore VIDEO``: a video or a folder of frames is tracked, every track the tracker
-keeps is segmented (incomplete ones included; ``--complete-only``: the full ones), and the frame view draws the video's frames behind the points.
+keeps is segmented (incomplete ones included; ``--complete-only``: the full ones), and the
+frame view draws the video's frames behind the points.
 
 The project's synthetic clip (``assets/two_objects/``: 24 frames of 320 x 240 px and the mask
 of every frame) says which object lies under every pixel, so the frames' placement under the
@@ -172,7 +173,8 @@ def test_open_video_keeps_every_track_and_estimates_c(video):
     n_full = int(tracks.visible.all(axis=0).sum())
     assert 0 < n_full < seq.n_points
     assert video.n_motions == 3 and video.motion_count is not None  # background, rectangle, disc
-    assert f"estimated on the {n_full} of {seq.n_points} tracks seen in every frame" in video.motion_count.reason
+    reason = video.motion_count.reason
+    assert f"estimated on the {n_full} of {seq.n_points} tracks seen in every frame" in reason
     assert video.frames.n_kept == 24 and video.frames.shape == (240, 320)
     assert np.array_equal(video.frames.get(5), cv2.imread(str(CLIP / "frame_005.png"), cv2.IMREAD_GRAYSCALE))
     text = video.summary()
@@ -182,7 +184,8 @@ def test_open_video_keeps_every_track_and_estimates_c(video):
     assert "C = 3 estimated" in text
     full = open_video(CLIP, 3, progress=False, complete_only=True)
     assert full.sequence.is_complete and full.sequence.n_points == n_full == full.kept.size
-    assert f"kept {n_full} of the {full.n_tracks}, those seen in every frame (--complete-only" in full.summary()
+    summary = full.summary()
+    assert f"kept {n_full} of the {full.n_tracks}, those seen in every frame (--complete-only" in summary
     given = open_video(CLIP, 2, progress=False, track_options={"stride": 2})
     assert given.n_motions == 2 and given.motion_count is None and given.sequence.n_frames == 12
     assert "C = 2 as given" in given.summary()
