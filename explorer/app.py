@@ -23,6 +23,7 @@ from operator import attrgetter
 from pathlib import Path
 
 import panel as pn
+from panel.io.document import unlocked
 from panel.io.state import set_curdoc
 
 import laav
@@ -351,12 +352,24 @@ class Explorer:
                 traceback.print_exc()
 
     @contextmanager
-    def hold(self):
-        """Send all model changes made inside as one batch (bokeh's own document hold; the
-        callers run on the document's thread, under its lock)."""
+    def hold(self, one_message: bool = False):
+        """Send all model changes made inside as one batch (the callers run on the document's
+        thread, under its lock).
+
+        With ``one_message`` (and once the page has loaded) the batch goes out as ONE
+        websocket message (panel's ``unlocked``): bokeh's own hold sends one message per
+        changed property, and the browser applies and redraws each in turn (a frame move was
+        about 12 messages; docs/bench/explorer_browser_latency.md). Only for batches that
+        change data and texts, not legends: a result's batch (data sources and legend labels
+        together) broke bokeh's legend drawing when applied as one patch."""
         doc = self._doc()
         if doc is None or doc.session_context is None or doc.callbacks.hold_value is not None:
             yield
+            return
+        if (one_message and pn.state.curdoc is doc and pn.state.loaded
+                and threading.get_ident() == self._doc_thread and doc.session_context.session is not None):
+            with unlocked("combine"):
+                yield
             return
         doc.hold("combine")
         try:
@@ -494,7 +507,7 @@ class Explorer:
     def _frame_now(self) -> None:
         if self.result is None or self.quieted:
             return
-        with self.hold():
+        with self.hold(one_message=True):
             self._draw_frame()
             self.graph_view.draw(self.result, self.frame, self.fine_colors)
             self.compare.redraw()

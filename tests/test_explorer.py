@@ -836,3 +836,34 @@ def test_cli_estimates_c_for_a_file_without_ground_truth(monkeypatch, tmp_path, 
     assert seen["n_motions"] == expected and f"C = {expected} estimated (" in out
     assert main([str(f), "--no-browser", "--port", "0", "--motions", "3"]) == 0
     assert seen["n_motions"] == 3
+
+
+def test_frame_move_sends_only_the_changed_columns(ex):
+    """A frame move changes the points' positions, not their colours, markers or labels:
+    only the position columns go to the browser (checked on the document's events)."""
+    from bokeh.document import Document
+    from bokeh.document.events import ColumnDataChangedEvent, ModelChangedEvent
+
+    doc = Document()
+    doc.add_root(ex.frame_view.fig)
+    sent: list = []
+    doc.on_change(lambda event: sent.append(event))
+    ex.w_frame.value = 1
+    src = ex.frame_view.src_points
+    changed = [e for e in sent if getattr(e, "model", None) is src]
+    assert changed, "the frame move sent nothing for the points"
+    cols = set()
+    for e in changed:
+        hint = getattr(e, "hint", None)
+        if isinstance(e, ColumnDataChangedEvent) or isinstance(hint, ColumnDataChangedEvent):
+            cols |= set((hint or e).cols)
+        else:
+            assert not isinstance(e, ModelChangedEvent), "the whole data was replaced"
+    assert cols == {"x", "y"}
+
+
+def test_the_frame_player_is_handled_without_panels_wait(ex):
+    """A frame change from the browser is handled at once (panel's 50 ms gathering wait is off
+    for the frame player only; the parameter sliders keep it)."""
+    assert ex.controls.w_frame._debounce == 0
+    assert all(w._debounce == type(w)._debounce for w in ex.controls.w_params.values())

@@ -37,6 +37,11 @@ class Controls:
                                          loop_policy="loop", interval=250, width=SIDE_W,
                                          show_loop_controls=False, value_align="start",
                                          scale_buttons=0.8)
+        # panel waits 50 ms after a browser change before handling it (to gather a drag's
+        # values); a frame move costs the server ~3 ms, so the wait was most of its share of
+        # the latency (docs/bench/explorer_browser_latency.md). Changes arriving while one
+        # is handled are still gathered into one.
+        self.w_frame._debounce = 0
         self.w_color = pn.widgets.Select(label="Colour points by", options=list(V.COLOR_MODES),
                                          value="ground truth" if seq.labels is not None
                                          else "final (after Random Voting)", width=SIDE_W)
