@@ -126,13 +126,20 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int
     sv = np.linalg.svd(centred, compute_uv=False)  # (F, 2) per frame
     if np.all(sv[:, 1] <= TOLERANCE * sv[:, 0] + tol):
         warn.append("the points are collinear in every frame (epipolar geometry is degenerate)")
+    _warn(src, warn, spread, pts, stacklevel + 1)
+
+
+def _warn(src, warn: list, spread: float, seen: np.ndarray, stacklevel: int) -> None:
+    """The pixel-scale and distant-origin warnings (from the visible coordinates ``seen``,
+    any shape, and their ``spread``) added to ``warn``, then one :class:`LaavWarning` for
+    all of them, if any."""
     if not PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]:
         warn.append(f"the coordinates span {spread:.3g} px, outside {PIXEL_SPREAD[0]:g}-"
                     f"{PIXEL_SPREAD[1]:g}: LaavParams lengths are in pixels and strengths in "
                     f"1/px^2, so rescale the coordinates to pixels or, for coordinates s times "
                     f"pixels, multiply {', '.join(PIXEL_PARAMS)} by s and "
                     f"{', '.join(STRENGTH_PARAMS)} by 1/s^2 (LaavParams.scaled(s))")
-    far = float(np.abs(pts).max()) if pts.size else 0.0
+    far = float(np.abs(seen).max()) if seen.size else 0.0
     if spread > 0 and far > ORIGIN_RATIO * spread:
         warn.append(f"the points lie up to {far:.3g} px from the coordinates' origin, "
                     f"{far / spread:.3g} times their spread, where rounding costs the "
@@ -175,22 +182,7 @@ def _check_degenerate_masked(src, pts, vis, n_motions, stacklevel) -> None:
             break
     if collinear:
         warn.append("the points are collinear in every frame (epipolar geometry is degenerate)")
-    if not PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]:  # as check_degenerate
-        warn.append(f"the coordinates span {spread:.3g} px, outside {PIXEL_SPREAD[0]:g}-"
-                    f"{PIXEL_SPREAD[1]:g}: LaavParams lengths are in pixels and strengths in "
-                    f"1/px^2, so rescale the coordinates to pixels or, for coordinates s times "
-                    f"pixels, multiply {', '.join(PIXEL_PARAMS)} by s and "
-                    f"{', '.join(STRENGTH_PARAMS)} by 1/s^2 (LaavParams.scaled(s))")
-    far = float(np.abs(seen).max()) if seen.size else 0.0
-    if spread > 0 and far > ORIGIN_RATIO * spread:
-        warn.append(f"the points lie up to {far:.3g} px from the coordinates' origin, "
-                    f"{far / spread:.3g} times their spread, where rounding costs the "
-                    f"epipolar fits their precision: subtract an offset (the image corner, say)")
-    if warn:
-        import warnings
-
-        warnings.warn(f"{src}: " + "; ".join(warn) + " - the labels are probably meaningless",
-                      LaavWarning, stacklevel=stacklevel)
+    _warn(src, warn, spread, seen, stacklevel + 1)
 
 
 def warn_single_label(seq, labels: np.ndarray, n_motions: int, stacklevel: int = 3) -> None:

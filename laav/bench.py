@@ -176,8 +176,9 @@ def format_noise(sigma: float) -> str:
     return np.format_float_positional(float(sigma), trim="-")
 
 
-def parse_noise(text: str | Iterable[float]) -> tuple[float, ...]:
-    """Noise levels (pixels) from ``"0,0.5,1,2"`` or a sequence of numbers; sorted, unique."""
+def _parse_levels(text, what: str, example: str, valid, rule: str) -> tuple[float, ...]:
+    """Levels from ``"0,0.5"`` or a sequence of numbers, each checked by ``valid``; sorted,
+    unique, written as :func:`format_noise` writes them."""
     items = text.split(",") if isinstance(text, str) else list(text)
     out = []
     for item in items:
@@ -186,34 +187,28 @@ def parse_noise(text: str | Iterable[float]) -> tuple[float, ...]:
         try:
             v = float(item)
         except (TypeError, ValueError):
-            raise BenchError(f"noise level {item!r} is not a number") from None
-        if not math.isfinite(v) or v < 0:
-            raise BenchError(f"noise level must be a finite number >= 0 px, got {item!r}")
+            raise BenchError(f"{what} {item!r} is not a number (e.g. {example})") from None
+        if not (math.isfinite(v) and valid(v)):
+            raise BenchError(f"{what} must be {rule}, got {item!r}")
         out.append(float(format_noise(v)))
     if not out:
-        raise BenchError("no noise level given (e.g. --noise 0,0.5,1,2)")
+        raise BenchError(f"no {what} given (e.g. {example})")
     return tuple(sorted(set(out)))
+
+
+def parse_noise(text: str | Iterable[float]) -> tuple[float, ...]:
+    """Noise levels (pixels) from ``"0,0.5,1,2"`` or a sequence of numbers; sorted, unique."""
+    return _parse_levels(text, "noise level", "--noise 0,0.5,1,2", lambda v: v >= 0,
+                         "a finite number >= 0 px")
 
 
 def parse_missing(text: str | Iterable[float]) -> tuple[float, ...]:
     """Missing shares from ``"0,0.2,0.4"`` or a sequence of numbers, each in [0, 0.95);
     sorted, unique."""
-    items = text.split(",") if isinstance(text, str) else list(text)
-    out = []
-    for item in items:
-        if isinstance(item, str) and not item.strip():
-            continue
-        try:
-            v = float(item)
-        except (TypeError, ValueError):
-            raise BenchError(f"missing share {item!r} is not a number (e.g. --missing 0,0.2,0.4)") from None
-        if not math.isfinite(v) or not 0.0 <= v < MAX_MISSING:
-            raise BenchError(f"missing share must be a number in [0, {MAX_MISSING:g}) "
-                             f"(a share of the entries, not a percentage), got {item!r}")
-        out.append(float(format_noise(v)))
-    if not out:
-        raise BenchError("no missing share given (e.g. --missing 0,0.2,0.4)")
-    return tuple(sorted(set(out)))
+    return _parse_levels(text, "missing share", "--missing 0,0.2,0.4",
+                         lambda v: 0.0 <= v < MAX_MISSING,
+                         f"a number in [0, {MAX_MISSING:g}) (a share of the entries, not a "
+                         f"percentage)")
 
 
 def hide_entries(seq: Sequence, missing: float, seed: int) -> Sequence:
