@@ -28,16 +28,44 @@ import numpy as np
 
 from ._sequence import Sequence, as_points
 from .atoms import Atoms
-from .coding import best_partition, merge_cost, model_stats
+from .coding import best_partition, merge_cost, model_stats, shortlist
 from .geometry import fit_fundamental, sampson_distance
 from .multicut import Multicut
 from .params import LaavParams
+from .refine import motion_distances
 from .voting import frame_pairs
 
-__all__ = ["Coarse", "VoteSamples", "merge_models", "point_labels_from_atoms", "pooled_voting"]
+__all__ = ["Coarse", "Shortlist", "VoteSamples", "merge_models", "point_labels_from_atoms", "pooled_voting"]
 
 _PER_ATOM = 6  # features drawn from each atom for one fit
 _POOLED_ALPHA = 0.9  # forgetting factor of pooled voting
+_JOINT_PAIRS = 8  # frame pairs of the joint merge's epipolar cost
+
+
+@dataclass(frozen=True, eq=False)
+class Shortlist:
+    """The partitions the joint merge (``coarse_merge="joint"``) compared.
+
+    Attributes
+    ----------
+    assign : ndarray of shape (K, n_fine), int64
+        Motion of each fine model, per partition (by increasing coding length).
+    coding_length : ndarray of shape (K,)
+        Total coding length (nats).
+    epipolar_cost : ndarray of shape (K,)
+        Sum over the points in atoms of ``log(1 + d)``, ``d`` the point's mean Sampson
+        distance to its motion's robust fundamental matrices (units of ``2 / lam``).
+    score : ndarray of shape (K,)
+        ``coding_length + coarse_epipolar_weight * epipolar_cost``.
+    chosen : int
+        Index of the partition of least score.
+    """
+
+    assign: np.ndarray
+    coding_length: np.ndarray
+    epipolar_cost: np.ndarray
+    score: np.ndarray
+    chosen: int
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,6 +135,8 @@ class Coarse:
         Total coding length of the chosen partition (nats); NaN with the epipolar merge.
     vote_samples : VoteSamples or None
         One typical sample of every pair's epipolar vote (what the explorer draws).
+    shortlist : Shortlist or None
+        ``method="joint"``: the partitions compared and their scores.
     pairwise_vote, coassociation : ndarray of shape (n_fine, n_fine) or None
         The two terms of the epipolar merge's Z, apart: the paper's pairwise vote (mean of
         ``exp(-lam d)`` over the samples) and the co-association of the pooled-voting
@@ -130,6 +160,7 @@ class Coarse:
     vote_samples: VoteSamples | None = None
     pairwise_vote: np.ndarray | None = None
     coassociation: np.ndarray | None = None
+    shortlist: Shortlist | None = None
 
     def pair_fundamental(self, points: np.ndarray, j: int, k: int) -> np.ndarray:
         """F fitted (normalised 8-point) on every feature of fine models ``j`` and ``k``
@@ -412,17 +443,17 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         flip = rng.random(params.coarse_frames) < 0.5
         pairs[flip] = pairs[flip][:, ::-1]
     widest = np.array([0, F - 1], dtype=np.int64)
-    coding = params.coarse_merge == "coding"
+    coding = params.coarse_merge in ("coding", "joint")
     if coding and vis is not None:
         import warnings
 
         from ._sequence import LaavWarning
 
-        warnings.warn(f"{getattr(seq, 'source', '<array>')}: coarse_merge='coding' needs "
-                      "complete trajectories; the epipolar merge was used on this incomplete "
-                      "sequence", LaavWarning, stacklevel=2)
+        warnings.warn(f"{getattr(seq, 'source', '<array>')}: coarse_merge="
+                      f"'{params.coarse_merge}' needs complete trajectories; the epipolar "
+                      "merge was used on this incomplete sequence", LaavWarning, stacklevel=2)
         coding = False
-    method = "coding" if coding else "epipolar"
+    method = params.coarse_merge if coding else "epipolar"
     if n == 0:
         e = np.zeros((0, 0))
         return Coarse(np.zeros(0, np.int64), e, e, e, np.zeros(0, np.int64), fine_pts,
@@ -502,7 +533,13 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     np.fill_diagonal(Z, 1.0)
 
     length = float("nan")
-    if coding:  # the partition is searched only when it decides
+    listed = None
+    if coding and method == "joint" and n > n_motions:
+        listed = _joint_shortlist(points, fine_pts, stats, n_motions, params)
+    if listed is not None:
+        assign, length = listed.assign[listed.chosen], float(listed.coding_length[listed.chosen])
+        Z = np.exp(-np.maximum(gain, 0.0))
+    elif coding:  # the partition is searched only when it decides
         assign, length = best_partition(stats, n_motions, params.coding_eps)
         Z = np.exp(-np.maximum(gain, 0.0))
     if n <= n_motions:
@@ -536,7 +573,30 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         vote_samples=samples,
         pairwise_vote=pairwise,
         coassociation=coassoc,
+        shortlist=listed,
     )
+
+
+def _joint_shortlist(points, fine_pts, stats, n_motions, params) -> Shortlist | None:
+    """The joint merge: the ``coarse_candidates`` partitions of least coding length whose
+    motions hold 8 points or more (what one fundamental matrix needs), each scored by its
+    coding length plus ``coarse_epipolar_weight`` times its epipolar cost; None when no
+    partition gives every motion 8 points."""
+    assign, coding = shortlist(stats, n_motions, params.coding_eps, params.coarse_candidates,
+                               min_count=8)
+    if assign.shape[0] == 0:
+        return None
+    cov = fine_pts >= 0
+    pts, fine = points[:, cov], fine_pts[cov]
+    unit2 = LaavParams.lam / params.lam  # the Sampson distance's unit: 1 px^2 at the default
+    pairs = frame_pairs(points.shape[0], _JOINT_PAIRS)  # deterministic: no draw from rng
+    epi = np.empty(assign.shape[0])
+    for i, a in enumerate(assign):
+        lab = a[fine]
+        D = motion_distances(pts, lab, n_motions, pairs, unit2)
+        epi[i] = np.log1p(D[lab, np.arange(lab.size)] / unit2).sum()
+    score = coding + params.coarse_epipolar_weight * epi
+    return Shortlist(assign, coding, epi, score, int(np.argmin(score)))
 
 
 def _median_samples(depi, Fm, idx, pairs, jj, kk, n) -> VoteSamples:

@@ -35,7 +35,8 @@ import numpy as np
 
 from .refine import trajectory_matrix
 
-__all__ = ["ModelStats", "model_stats", "coding_lengths", "best_partition", "merge_cost"]
+__all__ = ["ModelStats", "model_stats", "coding_lengths", "best_partition", "shortlist",
+           "merge_cost"]
 
 #: Principal directions of all trajectories the statistics are kept in.
 PROJECTION_RANK = 20
@@ -217,3 +218,55 @@ def best_partition(stats: ModelStats, n_groups: int, eps: float) -> tuple[np.nda
     _, first = np.unique(assign, return_index=True)
     rank = np.argsort(np.argsort(first))
     return rank[assign].astype(np.int64), best
+
+
+def shortlist(stats: ModelStats, n_groups: int, eps: float, n_best: int,
+              min_count: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """The ``n_best`` partitions of least total coding length whose groups all hold at
+    least ``min_count`` points (the joint merge of :func:`laav.coarse.merge_models`
+    re-ranks them by their epipolar fit).
+
+    Exact when :func:`best_partition` is; otherwise the greedy partition and every
+    partition one model move away from it.
+
+    Returns
+    -------
+    assign : ndarray of shape (K, n), int64
+        Group of each model per partition (K <= ``n_best``; groups numbered in order of
+        their first model), by increasing total length; K = 0 when no partition has
+        ``min_count`` points in every group.
+    total : ndarray of shape (K,)
+        Their total coding lengths (nats).
+    """
+    n, C = stats.n_models, int(n_groups)
+    if n <= C:
+        A = np.arange(n, dtype=np.int64)[None]
+        tot = np.array([_total(stats, A[0], max(n, 1), eps)])
+        size = stats.count[None]
+    elif n <= _SUBSETS_MAX_MODELS and C ** (n - 1) <= _EXHAUSTIVE_MAX:
+        masks = np.arange(1, 2 ** n)
+        bits = (masks[:, None] >> np.arange(n)) & 1
+        cost = coding_lengths(*stats.union(bits), stats.dim, eps)  # every non-empty subset
+        count = bits @ stats.count
+        A = _assignments(n, C)
+        pow2 = 1 << np.arange(n)
+        groups = np.stack([(A == c).astype(np.int64) @ pow2 for c in range(C)], axis=1)
+        tot = cost[groups - 1].sum(1)
+        size = count[groups - 1]
+    else:  # the greedy partition and its one-move neighbours
+        best, _ = best_partition(stats, C, eps)
+        rows = [best]
+        for i in range(n):
+            for c in range(C):
+                if c != best[i] and (best == best[i]).sum() > 1:
+                    trial = best.copy()
+                    trial[i] = c
+                    _, first = np.unique(trial, return_index=True)
+                    rank = np.argsort(np.argsort(first))
+                    rows.append(rank[trial])
+        A = np.unique(np.array(rows, dtype=np.int64), axis=0)
+        tot = np.array([_total(stats, a, C, eps) for a in A])
+        size = np.stack([(A == c) @ stats.count for c in range(C)], axis=1)
+    ok = np.flatnonzero(size.min(axis=1) >= min_count)
+    order = ok[np.argsort(tot[ok], kind="stable")][:n_best]
+    return np.array(A[order], dtype=np.int64).reshape(-1, n), tot[order]

@@ -69,7 +69,14 @@ class LaavParams:
         trajectories (:mod:`laav.coding`): better on Hopkins155, much worse when one
         motion holds a few percent of the points (``docs/ALGORITHM.md``).
     coding_eps : float
-        Distortion (px) of the coding length (``coarse_merge="coding"``).
+        Distortion (px) of the coding length (``coarse_merge="coding"`` or ``"joint"``).
+    coarse_candidates : int
+        ``coarse_merge="joint"``: how many partitions of least coding length (each motion
+        with 8 points or more) are re-ranked by their epipolar fit.
+    coarse_epipolar_weight : float
+        ``coarse_merge="joint"``: weight of the epipolar cost (a sum over the points in
+        atoms of ``log(1 + d)``, ``d`` the point's Sampson distance to its motion's robust
+        fundamental matrices in units of ``2 / lam``) against the coding length (nats).
     lam : float
         Epipolar voting strength lambda of the fine-to-coarse stage (1/px^2).
     coarse_frames : int
@@ -158,6 +165,8 @@ class LaavParams:
     fine_per_motion: int = 2
     coarse_merge: str = "epipolar"
     coding_eps: float = 10.0
+    coarse_candidates: int = 10
+    coarse_epipolar_weight: float = 2.0
     lam: float = 2.0
     coarse_frames: int = 7
     coarse_samples: int = 8
@@ -262,8 +271,10 @@ _BOUNDS = (
     ("cut_prior", "float", -_BIG, _BIG),
     ("fine_models", "int|None", 1, 1000),
     ("fine_per_motion", "int", 1, 100),
-    ("coarse_merge", "choice", ("coding", "epipolar"), None),
+    ("coarse_merge", "choice", ("coding", "epipolar", "joint"), None),
     ("coding_eps", "float>", 0, _BIG),
+    ("coarse_candidates", "int", 1, 1000),
+    ("coarse_epipolar_weight", "float", 0, _BIG),
     ("lam", "float>", 0, _BIG_STRENGTH),
     ("coarse_frames", "int", 1, 100),
     ("coarse_samples", "int", 1, 1000),
@@ -317,7 +328,8 @@ STAGE_PARAMS: dict[str, frozenset] = {
                         "atom_frames"}),
     "graph": frozenset({"graph_neighbors", "edge_scale", "cut_prior"}),
     "multicut": frozenset({"fine_models", "fine_per_motion"}),
-    "coarse": frozenset({"coarse_merge", "coding_eps", "lam", "coarse_frames", "coarse_samples",
+    "coarse": frozenset({"coarse_merge", "coding_eps", "coarse_candidates",
+                         "coarse_epipolar_weight", "lam", "coarse_frames", "coarse_samples",
                          "motion_weight", "pooled_trials",
                          "pairwise_weight"}),
     # every Random Voting setting is named rv_*
