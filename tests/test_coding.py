@@ -119,3 +119,62 @@ def test_every_partition_is_enumerated_once(n, C, stirling):
     assert A.shape == (stirling, n)  # Stirling numbers of the second kind S(n, C)
     canon = {tuple(np.unique(a, return_inverse=True)[1]) for a in A}
     assert len(canon) == stirling and all(len(set(a)) == C for a in A.tolist())
+
+
+def _brute_force_lengths(st, C, eps, min_count):
+    """Every partition of the models into C groups with >= min_count points per group,
+    as {canonical assignment: total length}, by itertools (independent of _assignments)."""
+    n = st.n_models
+    out = {}
+    for a in itertools.product(range(C), repeat=n):
+        if len(set(a)) < C:
+            continue
+        first = {}
+        canon = tuple(first.setdefault(g, len(first)) for g in a)
+        counts = np.bincount(np.array(canon), weights=st.count, minlength=C)
+        if counts.min() >= min_count and canon not in out:
+            out[canon] = coding._total(st, np.array(canon), C, eps)
+    return out
+
+
+@pytest.mark.parametrize("min_count", [1, 20])
+def test_shortlist_is_the_brute_force_ranking(min_count):
+    rng = np.random.default_rng(6)
+    pts, _ = _two_dependent_motions(rng)
+    fine = np.r_[rng.integers(0, 4, 60), 4 + rng.integers(0, 3, 30)]  # 7 models
+    st = coding.model_stats(pts, fine, 7)
+    want = _brute_force_lengths(st, 2, 10.0, min_count)
+    assign, total = coding.shortlist(st, 2, 10.0, n_best=12, min_count=min_count)
+    ranked = sorted(want.values())[:12]
+    assert np.allclose(total, ranked)
+    for a, t in zip(assign, total):
+        assert want[tuple(a.tolist())] == pytest.approx(t)
+    if min_count == 1:  # the first is best_partition's
+        best, length = coding.best_partition(st, 2, 10.0)
+        assert np.array_equal(assign[0], best) and total[0] == pytest.approx(length)
+
+
+def test_shortlist_keeps_every_group_above_min_count():
+    rng = np.random.default_rng(7)
+    pts, _ = _two_dependent_motions(rng)
+    fine = np.r_[np.zeros(57, int), np.ones(3, int), np.full(30, 2)]  # model 1: 3 points
+    st = coding.model_stats(pts, fine, 3)
+    assign, _ = coding.shortlist(st, 2, 10.0, n_best=10, min_count=8)
+    sizes = np.stack([np.bincount(a[fine], minlength=2) for a in assign])
+    assert sizes.min() >= 8
+    assert not any((a == a[1]).sum() == 1 for a in assign)  # model 1 never alone
+    none, _ = coding.shortlist(st, 2, 10.0, n_best=10, min_count=50)
+    assert none.shape == (0, 3)
+
+
+def test_shortlist_greedy_path_starts_from_the_greedy_partition(monkeypatch):
+    rng = np.random.default_rng(8)
+    pts, labels = _two_dependent_motions(rng, n_bg=80, n_obj=40)
+    fine = np.r_[np.arange(80) % 10, 10 + np.arange(40) % 8]  # 18 models: greedy path
+    st = coding.model_stats(pts, fine, 18)
+    assign, total = coding.shortlist(st, 2, 10.0, n_best=5)
+    best, length = coding.best_partition(st, 2, 10.0)
+    assert np.array_equal(assign[0], best) and total[0] == pytest.approx(length)
+    assert np.all(np.diff(total) >= 0) and assign.shape == (5, 18)
+    # the others are one model move away from it
+    assert all((a != best).sum() == 1 for a in assign[1:])
