@@ -645,6 +645,36 @@ def merge_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
     return "\n".join(rows)
 
 
+def shortlist_table(seq: laav.Sequence, result: laav.LaavResult, rows: int = 5) -> str:
+    """Markdown table of the joint merge's shortlist (``coarse_merge="joint"``): the first
+    ``rows`` partitions by score, each as its groups of fine models, with its coding length,
+    epipolar cost and score (and, with ground truth, its error on the points in atoms);
+    "" for the other merges."""
+    sl = getattr(result.coarse, "shortlist", None)
+    if sl is None:
+        return ""
+    w = result.params.coarse_epipolar_weight
+    fine = np.asarray(result.coarse.fine_point_labels)
+    cov = fine >= 0
+    truth = seq.labels is not None
+    head = ("| partition (fine models per motion) | coding length | epipolar cost | "
+            f"score = L + {w:g} E |" + (" error on atom points |" if truth else ""))
+    out = [head, "|---|---|---|---|" + ("---|" if truth else "")]
+    best = sl.score.min()
+    for i in np.argsort(sl.score, kind="stable")[:rows]:
+        a = np.asarray(sl.assign[i])
+        groups = " / ".join(",".join(f"f{j + 1}" for j in np.flatnonzero(a == c))
+                            for c in range(int(a.max()) + 1))
+        mark = " **← chosen**" if i == sl.chosen else f" (+{sl.score[i] - best:.1f})"
+        row = (f"| {groups}{mark} | {sl.coding_length[i]:.1f} | {sl.epipolar_cost[i]:.1f} | "
+               f"{sl.score[i]:.1f} |")
+        if truth:
+            err = laav.misclassification_rate(np.asarray(seq.labels)[cov], a[fine[cov]])
+            row += f" {100 * err:.1f} % |"
+        out.append(row)
+    return "\n".join(out)
+
+
 def _clip_lines(lines: np.ndarray, extent) -> tuple[np.ndarray, ...]:
     """End points of the lines ``a x + b y + c = 0`` across the box ``extent``."""
     x0, x1, y0, y1 = extent

@@ -345,3 +345,21 @@ def test_merge_table_has_a_true_motion_column(demo):
         assert cells[4].startswith(f"motion {m + 1} (") and cells[4].endswith("✗") == (m != mot[j])
     bare = laav.Sequence(seq.points, None, name="bare")
     assert "true motion" not in V.merge_table(bare, res)
+
+
+def test_shortlist_table_lists_the_joint_merge_partitions(demo):
+    seq, _ = demo
+    res = laav.segment(seq, seq.n_motions, laav.LaavParams(coarse_merge="joint", fine_per_motion=4),
+                       seed=0)
+    sl = res.coarse.shortlist
+    md = V.shortlist_table(seq, res, rows=3)
+    lines = md.splitlines()
+    assert "coding length" in lines[0] and "error on atom points" in lines[0]
+    assert len(lines) == 2 + min(3, sl.assign.shape[0])
+    assert lines[2].count("← chosen") == 1  # the best score comes first
+    chosen = np.asarray(sl.assign[sl.chosen])
+    fine = np.asarray(res.coarse.fine_point_labels)
+    cov = fine >= 0
+    err = laav.misclassification_rate(seq.labels[cov], chosen[fine[cov]])
+    assert lines[2].rstrip().endswith(f"{100 * err:.1f} % |")
+    assert V.shortlist_table(seq, demo[1]) == ""  # the epipolar merge has no shortlist

@@ -48,6 +48,16 @@ class CoarseView:
         self.fig_z.x_range.factors = factors or ["–"]
         self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
         set_data(self.src_z, data)
+        if res.coarse.method == "joint":
+            self.fig_z.title.text = (f"Coding affinity exp(−ΔL), ε = {res.params.coding_eps:g} px: "
+                                     f"{len(factors)} fine models")
+            how = ("ours: of the partitions of least coding length, the one of least coding "
+                   "length + epipolar cost decided; the paper's epipolar vote is the paper preset")
+            self.merge_md.object = (f"**Which fine model joined which motion** ({how}):\n\n"
+                                    + V.merge_table(seq, res)
+                                    + "\n\n**Partitions compared** (lower score wins):\n\n"
+                                    + V.shortlist_table(seq, res))
+            return
         if res.coarse.method == "coding":
             self.fig_z.title.text = (f"Coding affinity exp(−ΔL), ε = {res.params.coding_eps:g} px: "
                                      f"{len(factors)} fine models")

@@ -123,9 +123,11 @@ def epipolar_caption(d: dict, res, j: int, k: int) -> str:
         f"**{d['pairwise']:.2f}**")
     method = getattr(res.coarse, "method", "epipolar")
     w = res.params.pairwise_weight if res.params.pooled_trials > 0 else 1.0
-    if method == "coding":
+    if method in ("coding", "joint"):
         g = float(np.asarray(res.coarse.merge_cost)[j, k])
-        return text + (f". The coding-length merge decided, not this vote: joining {a} and "
+        who = ("The coding-length merge" if method == "coding" else
+               "The joint merge (coding length + epipolar cost of whole partitions)")
+        return text + (f". {who} decided, not this vote: joining {a} and "
                        f"{b} adds {g:+.2f} nats per point; they went to {same}.")
     if w < 1.0:
         text += (f"; co-association of the pooled-voting trials {d['coassociation']:.2f}; "
