@@ -4,7 +4,10 @@ For every sequence and seed, atoms, graph and multicut run once per number of fi
 (``--per-motion``, fine models per motion), and each merge of ``--merges`` labels the
 points in atoms: ``epipolar`` (the paper's: spectral clustering of the epipolar-vote
 affinity, our pooled-voting blend unless ``paper``), ``coding:EPS`` (the partition of
-least coding length, distortion EPS px), ``paper`` (the paper's pairwise votes alone).
+least coding length, distortion EPS px), ``joint[:W[:K]]`` (the K partitions of least
+coding length re-ranked by coding length + W x epipolar cost), ``paper`` (the paper's
+pairwise votes alone), ``oracle`` (each fine model to its majority true motion: the
+ceiling of any merge of those fine models).
 The error is taken on the points in atoms ("coarse"). Per configuration it prints the
 count of sequences <= 1 % and > 10 % wrong, the mean, and a 5-fold cross-validation
 grouped by source video that chooses the configuration on four folds and reports the
@@ -12,7 +15,7 @@ fifth (``benchmarks/cv.py``). Writes a CSV of every run and a Markdown report wi
 machine, date and git commit.
 
     python benchmarks/coarse.py [--data DIR] [--seeds 0] [--per-motion 2,3,4]
-        [--merges epipolar,paper,coding:5.5,coding:10,coding:17] [--out FILE] [--report FILE]
+        [--merges epipolar,paper,coding:10,joint:1,joint:2,oracle] [--out FILE] [--report FILE]
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from speed import data_dir, truth_files  # noqa: E402
 
 import laav  # noqa: E402
 from laav.atoms import Neighbourhoods, build_atoms  # noqa: E402
-from laav.coarse import merge_models  # noqa: E402
+from laav.coarse import merge_models, point_labels_from_atoms  # noqa: E402
 from laav.graph import atom_graph  # noqa: E402
 from laav.multicut import solve_multicut  # noqa: E402
 from laav.pipeline import _stage_rngs  # noqa: E402
@@ -44,15 +47,31 @@ from laav.pipeline import _stage_rngs  # noqa: E402
 FIELDS = ["config", "sequence", "motions", "seed", "coarse", "coverage", "seconds"]
 
 
-def merge_params(merge: str) -> laav.LaavParams:
+def merge_params(merge: str) -> laav.LaavParams | None:
+    """The parameters of a merge name; None for ``oracle`` (every fine model to the true
+    motion most of its points belong to: the best any merge of these fine models can do)."""
+    if merge == "oracle":
+        return None
     if merge == "paper":
         return laav.LaavParams.paper()
     if merge == "epipolar":
         return laav.LaavParams(coarse_merge="epipolar")
-    kind, _, eps = merge.partition(":")
-    if kind != "coding" or not eps:
-        raise argparse.ArgumentTypeError(f"unknown merge {merge!r}")
-    return laav.LaavParams(coarse_merge="coding", coding_eps=float(eps))
+    kind, _, value = merge.partition(":")
+    if kind == "coding" and value:
+        return laav.LaavParams(coarse_merge="coding", coding_eps=float(value))
+    if kind == "joint":  # joint[:W[:K]]: epipolar weight W, shortlist of K partitions
+        w, _, k = value.partition(":")
+        p = laav.LaavParams(coarse_merge="joint")
+        return p.replace(coarse_epipolar_weight=float(w or p.coarse_epipolar_weight),
+                         coarse_candidates=int(k or p.coarse_candidates))
+    raise argparse.ArgumentTypeError(f"unknown merge {merge!r}")
+
+
+def oracle_labels(seq, fine_pts: np.ndarray, n_models: int) -> np.ndarray:
+    """Every fine model's points labelled with the model's majority true motion."""
+    f2c = np.array([np.bincount(seq.labels[fine_pts == j], minlength=seq.n_motions).argmax()
+                    for j in range(n_models)], dtype=np.int64)
+    return np.where(fine_pts >= 0, f2c[np.maximum(fine_pts, 0)], -1)
 
 
 def run_sequence(path: Path, seed: int, per_motion: list[int], merges: list[str]) -> list[dict]:
@@ -69,10 +88,15 @@ def run_sequence(path: Path, seed: int, per_motion: list[int], merges: list[str]
         for merge in merges:
             p = merge_params(merge)
             t = time.perf_counter()
-            co = merge_models(seq, atoms, mc, C, p, np.random.default_rng(rng["coarse"]))
+            if p is None:
+                labels = oracle_labels(seq, point_labels_from_atoms(atoms, mc.atom_labels),
+                                       mc.n_models)
+            else:
+                labels = merge_models(seq, atoms, mc, C, p,
+                                      np.random.default_rng(rng["coarse"])).point_labels
             dt = time.perf_counter() - t
-            cov = co.point_labels >= 0
-            err = laav.misclassification_rate(seq.labels[cov], co.point_labels[cov]) if cov.any() else 1.0
+            cov = labels >= 0
+            err = laav.misclassification_rate(seq.labels[cov], labels[cov]) if cov.any() else 1.0
             rows.append({"config": f"{merge}/{k}C", "sequence": seq.name, "motions": C, "seed": seed,
                          "coarse": round(100 * err, 4), "coverage": round(float(cov.mean()), 4),
                          "seconds": round(dt, 5)})
