@@ -62,12 +62,17 @@ class LaavParams:
         Fine models per motion when ``fine_models`` is None: 2 (the paper, the default);
         3 suits the coding-length merge, which can afford more models
         (see ``docs/ALGORITHM.md``).
-    coarse_merge : {"epipolar", "coding"}
+    coarse_merge : {"epipolar", "coding", "joint"}
         How the fine models are merged into C motions: ``"epipolar"`` (the default, the
         paper's form) spectral clustering of the epipolar-vote affinity Z; ``"coding"``
         (ours, an option) the partition of least lossy coding length of the models'
-        trajectories (:mod:`laav.coding`): better on Hopkins155, much worse when one
-        motion holds a few percent of the points (``docs/ALGORITHM.md``).
+        trajectories (:mod:`laav.coding`); ``"joint"`` (ours, an option; with
+        ``fine_per_motion=4``) of the ``coarse_candidates`` partitions of least coding
+        length with 8 or more points per motion, the one of least coding length +
+        ``coarse_epipolar_weight`` x epipolar cost. Both are better on Hopkins155 and
+        much worse when one motion holds a few percent of the points
+        (``docs/ALGORITHM.md``); both need complete tracks (else the epipolar merge runs,
+        with a warning).
     coding_eps : float
         Distortion (px) of the coding length (``coarse_merge="coding"`` or ``"joint"``).
     coarse_candidates : int
