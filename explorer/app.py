@@ -554,13 +554,20 @@ class Explorer:
             self.controls.set_color_mode(view["color"])
         if "frame" in view:
             self.controls.w_frame.value = view["frame"]
+        if "tour" in view:  # on a served page once it is on screen (the tour's keys and
+            step = view["tour"] - 1  # sidebar fold run in the page's own script)
+            if self._session_doc is not None:
+                pn.state.onload(lambda: self.tour.start(step))
+            else:
+                self.tour.start(step)
         self.status_bar.show_url_problems(problems)
         return problems
 
     def query(self) -> dict[str, str]:
         """The URL query of what the page shows now (only what differs from the defaults)."""
         return query_of(self.state.settings, self.state.default_motions(), self.frame,
-                        self.controls.color_mode, self._default_color())
+                        self.controls.color_mode, self._default_color(),
+                        self.tour.step if self.tour.active else None)
 
     def _sync_url(self) -> None:
         """(Document thread.) The page address carries the shown state (pushState, no reload)."""

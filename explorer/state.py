@@ -173,8 +173,9 @@ _FIELDS = {f.name: f for f in dataclasses.fields(LaavParams)}
 _DEFAULTS = LaavParams()
 #: Colour-by keys in the URL (``color=final``) -> the views' colour modes.
 VIEW_COLORS = tuple(COLOR_MODES.values())
-#: Keys of the page URL's query: every LaavParams field, then the seed, C, frame and colour.
-URL_KEYS = tuple(_FIELDS) + ("seed", "motions", "frame", "color")
+#: Keys of the page URL's query: every LaavParams field, then the seed, C, frame, colour
+#: and the guided tour's step (1-based; absent when the tour is not running).
+URL_KEYS = tuple(_FIELDS) + ("seed", "motions", "frame", "color", "tour")
 _TRUE, _FALSE = ("1", "true", "on", "yes"), ("0", "false", "off", "no")
 
 
@@ -244,6 +245,10 @@ def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings
                 C = _whole("motions (C)", raw, 1, seq.n_points)
             elif key == "frame":
                 view["frame"] = _whole("frame", raw, 0, seq.n_frames - 1)
+            elif key == "tour":
+                from .tour import TOUR
+
+                view["tour"] = _whole("tour", raw, 1, len(TOUR))
             elif key == "color":
                 if str(raw) not in VIEW_COLORS:
                     raise ValueError(f"color must be one of {', '.join(VIEW_COLORS)}, got {str(raw)[:40]!r}")
@@ -284,9 +289,11 @@ def _short_float(v: float) -> str:
 
 
 def query_of(settings: Settings, default_motions: int | None, frame: int = 0,
-             color: str | None = None, default_color: str | None = None) -> dict[str, str]:
+             color: str | None = None, default_color: str | None = None,
+             tour: int | None = None) -> dict[str, str]:
     """The URL query for these settings and view: only what differs from the defaults
-    (``parse_settings(query_of(s, ...), ...)`` gives ``s`` back)."""
+    (``parse_settings(query_of(s, ...), ...)`` gives ``s`` back); ``tour``: the guided
+    tour's step shown (0-based; None when the tour is not running), written 1-based."""
     q: dict[str, str] = {}
     for name in _FIELDS:
         v = getattr(settings.params, name)
@@ -301,6 +308,8 @@ def query_of(settings: Settings, default_motions: int | None, frame: int = 0,
         q["frame"] = str(int(frame))
     if color is not None and color != default_color:
         q["color"] = color
+    if tour is not None:
+        q["tour"] = str(int(tour) + 1)
     return q
 
 

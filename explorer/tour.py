@@ -28,11 +28,13 @@ class TourStep:
     color: str | None = None
     color_no_truth: str | None = None
     text_epipolar: str | None = None
+    text_joint: str | None = None
 
     def text_for(self, params, n_motions: int) -> str:
         """The text for a result of ``params`` (a :class:`laav.LaavParams`) with C =
         ``n_motions``: the merge it used, its number of fine models."""
-        text = self.text_epipolar if self.text_epipolar and params.coarse_merge == "epipolar" else self.text
+        text = {"epipolar": self.text_epipolar, "joint": self.text_joint}.get(params.coarse_merge)
+        text = text or self.text
         n = params.n_fine(n_motions)
         k = n // n_motions if n_motions and n % n_motions == 0 else None
         return text.replace("{fine}", f"{k}C" if k is not None else str(n))
@@ -67,7 +69,15 @@ TOUR: tuple[TourStep, ...] = (
             "Pairs of fine models vote with epipolar geometry: one fundamental matrix fitted to atoms of "
             "both explains both when they move as one rigid body, and the votes form the affinity Z. "
             "Spectral clustering splits Z into C motions, as the paper does; the option coarse_merge = "
-            "coding instead picks the grouping whose trajectories take the fewest bits to describe.")),
+            "coding instead picks the grouping whose trajectories take the fewest bits to describe."),
+        # the text when the joint merge decided (coarse_merge = "joint", an option of ours)
+        text_joint=(
+            "The fine models are grouped into C motions by the joint merge: of the groupings whose "
+            "trajectories take the fewest bits to describe (up to a distortion ε), with at least 8 "
+            "points per motion, the one whose motions' fundamental matrices also explain their points "
+            "best wins. Coding length separates motions that share epipolar geometry (a truck and the "
+            "background it drives across), and the epipolar cost rejects a grouping that mixes "
+            "independent motions of nearly the same length.")),
     TourStep(
         "4 · Fine-tuning: Random Voting labels every point",
         "Random Voting starts from the coarse labels: in each iteration every motion fits a "

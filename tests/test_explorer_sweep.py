@@ -246,8 +246,10 @@ def test_tour_texts_are_two_sentences_each():
     assert "to 3C fine models" in TOUR[1].text_for(coding.replace(fine_per_motion=3), 3)
     assert "to 2C fine models" in TOUR[1].text_for(paper, 2)
     assert "to 7 fine models" in TOUR[1].text_for(coding.replace(fine_models=7), 3)
+    joint = laav.LaavParams(coarse_merge="joint", fine_per_motion=4)
+    assert "joint merge" in TOUR[2].text_for(joint, 3) and "to 4C fine models" in TOUR[1].text_for(joint, 3)
     for s in TOUR:
-        for t in (s.text_for(coding, 3), s.text_for(paper, 3)):
+        for t in (s.text_for(coding, 3), s.text_for(paper, 3), s.text_for(joint, 3)):
             assert len(re.findall(r"[.!?](?=\s+[A-Z]|\s*$)", t)) == 2 and "{" not in t
 
 
@@ -285,3 +287,16 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     tour.start(3)
     tour.w_key.value = "end:20"  # Esc
     assert not tour.active and all(c.visible for c in cards.values())
+
+
+def test_the_address_carries_the_tour_step(explorer):
+    ex = explorer
+    tour = ex.tour
+    assert ex.apply_query({"tour": ["3"]}) == []
+    assert tour.active and tour.step == 2 and ex.query()["tour"] == "3"
+    tour.w_next.clicks += 1
+    assert ex.query()["tour"] == "4"
+    tour.w_key.value = "end:99"
+    assert not tour.active and "tour" not in ex.query()
+    problems = ex.apply_query({"tour": ["99"]})
+    assert not tour.active and len(problems) == 1 and "tour must be between 1 and" in problems[0]

@@ -143,3 +143,33 @@ def test_guided_tour_in_the_page(tmp_path):
         # and no outline is left on any card in the page (the server's styles are not enough)
         page.wait_for_function(f"({JS_OUTLINED})() === 0", timeout=10000)
     assert not errors, errors[:5]
+
+
+def test_a_link_opens_the_tour_at_its_step(tmp_path):
+    """``/?tour=3`` opens the page in the tour at step 3, as the server-side tour would show it
+    (the sidebar folded, the keys armed: both run in the page once it is on screen), and
+    the address follows the steps."""
+    from explorer.tour import TOUR
+
+    seq = _sequence()
+    with _served(seq, viser=False) as (port, browser, created):
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(f"http://127.0.0.1:{port}/?tour=3", wait_until="domcontentloaded")
+        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        assert ex.wait(60)
+        page.get_by_text(TOUR[2].title).first.wait_for(timeout=30000)
+        page.get_by_text("step 3 of 5").first.wait_for(timeout=10000)
+        page.locator("#sidebar").wait_for(state="hidden", timeout=10000)
+        page.locator(".card-header", has_text="2 · Multicut graph").first.wait_for(
+            state="hidden", timeout=10000)
+        page.keyboard.press("ArrowRight")
+        page.get_by_text(TOUR[3].title).first.wait_for(timeout=20000)
+        page.wait_for_function("new URLSearchParams(location.search).get('tour') === '4'",
+                               timeout=20000)
+        page.keyboard.press("Escape")
+        _wait_for(lambda: not ex.tour.active, 10, "the tour to end", page=page)
+        page.wait_for_function("!new URLSearchParams(location.search).has('tour')", timeout=20000)
+        page.locator("#sidebar").wait_for(state="visible", timeout=10000)
+    assert not errors, errors[:5]

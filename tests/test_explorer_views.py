@@ -190,7 +190,7 @@ def test_url_query_round_trip_and_validation(demo):
     seq, _ = demo
     base = Settings(laav.LaavParams(), 0, 3)
     assert set(URL_KEYS) == {f.name for f in __import__("dataclasses").fields(laav.LaavParams)} | {
-        "seed", "motions", "frame", "color"}
+        "seed", "motions", "frame", "color", "tour"}
     s, view, problems = parse_settings({"r1": "25", "seed": ["3"], "frame": "4", "color": "final",
                                         "rv_refine": "off", "fine_models": "8", "lam": b"3.5"}, seq, base)
     assert problems == []
@@ -363,3 +363,16 @@ def test_shortlist_table_lists_the_joint_merge_partitions(demo):
     err = laav.misclassification_rate(seq.labels[cov], chosen[fine[cov]])
     assert lines[2].rstrip().endswith(f"{100 * err:.1f} % |")
     assert V.shortlist_table(seq, demo[1]) == ""  # the epipolar merge has no shortlist
+
+
+def test_url_carries_the_tour_step(demo):
+    from explorer.state import Settings, parse_settings, query_of
+    from explorer.tour import TOUR
+
+    seq, _ = demo
+    base = Settings(laav.LaavParams(), 0, 3)
+    assert query_of(base, 3, tour=2) == {"tour": "3"}  # 1-based in the address
+    assert parse_settings({"tour": "3"}, seq, base)[1] == {"tour": 3}
+    for bad in ("0", str(len(TOUR) + 1), "x"):
+        s, view, problems = parse_settings({"tour": bad}, seq, base)
+        assert view == {} and len(problems) == 1 and problems[0].startswith("tour must be")

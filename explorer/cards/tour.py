@@ -157,6 +157,7 @@ class TourView:
         if color is not None and self.controls.color_mode != color:
             self.controls.set_color_mode(color)
         self._js("scroll")
+        self._sync_url()
 
     def end(self) -> None:
         """Leave the tour: every card and the colour-by as before it."""
@@ -172,6 +173,13 @@ class TourView:
         if color is not None and self.controls.color_mode != color:
             self.controls.set_color_mode(color)
         self._js("off")
+        self._sync_url()
+
+    def _sync_url(self) -> None:
+        """The page address says which step is shown (``tour=N``), so a link opens it there."""
+        sync = getattr(self.host, "_sync_url", None)
+        if sync is not None:
+            sync()
 
     @property
     def texts(self) -> tuple[str, str]:
