@@ -31,18 +31,23 @@ def one_atom_models(seq, n_per_motion, rng):
         pool = rng.permutation(np.flatnonzero(seq.labels == c))
         for i in range(n_per_motion):
             members.append(np.sort(pool[i * PER_ATOM:(i + 1) * PER_ATOM]))
+    return models_of_single_atoms(seq, members) + (members,)
+
+
+def models_of_single_atoms(seq, members):
+    """(atoms, multicut) where atom i holds the features ``members[i]`` and is fine model i."""
     N, P, F = len(members), seq.n_points, seq.n_frames
     owner = np.full(P, -1, dtype=np.int64)
     for i, m in enumerate(members):
         owner[m] = i
     atoms = Atoms(members=tuple(members), seeds=np.array([m[0] for m in members]), owner=owner,
-                  affines=np.zeros((N, F, 2, 3)), residuals=tuple(np.zeros(PER_ATOM) for _ in members),
+                  affines=np.zeros((N, F, 2, 3)), residuals=tuple(np.zeros(m.size) for m in members),
                   unassigned=np.flatnonzero(owner < 0), r1=20.0, r2=40.0, n_points=P)
     labels = np.arange(N, dtype=np.int64)
     mc = Multicut(atom_labels=labels, n_models=N, multicut_labels=labels, n_segments=N,
                   cut=np.zeros(0, bool), objective=0.0, contractions=np.zeros((0, 2), np.int64),
                   contraction_costs=np.zeros(0))
-    return atoms, mc, members
+    return atoms, mc
 
 
 def direct_fundamental(x1, x2):

@@ -7,11 +7,10 @@ import warnings
 
 import numpy as np
 import pytest
+from test_coarse_votes import models_of_single_atoms  # tests/ is on sys.path
 
 from laav import LaavParams, LaavWarning, merge_models, misclassification_rate
-from laav.atoms import Atoms
 from laav.coding import best_partition, model_stats
-from laav.multicut import Multicut
 from laav.refine import frame_pairs, motion_distances
 
 synthetic = pytest.importorskip("laav.synthetic")
@@ -29,19 +28,7 @@ def atom_models(seq, sizes, rng):
         for size in per:
             members.append(np.sort(pool[start:start + size]))
             start += size
-    N, P, F = len(members), seq.n_points, seq.n_frames
-    owner = np.full(P, -1, dtype=np.int64)
-    for i, m in enumerate(members):
-        owner[m] = i
-    atoms = Atoms(members=tuple(members), seeds=np.array([m[0] for m in members]), owner=owner,
-                  affines=np.zeros((N, F, 2, 3)),
-                  residuals=tuple(np.zeros(m.size) for m in members),
-                  unassigned=np.flatnonzero(owner < 0), r1=20.0, r2=40.0, n_points=P)
-    labels = np.arange(N, dtype=np.int64)
-    mc = Multicut(atom_labels=labels, n_models=N, multicut_labels=labels, n_segments=N,
-                  cut=np.zeros(0, bool), objective=0.0, contractions=np.zeros((0, 2), np.int64),
-                  contraction_costs=np.zeros(0))
-    return atoms, mc, members
+    return models_of_single_atoms(seq, members) + (members,)
 
 
 def scene(seed, n_objects=2):
