@@ -455,7 +455,7 @@ def _load_csv(p: Path, header: tuple[str, dict], lim: tuple[int, int]) -> Sequen
                     visible=visible)
 
 
-_NPZ_MEMBERS = ("points", "labels", "visible", "width", "height", "name")
+_NPZ_MEMBERS = ("points", "labels", "visible", "width", "height", "image_size", "name")
 
 
 def _load_npz(p: Path, lim: tuple[int, int]) -> Sequence:
@@ -474,6 +474,8 @@ def _load_npz(p: Path, lim: tuple[int, int]) -> Sequence:
                     _scalar(data["width"], "width", p),
                     _scalar(data["height"], "height", p),
                 )
+            elif "image_size" in files:  # as `laav track` writes it: (width, height)
+                image_size = _image_size(data["image_size"], p)
             name = _stored_name(data["name"]) if "name" in files else None
     except SequenceError:
         raise
@@ -481,6 +483,21 @@ def _load_npz(p: Path, lim: tuple[int, int]) -> Sequence:
         raise SequenceError(f"{p}: truncated or corrupt NPZ file ({type(exc).__name__}: {exc})") from None
     return Sequence(points=points, labels=labels, name=name or _name_from_path(p),
                     image_size=image_size, source=str(p), visible=visible)
+
+
+def _image_size(value, p: Path) -> tuple[int, int] | None:
+    """``(width, height)`` from an ``image_size`` array of two whole numbers; None when it is
+    (0, 0), what ``laav track`` writes when the size is unknown."""
+    arr = np.asarray(value)
+    if arr.shape != (2,) or arr.dtype.kind not in "iu":
+        raise SequenceError(f"{p}: variable 'image_size' should be two whole numbers "
+                            f"(width, height), got shape {arr.shape} of {arr.dtype}")
+    w, h = (int(v) for v in arr)
+    if w == 0 and h == 0:
+        return None
+    if w < 0 or h < 0:
+        raise SequenceError(f"{p}: variable 'image_size' must not be negative, got ({w}, {h})")
+    return w, h
 
 
 def _stored_name(value) -> str | None:

@@ -383,3 +383,20 @@ def _npy(a) -> bytes:
     buf = io.BytesIO()
     np.save(buf, a)
     return buf.getvalue()
+
+
+def test_load_sequence_reads_the_image_size_laav_track_writes(tmp_path):
+    from laav.track import Tracks, save_tracks
+
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 300, (6, 20, 2))
+    vis = np.ones((6, 20), bool)
+    p = save_tracks(Tracks(pts, vis, "clip", np.arange(0, 12, 2), (640, 480)), tmp_path / "t.npz")
+    seq = load_sequence(p)
+    assert seq.image_size == (640, 480) and seq.name == "clip"
+    unknown = save_tracks(Tracks(pts, vis, "clip", np.arange(6), (0, 0)), tmp_path / "u.npz")
+    assert load_sequence(unknown).image_size is None
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, points=pts, image_size=np.array([640.5, 480.0]))
+    with pytest.raises(SequenceError, match=r"bad\.npz.*image_size"):
+        load_sequence(bad)
