@@ -215,8 +215,10 @@ class Pipeline:
                 else:
                     if self._plain_memo is None or self._plain_memo[0] != key[:3]:
                         self._plain_memo = (key[:3], {})  # new seed, C or rv_* settings
+                    # no atom: plain RV, whose input checks segment() made already
                     st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
-                                                 plain_memo=self._plain_memo[1])
+                                                 plain_memo=self._plain_memo[1],
+                                                 check_input=False)
                     self._voting_memo = (key, st["voting"])
             timings[stage] += time.perf_counter() - t
         return LaavResult(

@@ -144,7 +144,8 @@ class Voting:
 def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams | None = None,
                   seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
                   weights: np.ndarray | None = None, *, random_state=None,
-                  plain_memo: dict | None = None, visible: np.ndarray | None = None) -> Voting:
+                  plain_memo: dict | None = None, visible: np.ndarray | None = None,
+                  check_input: bool = True) -> Voting:
     """Segment trajectories into ``n_motions`` rigid motions by Random Voting.
 
     Parameters
@@ -176,6 +177,11 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         When an entry is hidden, the missing-data variant runs (``docs/ALGORITHM.md``,
         "Missing data"): points that no usable frame pair sees get label -1, with the
         reason in ``unlabelled_code``; hidden coordinates are never read.
+    check_input : bool
+        Plain RV only: warn about degenerate input (coordinates' spread, a distant origin,
+        duplicate tracks) and about a result with a single label. False for callers that
+        made those checks themselves (:func:`laav.segment` when no atom formed), so that
+        each warning is given once.
 
     Returns
     -------
@@ -208,7 +214,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if C > 1 and params.rv_sample_size > P:
         raise ValueError(f"rv_sample_size ({params.rv_sample_size}) exceeds the number of "
                          f"points ({P})")
-    if init_labels is None:  # plain RV, an entry point: the checks LAAV's segment() makes
+    if init_labels is None and check_input:  # plain RV, an entry point: segment()'s checks
         # 4: the caller of the single_threaded wrapper
         check_degenerate(seq, C, stacklevel=4, visible=None if isinstance(seq, Sequence) else vis)
     seed = resolve_seed(seed, random_state)
@@ -219,18 +225,22 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
                       (), init_labels is not None, 0,
                       unlabelled_code=None if vis is None else np.zeros(P, np.int8))
     if vis is not None:
-        return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo)
+        return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo,
+                              check_input)
     select = params.rv_select == "subspace"
 
     if init_labels is None:  # plain RV
         _, best, trials, ended = run_trials(points, C, params, rng)
-        return _plain_result(seq, points, C, params, rng, best, trials, ended, select)
+        return _plain_result(seq, points, C, params, rng, best, trials, ended, select,
+                             warn=check_input)
     return _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo)
 
 
-def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=None) -> Voting:
+def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=None,
+                  warn=True) -> Voting:
     """Plain RV's result from its trials: the converged one, else a selection or the
-    consensus. ``mk`` (missing data): a :class:`_Masks`; the caller then warns."""
+    consensus. ``mk`` (missing data): a :class:`_Masks`; the caller then warns. ``warn``:
+    about a single label (``check_input`` of :func:`random_voting`)."""
     if best is not None:
         out = _finish(points, C, params, best, trials, False, "trial", mk=mk)
     elif select:  # no trial converged: the consensus or one of the trials
@@ -239,7 +249,7 @@ def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=N
     else:
         out = _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus",
                       mk=mk)
-    if mk is None:
+    if mk is None and warn:
         warn_single_label(seq, out.labels, C, stacklevel=5)
     return out
 
@@ -337,7 +347,8 @@ class _Masks:
         self.pairs = cover_pairs(visible, pool, 12)
 
 
-def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo) -> Voting:
+def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo,
+                   warn=True) -> Voting:
     """:func:`random_voting` on incomplete data (``docs/ALGORITHM.md``, "Missing data").
 
     The frame pairs are :func:`laav._visibility.pair_pool`'s (at least ``max(8,
@@ -376,7 +387,7 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     votes[idx] = out.votes
     code = np.where(keep, 0, NO_FRAME_PAIR).astype(np.int8)
     result = dataclasses.replace(out, labels=labels, votes=votes, unlabelled_code=code)
-    if init_labels is None:
+    if init_labels is None and warn:
         warn_single_label(seq, labels, C, stacklevel=5)
     return result
 

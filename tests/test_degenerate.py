@@ -149,3 +149,17 @@ def test_cli_methods_check_alike(tmp_path, capsys, method):
     err = capsys.readouterr().err
     assert code == 2 and "only 1 distinct trajectory for 2 motions" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_segment_warns_once_when_no_atom_forms_and_plain_rv_runs():
+    seq = make_sequence(n_objects=1, n_frames=10, n_points=60, rng=0)
+    tiny = Sequence(seq.points * 1e-4, seq.labels)  # spread 0.06 px: the scale warning
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = segment(tiny, 2, LaavParams(r1=1e-4, r2=2e-4), seed=0)
+    assert not (res.coarse.point_labels >= 0).any()  # no atom: plain Random Voting ran
+    spread = [w for w in caught if issubclass(w.category, LaavWarning) and "span" in str(w.message)]
+    assert len(spread) == 1, [str(w.message) for w in caught]
+    # plain RV called directly still checks its input
+    with pytest.warns(LaavWarning, match="span"):
+        laav.random_voting(tiny, 2, seed=0)
