@@ -42,7 +42,7 @@ NOISE = 0.5
 N_OBJECTS = 2
 
 
-def _child(P: int, F: int, seed: int, memory: bool) -> dict:
+def _child(P: int, F: int, seed: int, memory: bool, missing: float = 0.0) -> dict:
     """One size in this (fresh) process: every stage in turn, timed or traced."""
     import resource
     import tracemalloc
@@ -60,17 +60,25 @@ def _child(P: int, F: int, seed: int, memory: bool) -> dict:
 
     laav.preload()
     seq = make_sequence(n_objects=N_OBJECTS, n_frames=F, n_points=P, noise=NOISE, rng=seed)
+    if missing > 0:  # the seeded occlusion of `laav bench --missing` (tracks start late, ...)
+        from laav.synthetic import occlude
+
+        seq = occlude(seq, missing, rng=seed)
     C = seq.n_motions
     p = laav.LaavParams()
     rngs = _stage_rngs(seed)
     new_api = hasattr(atoms_mod, "Neighbourhoods")
-    out = {"P": P, "F": F, "C": C, "seconds": {}, "cpu": {}, "peak_mb": {}}
+    out = {"P": P, "F": F, "C": C, "seconds": {}, "cpu": {}, "peak_mb": {},
+           "visible": float(seq.visible.mean()) if seq.visible is not None else 1.0}
     st: dict = {}
 
     def run(stage):
         if stage == "neighbourhoods":
-            st["nb"] = (atoms_mod.Neighbourhoods(seq.points) if new_api
-                        else atoms_mod.trajectory_distances(seq.points))
+            if not seq.is_complete:  # as laav.Pipeline does
+                st["nb"] = atoms_mod.MaskedNeighbourhoods(seq.points, seq.visible)
+            else:
+                st["nb"] = (atoms_mod.Neighbourhoods(seq.points) if new_api
+                            else atoms_mod.trajectory_distances(seq.points))
         elif stage == "atoms":
             st["atoms"] = atoms_mod.build_atoms(seq, p, np.random.default_rng(rngs["atoms"]), st["nb"])
         elif stage == "graph":
@@ -111,9 +119,9 @@ def _child(P: int, F: int, seed: int, memory: bool) -> dict:
     return out
 
 
-def _spawn(P, F, seed, memory, timeout):
+def _spawn(P, F, seed, memory, timeout, missing=0.0):
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(P), "--frames", str(F),
-           "--seed", str(seed)] + (["--memory"] if memory else [])
+           "--seed", str(seed), "--missing", str(missing)] + (["--memory"] if memory else [])
     try:
         res = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -126,7 +134,7 @@ def _spawn(P, F, seed, memory, timeout):
 
 def _fmt_row(t: dict, m: dict | None) -> str:
     if "failed" in t:
-        return f"| {t['P']:,} | {t['F']} | failed: {t['failed']} |" + " |" * (2 * len(STAGES) + 3)
+        return f"| {t['P']:,} | {t['F']} | - | failed: {t['failed']} |" + " |" * (2 * len(STAGES) + 3)
     secs = " | ".join(f"{t['cpu'][s]:.2f}" for s in STAGES)
     total = sum(t["cpu"].values())
     wall = sum(t["seconds"].values())
@@ -136,7 +144,8 @@ def _fmt_row(t: dict, m: dict | None) -> str:
     else:
         mems = " | ".join("-" for _ in STAGES)
         mmax = "-"
-    return (f"| {t['P']:,} | {t['F']} | {secs} | **{total:.1f}** | {wall:.1f} | {mems} | {mmax} | "
+    return (f"| {t['P']:,} | {t['F']} | {t.get('visible', 1.0):.0%} | {secs} | **{total:.1f}** | "
+            f"{wall:.1f} | {mems} | {mmax} | "
             f"{t['maxrss_mb']:.0f} | {t['atoms']} | {t['edges']} | {t['error_pct']:.2f} |")
 
 
@@ -145,6 +154,8 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", default="1000,2000,5000,20000")
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--missing", type=float, default=0.0,
+                    help="share of entries hidden by laav.synthetic.occlude (default 0: complete)")
     ap.add_argument("--report", default=str(HERE.parent / "docs" / "bench" / "scale.md"))
     ap.add_argument("--no-memory", action="store_true", help="skip the tracemalloc runs")
     ap.add_argument("--timeout", type=float, default=3600.0, help="seconds per subprocess")
@@ -152,7 +163,8 @@ def main(argv=None) -> int:
     ap.add_argument("--memory", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child is not None:
-        print(json.dumps(_child(args.child, args.frames, args.seed, args.memory)), flush=True)
+        print(json.dumps(_child(args.child, args.frames, args.seed, args.memory, args.missing)),
+              flush=True)
         return 0
 
     sys.path.insert(0, str(HERE))
@@ -160,9 +172,9 @@ def main(argv=None) -> int:
 
     rows = []
     for P in (int(s) for s in args.sizes.split(",")):
-        t = _spawn(P, args.frames, args.seed, False, args.timeout)
+        t = _spawn(P, args.frames, args.seed, False, args.timeout, args.missing)
         m = None if args.no_memory or "failed" in t else _spawn(P, args.frames, args.seed, True,
-                                                                 args.timeout)
+                                                                 args.timeout, args.missing)
         rows.append((t, m))
         if "failed" in t:
             print(f"P={P} F={args.frames}: {t['failed']}", flush=True)
@@ -184,7 +196,9 @@ def main(argv=None) -> int:
         f"{platform.system()} {platform.release()} {platform.machine()}",
         f"- Software: Python {platform.python_version()}, laav {laav_version()} (git {git_commit()})",
         f"- Data: `laav.synthetic.make_sequence(n_objects={N_OBJECTS}, n_frames={args.frames}, "
-        f"n_points=P, noise={NOISE}, rng={args.seed})` (3 motions, 640 x 480), default `LaavParams()`",
+        f"n_points=P, noise={NOISE}, rng={args.seed})` (3 motions, 640 x 480), default `LaavParams()`"
+        + (f"; then `laav.synthetic.occlude(seq, {args.missing}, rng={args.seed})` (visible share "
+           "in the table): every stage's missing-data variant runs" if args.missing > 0 else ""),
         "- Command: `python benchmarks/scale.py "
         + " ".join(argv if argv is not None else sys.argv[1:]) + "`",
         "- Seconds: a run without tracing, in a fresh process per size; CPU seconds of the process "
@@ -194,9 +208,9 @@ def main(argv=None) -> int:
         "fresh process). maxrss: the timing process's peak resident memory (interpreter, "
         "libraries and sequence included).",
         "",
-        f"| P | F | {head_s} | total CPU s | wall s | {head_m} | max stage MB | maxrss MB | atoms | "
-        "edges | error % |",
-        "|" + "---|" * (2 * len(STAGES) + 9),
+        f"| P | F | visible | {head_s} | total CPU s | wall s | {head_m} | max stage MB | maxrss MB | "
+        "atoms | edges | error % |",
+        "|" + "---|" * (2 * len(STAGES) + 10),
     ]
     lines += [_fmt_row(t, m) for t, m in rows]
     lines.append("")
