@@ -52,7 +52,7 @@ def test_every_field_once_with_the_validation_tables_bounds():
     stages = [f.stage for f in FIELDS]
     assert stages == sorted(stages, key=["atoms", "graph", "multicut", "coarse", "voting"].index)
     by_name = {f.name: f for f in FIELDS}
-    assert by_name["coarse_merge"].choices == ("coding", "epipolar")
+    assert by_name["coarse_merge"].choices == ("coding", "epipolar", "joint")
     assert by_name["coarse_merge"].default == "epipolar"
     assert by_name["rv_refine"].kind == "bool" and by_name["fine_models"].kind == "int|None"
 
