@@ -82,11 +82,29 @@ def page_hosts(host: str) -> list[str]:
 
 
 def serve_options() -> dict:
-    """Keyword arguments for ``pn.serve`` that every server of the explorer needs."""
+    """Keyword arguments for ``pn.serve`` that every server of the explorer needs (and the
+    page without MathJax: :func:`no_mathjax`)."""
     from .cards.files import UPLOAD_CHUNK
 
     assert 2 * UPLOAD_CHUNK < WEBSOCKET_MAX_MESSAGE  # a chunk and its message's framing fit
+    no_mathjax()
     return {"websocket_max_message_size": WEBSOCKET_MAX_MESSAGE}
+
+
+def no_mathjax() -> None:
+    """Serve the page without bokeh's MathJax bundle (1.8 MB of JavaScript, a third of the
+    page's, parsed before anything is drawn).
+
+    Panel adds it to every page with a Markdown or HTML pane, in case the text holds TeX;
+    the explorer's texts hold none, and a sequence or file name that looks like TeX should be
+    shown as typed anyway. Panel has no setting for it: its resource check is replaced
+    (``panel.io.resources._panel_use_mathjax``; nothing happens if a later panel renames it,
+    the page then just loads MathJax again). Bokeh's own check (TeX in an axis label, a
+    slider's title, ...) still applies."""
+    from panel.io import resources
+
+    if hasattr(resources, "_panel_use_mathjax"):
+        resources._panel_use_mathjax = lambda roots: False
 
 
 def _size(text: str) -> int:
