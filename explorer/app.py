@@ -69,6 +69,15 @@ SHORTCUTS = {
 }
 
 
+def _is_data_event(event) -> bool:
+    from bokeh.document.events import ColumnDataChangedEvent, ModelChangedEvent
+    from bokeh.models import ColumnDataSource
+
+    return isinstance(event, ColumnDataChangedEvent) or (
+        isinstance(event, ModelChangedEvent) and isinstance(event.model, ColumnDataSource)
+        and event.attr == "data")
+
+
 class Explorer:
     """The LAAV explorer for one sequence (one per browser session).
 
@@ -352,30 +361,51 @@ class Explorer:
                 traceback.print_exc()
 
     @contextmanager
-    def hold(self, one_message: bool = False):
+    def hold(self, one_message: bool = False, freeze: bool = False):
         """Send all model changes made inside as one batch (the callers run on the document's
         thread, under its lock).
 
         With ``one_message`` (and once the page has loaded) the batch goes out as ONE
         websocket message (panel's ``unlocked``): bokeh's own hold sends one message per
         changed property, and the browser applies and redraws each in turn (a frame move was
-        about 12 messages; docs/bench/explorer_browser_latency.md). Only for batches that
-        change data and texts, not legends: a result's batch (data sources and legend labels
-        together) broke bokeh's legend drawing when applied as one patch."""
+        about 12 messages, a result about 50; docs/bench/explorer_browser_latency.md). The
+        data sources' changes go last in the message: a legend repainted while a glyph's new
+        data was still being mapped read past its old colours (bokeh's ``draw_legend_for_index``
+        threw ``Offset is outside the bounds of the DataView`` when a result's legend labels
+        came after its data).
+
+        With ``freeze`` the document's model graph is walked once at the end instead of after
+        every pane whose text changes (panel sets a Markdown pane's stylesheets with its text,
+        and bokeh then walks every model of the page: ~0.07 s each, several per result)."""
         doc = self._doc()
         if doc is None or doc.session_context is None or doc.callbacks.hold_value is not None:
-            yield
+            with self._frozen(doc if freeze else None):
+                yield
             return
         if (one_message and pn.state.curdoc is doc and pn.state.loaded
                 and threading.get_ident() == self._doc_thread and doc.session_context.session is not None):
             with unlocked("combine"):
-                yield
+                with self._frozen(doc if freeze else None):
+                    yield
+                held = doc.callbacks._held_events
+                if held:
+                    held[:] = sorted(held, key=_is_data_event)  # stable: data changes last
             return
         doc.hold("combine")
         try:
-            yield
+            with self._frozen(doc if freeze else None):
+                yield
         finally:
             doc.unhold()
+
+    @staticmethod
+    @contextmanager
+    def _frozen(doc):
+        if doc is None:
+            yield
+            return
+        with doc.models.freeze():
+            yield
 
     # state hooks (worker threads)
     def _on_result(self, result, seq, settings, gen) -> None:
@@ -404,7 +434,7 @@ class Explorer:
         t0 = time.perf_counter()
         new_seq = seq is not self._seq_shown
         with self.quiet():
-            with self.hold():
+            with self.hold(one_message=True, freeze=True):
                 unpinned = None
                 if new_seq:
                     self._set_sequence(seq, settings)
