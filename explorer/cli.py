@@ -215,11 +215,13 @@ def _reachable_name(host: str) -> str:
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
                 hosts: list[str] | None = None, announce_viser: bool = False,
-                params: laav.LaavParams | None = None, max_upload: int | None = None, video=None):
+                params: laav.LaavParams | None = None, max_upload: int | None = None, video=None,
+                warm=None):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
-    or after 3 s at the latest), so the first page does not wait behind the computation.
+    or after 3 s at the latest), so the first page does not wait behind the computation;
+    except the first tab's, when the command computes it in a child process (``pipeline``).
     ``prebuild`` builds the first tab's explorer now, in a background thread, while the
     server starts and the browser opens. ``created`` (optional list) receives every
     Explorer built (tests and benchmarks use it). ``hosts``: see :func:`page_hosts` (its
@@ -229,21 +231,28 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     (validated; problems shown on the page as text). ``max_upload``: the largest upload in
     bytes (default :data:`explorer.cards.files.DEFAULT_MAX_UPLOAD`); serve with
     :func:`serve_options`. ``video``: the :class:`explorer.video.Video` ``seq`` was tracked
-    from (its frames, shared read-only by every tab, go behind the points).
+    from (its frames, shared read-only by every tab, go behind the points). ``warm``: the
+    first tab's pipeline and plain RV for ``seq`` computed elsewhere (:func:`explorer.warm.first_results`;
+    only the first explorer built takes them).
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
     spare: list = []
     lock = threading.Lock()
 
+    warm_left = [warm]  # for the first explorer built only
+
     def build():
         from .app import Explorer
         from .cards.files import DEFAULT_MAX_UPLOAD
 
+        with lock:
+            first, warm_left[0] = warm_left[0], None
         return Explorer(seq, n_motions, params=params, seed=seed, viser=viser, viser_host=host,
                         iframe_host=iframe_host, start=False, page_hosts=hosts,
                         max_upload=DEFAULT_MAX_UPLOAD if max_upload is None else max_upload,
-                        video=video)
+                        video=video, pipeline=None if first is None else first.pipeline,
+                        plain_rv=None if first is None else first.plain_rv)
 
     if prebuild:
         fut: Future = Future()
@@ -288,10 +297,17 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
 
             threading.Thread(target=announce, name="laav-explore-announce", daemon=True).start()
         pn.state.on_session_destroyed(lambda ctx: ex.close())
+        if ex.state.warm:
+            # computed in a child process: taking it costs this process nothing, so the first
+            # result is applied as soon as it is there (into the page itself if the page has
+            # not fetched it yet)
+            ex.state.start()
         pn.state.onload(ex.start)
         doc = pn.state.curdoc
         if doc is not None:
             doc.add_timeout_callback(ex.start, 3000)  # no document_ready (e.g. a script client)
+            # the first computation's imports, once this page is sent (see ExplorerState.preload)
+            doc.add_next_tick_callback(ex.state.preload)
         # the header shows the sequence in a pane that follows uploads; the tab's title is set
         # to the shown sequence with every result of a new one
         return ex.template("LAAV explorer")
@@ -420,6 +436,11 @@ def main(argv: list[str] | None = None) -> int:
         if problems:
             return _fail(parser, "--param: " + "; ".join(problems))
     C = settings.n_motions
+    # the first result, computed from now on in a child process (not in this one: the page
+    # being served would wait for the GIL); the first tab's explorer takes it
+    from .warm import first_results
+
+    first = first_results(seq, C, settings.params, settings.seed)
 
     import panel as pn
 
@@ -428,7 +449,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
                               announce_viser=not _is_loopback(args.host), params=settings.params,
-                              max_upload=args.max_upload, video=video)
+                              max_upload=args.max_upload, video=video, warm=first)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False, **serve_options())
