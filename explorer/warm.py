@@ -14,6 +14,7 @@ No GUI imports here.
 from __future__ import annotations
 
 import multiprocessing
+import os
 import pickle
 import threading
 from concurrent.futures import Future
@@ -55,21 +56,30 @@ class Warm(NamedTuple):
     plain_rv: Future
 
 
-def _child(conn, seq, n_motions, params, seed) -> None:
+def _child(conn, other_end, parent: int, seq, n_motions, params, seed) -> None:
+    from laav._interrupt import interruptible
+
     from .state import Settings, plain_rv_of
 
+    # only the parent reads: with this end open here too, a send to a parent that has gone
+    # would wait for ever (a state is larger than the pipe's buffer)
+    other_end.close()
+    orphaned = lambda: os.getppid() != parent  # noqa: E731 - the parent has gone: stop
     try:
-        try:
-            data = pipeline_state(laav.Pipeline(seq, n_motions, params, seed))
-        except BaseException:  # noqa: BLE001 - the parent then computes it itself
-            data = b""
-        conn.send_bytes(data)
-        try:
-            settings = Settings(laav.LaavParams() if params is None else params, seed, n_motions)
-            data = pickle.dumps(plain_rv_of(seq, settings), protocol=pickle.HIGHEST_PROTOCOL)
-        except BaseException:  # noqa: BLE001
-            data = b""
-        conn.send_bytes(data)
+        with interruptible(orphaned):  # checked between stages and once per voting iteration
+            try:
+                data = pipeline_state(laav.Pipeline(seq, n_motions, params, seed))
+            except BaseException:  # noqa: BLE001 - the parent then computes it itself
+                data = b""
+            conn.send_bytes(data)
+            try:
+                settings = Settings(laav.LaavParams() if params is None else params, seed, n_motions)
+                data = pickle.dumps(plain_rv_of(seq, settings), protocol=pickle.HIGHEST_PROTOCOL)
+            except BaseException:  # noqa: BLE001
+                data = b""
+            conn.send_bytes(data)
+    except OSError:  # the parent has gone
+        pass
     finally:
         conn.close()
 
@@ -88,7 +98,7 @@ def first_results(seq: laav.Sequence, n_motions: int, params: laav.LaavParams | 
     try:
         ctx = multiprocessing.get_context("fork")
         recv, send = ctx.Pipe(duplex=False)
-        proc = ctx.Process(target=_child, args=(send, seq, n_motions, params, seed),
+        proc = ctx.Process(target=_child, args=(send, recv, os.getpid(), seq, n_motions, params, seed),
                            name="laav-explore-first", daemon=True)
         proc.start()
         send.close()
