@@ -220,8 +220,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
-    or after 3 s at the latest), so the first page does not wait behind the computation;
-    except the first tab's, when the command computes it in a child process (``pipeline``).
+    or after 3 s at the latest), so the first page does not wait behind the computation (the
+    first tab's is usually done by then: the command computes it in a child process, ``warm``).
     ``prebuild`` builds the first tab's explorer now, in a background thread, while the
     server starts and the browser opens. ``created`` (optional list) receives every
     Explorer built (tests and benchmarks use it). ``hosts``: see :func:`page_hosts` (its
@@ -297,17 +297,10 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
 
             threading.Thread(target=announce, name="laav-explore-announce", daemon=True).start()
         pn.state.on_session_destroyed(lambda ctx: ex.close())
-        if ex.state.warm:
-            # computed in a child process: taking it costs this process nothing, so the first
-            # result is applied as soon as it is there (into the page itself if the page has
-            # not fetched it yet)
-            ex.state.start()
         pn.state.onload(ex.start)
         doc = pn.state.curdoc
         if doc is not None:
             doc.add_timeout_callback(ex.start, 3000)  # no document_ready (e.g. a script client)
-            # the first computation's imports, once this page is sent (see ExplorerState.preload)
-            doc.add_next_tick_callback(ex.state.preload)
         # the header shows the sequence in a pane that follows uploads; the tab's title is set
         # to the shown sequence with every result of a new one
         return ex.template("LAAV explorer")

@@ -438,9 +438,9 @@ class ExplorerState:
         self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-plain-rv")
         # the pipeline's first-use imports (~1 s), ahead of the first job: they overlap the
         # page's loading, and stage timings shown to the user do not include them. With a
-        # pipeline computed elsewhere the first job needs none of them: the server asks for
-        # them once the page is sent (preload()), so that they do not hold this process's
-        # GIL while the page is being built
+        # pipeline computed elsewhere the first job needs none of them: the app asks for
+        # them once the page shows the first result and all its cards (preload()), so that
+        # they do not hold this process's GIL while the page is being built and drawn
         self._preloaded = pipeline is None
         if self._preloaded:
             self._worker.submit(laav.preload)
@@ -471,17 +471,10 @@ class ExplorerState:
 
     def preload(self) -> None:
         """Start the pipeline's first-use imports (:func:`laav.preload`) in a thread of their
-        own, if not done yet (the server calls it once the page is sent: the browser then
-        reads its scripts and this process has little to do)."""
+        own, if not done yet (the app calls it once the page is complete)."""
         if not self._preloaded and not self._closed:
             self._preloaded = True
             threading.Thread(target=laav.preload, name="laav-explore-preload", daemon=True).start()
-
-    @property
-    def warm(self) -> bool:
-        """The first computation is a pipeline computed elsewhere (see ``pipeline``), not
-        started yet."""
-        return self._first is not None and not self._started
 
     def start(self) -> None:
         """Queue the first computation (call after setting the ``on_*`` hooks)."""

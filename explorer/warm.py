@@ -1,11 +1,12 @@
 """The first result of ``laav-explore``, computed in a child process from the command's start.
 
-Without it the first computation starts once the page is on screen (so that it does not
-slow the page down) and the first result came 4-6 s after the trajectories
-(docs/bench/explorer_browser_latency.md). A forked child computes the same
-:class:`laav.Pipeline` meanwhile, on the other core, without holding the server's GIL, and
-sends its state back, then plain Random Voting's run shown beside it; the first session's
-explorer takes them (``Explorer(pipeline=..., plain_rv=...)``). The labels are those
+The server starts a session's computation once its page is on screen (so that it does not
+slow the page down), and the first result came 4-6 s after the trajectories
+(docs/bench/explorer_browser_latency.md). A forked child (at a lower priority: the page
+comes first) computes the same :class:`laav.Pipeline` meanwhile, on the other core, without
+holding the server's GIL, and sends its state back, then plain Random Voting's run shown
+beside it; the first session's explorer takes them (``Explorer(pipeline=..., plain_rv=...)``),
+so that its first result is ready, or nearly, when the page is. The labels are those
 computed in-process (the same inputs, seed and code; ``tests/test_explorer_warm.py``).
 
 No GUI imports here.
@@ -64,6 +65,10 @@ def _child(conn, other_end, parent: int, seq, n_motions, params, seed) -> None:
     # only the parent reads: with this end open here too, a send to a parent that has gone
     # would wait for ever (a state is larger than the pipe's buffer)
     other_end.close()
+    try:  # the page being served and drawn comes first on a busy machine
+        os.nice(10)
+    except OSError:
+        pass
     orphaned = lambda: os.getppid() != parent  # noqa: E731 - the parent has gone: stop
     try:
         with interruptible(orphaned):  # checked between stages and once per voting iteration
