@@ -615,8 +615,11 @@ class ExplorerState:
                     if kind == "load" or self._pipe is None or self._pipe.seq is not seq:
                         warm = self._warm_pipeline(seq, pipeline)
                         if warm is not None:  # computed elsewhere: only what differs is rerun
-                            pipe = warm
+                            pipe, before = warm, warm.result
+                            t0 = time.perf_counter()  # (the wait is not this computation's)
                             result = pipe.update(**target.update_kwargs())
+                            if result is before:  # as computed elsewhere: its own stage times
+                                t0 -= sum(result.timings.values())
                         else:
                             pipe = Pipeline(seq, target.n_motions, target.params, target.seed)
                             result = pipe.result

@@ -89,6 +89,20 @@ def test_state_takes_the_warm_pipeline_and_updates_it_to_the_settings_asked(seq,
         st.close()
 
 
+def test_the_time_shown_is_the_computation_not_the_wait(seq):
+    fut: Future = Future()
+    pipe = laav.Pipeline(seq, 2)
+    st = _state(seq, fut)
+    try:
+        st.start()
+        threading.Timer(1.0, fut.set_result, (pipe,)).start()  # the child takes a while
+        assert st.wait(120) and st.result is pipe.result
+        own = sum(pipe.result.timings.values())
+        assert own <= st.compute_seconds < own + 0.9  # not the >= 1 s wait for the child
+    finally:
+        st.close()
+
+
 def test_state_computes_itself_when_the_child_gave_nothing(seq):
     fut: Future = Future()
     fut.set_result(None)
