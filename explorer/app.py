@@ -46,7 +46,11 @@ from .cards.tour import TourView
 from .cards.view3d import View3D
 from .state import ExplorerState, non_defaults, parse_settings, query_of, settings_from_json
 
-__all__ = ["Explorer", "PARAM_SLIDERS", "SIDE_W"]
+__all__ = ["Explorer", "PARAM_SLIDERS", "SIDE_W", "REST_AFTER_S"]
+
+#: Seconds after the page has loaded at which the later cards are added even without a
+#: result (a long first computation; see :meth:`Explorer.template`).
+REST_AFTER_S = 3.0
 
 #: The cards' widgets, sources and panes that tests, benchmarks and notebooks reach on the
 #: explorer itself (the same objects): name -> where it lives.
@@ -67,6 +71,15 @@ SHORTCUTS = {
     "v_frame": "frame_view.card", "v_viser": "view3d.card", "v_graph": "graph_view.card",
     "v_coarse": "coarse_view.card", "v_rv": "rv_view.card", "v_numbers": "numbers_view.card",
 }
+
+
+def _is_data_event(event) -> bool:
+    from bokeh.document.events import ColumnDataChangedEvent, ModelChangedEvent
+    from bokeh.models import ColumnDataSource
+
+    return isinstance(event, ColumnDataChangedEvent) or (
+        isinstance(event, ModelChangedEvent) and isinstance(event.model, ColumnDataSource)
+        and event.attr == "data")
 
 
 class Explorer:
@@ -90,7 +103,9 @@ class Explorer:
         Every host name the browser may use for the page; the 3-D view's websocket accepts
         only these origins (default: 127.0.0.1, localhost and ``viser_host``).
     pipeline : Future or laav.Pipeline, optional
-        A warm pipeline for exactly these settings (see :class:`ExplorerState`).
+        A warm pipeline for ``seq`` (see :class:`ExplorerState`).
+    plain_rv : Future, optional
+        Plain RV's run for these settings, computed elsewhere (see :class:`ExplorerState`).
     start : bool
         Start computing at once; else call ``explorer.start()`` (the server does so
         once the page is on screen, so the first page is not slowed down by the pipeline).
@@ -109,11 +124,13 @@ class Explorer:
     def __init__(self, seq: laav.Sequence, n_motions: int | None = None,
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
-                 start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD, video=None):
+                 start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD, video=None,
+                 plain_rv=None):
         if video is not None and video.sequence is not seq:
             raise ValueError("video must be the one seq was tracked from (video.sequence is seq)")
         self.video = video
-        self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False)
+        self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False,
+                                   plain_rv=plain_rv)
         self._session_doc = None
         self._doc_thread = threading.get_ident()
         self._capture_session()
@@ -133,6 +150,8 @@ class Explorer:
         self.moved = None
         self.change = None
         self._seq_shown: laav.Sequence | None = None
+        self._rest: dict | None = None  # the later cards, until they are on the page (template)
+        self.main_column = None
 
         ext = seq.extent()
         self.controls = Controls(self, self.state, seq, self._defaults)
@@ -179,6 +198,8 @@ class Explorer:
         self.view3d.start()
         self.state.start()
         self.files.arm()  # the upload box's browser-side checks, the progress line
+        if self._rest is None:  # (with lazy cards: once they are on the page)
+            self.state.preload()
 
     @property
     def viser(self):
@@ -271,23 +292,51 @@ class Explorer:
         """The page (a BootstrapTemplate: loads all its resources from the server).
 
         ``lazy`` (default: when served) sends the atoms and 3-D cards first and adds the
-        later stages' cards (graph, fine-to-coarse, RV, numbers) once the page has loaded, so
-        the page appears sooner.
+        later stages' cards (graph, fine-to-coarse, RV, numbers) once the page has loaded and
+        the first result is shown (or :data:`REST_AFTER_S` after the page loaded, whichever
+        comes first), so that the page and then the first result appear sooner: the browser
+        draws those cards once, with their data, after the status line and the points.
         """
         n_first = self.main.index(self.view3d.card) + 1  # status, alerts, note, tour, atoms, 3-D
         if lazy is None:
             lazy = self._session_doc is not None
         main = pn.Column(*(self.main[:n_first] if lazy else self.main), sizing_mode="stretch_width")
-        if lazy:
-            rest = self.main[n_first:]
-            pn.state.onload(lambda: main.extend(rest))
         self.main_column = main
+        self._rest = None
+        if lazy:
+            self._rest = {"cards": self.main[n_first:], "loaded": False}
+            pn.state.onload(self._page_loaded)
         # one root per area: every extra document root costs a full model walk on page load.
         # The header's button folds the sidebar away.
         return pn.template.BootstrapTemplate(
             title=title, sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
             header=[self.status_bar.header_name], main=[main], sidebar_width=SIDE_W + 35,
             header_background="#2c4a66")
+
+    def _page_loaded(self) -> None:
+        """(Document thread.) The page is on screen: the later cards follow the first result
+        (or come after :data:`REST_AFTER_S` without one)."""
+        if self._rest is None:
+            return
+        self._rest["loaded"] = True
+        if self.result is not None or self.state.error is not None:
+            self.schedule(self._add_rest)
+            return
+        doc = self._doc()
+        if doc is not None and doc.session_context is not None:
+            doc.add_timeout_callback(lambda: self._locked(self._add_rest), int(1000 * REST_AFTER_S))
+        else:
+            self._add_rest()
+
+    def _add_rest(self) -> None:
+        """(Document thread.) The later stages' cards onto the page, once (see :meth:`template`);
+        then the pipeline's first-use imports, if still to do (:meth:`ExplorerState.preload`)."""
+        rest = self._rest
+        if rest is None or not rest["loaded"]:
+            return
+        self._rest = None
+        self.main_column.extend(rest["cards"])
+        self.state.preload()
 
     def panel(self) -> pn.viewable.Viewable:
         """The whole explorer as one panel layout (for notebooks)."""
@@ -352,30 +401,51 @@ class Explorer:
                 traceback.print_exc()
 
     @contextmanager
-    def hold(self, one_message: bool = False):
+    def hold(self, one_message: bool = False, freeze: bool = False):
         """Send all model changes made inside as one batch (the callers run on the document's
         thread, under its lock).
 
         With ``one_message`` (and once the page has loaded) the batch goes out as ONE
         websocket message (panel's ``unlocked``): bokeh's own hold sends one message per
         changed property, and the browser applies and redraws each in turn (a frame move was
-        about 12 messages; docs/bench/explorer_browser_latency.md). Only for batches that
-        change data and texts, not legends: a result's batch (data sources and legend labels
-        together) broke bokeh's legend drawing when applied as one patch."""
+        about 12 messages, a result about 50; docs/bench/explorer_browser_latency.md). The
+        data sources' changes go last in the message: a legend repainted while a glyph's new
+        data was still being mapped read past its old colours (bokeh's ``draw_legend_for_index``
+        threw ``Offset is outside the bounds of the DataView`` when a result's legend labels
+        came after its data).
+
+        With ``freeze`` the document's model graph is walked once at the end instead of after
+        every pane whose text changes (panel sets a Markdown pane's stylesheets with its text,
+        and bokeh then walks every model of the page: ~0.07 s each, several per result)."""
         doc = self._doc()
         if doc is None or doc.session_context is None or doc.callbacks.hold_value is not None:
-            yield
+            with self._frozen(doc if freeze else None):
+                yield
             return
         if (one_message and pn.state.curdoc is doc and pn.state.loaded
                 and threading.get_ident() == self._doc_thread and doc.session_context.session is not None):
             with unlocked("combine"):
-                yield
+                with self._frozen(doc if freeze else None):
+                    yield
+                held = doc.callbacks._held_events
+                if held:
+                    held[:] = sorted(held, key=_is_data_event)  # stable: data changes last
             return
         doc.hold("combine")
         try:
-            yield
+            with self._frozen(doc if freeze else None):
+                yield
         finally:
             doc.unhold()
+
+    @staticmethod
+    @contextmanager
+    def _frozen(doc):
+        if doc is None:
+            yield
+            return
+        with doc.models.freeze():
+            yield
 
     # state hooks (worker threads)
     def _on_result(self, result, seq, settings, gen) -> None:
@@ -404,7 +474,7 @@ class Explorer:
         t0 = time.perf_counter()
         new_seq = seq is not self._seq_shown
         with self.quiet():
-            with self.hold():
+            with self.hold(one_message=True, freeze=True):
                 unpinned = None
                 if new_seq:
                     self._set_sequence(seq, settings)
@@ -446,6 +516,8 @@ class Explorer:
             self._seq_shown = seq
             self._sync_url()
         self.apply_seconds = time.perf_counter() - t0
+        if self._rest is not None and self._rest["loaded"]:
+            self.schedule(self._add_rest)  # after this result's message: a message of its own
         with self._applied:
             self.applied_generation = gen
             self._applied.notify_all()
@@ -497,6 +569,8 @@ class Explorer:
         self.status_bar.show_busy(busy, self.result is not None)
 
     def _show_error(self, message: str) -> None:
+        if self._rest is not None and self._rest["loaded"]:
+            self.schedule(self._add_rest)
         self.lock_for_upload(False)
         self.status_bar.show_error(message)
 

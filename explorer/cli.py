@@ -82,11 +82,29 @@ def page_hosts(host: str) -> list[str]:
 
 
 def serve_options() -> dict:
-    """Keyword arguments for ``pn.serve`` that every server of the explorer needs."""
+    """Keyword arguments for ``pn.serve`` that every server of the explorer needs (and the
+    page without MathJax: :func:`no_mathjax`)."""
     from .cards.files import UPLOAD_CHUNK
 
     assert 2 * UPLOAD_CHUNK < WEBSOCKET_MAX_MESSAGE  # a chunk and its message's framing fit
+    no_mathjax()
     return {"websocket_max_message_size": WEBSOCKET_MAX_MESSAGE}
+
+
+def no_mathjax() -> None:
+    """Serve the page without bokeh's MathJax bundle (1.8 MB of JavaScript, a third of the
+    page's, parsed before anything is drawn).
+
+    Panel adds it to every page with a Markdown or HTML pane, in case the text holds TeX;
+    the explorer's texts hold none, and a sequence or file name that looks like TeX should be
+    shown as typed anyway. Panel has no setting for it: its resource check is replaced
+    (``panel.io.resources._panel_use_mathjax``; nothing happens if a later panel renames it,
+    the page then just loads MathJax again). Bokeh's own check (TeX in an axis label, a
+    slider's title, ...) still applies."""
+    from panel.io import resources
+
+    if hasattr(resources, "_panel_use_mathjax"):
+        resources._panel_use_mathjax = lambda roots: False
 
 
 def _size(text: str) -> int:
@@ -197,11 +215,13 @@ def _reachable_name(host: str) -> str:
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
                 hosts: list[str] | None = None, announce_viser: bool = False,
-                params: laav.LaavParams | None = None, max_upload: int | None = None, video=None):
+                params: laav.LaavParams | None = None, max_upload: int | None = None, video=None,
+                warm=None):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
-    or after 3 s at the latest), so the first page does not wait behind the computation.
+    or after 3 s at the latest), so the first page does not wait behind the computation (the
+    first tab's is usually done by then: the command computes it in a child process, ``warm``).
     ``prebuild`` builds the first tab's explorer now, in a background thread, while the
     server starts and the browser opens. ``created`` (optional list) receives every
     Explorer built (tests and benchmarks use it). ``hosts``: see :func:`page_hosts` (its
@@ -211,21 +231,28 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     (validated; problems shown on the page as text). ``max_upload``: the largest upload in
     bytes (default :data:`explorer.cards.files.DEFAULT_MAX_UPLOAD`); serve with
     :func:`serve_options`. ``video``: the :class:`explorer.video.Video` ``seq`` was tracked
-    from (its frames, shared read-only by every tab, go behind the points).
+    from (its frames, shared read-only by every tab, go behind the points). ``warm``: the
+    first tab's pipeline and plain RV for ``seq`` computed elsewhere (:func:`explorer.warm.first_results`;
+    only the first explorer built takes them).
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
     spare: list = []
     lock = threading.Lock()
 
+    warm_left = [warm]  # for the first explorer built only
+
     def build():
         from .app import Explorer
         from .cards.files import DEFAULT_MAX_UPLOAD
 
+        with lock:
+            first, warm_left[0] = warm_left[0], None
         return Explorer(seq, n_motions, params=params, seed=seed, viser=viser, viser_host=host,
                         iframe_host=iframe_host, start=False, page_hosts=hosts,
                         max_upload=DEFAULT_MAX_UPLOAD if max_upload is None else max_upload,
-                        video=video)
+                        video=video, pipeline=None if first is None else first.pipeline,
+                        plain_rv=None if first is None else first.plain_rv)
 
     if prebuild:
         fut: Future = Future()
@@ -402,6 +429,11 @@ def main(argv: list[str] | None = None) -> int:
         if problems:
             return _fail(parser, "--param: " + "; ".join(problems))
     C = settings.n_motions
+    # the first result, computed from now on in a child process (not in this one: the page
+    # being served would wait for the GIL); the first tab's explorer takes it
+    from .warm import first_results
+
+    first = first_results(seq, C, settings.params, settings.seed)
 
     import panel as pn
 
@@ -410,7 +442,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
                               announce_viser=not _is_loopback(args.host), params=settings.params,
-                              max_upload=args.max_upload, video=video)
+                              max_upload=args.max_upload, video=video, warm=first)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False, **serve_options())

@@ -33,6 +33,7 @@ import traceback
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
 from contextlib import contextmanager
 
 import numpy as np
@@ -40,6 +41,7 @@ import numpy as np
 import laav
 from laav import LaavParams, LaavResult, Pipeline, Sequence
 from laav._interrupt import Interrupted, interruptible
+from laav._interrupt import check as check_interrupt
 
 from .views import COLOR_MODES, align_labels, stage_numbers
 
@@ -72,6 +74,25 @@ class _Interruptible:
 #: Raised in the worker when :meth:`ExplorerState.cancel` stopped its computation (the
 #: same cooperative stop as :data:`Superseded`).
 Cancelled = Interrupted
+
+
+def _await(fut: Future):
+    """(Worker.) The value of ``fut``, computed elsewhere; None if it failed. The wait stops
+    like a computation (:class:`Superseded`, at the worker's checks)."""
+    while True:
+        try:
+            return fut.result(timeout=0.05)
+        except FutureTimeout:
+            check_interrupt()
+        except Exception:  # computed elsewhere and failed: the caller computes it itself
+            traceback.print_exc()
+            return None
+
+
+def plain_rv_of(seq: Sequence, settings: Settings) -> laav.Voting:
+    """Plain Random Voting from a random start for ``settings`` (what the explorer shows
+    beside LAAV's fine-tuning; computed by :class:`ExplorerState` or :mod:`explorer.warm`)."""
+    return laav.random_voting(seq, settings.n_motions, settings.params, settings.seed)
 
 
 #: The parameters plain Random Voting depends on (its cache key).
@@ -366,10 +387,15 @@ class ExplorerState:
     params : laav.LaavParams, optional
     seed : int
     pipeline : Future or Pipeline, optional
-        A pipeline for exactly these settings computed elsewhere (the CLI warms one up
-        while the server starts); used for the first result instead of building one.
+        A pipeline for ``seq`` computed elsewhere (the CLI computes one in a child process
+        while the server starts: :mod:`explorer.warm`); the first result is its
+        :meth:`~laav.Pipeline.update` to the settings asked for instead of a fresh one. A
+        Future of None (or of an exception) means: compute it here.
     autostart : bool
         Queue the first computation at once (else call :meth:`start`).
+    plain_rv : Future, optional
+        Plain RV's run (:func:`plain_rv_of`) for ``seq`` and the first settings, computed
+        elsewhere: used instead of computing it when those settings are shown (None: compute).
 
     Attributes
     ----------
@@ -386,7 +412,8 @@ class ExplorerState:
     """
 
     def __init__(self, seq: Sequence, n_motions: int | None = None, params: LaavParams | None = None,
-                 seed: int = 0, pipeline: Future | Pipeline | None = None, autostart: bool = True):
+                 seed: int = 0, pipeline: Future | Pipeline | None = None, autostart: bool = True,
+                 plain_rv: Future | None = None):
         if n_motions is None:
             if seq.n_motions is None:
                 raise ValueError(f"{seq.name} has no ground truth: the number of motions C is needed")
@@ -418,9 +445,14 @@ class ExplorerState:
         self._idle = threading.Condition(self._lock)
         self._worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-pipeline")
         self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-plain-rv")
-        # the pipeline's first-use imports (~1 s), now, ahead of the first job: they overlap
-        # the page's loading, and stage timings shown to the user do not include them
-        self._worker.submit(laav.preload)
+        # the pipeline's first-use imports (~1 s), ahead of the first job: they overlap the
+        # page's loading, and stage timings shown to the user do not include them. With a
+        # pipeline computed elsewhere the first job needs none of them: the app asks for
+        # them once the page shows the first result and all its cards (preload()), so that
+        # they do not hold this process's GIL while the page is being built and drawn
+        self._preloaded = pipeline is None
+        if self._preloaded:
+            self._worker.submit(laav.preload)
         self._rv_cache: OrderedDict = OrderedDict()
         self._rv_key = None
         #: the pipeline's and plain RV's computations, interruptible by a newer request
@@ -428,20 +460,30 @@ class ExplorerState:
         self.rv_computing = _Interruptible()
         self._closed = False
         self._first = pipeline
+        self._warm: tuple | None = None  # (sequence, Future) of a superseded first job
+        # plain RV for the first settings computed elsewhere: (its cache key, Future)
+        self._rv_warm = None if plain_rv is None else (self.plain_rv_key(seq, target), plain_rv)
         self._started = False
         if autostart:
             self.start()
 
     def retarget(self, settings: Settings) -> None:
         """Before :meth:`start`: compute ``settings`` first instead (a shared URL's state).
-        A warm pipeline given for other settings is dropped."""
+        A warm pipeline given for other settings is updated to them (only the stages they
+        touch rerun; the result equals a fresh computation)."""
         check_settings(self._target_seq, settings)
         if self._started:
             raise RuntimeError("retarget() only before start(); use request()")
         if settings != self._target:
             self._target = self.settings = settings
-            self._first = None
             self._notify_target()
+
+    def preload(self) -> None:
+        """Start the pipeline's first-use imports (:func:`laav.preload`) in a thread of their
+        own, if not done yet (the app calls it once the page is complete)."""
+        if not self._preloaded and not self._closed:
+            self._preloaded = True
+            threading.Thread(target=laav.preload, name="laav-explore-preload", daemon=True).start()
 
     def start(self) -> None:
         """Queue the first computation (call after setting the ``on_*`` hooks)."""
@@ -580,11 +622,16 @@ class ExplorerState:
                     if gen != self._gen:
                         return
                     if kind == "load" or self._pipe is None or self._pipe.seq is not seq:
-                        if isinstance(pipeline, Future):
-                            pipeline = pipeline.result()
-                        pipe = pipeline if pipeline is not None else Pipeline(
-                            seq, target.n_motions, target.params, target.seed)
-                        result = pipe.result
+                        warm = self._warm_pipeline(seq, pipeline)
+                        if warm is not None:  # computed elsewhere: only what differs is rerun
+                            pipe, before = warm, warm.result
+                            t0 = time.perf_counter()  # (the wait is not this computation's)
+                            result = pipe.update(**target.update_kwargs())
+                            if result is before:  # as computed elsewhere: its own stage times
+                                t0 -= sum(result.timings.values())
+                        else:
+                            pipe = Pipeline(seq, target.n_motions, target.params, target.seed)
+                            result = pipe.result
                     else:
                         pipe = self._pipe
                         result = pipe.update(**target.update_kwargs())
@@ -626,6 +673,22 @@ class ExplorerState:
                 self._pending -= 1
                 self._idle.notify_all()
             self._notify_busy()
+
+    def _warm_pipeline(self, seq: Sequence, pipeline) -> Pipeline | None:
+        """(Worker.) The pipeline computed elsewhere for ``seq`` (given, or left by a first job
+        that a newer request superseded), None if there is none or it failed. Waiting for it
+        is interruptible like a computation; the pipeline is then kept for the next job."""
+        if pipeline is None and self._warm is not None and self._warm[0] is seq:
+            pipeline = self._warm[1]
+        self._warm = None
+        if not isinstance(pipeline, Future):
+            return pipeline
+        try:
+            pipe = _await(pipeline)
+        except Interrupted:
+            self._warm = (seq, pipeline)  # the next job on this sequence takes it
+            raise
+        return pipe if isinstance(pipe, laav.Pipeline) and pipe.seq is seq else None
 
     def _fail(self, kind: str, message: str) -> None:
         with self._lock:
@@ -694,7 +757,13 @@ class ExplorerState:
             with self.rv_computing(lambda: key != self._rv_key):
                 if key != self._rv_key:
                     return
-                voting = laav.random_voting(seq, s.n_motions, s.params, s.seed)
+                voting = None
+                warm = self._rv_warm
+                if warm is not None and warm[0] == key:  # computed elsewhere (explorer.warm)
+                    voting = _await(warm[1])  # kept for later if a new request stops the wait
+                    self._rv_warm = None
+                if voting is None:
+                    voting = plain_rv_of(seq, s)
         except Superseded:
             return
         except Exception:

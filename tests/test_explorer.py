@@ -862,8 +862,9 @@ def test_frame_move_sends_only_the_changed_columns(ex):
     assert cols == {"x", "y"}
 
 
-def test_the_frame_player_is_handled_without_panels_wait(ex):
-    """A frame change from the browser is handled at once (panel's 50 ms gathering wait is off
-    for the frame player only; the parameter sliders keep it)."""
+def test_the_frame_player_and_parameters_are_handled_without_panels_wait(ex):
+    """A frame or parameter change from the browser is handled at once (panel's 50 ms
+    gathering wait is off: a newer parameter value supersedes the computation running)."""
     assert ex.controls.w_frame._debounce == 0
-    assert all(w._debounce == type(w)._debounce for w in ex.controls.w_params.values())
+    assert all(w._debounce == 0 for w in ex.controls.w_params.values())
+    assert ex.controls.w_seed._debounce == 0

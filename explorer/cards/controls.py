@@ -40,7 +40,9 @@ class Controls:
         # panel waits 50 ms after a browser change before handling it (to gather a drag's
         # values); a frame move costs the server ~3 ms, so the wait was most of its share of
         # the latency (docs/bench/explorer_browser_latency.md). Changes arriving while one
-        # is handled are still gathered into one.
+        # is handled are still gathered into one. The parameter sliders go without it too:
+        # a value that comes during a computation supersedes it (ExplorerState), so there is
+        # nothing to gather, and the wait was 50 ms of every parameter change's latency.
         self.w_frame._debounce = 0
         self.w_color = pn.widgets.Select(label="Colour points by", options=list(V.COLOR_MODES),
                                          value="ground truth" if seq.labels is not None
@@ -61,10 +63,12 @@ class Controls:
                                            if name != "rv_alpha" else hi, step=step,
                                            value=float(getattr(p, name)), width=SIDE_W)
             w.param.watch(self._on_param, "value")
+            w._debounce = 0  # as the frame player's (above): a newer value supersedes at once
             self.w_params[name] = w
         self.w_seed = pn.widgets.IntSlider(label="seed (random stages)", start=0, end=99,
                                            value=st.seed, width=SIDE_W)
         self.w_seed.param.watch(self._on_param, "value")
+        self.w_seed._debounce = 0
         # C: at least 1 and at most the number of points (the browser's box clamps to these)
         self.w_motions = pn.widgets.IntInput(label="C — number of motions", start=1, end=seq.n_points,
                                              value=st.n_motions, width=140)

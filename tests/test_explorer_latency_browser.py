@@ -1,0 +1,128 @@
+"""What makes the explorer quick in Chromium (docs/bench/explorer_browser_latency.md), checked
+on the page's websocket and models, never on timings:
+
+- start-up: the trajectories are drawn before the first result, the later stages' cards
+  come after it (a warm pipeline held back by the test), and the page loads no MathJax;
+- a parameter change's result reaches the page as ONE message, its data last, and is
+  drawn without a script error (bokeh's legend read a glyph's old colours when a legend
+  label came after the data in one patch);
+- a frame move sends the points' x and y only, in one message.
+"""
+
+from __future__ import annotations
+
+import json
+from concurrent.futures import Future
+
+import pytest
+from test_explorer_browser import ARGS, CHROMIUM, _sequence, _served, _wait_for  # noqa: F401
+
+import laav
+from explorer.warm import Warm
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+JS_PAGE = """() => {
+  const out = {status: '', points: 0, graph: false, frame_title: ''};
+  if (!(window.Bokeh && Bokeh.documents.length > 0)) return out;
+  for (const m of Bokeh.documents[0].all_models) {
+    if (typeof m.text === 'string' && m.text.includes('Showing')) out.status = m.text;
+    if (m.type === 'ColumnDataSource' && m.data.index !== undefined) out.points = m.data.index.length;
+    if (m.type === 'Title' && typeof m.text === 'string' && m.text.includes('atoms,') &&
+        m.text.includes('edges')) out.graph = true;
+    if (m.type === 'Title' && /^frame \\d+ of/.test(m.text)) out.frame_title = m.text;
+  }
+  return out;
+}"""
+
+JS_SET = """([prefix, value]) => {
+  for (const m of Bokeh.documents[0].all_models) {
+    if ((m.type === 'Slider' || m.type.endsWith('Player')) && typeof m.title === 'string'
+        && m.title.startsWith(prefix)) { m.value = value; m.value_throttled = value; return true; }
+  }
+  return false;
+}"""
+
+
+def _open(browser, port):
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    errors: list[str] = []
+    frames: list = []  # text frames the page received
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.on("websocket", lambda ws: ws.on("framereceived", lambda f: frames.append(f) if isinstance(f, str)
+                                          else None))
+    page.goto(f"http://127.0.0.1:{port}/")
+    return page, errors, frames
+
+
+def _patches(frames) -> list[list[dict]]:
+    """The events of every PATCH-DOC content the page received (header frames skipped)."""
+    out = []
+    for f in frames:
+        if f.startswith('{"events"'):
+            out.append(json.loads(f)["events"])
+    return out
+
+
+def test_start_up_shows_points_then_the_result_then_the_later_cards(monkeypatch):
+    import test_explorer_browser as tb
+
+    seq = _sequence()
+    held: Future = Future()  # the first result (as laav-explore's child computes it), held back
+    no_rv: Future = Future()
+    no_rv.set_result(None)  # plain RV: computed by the server itself
+    factory = tb.app_factory
+    monkeypatch.setattr(tb, "app_factory", lambda *a, **k: factory(*a, warm=Warm(held, no_rv), **k))
+    with _served(seq, viser=False) as (port, browser, created):
+        page, errors, _ = _open(browser, port)
+        page.wait_for_function(f"() => ({JS_PAGE})().points > 0", timeout=60000)
+        state = page.evaluate(JS_PAGE)
+        assert state["status"] == "" and not state["graph"], state  # the points first, alone
+        assert "bokeh-mathjax" not in page.content()
+        page.wait_for_timeout(500)
+        assert not page.evaluate(JS_PAGE)["graph"]  # the later cards wait for the result
+        held.set_result(laav.Pipeline(seq, seq.n_motions))
+        page.wait_for_function(f"() => ({JS_PAGE})().status.length > 0", timeout=60000)
+        page.wait_for_function(f"() => ({JS_PAGE})().graph", timeout=60000)
+        assert not errors, errors
+        assert created[0].state.result is not None
+
+
+def test_a_result_is_one_message_and_a_frame_move_sends_only_positions():
+    seq = _sequence()
+    with _served(seq, viser=False) as (port, browser, created):
+        page, errors, frames = _open(browser, port)
+        page.wait_for_function(f"() => ({JS_PAGE})().status.length > 0", timeout=60000)
+        page.wait_for_function(f"() => ({JS_PAGE})().graph", timeout=60000)
+        page.wait_for_timeout(500)
+        ex = created[0]
+        for lam in (3.5, 2.5):
+            n0 = len(frames)
+            assert page.evaluate(JS_SET, ["λ", lam])
+            page.wait_for_function(f"() => ({JS_PAGE})().status.includes('λ = {lam:g}')", timeout=60000)
+            _wait_for(lambda lam=lam: ex.settings.params.lam == lam and ex.result is ex.state.result, 30,
+                      "the result", page=page)
+            page.wait_for_timeout(300)
+            with_status = [ev for ev in _patches(frames[n0:])
+                           if any(e.get("attr") == "text" and "Showing" in str(e.get("new")) for e in ev)]
+            assert len(with_status) == 1, "the status line came in more than one message"
+            events = with_status[0]
+            data = [i for i, e in enumerate(events) if e["kind"] == "ColumnDataChanged"
+                    or (e["kind"] == "ModelChanged" and e.get("attr") == "data")]
+            assert data, "the result's data sources came in another message"
+            assert data == list(range(len(events) - len(data), len(events))), "data changes are not last"
+        n0 = len(frames)
+        assert page.evaluate(JS_SET, ["frame", 1])
+        page.wait_for_function(f"() => ({JS_PAGE})().frame_title.startsWith('frame 1 of')", timeout=30000)
+        page.wait_for_timeout(300)
+        points_id = ex.frame_view.src_points.id
+        moved = [ev for ev in _patches(frames[n0:])
+                 if any(e.get("model", {}).get("id") == points_id for e in ev)]
+        assert len(moved) == 1
+        cols = set()
+        for e in moved[0]:
+            if e.get("model", {}).get("id") == points_id:
+                assert e["kind"] == "ColumnDataChanged"
+                cols |= set(e["cols"])
+        assert cols == {"x", "y"}
+        assert not errors, errors

@@ -1,0 +1,136 @@
+"""The first result computed in a child process (explorer.warm) and taken by the explorer's
+state: the same labels as a pipeline computed in-process, later updates too; a failed or
+missing child falls back to computing in-process; a request made while it is being waited
+for supersedes the wait and still starts from it."""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import Future
+
+import numpy as np
+import pytest
+from conftest import two_motion_sequence
+
+import laav
+from explorer import state as state_mod
+from explorer import warm
+from explorer.state import ExplorerState, Settings
+
+
+@pytest.fixture(scope="module")
+def seq() -> laav.Sequence:
+    return two_motion_sequence(0, P=120, F=10, name="warm_test")
+
+
+def _same(a: laav.LaavResult, b: laav.LaavResult) -> bool:
+    return (np.array_equal(a.labels, b.labels)
+            and np.array_equal(a.coarse.point_labels, b.coarse.point_labels)
+            and np.array_equal(a.atoms.seeds, b.atoms.seeds))
+
+
+def test_a_pipeline_travels_and_updates_like_the_original(seq):
+    pipe = laav.Pipeline(seq, 2, seed=3)
+    back = warm.pipeline_from_state(warm.pipeline_state(pipe), seq)
+    assert back.seq is seq and _same(back.result, pipe.result)
+    for change in ({"lam": 4.0}, {"r1": 15.0}, {"seed": 5}):
+        assert _same(back.update(**change), pipe.update(**change))
+
+
+def test_the_child_computes_the_pipeline_and_plain_rv_of_this_process(seq):
+    p = laav.LaavParams(lam=3.0)
+    w = warm.first_results(seq, 2, p, 1)
+    pipe = w.pipeline.result(timeout=120)
+    assert isinstance(pipe, laav.Pipeline) and pipe.seq is seq
+    assert _same(pipe.result, laav.Pipeline(seq, 2, p, 1).result)
+    voting = w.plain_rv.result(timeout=120)
+    assert np.array_equal(voting.labels, state_mod.plain_rv_of(seq, Settings(p, 1, 2)).labels)
+
+
+def test_a_failing_child_gives_none(seq):
+    bad = warm.first_results(seq, 10 ** 6, None, 0)  # C > P: the child fails
+    assert bad.pipeline.result(timeout=120) is None and bad.plain_rv.result(timeout=120) is None
+
+
+def test_state_takes_plain_rv_from_the_child(seq, monkeypatch):
+    w = warm.first_results(seq, 2)  # (forked before the patch below)
+    ran = []
+    monkeypatch.setattr(state_mod, "plain_rv_of", lambda *a: ran.append(a))
+    st = ExplorerState(seq, 2, pipeline=w.pipeline, plain_rv=w.plain_rv, autostart=False)
+    try:
+        st.start()
+        assert st.wait(120) and st.wait_plain_rv(120) is not None
+        assert not ran, "plain RV was computed although the child gave it"
+        assert np.array_equal(st.plain_rv().labels, laav.random_voting(seq, 2, laav.LaavParams(), 0).labels)
+    finally:
+        st.close()
+
+
+def _state(seq, fut, settings: Settings | None = None) -> ExplorerState:
+    st = ExplorerState(seq, 2, pipeline=fut, autostart=False)
+    if settings is not None:
+        st.retarget(settings)
+    return st
+
+
+def test_state_takes_the_warm_pipeline_and_updates_it_to_the_settings_asked(seq, monkeypatch):
+    built = []
+    monkeypatch.setattr(state_mod, "Pipeline", lambda *a, **k: built.append(a) or laav.Pipeline(*a, **k))
+    fut: Future = Future()
+    fut.set_result(laav.Pipeline(seq, 2))
+    asked = Settings(laav.LaavParams(lam=4.0), 0, 2)
+    st = _state(seq, fut, asked)  # e.g. a shared URL's settings
+    try:
+        st.start()
+        assert st.wait(120) and st.error is None
+        assert not built, "a pipeline was built although a warm one was given"
+        assert _same(st.result, laav.Pipeline(seq, 2, asked.params, 0).result)
+    finally:
+        st.close()
+
+
+def test_the_time_shown_is_the_computation_not_the_wait(seq):
+    fut: Future = Future()
+    pipe = laav.Pipeline(seq, 2)
+    st = _state(seq, fut)
+    try:
+        st.start()
+        threading.Timer(1.0, fut.set_result, (pipe,)).start()  # the child takes a while
+        assert st.wait(120) and st.result is pipe.result
+        own = sum(pipe.result.timings.values())
+        assert own <= st.compute_seconds < own + 0.9  # not the >= 1 s wait for the child
+    finally:
+        st.close()
+
+
+def test_state_computes_itself_when_the_child_gave_nothing(seq):
+    fut: Future = Future()
+    fut.set_result(None)
+    st = _state(seq, fut)
+    try:
+        st.start()
+        assert st.wait(120) and st.error is None
+        assert _same(st.result, laav.Pipeline(seq, 2).result)
+    finally:
+        st.close()
+
+
+def test_a_request_supersedes_the_wait_and_starts_from_the_warm_pipeline(seq, monkeypatch):
+    built = []
+    monkeypatch.setattr(state_mod, "Pipeline", lambda *a, **k: built.append(a) or laav.Pipeline(*a, **k))
+    fut: Future = Future()
+    st = _state(seq, fut)
+    try:
+        st.start()
+        started = threading.Event()
+        st.on_busy = lambda busy: started.set()
+        gen = st.request(params={"lam": 5.0})  # while the first result is still awaited
+        assert gen is not None and started.wait(10)
+        fut.set_result(laav.Pipeline(seq, 2))  # the child delivers
+        assert st.wait(120) and st.error is None
+        assert st.computing.interrupted >= 1 or st.published_generation == gen
+        assert not built
+        assert st.settings.params.lam == 5.0
+        assert _same(st.result, laav.Pipeline(seq, 2, laav.LaavParams(lam=5.0)).result)
+    finally:
+        st.close()
