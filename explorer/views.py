@@ -590,6 +590,10 @@ def _model_factors(result: laav.LaavResult) -> list:
     return [f"f{j + 1}→M{int(m) + 1}" for j, m in enumerate(f2c.tolist())]
 
 
+#: Most fine models whose Z values are written in the heat map's cells (9 models overlap).
+Z_TEXT_MAX = 8
+
+
 def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None) -> tuple[dict, list]:
     """Heat-map cells of the affinity Z (n_fine x n_fine) and the axis factors; ``d`` the
     pair's epipolar distance, ``g`` the coding length merging it adds (nats per point).
@@ -606,7 +610,10 @@ def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None) -> tupl
     jj, kk = jj.ravel(), kk.ravel()
     fac = np.asarray(factors, dtype=object)
     data = {"x": fac[kk] if n else np.zeros(0, object), "y": fac[jj] if n else np.zeros(0, object),
-            "z": Z.ravel(), "text": np.array([f"{v:.2f}" for v in Z.ravel()], dtype=object),
+            # the values written in the cells up to Z_TEXT_MAX models (beyond, they overlap:
+            # the colour and the hover tell them)
+            "z": Z.ravel(), "text": np.array([f"{v:.2f}" if n <= Z_TEXT_MAX else ""
+                                              for v in Z.ravel()], dtype=object),
             "text_color": np.where(Z.ravel() > 0.55, "white", "black"),
             "d": np.asarray(result.coarse.epipolar_distance, float).ravel(),
             "g": (np.zeros(n * n) if result.coarse.merge_cost is None

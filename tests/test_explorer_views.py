@@ -376,3 +376,14 @@ def test_url_carries_the_tour_step(demo):
     for bad in ("0", str(len(TOUR) + 1), "x"):
         s, view, problems = parse_settings({"tour": bad}, seq, base)
         assert view == {} and len(problems) == 1 and problems[0].startswith("tour must be")
+
+
+def test_z_cells_carry_their_value_only_while_it_fits(demo):
+    seq, res = demo  # 2C = 6 fine models: every value written
+    data, _ = V.z_sources(res, seq)
+    assert all(t == f"{z:.2f}" for t, z in zip(data["text"], data["z"]))
+    many = laav.segment(seq, seq.n_motions, laav.LaavParams(coarse_merge="joint", fine_per_motion=4),
+                        seed=0)
+    assert many.multicut.n_models > V.Z_TEXT_MAX
+    data, _ = V.z_sources(many, seq)
+    assert not any(data["text"]) and len(data["z"]) == many.multicut.n_models ** 2  # hover only
