@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -82,7 +84,22 @@ ORIGIN_RATIO = 1e6
 TOLERANCE = 1e-9
 
 
-def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int = 3, *,
+#: The package's folder: warnings point at the first frame outside it (:func:`user_stacklevel`).
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
+
+
+def user_stacklevel() -> int:
+    """``stacklevel`` for a :func:`warnings.warn` made by the caller of this function, such
+    that the warning names the first frame outside the ``laav`` package: the user's line,
+    however many of laav's functions (``segment``, ``Pipeline``, ``random_voting``, the
+    single-thread wrapper) lie in between."""
+    frame, level = sys._getframe(1), 1
+    while frame is not None and os.path.dirname(os.path.abspath(frame.f_code.co_filename)) == _PACKAGE_DIR:
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, *,
                      visible: np.ndarray | None = None) -> None:
     """Refuse inputs that cannot hold ``n_motions`` motions; warn about degenerate ones.
 
@@ -105,8 +122,7 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int
     if isinstance(seq, Sequence) and not seq.is_complete:
         visible = seq.visible
     if visible is not None and not np.all(visible):
-        _check_degenerate_masked(src, pts, np.asarray(visible, dtype=bool), n_motions,
-                                 stacklevel + 1)
+        _check_degenerate_masked(src, pts, np.asarray(visible, dtype=bool), n_motions)
         return
     P = pts.shape[1]
     warn = []
@@ -126,10 +142,10 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, stacklevel: int
     sv = np.linalg.svd(centred, compute_uv=False)  # (F, 2) per frame
     if np.all(sv[:, 1] <= TOLERANCE * sv[:, 0] + tol):
         warn.append("the points are collinear in every frame (epipolar geometry is degenerate)")
-    _warn(src, warn, spread, pts, stacklevel + 1)
+    _warn(src, warn, spread, pts)
 
 
-def _warn(src, warn: list, spread: float, seen: np.ndarray, stacklevel: int) -> None:
+def _warn(src, warn: list, spread: float, seen: np.ndarray) -> None:
     """The pixel-scale and distant-origin warnings (from the visible coordinates ``seen``,
     any shape, and their ``spread``) added to ``warn``, then one :class:`LaavWarning` for
     all of them, if any."""
@@ -148,10 +164,10 @@ def _warn(src, warn: list, spread: float, seen: np.ndarray, stacklevel: int) -> 
         import warnings
 
         warnings.warn(f"{src}: " + "; ".join(warn) + " - the labels are probably meaningless",
-                      LaavWarning, stacklevel=stacklevel)
+                      LaavWarning, stacklevel=user_stacklevel())
 
 
-def _check_degenerate_masked(src, pts, vis, n_motions, stacklevel) -> None:
+def _check_degenerate_masked(src, pts, vis, n_motions) -> None:
     """:func:`check_degenerate` on incomplete data (see there)."""
     P = pts.shape[1]
     warn = []
@@ -182,10 +198,10 @@ def _check_degenerate_masked(src, pts, vis, n_motions, stacklevel) -> None:
             break
     if collinear:
         warn.append("the points are collinear in every frame (epipolar geometry is degenerate)")
-    _warn(src, warn, spread, seen, stacklevel + 1)
+    _warn(src, warn, spread, seen)
 
 
-def warn_single_label(seq, labels: np.ndarray, n_motions: int, stacklevel: int = 3) -> None:
+def warn_single_label(seq, labels: np.ndarray, n_motions: int) -> None:
     """Warn (:class:`LaavWarning`) when ``labels`` give every labelled point one motion
     though ``n_motions`` > 1 were asked for (after LAAV or plain Random Voting; points
     left unlabelled, -1, do not count)."""
@@ -195,7 +211,7 @@ def warn_single_label(seq, labels: np.ndarray, n_motions: int, stacklevel: int =
 
         warnings.warn(f"{getattr(seq, 'source', '<array>')}: every point got the same label "
                       f"though {n_motions} motions were asked for", LaavWarning,
-                      stacklevel=stacklevel)
+                      stacklevel=user_stacklevel())
 
 
 @dataclass(frozen=True, eq=False)

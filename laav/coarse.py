@@ -447,11 +447,12 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     if coding and vis is not None:
         import warnings
 
-        from ._sequence import LaavWarning
+        from ._sequence import LaavWarning, user_stacklevel
 
         warnings.warn(f"{getattr(seq, 'source', '<array>')}: coarse_merge="
                       f"'{params.coarse_merge}' needs complete trajectories; the epipolar "
-                      "merge was used on this incomplete sequence", LaavWarning, stacklevel=2)
+                      "merge was used on this incomplete sequence", LaavWarning,
+                      stacklevel=user_stacklevel())
         coding = False
     method = params.coarse_merge if coding else "epipolar"
     if n == 0:

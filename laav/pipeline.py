@@ -329,6 +329,6 @@ def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: i
         from dataclasses import replace
 
         result = replace(result, motion_count=count)
-    warn_single_label(seq, result.labels, result.n_motions)  # points at segment's caller
+    warn_single_label(seq, result.labels, result.n_motions)  # names segment's caller
     return result
 

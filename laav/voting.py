@@ -215,8 +215,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         raise ValueError(f"rv_sample_size ({params.rv_sample_size}) exceeds the number of "
                          f"points ({P})")
     if init_labels is None and check_input:  # plain RV, an entry point: segment()'s checks
-        # 4: the caller of the single_threaded wrapper
-        check_degenerate(seq, C, stacklevel=4, visible=None if isinstance(seq, Sequence) else vis)
+        check_degenerate(seq, C, visible=None if isinstance(seq, Sequence) else vis)
     seed = resolve_seed(seed, random_state)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     if C == 1 or F < 2:
@@ -250,7 +249,7 @@ def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=N
         out = _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus",
                       mk=mk)
     if mk is None and warn:
-        warn_single_label(seq, out.labels, C, stacklevel=5)
+        warn_single_label(seq, out.labels, C)
     return out
 
 
@@ -388,7 +387,7 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     code = np.where(keep, 0, NO_FRAME_PAIR).astype(np.int8)
     result = dataclasses.replace(out, labels=labels, votes=votes, unlabelled_code=code)
     if init_labels is None and warn:
-        warn_single_label(seq, labels, C, stacklevel=5)
+        warn_single_label(seq, labels, C)
     return result
 
 

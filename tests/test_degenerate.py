@@ -163,3 +163,23 @@ def test_segment_warns_once_when_no_atom_forms_and_plain_rv_runs():
     # plain RV called directly still checks its input
     with pytest.warns(LaavWarning, match="span"):
         laav.random_voting(tiny, 2, seed=0)
+
+
+@pytest.mark.parametrize("call", ["segment", "Pipeline", "random_voting", "segment_incomplete"])
+def test_warnings_name_the_callers_line(call):
+    """However deep inside laav a warning is raised, it names the user's file and line."""
+    seq = make_sequence(n_objects=1, n_frames=10, n_points=60, rng=0)
+    tiny = Sequence(seq.points * 1e-4, seq.labels)  # the spread warning
+    if call == "segment_incomplete":
+        vis = np.ones(tiny.points.shape[:2], bool)
+        vis[:2, ::5] = False
+        tiny = Sequence(np.where(vis[..., None], tiny.points, np.nan), seq.labels, visible=vis)
+    run = {"segment": lambda: segment(tiny, 2, seed=0),
+           "segment_incomplete": lambda: segment(tiny, 2, seed=0),
+           "Pipeline": lambda: laav.Pipeline(tiny, 2),
+           "random_voting": lambda: laav.random_voting(tiny, 2, seed=0)}[call]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run()
+    mine = [w for w in caught if issubclass(w.category, LaavWarning)]
+    assert mine and all(w.filename == __file__ for w in mine), [(w.filename, w.lineno) for w in mine]
