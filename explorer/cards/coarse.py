@@ -23,7 +23,8 @@ class CoarseView:
         z = self.fig_z = figure(title="Affinity Z of fine-model pairs", width=320, height=320,
                                 x_range=FactorRange(factors=["f1"]), y_range=FactorRange(factors=["f1"]),
                                 tools="hover", toolbar_location=None,
-                                tooltips=[("pair", "f@j, f@k"), ("Z", "@text"), ("epipolar distance", "@d"),
+                                tooltips=[("pair", "f@j, f@k"), ("Z", "@z{0.00}"),
+                                          ("epipolar distance", "@d"),
                                           ("coding length added by merging (nats/point)", "@g")])
         z.rect("x", "y", 1, 1, source=self.src_z, fill_color={"field": "z", "transform": self.z_mapper},
                line_color="white")
@@ -49,18 +50,19 @@ class CoarseView:
         self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
         set_data(self.src_z, data)
         if res.coarse.method == "joint":
-            self.fig_z.title.text = (f"Coding affinity exp(−ΔL), ε = {res.params.coding_eps:g} px: "
-                                     f"{len(factors)} fine models")
+            self.fig_z.title.text = (f"Coding affinity, ε = {res.params.coding_eps:g} px: "
+                                     f"{len(factors)} models")
             how = ("ours: of the partitions of least coding length, the one of least coding "
-                   "length + epipolar cost decided; the paper's epipolar vote is the paper preset")
+                   "length + epipolar cost decided; the map shows exp(−ΔL), ΔL the nats per point "
+                   "that merging a pair adds; the paper's epipolar vote is the paper preset")
             self.merge_md.object = (f"**Which fine model joined which motion** ({how}):\n\n"
                                     + V.merge_table(seq, res)
                                     + "\n\n**Partitions compared** (lower score wins):\n\n"
                                     + V.shortlist_table(seq, res))
             return
         if res.coarse.method == "coding":
-            self.fig_z.title.text = (f"Coding affinity exp(−ΔL), ε = {res.params.coding_eps:g} px: "
-                                     f"{len(factors)} fine models")
+            self.fig_z.title.text = (f"Coding affinity, ε = {res.params.coding_eps:g} px: "
+                                     f"{len(factors)} models")
             how = ("the partition of least coding length decided (ours; ΔL: bits per point that "
                    "merging a pair adds; the paper's epipolar vote is the paper preset)")
         else:
