@@ -535,13 +535,13 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
 
     length = float("nan")
     listed = None
-    if coding and method == "joint" and n > n_motions:
-        listed = _joint_shortlist(points, fine_pts, stats, n_motions, params)
-    if listed is not None:
-        assign, length = listed.assign[listed.chosen], float(listed.coding_length[listed.chosen])
-        Z = np.exp(-np.maximum(gain, 0.0))
-    elif coding:  # the partition is searched only when it decides
-        assign, length = best_partition(stats, n_motions, params.coding_eps)
+    if coding:  # the partition is searched only when it decides
+        if method == "joint" and n > n_motions:
+            listed = _joint_shortlist(points, fine_pts, stats, n_motions, params)
+        if listed is not None:
+            assign, length = listed.assign[listed.chosen], float(listed.coding_length[listed.chosen])
+        else:  # the coding merge (also the joint one when no partition has 8 points a motion)
+            assign, length = best_partition(stats, n_motions, params.coding_eps)
         Z = np.exp(-np.maximum(gain, 0.0))
     if n <= n_motions:
         f2c = np.arange(n, dtype=np.int64)

@@ -164,6 +164,24 @@ def _total(stats, assign, C, eps) -> float:
     return float(coding_lengths(*stats.union(m), stats.dim, eps).sum())
 
 
+def _exact(n: int, C: int) -> bool:
+    """Whether every partition of ``n`` models into ``C`` groups is enumerated."""
+    return n <= _SUBSETS_MAX_MODELS and C ** (n - 1) <= _EXHAUSTIVE_MAX
+
+
+def _every_partition(stats: ModelStats, C: int, eps: float) -> tuple:
+    """Every partition of the models into ``C`` groups (:func:`_assignments`, (A, n)), its
+    total coding length (A,) and the point count of each of its groups (A, C): the 2^n - 1
+    groups' lengths are evaluated once, and a partition sums its groups'."""
+    n = stats.n_models
+    bits = (np.arange(1, 2 ** n)[:, None] >> np.arange(n)) & 1  # every non-empty subset
+    cost = coding_lengths(*stats.union(bits), stats.dim, eps)
+    count = bits @ stats.count
+    A = _assignments(n, C)
+    groups = np.stack([(A == c).astype(np.int64) @ (1 << np.arange(n)) for c in range(C)], axis=1)
+    return A, cost[groups - 1].sum(1), count[groups - 1]
+
+
 def best_partition(stats: ModelStats, n_groups: int, eps: float) -> tuple[np.ndarray, float]:
     """The assignment of the models to ``n_groups`` groups of least total coding length.
 
@@ -181,14 +199,8 @@ def best_partition(stats: ModelStats, n_groups: int, eps: float) -> tuple[np.nda
     n, C = stats.n_models, int(n_groups)
     if n <= C:
         return np.arange(n, dtype=np.int64), _total(stats, np.arange(n), max(n, 1), eps)
-    if n <= _SUBSETS_MAX_MODELS and C ** (n - 1) <= _EXHAUSTIVE_MAX:
-        masks = np.arange(1, 2 ** n)
-        bits = (masks[:, None] >> np.arange(n)) & 1
-        cost = coding_lengths(*stats.union(bits), stats.dim, eps)  # every non-empty subset
-        A = _assignments(n, C)
-        pow2 = 1 << np.arange(n)
-        groups = np.stack([(A == c).astype(np.int64) @ pow2 for c in range(C)], axis=1)
-        tot = cost[groups - 1].sum(1)
+    if _exact(n, C):
+        A, tot, _ = _every_partition(stats, C, eps)
         k = int(np.argmin(tot))
         return A[k].copy(), float(tot[k])
     # greedy: merge the pair of groups whose union adds the least length
@@ -243,16 +255,8 @@ def shortlist(stats: ModelStats, n_groups: int, eps: float, n_best: int,
         A = np.arange(n, dtype=np.int64)[None]
         tot = np.array([_total(stats, A[0], max(n, 1), eps)])
         size = stats.count[None]
-    elif n <= _SUBSETS_MAX_MODELS and C ** (n - 1) <= _EXHAUSTIVE_MAX:
-        masks = np.arange(1, 2 ** n)
-        bits = (masks[:, None] >> np.arange(n)) & 1
-        cost = coding_lengths(*stats.union(bits), stats.dim, eps)  # every non-empty subset
-        count = bits @ stats.count
-        A = _assignments(n, C)
-        pow2 = 1 << np.arange(n)
-        groups = np.stack([(A == c).astype(np.int64) @ pow2 for c in range(C)], axis=1)
-        tot = cost[groups - 1].sum(1)
-        size = count[groups - 1]
+    elif _exact(n, C):
+        A, tot, size = _every_partition(stats, C, eps)
     else:  # the greedy partition and its one-move neighbours
         best, _ = best_partition(stats, C, eps)
         rows = [best]

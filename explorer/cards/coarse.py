@@ -49,24 +49,21 @@ class CoarseView:
         self.fig_z.x_range.factors = factors or ["–"]
         self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
         set_data(self.src_z, data)
-        if res.coarse.method == "joint":
+        method = res.coarse.method
+        if method in ("coding", "joint"):
             self.fig_z.title.text = (f"Coding affinity, ε = {res.params.coding_eps:g} px: "
                                      f"{len(factors)} models")
-            how = ("ours: of the partitions of least coding length, the one of least coding "
-                   "length + epipolar cost decided; the map shows exp(−ΔL), ΔL the nats per point "
-                   "that merging a pair adds; the paper's epipolar vote is the paper preset")
-            self.merge_md.object = (f"**Which fine model joined which motion** ({how}):\n\n"
-                                    + V.merge_table(seq, res)
-                                    + "\n\n**Partitions compared** (lower score wins):\n\n"
-                                    + V.shortlist_table(seq, res))
-            return
-        if res.coarse.method == "coding":
-            self.fig_z.title.text = (f"Coding affinity, ε = {res.params.coding_eps:g} px: "
-                                     f"{len(factors)} models")
-            how = ("the partition of least coding length decided (ours; ΔL: bits per point that "
-                   "merging a pair adds; the paper's epipolar vote is the paper preset)")
+            how = ("ours: " + ("the partition of least coding length decided"
+                               if method == "coding" else
+                               "of the partitions of least coding length, the one of least "
+                               "coding length + epipolar cost decided")
+                   + "; the map shows exp(−ΔL), ΔL the nats per point that merging a pair adds;"
+                   " the paper's epipolar vote is the paper preset")
         else:
             self.fig_z.title.text = f"Affinity Z (λ = {res.params.lam:g}): {len(factors)} fine models"
             how = "spectral clustering of Z (the paper's epipolar votes)"
+        listed = V.shortlist_table(seq, res)  # "" but for the joint merge
         self.merge_md.object = (f"**Which fine model joined which motion** ({how}):\n\n"
-                                + V.merge_table(seq, res))
+                                + V.merge_table(seq, res)
+                                + (f"\n\n**Partitions compared** (lower score wins):\n\n{listed}"
+                                   if listed else ""))
