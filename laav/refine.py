@@ -397,14 +397,17 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
 _ALS_FIRST, _ALS_ROUND = 12, 4
 
 
-def _project_masked(U: np.ndarray, X: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _project_masked(U: np.ndarray, MX: np.ndarray, M: np.ndarray,
+                    residuals: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
     """Least-squares coefficients ``V`` (n, r) of columns ``X`` (D, n) on the basis ``U``
-    (D, r) over each column's rows ``M`` (D, n, 0/1), and the squared residuals (n,)."""
+    (D, r) over each column's rows ``M`` (D, n, 0/1), given ``MX = M * X``, and the squared
+    residuals (n,) (None unless ``residuals``)."""
     r = U.shape[1]
     G = (M.T @ (U[:, :, None] * U[:, None, :]).reshape(-1, r * r)).reshape(-1, r, r)
     G[:, np.arange(r), np.arange(r)] += 1e-9 * (np.trace(G, axis1=1, axis2=2)[:, None] + 1e-12)
-    MX = M * X
     V = np.linalg.solve(G, (MX.T @ U)[..., None])[..., 0]
+    if not residuals:
+        return V, None
     res = MX - M * (U @ V.T)
     return V, np.einsum("dn,dn->n", res, res)
 
@@ -424,17 +427,18 @@ def _fit_subspace_masked(X, M, rank, rounds, tiny, sweeps_first=_ALS_FIRST, swee
     cnt = np.maximum(M.sum(axis=0) / 2.0, 1.0)  # frames seen per column
     w = np.ones(n)
     eye = np.eye(rank)
+    MX = M * X  # the same in every sweep; M * w * X below equals MX * w bit for bit (M is 0/1)
     for k in range(rounds):
+        WM, WMX = M * w, MX * w  # (D, n)
         for _ in range(sweeps_first if k == 0 else sweeps):
-            V, _ = _project_masked(U, X, M)
-            WM = M * w  # (D, n)
+            V, _ = _project_masked(U, MX, M, residuals=False)
             H = (WM @ (V[:, :, None] * V[:, None, :]).reshape(n, -1)).reshape(D, rank, rank)
             H += 1e-9 * (np.trace(H, axis1=1, axis2=2)[:, None, None] + 1e-12) * eye
-            c = (WM * X) @ V
+            c = WMX @ V
             U = np.linalg.solve(H, c[..., None])[..., 0]
             U = np.linalg.qr(U)[0]
         if k + 1 < rounds:
-            _, r2 = _project_masked(U, X, M)
+            _, r2 = _project_masked(U, MX, M)
             r = np.sqrt(r2 / cnt)
             w = (1.0 / (1.0 + (r / (2.0 * np.median(r) + tiny)) ** 2)) ** 2
     return U
@@ -445,6 +449,7 @@ def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible,
     F, P, _ = points.shape
     W = _trajectory_matrix_masked(points, visible)  # the origin at the visible points' corner
     M = np.repeat(visible, 2, axis=0).astype(np.float64)  # (2F, P): x and y rows of a frame
+    MW = M * W
     cnt = visible.sum(axis=0)
     R = np.empty((n_motions, P))
     for g in range(n_motions):
@@ -452,7 +457,7 @@ def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible,
         if mem.sum() <= rank + 1:
             return None
         U = _fit_subspace_masked(W[:, mem], M[:, mem], rank, rounds, TINY2 * np.sqrt(unit2))
-        _, r2 = _project_masked(U, W, M)
+        _, r2 = _project_masked(U, MW, M)
         R[g] = np.maximum(r2, 0.0) / cnt
     return R
 
