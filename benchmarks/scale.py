@@ -115,6 +115,9 @@ def _child(P: int, F: int, seed: int, memory: bool, missing: float = 0.0) -> dic
     out["atoms"] = st["atoms"].n_atoms
     out["edges"] = st["graph"].n_edges
     out["error_pct"] = 100 * laav.misclassification_rate(seq.labels, st["voting"].labels)
+    v = st["voting"]
+    out["voting"] = {"trials": v.n_trials, "iterations": v.n_iterations,
+                     "converged": bool(v.converged), "candidates": len(v.costs)}
     out["labels_crc"] = int(__import__("zlib").crc32(np.asarray(st["voting"].labels, np.int64).tobytes()))
     return out
 
@@ -185,7 +188,7 @@ def main(argv=None) -> int:
         print(f"P={P} F={args.frames} cpu={sum(t['cpu'].values()):.1f}s "
               f"wall={sum(t['seconds'].values()):.1f}s {line} | "
               f"maxrss={t['maxrss_mb']:.0f}MB atoms={t['atoms']} edges={t['edges']} "
-              f"error={t['error_pct']:.2f}%", flush=True)
+              f"error={t['error_pct']:.2f}% voting={t['voting']}", flush=True)
 
     head_s = " | ".join(f"{s} CPU s" for s in STAGES)
     head_m = " | ".join(f"{s} MB" for s in STAGES)

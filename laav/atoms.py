@@ -307,7 +307,8 @@ class MaskedNeighbourhoods:
             a, b = fi[s:s + step], fj[s:s + step]
             both = self.visible[:, a] & self.visible[:, b]  # (F, n)
             d = self.points[:, a] - self.points[:, b]
-            d2 = np.where(both, (d * d).sum(-1), 0.0).max(axis=0, initial=0.0)
+            dx, dy = d[..., 0], d[..., 1]  # dx^2 + dy^2: the sum over the last axis, bit for bit
+            d2 = np.where(both, dx * dx + dy * dy, 0.0).max(axis=0, initial=0.0)
             flat[s:s + step] = np.where(both.sum(axis=0) >= self.min_overlap, np.sqrt(d2), FAR)
         return out
 

@@ -189,36 +189,44 @@ def forward_backward_error_masked(points: np.ndarray, visible: np.ndarray, atoms
     bwd = np.linalg.inv(fwd)
     both_seen = atoms.seen[:, left] & atoms.seen[:, right]  # (N, K)
     sizes = np.array([m.size for m in atoms.members])
-    mmax = int(sizes.max())
-    pad = np.zeros((atoms.n_atoms, mmax), dtype=np.int64)
-    mask = np.zeros((atoms.n_atoms, mmax), dtype=bool)
+    # every atom's members padded to the power of two at or above its size (not to the
+    # largest atom's: on incomplete data sizes range over 10-300, and the padding was
+    # most of the work); an edge's sums then depend on its own atoms only, not on batching
+    width = 1 << np.ceil(np.log2(np.maximum(sizes, 1))).astype(np.int64)
+    pad = np.zeros((atoms.n_atoms, int(width.max())), dtype=np.int64)
+    mask = np.zeros(pad.shape, dtype=bool)
     for i, m in enumerate(atoms.members):
         pad[i, : m.size] = m
         mask[i, : m.size] = True
     pl, pr = pts[left], pts[right]  # (K, P, 2)
     vlr = visible[left] & visible[right]  # (K, P)
 
-    def directed(a, b):
-        idx = pad[b]  # (E, m)
-        xl = pl[:, idx]  # (K, E, m, 2)
+    def directed(a, b, w):
+        """Mean transfer error of b's members under a's maps; b's atoms all of width w."""
+        idx = pad[b, :w]  # (E, w)
+        xl = pl[:, idx]  # (K, E, w, 2)
         xr = pr[:, idx]
         Tf = np.transpose(fwd[a], (1, 0, 2, 3))  # (K, E, 3, 3)
         Tb = np.transpose(bwd[a], (1, 0, 2, 3))
-        e = 0.5 * (_transfer_error(Tf, xl, xr) + _transfer_error(Tb, xr, xl))  # (K, E, m)
-        ok = (vlr[:, idx] & mask[b][None]
-              & (both_seen[a] & both_seen[b]).T[:, :, None])  # (K, E, m)
+        e = 0.5 * (_transfer_error(Tf, xl, xr) + _transfer_error(Tb, xr, xl))  # (K, E, w)
+        ok = (vlr[:, idx] & mask[b, :w][None]
+              & (both_seen[a] & both_seen[b]).T[:, :, None])  # (K, E, w)
         n = ok.sum(axis=(0, 2))
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(n > 0, np.where(ok, e, 0.0).sum(axis=(0, 2)) / n, np.nan)
 
-    out = np.empty(E)
-    chunk = int(np.clip(2**17 // max(left.size * mmax, 1), 16, 256))
-    for s in range(0, E, chunk):
-        a = edges[s : s + chunk, 0]
-        b = edges[s : s + chunk, 1]
-        ab, ba = directed(a, b), directed(b, a)
-        out[s : s + chunk] = np.maximum(ab, ba)  # NaN when either direction has no entry
-    return out
+    def one_way(src, dst):
+        out = np.empty(E)
+        for w in np.unique(width[dst]):
+            sel = np.flatnonzero(width[dst] == w)
+            chunk = int(np.clip(2**17 // (left.size * w), 16, 256))
+            for s in range(0, sel.size, chunk):
+                e = sel[s : s + chunk]
+                out[e] = directed(src[e], dst[e], int(w))
+        return out
+
+    # NaN when either direction has no entry
+    return np.maximum(one_way(edges[:, 0], edges[:, 1]), one_way(edges[:, 1], edges[:, 0]))
 
 
 def _transfer_error(T: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
