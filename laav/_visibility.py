@@ -23,7 +23,8 @@ import numpy as np
 from ._sequence import Sequence
 
 __all__ = ["visibility", "filled", "min_overlap", "pair_pool", "decidable", "cover_pairs",
-           "MIN_OVERLAP_FRAMES", "MIN_OVERLAP_SHARE", "UNLABELLED_REASONS"]
+           "MIN_OVERLAP_FRAMES", "MIN_OVERLAP_SHARE", "UNLABELLED_REASONS",
+           "MIN_ASSIGN_FRAMES"]
 
 #: Two trajectories are compared (neighbourhoods, atoms) only over at least this many
 #: frames both are seen in, and at least :data:`MIN_OVERLAP_SHARE` of the sequence.
@@ -35,10 +36,16 @@ MIN_OVERLAP_SHARE = 0.2
 UNLABELLED_REASONS = {
     1: ("seen too briefly: it is visible in both frames of no frame pair the voting uses "
         "(frames at least max(1, F // 3) apart that enough points share), so no epipolar "
-        "vote can reach it"),
+        "vote can reach it, and in fewer than 4 frames, too few to tell the motions' "
+        "trajectory subspaces apart"),
 }
-#: The code of :data:`UNLABELLED_REASONS` for a point no voting frame pair sees.
+#: The code of :data:`UNLABELLED_REASONS` for a point no voting frame pair sees and too
+#: few frames (:data:`MIN_ASSIGN_FRAMES`) place in a motion's trajectory subspace.
 NO_FRAME_PAIR = 1
+#: Fewest frames a point no voting frame pair sees must be visible in to be assigned by
+#: the motions' trajectory subspaces (:func:`laav.refine.assign_by_subspace`): its 2f
+#: coordinates must outnumber the rank-4 subspace's 4 coefficients twice over.
+MIN_ASSIGN_FRAMES = 4
 
 
 def visibility(seq, visible=None) -> np.ndarray | None:

@@ -31,7 +31,8 @@ import numpy as np
 from .geometry import fit_fundamental, sampson_distance
 
 __all__ = ["labelling_cost", "subspace_cost", "motion_distances", "refine_labels",
-           "subspace_residuals", "reassign_labels", "frame_pairs", "trajectory_matrix"]
+           "subspace_residuals", "reassign_labels", "assign_by_subspace", "frame_pairs",
+           "trajectory_matrix"]
 
 #: Rank of the trajectory subspaces of :func:`subspace_cost` (affine camera: 4, plus one
 #: for perspective and tracking noise; 5 measured best of 4..8, see benchmarks/TUNING.md).
@@ -559,3 +560,50 @@ def _reassign_masked(points, start, n_motions, rank, epipolar_weight, rounds, mi
             break
         cur = new
     return cur.copy(), int((cur != start).sum())
+
+
+def assign_by_subspace(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                       visible: np.ndarray, targets: np.ndarray, min_frames: int,
+                       rank: int = REASSIGN_RANK, unit2: float = 1.0) -> np.ndarray:
+    """Labels for the points ``targets`` from the motions of the labelled points.
+
+    Each motion's robust rank-``rank`` trajectory subspace is fitted on the visible entries
+    of its labelled points (:func:`subspace_residuals` with the mask; ``-1`` points take
+    no part); a target point goes to the motion whose subspace fits its visible
+    coordinates with the least residual per frame. For the points of incomplete data that
+    no voting frame pair sees (:mod:`laav.voting`): the subspaces use every frame at once,
+    so a point seen over a short stretch of the sequence is still placed.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+        Hidden entries filled (finite).
+    labels : ndarray of shape (P,)
+        ``-1`` for the points to leave out of the fits (the targets among them).
+    n_motions : int
+    visible : ndarray of shape (F, P), bool
+    targets : ndarray of int
+    min_frames : int
+        Targets visible in fewer frames keep ``-1``.
+    rank : int
+    unit2 : float
+        Squared pixel in the coordinates' units (see the module docstring).
+
+    Returns
+    -------
+    ndarray of shape (len(targets),), int64: a motion, or ``-1`` (too few frames, or a
+    motion with ``rank + 1`` points or fewer to fit).
+    """
+    targets = np.asarray(targets, dtype=np.int64)
+    out = np.full(targets.size, -1, dtype=np.int64)
+    enough = visible[:, targets].sum(axis=0) >= min_frames
+    if not enough.any():
+        return out
+    if n_motions == 1:
+        out[enough] = 0
+        return out
+    R = subspace_residuals(points, labels, n_motions, rank, unit2=unit2, visible=visible)
+    if R is None:
+        return out
+    out[enough] = R[:, targets[enough]].argmin(axis=0)
+    return out

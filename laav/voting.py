@@ -42,6 +42,7 @@ from ._threads import single_threaded
 from .metrics import misclassification_rate
 from .params import LaavParams
 from .refine import (
+    assign_by_subspace,
     frame_pairs,
     labelling_cost,
     motion_distances,
@@ -352,13 +353,16 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
 
     The frame pairs are :func:`laav._visibility.pair_pool`'s (at least ``max(8,
     rv_sample_size)`` points per motion seen in both frames); the points no pool pair sees
-    get label -1 (code 1 of :data:`laav._visibility.UNLABELLED_REASONS`) and take no
-    part; the others are segmented as on complete data, with every step masked: voting
+    take no part in the voting, and afterwards go to the motion whose trajectory subspace
+    fits them best (:func:`laav.refine.assign_by_subspace`) when they are seen in at least
+    :data:`laav._visibility.MIN_ASSIGN_FRAMES` frames, else get label -1 (code 1 of
+    :data:`laav._visibility.UNLABELLED_REASONS`); the others are segmented as on complete
+    data, with every step masked: voting
     (:func:`laav.rv.run_trials` with ``masks``), refinement and reassignment over
     :func:`laav._visibility.cover_pairs`, subspaces (reassignment, model selection)
     fitted on the visible entries (:func:`laav.refine.subspace_residuals` with the mask).
     """
-    from ._visibility import NO_FRAME_PAIR, decidable, filled, pair_pool
+    from ._visibility import MIN_ASSIGN_FRAMES, NO_FRAME_PAIR, decidable, filled, pair_pool
 
     P = points.shape[1]
     pool = pair_pool(vis, max(8, params.rv_sample_size) * C)  # ValueError when none qualifies
@@ -382,9 +386,13 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
                            plain_memo, mk)
     labels = np.full(P, -1, dtype=np.int64)
     labels[idx] = out.labels
+    rest = np.flatnonzero(~keep)
+    if rest.size:  # no vote reaches them: the motions' trajectory subspaces place them
+        labels[rest] = assign_by_subspace(filled(points, vis), labels, C, vis, rest,
+                                          MIN_ASSIGN_FRAMES, unit2=unit2(params))
     votes = np.zeros((P, C))
     votes[idx] = out.votes
-    code = np.where(keep, 0, NO_FRAME_PAIR).astype(np.int8)
+    code = np.where(labels >= 0, 0, NO_FRAME_PAIR).astype(np.int8)
     result = dataclasses.replace(out, labels=labels, votes=votes, unlabelled_code=code)
     if init_labels is None and warn:
         warn_single_label(seq, labels, C)

@@ -14,11 +14,20 @@ import pytest
 
 import laav
 from laav import LaavParams, Sequence
-from laav._visibility import NO_FRAME_PAIR, UNLABELLED_REASONS, decidable, min_overlap, pair_pool
+from laav._visibility import (
+    MIN_ASSIGN_FRAMES,
+    NO_FRAME_PAIR,
+    UNLABELLED_REASONS,
+    decidable,
+    filled,
+    min_overlap,
+    pair_pool,
+)
 from laav.atoms import build_atoms
 from laav.coarse import merge_models
 from laav.graph import atom_graph
 from laav.multicut import solve_multicut
+from laav.refine import assign_by_subspace
 from laav.synthetic import make_sequence, occlude
 
 
@@ -221,13 +230,19 @@ def test_points_seen_too_briefly_get_minus_one_with_a_reason_and_count_as_errors
     F, P = seq.n_frames, seq.n_points
     gap = F // 3
     vis = np.ones((F, P), bool)
-    brief = np.arange(0, P, 20)  # 8 points, seen in frames 10 .. 10 + gap - 1 only
-    vis[:, brief] = False
-    vis[10:10 + gap, brief] = True
+    brief = np.arange(0, P, 20)  # 8 points, seen in frames 10 .. 12 only
+    short = np.arange(10, P, 20)  # 8 points, seen in frames 10 .. 10 + gap - 1 only
+    vis[:, brief] = vis[:, short] = False
+    vis[10:13, brief] = True
+    vis[10:10 + gap, short] = True
     occl = Sequence(seq.points, seq.labels, visible=vis, name="brief")
     pool = pair_pool(vis, 16)
-    assert not decidable(vis, pool)[brief].any() and decidable(vis, pool).sum() == P - brief.size
+    no_pair = np.union1d(brief, short)
+    assert not decidable(vis, pool)[no_pair].any() and decidable(vis, pool).sum() == P - no_pair.size
+    assert MIN_ASSIGN_FRAMES == 4 and 3 < MIN_ASSIGN_FRAMES <= gap
     res = _quiet_segment(occl, 2)
+    # no vote reaches either group; the 7-frame tracks are placed by the motions'
+    # trajectory subspaces (right: the first scene's motions differ), the 3-frame ones not
     assert np.array_equal(np.flatnonzero(res.labels == -1), brief)
     assert np.array_equal(np.flatnonzero(res.unlabelled_code), brief)
     assert (res.unlabelled_code[brief] == NO_FRAME_PAIR).all()
@@ -240,7 +255,29 @@ def test_points_seen_too_briefly_get_minus_one_with_a_reason_and_count_as_errors
     rest = np.setdiff1d(np.arange(P), brief)
     assert laav.misclassification_rate(seq.labels[rest], res.labels[rest]) == 0.0
     assert err == pytest.approx(brief.size / P)
-    assert (res.voting.votes[brief] == 0).all()
+    assert (res.voting.votes[no_pair] == 0).all()  # placed without a vote
+
+
+def test_subspace_assignment_places_tracks_by_their_motion():
+    """assign_by_subspace on its own: short tracks of two motions go to their motions'
+    subspaces; a wrong motion's subspace would not fit them (swap the motions' labels
+    and every placed track follows)."""
+    seq = make_sequence(1, n_frames=21, n_points=160, rng=3)
+    F, P = seq.n_frames, seq.n_points
+    vis = np.ones((F, P), bool)
+    targets = np.arange(5, P, 9)
+    vis[:, targets] = False
+    vis[4:9, targets] = True  # 5 frames each
+    pts = filled(seq.points, vis)
+    lab = seq.labels.copy()
+    lab[targets] = -1
+    got = assign_by_subspace(pts, lab, 2, vis, targets, MIN_ASSIGN_FRAMES)
+    assert np.array_equal(got, seq.labels[targets])
+    swapped = np.where(lab >= 0, 1 - lab, -1)
+    assert np.array_equal(assign_by_subspace(pts, swapped, 2, vis, targets, MIN_ASSIGN_FRAMES),
+                          1 - seq.labels[targets])
+    # fewer frames than asked: -1
+    assert (assign_by_subspace(pts, lab, 2, vis, targets, 6) == -1).all()
 
 
 def test_too_little_seen_together_is_a_clear_error():
