@@ -1,14 +1,15 @@
 """Estimating the number of motions C when it is not known: :func:`estimate_motions`.
 
-**Profile** (:func:`motion_profile`, one pass, no Random Voting). LAAV's atoms, graph
-and minimum cost multicut (its own segments, at least ``max_motions + 1``) give fine
-models; these are merged greedily, always the pair whose union adds the least residual
-to a rank-4 trajectory subspace (an affine camera's rigid motion spans 4 dimensions),
-which yields one labelling for every C = 1 .. ``max_motions + 1``. Each is polished
-(k-subspaces, then :func:`laav.refine.reassign_labels`) and scored twice per point: its
-squared distance to its motion's robust rank-4 subspace (``residuals``) and its mean
-Sampson distance to the nearest motion's fundamental matrices over 12 frame pairs
-(``epipolar``). The level of C is the 95 % trimmed mean of each.
+**Profile** (:func:`motion_profile`): LAAV's own segmentation (:class:`laav.Pipeline`, same
+seed; atoms and graph computed once, the later stages again for every C) gives one
+labelling for every C = 2 .. ``max_motions + 1`` (C = 1: every point in one motion).
+Each is scored twice per point: its squared distance to its motion's robust rank-4
+trajectory subspace (``residuals``; an affine camera's rigid motion spans 4 dimensions)
+and its mean Sampson distance to the nearest motion's fundamental matrices over 12 frame
+pairs (``epipolar``). The level of C is the 95 % trimmed mean of each. (Until 2026-11-30
+the labellings came from a greedy merge of the multicut's segments by subspace residual,
+without Random Voting: cheaper, but right at the true C on only 46 % of the three-motion
+sequences, and the test then found 8 of 35 three-motion sequences; ``docs/bench/motions.md``.)
 
 **Decision** (:func:`decide`), a sequential test: start at C = 1 and add a motion while
 the test says the next one is real.
@@ -27,11 +28,12 @@ stability across seeds, the multicut's own count).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ._sequence import MIN_POINTS, Sequence
+from ._sequence import MIN_POINTS, LaavWarning, Sequence
 from ._threads import single_threaded
 
 __all__ = ["MotionCount", "MotionProfile", "motion_profile", "estimate_motions", "decide",
@@ -40,8 +42,8 @@ __all__ = ["MotionCount", "MotionProfile", "motion_profile", "estimate_motions",
 RANK = 4  # an affine camera's rigid motion spans a 4-dimensional trajectory subspace
 #: Fitted by benchmarks/motions.py on all 155 Hopkins155 sequences (seed 0 profiles);
 #: weights of the log gains (subspace, epipolar) at a step and at the next step.
-STEP_WEIGHTS = (0.5485, 1.0168, 1.2177, 0.8958)
-STEP_BIAS = -3.2326
+STEP_WEIGHTS = (0.7494, 2.3861, 0.7248, 1.3284)
+STEP_BIAS = -3.9601
 #: One motion when its epipolar level <= this x the atoms' noise level (px^2).
 ONE_MOTION_RATIO = 0.05
 TRIM = 0.95  # share of points (best explained) in a level
@@ -54,19 +56,9 @@ class MotionProfile:
     candidates: np.ndarray      # (K,) C values
     residuals: np.ndarray       # (K, P) squared distance (px^2) of each point to its motion
     epipolar: np.ndarray        # (K, P) mean Sampson distance (px^2) to the nearest motion
-    labels: np.ndarray          # (K, P) the labelling behind each row
-    merge_costs: np.ndarray     # (K,) residual increase of the merge that left C groups
+    labels: np.ndarray          # (K, P) the labelling behind each row (LAAV's, seeded)
     noise2: float               # px^2: median squared affine residual of the atoms' members
-    n_segments: int             # segments of the multicut itself
     n_atoms: int
-    fine_cost: np.ndarray       # (M, M) pairwise merge cost of the fine models (px^2 total)
-    fine_sizes: np.ndarray      # (M,) points per fine model
-
-
-def _tail_sum(S: np.ndarray, rank: int) -> float:
-    """Residual sum of squares of the best rank-``rank`` subspace of scatter matrix ``S``."""
-    ev = np.linalg.eigvalsh(S)
-    return float(max(ev[:-rank].sum(), 0.0)) if ev.size > rank else 0.0
 
 
 def _group_residuals(W, norm2, labels, n_groups, rank, rounds=3, min_size=MIN_POINTS, unit2=1.0):
@@ -93,23 +85,6 @@ def _group_residuals(W, norm2, labels, n_groups, rank, rounds=3, min_size=MIN_PO
     return R
 
 
-def _polish(W, norm2, labels, n_groups, rank, rounds=3, unit2=1.0):
-    """k-subspaces from ``labels`` (-1 = unlabelled): every point to its nearest subspace."""
-    cur = labels
-    R = _group_residuals(W, norm2, cur, n_groups, rank, unit2=unit2)
-    for _ in range(rounds):
-        if not np.isfinite(R).any():
-            break
-        new = R.argmin(axis=0)
-        if np.array_equal(new, cur):
-            break
-        cur = new
-        R = _group_residuals(W, norm2, cur, n_groups, rank, unit2=unit2)
-    if not np.isfinite(R).any():
-        return cur, np.full(labels.size, np.inf)
-    return cur, R.min(axis=0)
-
-
 @single_threaded
 def motion_profile(seq, max_motions: int = 5, params=None, seed: int = 0,
                    rank: int = RANK) -> MotionProfile:
@@ -120,17 +95,17 @@ def motion_profile(seq, max_motions: int = 5, params=None, seed: int = 0,
     seq : Sequence or ndarray of shape (F, P, 2)
     max_motions : int
     params : LaavParams, optional
-        Atoms and graph settings (default preset).
+        LAAV's settings (default preset).
     seed : int
-        Seeds the atoms as :func:`laav.segment` does.
+        LAAV's seed, as :func:`laav.segment`'s.
     rank : int
 
     Returns
     -------
     MotionProfile
         Rows of ``residuals``, ``epipolar`` and ``labels`` are the candidates; a candidate
-        with no labelling (fewer fine models than C, or a group under 8 points) has inf
-        rows.
+        with no labelling (too few points for C motions, or a motion under 8 points) has
+        inf rows.
     """
     ctx = _prepare(seq, max_motions, params, seed, rank)
     K = max_motions + 1
@@ -142,133 +117,67 @@ def motion_profile(seq, max_motions: int = 5, params=None, seed: int = 0,
         got = _evaluate(ctx, int(C))
         if got is not None:
             L[i], R[i], E[i] = got
-    mcost = np.array([ctx.paid.get(int(C), np.nan) for C in cands])
-    return MotionProfile(cands, R, E, L, mcost, ctx.noise2, ctx.n_segments, ctx.n_atoms,
-                         ctx.fine_cost, ctx.fine_sizes)
+    return MotionProfile(cands, R, E, L, ctx.noise2, ctx.n_atoms)
 
 
 @dataclass(eq=False)
 class _Context:
-    pts: np.ndarray
+    pipe: object  # laav.Pipeline at C = 2: atoms and graph, reused for every C
     W: np.ndarray
     norm2: np.ndarray
-    point_fine: np.ndarray
-    states: dict
-    paid: dict
     noise2: float
-    n_segments: int
     n_atoms: int
-    fine_cost: np.ndarray
-    fine_sizes: np.ndarray
     rank: int
     pairs: np.ndarray
     unit2: float
 
     @property
     def P(self) -> int:
-        return self.pts.shape[1]
+        return self.W.shape[1]
 
 
 def _prepare(seq, max_motions, params, seed, rank) -> _Context:
-    """Atoms, graph, multicut and the greedy merges: everything before the candidates."""
-    from .atoms import Neighbourhoods, build_atoms
-    from .coarse import point_labels_from_atoms
-    from .graph import atom_graph
-    from .multicut import solve_multicut
-    from .params import LaavParams
-    from .pipeline import _stage_rngs
+    """LAAV at C = 2 (its atoms and graph serve every C) and the trajectory matrix."""
+    from .pipeline import Pipeline
     from .refine import frame_pairs, trajectory_matrix
     from .voting import unit2
 
     if not isinstance(seq, Sequence):
         seq = Sequence(np.asarray(seq, dtype=np.float64))
-    p = LaavParams() if params is None else params
-    pts = seq.points
-    F, P, _ = pts.shape
-    rng = np.random.default_rng(_stage_rngs(seed)["atoms"])
-    D = Neighbourhoods(pts)
-    atoms = build_atoms(seq, p, rng, D)
-    graph = atom_graph(seq, atoms, p, D)
-    kmin = max_motions + 1
-    mc = solve_multicut(graph, kmin)
-    fine = mc.multicut_labels if mc.n_segments > kmin else mc.atom_labels
-    M = int(fine.max()) + 1 if fine.size else 0
-    point_fine = point_labels_from_atoms(atoms, fine) if M else np.full(P, -1)
+    with warnings.catch_warnings():  # a candidate's warnings are not the caller's
+        warnings.simplefilter("ignore", LaavWarning)
+        pipe = Pipeline(seq, 2, params, seed)
+    atoms = pipe.result.atoms
     res = [np.ravel(r) for r in atoms.residuals if np.size(r)]
     noise2 = float(np.median(np.concatenate(res)) ** 2) if res else 0.0
-    W = trajectory_matrix(pts)  # origin at the points' corner: translation-free
+    W = trajectory_matrix(seq.points)  # origin at the points' corner: translation-free
     norm2 = np.einsum("ij,ij->j", W, W)
-    # merge costs in the span of the leading directions (C motions span at most 4C)
-    d = min(2 * F, rank * (max_motions + 1) + rank)
-    U0 = np.linalg.svd(W, full_matrices=False)[0][:, :d]
-    states, paid, fine_cost, sizes = _greedy_merge(U0.T @ W, point_fine, M, rank, max_motions + 1)
-    return _Context(pts, W, norm2, point_fine, states, paid, noise2, mc.n_segments,
-                    atoms.n_atoms, fine_cost, sizes, rank, frame_pairs(F, 12), unit2(p))
+    return _Context(pipe, W, norm2, noise2, atoms.n_atoms, rank, frame_pairs(seq.n_frames, 12),
+                    unit2(pipe.params))
 
 
 def _evaluate(ctx: _Context, C: int):
-    """(labels, subspace residuals, epipolar distances) of candidate C, None if it has no
-    labelling."""
-    from .refine import motion_distances, reassign_labels
+    """(labels, subspace residuals, epipolar distances) of candidate C: LAAV's labels with C
+    motions; None when there is no such labelling (too few points, a motion under 8)."""
+    from .refine import motion_distances
 
-    if C not in ctx.states:
-        return None
-    lab0 = np.full(ctx.P, -1, dtype=np.int64)
-    for k, fines in enumerate(ctx.states[C]):
-        lab0[np.isin(ctx.point_fine, fines)] = k
-    lab, _ = _polish(ctx.W, ctx.norm2, lab0, C, ctx.rank, unit2=ctx.unit2)
-    if C > 1 and np.bincount(lab, minlength=C).min() >= MIN_POINTS:
-        lab, _ = reassign_labels(ctx.pts, lab, C, rounds=2, min_size=MIN_POINTS, unit2=ctx.unit2)
+    if C == 1:
+        lab = np.zeros(ctx.P, dtype=np.int64)
+    else:
+        if C * MIN_POINTS > ctx.P:
+            return None
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", LaavWarning)
+                lab = ctx.pipe.update(n_motions=C).labels
+        except ValueError:  # the sequence cannot hold C motions (degenerate-input checks)
+            return None
+        if (lab < 0).any() or np.bincount(lab, minlength=C).min() < MIN_POINTS:
+            return None
     R = _group_residuals(ctx.W, ctx.norm2, lab, C, ctx.rank, unit2=ctx.unit2).min(axis=0)
-    Dm = motion_distances(ctx.pts, lab, C, ctx.pairs, ctx.unit2)
+    Dm = motion_distances(ctx.pipe.seq.points, lab, C, ctx.pairs, ctx.unit2)
     E = np.where(np.isfinite(Dm), Dm, np.inf).min(axis=0)
     return lab, R, E
-
-
-
-def _greedy_merge(Wp, point_fine, n_fine, rank, n_keep):
-    """Merge fine models two at a time, always the pair whose union's rank-``rank`` fit
-    adds the least residual (groups under MIN_POINTS points first, into their cheapest
-    partner). Returns the groups (lists of fine models) present when n <= ``n_keep``
-    remained, the cost of the merge that left n, the fine models' pairwise costs and sizes."""
-    groups = {g: np.flatnonzero(point_fine == g) for g in range(n_fine)}
-    groups = {g: m for g, m in groups.items() if m.size}
-    S = {g: Wp[:, m] @ Wp[:, m].T for g, m in groups.items()}
-    cost = {g: _tail_sum(S[g], rank) for g in groups}
-    keys = sorted(groups)
-    sizes = np.array([groups[g].size for g in keys])
-    pair = {}
-    for i, a in enumerate(keys):
-        for b in keys[i + 1:]:
-            pair[(a, b)] = _tail_sum(S[a] + S[b], rank) - cost[a] - cost[b]
-    fine_cost = np.zeros((len(keys), len(keys)))
-    for (a, b), c in pair.items():
-        fine_cost[keys.index(a), keys.index(b)] = fine_cost[keys.index(b), keys.index(a)] = c
-    members = {g: [g] for g in groups}
-    states, paid = {}, {}
-    while True:
-        small = [g for g in groups if groups[g].size < MIN_POINTS]
-        if small and len(groups) > 1:
-            s = min(small, key=lambda g: groups[g].size)
-            (a, b), c = min(((k, v) for k, v in pair.items() if s in k), key=lambda kv: kv[1])
-        else:
-            if len(groups) <= n_keep:
-                states[len(groups)] = [list(v) for v in members.values()]
-            if len(groups) <= 1:
-                break
-            (a, b), c = min(pair.items(), key=lambda kv: kv[1])
-            if len(groups) <= n_keep + 1:
-                paid[len(groups) - 1] = c
-        groups[a] = np.concatenate([groups[a], groups.pop(b)])
-        S[a] = S[a] + S.pop(b)
-        cost[a] = _tail_sum(S[a], rank)
-        cost.pop(b)
-        members[a] += members.pop(b)
-        pair = {k: v for k, v in pair.items() if a not in k and b not in k}
-        for g in groups:
-            if g != a:
-                pair[(min(a, g), max(a, g))] = _tail_sum(S[a] + S[g], rank) - cost[a] - cost[g]
-    return states, paid, fine_cost, sizes
 
 
 def profile_levels(residuals: np.ndarray, epipolar: np.ndarray, unit2: float = 1.0) -> np.ndarray:
