@@ -357,12 +357,13 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
     visible : ndarray of shape (F, P), bool, optional
         Missing data (``points`` finite everywhere, hidden entries filled): each
         motion's subspace is fitted on the visible entries of its members only, by
-        alternating least squares (per-point coefficients, per-row basis), started from
-        the principal subspace with unseen entries set to their row's mean, with the
-        same reweighting; the origin is the corner of the visible points' bounding box;
-        a point's residual is that of its least-squares fit on its visible rows, per
-        visible frame. A point seen in ``rank / 2`` frames or fewer is fitted exactly by
-        every subspace (residual 0 everywhere: no evidence).
+        alternating least squares (per-point coefficients, per-row basis) swept until it
+        stops gaining (``_ALS_TOL``), started from the principal subspace with every
+        unseen entry guessed from the point's nearest seen frame and its motion's mean
+        translation (``_impute_by_translation``), with the same reweighting; the origin
+        is the corner of the visible points' bounding box; a point's residual is that of
+        its least-squares fit on its visible rows, per visible frame. A point seen in
+        ``rank / 2`` frames or fewer is fitted exactly by every subspace (residual 0 everywhere: no evidence).
 
     Returns
     -------
