@@ -363,7 +363,8 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
         translation (``_impute_by_translation``), with the same reweighting; the origin
         is the corner of the visible points' bounding box; a point's residual is that of
         its least-squares fit on its visible rows, per visible frame. A point seen in
-        ``rank / 2`` frames or fewer is fitted exactly by every subspace (residual 0 everywhere: no evidence).
+        ``rank / 2`` frames or fewer is fitted exactly by every subspace (residual 0
+        everywhere: no evidence).
 
     Returns
     -------
