@@ -164,3 +164,12 @@ def test_cli_motions_bad_value(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["segment", str(path), "--motions", "several"])
     assert "positive integer or 'auto'" in capsys.readouterr().err
+
+
+def test_many_tracks_are_estimated_on_a_seeded_subset():
+    seq = make_sequence(1, n_frames=12, n_points=1100, rng=0)
+    a = estimate_motions(seq, random_state=0)
+    assert a.n_motions == 2, a.reason
+    assert "1000 of the 1100 tracks" in a.reason
+    b = estimate_motions(seq, random_state=0)
+    np.testing.assert_array_equal(a.subspace_level, b.subspace_level)  # the same subset
