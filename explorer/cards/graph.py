@@ -12,14 +12,19 @@ from bokeh.palettes import RdBu11
 
 from .. import views as V
 from .base import Host, card, fit_image_figure, image_figure, move_legend, set_data
+from .live import LiveFrames
 
 
 class GraphView:
     """Atoms as nodes at their seeds' positions in the shown frame, kept / cut edges by cost,
     clusters after a GAEC step coloured by the fine model they end in."""
 
-    def __init__(self, host: Host, extent) -> None:
+    def __init__(self, host: Host, extent, live: LiveFrames | None = None) -> None:
         self.host = host
+        self.live = live if live is not None else LiveFrames()
+        self.specs = V.graph_specs()
+        self._tpl_key = None  # (result, step, colours) of the templates kept
+        self._tpls: dict = {}
         # a player, not a slider: its range input takes Home/End to the first/last step (the
         # slider's noUiSlider keeps its first range for the End key: it went to step 1), and
         # play steps through the contractions for a class
@@ -60,6 +65,12 @@ class GraphView:
                               padding=4), "below")
         move_legend(g)
 
+        # the views the page makes at each frame (explorer/cards/live.py)
+        for name, src in (("nodes", self.src_nodes), ("joined", self.src_joined), ("cut", self.src_cut),
+                          ("step_edge", self.src_step), ("pair", self.src_pair)):
+            self.live.add("graph_" + name, src, self.specs[name])
+        self.live.add_text("graph_title", g.title, "text")
+
         self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
         self.card = card("2 · Multicut graph of atoms → fine models (GAEC replay)",
                          pn.pane.Bokeh(self.fig), self.w_step, self.caption)
@@ -78,8 +89,18 @@ class GraphView:
         """Show ``res``'s graph at ``frame`` and the replay's step."""
         if res is None:
             return
-        f, step = int(frame), int(self.w_step.value)
-        d = V.graph_sources(res, f, step, fine_colors)
+        step = int(self.w_step.value)
+        key = (res, step, fine_colors)
+        if self._tpl_key is None or any(a is not b for a, b in zip(key, self._tpl_key)):
+            self._tpls = V.graph_templates(res, step, fine_colors)
+            self._tpl_key = key
+        track = V.atom_track(res)
+        f = int(np.clip(int(frame), 0, max(track[0].shape[0] - 1, 0)))
+        d = {k: V.instantiate(t, self.specs[k], *track, f) for k, t in self._tpls.items()}
+        live = self.live
+        live.set_atoms(res)
+        for k, t in self._tpls.items():
+            live.template("graph_" + k, t)
         lim = V.cost_limit(res)
         self.cost_mapper.low, self.cost_mapper.high = -lim, lim
         set_data(self.src_nodes, d["nodes"])
@@ -87,9 +108,11 @@ class GraphView:
         set_data(self.src_cut, d["cut"])
         set_data(self.src_step, d["step_edge"])
         set_data(self.src_pair, d["pair"])
-        self.fig.title.text = (f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {f} · "
-                               f"{len(np.unique(d['nodes']['cluster']))} clusters")
+        self.fig.title.text = live.text(
+            "graph_title", f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {{f}} · "
+            "{k:graph_nodes.cluster} clusters", f, {"graph_" + k: v for k, v in d.items()})
         self.caption.object = V.replay_caption(res, step)
+        live.commit(f)
 
     # ------------------------------------------------------------------ callbacks
     def _on_step(self, event=None) -> None:
@@ -99,5 +122,5 @@ class GraphView:
         h = self.host
         if h.result is None or h.quieted:
             return
-        with h.hold():
+        with h.hold(live="draw"):
             self.draw(h.result, h.frame, h.fine_colors)
