@@ -16,7 +16,7 @@ from bokeh.palettes import Greys256
 
 from .. import views as V
 from .base import Host, card, fit_image_figure, image_figure, move_legend, set_data
-from .live import LiveFrames
+from .live import LiveFrames, repaint_alone
 
 EMPTY_POINTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "index": []}
 #: The layers a checkbox shows or hides, in the sidebar's order.
@@ -82,8 +82,11 @@ class FrameView:
         self._item_changed = items.get("changed motion")
 
         # the views the page makes at each frame (explorer/cards/live.py)
+        repaint_alone(f, [self.r_trails, self.r_r2, self.r_r1, self.r_points, self.r_unassigned,
+                          self.r_changed, self.r_errors])
         for name in self.specs:
             self.live.add("frame_" + name, getattr(self, "src_" + name), self.specs[name])
+        self.live.detach_legend(f)
         self.live.add_text("frame_title", f.title, "text")
         self.live.add_text("frame_unassigned", self._item_unassigned, "label", value=True)
         self.live.add_text("frame_changed", self._item_changed, "label", value=True)
@@ -199,8 +202,7 @@ class FrameView:
 
     def _layers_now(self) -> None:
         on = set(self.w_layers.value)
-        self.r_trails.visible = LAYERS[0] in on
-        self.r_r1.visible = self.r_r2.visible = LAYERS[1] in on
-        self.r_unassigned.visible = LAYERS[2] in on
-        self.r_errors.visible = LAYERS[3] in on
-        self.r_changed.visible = LAYERS[4] in on
+        for rs, layer in (((self.r_trails,), 0), ((self.r_r1, self.r_r2), 1), ((self.r_unassigned,), 2),
+                          ((self.r_errors,), 3), ((self.r_changed,), 4)):
+            for r in rs:  # the renderer and its legend entry's stand-in (live.py)
+                r.visible = self.live.stand_in(r).visible = LAYERS[layer] in on

@@ -12,7 +12,7 @@ from bokeh.palettes import RdBu11
 
 from .. import views as V
 from .base import Host, card, fit_image_figure, image_figure, move_legend, set_data
-from .live import LiveFrames
+from .live import LiveFrames, repaint_alone
 
 
 class GraphView:
@@ -36,6 +36,9 @@ class GraphView:
 
         # RdBu11 runs blue -> red; cost > 0 (join) is blue
         self.cost_mapper = LinearColorMapper(palette=list(RdBu11)[::-1], low=-1, high=1)
+        # the colour bar reads a mapper of its own: bokeh's colour bar lays the whole figure
+        # out again whenever its mapper colours anything, i.e. at every frame move's edges
+        self.bar_mapper = LinearColorMapper(palette=list(RdBu11)[::-1], low=-1, high=1)
         g = self.fig = image_figure("Atom graph at frame 0", 410, extent)
         empty_e = {"x0": [], "y0": [], "x1": [], "y1": [], "cost": [], "error": [], "a": [], "b": []}
         self.src_joined = ColumnDataSource(dict(empty_e))
@@ -60,15 +63,18 @@ class GraphView:
                   line_width=3, legend_label="joined at this step (ringed)")
         g.add_tools(HoverTool(renderers=[r_nodes], tooltips=[("atom", "@atom"), ("cluster", "@cluster"),
                                                              ("features", "@members")]))
-        g.add_layout(ColorBar(color_mapper=self.cost_mapper, title="edge cost: + join (blue), − cut (red)",
+        g.add_layout(ColorBar(color_mapper=self.bar_mapper, title="edge cost: + join (blue), − cut (red)",
                               orientation="horizontal", height=8, title_text_font_size="9pt",
                               padding=4), "below")
         move_legend(g)
 
         # the views the page makes at each frame (explorer/cards/live.py)
+        live_srcs = (self.src_nodes, self.src_joined, self.src_cut, self.src_step, self.src_pair)
+        repaint_alone(g, [r for r in g.renderers if getattr(r, "data_source", None) in live_srcs])
         for name, src in (("nodes", self.src_nodes), ("joined", self.src_joined), ("cut", self.src_cut),
                           ("step_edge", self.src_step), ("pair", self.src_pair)):
             self.live.add("graph_" + name, src, self.specs[name])
+        self.live.detach_legend(g)
         self.live.add_text("graph_title", g.title, "text")
 
         self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
@@ -102,7 +108,8 @@ class GraphView:
         for k, t in self._tpls.items():
             live.template("graph_" + k, t)
         lim = V.cost_limit(res)
-        self.cost_mapper.low, self.cost_mapper.high = -lim, lim
+        for m in (self.cost_mapper, self.bar_mapper):
+            m.low, m.high = -lim, lim
         set_data(self.src_nodes, d["nodes"])
         set_data(self.src_joined, d["joined"])
         set_data(self.src_cut, d["cut"])

@@ -20,7 +20,7 @@ and a frame move is drawn by the server, as before (docs/bench/explorer_browser_
 from __future__ import annotations
 
 import numpy as np
-from bokeh.models import ColumnDataSource, CustomJS
+from bokeh.models import ColumnDataSource, CustomJS, GlyphRenderer
 
 from .. import views as V
 from .base import set_data
@@ -130,6 +130,38 @@ for (const name of Object.keys(out)) out[name][0].setv({data: out[name][1]}, {sy
 """
 
 
+def legend_rows(tpl: dict, spec: dict, by: str | None = None) -> dict:
+    """The rows a legend's stand-in renderer holds for view template ``tpl`` (see
+    :meth:`LiveFrames.detach_legend`): its first row (one per distinct value of column ``by``,
+    for a legend listing them), the last block's constants (the newest trail step), no
+    position (NaN: drawn nowhere in the plot)."""
+    consts = {k: np.asarray(v) for k, v in tpl.items() if k not in ("_a", "_b")}
+    n = len(np.asarray(tpl["_a"]))
+    if by is not None and by in consts:
+        _, rows = np.unique(consts[by], return_index=True)
+        rows = np.sort(rows)
+    else:
+        rows = np.arange(min(n, 1))
+    out = {c: np.full(rows.size, np.nan) for c in spec["coords"]}
+    last = spec["blocks"][-1].get("const", {}) if spec["blocks"] else {}
+    for name, val in last.items():
+        out[name] = np.full(rows.size, float(val))
+    for name, col in consts.items():
+        out[name] = col[rows]
+    return out
+
+
+def repaint_alone(fig, renderers) -> None:
+    """Draw ``renderers`` and ``fig``'s title on the figure's overlay canvas: bokeh repaints
+    only that layer when they change (a frame move), not the axes, grid, legend and colour
+    bar of its primary canvas, which were most of a frame move's painting (measured:
+    docs/bench/explorer_browser_latency.md). They are still clipped to the plot's frame and
+    drawn in their order, over the image and grid as before."""
+    for r in renderers:
+        r.level = "overlay"
+    fig.title.level = "overlay"
+
+
 class LiveFrames:
     """The browser's copy of the views that follow the frame, and the script making them.
 
@@ -151,6 +183,8 @@ class LiveFrames:
         self._seq = None  # the sequence whose tracks were set
         self._atoms = None  # the graph whose atom track was set
         self._fmt: dict[str, str] = {}
+        self._proxies: dict[str, list] = {}  # view name -> [(legend's stand-in renderer, by)]
+        self._stand_in: dict[int, GlyphRenderer] = {}  # id(renderer) -> its legend stand-in
         self._shape = {"points": (0, 0), "atoms": (0, 0)}
 
     # ------------------------------------------------------------------ building
@@ -164,6 +198,39 @@ class LiveFrames:
         property takes ``{"value": text}``, as a legend item's label)."""
         if model is not None:
             self.texts[key] = (model, attr, value)
+
+    def detach_legend(self, fig) -> None:
+        """``fig``'s legend items drawn from stand-ins of the registered views' renderers.
+
+        Bokeh's legend repaints whenever anything its items reference changes, data sources
+        included, and a legend repaint redraws the figure's whole primary canvas (axes, grid,
+        legend): most of a frame move's painting. The stand-ins (a copy of each glyph, rows
+        made once per result by :func:`legend_rows`, drawn nowhere) keep the legend's look
+        and its clicks: a stand-in's visibility and its renderer's follow each other."""
+        by_src = {id(src): name for name, (src, _, _) in self.views.items()}
+        for item in fig.legend[0].items:
+            label = item.label
+            by = label.get("field") if isinstance(label, dict) else getattr(label, "field", None)
+            reps = []
+            for r in item.renderers:
+                name = by_src.get(id(getattr(r, "data_source", None)))
+                if name is None:
+                    reps.append(r)
+                    continue
+                cols = {c: [] for c in r.data_source.data}
+                proxy = GlyphRenderer(data_source=ColumnDataSource(cols), glyph=r.glyph.clone(),
+                                      visible=r.visible)
+                fig.renderers.append(proxy)
+                r.js_link("visible", proxy, "visible")
+                proxy.js_link("visible", r, "visible")
+                self._proxies.setdefault(name, []).append((proxy, by if isinstance(by, str) else None))
+                self._stand_in[id(r)] = proxy
+                reps.append(proxy)
+            item.renderers = reps
+
+    def stand_in(self, renderer):
+        """The legend's stand-in for ``renderer`` (itself when it has none)."""
+        return self._stand_in.get(id(renderer), renderer)
 
     def link(self, player) -> CustomJS:
         """Build the script and run it when ``player`` (a panel Player) moves or the server
@@ -213,9 +280,11 @@ class LiveFrames:
 
     def template(self, name: str, tpl: dict) -> None:
         """The template of view ``name`` (sent only when it differs from the page's)."""
+        _, tsrc, spec = self.views[name]
+        for proxy, by in self._proxies.get(name, ()):
+            set_data(proxy.data_source, legend_rows(tpl, spec, by))
         if not self.enabled:
             return
-        _, tsrc, _ = self.views[name]
         set_data(tsrc, {("@" + k[1:]) if k in ("_a", "_b") else "=" + k: np.asarray(v)
                         for k, v in tpl.items()})
 
