@@ -141,6 +141,14 @@ def test_a_frame_move_is_drawn_by_the_page_while_the_server_is_blocked():
         touched = [e for ev in _patches(frames[n0:]) for e in ev if e.get("model", {}).get("id") in sent]
         assert not touched, f"the server sent frame views after the move: {touched[:3]}"
         assert not _page_differs_from_server(page, ex)  # the server's copies followed the page
+        # the legend draws stand-ins (live.py); a click on an entry still hides its renderers
+        shown = ("(id) => { for (const m of Bokeh.documents[0].all_models) "
+                 "if (m.id === id) return m.visible; }")
+        assert page.evaluate(shown, fv.r_r1.id)
+        page.get_by_text("atom R1", exact=True).first.click()
+        page.wait_for_function(f"() => ({shown})('{fv.r_r1.id}') === false && ({shown})('{fv.r_r2.id}')",
+                               timeout=10000)
+        _wait_for(lambda: not fv.r_r1.visible, 30, "the server to hide the atom circles", page=page)
         assert not errors, errors
 
 

@@ -88,9 +88,10 @@ class FrameView:
             self.live.add("frame_" + name, getattr(self, "src_" + name), self.specs[name])
         self.live.detach_legend(f)
         self.live.add_text("frame_title", f.title, "text")
-        self.live.add_text("frame_unassigned", self._item_unassigned, "label", value=True)
-        self.live.add_text("frame_changed", self._item_changed, "label", value=True)
-        self.live.add_text("frame_errors", self._item_errors, "label", value=True)
+        leg = f.legend[0]
+        self.live.add_text("frame_unassigned", self._item_unassigned, "label", legend=leg)
+        self.live.add_text("frame_changed", self._item_changed, "label", legend=leg)
+        self.live.add_text("frame_errors", self._item_errors, "label", legend=leg)
 
         self._caption = ""  # the caption of the last result, without the background's sentence
         self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=900, margin=(0, 10))

@@ -120,11 +120,23 @@ const fill = (fmt) => String(fmt).replace(/\{(f|n|k)(?::(\w+)(?:\.(\w+))?)?\}/g,
 });
 // texts (titles, legend labels) before the data: a legend repainted while a glyph's new
 // data is being mapped read past its old colours (see Explorer.hold)
-for (const [key, model, attr, wrap] of texts) {
+// (only when they change: a legend rebuilds its entries, blank, on any change of an item,
+// and draws their glyphs only when its figure's main layer is painted, which a frame move
+// no longer does: repaint_alone; so a legend whose label changed is asked to repaint)
+const repaint = new Set();
+for (const [key, model, attr, wrap, owner] of texts) {
   const fmt = m['t_' + key];
   if (fmt === undefined || fmt.length === 0) continue;
   const text = fill(fmt[0]);
+  const cur = model[attr];
+  if ((cur !== null && typeof cur === 'object' ? cur.value : cur) === text) continue;
   model.setv({[attr]: wrap ? {value: text} : text}, {sync: false});
+  if (owner) repaint.add(owner);
+}
+const index = (cb_context && cb_context.index) || (window.Bokeh && Bokeh.index);
+for (const owner of index ? repaint : []) {
+  const view = index.find_one(owner);
+  if (view) view.request_paint();
 }
 for (const name of Object.keys(out)) out[name][0].setv({data: out[name][1]}, {sync: false});
 """
@@ -149,6 +161,15 @@ def legend_rows(tpl: dict, spec: dict, by: str | None = None) -> dict:
     for name, col in consts.items():
         out[name] = col[rows]
     return out
+
+
+def _field_of(spec) -> str | None:
+    """The column a glyph property reads (a name, a field spec), or None."""
+    if isinstance(spec, str):
+        return spec
+    if isinstance(spec, dict):
+        return spec.get("field")
+    return getattr(spec, "field", None)
 
 
 def repaint_alone(fig, renderers) -> None:
@@ -193,22 +214,26 @@ class LiveFrames:
         by ``spec`` (:func:`explorer.views.frame_specs`)."""
         self.views[name] = (src, ColumnDataSource({"@a": []}), spec)
 
-    def add_text(self, key: str, model, attr: str, value: bool = False) -> None:
-        """Fill ``model.attr`` from the format :meth:`text` gives ``key`` (``value``: the
-        property takes ``{"value": text}``, as a legend item's label)."""
+    def add_text(self, key: str, model, attr: str, legend=None) -> None:
+        """Fill ``model.attr`` from the format :meth:`text` gives ``key``; ``legend``: the
+        Legend ``model`` (a LegendItem, whose label takes ``{"value": text}``) belongs to."""
         if model is not None:
-            self.texts[key] = (model, attr, value)
+            self.texts[key] = (model, attr, legend is not None, legend)
 
     def detach_legend(self, fig) -> None:
         """``fig``'s legend items drawn from stand-ins of the registered views' renderers.
 
-        Bokeh's legend repaints whenever anything its items reference changes, data sources
-        included, and a legend repaint redraws the figure's whole primary canvas (axes, grid,
-        legend): most of a frame move's painting. The stand-ins (a copy of each glyph, rows
-        made once per result by :func:`legend_rows`, drawn nowhere) keep the legend's look
-        and its clicks: a stand-in's visibility and its renderer's follow each other."""
+        Bokeh's legend rebuilds itself whenever anything its items reference changes, data
+        sources included, and draws its entries' glyphs only with the figure's main canvas:
+        with the moving renderers in its items, every frame move repainted the whole figure
+        (axes, grid, legend), most of a frame move's painting. The stand-ins (a copy of each
+        glyph, rows made once per result by :func:`legend_rows`, drawn nowhere) keep the
+        legend's look; a click on an entry shows or hides the real renderers as before (a
+        callback on the legend: nothing the items reference points back to them)."""
         by_src = {id(src): name for name, (src, _, _) in self.views.items()}
-        for item in fig.legend[0].items:
+        legend = fig.legend[0]
+        pairs = []
+        for item in legend.items:
             label = item.label
             by = label.get("field") if isinstance(label, dict) else getattr(label, "field", None)
             reps = []
@@ -217,16 +242,22 @@ class LiveFrames:
                 if name is None:
                     reps.append(r)
                     continue
-                cols = {c: [] for c in r.data_source.data}
+                # only the columns its glyph reads (and the legend's field): the page's other
+                # readers of the views (tests, benchmarks) do not take it for one
+                by_name = by if isinstance(by, str) else None
+                used = {_field_of(getattr(r.glyph, spec, None)) for spec in r.glyph.dataspecs()}
+                cols = {c: [] for c in r.data_source.data if c in used or c == by_name}
                 proxy = GlyphRenderer(data_source=ColumnDataSource(cols), glyph=r.glyph.clone(),
                                       visible=r.visible)
                 fig.renderers.append(proxy)
-                r.js_link("visible", proxy, "visible")
-                proxy.js_link("visible", r, "visible")
+                pairs.append([proxy, r])
                 self._proxies.setdefault(name, []).append((proxy, by if isinstance(by, str) else None))
                 self._stand_in[id(r)] = proxy
                 reps.append(proxy)
             item.renderers = reps
+        if pairs:  # (the legend toggles its items' renderers after it sends the click)
+            legend.js_on_event("legend_item_click", CustomJS(args={"pairs": pairs}, code=(
+                "Promise.resolve().then(() => { for (const [p, r] of pairs) r.visible = p.visible; });")))
 
     def stand_in(self, renderer):
         """The legend's stand-in for ``renderer`` (itself when it has none)."""
@@ -238,7 +269,7 @@ class LiveFrames:
         self.derive = CustomJS(
             args={"meta": self.meta, "tracks": dict(self.tracks),
                   "views": [[n, src, tsrc, spec] for n, (src, tsrc, spec) in self.views.items()],
-                  "texts": [[k, m, a, w] for k, (m, a, w) in self.texts.items()]},
+                  "texts": [[k, m, a, w, o] for k, (m, a, w, o) in self.texts.items()]},
             code=JS_DERIVE)
         self.meta.js_on_change("data", self.derive)
         player.jscallback(value="derive.execute(cb_obj, {frame: cb_obj.value});",
@@ -282,7 +313,8 @@ class LiveFrames:
         """The template of view ``name`` (sent only when it differs from the page's)."""
         _, tsrc, spec = self.views[name]
         for proxy, by in self._proxies.get(name, ()):
-            set_data(proxy.data_source, legend_rows(tpl, spec, by))
+            rows = legend_rows(tpl, spec, by)
+            set_data(proxy.data_source, {c: rows[c] for c in proxy.data_source.data if c in rows})
         if not self.enabled:
             return
         set_data(tsrc, {("@" + k[1:]) if k in ("_a", "_b") else "=" + k: np.asarray(v)
@@ -314,5 +346,5 @@ class LiveFrames:
         ``meta``: its new frame needs no redraw). Empty when not :attr:`active`."""
         if not self.active:
             return []
-        out = [src for src, _, _ in self.views.values()] + [m for m, _, _ in self.texts.values()]
+        out = [src for src, _, _ in self.views.values()] + [t[0] for t in self.texts.values()]
         return out + [self.meta] if frame_move else out
