@@ -6,6 +6,8 @@ fresh process, loads the page in Debian's Chromium (``/usr/bin/chromium``, via P
 Chromium is launched before the command, so its own start-up is not counted) and measures,
 in the page's own clock:
 
+- ``first_result_kb``, ``<control>_kb_median``: what the page's websockets received until
+  the first result, and per move until 300 ms after its redraw (KiB);
 - ``first_points_s`` / ``first_result_s``: seconds from starting the command to the
   trajectories drawn in the frame view / to the first segmentation shown (the status line
   reads "Showing …");
@@ -167,6 +169,9 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
         t_cmd = time.monotonic()
         try:
             page = browser.new_page(viewport={"width": 1280, "height": 800})
+            received = [0]  # bytes the page's websockets received (bokeh's and, if shown, viser's)
+            page.on("websocket", lambda ws: ws.on("framereceived", lambda f: received.__setitem__(
+                0, received[0] + len(f if isinstance(f, (bytes, bytearray)) else f.encode()))))
             deadline = t_cmd + 300  # a video is tracked before the server starts
             while True:
                 try:
@@ -181,19 +186,25 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
             page.wait_for_function("() => (" + JS_STATE + ")().status.length > 0", timeout=120000,
                                    polling=20)
             out["first_result_s"] = round(time.monotonic() - t_cmd, 2)
+            out["first_result_kb"] = round(received[0] / 1024, 1)
             page.wait_for_timeout(1000)  # the lazily added cards arrive after the first result
             runs: dict = {}
+            sent: dict = {}  # bytes received per move, until 300 ms after the redraw
             for _ in range(repeats):
                 for name, prefix, kind, values, marker in controls:
                     for v in values:
                         xs = frame_x(seq, v) if kind == "frame" else None
+                        b0 = received[0]
                         ms = page.evaluate(JS_MOVE, [prefix, v, kind, marker(v), xs])
+                        page.wait_for_timeout(300)  # (what the server sends after the redraw)
+                        sent.setdefault(name, []).append(received[0] - b0)
                         if ms < 0:
                             raise RuntimeError(f"{prefix} = {v}: no result in the page ({ms})")
                         runs.setdefault(name, []).append(round(ms, 1))
             for name, values in runs.items():
                 out[f"{name}_ms_median"] = round(statistics.median(values), 1)
                 out[f"{name}_ms"] = values
+                out[f"{name}_kb_median"] = round(statistics.median(sent[name]) / 1024, 1)
         finally:
             proc.terminate()
             proc.wait(30)

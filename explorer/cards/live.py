@@ -19,6 +19,8 @@ and a frame move is drawn by the server, as before (docs/bench/explorer_browser_
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 from bokeh.models import ColumnDataSource, CustomJS, GlyphRenderer
 
@@ -28,6 +30,8 @@ from .base import set_data
 #: Largest frames x points whose tracks go to the browser (x, y as float32: 8 bytes per
 #: entry, plus one byte where a sequence is incomplete). 5,000 points x 100 frames (the
 #: largest the explorer was measured with) is 500,000: 4 MB, once per sequence.
+#: ``$LAAV_EXPLORE_LIVE_MAX`` overrides it (0: every frame move drawn by the server, as
+#: before; for measurements).
 LIVE_MAX_ENTRIES = 1_000_000
 
 #: The page's side: make every registered view at the frame shown. ``cb_data.frame`` is the
@@ -191,7 +195,12 @@ class LiveFrames:
     (:meth:`template`) and text formats (:meth:`text`); the app ends every draw with
     :meth:`commit`."""
 
-    def __init__(self, max_entries: int = LIVE_MAX_ENTRIES) -> None:
+    def __init__(self, max_entries: int | None = None) -> None:
+        if max_entries is None:
+            try:
+                max_entries = int(os.environ.get("LAAV_EXPLORE_LIVE_MAX", LIVE_MAX_ENTRIES))
+            except ValueError:
+                max_entries = LIVE_MAX_ENTRIES
         self.max_entries = int(max_entries)
         self.tracks = {"points": ColumnDataSource({"x": [], "y": []}),
                        "atoms": ColumnDataSource({"x": [], "y": []})}
