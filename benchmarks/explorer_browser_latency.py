@@ -6,6 +6,8 @@ fresh process, loads the page in Debian's Chromium (``/usr/bin/chromium``, via P
 Chromium is launched before the command, so its own start-up is not counted) and measures,
 in the page's own clock:
 
+- ``first_result_kb``, ``<control>_kb_median``: what the page's websockets received until
+  the first result, and per move until 300 ms after its redraw (KiB);
 - ``first_points_s`` / ``first_result_s``: seconds from starting the command to the
   trajectories drawn in the frame view / to the first segmentation shown (the status line
   reads "Showing …");
@@ -13,8 +15,11 @@ in the page's own clock:
   ``frame_ms_median``: from a slider's release (its value set in the page, as a released
   drag sets it) until the page shows the new result: the status line names the new value
   (the app updates every view and the status in one document change, so they arrive
-  together), or for the frame the frame view's title shows the new frame, then two
-  animation frames so that the browser has drawn them.
+  together), or for the frame until the frame view's title shows the new frame AND the
+  points' glyph in the page holds that frame's coordinates (the renderer's view, i.e. what
+  bokeh draws, compared with the sequence's x of each point shown; a video falls back to
+  "the glyph holds its source's new x"), then two animation frames so that the browser has
+  drawn them. The frame move is thus timed to the redraw, whichever side computes it.
 
 Each control is moved ``--repeats`` times between two values. Prints ONE JSON line and
 writes it, with date, machine and commit, to ``--out`` (default
@@ -60,10 +65,31 @@ JS_STATE = """() => {
   return out;
 }"""
 
+#: The frame view's points in the page: the source's point indices and x, and what the
+#: points renderer's glyph view holds (the data bokeh draws), or null before the page is up.
+JS_POINTS = """() => {
+  if (!(window.Bokeh && Bokeh.documents.length > 0 && Bokeh.index)) return null;
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.type !== 'Figure' && m.type !== 'Plot') continue;
+    if (!(m.title && /^frame \\d+ of/.test(m.title.text))) continue;
+    for (const r of m.renderers) {
+      const d = r.data_source ? r.data_source.data : null;
+      if (!d || d.index === undefined || d.marker === undefined) continue;
+      const v = Bokeh.index.find_one(r);
+      if (!v) return null;
+      return {index: Array.from(d.index), src_x: Array.from(d.x), glyph_x: Array.from(v.glyph.x || [])};
+    }
+  }
+  return null;
+}"""
+
 #: Set a slider as a released drag does, then wait until ``test(state)`` holds and two
 #: animation frames have passed; the milliseconds (page clock), or -1 after 60 s.
-JS_MOVE = """async ([prefix, value, kind, marker]) => {
+#: For the frame, ``xs`` is the frame's x of every point (null: unknown, e.g. a video):
+#: the points' glyph must hold them (else: must hold its source's x, changed by the move).
+JS_MOVE = """async ([prefix, value, kind, marker, xs]) => {
   const state = """ + JS_STATE + """;
+  const points = """ + JS_POINTS + """;
   let slider = null;
   for (const m of Bokeh.documents[0].all_models) {
     if ((m.type === 'Slider' || m.type.endsWith('Player')) && typeof m.title === 'string'
@@ -71,11 +97,23 @@ JS_MOVE = """async ([prefix, value, kind, marker]) => {
   }
   if (slider === null) return -2;  // no such control
   const frame = () => new Promise(r => requestAnimationFrame(() => r()));
+  const before = kind === 'frame' ? points() : null;
+  const drawn = () => {
+    const p = points();
+    if (p === null || p.glyph_x.length !== p.index.length || p.index.length === 0) return false;
+    for (let k = 0; k < p.index.length; k++) {
+      const want = xs !== null ? xs[p.index[k]] : p.src_x[k];
+      if (!(Math.abs(p.glyph_x[k] - want) <= 1e-3)) return false;
+    }
+    if (xs === null && before !== null && before.src_x.length === p.src_x.length &&
+        before.src_x.every((x, k) => x === p.src_x[k])) return false;
+    return true;
+  };
   const t0 = performance.now();
   slider.value = value; slider.value_throttled = value;
   while (true) {
     const s = state();
-    const done = kind === 'frame' ? s.frame_title.startsWith(marker) : s.status.includes(marker);
+    const done = kind === 'frame' ? s.frame_title.startsWith(marker) && drawn() : s.status.includes(marker);
     if (done) break;
     if (performance.now() - t0 > 60000) return -1;
     await frame();
@@ -94,6 +132,25 @@ CONTROLS = [
 ]
 
 
+def _sequence_of(file: str | None):
+    """The sequence the command shows (None for a video: tracked by the command only)."""
+    import laav
+    from explorer.demo import demo_sequence
+    from explorer.video import is_video
+
+    if file is None:
+        return demo_sequence()
+    return None if is_video(file) else laav.load_sequence(file)
+
+
+def frame_x(seq, frame: int) -> list | None:
+    """Every point's x in ``frame`` (NaN as null: not seen there), or None without a sequence."""
+    if seq is None:
+        return None
+    x = seq.points[int(frame), :, 0].astype(float)
+    return [None if x_ != x_ else x_ for x_ in x.tolist()]
+
+
 def measure(file: str | None, repeats: int, only: list[str] | None = None,
             extra: list[str] | None = None) -> dict:
     from playwright import sync_api
@@ -102,6 +159,7 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
     cmd = [sys.executable, "-m", "explorer.cli", *([file] if file else []), "--no-browser",
            "--port", str(port), *(extra or [])]
     controls = [c for c in CONTROLS if only is None or c[0] in only]
+    seq = _sequence_of(file)
     env = dict(os.environ, PYTHONPATH=str(REPO))
     out: dict = {"file": file or "bundled demo", **({"options": " ".join(extra)} if extra else {})}
     with sync_api.sync_playwright() as p:
@@ -111,6 +169,9 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
         t_cmd = time.monotonic()
         try:
             page = browser.new_page(viewport={"width": 1280, "height": 800})
+            received = [0]  # bytes the page's websockets received (bokeh's and, if shown, viser's)
+            page.on("websocket", lambda ws: ws.on("framereceived", lambda f: received.__setitem__(
+                0, received[0] + len(f if isinstance(f, (bytes, bytearray)) else f.encode()))))
             deadline = t_cmd + 300  # a video is tracked before the server starts
             while True:
                 try:
@@ -125,18 +186,25 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
             page.wait_for_function("() => (" + JS_STATE + ")().status.length > 0", timeout=120000,
                                    polling=20)
             out["first_result_s"] = round(time.monotonic() - t_cmd, 2)
+            out["first_result_kb"] = round(received[0] / 1024, 1)
             page.wait_for_timeout(1000)  # the lazily added cards arrive after the first result
             runs: dict = {}
+            sent: dict = {}  # bytes received per move, until 300 ms after the redraw
             for _ in range(repeats):
                 for name, prefix, kind, values, marker in controls:
                     for v in values:
-                        ms = page.evaluate(JS_MOVE, [prefix, v, kind, marker(v)])
+                        xs = frame_x(seq, v) if kind == "frame" else None
+                        b0 = received[0]
+                        ms = page.evaluate(JS_MOVE, [prefix, v, kind, marker(v), xs])
+                        page.wait_for_timeout(300)  # (what the server sends after the redraw)
+                        sent.setdefault(name, []).append(received[0] - b0)
                         if ms < 0:
                             raise RuntimeError(f"{prefix} = {v}: no result in the page ({ms})")
                         runs.setdefault(name, []).append(round(ms, 1))
             for name, values in runs.items():
                 out[f"{name}_ms_median"] = round(statistics.median(values), 1)
                 out[f"{name}_ms"] = values
+                out[f"{name}_kb_median"] = round(statistics.median(sent[name]) / 1024, 1)
         finally:
             proc.terminate()
             proc.wait(30)

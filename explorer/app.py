@@ -38,6 +38,7 @@ from .cards.controls import PARAM_SLIDERS, Controls
 from .cards.files import DEFAULT_MAX_UPLOAD, Files
 from .cards.frame import FrameView
 from .cards.graph import GraphView
+from .cards.live import LiveFrames
 from .cards.numbers import NumbersView
 from .cards.rv import RVView
 from .cards.status import StatusBar
@@ -158,7 +159,9 @@ class Explorer:
         self.status_bar = StatusBar(seq)
         self.files = Files(self, self.state, self.controls, self.status_bar, seq, self._png_view,
                            max_upload=max_upload)
-        self.frame_view = FrameView(self, ext)
+        # the views that follow the frame, made by the page itself at each frame move
+        self.live = LiveFrames()
+        self.frame_view = FrameView(self, ext, self.live)
         self.frame_view.set_video(video)
         self.frame_view.draw_raw(seq)  # in the first page already: the points before any compute
         if video is not None:  # how the tracks were made, from the first page on
@@ -167,7 +170,7 @@ class Explorer:
         self.view3d = View3D(self, viser, viser_host, page_hosts,
                              iframe_host or (viser_host if viser_host not in ("0.0.0.0", "::") else None),
                              on_frame=self._frame_from_viser)
-        self.graph_view = GraphView(self, ext)
+        self.graph_view = GraphView(self, ext, self.live)
         self.coarse_view = CoarseView(self, ext)
         self.rv_view = RVView()
         self.numbers_view = NumbersView()
@@ -180,6 +183,7 @@ class Explorer:
             "sweep": self.sweep_view.card, "compare": self.compare.card})
         # the view controls that redraw more than one card
         self.controls.w_frame.param.watch(self._on_frame, "value")
+        self.live.link(self.controls.w_frame)
         self.controls.w_color.param.watch(self._on_color, "value")
         for name, where in SHORTCUTS.items():
             setattr(self, name, attrgetter(where)(self))
@@ -401,7 +405,7 @@ class Explorer:
                 traceback.print_exc()
 
     @contextmanager
-    def hold(self, one_message: bool = False, freeze: bool = False):
+    def hold(self, one_message: bool = False, freeze: bool = False, live: str | None = None):
         """Send all model changes made inside as one batch (the callers run on the document's
         thread, under its lock).
 
@@ -409,34 +413,54 @@ class Explorer:
         websocket message (panel's ``unlocked``): bokeh's own hold sends one message per
         changed property, and the browser applies and redraws each in turn (a frame move was
         about 12 messages, a result about 50; docs/bench/explorer_browser_latency.md). The
-        data sources' changes go last in the message: a legend repainted while a glyph's new
-        data was still being mapped read past its old colours (bokeh's ``draw_legend_for_index``
-        threw ``Offset is outside the bounds of the DataView`` when a result's legend labels
-        came after its data).
+        data sources' changes go last in the message, the page's frame views' ``meta`` the
+        very last (the page makes those views when it arrives: every template must be in):
+        a legend repainted while a glyph's new data was still being mapped read past its old
+        colours (bokeh's ``draw_legend_for_index`` threw ``Offset is outside the bounds of the
+        DataView`` when a result's legend labels came after its data).
 
         With ``freeze`` the document's model graph is walked once at the end instead of after
         every pane whose text changes (panel sets a Markdown pane's stylesheets with its text,
-        and bokeh then walks every model of the page: ~0.07 s each, several per result)."""
+        and bokeh then walks every model of the page: ~0.07 s each, several per result).
+
+        ``live``: the batch draws views the page makes itself (:class:`~.cards.live.LiveFrames`):
+        ``"draw"`` (a result, colouring or step: their templates go, the made views' changes
+        are dropped) or ``"frame"`` (a frame move: the page has drawn it already; nothing of
+        those views is sent, the server's copies just follow)."""
         doc = self._doc()
-        if doc is None or doc.session_context is None or doc.callbacks.hold_value is not None:
+        if doc is None or doc.session_context is None:
             with self._frozen(doc if freeze else None):
                 yield
+            return
+        if doc.callbacks.hold_value is not None:  # inside another batch (panel's, ours)
+            with self._frozen(doc if freeze else None):
+                yield
+            self._tidy(doc.callbacks._held_events, live)
             return
         if (one_message and pn.state.curdoc is doc and pn.state.loaded
                 and threading.get_ident() == self._doc_thread and doc.session_context.session is not None):
             with unlocked("combine"):
                 with self._frozen(doc if freeze else None):
                     yield
-                held = doc.callbacks._held_events
-                if held:
-                    held[:] = sorted(held, key=_is_data_event)  # stable: data changes last
+                self._tidy(doc.callbacks._held_events, live)
             return
         doc.hold("combine")
         try:
             with self._frozen(doc if freeze else None):
                 yield
         finally:
+            self._tidy(doc.callbacks._held_events, live)
             doc.unhold()
+
+    def _tidy(self, held, live: str | None) -> None:
+        """The held events without those of the views the page makes (``live``, see
+        :meth:`hold`), data changes last, the page's ``meta`` the very last."""
+        if not held:
+            return
+        drop = {id(m) for m in self.live.models(frame_move=live == "frame")} if live else set()
+        meta = self.live.meta
+        kept = [e for e in held if id(getattr(e, "model", None)) not in drop]
+        held[:] = sorted(kept, key=lambda e: (_is_data_event(e), getattr(e, "model", None) is meta))
 
     @staticmethod
     @contextmanager
@@ -474,7 +498,7 @@ class Explorer:
         t0 = time.perf_counter()
         new_seq = seq is not self._seq_shown
         with self.quiet():
-            with self.hold(one_message=True, freeze=True):
+            with self.hold(one_message=True, freeze=True, live="draw"):
                 unpinned = None
                 if new_seq:
                     self._set_sequence(seq, settings)
@@ -581,7 +605,7 @@ class Explorer:
     def _frame_now(self) -> None:
         if self.result is None or self.quieted:
             return
-        with self.hold(one_message=True):
+        with self.hold(one_message=True, live="frame"):
             self._draw_frame()
             self.graph_view.draw(self.result, self.frame, self.fine_colors)
             self.compare.redraw()
@@ -596,7 +620,7 @@ class Explorer:
             return
         self.style = V.point_style(self.sequence, self.result, self.controls.color_mode,
                                    self.state.plain_rv())
-        with self.hold():
+        with self.hold(live="draw"):
             self._draw_frame()
             self.compare.redraw()
             self.status_bar.show_note("  \n".join(

@@ -21,7 +21,8 @@ __all__ = [
     "incomplete_note",
     "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "raw_style", "points_source", "frame_sources",
-    "graph_sources",
+    "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
+    "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
     "replay_caption", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
@@ -378,24 +379,168 @@ def raw_style(seq: laav.Sequence) -> dict:
             "label": np.asarray(np.char.add("motion ", (lab + 1).astype("U3"))).astype(str)}
 
 
+# ---------------------------------------------------------------------- frame templates
+# A view that follows the frame (the frame view's points, trails, atoms and marks; the
+# graph's nodes and edges) is described once per result by a *template* per data source:
+# rows anchored to one or two tracked ids (``_a``, ``_b``: points, or atoms for the graph)
+# with the columns that do not depend on the frame; a *spec* says how a frame's rows are
+# made from it. :func:`instantiate` makes the rows of one frame; the page runs the same rules
+# in JavaScript (explorer/cards/live.py) so that a frame move is drawn without the server.
+
+#: Frames of trail behind each point in the frame view.
+TRAIL = 5
+
+
+def trail_alpha(age: int, trail: int = TRAIL) -> float:
+    """Opacity of a trail step ``age`` frames back (1 = the last step)."""
+    return 0.85 - 0.7 * (age - 1) / max(trail, 1)
+
+
+_AT = {"x": ["_a", 0], "y": ["_a", 1]}
+_SEGMENT = {"x0": ["_a", 0], "y0": ["_a", 1], "x1": ["_b", 0], "y1": ["_b", 1]}
+
+
+def frame_specs(trail: int = TRAIL) -> dict:
+    """How each source of the frame view is made from its template at a frame
+    (:func:`instantiate`); JSON-able: the page runs the same rules.
+
+    A spec: ``track`` (``points`` or ``atoms``), ``coords`` (column -> [anchor, 0 for x / 1
+    for y]) and ``blocks``: each block adds the template's rows with the anchors taken ``da``
+    / ``db`` frames from the frame shown (a row is kept when its anchors are seen there),
+    with the block's ``const`` columns. The trails are one block per step back (the oldest
+    first), between frames f - k and f - k + 1."""
+    one = [{}]
+    return {
+        "points": {"track": "points", "coords": _AT, "blocks": one},
+        "trails": {"track": "points", "coords": _SEGMENT,
+                   "blocks": [{"da": -k, "db": 1 - k, "const": {"alpha": trail_alpha(k, trail)}}
+                              for k in range(trail, 0, -1)]},
+        "atoms": {"track": "points", "coords": _AT, "blocks": one},
+        "unassigned": {"track": "points", "coords": _AT, "blocks": one},
+        "errors": {"track": "points", "coords": _AT, "blocks": one},
+        "changed": {"track": "points", "coords": _AT, "blocks": one},
+    }
+
+
+def graph_specs() -> dict:
+    """The multicut graph's sources (:func:`graph_templates`), as :func:`frame_specs`."""
+    one = [{}]
+    return {"nodes": {"track": "atoms", "coords": _AT, "blocks": one},
+            "joined": {"track": "atoms", "coords": _SEGMENT, "blocks": one},
+            "cut": {"track": "atoms", "coords": _SEGMENT, "blocks": one},
+            "step_edge": {"track": "atoms", "coords": _SEGMENT, "blocks": one},
+            "pair": {"track": "atoms", "coords": _AT, "blocks": one}}
+
+
+def point_track(seq: laav.Sequence) -> tuple[np.ndarray, np.ndarray | None]:
+    """The points' positions (F, P, 2) and where each is seen (F, P) bool, None when complete."""
+    return seq.points, (None if seq.is_complete else np.asarray(seq.visible, dtype=bool))
+
+
+def atom_track(result: laav.LaavResult) -> tuple[np.ndarray, np.ndarray | None]:
+    """The atoms' centres (F, N, 2) (``AtomGraph.positions``; NaN where no member is seen)
+    and where each is drawn: where its centre is finite."""
+    pos = np.asarray(result.graph.positions, dtype=float)
+    if pos.ndim != 3 or pos.shape[2:] != (2,):  # no atoms
+        pos = np.zeros((max(pos.shape[0] if pos.ndim else 0, 1), 0, 2))
+    return pos, np.isfinite(pos).all(axis=2)
+
+
+def instantiate(tpl: dict, spec: dict, xy: np.ndarray, visible: np.ndarray | None, frame: int) -> dict:
+    """The rows of template ``tpl`` (``_a``, optional ``_b``: ids into the track; other keys:
+    columns) at ``frame`` by ``spec`` (:func:`frame_specs`), on the track ``xy`` (F, N, 2)
+    seen where ``visible`` (F, N) (None: everywhere). ``frame`` is clipped to the track."""
+    F = xy.shape[0]
+    f = int(np.clip(frame, 0, F - 1)) if F else 0
+    a = np.asarray(tpl["_a"], dtype=np.int64)
+    b = np.asarray(tpl["_b"], dtype=np.int64) if "_b" in tpl else None
+    keeps = []  # (block, frame of a, frame of b, kept rows)
+    for blk in spec["blocks"]:
+        fa, fb = f + int(blk.get("da", 0)), f + int(blk.get("db", 0))
+        if not 0 <= fa < F or (b is not None and not 0 <= fb < F):
+            continue
+        keep = np.ones(a.size, dtype=bool) if visible is None else visible[fa][a]
+        if b is not None and visible is not None:
+            keep &= visible[fb][b]
+        keeps.append((blk, fa, fb, np.flatnonzero(keep)))
+    out = {}
+    for col, (anchor, dim) in spec["coords"].items():
+        ids = a if anchor == "_a" else b
+        parts = [xy[fa if anchor == "_a" else fb, ids[k], int(dim)] for _, fa, fb, k in keeps]
+        out[col] = np.concatenate(parts) if parts else np.zeros(0)
+    for name in dict.fromkeys(n for blk in spec["blocks"] for n in blk.get("const", {})):
+        parts = [np.full(k.size, blk.get("const", {}).get(name, np.nan)) for blk, _, _, k in keeps]
+        out[name] = np.concatenate(parts) if parts else np.zeros(0)
+    for name, col in tpl.items():
+        if name in ("_a", "_b"):
+            continue
+        col = np.asarray(col)
+        out[name] = np.concatenate([col[k] for _, _, _, k in keeps]) if keeps else col[:0]
+    return out
+
+
+_FIELD = re.compile(r"\{(f|n|k)(?::(\w+)(?:\.(\w+))?)?\}")
+
+
+def fill_text(fmt: str, frame: int, sources: dict) -> str:
+    """A view's text at a frame: ``{f}`` the frame, ``{n:src}`` the rows of ``sources[src]``,
+    ``{k:src.col}`` the distinct values of that column (the page fills them the same way)."""
+    def sub(m):
+        kind, name, col = m.groups()
+        if kind == "f":
+            return str(int(frame))
+        d = sources[name]
+        if kind == "n":
+            return str(len(next(iter(d.values()))) if d else 0)
+        return str(len(np.unique(np.asarray(d[col]))))
+    return _FIELD.sub(sub, fmt)
+
+
+def points_template(style: dict) -> dict:
+    """The frame view's points (x, y, color, marker, label, index) as a template: in label
+    order so that the legend lists "motion 1, motion 2, ..." in order."""
+    color = style["color"]
+    order = np.argsort(style["label"], kind="stable")
+    marker = style.get("marker")
+    marker = np.full(color.shape, "circle", dtype=object) if marker is None else marker
+    return {"_a": order.astype(np.int32), "color": color[order], "marker": marker[order],
+            "label": style["label"][order], "index": order}
+
+
 def points_source(seq: laav.Sequence, frame: int, style: dict) -> dict:
     """The frame view's points at ``frame`` (x, y, color, marker, label, index), in label
     order so that the legend lists "motion 1, motion 2, ..." in order; only the points
     visible in ``frame`` (:func:`visible_at`). Needs no result:
     with :func:`raw_style` it draws the raw points before anything is computed."""
-    f = int(np.clip(frame, 0, seq.n_frames - 1))
-    xy = seq.points[f]
+    return instantiate(points_template(style), frame_specs()["points"], *point_track(seq), frame)
+
+
+def frame_templates(seq: laav.Sequence, result: laav.LaavResult, style: dict, moved=None) -> dict:
+    """The frame view's templates (see :func:`frame_specs`): ``points``, ``trails`` (each
+    point's steps, in its colour), ``atoms`` (at their seeds: r1, r2, color, atom),
+    ``unassigned``, ``errors`` (misclassified points), ``changed`` (``moved``: indices of
+    points whose final motion changed with the last recompute)."""
     color = style["color"]
-    order = np.argsort(style["label"], kind="stable")
-    order = order[visible_at(seq, f)[order]]  # only the points seen in this frame
-    marker = style.get("marker")
-    marker = np.full(color.shape, "circle", dtype=object) if marker is None else marker
-    return {"x": xy[order, 0], "y": xy[order, 1], "color": color[order],
-            "marker": marker[order], "label": style["label"][order], "index": order}
+    ids = np.arange(seq.n_points, dtype=np.int32)
+    atoms = result.atoms
+    seeds = np.asarray(atoms.seeds, dtype=np.int64)
+    un = np.asarray(atoms.unassigned, dtype=np.int64)
+    mv = np.zeros(0, np.int64) if moved is None else np.asarray(moved, dtype=np.int64)
+    return {
+        "points": points_template(style),
+        "trails": {"_a": ids, "_b": ids, "color": color},
+        "atoms": {"_a": seeds.astype(np.int32), "r1": np.full(seeds.size, float(atoms.r1)),
+                  "r2": np.full(seeds.size, float(atoms.r2)),
+                  "color": color[seeds] if seeds.size else np.zeros(0, "U7"),
+                  "atom": np.arange(seeds.size)},
+        "unassigned": {"_a": un.astype(np.int32)},
+        "errors": {"_a": np.flatnonzero(style["misclassified"]).astype(np.int32)},
+        "changed": {"_a": mv.astype(np.int32)},
+    }
 
 
 def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style: dict,
-                  trail: int = 5, moved=None) -> dict:
+                  trail: int = TRAIL, moved=None) -> dict:
     """Data of the frame view at ``frame``.
 
     ``moved``: indices of points whose final motion changed with the last recompute
@@ -407,48 +552,11 @@ def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style
 
     On incomplete data everything is drawn only where it is seen: points, marks and atom
     seeds visible in ``frame``, trail steps between two consecutive frames both visible
-    (a gap breaks the trail).
+    (a gap breaks the trail). (:func:`frame_templates` at ``frame``.)
     """
-    pts = seq.points
-    F = seq.n_frames
-    f = int(np.clip(frame, 0, F - 1))
-    xy = pts[f]
-    color = style["color"]
-    vis = visible_at(seq, f)
-    out = {"points": points_source(seq, f, style)}
-    f0 = max(0, f - trail)
-    if f > f0:
-        seg = pts[f0:f + 1]  # (t+1, P, 2)
-        n = seg.shape[0] - 1
-        age = np.repeat(np.arange(n, 0, -1), seq.n_points)  # n .. 1 frames back
-        both = np.ones(n * seq.n_points, dtype=bool) if seq.is_complete else (
-            seq.visible[f0:f] & seq.visible[f0 + 1:f + 1]).ravel()  # a step both ends of which are seen
-        out["trails"] = {
-            "x0": seg[:-1, :, 0].ravel()[both], "y0": seg[:-1, :, 1].ravel()[both],
-            "x1": seg[1:, :, 0].ravel()[both], "y1": seg[1:, :, 1].ravel()[both],
-            "color": np.tile(color, n)[both], "alpha": (0.85 - 0.7 * (age - 1) / max(trail, 1))[both],
-        }
-    else:
-        e = np.zeros(0)
-        out["trails"] = {"x0": e, "y0": e, "x1": e, "y1": e, "color": np.zeros(0, "U7"), "alpha": e}
-    atoms = result.atoms
-    seeds = np.asarray(atoms.seeds, dtype=np.int64)
-    ids = np.flatnonzero(vis[seeds])  # atoms whose seed is seen in this frame
-    seeds = seeds[ids]
-    out["atoms"] = {"x": xy[seeds, 0], "y": xy[seeds, 1],
-                    "r1": np.full(seeds.size, float(atoms.r1)),
-                    "r2": np.full(seeds.size, float(atoms.r2)),
-                    "color": color[seeds] if seeds.size else np.zeros(0, "U7"),
-                    "atom": ids}
-    un = np.asarray(atoms.unassigned, dtype=np.int64)
-    un = un[vis[un]]
-    out["unassigned"] = {"x": xy[un, 0], "y": xy[un, 1]}
-    bad = np.flatnonzero(style["misclassified"] & vis)
-    out["errors"] = {"x": xy[bad, 0], "y": xy[bad, 1]}
-    mv = np.zeros(0, np.int64) if moved is None else np.asarray(moved, dtype=np.int64)
-    mv = mv[vis[mv]]
-    out["changed"] = {"x": xy[mv, 0], "y": xy[mv, 1]}
-    return out
+    specs, track = frame_specs(trail), point_track(seq)
+    return {k: instantiate(t, specs[k], *track, frame)
+            for k, t in frame_templates(seq, result, style, moved).items()}
 
 
 # ---------------------------------------------------------------------- multicut graph
@@ -519,6 +627,45 @@ def cost_limit(result: laav.LaavResult) -> float:
     return float(max(np.percentile(c, 95), 1e-6))
 
 
+def graph_templates(result: laav.LaavResult, step: int, colors=None) -> dict:
+    """The multicut graph view after ``step`` GAEC contractions as templates on the atoms'
+    track (:func:`graph_specs`, :func:`atom_track`); see :func:`graph_sources`."""
+    g = result.graph
+    n = g.n_nodes
+    lab = replay_labels(result, step)
+    sizes = np.array([len(m) for m in result.atoms.members], dtype=float)
+    final = np.asarray(result.multicut.atom_labels, dtype=np.int64)
+    pal = np.asarray(colors if colors is not None and len(colors) else ATOM_COLORS, dtype="U7")
+    K = len(result.multicut.contractions)
+    owner = final if step > K else final[replay_roots(result, step)] if final.size else final
+    node_color = pal[owner % pal.size] if owner.size else np.zeros(0, "U7")
+    ids = np.arange(n, dtype=np.int32)
+    nodes = {"_a": ids, "color": node_color, "cluster": lab + 1, "atom": np.arange(n),
+             "members": sizes.astype(int), "size": 7 + 2.0 * np.sqrt(sizes),
+             "label": np.array([str(i) for i in range(n)], dtype=object)}
+    E = np.asarray(g.edges, dtype=np.int64).reshape(-1, 2)
+    cut = np.asarray(result.multicut.cut, bool) if step > K else (lab[E[:, 0]] != lab[E[:, 1]])
+
+    def edges(mask):
+        e = E[mask]
+        return {"_a": e[:, 0].astype(np.int32), "_b": e[:, 1].astype(np.int32),
+                "cost": np.asarray(g.costs, dtype=float)[mask], "error": np.asarray(g.errors)[mask],
+                "a": e[:, 0], "b": e[:, 1]}
+
+    out = {"nodes": nodes, "joined": edges(~cut), "cut": edges(cut)}
+    if 0 < step <= K:
+        k, m = np.asarray(result.multicut.contractions[step - 1]).tolist()
+        out["step_edge"] = {"_a": np.array([k], np.int32), "_b": np.array([m], np.int32)}
+        # the two atoms joined at this step, drawn again on top of the others, ringed
+        out["pair"] = {"_a": np.array([k, m], np.int32), "color": node_color[[k, m]],
+                       "size": 7 + 2.0 * np.sqrt(sizes[[k, m]]) + 6, "atom": np.array([k, m], dtype=int)}
+    else:
+        e = np.zeros(0, np.int32)
+        out["step_edge"] = {"_a": e, "_b": e}
+        out["pair"] = {"_a": e, "color": np.zeros(0, "U7"), "size": np.zeros(0), "atom": np.zeros(0, int)}
+    return out
+
+
 def graph_sources(result: laav.LaavResult, frame: int, step: int, colors=None) -> dict:
     """Data of the multicut graph view at ``frame`` after ``step`` GAEC contractions.
 
@@ -531,57 +678,11 @@ def graph_sources(result: laav.LaavResult, frame: int, step: int, colors=None) -
     contraction of this step), ``pair`` (x, y, color, size, atom: its two atoms; empty at
     step 0 and after the last contraction). On incomplete data only the atoms with a centre
     in ``frame`` (a member seen there; ``AtomGraph.positions`` is NaN otherwise) and the
-    edges between two of them are drawn.
+    edges between two of them are drawn. (:func:`graph_templates` at ``frame``.)
     """
-    g = result.graph
-    pos = np.asarray(g.positions)
-    f = int(np.clip(frame, 0, pos.shape[0] - 1)) if pos.shape[0] else 0
-    xy = pos[f] if pos.size else np.zeros((0, 2))
-    lab = replay_labels(result, step)
-    sizes = np.array([len(m) for m in result.atoms.members], dtype=float)
-    final = np.asarray(result.multicut.atom_labels, dtype=np.int64)
-    pal = np.asarray(colors if colors is not None and len(colors) else ATOM_COLORS, dtype="U7")
-    K0 = len(result.multicut.contractions)
-    owner = final if step > K0 else final[replay_roots(result, step)] if final.size else final
-    node_color = pal[owner % pal.size] if owner.size else np.zeros(0, "U7")
-    nodes = {"x": xy[:, 0], "y": xy[:, 1], "color": node_color, "cluster": lab + 1,
-             "atom": np.arange(g.n_nodes), "members": sizes.astype(int),
-             "size": 7 + 2.0 * np.sqrt(sizes)}
-    E = np.asarray(g.edges, dtype=np.int64).reshape(-1, 2)
-    K = len(result.multicut.contractions)
-    cut = np.asarray(result.multicut.cut, bool) if step > K else (lab[E[:, 0]] != lab[E[:, 1]])
-
-    def edges(mask):
-        e = E[mask]
-        return {"x0": xy[e[:, 0], 0], "y0": xy[e[:, 0], 1], "x1": xy[e[:, 1], 0], "y1": xy[e[:, 1], 1],
-                "cost": np.asarray(g.costs)[mask], "error": np.asarray(g.errors)[mask],
-                "a": e[:, 0], "b": e[:, 1]}
-
-    # missing data: an atom with no member seen in this frame has no centre there (NaN in
-    # ``AtomGraph.positions``): it and its edges are not drawn in this frame
-    shown = np.isfinite(xy).all(axis=1) if xy.size else np.zeros(0, bool)
-    E_ok = shown[E[:, 0]] & shown[E[:, 1]] if E.size else np.zeros(0, bool)
-    out = {"nodes": nodes, "joined": edges(~cut & E_ok), "cut": edges(cut & E_ok)}
-    nodes["label"] = np.array([str(i) for i in range(g.n_nodes)], dtype=object)
-    if not shown.all():
-        for key in list(nodes):
-            nodes[key] = np.asarray(nodes[key])[shown]
-    if 0 < step <= K:
-        k, m = np.asarray(result.multicut.contractions[step - 1]).tolist()
-        both = [a for a in (k, m) if shown[a]]
-        if len(both) == 2:
-            out["step_edge"] = {"x0": xy[[k], 0], "y0": xy[[k], 1], "x1": xy[[m], 0], "y1": xy[[m], 1]}
-        else:
-            e = np.zeros(0)
-            out["step_edge"] = {"x0": e, "y0": e, "x1": e, "y1": e}
-        # the two atoms joined at this step, drawn again on top of the others, ringed
-        out["pair"] = {"x": xy[both, 0], "y": xy[both, 1], "color": node_color[both],
-                       "size": 7 + 2.0 * np.sqrt(sizes[both]) + 6, "atom": np.array(both, dtype=int)}
-    else:
-        e = np.zeros(0)
-        out["step_edge"] = {"x0": e, "y0": e, "x1": e, "y1": e}
-        out["pair"] = {"x": e, "y": e, "color": np.zeros(0, "U7"), "size": e, "atom": np.zeros(0, int)}
-    return out
+    specs, track = graph_specs(), atom_track(result)
+    return {k: instantiate(t, specs[k], *track, frame)
+            for k, t in graph_templates(result, step, colors).items()}
 
 
 # ---------------------------------------------------------------------- coarse merges

@@ -14,6 +14,7 @@ how it draws a result and its callbacks; :class:`explorer.app.Explorer` composes
 ``numbers``        5 · every stage's numbers
 ``sweep``          the seed sweep: seeds 0-9 in the background, a click loads one
 ``tour``           the guided tour: one stage at a time, large type (texts: ``explorer.tour``)
+``live``           frame moves drawn in the page (bokeh CustomJS) for cards 1 and 2
 ``base``           card / figure helpers, sizes, the :class:`~base.Host` protocol
 =================  ===========================================================
 """

@@ -37,7 +37,8 @@ class Host(Protocol):
 
     def schedule(self, fn, *args, now_if_on_doc_thread: bool = False) -> None: ...
 
-    def hold(self): ...  # context manager: the model changes inside go out as one batch
+    def hold(self, one_message: bool = False, freeze: bool = False, live: str | None = None):
+        ...  # context manager: the model changes inside go out as one batch (live: see Explorer.hold)
 
 
 def _same(a, b) -> bool:

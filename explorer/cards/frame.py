@@ -16,6 +16,7 @@ from bokeh.palettes import Greys256
 
 from .. import views as V
 from .base import Host, card, fit_image_figure, image_figure, move_legend, set_data
+from .live import LiveFrames, repaint_alone
 
 EMPTY_POINTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "index": []}
 #: The layers a checkbox shows or hides, in the sidebar's order.
@@ -29,8 +30,12 @@ BACKGROUND_ALPHA = 0.55
 class FrameView:
     """The frame view: points, trails (last 5 frames), atom circles, the marks; a caption."""
 
-    def __init__(self, host: Host, extent) -> None:
+    def __init__(self, host: Host, extent, live: LiveFrames | None = None) -> None:
         self.host = host
+        self.live = live if live is not None else LiveFrames()
+        self.specs = V.frame_specs()
+        self._tpl_key = None  # (sequence, result, style, moved) of the templates kept
+        self._tpls: dict = {}
         self.w_layers = pn.widgets.CheckBoxGroup(options=list(LAYERS), value=list(LAYERS), inline=False)
         self.w_layers.param.watch(self._on_layers, "value")
 
@@ -75,6 +80,18 @@ class FrameView:
         self._item_unassigned = items.get("in no atom")
         self._item_errors = items.get("misclassified")
         self._item_changed = items.get("changed motion")
+
+        # the views the page makes at each frame (explorer/cards/live.py)
+        repaint_alone(f, [self.r_trails, self.r_r2, self.r_r1, self.r_points, self.r_unassigned,
+                          self.r_changed, self.r_errors])
+        for name in self.specs:
+            self.live.add("frame_" + name, getattr(self, "src_" + name), self.specs[name])
+        self.live.detach_legend(f)
+        self.live.add_text("frame_title", f.title, "text")
+        leg = f.legend[0]
+        self.live.add_text("frame_unassigned", self._item_unassigned, "label", legend=leg)
+        self.live.add_text("frame_changed", self._item_changed, "label", legend=leg)
+        self.live.add_text("frame_errors", self._item_errors, "label", legend=leg)
 
         self._caption = ""  # the caption of the last result, without the background's sentence
         self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=900, margin=(0, 10))
@@ -126,11 +143,22 @@ class FrameView:
         self.fig.title.text = f"frame {int(frame)} of {seq.n_frames - 1} · segmenting…"
 
     def draw(self, seq, res, frame: int, style: dict, moved, color_label: str) -> None:
-        """Show ``res`` at ``frame``, coloured by ``style`` (:func:`views.point_style`)."""
+        """Show ``res`` at ``frame``, coloured by ``style`` (:func:`views.point_style`); the
+        page gets the templates too (:class:`~.live.LiveFrames`) and makes the other frames."""
         if res is None:
             return
-        f = int(frame)
-        d = V.frame_sources(seq, res, f, style, moved=moved)
+        f = int(np.clip(int(frame), 0, seq.n_frames - 1))
+        key = (seq, res, style, moved)
+        if self._tpl_key is None or any(a is not b for a, b in zip(key, self._tpl_key)):
+            self._tpls = V.frame_templates(seq, res, style, moved)
+            self._tpl_key = key
+        track = V.point_track(seq)
+        d = {k: V.instantiate(t, self.specs[k], *track, f) for k, t in self._tpls.items()}
+        live = self.live
+        live.set_sequence(seq)
+        for k, t in self._tpls.items():
+            live.template("frame_" + k, t)
+        named = {"frame_" + k: v for k, v in d.items()}
         set_data(self.src_points, d["points"])
         set_data(self.src_trails, d["trails"])
         set_data(self.src_atoms, d["atoms"])
@@ -138,23 +166,26 @@ class FrameView:
         set_data(self.src_errors, d["errors"])
         set_data(self.src_changed, d["changed"])
         self.draw_background(seq, f)
-        self.fig.title.text = f"frame {f} of {seq.n_frames - 1} · colour: {color_label}"
-        n_un, n_bad = len(d["unassigned"]["x"]), len(d["errors"]["x"])
+        title = f"frame {{f}} of {seq.n_frames - 1} · colour: {color_label}"
+        self.fig.title.text = live.text("frame_title", title, f, named)
         if self._item_unassigned is not None:
-            self._item_unassigned.label = value(f"in no atom: {n_un}")
+            self._item_unassigned.label = value(live.text(
+                "frame_unassigned", "in no atom: {n:frame_unassigned}", f, named))
         if self._item_changed is not None:
-            n_mv = len(d["changed"]["x"])
-            self._item_changed.label = value(f"changed motion: {n_mv}")
+            self._item_changed.label = value(live.text("frame_changed", "changed motion: {n:frame_changed}",
+                                                       f, named))
         stage = style.get("stage", "final")
         if self._item_errors is not None:
-            self._item_errors.label = value(f"misclassified ({stage}): {n_bad}" if seq.labels is not None
-                                            else "misclassified: (no truth)")
+            self._item_errors.label = value(live.text(
+                "frame_errors", f"misclassified ({stage}): {{n:frame_errors}}" if seq.labels is not None
+                else "misclassified: (no truth)", f, named))
         self._caption = (
             f"{res.atoms.n_atoms} atoms (R1 = {res.atoms.r1:g} px solid, R2 = {res.atoms.r2:g} px dashed, "
             f"drawn at their seeds); {np.asarray(res.atoms.unassigned).size} features in no atom (×); "
             f"{int(style['misclassified'].sum())} points misclassified by the {stage} stage (black "
             "ring; the colour-by choice picks the stage). Click legend entries to hide them.")
         self.caption.object = self._caption + self._background_text(seq, f)
+        live.commit(f)
 
     # ------------------------------------------------------------------ callbacks
     def _on_background(self, event=None) -> None:
@@ -172,8 +203,7 @@ class FrameView:
 
     def _layers_now(self) -> None:
         on = set(self.w_layers.value)
-        self.r_trails.visible = LAYERS[0] in on
-        self.r_r1.visible = self.r_r2.visible = LAYERS[1] in on
-        self.r_unassigned.visible = LAYERS[2] in on
-        self.r_errors.visible = LAYERS[3] in on
-        self.r_changed.visible = LAYERS[4] in on
+        for rs, layer in (((self.r_trails,), 0), ((self.r_r1, self.r_r2), 1), ((self.r_unassigned,), 2),
+                          ((self.r_errors,), 3), ((self.r_changed,), 4)):
+            for r in rs:  # the renderer and its legend entry's stand-in (live.py)
+                r.visible = self.live.stand_in(r).visible = LAYERS[layer] in on

@@ -12,14 +12,19 @@ from bokeh.palettes import RdBu11
 
 from .. import views as V
 from .base import Host, card, fit_image_figure, image_figure, move_legend, set_data
+from .live import LiveFrames, repaint_alone
 
 
 class GraphView:
     """Atoms as nodes at their seeds' positions in the shown frame, kept / cut edges by cost,
     clusters after a GAEC step coloured by the fine model they end in."""
 
-    def __init__(self, host: Host, extent) -> None:
+    def __init__(self, host: Host, extent, live: LiveFrames | None = None) -> None:
         self.host = host
+        self.live = live if live is not None else LiveFrames()
+        self.specs = V.graph_specs()
+        self._tpl_key = None  # (result, step, colours) of the templates kept
+        self._tpls: dict = {}
         # a player, not a slider: its range input takes Home/End to the first/last step (the
         # slider's noUiSlider keeps its first range for the End key: it went to step 1), and
         # play steps through the contractions for a class
@@ -31,6 +36,9 @@ class GraphView:
 
         # RdBu11 runs blue -> red; cost > 0 (join) is blue
         self.cost_mapper = LinearColorMapper(palette=list(RdBu11)[::-1], low=-1, high=1)
+        # the colour bar reads a mapper of its own: bokeh's colour bar lays the whole figure
+        # out again whenever its mapper colours anything, i.e. at every frame move's edges
+        self.bar_mapper = LinearColorMapper(palette=list(RdBu11)[::-1], low=-1, high=1)
         g = self.fig = image_figure("Atom graph at frame 0", 410, extent)
         empty_e = {"x0": [], "y0": [], "x1": [], "y1": [], "cost": [], "error": [], "a": [], "b": []}
         self.src_joined = ColumnDataSource(dict(empty_e))
@@ -55,10 +63,19 @@ class GraphView:
                   line_width=3, legend_label="joined at this step (ringed)")
         g.add_tools(HoverTool(renderers=[r_nodes], tooltips=[("atom", "@atom"), ("cluster", "@cluster"),
                                                              ("features", "@members")]))
-        g.add_layout(ColorBar(color_mapper=self.cost_mapper, title="edge cost: + join (blue), − cut (red)",
+        g.add_layout(ColorBar(color_mapper=self.bar_mapper, title="edge cost: + join (blue), − cut (red)",
                               orientation="horizontal", height=8, title_text_font_size="9pt",
                               padding=4), "below")
         move_legend(g)
+
+        # the views the page makes at each frame (explorer/cards/live.py)
+        live_srcs = (self.src_nodes, self.src_joined, self.src_cut, self.src_step, self.src_pair)
+        repaint_alone(g, [r for r in g.renderers if getattr(r, "data_source", None) in live_srcs])
+        for name, src in (("nodes", self.src_nodes), ("joined", self.src_joined), ("cut", self.src_cut),
+                          ("step_edge", self.src_step), ("pair", self.src_pair)):
+            self.live.add("graph_" + name, src, self.specs[name])
+        self.live.detach_legend(g)
+        self.live.add_text("graph_title", g.title, "text")
 
         self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
         self.card = card("2 · Multicut graph of atoms → fine models (GAEC replay)",
@@ -78,18 +95,31 @@ class GraphView:
         """Show ``res``'s graph at ``frame`` and the replay's step."""
         if res is None:
             return
-        f, step = int(frame), int(self.w_step.value)
-        d = V.graph_sources(res, f, step, fine_colors)
+        step = int(self.w_step.value)
+        key = (res, step, fine_colors)
+        if self._tpl_key is None or any(a is not b for a, b in zip(key, self._tpl_key)):
+            self._tpls = V.graph_templates(res, step, fine_colors)
+            self._tpl_key = key
+        track = V.atom_track(res)
+        f = int(np.clip(int(frame), 0, max(track[0].shape[0] - 1, 0)))
+        d = {k: V.instantiate(t, self.specs[k], *track, f) for k, t in self._tpls.items()}
+        live = self.live
+        live.set_atoms(res)
+        for k, t in self._tpls.items():
+            live.template("graph_" + k, t)
         lim = V.cost_limit(res)
-        self.cost_mapper.low, self.cost_mapper.high = -lim, lim
+        for m in (self.cost_mapper, self.bar_mapper):
+            m.low, m.high = -lim, lim
         set_data(self.src_nodes, d["nodes"])
         set_data(self.src_joined, d["joined"])
         set_data(self.src_cut, d["cut"])
         set_data(self.src_step, d["step_edge"])
         set_data(self.src_pair, d["pair"])
-        self.fig.title.text = (f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {f} · "
-                               f"{len(np.unique(d['nodes']['cluster']))} clusters")
+        self.fig.title.text = live.text(
+            "graph_title", f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {{f}} · "
+            "{k:graph_nodes.cluster} clusters", f, {"graph_" + k: v for k, v in d.items()})
         self.caption.object = V.replay_caption(res, step)
+        live.commit(f)
 
     # ------------------------------------------------------------------ callbacks
     def _on_step(self, event=None) -> None:
@@ -99,5 +129,5 @@ class GraphView:
         h = self.host
         if h.result is None or h.quieted:
             return
-        with h.hold():
+        with h.hold(live="draw"):
             self.draw(h.result, h.frame, h.fine_colors)

@@ -1,0 +1,109 @@
+"""The data the page gets to draw frame moves itself (explorer/cards/live.py), without a
+browser: tracks, templates, the size limit, the legend's stand-ins. The page's side is
+checked in Chromium by tests/test_explorer_frame_browser.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from explorer import views as V
+from explorer.app import Explorer
+from explorer.cards.live import LIVE_MAX_ENTRIES, LiveFrames, legend_rows
+
+
+@pytest.fixture(scope="module")
+def seq():
+    from test_explorer_incomplete import occluded_sequence
+
+    return occluded_sequence()
+
+
+def test_the_page_gets_the_tracks_once_and_the_templates_per_result(seq):
+    ex = Explorer(seq, viser=False)
+    try:
+        assert ex.wait(120)
+        live = ex.live
+        assert live.enabled and live.active
+        pts = live.tracks["points"].data
+        F, P = seq.n_frames, seq.n_points
+        assert len(pts["x"]) == F * P and np.asarray(pts["x"]).dtype == np.float32
+        np.testing.assert_array_equal(np.asarray(pts["v"]).reshape(F, P), seq.visible)
+        y = np.asarray(pts["y"]).reshape(F, P)
+        np.testing.assert_allclose(y[seq.visible], seq.points[..., 1][seq.visible], rtol=1e-6)
+        meta = live.meta.data
+        assert (meta["live"][0], meta["points_f"][0], meta["points_n"][0]) == (1, F, P)
+        assert meta["t_frame_title"][0].startswith(f"frame {{f}} of {F - 1}")
+        # a template, made at the frame shown, is what the server shows there
+        _, tsrc, spec = live.views["frame_trails"]
+        tpl = {("_" + k[1:]) if k[0] == "@" else k[1:]: np.asarray(v) for k, v in tsrc.data.items()}
+        ex.w_frame.value = 7
+        got = V.instantiate(tpl, spec, seq.points, seq.visible, 7)
+        for k, v in got.items():
+            np.testing.assert_array_equal(np.asarray(ex.frame_view.src_trails.data[k]), v)
+        # a frame move: the page makes these; a result: their templates go, the views do not
+        moved = {id(m) for m in live.models(frame_move=True)}
+        assert id(ex.frame_view.src_points) in moved and id(ex.graph_view.src_nodes) in moved
+        assert id(live.meta) in moved and id(live.meta) not in {id(m) for m in live.models()}
+        sent_track = live.tracks["points"]
+        before = dict(sent_track.data)
+        ex.w_params["lam"].value = 3.5
+        assert ex.wait(60)
+        assert all(sent_track.data[k] is before[k] for k in before)  # same sequence: not again
+    finally:
+        ex.close()
+
+
+def test_above_the_limit_the_server_draws_every_frame(seq, monkeypatch):
+    monkeypatch.setenv("LAAV_EXPLORE_LIVE_MAX", str(seq.n_frames * seq.n_points - 1))
+    ex = Explorer(seq, viser=False)
+    try:
+        assert ex.wait(120)
+        live = ex.live
+        assert not live.enabled and live.models() == [] and live.models(frame_move=True) == []
+        assert len(live.tracks["points"].data["x"]) == 0 and live.meta.data["live"][0] == 0
+        assert all(len(tsrc.data["@a"]) == 0 for _, tsrc, _ in live.views.values())
+        ex.w_frame.value = 6  # the server's copies follow (they are sent: nothing is dropped)
+        idx = np.asarray(ex.src_points.data["index"])
+        assert len(idx) == seq.visible[6].sum() and seq.visible[6, idx].all()
+    finally:
+        ex.close()
+
+
+@pytest.mark.parametrize("raw", ["", "many", "1e3"])
+def test_a_bad_limit_in_the_environment_is_the_default(raw, monkeypatch):
+    monkeypatch.setenv("LAAV_EXPLORE_LIVE_MAX", raw)
+    assert LiveFrames().max_entries == LIVE_MAX_ENTRIES
+
+
+def test_legend_rows_one_per_label_no_position():
+    tpl = {"_a": np.array([4, 2, 9], np.int32), "color": np.array(["#a", "#b", "#a"]),
+           "label": np.array(["m1", "m2", "m1"])}
+    spec = V.frame_specs()["points"]
+    rows = legend_rows(tpl, spec, by="label")
+    assert list(rows["label"]) == ["m1", "m2"] and list(rows["color"]) == ["#a", "#b"]
+    assert np.isnan(rows["x"]).all() and len(rows["y"]) == 2
+    trails = legend_rows({"_a": np.arange(3), "_b": np.arange(3), "color": np.array(["#c"] * 3)},
+                         V.frame_specs()["trails"])
+    assert list(trails["alpha"]) == [V.trail_alpha(1)] and np.isnan(trails["x1"]).all()
+    empty = legend_rows({"_a": np.zeros(0, np.int32)}, V.frame_specs()["errors"])
+    assert len(empty["x"]) == 0
+
+
+def test_the_legend_draws_stand_ins_that_follow_the_layers(seq):
+    ex = Explorer(seq, viser=False)
+    try:
+        assert ex.wait(120)
+        fv = ex.frame_view
+        items = fv.fig.legend[0].items
+        moving = {id(r) for r in (fv.r_points, fv.r_r1, fv.r_r2, fv.r_unassigned, fv.r_errors, fv.r_changed)}
+        assert not any(id(r) in moving for it in items for r in it.renderers)
+        points_stand_in = ex.live.stand_in(fv.r_points)
+        assert points_stand_in is not fv.r_points and "index" not in points_stand_in.data_source.data
+        labels = set(np.asarray(points_stand_in.data_source.data["label"]))
+        assert labels == set(np.asarray(fv.src_points.data["label"]))  # one legend entry per motion
+        ex.w_layers.value = [v for v in ex.w_layers.value if not v.startswith("atom")]
+        assert not fv.r_r1.visible and not ex.live.stand_in(fv.r_r1).visible
+        assert fv.r_points.level == "overlay" and fv.fig.title.level == "overlay"
+    finally:
+        ex.close()
