@@ -15,7 +15,7 @@ import threading
 import numpy as np
 import pytest
 from test_explorer_browser import _sequence, _served, _wait_for
-from test_explorer_latency_browser import JS_PAGE, JS_SET, _open, _patches
+from test_explorer_latency_browser import JS_PAGE, JS_SET, _open_with_result, _patches
 
 from explorer import views as V
 
@@ -96,10 +96,7 @@ def test_a_frame_move_is_drawn_by_the_page_while_the_server_is_blocked():
     seq = _sequence()
     f = 7
     with _served(seq, viser=False) as (port, browser, created):
-        page, errors, frames = _open(browser, port)
-        page.wait_for_function(f"() => ({JS_PAGE})().status.length > 0", timeout=60000)
-        page.wait_for_function(f"() => ({JS_PAGE})().graph", timeout=60000)
-        page.wait_for_timeout(500)
+        page, errors, frames = _open_with_result(browser, port)
         ex = created[0]
         assert ex.frame == 0 and not _page_differs_from_server(page, ex)
         fv, gv = ex.frame_view, ex.graph_view
@@ -160,10 +157,7 @@ def test_the_page_and_the_server_agree_on_an_incomplete_sequence():
 
     seq = occluded_sequence()
     with _served(seq, viser=False) as (port, browser, created):
-        page, errors, _ = _open(browser, port)
-        page.wait_for_function(f"() => ({JS_PAGE})().status.length > 0", timeout=60000)
-        page.wait_for_function(f"() => ({JS_PAGE})().graph", timeout=60000)
-        page.wait_for_timeout(500)
+        page, errors, _ = _open_with_result(browser, port)
         ex = created[0]
         for f in (3, 8):
             assert page.evaluate(JS_SET, ["frame", f])

@@ -56,6 +56,16 @@ def _open(browser, port):
     return page, errors, frames
 
 
+def _open_with_result(browser, port):
+    """:func:`_open`, then wait for the first result's status and graph (and half a second
+    for anything the server sends after them)."""
+    page, errors, frames = _open(browser, port)
+    page.wait_for_function(f"() => ({JS_PAGE})().status.length > 0", timeout=60000)
+    page.wait_for_function(f"() => ({JS_PAGE})().graph", timeout=60000)
+    page.wait_for_timeout(500)
+    return page, errors, frames
+
+
 def _patches(frames) -> list[list[dict]]:
     """The events of every PATCH-DOC content the page received (header frames skipped)."""
     out = []
@@ -92,10 +102,7 @@ def test_start_up_shows_points_then_the_result_then_the_later_cards(monkeypatch)
 def test_a_result_is_one_message_and_a_frame_move_sends_no_view_data():
     seq = _sequence()
     with _served(seq, viser=False) as (port, browser, created):
-        page, errors, frames = _open(browser, port)
-        page.wait_for_function(f"() => ({JS_PAGE})().status.length > 0", timeout=60000)
-        page.wait_for_function(f"() => ({JS_PAGE})().graph", timeout=60000)
-        page.wait_for_timeout(500)
+        page, errors, frames = _open_with_result(browser, port)
         ex = created[0]
         for lam in (3.5, 2.5):
             n0 = len(frames)
