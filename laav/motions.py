@@ -29,7 +29,7 @@ stability across seeds, the multicut's own count).
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -134,6 +134,7 @@ class _Context:
     rank: int
     pairs: np.ndarray
     unit2: float
+    results: dict = field(default_factory=dict)  # C -> the LaavResult behind candidate C
 
     @property
     def P(self) -> int:
@@ -173,7 +174,8 @@ def _evaluate(ctx: _Context, C: int):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", LaavWarning)
-                lab = ctx.pipe.update(n_motions=C).labels
+                ctx.results[C] = ctx.pipe.update(n_motions=C)
+            lab = ctx.results[C].labels
         except ValueError:  # the sequence cannot hold C motions (degenerate-input checks)
             return None
         if (lab < 0).any() or np.bincount(lab, minlength=C).min() < MIN_POINTS:
@@ -327,6 +329,13 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     (:meth:`Sequence.complete`): the profile fits whole trajectories. The ``reason`` says
     so and how many tracks that was; a motion none of whose tracks is complete is missed.
     """
+    return _estimate_motions(seq_or_points, max_motions, random_state, params)[0]
+
+
+def _estimate_motions(seq_or_points, max_motions, random_state, params):
+    """:func:`estimate_motions`, and LAAV's result with the estimated C when the estimate ran
+    on the whole sequence (else None): :func:`laav.segment` with ``"auto"`` takes it instead
+    of segmenting again (the same labels: :meth:`laav.Pipeline.update`)."""
     import time
 
     from ._random import as_seed
@@ -336,6 +345,7 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     max_motions = int(max_motions)
     if not isinstance(seq_or_points, Sequence):
         seq_or_points = Sequence(np.asarray(seq_or_points, dtype=np.float64))
+    whole = seq_or_points
     basis = ""
     if not seq_or_points.is_complete:
         # the profile fits whole trajectories (rank-4 subspaces): on incomplete data it runs on
@@ -366,13 +376,15 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
                          f"of motions (needs at least {2 * MIN_POINTS}: {MIN_POINTS} per motion of two)")
     max_motions = min(max_motions, P // MIN_POINTS)
     t = time.perf_counter()
-    C, scores, levels, noise2, why = _estimate(seq_or_points, max_motions, params, seed)
-    return MotionCount(
+    C, scores, levels, noise2, why, results = _estimate(seq_or_points, max_motions, params, seed)
+    count = MotionCount(
         n_motions=int(C), candidates=tuple(range(1, max_motions + 2)),
         subspace_level=tuple(float(v) for v in np.exp(levels[0])),
         epipolar_level=tuple(float(v) for v in np.exp(levels[1])),
         step_scores=tuple(float(v) for v in scores), noise=noise2, reason=why + basis,
         seed=seed, seconds=time.perf_counter() - t)
+    # LAAV's result at the estimate, when it was computed on the caller's whole sequence
+    return count, (results.get(int(C)) if seq_or_points is whole else None)
 
 
 @single_threaded
@@ -394,4 +406,4 @@ def _estimate(seq, max_motions, params, seed):
         return levels[:, c - 1]
 
     C, scores, why = decide(col, ctx.noise2, max_motions, unit2=ctx.unit2)
-    return C, scores, levels, float(ctx.noise2), why
+    return C, scores, levels, float(ctx.noise2), why, ctx.results

@@ -315,16 +315,17 @@ def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: i
     are.
     """
     seed = resolve_seed(seed, random_state)
-    count = None
+    count = result = None
     if isinstance(n_motions, str):
         if n_motions != "auto":
             raise ValueError(f"n_motions must be an integer or 'auto', got {n_motions!r}")
-        from .motions import estimate_motions
+        from .motions import _estimate_motions
 
         seed = _check_seed(seed)
-        count = estimate_motions(seq, params=params, random_state=seed)
+        count, result = _estimate_motions(seq, 5, seed, params)
         n_motions = count.n_motions
-    result = Pipeline(seq, n_motions, params, seed).result
+    if result is None:  # C given, or the estimate did not segment the whole sequence with it
+        result = Pipeline(seq, n_motions, params, seed).result
     if count is not None:
         from dataclasses import replace
 

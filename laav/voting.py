@@ -176,7 +176,8 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     visible : ndarray of shape (F, P), bool, optional
         For an array ``seq`` with missing entries (a :class:`Sequence` carries its own).
         When an entry is hidden, the missing-data variant runs (``docs/ALGORITHM.md``,
-        "Missing data"): points that no usable frame pair sees get label -1, with the
+        "Missing data"): points that no usable frame pair sees are placed by the motions'
+        trajectory subspaces when seen in at least 4 frames, else get label -1, with the
         reason in ``unlabelled_code``; hidden coordinates are never read.
     check_input : bool
         Plain RV only: warn about degenerate input (coordinates' spread, a distant origin,

@@ -134,6 +134,11 @@ def test_segment_auto():
     res = laav.segment(seq, "auto", laav.LaavParams(rv_max_iter=30, rv_trials=2), seed=0)
     assert res.n_motions == 3 and res.motion_count.n_motions == 3
     assert np.unique(res.labels).size == 3
+    # the estimate's own segmentation with C = 3 is returned, not computed again: the same
+    # labels as segmenting with C given
+    fixed = laav.segment(seq, 3, laav.LaavParams(rv_max_iter=30, rv_trials=2), seed=0)
+    np.testing.assert_array_equal(res.labels, fixed.labels)
+    assert res.voting.n_iterations == fixed.voting.n_iterations
     with pytest.raises(ValueError, match="'auto'"):
         laav.segment(seq, "many")
 
