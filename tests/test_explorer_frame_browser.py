@@ -171,10 +171,17 @@ def test_the_page_and_the_server_agree_on_an_incomplete_sequence():
                   page=page)
         page.wait_for_timeout(400)
         assert not _page_differs_from_server(page, ex), "after λ"
-        for what, fn in (("colour", lambda: setattr(ex.w_color, "value", "errors: final")),
-                         ("step", lambda: setattr(ex.graph_view.w_step, "value", 2)),
-                         ("server frame", lambda: setattr(ex.w_frame, "value", 10))):
+        # each change is scheduled on the server: wait until it has happened there (else the
+        # page and the server agree, trivially, on the state before it), then for the page
+        for what, fn, done in (
+                ("colour", lambda: setattr(ex.w_color, "value", "errors: final"),
+                 lambda: "errors: final" in ex.fig_frame.title.text),
+                ("step", lambda: setattr(ex.graph_view.w_step, "value", 2),
+                 lambda: int(ex.graph_view.w_step.value) == 2),
+                ("server frame", lambda: setattr(ex.w_frame, "value", 10),
+                 lambda: ex.frame == 10 and "frame 10 of" in ex.fig_frame.title.text)):
             ex.schedule(fn)
+            _wait_for(done, 30, f"the server after the {what}", page=page)
             _wait_for(lambda: not _page_differs_from_server(page, ex), 30, f"the page after the {what}",
                       page=page)
         assert ex.frame == 10 and "frame 10 of" in ex.fig_frame.title.text
