@@ -533,7 +533,8 @@ class Explorer:
                 notes = [n for n in (self.style["note"], unpinned) if n] + self._data_notes
                 s.show_note("  \n".join(notes))
                 s.show_result(seq, num["error_final"], self.state.compute_seconds,
-                              non_defaults(settings, self.state.default_motions(seq)), self.change)
+                              non_defaults(settings, self.state.default_motions(seq), seq.is_complete),
+                              self.change)
                 self.view3d.show_first()
                 self.compare.redraw()
             self.view3d.draw(seq, result, self.style["color"], self.controls.w_frame.value, new_seq)

@@ -58,7 +58,8 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
     FigureCanvasAgg(fig)
     num = V.stage_numbers(seq, result, plain)
     settings = Settings(result.params, int(result.seed), int(result.n_motions))
-    off = non_defaults(settings, seq.n_motions if seq.labels is not None else None)
+    off = non_defaults(settings, seq.n_motions if seq.labels is not None else None,
+                       seq.is_complete)
     errs = ", ".join(f"{st} {V._pct(num[f'error_{st}'])}" for st in ("fine", "coarse", "final"))
     if plain is not None:
         errs += f"; plain RV {V._pct(num['error_plain'])}"

@@ -127,21 +127,24 @@ def _fmt(v) -> str:
     return str(v)
 
 
-def _values(settings: Settings) -> dict:
-    """Every setting by name, as shown: fine_models as the number of fine models used."""
+def _values(settings: Settings, complete: bool = True) -> dict:
+    """Every setting by name, as shown: fine_models as the number of fine models used (on
+    complete or incomplete tracks)."""
     d = settings.params.to_dict()
-    d["fine_models"] = settings.params.n_fine(settings.n_motions)
+    d["fine_models"] = settings.params.n_fine(settings.n_motions, complete)
     d["seed"], d["n_motions"] = settings.seed, settings.n_motions
     return d
 
 
-def non_defaults(settings: Settings, default_motions: int | None) -> list[str]:
+def non_defaults(settings: Settings, default_motions: int | None,
+                 complete: bool = True) -> list[str]:
     """``name = value`` for every setting that differs from the defaults (the LaavParams
-    defaults, seed 0, C of the ground truth, ``fine_per_motion`` C fine models)."""
+    defaults, seed 0, C of the ground truth, the default number of fine models for the C in
+    use, on complete or incomplete tracks)."""
     default = _values(Settings(LaavParams(), 0, settings.n_motions if default_motions is None
-                               else default_motions))
-    default["fine_models"] = LaavParams().n_fine(settings.n_motions)  # follows the C in use
-    now = _values(settings)
+                               else default_motions), complete)
+    default["fine_models"] = LaavParams().n_fine(settings.n_motions, complete)  # follows C
+    now = _values(settings, complete)
     return [f"{PARAM_NAMES.get(k, k)} = {_fmt(v)}" for k, v in now.items() if v != default[k]]
 
 
@@ -177,7 +180,7 @@ class Change:
 def describe_change(seq: Sequence, before: LaavResult, before_settings: Settings, after: LaavResult,
                     after_settings: Settings) -> Change:
     """The :class:`Change` from ``before`` to ``after`` (two results on ``seq``)."""
-    old, new = _values(before_settings), _values(after_settings)
+    old, new = _values(before_settings, seq.is_complete), _values(after_settings, seq.is_complete)
     changed = tuple((PARAM_NAMES.get(k, k), old[k], new[k]) for k in new if new[k] != old[k])
     errors = ()
     if seq.labels is not None:
@@ -373,7 +376,7 @@ def check_settings(seq: Sequence, settings: Settings) -> None:
         raise ValueError(f"the number of motions C must be a positive integer, got {C!r}")
     if C > seq.n_points:
         raise ValueError(f"C = {C} motions is more than the {seq.n_points} points of the sequence")
-    settings.params.n_fine(C)  # 2C >= C
+    settings.params.n_fine(C, seq.is_complete)  # at least C fine models
 
 
 class ExplorerState:

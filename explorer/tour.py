@@ -30,12 +30,14 @@ class TourStep:
     text_epipolar: str | None = None
     text_joint: str | None = None
 
-    def text_for(self, params, n_motions: int) -> str:
+    def text_for(self, params, n_motions: int, complete: bool = True) -> str:
         """The text for a result of ``params`` (a :class:`laav.LaavParams`) with C =
-        ``n_motions``: the merge it used, its number of fine models."""
-        text = {"epipolar": self.text_epipolar, "joint": self.text_joint}.get(params.coarse_merge)
+        ``n_motions`` on complete (or incomplete) tracks: the merge it used, its number of
+        fine models."""
+        merge = params.merge_for(complete)
+        text = {"epipolar": self.text_epipolar, "joint": self.text_joint}.get(merge)
         text = text or self.text
-        n = params.n_fine(n_motions)
+        n = params.n_fine(n_motions, complete)
         k = n // n_motions if n_motions and n % n_motions == 0 else None
         return text.replace("{fine}", f"{k}C" if k is not None else str(n))
 

@@ -925,7 +925,14 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
         moved.append(f"joint reassignment {voting.reassigned}")
     extra = f"; points moved by {' and '.join(moved)}" if moved else ""
     returned = ""
-    if voting.initialised and voting.selected != "informed":
+    if voting.initialised and voting.selected.startswith("missing motion"):
+        # LAAV's own trial, from another start of ours: say which, and why
+        returned = (f"; **returned the trial from the {md_text(voting.selected)} start, not the "
+                    "coarse labels' trial** (ours, not in the paper: two coarse motions as one, "
+                    "the points in no atom that no motion explains as the C-th); its coding "
+                    f"length + epipolar cost was lower; {voting.n_iterations} voting iterations "
+                    f"in all, the coarse labels' trial {per[0] if per else 0}")
+    elif voting.initialised and voting.selected != "informed":
         # the labels shown are not LAAV's own trial: say whose they are, and why
         returned = (f"; **returned {md_text(voting.selected)}, not LAAV's informed trial**: the model "
                     f"selection (ours, not in the paper) preferred it; {voting.n_iterations} voting "

@@ -443,8 +443,9 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         flip = rng.random(params.coarse_frames) < 0.5
         pairs[flip] = pairs[flip][:, ::-1]
     widest = np.array([0, F - 1], dtype=np.int64)
-    coding = params.coarse_merge in ("coding", "joint")
-    if coding and vis is not None:
+    method = params.merge_for(vis is None)
+    coding = method in ("coding", "joint")
+    if params.coarse_merge in ("coding", "joint") and vis is not None:
         import warnings
 
         from ._sequence import LaavWarning, user_stacklevel
@@ -453,8 +454,6 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
                       f"'{params.coarse_merge}' needs complete trajectories; the epipolar "
                       "merge was used on this incomplete sequence", LaavWarning,
                       stacklevel=user_stacklevel())
-        coding = False
-    method = params.coarse_merge if coding else "epipolar"
     if n == 0:
         e = np.zeros((0, 0))
         return Coarse(np.zeros(0, np.int64), e, e, e, np.zeros(0, np.int64), fine_pts,

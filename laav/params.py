@@ -58,21 +58,20 @@ class LaavParams:
     fine_models : int or None
         Number of fine motion models the multicut is brought to; None means
         ``fine_per_motion * C``.
-    fine_per_motion : int
-        Fine models per motion when ``fine_models`` is None: 2 (the paper, the default);
-        3 suits the coding-length merge, which can afford more models
-        (see ``docs/ALGORITHM.md``).
-    coarse_merge : {"epipolar", "coding", "joint"}
-        How the fine models are merged into C motions: ``"epipolar"`` (the default, the
-        paper's form) spectral clustering of the epipolar-vote affinity Z; ``"coding"``
-        (ours, an option) the partition of least lossy coding length of the models'
-        trajectories (:mod:`laav.coding`); ``"joint"`` (ours, an option; with
-        ``fine_per_motion=4``) of the ``coarse_candidates`` partitions of least coding
-        length with 8 or more points per motion, the one of least coding length +
-        ``coarse_epipolar_weight`` x epipolar cost. Both are better on Hopkins155 and
-        much worse when one motion holds a few percent of the points
-        (``docs/ALGORITHM.md``); both need complete tracks (else the epipolar merge runs,
-        with a warning).
+    fine_per_motion : int or None
+        Fine models per motion when ``fine_models`` is None. None (the default): by the
+        merge that runs (:meth:`merge_for`): 4 for the joint merge, 3 for the coding
+        merge, 2 for the epipolar merge (the paper's 2C).
+    coarse_merge : {"auto", "epipolar", "coding", "joint"}
+        How the fine models are merged into C motions: ``"epipolar"`` (the paper's form)
+        spectral clustering of the epipolar-vote affinity Z; ``"coding"`` (ours) the
+        partition of least lossy coding length of the models' trajectories
+        (:mod:`laav.coding`); ``"joint"`` (ours) of the ``coarse_candidates`` partitions
+        of least coding length with 8 or more points per motion, the one of least coding
+        length + ``coarse_epipolar_weight`` x epipolar cost. The coding and joint merges
+        need complete tracks (on incomplete ones the epipolar merge runs, with a
+        warning). ``"auto"`` (the default): the joint merge on complete tracks, the
+        epipolar merge on incomplete ones, without a warning (``docs/ALGORITHM.md``).
     coding_eps : float
         Distortion (px) of the coding length (``coarse_merge="coding"`` or ``"joint"``).
     coarse_candidates : int
@@ -125,7 +124,22 @@ class LaavParams:
         trajectory subspace and fundamental matrices explain it best together
         (:func:`laav.refine.reassign_labels`). With model selection, every candidate
         labelling is polished so before it is scored.
-    rv_select : {"none", "subspace"}
+    rv_subspace_weight : float
+        Subspace votes (ours, :class:`laav.rv.SubspaceVotes`; complete data): every
+        voting group also fits a rank-4 trajectory subspace to ``rv_subspace_sample`` of
+        its points, and a point's vote uses its Sampson distance plus this weight times
+        its squared distance to the subspace (px^2 per frame). 0: the epipolar votes of
+        Random Voting alone (the RV and LAAV papers).
+    rv_subspace_sample : int
+        Points per group the subspace of the subspace votes is fitted to (>= 8).
+    rv_select : {"none", "subspace", "laav"}
+        ``"laav"`` (ours): LAAV's own candidates, no plain Random Voting. The informed
+        trial from the coarse labels, and, for every pair of coarse motions, a trial from
+        a *missing-motion start* (the pair as one motion; the points in no atom that the
+        other motions explain worst as the C-th), each refined and reassigned; the one of
+        least coding length plus ``coarse_epipolar_weight`` x epipolar cost over all
+        points (the joint merge's score) is kept (:func:`laav.voting.joint_score`). On
+        incomplete data it runs as ``"subspace"``.
         ``"subspace"`` (ours): model selection between candidate labellings by their
         trajectory-subspace cost (:func:`laav.refine.subspace_cost`) and agreement;
         plain RV with no converged trial keeps the best of the trials and their
@@ -167,8 +181,8 @@ class LaavParams:
     edge_scale: float = 2.0
     cut_prior: float = 0.0
     fine_models: int | None = None
-    fine_per_motion: int = 2
-    coarse_merge: str = "epipolar"
+    fine_per_motion: int | None = None
+    coarse_merge: str = "auto"
     coding_eps: float = 10.0
     coarse_candidates: int = 10
     coarse_epipolar_weight: float = 2.0
@@ -188,7 +202,9 @@ class LaavParams:
     rv_batch: int = 2
     rv_refine: bool = True
     rv_reassign: bool = True
-    rv_select: str = "subspace"
+    rv_subspace_weight: float = 1.0
+    rv_subspace_sample: int = 16
+    rv_select: str = "laav"
     rv_select_agreement: float = 2.0
 
     def __post_init__(self) -> None:
@@ -217,7 +233,7 @@ class LaavParams:
         """
         return cls(atom_frames="pair", fine_per_motion=2, coarse_merge="epipolar", pooled_trials=0,
                    pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
-                   rv_select="none").replace(**changes)
+                   rv_subspace_weight=0.0, rv_select="none").replace(**changes)
 
     def scaled(self, s: float) -> LaavParams:
         """The parameters for coordinates ``s`` times larger: lengths (:data:`PIXEL_PARAMS`)
@@ -241,10 +257,22 @@ class LaavParams:
             raise ValueError(f"unknown LAAV parameter(s): {sorted(unknown)}")
         return dataclasses.replace(self, **changes)
 
-    def n_fine(self, n_motions: int) -> int:
-        """Number of fine models for ``n_motions`` motions (``fine_models`` or
-        ``fine_per_motion`` C)."""
-        k = self.fine_per_motion * n_motions if self.fine_models is None else self.fine_models
+    def merge_for(self, complete: bool = True) -> str:
+        """The coarse merge that runs on complete (or incomplete) tracks: ``coarse_merge``,
+        with ``"auto"`` the joint merge on complete tracks and the epipolar merge on
+        incomplete ones; the coding and joint merges need complete tracks."""
+        if not complete:
+            return "epipolar"
+        return "joint" if self.coarse_merge == "auto" else self.coarse_merge
+
+    def n_fine(self, n_motions: int, complete: bool = True) -> int:
+        """Number of fine models for ``n_motions`` motions: ``fine_models``, else
+        ``fine_per_motion`` C, where None means 4, 3 or 2 per motion for the merge that
+        runs on complete (or incomplete) tracks (:meth:`merge_for`)."""
+        per = self.fine_per_motion
+        if per is None:
+            per = _FINE_PER_MOTION[self.merge_for(complete)]
+        k = per * n_motions if self.fine_models is None else self.fine_models
         if k < n_motions:
             raise ValueError(
                 f"fine_models ({k}) must be >= the number of motions ({n_motions})"
@@ -254,6 +282,11 @@ class LaavParams:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
+
+#: Fine models per motion of each merge when ``fine_per_motion`` is None: the paper's 2C
+#: for the epipolar merge; the coding and joint merges measured best with 3C and 4C
+#: (benchmarks/TUNING.md, "Stage 4 by coding length", "Stage 4: the joint merge").
+_FINE_PER_MOTION = {"epipolar": 2, "coding": 3, "joint": 4}
 
 _BIG = 1e6  # px or 1/px^2: far beyond any image, small enough that squares stay finite
 #: Upper bound of the strengths in 1/px^2 (lam, rv_lambda): 1e6 / s^2 for coordinates
@@ -275,8 +308,8 @@ _BOUNDS = (
     ("edge_scale", "float>", 0, _BIG),
     ("cut_prior", "float", -_BIG, _BIG),
     ("fine_models", "int|None", 1, 1000),
-    ("fine_per_motion", "int", 1, 100),
-    ("coarse_merge", "choice", ("coding", "epipolar", "joint"), None),
+    ("fine_per_motion", "int|None", 1, 100),
+    ("coarse_merge", "choice", ("auto", "coding", "epipolar", "joint"), None),
     ("coding_eps", "float>", 0, _BIG),
     ("coarse_candidates", "int", 1, 1000),
     ("coarse_epipolar_weight", "float", 0, _BIG),
@@ -296,7 +329,9 @@ _BOUNDS = (
     ("rv_batch", "int", 1, 32),
     ("rv_refine", "bool", None, None),
     ("rv_reassign", "bool", None, None),
-    ("rv_select", "choice", ("none", "subspace"), None),
+    ("rv_subspace_weight", "float", 0, _BIG),
+    ("rv_subspace_sample", "int", 8, 1000),
+    ("rv_select", "choice", ("none", "subspace", "laav"), None),
     ("rv_select_agreement", "float", 0, _BIG),
 )
 

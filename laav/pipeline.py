@@ -158,7 +158,7 @@ class Pipeline:
     def __init__(self, seq, n_motions: int, params: LaavParams | None = None, seed: int = 0):
         self.seq, self.n_motions = _check_inputs(seq, n_motions)
         self.params = LaavParams() if params is None else params
-        self.params.n_fine(self.n_motions)
+        self.params.n_fine(self.n_motions, self.seq.is_complete)
         self.seed = _check_seed(seed)
         self._lock = threading.Lock()
         self._distances = None
@@ -201,7 +201,7 @@ class Pipeline:
             elif stage == "graph":
                 st["graph"] = atom_graph(seq, st["atoms"], p, self._distances)
             elif stage == "multicut":
-                st["multicut"] = solve_multicut(st["graph"], p.n_fine(C))
+                st["multicut"] = solve_multicut(st["graph"], p.n_fine(C, seq.is_complete))
             elif stage == "coarse":
                 st["coarse"] = merge_models(seq, st["atoms"], st["multicut"], C, p,
                                             self._rng("coarse"))
@@ -247,7 +247,7 @@ class Pipeline:
             new_params = self.params.replace(**changed) if changed else self.params
             # the sequence is the one checked at construction: only a new C is checked again
             _, C = _check_inputs(self.seq, C, degenerate=C != self.n_motions)
-            new_params.n_fine(C)
+            new_params.n_fine(C, self.seq.is_complete)
             diff = {k for k, v in new_params.to_dict().items() if v != getattr(self.params, k)}
             starts = [stages_affected(diff)] if diff else []
             if C != self.n_motions:

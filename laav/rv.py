@@ -26,6 +26,15 @@ Choices where the RV paper is vague (measured on Hopkins155, ``benchmarks/TUNING
 * **Trials side by side** (``rv_batch``): speed only; the plain trial kept is the first
   *in start order* to converge, exactly as if the trials ran one after another.
 
+One departure of ours, off unless ``rv_subspace_weight`` > 0 (LAAV's default fine-tuning;
+:meth:`laav.LaavParams.paper` and plain RV's published form keep it off): **subspace
+votes** (:class:`SubspaceVotes`). Besides its fundamental matrix, every group fits a
+rank-4 trajectory subspace to ``rv_subspace_sample`` of its points (drawn as above), and
+a point's distance becomes its Sampson distance plus ``rv_subspace_weight`` times its
+squared distance to the subspace (px^2 per frame). The epipolar vote alone cannot tell a
+static background from an object translating across it (one fundamental matrix fits
+both); their trajectories do not share one rank-4 subspace.
+
 Everything beyond the paper (refinement, joint reassignment, model selection) is in
 :mod:`laav.voting` and :mod:`laav.refine`.
 """
@@ -37,10 +46,48 @@ import numpy as np
 from ._interrupt import check as check_interrupt
 from .geometry import fit_fundamental, sampson_distance
 
-__all__ = ["vote", "run_trials", "consensus", "consensus_seed", "RESET_AT"]
+__all__ = ["vote", "run_trials", "consensus", "consensus_seed", "RESET_AT", "SubspaceVotes"]
 
 #: Plain RV resets its votes once, at this iteration (RV paper).
 RESET_AT = 15
+
+
+class SubspaceVotes:
+    """The trajectories and settings of the subspace votes (complete data only).
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    weight : float
+        ``rv_subspace_weight``: squared subspace distance (px^2 per frame) added to the
+        Sampson distance (px^2) before ``exp(-lambda d)``.
+    sample : int
+        ``rv_subspace_sample``: points per group the rank-4 subspace is fitted to.
+    """
+
+    RANK = 4
+
+    def __init__(self, points: np.ndarray, weight: float, sample: int):
+        from .refine import trajectory_matrix
+
+        self.n_frames = points.shape[0]
+        self.W = trajectory_matrix(points)  # (2F, P), origin at the points' corner
+        self.norm2 = np.einsum("ij,ij->j", self.W, self.W)
+        # never more than the points there are (a group smaller than the sample draws
+        # from every point, as the epipolar sample does)
+        self.weight, self.sample = float(weight), min(int(sample), points.shape[1])
+
+    def distances(self, idx: np.ndarray) -> np.ndarray:
+        """Squared distance (px^2 per frame) of every point to each group's subspace.
+
+        ``idx`` (..., C, m): the points each group's subspace is fitted to; returns
+        (..., C, P).
+        """
+        X = np.moveaxis(self.W[:, idx], 0, -2)  # (..., C, 2F, m)
+        U = np.linalg.svd(X, full_matrices=False)[0][..., :self.RANK]  # (..., C, 2F, 4)
+        proj = np.einsum("...dk,dp->...kp", U, self.W)  # (..., C, 4, P)
+        inside = np.einsum("...kp,...kp->...p", proj, proj)
+        return np.maximum(self.norm2 - inside, 0.0) / self.n_frames
 
 
 def _sample_groups(labels, votes, C, m, rng, avail=None):
@@ -82,7 +129,8 @@ def _sample_groups(labels, votes, C, m, rng, avail=None):
 
 
 def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: float,
-         m: int, rng: np.random.Generator, visible: np.ndarray | None = None) -> np.ndarray:
+         m: int, rng: np.random.Generator, visible: np.ndarray | None = None,
+         subspace: SubspaceVotes | None = None) -> np.ndarray:
     """One voting step on frame pair ``pair``: one F per group, the votes of every point.
 
     Parameters
@@ -105,6 +153,10 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
         the fits and receive votes (the others get 0); ``points`` must be finite
         everywhere (hidden entries filled, e.g. with 0) and at least ``m`` points must be
         visible in both frames.
+    subspace : SubspaceVotes, optional
+        Complete data only: each point's squared distance to its group's rank-4
+        trajectory subspace (fitted to a second sample of each group) is added to its
+        Sampson distance, times ``subspace.weight``.
 
     Returns
     -------
@@ -129,6 +181,9 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
         F = fit_fundamental(x1[b, idx], x2[b, idx])  # (B, C, 3, 3)
         x1, x2 = x1[:, None], x2[:, None]
     d = sampson_distance(F, x1, x2)  # (..., C, P)
+    if subspace is not None:
+        sub_idx = _sample_groups(labels, votes, C, subspace.sample, rng)
+        d += subspace.weight * subspace.distances(sub_idx)
     v = np.exp(-lam * d)
     other = 1.0 - v
     total_other = np.add.reduce(other, axis=-2, keepdims=True)  # (..., 1, P)
@@ -185,7 +240,7 @@ def _pool_pair(pool: np.ndarray, rng: np.random.Generator) -> tuple[int, int]:
     return (right, left) if rng.random() < 0.5 else (left, right)
 
 
-def _step(points, trials, params, masks=None):
+def _step(points, trials, params, masks=None, subspace=None):
     """One voting iteration of every trial in ``trials``, in one batched call; every
     random draw of a trial comes from its own generator. ``masks`` (missing data): the
     ``(visible, pool)`` of :func:`run_trials`."""
@@ -195,7 +250,7 @@ def _step(points, trials, params, masks=None):
     if masks is None:
         pairs = np.array([_frame_pair(F, t.rng) for t in trials])  # (B, 2)
         votes += vote(points, labels, votes, pairs, params.rv_lambda, params.rv_sample_size,
-                      [t.rng for t in trials])
+                      [t.rng for t in trials], subspace=subspace)
     else:
         visible, pool = masks
         pairs = np.array([_pool_pair(pool, t.rng) for t in trials])  # (B, 2)
@@ -263,6 +318,8 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
         only (:func:`vote`), and a point not voted on keeps its label and its votes (the
         forgetting factor applies to the points voted on: each point's histogram decays
         by its own votes). ``points`` must be finite everywhere (hidden entries filled).
+        The subspace votes (``rv_subspace_weight``) are for complete data; with ``masks``
+        the votes are epipolar only.
 
     Returns
     -------
@@ -278,6 +335,8 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
     P = points.shape[1]
     width = params.rv_batch
     n_plain = params.rv_trials if n_plain is None else n_plain
+    subspace = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
+                if params.rv_subspace_weight > 0 and masks is None else None)
     if streams is None:
         streams = rng.spawn(1 + n_plain)  # [informed, plain 0, plain 1, ...]
     active: list = []
@@ -302,7 +361,7 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
             plain.append(t)
         if not active:
             break
-        _step(points, active, params, masks)
+        _step(points, active, params, masks, subspace)
         active = [t for t in active if not t.done]
         # the kept plain trial is the first *in start order* to converge, as if the trials
         # ran one after another: a trial that converges sooner than an earlier one is not

@@ -53,7 +53,8 @@ from .refine import (
 from .rv import consensus, consensus_seed, run_trials, vote
 
 __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances", "frame_pairs",
-           "labelling_cost", "subspace_cost", "reassign_labels"]
+           "labelling_cost", "subspace_cost", "reassign_labels", "joint_score",
+           "missing_motion_start"]
 
 #: In LAAV's fine-tuning with model selection, when the informed trial and plain RV's
 #: converged trial disagree on more than this share of the points, two more plain RV
@@ -228,7 +229,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if vis is not None:
         return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo,
                               check_input)
-    select = params.rv_select == "subspace"
+    select = params.rv_select in ("subspace", "laav")  # plain RV: "laav" selects as "subspace"
 
     if init_labels is None:  # plain RV
         _, best, trials, ended = run_trials(points, C, params, rng)
@@ -277,6 +278,8 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     labels0 = np.where(known, init, rng.integers(0, C, P))
     votes0 = np.zeros((P, C))
     votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
+    if params.rv_select == "laav" and mk is None:
+        return _own_candidates(points, C, params, rng, init, labels0, votes0)
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
         first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,
                                          masks=masks)
@@ -299,6 +302,106 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
                                   polished=polished, mk=mk), first)
+
+
+#: A missing-motion start (``rv_select="laav"``) takes the points in no atom whose best
+#: subspace distance exceeds this quantile of the covered points' own distances.
+MISSING_MOTION_QUANTILE = 0.95
+#: Epipolar frame pairs of :func:`joint_score` (as the joint merge's, ``laav.coarse``).
+_JOINT_PAIRS = 8
+
+
+def joint_score(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                params: LaavParams) -> float:
+    """The joint merge's score of a whole labelling (lower is better).
+
+    Lossy coding length (nats, distortion ``coding_eps``) of every motion's trajectories
+    (:mod:`laav.coding`) plus ``coarse_epipolar_weight`` times the epipolar cost: the sum
+    over points of ``log(1 + d)``, ``d`` the point's mean Sampson distance to its own
+    motion's robust fundamental matrices over 8 frame pairs, in units of
+    :func:`unit2`. ``inf`` when a motion has fewer than 8 points.
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+    labels : ndarray of shape (P,)
+    n_motions : int
+    params : LaavParams
+        Uses ``coding_eps``, ``coarse_epipolar_weight`` and ``rv_lambda``.
+    """
+    from .coding import coding_lengths, model_stats
+
+    labels = np.asarray(labels, dtype=np.int64)
+    if np.bincount(labels, minlength=n_motions).min() < 8:
+        return float("inf")
+    u2 = unit2(params)
+    st = model_stats(points, labels, n_motions)
+    coding = float(coding_lengths(st.count, st.total, st.scatter, st.dim, params.coding_eps).sum())
+    D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], _JOINT_PAIRS), u2)
+    own = D[labels, np.arange(labels.size)]
+    if not np.isfinite(own).all():
+        return float("inf")
+    return coding + params.coarse_epipolar_weight * float(np.log1p(own / u2).sum())
+
+
+def missing_motion_start(points: np.ndarray, init: np.ndarray, n_motions: int, g: int, h: int,
+                         params: LaavParams, min_points: int) -> np.ndarray | None:
+    """A start for the case where one motion has no atom (``rv_select="laav"``).
+
+    Coarse motions ``g`` and ``h`` become one; the points in no atom (``init`` -1) whose
+    squared distance to every remaining motion's robust rank-4 trajectory subspace
+    (:func:`laav.refine.subspace_residuals`) exceeds the :data:`MISSING_MOTION_QUANTILE`
+    of the covered points' own become motion ``n_motions - 1``. Returns labels (P,)
+    with -1 for the other uncovered points, or None when fewer than ``min_points``
+    points qualify (or a motion is too small to fit).
+    """
+    from .refine import subspace_residuals
+
+    C = n_motions
+    L = np.where(init == h, g, init)
+    L = np.where(L > h, L - 1, L)  # C - 1 motions, -1 outside the atoms
+    R = subspace_residuals(points, L, C - 1, unit2=unit2(params))
+    if R is None:
+        return None
+    cov = L >= 0
+    own = R[L[cov], np.flatnonzero(cov)]
+    new = ~cov & (R.min(axis=0) > np.quantile(own, MISSING_MOTION_QUANTILE))
+    if new.sum() < min_points:
+        return None
+    return np.where(new, C - 1, L)
+
+
+def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
+    """``rv_select="laav"``: LAAV's informed trial and its missing-motion starts, each
+    polished, the one of least :func:`joint_score` kept (see :class:`LaavParams`)."""
+    P = points.shape[1]
+    pairs = [(g, h) for g in range(C) for h in range(g + 1, C)]
+    streams = rng.spawn(1 + len(pairs))  # [coarse start, one per pair]
+    starts = [("informed", labels0, votes0, streams[0])]
+    for (g, h), stream in zip(pairs, streams[1:]):
+        start = missing_motion_start(points, init, C, g, h, params,
+                                     max(8, params.rv_sample_size))
+        if start is None:
+            continue
+        known2 = start >= 0
+        lab = np.where(known2, start, stream.integers(0, C, P))
+        vot = np.zeros((P, C))
+        vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
+        starts.append((f"missing motion ({g}+{h})", lab, vot, stream))
+    trials, entries, first = [], [], None
+    for name, lab, vot, stream in starts:
+        res, _, ran, _ = run_trials(points, C, params, None, (lab, vot), n_plain=0,
+                                    streams=[stream])
+        first = res if first is None else first
+        trials += ran
+        pol = _Polished(points, C, params, res[0])
+        entries.append((name, res, pol, joint_score(points, pol.final()[0], C, params)))
+    scores = np.array([e[3] for e in entries])
+    k = int(np.argmin(scores))  # the first of equal scores: the coarse start
+    name, res, pol, _ = entries[k]
+    costs = {e[0]: float(e[3]) for e in entries}
+    return _with_informed(_finish(points, C, params, res, trials, True, name, polished=pol,
+                                  costs=costs), first)
 
 
 def _plain_run(points, C, params, rng, streams, memo, k, masks=None):
@@ -378,7 +481,7 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     if w is not None and w.shape != (P,):
         raise ValueError(f"weights must have shape ({P},), got {w.shape}")
     mk = _Masks(sub_vis, pool)
-    select = params.rv_select == "subspace"
+    select = params.rv_select in ("subspace", "laav")  # incomplete data: "laav" as "subspace"
     if init is None:  # plain RV
         _, best, trials, ended = run_trials(sub, C, params, rng, masks=(mk.visible, mk.pool))
         out = _plain_result(seq, sub, C, params, rng, best, trials, ended, select, mk)

@@ -134,12 +134,12 @@ def test_paper_pairwise_votes_match_direct_computation(n_objects, seed):
 
 
 def test_default_blend_is_pairwise_votes_plus_coassociation():
-    """The default's Z is (1 - w) co-association of its pooled-voting trials + w pairwise
-    votes: with the pairwise part computed directly, what is left must be a co-association,
+    """The epipolar merge's Z is (1 - w) co-association of its pooled-voting trials + w
+    pairwise votes: with the pairwise part computed directly, what is left must be a co-association,
     i.e. a multiple of 1 / pooled_trials in [0, 1] on every pair."""
     seq = synthetic.make_sequence(n_objects=2, n_frames=12, n_points=240, noise=0.5, rng=4)
     atoms, mc, members = one_atom_models(seq, 2, np.random.default_rng(4))
-    params = LaavParams(coarse_frames=3, coarse_samples=2)
+    params = LaavParams(coarse_merge="epipolar", coarse_frames=3, coarse_samples=2)
     assert 0 < params.pairwise_weight < 1 and params.pooled_trials > 0
     co = merge_models(seq, atoms, mc, seq.n_motions, params, np.random.default_rng(4))
     _, pair = direct_pair_votes(seq.points, members, co.frame_pairs, params.lam)
@@ -223,10 +223,10 @@ def test_vote_samples_are_fits_the_vote_used():
 
 def test_terms_of_z_are_returned_apart():
     """``Coarse.pairwise_vote`` is the directly computed pairwise vote and ``affinity`` is
-    its blend with ``Coarse.coassociation`` (the default preset)."""
+    its blend with ``Coarse.coassociation`` (the epipolar merge, as on incomplete tracks)."""
     seq = synthetic.make_sequence(n_objects=2, n_frames=12, n_points=240, noise=0.5, rng=4)
     atoms, mc, members = one_atom_models(seq, 2, np.random.default_rng(4))
-    params = LaavParams(coarse_frames=3, coarse_samples=2)
+    params = LaavParams(coarse_merge="epipolar", coarse_frames=3, coarse_samples=2)
     co = merge_models(seq, atoms, mc, seq.n_motions, params, np.random.default_rng(4))
     _, pair = direct_pair_votes(seq.points, members, co.frame_pairs, params.lam)
     np.testing.assert_allclose(co.pairwise_vote, pair, rtol=1e-6, atol=1e-9)

@@ -120,9 +120,10 @@ def test_lambda_change_alters_z_and_not_the_atoms():
     p = REPO / "explorer" / "assets" / "demo_two_objects.mat"
     if not p.is_file():
         pytest.skip("explorer/assets/demo_two_objects.mat is missing")
-    # λ enters Z with the epipolar merge (the default; the coding merge does not use it:
-    # see test_lambda_does_not_move_the_coding_merge)
-    ex = Explorer.from_file(p, viser=False)
+    # λ enters Z with the epipolar merge (the paper's, and the default on incomplete tracks;
+    # the coding merge does not use it, the joint merge only in its epipolar cost: see
+    # test_lambda_does_not_move_the_coding_merge, test_lambda_weighs_the_joint_merges_epipolar_cost)
+    ex = Explorer.from_file(p, viser=False, params=laav.LaavParams(coarse_merge="epipolar"))
     try:
         assert ex.wait(120)
         z0 = _data(ex.src_z, "z")
@@ -139,6 +140,24 @@ def test_lambda_change_alters_z_and_not_the_atoms():
         assert "λ = 0.3" in ex.fig_z.title.text
     finally:
         ex.close()
+
+
+def test_lambda_weighs_the_joint_merges_epipolar_cost():
+    """With the default (joint) merge on complete tracks λ sets the unit of the epipolar
+    cost of the shortlisted partitions (``2 / λ``); their coding lengths and Z (the coding
+    affinity) stay."""
+    ex = Explorer.demo(viser=False)
+    assert ex.wait(120)
+    co0 = ex.result.coarse
+    z0 = _data(ex.src_z, "z")
+    ex.w_params["lam"].value = 0.3
+    assert ex.wait(120)
+    co = ex.result.coarse
+    assert co0.method == co.method == "joint" and co is not co0
+    np.testing.assert_array_equal(co.shortlist.coding_length, co0.shortlist.coding_length)
+    assert not np.allclose(co.shortlist.epipolar_cost, co0.shortlist.epipolar_cost)
+    np.testing.assert_allclose(_data(ex.src_z, "z"), z0)
+    ex.close()
 
 
 def test_lambda_does_not_move_the_coding_merge():

@@ -52,8 +52,8 @@ def test_every_field_once_with_the_validation_tables_bounds():
     stages = [f.stage for f in FIELDS]
     assert stages == sorted(stages, key=["atoms", "graph", "multicut", "coarse", "voting"].index)
     by_name = {f.name: f for f in FIELDS}
-    assert by_name["coarse_merge"].choices == ("coding", "epipolar", "joint")
-    assert by_name["coarse_merge"].default == "epipolar"
+    assert by_name["coarse_merge"].choices == ("auto", "coding", "epipolar", "joint")
+    assert by_name["coarse_merge"].default == "auto"
     assert by_name["rv_refine"].kind == "bool" and by_name["fine_models"].kind == "int|None"
 
 
@@ -68,7 +68,7 @@ def test_every_field_has_its_docstring_as_plain_text_tooltip():
     lam = next(f for f in FIELDS if f.name == "lam")
     assert "Epipolar voting strength lambda" in lam.doc and "(0, 1e+12]" in lam.tooltip()
     merge = next(f for f in FIELDS if f.name == "coarse_merge")
-    assert "laav.coding" in merge.doc and "one of: coding, epipolar" in merge.tooltip()
+    assert "laav.coding" in merge.doc and "one of: auto, coding, epipolar, joint" in merge.tooltip()
     # the parser stops at the next section and reads any numpydoc Parameters block
     doc = """Title.
 
@@ -109,7 +109,7 @@ def test_params_diff_names_every_setting_that_differs():
     a = Settings(laav.LaavParams(), 0, 2)
     assert C.params_diff(a, a) == []
     b = Settings(laav.LaavParams(lam=3.5, coarse_merge="coding", fine_models=5), 4, 3)
-    assert C.params_diff(a, b) == [("fine_models", None, 5), ("coarse_merge", "epipolar", "coding"),
+    assert C.params_diff(a, b) == [("fine_models", None, 5), ("coarse_merge", "auto", "coding"),
                                    ("lam", 2.0, 3.5), ("seed", 0, 4), ("motions", 2, 3)]
     assert C.params_diff(b, a)[0] == ("fine_models", 5, None)
 

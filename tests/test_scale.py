@@ -144,14 +144,16 @@ def test_pipeline_reuses_the_neighbourhoods_across_radii():
 
 
 def test_no_stage_allocates_a_p_by_p_array():
-    """P = 3,000: a P x P float64 array is 72 MB; every stage allocates under a third of it."""
+    """P = 6,000: a P x P float64 array is 288 MB; every stage allocates under a third of it.
+    (At 3,000 the bound, 24 MB, was below what the joint merge allocates whatever P is:
+    its pairwise votes and partition search grow with the fine models, 26 MB at 12.)"""
     from laav.coarse import merge_models
     from laav.multicut import solve_multicut
     from laav.pipeline import _stage_rngs
     from laav.rv import consensus
     from laav.voting import random_voting
 
-    P = 3000
+    P = 6000
     seq = make_sequence(n_objects=2, n_frames=8, n_points=P, noise=0.5, rng=0)
     dense = P * P * 8
     # first-use imports allocate too (tracemalloc counts them): get them done beforehand

@@ -221,11 +221,13 @@ def test_subspace_cost_prefers_the_true_partition():
 
 
 def test_fine_tuning_from_a_wrong_start_is_outvoted_by_plain_rv():
-    """LAAV's fine-tuning keeps its start only when that explains the trajectories best."""
+    """With ``rv_select="subspace"`` (plain RV beside LAAV's trial, an option) the
+    fine-tuning keeps its start only when that explains the trajectories best."""
     seq = scene(1, 3)
     C = seq.n_motions
     wrong = np.where(np.arange(seq.n_points) < seq.n_points // 2, 0, 1)  # ignores the motions
-    selection_only = LaavParams(rv_reassign=False)  # the last reassignment would fix it too
+    # the last reassignment would fix it too
+    selection_only = LaavParams(rv_select="subspace", rv_reassign=False)
     res = random_voting(seq, C, selection_only, seed=0, init_labels=wrong,
                         weights=np.full(seq.n_points, 50.0))
     assert res.initialised and "informed" in res.costs and len(res.costs) >= 2
@@ -397,7 +399,7 @@ def test_plain_memo_reuses_plain_rv_and_keeps_the_labels(monkeypatch, max_iter):
     from laav import synthetic
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=12, n_points=150, rng=3)
-    p = LaavParams(rv_max_iter=max_iter, rv_trials=3)
+    p = LaavParams(rv_max_iter=max_iter, rv_trials=3, rv_select="subspace")
     rng = np.random.default_rng(0)
     starts = [seq.labels.copy(), (seq.labels + 1) % 3, rng.integers(0, 3, seq.n_points),
               np.where(rng.random(seq.n_points) < 0.5, seq.labels, -1)]

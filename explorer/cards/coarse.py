@@ -52,7 +52,10 @@ class CoarseView:
         method = res.coarse.method
         if method in ("coding", "joint"):
             self.fig_z.title.text = (f"Coding affinity, ε = {res.params.coding_eps:g} px: "
-                                     f"{len(factors)} models")
+                                     f"{len(factors)} models"
+                                     # λ enters the joint merge as its epipolar cost's unit
+                                     + (f" (epipolar cost per 2/λ px², λ = {res.params.lam:g})"
+                                        if method == "joint" else ""))
             how = ("ours: " + ("the partition of least coding length decided"
                                if method == "coding" else
                                "of the partitions of least coding length, the one of least "

@@ -55,7 +55,7 @@ class Controls:
         for name, (label, typ, lo, hi, step) in PARAM_SLIDERS.items():
             default = getattr(defaults, name)
             if name == "fine_models":
-                value = p.n_fine(st.n_motions)
+                value = p.n_fine(st.n_motions, seq.is_complete)
                 hi = max(hi, 4 * st.n_motions)
                 w = pn.widgets.IntSlider(label=label, start=lo, end=hi, step=step, value=value,
                                          width=SIDE_W)
@@ -94,13 +94,22 @@ class Controls:
         """The ``fine_models`` field for the slider's number ``v`` of fine models with C
         motions: what is asked for now when it gives ``v`` (an explicit number typed in the
         Advanced card stays one), None (auto) when ``v`` is ``fine_per_motion`` C, else ``v``."""
-        tp = self.state.target.params
+        tp, complete = self.state.target.params, self._complete()
         try:
-            if v == tp.n_fine(C):
+            if v == tp.n_fine(C, complete):
                 return tp.fine_models
         except ValueError:  # the fine models asked for are fewer than this C
             pass
-        return None if self.defaults.fine_models is None and v == tp.fine_per_motion * C else v
+        try:
+            auto = tp.replace(fine_models=None).n_fine(C, complete)
+        except ValueError:  # C itself is invalid (the state says so): keep the number
+            return v
+        return None if self.defaults.fine_models is None and v == auto else v
+
+    def _complete(self) -> bool:
+        """Whether the sequence shown has complete tracks (the merge and the number of fine
+        models that ``coarse_merge="auto"`` and ``fine_per_motion=None`` mean depend on it)."""
+        return bool(self.state.sequence.is_complete)
 
     def widget_params(self) -> dict:
         out = {}
@@ -126,7 +135,8 @@ class Controls:
         if event is not None and event.obj is self.w_motions:
             fm = self.w_params["fine_models"]
             old = event.old if isinstance(event.old, int) else None
-            k = self.state.target.params.fine_per_motion  # the fine models follow C (k C by default)
+            # the fine models follow C (k C by default)
+            k = self.state.target.params.replace(fine_models=None).n_fine(1, self._complete())
             if old is not None and fm.value == k * old:
                 with self.host.quiet():
                     fm.end = max(fm.end, 4 * int(event.new or 1))
@@ -140,7 +150,7 @@ class Controls:
         with self.host.quiet():
             C = int(self.w_motions.value or 1)
             for name, w in self.w_params.items():
-                w.value = d.n_fine(C) if name == "fine_models" else getattr(d, name)
+                w.value = d.n_fine(C, self._complete()) if name == "fine_models" else getattr(d, name)
             self.w_seed.value = 0
         self.state.request(params={**d.to_dict(), **self.widget_params()}, seed=0, n_motions=self._motions())
 
@@ -150,9 +160,10 @@ class Controls:
         with self.host.quiet():
             C = settings.n_motions
             fm = self.w_params["fine_models"]
-            fm.end = max(fm.end, 4 * C, settings.params.n_fine(C))
+            n_fine = settings.params.n_fine(C, self._complete())
+            fm.end = max(fm.end, 4 * C, n_fine)
             for name, w in self.w_params.items():
-                v = settings.params.n_fine(C) if name == "fine_models" else getattr(settings.params, name)
+                v = n_fine if name == "fine_models" else getattr(settings.params, name)
                 if name != "fine_models":
                     w.start, w.end = min(w.start, v), max(w.end, v)
                 w.value = v
@@ -165,7 +176,8 @@ class Controls:
         widgets may already be ahead of the result being applied)."""
         p = settings.params
         for name, w in self.w_params.items():
-            v = p.n_fine(settings.n_motions) if name == "fine_models" else getattr(p, name)
+            v = (p.n_fine(settings.n_motions, self._complete()) if name == "fine_models"
+                 else getattr(p, name))
             if self.state.error is None and w.value != v:
                 w.value = v
         if self.state.error is None and self.w_seed.value != settings.seed:

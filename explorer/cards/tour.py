@@ -149,9 +149,10 @@ class TourView:
             self.step_md.object = f"Guided tour · step {self.step + 1} of {len(TOUR)}"
             self.title_md.object = s.title
             res = self.host.result
-            self.text_md.object = (s.text_for(res.params, res.n_motions) if res is not None
+            complete = self.controls.state.sequence.is_complete
+            self.text_md.object = (s.text_for(res.params, res.n_motions, complete) if res is not None
                                    else s.text_for(self.controls.state.target.params,
-                                                   self.controls.state.target.n_motions))
+                                                   self.controls.state.target.n_motions, complete))
             self.w_back.disabled = self.step == 0
             self.w_next.label = "Next ▶" if self.step < len(TOUR) - 1 else "Finish"
         if color is not None and self.controls.color_mode != color:
