@@ -53,6 +53,18 @@ TRIM = 0.95  # share of points (best explained) in a level
 MAX_ESTIMATE_POINTS = 1000
 
 
+def profile_params():
+    """The LAAV settings the profile runs with when none are given: those its constants
+    (:data:`STEP_WEIGHTS`, :data:`STEP_BIAS`) were fitted with, the default preset before
+    2026-11-30 (late evening): the epipolar merge on 2C fine models and plain RV beside
+    LAAV's trial. Today's default preset (no plain RV) segments differently, and the
+    constants have not been refitted to its profiles (issue 14 item 7)."""
+    from .params import LaavParams
+
+    return LaavParams(coarse_merge="epipolar", fine_per_motion=2, rv_select="subspace",
+                      rv_subspace_weight=0.0)
+
+
 @dataclass(frozen=True, eq=False)
 class MotionProfile:
     """How well C motions explain the trajectories, for C = 1 .. max_motions + 1."""
@@ -99,7 +111,7 @@ def motion_profile(seq, max_motions: int = 5, params=None, seed: int = 0,
     seq : Sequence or ndarray of shape (F, P, 2)
     max_motions : int
     params : LaavParams, optional
-        LAAV's settings (default preset).
+        LAAV's settings (:func:`profile_params` when None).
     seed : int
         LAAV's seed, as :func:`laav.segment`'s.
     rank : int
@@ -151,7 +163,7 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
         seq = Sequence(np.asarray(seq, dtype=np.float64))
     with warnings.catch_warnings():  # a candidate's warnings are not the caller's
         warnings.simplefilter("ignore", LaavWarning)
-        pipe = Pipeline(seq, 2, params, seed)
+        pipe = Pipeline(seq, 2, profile_params() if params is None else params, seed)
     atoms = pipe.result.atoms
     res = [np.ravel(r) for r in atoms.residuals if np.size(r)]
     noise2 = float(np.median(np.concatenate(res)) ** 2) if res else 0.0
@@ -310,7 +322,8 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     random_state : None, int, numpy Generator or RandomState
         Seeds the atoms (as ``segment``'s ``random_state``); 0 by default.
     params : LaavParams, optional
-        For the atoms and the graph (the default preset otherwise).
+        For the LAAV runs of the profile (:func:`profile_params` otherwise: the settings
+        its constants were fitted with).
 
     Returns
     -------
@@ -383,8 +396,9 @@ def _estimate_motions(seq_or_points, max_motions, random_state, params):
         epipolar_level=tuple(float(v) for v in np.exp(levels[1])),
         step_scores=tuple(float(v) for v in scores), noise=noise2, reason=why + basis,
         seed=seed, seconds=time.perf_counter() - t)
-    # LAAV's result at the estimate, when it was computed on the caller's whole sequence
-    return count, (results.get(int(C)) if seq_or_points is whole else None)
+    # LAAV's result at the estimate, when it was computed on the caller's whole sequence with
+    # the caller's settings (not with profile_params(), for a caller who gave none)
+    return count, (results.get(int(C)) if seq_or_points is whole and params is not None else None)
 
 
 @single_threaded
