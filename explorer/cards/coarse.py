@@ -51,15 +51,14 @@ class CoarseView:
         set_data(self.src_z, data)
         method = res.coarse.method
         if method in ("coding", "joint"):
-            self.fig_z.title.text = (f"Coding affinity, ε = {res.params.coding_eps:g} px: "
-                                     f"{len(factors)} models"
-                                     # λ enters the joint merge as its epipolar cost's unit
-                                     + (f" (epipolar cost per 2/λ px², λ = {res.params.lam:g})"
-                                        if method == "joint" else ""))
+            # λ enters the joint merge as its epipolar cost's unit (2/λ px², see the text)
+            lam = f", λ = {res.params.lam:g}" if method == "joint" else ""
+            self.fig_z.title.text = (f"Coding affinity, ε = {res.params.coding_eps:g} px{lam}: "
+                                     f"{len(factors)} models")
             how = ("ours: " + ("the partition of least coding length decided"
                                if method == "coding" else
                                "of the partitions of least coding length, the one of least "
-                               "coding length + epipolar cost decided")
+                               "coding length + epipolar cost (in units of 2/λ px²) decided")
                    + "; the map shows exp(−ΔL), ΔL the nats per point that merging a pair adds;"
                    " the paper's epipolar vote is the paper preset")
         else:
