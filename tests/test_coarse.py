@@ -154,13 +154,11 @@ def test_point_labels_from_atoms_rules():
     assert lab.tolist() == [1, 1, 0, 0, 0, 1, 1, 1, -1]
 
 
-#: Clean scenes on which the default coarse stage is known to be wrong. Until
-#: 2026-11-30 3-motion scene 0, seed 0 (the epipolar merge, then the default, puts two
-#: pure fine models in the wrong motion; see the test below). Strict: a fix shows as a
-#: failure here.
-#: 2026-11-30 (evening): empty since the default merge is the joint one ("auto" on
-#: complete tracks); the epipolar merge's failure stays tested below.
-COARSE_KNOWN_WRONG: set = set()
+#: The clean scene on which the default coarse stage is known to be wrong (measured
+#: 2026-11-30: 3-motion scene 0, seed 0: the multicut's 2C fine models are pure, the
+#: epipolar merge puts two of them in the wrong motion; the coding merge gets it right,
+#: see the test below). Strict: a fix shows as a failure here.
+COARSE_KNOWN_WRONG = {(2, 0)}
 
 
 @pytest.mark.parametrize("n_objects, seed", [
@@ -177,7 +175,7 @@ def test_segment_coarse_labels_match_truth_on_covered_points(n_objects, seed):
 
 def test_epipolar_merge_is_wrong_where_the_coding_merge_is_right():
     """The scene the paper's merge gets wrong (3 motions, scene 0, seed 0): kept as the
-    measured reason why the default merge is not the paper's epipolar one; strict both ways."""
+    measured reason for the default ``coarse_merge="coding"``; strict both ways."""
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
     errs = {}
     for merge, k in (("coding", 3), ("epipolar", 2)):

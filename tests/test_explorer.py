@@ -143,10 +143,10 @@ def test_lambda_change_alters_z_and_not_the_atoms():
 
 
 def test_lambda_weighs_the_joint_merges_epipolar_cost():
-    """With the default (joint) merge on complete tracks λ sets the unit of the epipolar
-    cost of the shortlisted partitions (``2 / λ``); their coding lengths and Z (the coding
-    affinity) stay."""
-    ex = Explorer.demo(viser=False)
+    """With the joint merge (``LaavParams.own_chain()``) on complete tracks λ sets the unit
+    of the epipolar cost of the shortlisted partitions (``2 / λ``); their coding lengths and
+    Z (the coding affinity) stay."""
+    ex = Explorer.demo(viser=False, params=laav.LaavParams.own_chain())
     assert ex.wait(120)
     co0 = ex.result.coarse
     z0 = _data(ex.src_z, "z")

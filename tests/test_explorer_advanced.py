@@ -56,7 +56,7 @@ def test_advanced_card_has_every_field_folded_with_tooltips(ex):
             assert (w.start, w.end) == (f.low, f.high)
             assert w.description == V.md_text(f.tooltip())  # Markdown: every character literal
     assert adv.widgets["coarse_merge"].options == ["auto", "coding", "epipolar", "joint"]
-    assert adv.widgets["coarse_merge"].value == "auto"
+    assert adv.widgets["coarse_merge"].value == "epipolar"
     assert adv.marked == [] and "All fields at their defaults" in adv.summary.object
 
 

@@ -170,7 +170,7 @@ def test_non_defaults_names_every_changed_setting():
                                   rv_select="none", fine_models=6), 0, 2), 3)
     assert got == ["fine models = 6", "coarse_frames = 5", "α = 0.8", "iteration cap = 90", "rv_refine = off",
                    "rv_select = none", "C = 2"]
-    # the fine models follow C: C = 2 with fine_models unset is 4C = 8, not a change of its own
+    # the fine models follow C: C = 2 with fine_models unset is 2C = 4, not a change of its own
     assert non_defaults(Settings(P(), 0, 2), 3) == ["C = 2"]
     assert non_defaults(Settings(P(), 0, 2), None) == []  # no ground truth: C is the user's
 

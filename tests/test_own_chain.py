@@ -28,7 +28,7 @@ def test_plain_rv_never_uses_subspace_votes():
 def test_subspace_votes_change_the_informed_trial():
     seq = two_motions(2)
     start = np.where(np.random.default_rng(0).random(seq.n_points) < 0.7, seq.labels, -1)
-    p = LaavParams(rv_select="none", rv_refine=False, rv_reassign=False)
+    p = LaavParams(rv_select="none", rv_refine=False, rv_reassign=False, rv_subspace_weight=1.0)
     on = random_voting(seq, 2, p, seed=0, init_labels=start)
     off = random_voting(seq, 2, p.replace(rv_subspace_weight=0.0), seed=0, init_labels=start)
     assert on.trial_iterations != off.trial_iterations or not np.array_equal(on.votes, off.votes)
@@ -66,7 +66,7 @@ def test_missing_motion_start_finds_the_motion_without_atoms(seed):
     gives the truth's start, and the fine-tuning keeps that trial; the paper's
     fine-tuning from the same coarse labels cannot find the small motion."""
     seq, init, big = small_motion_uncovered(seed)
-    p = LaavParams()
+    p = LaavParams.own_chain()
     start = missing_motion_start(seq.points, init, 2, 0, 1, p, 8)
     assert start is not None
     new = start == 1
@@ -97,3 +97,12 @@ def test_joint_score_prefers_the_truth_and_needs_eight_points_a_motion():
     tiny = np.zeros(seq.n_points, dtype=np.int64)
     tiny[:5] = 1
     assert joint_score(seq.points, tiny, 2, p) == float("inf")
+
+
+def test_own_chain_preset_and_default():
+    """The own chain is a preset; the default keeps plain RV beside LAAV's trial."""
+    own, default = LaavParams.own_chain(), LaavParams()
+    assert (own.coarse_merge, own.rv_select, own.rv_subspace_weight) == ("auto", "laav", 1.0)
+    assert (default.coarse_merge, default.rv_select, default.rv_subspace_weight) == (
+        "epipolar", "subspace", 0.0)
+    assert own.n_fine(2) == 8 and own.n_fine(2, complete=False) == 4 and default.n_fine(2) == 4

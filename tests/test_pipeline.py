@@ -104,7 +104,7 @@ def test_result_structure():
     assert set(st) == {"fine", "coarse", "final"}
     assert st["final"] is res.labels
     assert np.array_equal(st["coarse"] >= 0, st["fine"] >= 0)
-    assert res.multicut.n_models == res.params.n_fine(2) == 4 * 2  # the joint merge's 4C
+    assert res.multicut.n_models == res.params.n_fine(2) == 2 * 2  # fine_per_motion C
     assert res.voting.initialised
 
 
