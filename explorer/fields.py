@@ -60,7 +60,8 @@ class Field:
 
 #: What "auto" (None) means for the fields that allow it.
 AUTO = {"fine_models": "fine_per_motion × C",
-        "fine_per_motion": "4 with the joint merge, 3 coding, 2 epipolar"}
+        "fine_per_motion": "4 with the joint merge, 3 coding, 2 epipolar",
+        "rv_max_points": "every point votes"}
 
 _RST = [
     (re.compile(r":(?:mod|func|meth|class|data|attr):`~?([^`]+)`"), r"\1"),  # :mod:`laav.coding`

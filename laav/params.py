@@ -155,6 +155,15 @@ class LaavParams:
         the other candidates in the selection score, when there are more than two: the
         labelling most others agree with is preferred among costs that are close.
         2.0 measured best of 0.5-6 once candidates are reassigned (benchmarks/TUNING.md).
+    rv_max_points : int or None
+        Ours, for thousands of tracks: with more points than this, Random Voting (every
+        trial, the refinement and the model selection) runs on a seeded random subset of
+        this many, and every other point then goes to the motion whose trajectory
+        subspace and fundamental matrices, fitted on the voted points, explain it best
+        (:func:`laav.refine.assign_jointly`, the joint reassignment's rule), then, with
+        ``rv_reassign``, the joint reassignment runs over every point. None: every
+        point votes (the papers). Hopkins155 has at most 556 points, so the default
+        never acts there (``docs/ALGORITHM.md``, "Thousands of tracks").
 
     Validation
     ----------
@@ -208,6 +217,7 @@ class LaavParams:
     rv_subspace_sample: int = 16
     rv_select: str = "subspace"
     rv_select_agreement: float = 2.0
+    rv_max_points: int | None = 1000
 
     def __post_init__(self) -> None:
         problems = []
@@ -231,11 +241,11 @@ class LaavParams:
         epipolar votes alone (``coarse_merge="epipolar"``, no pooled voting), and a
         fine-tuning that is Random Voting started from the coarse labels: one informed
         trial, no plain RV run, no model selection, no refinement and no joint
-        reassignment. ``changes`` override fields as in :meth:`replace`.
+        reassignment, every point voting however many. ``changes`` override fields as in :meth:`replace`.
         """
         return cls(atom_frames="pair", fine_per_motion=2, coarse_merge="epipolar", pooled_trials=0,
                    pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
-                   rv_subspace_weight=0.0, rv_select="none").replace(**changes)
+                   rv_subspace_weight=0.0, rv_select="none", rv_max_points=None).replace(**changes)
 
     @classmethod
     def own_chain(cls, **changes) -> LaavParams:
@@ -348,6 +358,7 @@ _BOUNDS = (
     ("rv_subspace_sample", "int", 8, 1000),
     ("rv_select", "choice", ("none", "subspace", "laav"), None),
     ("rv_select_agreement", "float", 0, _BIG),
+    ("rv_max_points", "int|None", 100, 10_000_000),
 )
 
 

@@ -31,7 +31,8 @@ import numpy as np
 from .geometry import fit_fundamental, sampson_distance
 
 __all__ = ["labelling_cost", "subspace_cost", "motion_distances", "refine_labels",
-           "subspace_residuals", "reassign_labels", "assign_by_subspace", "frame_pairs",
+           "subspace_residuals", "reassign_labels", "assign_by_subspace", "assign_jointly",
+           "frame_pairs",
            "trajectory_matrix"]
 
 #: Rank of the trajectory subspaces of :func:`subspace_cost` (affine camera: 4, plus one
@@ -648,4 +649,66 @@ def assign_by_subspace(points: np.ndarray, labels: np.ndarray, n_motions: int,
     if R is None:
         return out
     out[enough] = R[:, targets[enough]].argmin(axis=0)
+    return out
+
+
+def assign_jointly(points: np.ndarray, labels: np.ndarray, n_motions: int,
+                   targets: np.ndarray, unit2: float = 1.0, *,
+                   rank: int = REASSIGN_RANK, epipolar_weight: float = REASSIGN_EPIPOLAR_WEIGHT,
+                   visible: np.ndarray | None = None, pairs: np.ndarray | None = None,
+                   min_frames: int = 4) -> np.ndarray:
+    """Labels for the points ``targets`` by the rule of :func:`reassign_labels`, one round.
+
+    The motions' robust rank-``rank`` trajectory subspaces and robust fundamental matrices
+    are fitted on the labelled points (``-1`` points, the targets among them, take no
+    part); a target goes to the motion of least ``log(r + eps) + epipolar_weight *
+    log(d + eps)`` (see :func:`reassign_labels`). For the points left out of Random Voting
+    when there are more than ``rv_max_points`` (:mod:`laav.voting`).
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+        Hidden entries filled (finite) when ``visible`` is given.
+    labels : ndarray of shape (P,)
+        ``-1`` for the points to leave out of the fits.
+    n_motions : int
+    targets : ndarray of int
+    unit2 : float
+        Squared pixel in the coordinates' units (see the module docstring).
+    rank, epipolar_weight : as :func:`reassign_labels`.
+    visible : ndarray of shape (F, P), bool, optional
+        Missing data: both fits on the visible entries (as :func:`reassign_labels`); a
+        target no motion has a finite epipolar distance for is placed by the subspaces
+        alone when seen in ``min_frames`` frames or more, else gets ``-1``.
+    pairs : ndarray of shape (K, 2), optional
+        The epipolar term's frame pairs (default ``frame_pairs(F, 12)``).
+    min_frames : int
+
+    Returns
+    -------
+    ndarray of shape (len(targets),), int64: a motion, or ``-1`` (missing data only, see
+    ``visible``; or when no motion has enough labelled points to fit).
+    """
+    targets = np.asarray(targets, dtype=np.int64)
+    out = np.full(targets.size, -1, dtype=np.int64)
+    if targets.size == 0:
+        return out
+    if n_motions == 1:
+        out[:] = 0 if visible is None else np.where(
+            visible[:, targets].sum(axis=0) >= min_frames, 0, -1)
+        return out
+    if pairs is None:
+        pairs = frame_pairs(points.shape[0], 12)
+    R = subspace_residuals(points, labels, n_motions, rank, unit2=unit2, visible=visible)
+    D = motion_distances(points, labels, n_motions, pairs, unit2, visible)[:, targets]
+    eps = REASSIGN_FLOOR * unit2
+    with np.errstate(divide="ignore"):
+        score = epipolar_weight * np.log(D + eps)  # inf where a motion has no matrix
+        if R is not None:
+            score = score + np.log(R[:, targets] + eps)
+    known = np.isfinite(score).any(axis=0)
+    out[known] = score[:, known].argmin(axis=0)
+    if visible is not None and R is not None:  # no epipolar evidence: the subspaces alone
+        alone = ~known & (visible[:, targets].sum(axis=0) >= min_frames)
+        out[alone] = R[:, targets[alone]].argmin(axis=0)
     return out

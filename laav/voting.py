@@ -43,6 +43,7 @@ from .metrics import misclassification_rate
 from .params import LaavParams
 from .refine import (
     assign_by_subspace,
+    assign_jointly,
     frame_pairs,
     labelling_cost,
     motion_distances,
@@ -226,6 +227,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         return Voting(lab, np.ones((P, 1)), np.zeros(0, np.int64), np.zeros(0), 0, 0, True,
                       (), init_labels is not None, 0,
                       unlabelled_code=None if vis is None else np.zeros(P, np.int8))
+    if params.rv_max_points is not None and P > params.rv_max_points:
+        return _subset_voting(seq, points, vis, C, params, rng, init_labels, weights,
+                              plain_memo, check_input)
     if vis is not None:
         return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo,
                               check_input)
@@ -236,6 +240,50 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         return _plain_result(seq, points, C, params, rng, best, trials, ended, select,
                              warn=check_input)
     return _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo)
+
+
+def _subset_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo,
+                   warn) -> Voting:
+    """:func:`random_voting` with more than ``rv_max_points`` points: every step of voting
+    on a seeded random subset of that many, then every other point placed by the motions
+    fitted on the voted ones (:func:`laav.refine.assign_jointly`), and, with
+    ``rv_reassign``, the joint reassignment once more over every point. A point left
+    unlabelled (missing data: no frame pair and too few frames) gets code 1."""
+    from ._visibility import MIN_ASSIGN_FRAMES, NO_FRAME_PAIR, cover_pairs, filled, pair_pool
+
+    P = points.shape[1]
+    init = None if init_labels is None else np.asarray(init_labels, dtype=np.int64)
+    w = None if weights is None else np.asarray(weights, dtype=np.float64)
+    if init is not None and init.shape != (P,):
+        raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
+    if w is not None and w.shape != (P,):
+        raise ValueError(f"weights must have shape ({P},), got {w.shape}")
+    idx = np.sort(rng.spawn(1)[0].choice(P, params.rv_max_points, replace=False))
+    out = random_voting(points[:, idx], C, params.replace(rv_max_points=None), rng,
+                        None if init is None else init[idx], None if w is None else w[idx],
+                        plain_memo=plain_memo, visible=None if vis is None else vis[:, idx],
+                        check_input=False)
+    labels = np.full(P, -1, dtype=np.int64)
+    labels[idx] = out.labels
+    rest = np.setdiff1d(np.arange(P), idx)
+    kw = {}
+    if vis is not None:
+        pool = pair_pool(vis, max(8, params.rv_sample_size) * C)
+        points = filled(points, vis)
+        kw = {"visible": vis, "pairs": cover_pairs(vis, pool, 12)}
+    labels[rest] = assign_jointly(points, labels, C, rest, unit2(params),
+                                  min_frames=MIN_ASSIGN_FRAMES, **kw)
+    moved = 0
+    if params.rv_reassign:  # as the voting's own last step, now over every point
+        labels, moved = reassign_labels(points, labels, C, unit2=unit2(params), **kw)
+    votes = np.zeros((P, C))
+    votes[idx] = out.votes
+    code = None if vis is None else np.where(labels >= 0, 0, NO_FRAME_PAIR).astype(np.int8)
+    result = dataclasses.replace(out, labels=labels, votes=votes, unlabelled_code=code,
+                                 reassigned=out.reassigned + moved)
+    if init_labels is None and warn:
+        warn_single_label(seq, labels, C)
+    return result
 
 
 def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=None,

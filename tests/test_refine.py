@@ -99,3 +99,37 @@ def test_reassignment_repairs_laav_on_hopkins(hopkins_root, name):
 def test_reassign_flag_is_validated(bad_value):
     with pytest.raises(ValueError, match="rv_reassign must be True or False"):
         LaavParams(rv_reassign=bad_value)
+
+
+def test_assign_jointly_places_points_by_the_labelled_ones(three_motions):
+    from laav.refine import assign_jointly
+
+    seq = three_motions
+    P, C = seq.n_points, seq.n_motions
+    targets = np.arange(1, P, 2)
+    known = seq.labels.copy()
+    known[targets] = -1
+    got = assign_jointly(seq.points, known, C, targets)
+    assert (got == seq.labels[targets]).mean() > 0.99
+    # it follows the labels it is given (an earlier stage's error is not repaired):
+    # with two motions' names swapped on the labelled points, their targets swap too
+    swapped = np.where(known == 0, 1, np.where(known == 1, 0, known))
+    got2 = assign_jointly(seq.points, swapped, C, targets)
+    assert (got2 == np.where(got == 0, 1, np.where(got == 1, 0, got))).mean() > 0.99
+
+
+def test_assign_jointly_on_incomplete_tracks(three_motions):
+    from laav._visibility import filled
+    from laav.refine import assign_jointly
+
+    seq = synthetic.occlude(three_motions, 0.4, rng=0)
+    P, C = seq.n_points, seq.n_motions
+    targets = np.arange(1, P, 2)
+    known = seq.labels.copy()
+    known[targets] = -1
+    pts = filled(seq.points, seq.visible)
+    got = assign_jointly(pts, known, C, targets, visible=seq.visible,
+                         pairs=np.array([[0, seq.n_frames - 1]]))
+    assert (got >= 0).mean() > 0.95  # points hidden in that pair go by their subspaces
+    ok = got >= 0
+    assert (got[ok] == seq.labels[targets][ok]).mean() > 0.97

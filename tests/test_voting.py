@@ -424,3 +424,51 @@ def test_plain_memo_reuses_plain_rv_and_keeps_the_labels(monkeypatch, max_iter):
     assert len(plain_calls) == len({k for k in memo if isinstance(k, tuple)})
     assert calls.count(0) == len(starts)
     assert (("run", 2) in memo) == (max_iter == 40)  # both paths really ran
+
+
+# -- rv_max_points: Random Voting on a seeded subset of many points -------------------------
+
+def _many(missing=0.0):
+    key = ("many", missing)
+    if key not in _cache:
+        seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=900, noise=0.5, rng=3)
+        _cache[key] = synthetic.occlude(seq, missing, rng=3) if missing else seq
+    return _cache[key]
+
+
+@pytest.mark.parametrize("init", [False, True])
+def test_voting_runs_on_a_subset_and_places_the_rest(init):
+    seq = _many()
+    P, C = seq.n_points, seq.n_motions
+    start = None
+    if init:  # an informed start that labels every second point
+        start = np.where(np.arange(P) % 2 == 0, seq.labels, -1)
+    res = random_voting(seq, C, LaavParams(rv_max_points=300), seed=0, init_labels=start)
+    voted = np.flatnonzero(np.abs(res.votes).sum(axis=1) > 0)
+    assert len(voted) <= 300 and res.labels.shape == (P,) and (res.labels >= 0).all()
+    rest = np.setdiff1d(np.arange(P), voted)
+    assert len(rest) >= 600
+    # the 600+ points that never voted are placed by the voted points' motions
+    assert misclassification_rate(seq.labels[rest], res.labels[rest]) < 0.01
+    assert misclassification_rate(seq.labels, res.labels) < 0.01
+    again = random_voting(seq, C, LaavParams(rv_max_points=300), seed=0, init_labels=start)
+    np.testing.assert_array_equal(res.labels, again.labels)
+
+
+def test_voting_on_a_subset_of_incomplete_tracks():
+    seq = _many(0.4)
+    res = random_voting(seq, seq.n_motions, LaavParams(rv_max_points=300), seed=1)
+    assert res.unlabelled_code is not None
+    np.testing.assert_array_equal(res.labels < 0, res.unlabelled_code > 0)
+    assert (res.labels >= 0).mean() > 0.98
+    assert misclassification_rate(seq.labels, res.labels) < 0.02
+
+
+def test_voting_subset_limit_is_off_in_the_paper_preset_and_below_the_limit():
+    assert LaavParams.paper().rv_max_points is None
+    seq = scene(1, 0)  # 300 points: under the default limit, the subset path never runs
+    a = random_voting(seq, 2, LaavParams(), seed=0)
+    b = random_voting(seq, 2, LaavParams(rv_max_points=None), seed=0)
+    np.testing.assert_array_equal(a.labels, b.labels)
+    with pytest.raises(ValueError, match="rv_max_points"):
+        LaavParams(rv_max_points=10)
