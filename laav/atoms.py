@@ -268,6 +268,38 @@ class _DenseNeighbourhoods:
 FAR = 1e300
 
 
+def _pair_counts(listed, n: int, least: int):
+    """``(i, j, count)``: the pairs ``i < j`` listed ``count >= least`` times in ``listed``
+    (an iterable of pairs of int arrays ``(i, j)``), ordered by ``i`` then ``j``, as
+    ``np.unique`` of ``i n + j`` would give them. Counted by ``bincount`` over blocks of
+    rows (a table of about 4M cells each), each array's pairs grouped by block with a radix
+    sort, instead of sorting all the listed pairs at once (0.3 s against 1.5 s for the
+    19.6M pairs of 5,000 tracks x 100 frames at 50 % visible)."""
+    rows = max(1, (1 << 22) // n)  # rows per block
+    n_blocks = (n + rows - 1) // rows
+    small = np.int16 if n_blocks < 32768 else np.int64  # int16: numpy's stable sort is radix
+    per: list[list] = [[] for _ in range(n_blocks)]
+    for x, y in listed:
+        x, y = np.asarray(x, np.int64), np.asarray(y, np.int64)
+        blk = (x // rows).astype(small)
+        order = np.argsort(blk, kind="stable")
+        key = ((x - blk.astype(np.int64) * rows) * n + y)[order]
+        cut = np.concatenate([[0], np.cumsum(np.bincount(blk, minlength=n_blocks))])
+        for k in np.flatnonzero(cut[1:] > cut[:-1]):
+            per[k].append(key[cut[k]:cut[k + 1]])
+    out_i, out_j, out_c = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    for k in range(n_blocks):
+        if not per[k]:
+            continue
+        cnt = np.bincount(np.concatenate(per[k]), minlength=rows * n)
+        per[k] = None
+        cell = np.flatnonzero(cnt >= least)
+        out_i.append(k * rows + cell // n)
+        out_j.append(cell % n)
+        out_c.append(cnt[cell])
+    return np.concatenate(out_i), np.concatenate(out_j), np.concatenate(out_c)
+
+
 class MaskedNeighbourhoods:
     """:class:`Neighbourhoods` for missing data.
 
@@ -317,21 +349,25 @@ class MaskedNeighbourhoods:
 
         P = self.n_points
         r = float(radius)
-        keys = []
-        for f in range(self.points.shape[0]):
-            idx = np.flatnonzero(self.visible[f])
-            if idx.size < 2:
-                continue
-            # a slightly larger ball (relative margin): a superset, the exact test follows
-            pairs = cKDTree(self.points[f, idx]).query_pairs(r * (1.0 + 1e-9),
-                                                              output_type="ndarray")
-            if pairs.size:
-                a, b = idx[pairs[:, 0]], idx[pairs[:, 1]]
-                keys.append(np.minimum(a, b).astype(np.int64) * P + np.maximum(a, b))
-        keys = np.concatenate(keys) if keys else np.zeros(0, np.int64)
-        uniq, count = np.unique(keys, return_counts=True)
-        uniq = uniq[count >= self.min_overlap]  # within r in every shared frame: that often
-        i, j = uniq // P, uniq % P
+
+        def listed():  # per frame, the visible pairs within r there
+            for f in range(self.points.shape[0]):
+                idx = np.flatnonzero(self.visible[f])
+                if idx.size < 2:
+                    continue
+                # a slightly larger ball (relative margin): a superset, the exact test follows
+                pairs = cKDTree(self.points[f, idx]).query_pairs(r * (1.0 + 1e-9),
+                                                                  output_type="ndarray")
+                if pairs.size:
+                    a, b = idx[pairs[:, 0]], idx[pairs[:, 1]]
+                    yield np.minimum(a, b), np.maximum(a, b)
+
+        i, j, count = _pair_counts(listed(), P, self.min_overlap)
+        # within r in every shared frame: found in each of them (a necessary condition,
+        # tested on a popcount of the packed masks before the exact distances)
+        bits = np.packbits(self.visible, axis=0)  # (ceil(F / 8), P)
+        sure = count == np.bitwise_count(bits[:, i] & bits[:, j]).sum(axis=0, dtype=np.int64)
+        i, j = i[sure], j[sure]
         d = self.distances(i, j)
         keep = d <= r
         i, j, d = i[keep], j[keep], d[keep]
