@@ -242,6 +242,18 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     return _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo)
 
 
+def _start_arrays(init_labels, weights, P: int):
+    """``init_labels`` and ``weights`` as int64 / float64 arrays (or None), checked to be
+    of shape (P,)."""
+    init = None if init_labels is None else np.asarray(init_labels, dtype=np.int64)
+    w = None if weights is None else np.asarray(weights, dtype=np.float64)
+    if init is not None and init.shape != (P,):
+        raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
+    if w is not None and w.shape != (P,):
+        raise ValueError(f"weights must have shape ({P},), got {w.shape}")
+    return init, w
+
+
 def _subset_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo,
                    warn) -> Voting:
     """:func:`random_voting` with more than ``rv_max_points`` points: every step of voting
@@ -252,12 +264,7 @@ def _subset_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     from ._visibility import MIN_ASSIGN_FRAMES, NO_FRAME_PAIR, cover_pairs, filled, pair_pool
 
     P = points.shape[1]
-    init = None if init_labels is None else np.asarray(init_labels, dtype=np.int64)
-    w = None if weights is None else np.asarray(weights, dtype=np.float64)
-    if init is not None and init.shape != (P,):
-        raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
-    if w is not None and w.shape != (P,):
-        raise ValueError(f"weights must have shape ({P},), got {w.shape}")
+    init, w = _start_arrays(init_labels, weights, P)
     idx = np.sort(rng.spawn(1)[0].choice(P, params.rv_max_points, replace=False))
     out = random_voting(points[:, idx], C, params.replace(rv_max_points=None), rng,
                         None if init is None else init[idx], None if w is None else w[idx],
@@ -539,12 +546,7 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     idx = np.flatnonzero(keep)
     sub_vis = vis[:, idx]
     sub = filled(points[:, idx], sub_vis)
-    init = None if init_labels is None else np.asarray(init_labels, dtype=np.int64)
-    w = None if weights is None else np.asarray(weights, dtype=np.float64)
-    if init is not None and init.shape != (P,):
-        raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
-    if w is not None and w.shape != (P,):
-        raise ValueError(f"weights must have shape ({P},), got {w.shape}")
+    init, w = _start_arrays(init_labels, weights, P)
     mk = _Masks(sub_vis, pool)
     select = params.rv_select in ("subspace", "laav")  # incomplete data: "laav" as "subspace"
     if init is None:  # plain RV
