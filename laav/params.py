@@ -49,6 +49,14 @@ class LaavParams:
         ``F // 3`` apart per atom.
     ransac_hypotheses : int
         Minimal samples (seed + 2 neighbours) tried per atom, evaluated as one batch.
+    noise_adaptive : bool
+        Adapt the residual thresholds to the tracks' measured pixel noise (ours, issue
+        12): σ̂ is estimated from the data (:func:`laav.noise.estimate_noise`, px) and the
+        stages run with :meth:`for_noise` ``(σ̂)``: ``affine_threshold`` becomes
+        ``max(affine_threshold, k σ̂)`` (``k`` = 3.35 for ``atom_frames="all"``, the 99 %
+        quantile of an inlier's residual under the noise model;
+        :func:`laav.noise.threshold_factor`) and ``edge_scale`` grows by the same ratio.
+        On clean tracks ``k σ̂`` is below ``affine_threshold`` and nothing changes.
     graph_neighbors : int
         Each atom is joined to this many nearest atoms besides those it overlaps.
     edge_scale : float
@@ -179,6 +187,7 @@ class LaavParams:
     affine_threshold: float = 2.0
     atom_frames: str = "all"
     ransac_hypotheses: int = 24
+    noise_adaptive: bool = False
     graph_neighbors: int = 5
     edge_scale: float = 2.0
     cut_prior: float = 0.0
@@ -265,6 +274,30 @@ class LaavParams:
         changes.update({name: getattr(self, name) / s ** 2 for name in STRENGTH_PARAMS})
         return self.replace(**changes)
 
+    def for_noise(self, sigma: float) -> LaavParams:
+        """The parameters the stages run with on tracks of pixel noise ``sigma`` (px, per
+        coordinate; :func:`laav.noise.estimate_noise`), with ``noise_adaptive`` off.
+
+        ``affine_threshold`` becomes ``max(affine_threshold, k sigma)``, ``k`` from
+        :func:`laav.noise.threshold_factor` (for ``atom_frames``), and ``edge_scale`` is
+        multiplied by the same ratio (the graph's forward-backward errors of one motion's
+        atoms grow with the noise as the atom residuals do). Every other field is kept.
+        When ``k sigma <= affine_threshold`` only ``noise_adaptive`` changes, so the labels
+        are those of ``noise_adaptive=False`` exactly. Coordinates scaled by ``s`` with
+        :meth:`scaled` ``(s)`` give ``sigma`` times ``s`` and the same ratio.
+        """
+        from .noise import threshold_factor
+
+        if isinstance(sigma, bool) or not isinstance(sigma, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(sigma) and sigma >= 0):
+            raise ValueError(f"sigma must be a finite number >= 0, got {sigma!r}")
+        thr = threshold_factor(self.atom_frames) * float(sigma)
+        if not thr > self.affine_threshold:
+            return self.replace(noise_adaptive=False)
+        ratio = thr / self.affine_threshold
+        return self.replace(noise_adaptive=False, affine_threshold=thr,
+                            edge_scale=self.edge_scale * ratio)
+
     def replace(self, **changes) -> LaavParams:
         """A copy with some fields changed (validated like the original)."""
         unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
@@ -319,6 +352,7 @@ _BOUNDS = (
     ("affine_threshold", "float>", 0, _BIG),
     ("atom_frames", "choice", ("all", "pair"), None),
     ("ransac_hypotheses", "int", 1, 1000),
+    ("noise_adaptive", "bool", None, None),
     ("graph_neighbors", "int", 1, 100),
     ("edge_scale", "float>", 0, _BIG),
     ("cut_prior", "float", -_BIG, _BIG),
@@ -380,7 +414,7 @@ def _check(value, kind: str, low, high):
 #: Which parameters each stage reads; a change reruns that stage and all after it.
 STAGE_PARAMS: dict[str, frozenset] = {
     "atoms": frozenset({"r1", "r2", "atom_min_size", "affine_threshold", "ransac_hypotheses",
-                        "atom_frames"}),
+                        "atom_frames", "noise_adaptive"}),
     "graph": frozenset({"graph_neighbors", "edge_scale", "cut_prior"}),
     "multicut": frozenset({"fine_models", "fine_per_motion"}),
     "coarse": frozenset({"coarse_merge", "coding_eps", "coarse_candidates",
