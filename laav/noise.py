@@ -9,9 +9,10 @@ residual of a feature under its own atom's affine motion is about 2σ to 3σ, so
 With ``LaavParams(noise_adaptive=True)`` the pipeline measures σ (:func:`estimate_noise`)
 and runs with :meth:`laav.LaavParams.for_noise`: the threshold becomes
 ``max(affine_threshold, k σ̂)`` with ``k`` the 99 % quantile of an inlier's residual under
-the noise model (:func:`threshold_factor`), and ``edge_scale`` is multiplied by the same
-ratio. On clean tracks ``k σ̂`` stays below the threshold, so nothing changes there (every
-label is identical).
+the noise model (:func:`threshold_factor`), ``edge_scale`` is multiplied by the same
+ratio ρ, and the voting strengths ``lam`` and ``rv_lambda`` (1/px², so the Sampson
+distances they weigh, px², grow as ρ²) are divided by ρ². On clean tracks ``k σ̂`` stays
+below the threshold, so nothing changes there (every label is identical).
 
 **The estimate** is model-free enough to be near 0 on clean tracks, whatever the
 motions: between two *consecutive* frames every small neighbourhood moves by an affine

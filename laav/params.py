@@ -50,13 +50,17 @@ class LaavParams:
     ransac_hypotheses : int
         Minimal samples (seed + 2 neighbours) tried per atom, evaluated as one batch.
     noise_adaptive : bool
-        Adapt the residual thresholds to the tracks' measured pixel noise (ours, issue
-        12): σ̂ is estimated from the data (:func:`laav.noise.estimate_noise`, px) and the
+        Adapt the residual scales to the tracks' measured pixel noise (ours, issue 12):
+        σ̂ is estimated from the data (:func:`laav.noise.estimate_noise`, px) and the
         stages run with :meth:`for_noise` ``(σ̂)``: ``affine_threshold`` becomes
         ``max(affine_threshold, k σ̂)`` (``k`` = 3.35 for ``atom_frames="all"``, the 99 %
         quantile of an inlier's residual under the noise model;
-        :func:`laav.noise.threshold_factor`) and ``edge_scale`` grows by the same ratio.
-        On clean tracks ``k σ̂`` is below ``affine_threshold`` and nothing changes.
+        :func:`laav.noise.threshold_factor`), ``edge_scale`` grows by the same ratio ρ
+        and ``lam``, ``rv_lambda`` shrink by ρ². On clean tracks ``k σ̂`` is below
+        ``affine_threshold`` and nothing changes. Read by :func:`laav.segment`,
+        :class:`laav.Pipeline` and the stage functions ``build_atoms``, ``atom_graph``,
+        ``merge_models``; plain Random Voting (:func:`laav.random_voting` called alone)
+        runs with the parameters as given.
     graph_neighbors : int
         Each atom is joined to this many nearest atoms besides those it overlaps.
     edge_scale : float
@@ -187,7 +191,7 @@ class LaavParams:
     affine_threshold: float = 2.0
     atom_frames: str = "all"
     ransac_hypotheses: int = 24
-    noise_adaptive: bool = False
+    noise_adaptive: bool = True
     graph_neighbors: int = 5
     edge_scale: float = 2.0
     cut_prior: float = 0.0
@@ -240,11 +244,13 @@ class LaavParams:
         epipolar votes alone (``coarse_merge="epipolar"``, no pooled voting), and a
         fine-tuning that is Random Voting started from the coarse labels: one informed
         trial, no plain RV run, no model selection, no refinement and no joint
-        reassignment. ``changes`` override fields as in :meth:`replace`.
+        reassignment; thresholds fixed whatever the noise (``noise_adaptive=False``).
+        ``changes`` override fields as in :meth:`replace`.
         """
         return cls(atom_frames="pair", fine_per_motion=2, coarse_merge="epipolar", pooled_trials=0,
                    pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
-                   rv_subspace_weight=0.0, rv_select="none").replace(**changes)
+                   rv_subspace_weight=0.0, rv_select="none",
+                   noise_adaptive=False).replace(**changes)
 
     @classmethod
     def own_chain(cls, **changes) -> LaavParams:
@@ -278,13 +284,18 @@ class LaavParams:
         """The parameters the stages run with on tracks of pixel noise ``sigma`` (px, per
         coordinate; :func:`laav.noise.estimate_noise`), with ``noise_adaptive`` off.
 
-        ``affine_threshold`` becomes ``max(affine_threshold, k sigma)``, ``k`` from
-        :func:`laav.noise.threshold_factor` (for ``atom_frames``), and ``edge_scale`` is
-        multiplied by the same ratio (the graph's forward-backward errors of one motion's
-        atoms grow with the noise as the atom residuals do). Every other field is kept.
-        When ``k sigma <= affine_threshold`` only ``noise_adaptive`` changes, so the labels
-        are those of ``noise_adaptive=False`` exactly. Coordinates scaled by ``s`` with
-        :meth:`scaled` ``(s)`` give ``sigma`` times ``s`` and the same ratio.
+        With ``k`` from :func:`laav.noise.threshold_factor` (for ``atom_frames``; 3.35 for
+        ``"all"``) and the ratio ``rho = max(1, k sigma / affine_threshold)``, every scale
+        a residual is judged on grows as the residuals do under the noise:
+        ``affine_threshold`` and ``edge_scale`` (px) are multiplied by ``rho`` (the
+        threshold becomes ``max(affine_threshold, k sigma)``), the strengths ``lam`` and
+        ``rv_lambda`` (1/px^2, which also set the px^2 constants of the refinement,
+        reassignment and selection, :func:`laav.voting.unit2`) are divided by ``rho^2``.
+        The radii ``r1``, ``r2`` and ``coding_eps`` (sizes of the scene, not of the noise)
+        and every other field are kept. When ``k sigma <= affine_threshold`` (clean
+        tracks) only ``noise_adaptive`` changes, so the labels are those of
+        ``noise_adaptive=False`` exactly. Coordinates scaled by ``s`` with :meth:`scaled`
+        ``(s)`` scale ``sigma`` by ``s`` and leave ``rho`` as it is.
         """
         from .noise import threshold_factor
 
@@ -294,9 +305,10 @@ class LaavParams:
         thr = threshold_factor(self.atom_frames) * float(sigma)
         if not thr > self.affine_threshold:
             return self.replace(noise_adaptive=False)
-        ratio = thr / self.affine_threshold
+        rho = thr / self.affine_threshold
         return self.replace(noise_adaptive=False, affine_threshold=thr,
-                            edge_scale=self.edge_scale * ratio)
+                            edge_scale=self.edge_scale * rho, lam=self.lam / rho ** 2,
+                            rv_lambda=self.rv_lambda / rho ** 2)
 
     def replace(self, **changes) -> LaavParams:
         """A copy with some fields changed (validated like the original)."""
