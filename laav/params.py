@@ -305,7 +305,11 @@ class LaavParams:
         thr = threshold_factor(self.atom_frames) * float(sigma)
         if not thr > self.affine_threshold:
             return self.replace(noise_adaptive=False)
-        rho = thr / self.affine_threshold
+        # at most what keeps the lengths within their bounds (coordinates far off the
+        # parameters' pixel scale: their labels are meaningless anyway and warned about)
+        rho = min(thr / self.affine_threshold, _BIG / self.affine_threshold,
+                  _BIG / self.edge_scale)
+        thr = self.affine_threshold * rho
         return self.replace(noise_adaptive=False, affine_threshold=thr,
                             edge_scale=self.edge_scale * rho, lam=self.lam / rho ** 2,
                             rv_lambda=self.rv_lambda / rho ** 2)

@@ -212,8 +212,10 @@ class Pipeline:
         seq, C = self.seq, self.n_motions
         timings = dict.fromkeys(STAGES, 0.0)
         t = time.perf_counter()
+        measure = self.params.noise_adaptive and self._noise is None  # once per sequence
         p = self._run_params()  # noise_adaptive: the thresholds for the measured noise
-        timings["atoms"] += time.perf_counter() - t
+        if measure:
+            timings["atoms"] += time.perf_counter() - t
         todo = STAGES[STAGES.index(start):]
         st = self._stages
         if self._distances is None:  # kept for every later run: R1/R2 changes reuse it
