@@ -46,6 +46,7 @@ import numpy as np
 
 from ._sequence import Sequence, as_points
 from .geometry import affine_residuals, fit_affine, fit_affine_leverage, fit_affine_masked
+from .noise import adapted_params
 from .params import LaavParams
 
 __all__ = ["Atoms", "Neighbourhoods", "MaskedNeighbourhoods", "build_atoms",
@@ -689,7 +690,11 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
     ----------
     seq : Sequence or ndarray of shape (F, P, 2)
     params : LaavParams
-        Uses ``r1``, ``r2``, ``atom_min_size``, ``affine_threshold``, ``ransac_hypotheses``.
+        Uses ``r1``, ``r2``, ``atom_min_size``, ``affine_threshold``, ``ransac_hypotheses``,
+        ``atom_frames``; with ``noise_adaptive`` the threshold of
+        :meth:`LaavParams.for_noise` for the noise measured on ``seq``
+        (:func:`laav.noise.estimate_noise`; :class:`laav.Pipeline` measures it once and
+        passes the adapted parameters).
     rng : numpy.random.Generator
         Seed order and RANSAC samples.
     distances : Neighbourhoods, optional
@@ -710,6 +715,7 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
     vis = visibility(seq, visible)
     points = as_points(seq)
     params = LaavParams() if params is None else params
+    params, _ = adapted_params(points, params, vis)  # noise_adaptive: thresholds for σ̂
     rng = np.random.default_rng(0) if rng is None else rng
     if vis is not None:
         return _build_atoms_masked(points, vis, params, rng,

@@ -31,6 +31,7 @@ from .atoms import Atoms
 from .coding import best_partition, merge_cost, model_stats, shortlist
 from .geometry import fit_fundamental, sampson_distance
 from .multicut import Multicut
+from .noise import adapted_params
 from .params import LaavParams
 from .refine import motion_distances
 from .voting import frame_pairs
@@ -406,7 +407,9 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     n_motions : int
         C.
     params : LaavParams
-        Uses ``lam``, ``coarse_frames``, ``coarse_samples``, ``motion_weight``.
+        Uses ``lam``, ``coarse_frames``, ``coarse_samples``, ``motion_weight``; with
+        ``noise_adaptive`` the ``lam`` of :meth:`LaavParams.for_noise` for the noise
+        measured on ``seq`` (:func:`laav.noise.estimate_noise`).
     rng : numpy.random.Generator
     visible : ndarray of shape (F, P), bool, optional
         For an array ``seq`` with missing entries (a :class:`Sequence` carries its own).
@@ -430,6 +433,7 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     vis = visibility(seq, visible)
     points = as_points(seq)
     params = LaavParams() if params is None else params
+    params, _ = adapted_params(points, params, vis)  # noise_adaptive: lam for σ̂
     rng = np.random.default_rng(0) if rng is None else rng
     F, P, _ = points.shape
     n = multicut.n_models

@@ -35,6 +35,7 @@ import numpy as np
 from ._sequence import Sequence, as_points
 from .atoms import Atoms, MaskedNeighbourhoods, Neighbourhoods, _DenseNeighbourhoods, as_neighbourhoods
 from .geometry import affine_residuals
+from .noise import adapted_params
 from .params import LaavParams
 
 __all__ = ["AtomGraph", "atom_graph", "forward_backward_error", "forward_backward_error_masked"]
@@ -298,7 +299,9 @@ def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | No
     seq : Sequence or ndarray of shape (F, P, 2)
     atoms : Atoms
     params : LaavParams
-        Uses ``graph_neighbors``, ``edge_scale``, ``cut_prior``.
+        Uses ``graph_neighbors``, ``edge_scale``, ``cut_prior``; with ``noise_adaptive``
+        the ``edge_scale`` of :meth:`LaavParams.for_noise` for the noise measured on
+        ``seq`` (:func:`laav.noise.estimate_noise`).
     distances : Neighbourhoods, optional
         Precomputed :class:`~laav.atoms.Neighbourhoods` (a dense
         :func:`~laav.atoms.trajectory_distances` matrix is accepted too; on incomplete
@@ -319,6 +322,7 @@ def atom_graph(seq: Sequence | np.ndarray, atoms: Atoms, params: LaavParams | No
     vis = visibility(seq, visible)
     points = as_points(seq)
     params = LaavParams() if params is None else params
+    params, _ = adapted_params(points, params, vis)  # noise_adaptive: edge_scale for σ̂
     N = atoms.n_atoms
     positions = atoms.centers(points, vis)
     if N < 2:

@@ -49,6 +49,18 @@ class LaavParams:
         ``F // 3`` apart per atom.
     ransac_hypotheses : int
         Minimal samples (seed + 2 neighbours) tried per atom, evaluated as one batch.
+    noise_adaptive : bool
+        Adapt the residual scales to the tracks' measured pixel noise (ours, issue 12):
+        σ̂ is estimated from the data (:func:`laav.noise.estimate_noise`, px) and the
+        stages run with :meth:`for_noise` ``(σ̂)``: ``affine_threshold`` becomes
+        ``max(affine_threshold, k σ̂)`` (``k`` = 3.35 for ``atom_frames="all"``, the 99 %
+        quantile of an inlier's residual under the noise model;
+        :func:`laav.noise.threshold_factor`), ``edge_scale`` grows by the same ratio ρ
+        and ``lam``, ``rv_lambda`` shrink by ρ². On clean tracks ``k σ̂`` is below
+        ``affine_threshold`` and nothing changes. Read by :func:`laav.segment`,
+        :class:`laav.Pipeline` and the stage functions ``build_atoms``, ``atom_graph``,
+        ``merge_models``; plain Random Voting (:func:`laav.random_voting` called alone)
+        runs with the parameters as given.
     graph_neighbors : int
         Each atom is joined to this many nearest atoms besides those it overlaps.
     edge_scale : float
@@ -188,6 +200,7 @@ class LaavParams:
     affine_threshold: float = 2.0
     atom_frames: str = "all"
     ransac_hypotheses: int = 24
+    noise_adaptive: bool = True
     graph_neighbors: int = 5
     edge_scale: float = 2.0
     cut_prior: float = 0.0
@@ -241,11 +254,13 @@ class LaavParams:
         epipolar votes alone (``coarse_merge="epipolar"``, no pooled voting), and a
         fine-tuning that is Random Voting started from the coarse labels: one informed
         trial, no plain RV run, no model selection, no refinement and no joint
-        reassignment, every point voting however many. ``changes`` override fields as in :meth:`replace`.
+        reassignment, every point voting however many; thresholds fixed whatever the noise
+        (``noise_adaptive=False``). ``changes`` override fields as in :meth:`replace`.
         """
         return cls(atom_frames="pair", fine_per_motion=2, coarse_merge="epipolar", pooled_trials=0,
                    pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
-                   rv_subspace_weight=0.0, rv_select="none", rv_max_points=None).replace(**changes)
+                   rv_subspace_weight=0.0, rv_select="none", rv_max_points=None,
+                   noise_adaptive=False).replace(**changes)
 
     @classmethod
     def own_chain(cls, **changes) -> LaavParams:
@@ -274,6 +289,40 @@ class LaavParams:
         changes = {name: getattr(self, name) * s for name in PIXEL_PARAMS}
         changes.update({name: getattr(self, name) / s ** 2 for name in STRENGTH_PARAMS})
         return self.replace(**changes)
+
+    def for_noise(self, sigma: float) -> LaavParams:
+        """The parameters the stages run with on tracks of pixel noise ``sigma`` (px, per
+        coordinate; :func:`laav.noise.estimate_noise`), with ``noise_adaptive`` off.
+
+        With ``k`` from :func:`laav.noise.threshold_factor` (for ``atom_frames``; 3.35 for
+        ``"all"``) and the ratio ``rho = max(1, k sigma / affine_threshold)``, every scale
+        a residual is judged on grows as the residuals do under the noise:
+        ``affine_threshold`` and ``edge_scale`` (px) are multiplied by ``rho`` (the
+        threshold becomes ``max(affine_threshold, k sigma)``), the strengths ``lam`` and
+        ``rv_lambda`` (1/px^2, which also set the px^2 constants of the refinement,
+        reassignment and selection, :func:`laav.voting.unit2`) are divided by ``rho^2``.
+        The radii ``r1``, ``r2`` and ``coding_eps`` (sizes of the scene, not of the noise)
+        and every other field are kept. When ``k sigma <= affine_threshold`` (clean
+        tracks) only ``noise_adaptive`` changes, so the labels are those of
+        ``noise_adaptive=False`` exactly. Coordinates scaled by ``s`` with :meth:`scaled`
+        ``(s)`` scale ``sigma`` by ``s`` and leave ``rho`` as it is.
+        """
+        from .noise import threshold_factor
+
+        if isinstance(sigma, bool) or not isinstance(sigma, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(sigma) and sigma >= 0):
+            raise ValueError(f"sigma must be a finite number >= 0, got {sigma!r}")
+        thr = threshold_factor(self.atom_frames) * float(sigma)
+        if not thr > self.affine_threshold:
+            return self.replace(noise_adaptive=False)
+        # at most what keeps the lengths within their bounds (coordinates far off the
+        # parameters' pixel scale: their labels are meaningless anyway and warned about)
+        rho = min(thr / self.affine_threshold, _BIG / self.affine_threshold,
+                  _BIG / self.edge_scale)
+        thr = self.affine_threshold * rho
+        return self.replace(noise_adaptive=False, affine_threshold=thr,
+                            edge_scale=self.edge_scale * rho, lam=self.lam / rho ** 2,
+                            rv_lambda=self.rv_lambda / rho ** 2)
 
     def replace(self, **changes) -> LaavParams:
         """A copy with some fields changed (validated like the original)."""
@@ -329,6 +378,7 @@ _BOUNDS = (
     ("affine_threshold", "float>", 0, _BIG),
     ("atom_frames", "choice", ("all", "pair"), None),
     ("ransac_hypotheses", "int", 1, 1000),
+    ("noise_adaptive", "bool", None, None),
     ("graph_neighbors", "int", 1, 100),
     ("edge_scale", "float>", 0, _BIG),
     ("cut_prior", "float", -_BIG, _BIG),
@@ -391,7 +441,7 @@ def _check(value, kind: str, low, high):
 #: Which parameters each stage reads; a change reruns that stage and all after it.
 STAGE_PARAMS: dict[str, frozenset] = {
     "atoms": frozenset({"r1", "r2", "atom_min_size", "affine_threshold", "ransac_hypotheses",
-                        "atom_frames"}),
+                        "atom_frames", "noise_adaptive"}),
     "graph": frozenset({"graph_neighbors", "edge_scale", "cut_prior"}),
     "multicut": frozenset({"fine_models", "fine_per_motion"}),
     "coarse": frozenset({"coarse_merge", "coding_eps", "coarse_candidates",

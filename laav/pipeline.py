@@ -50,6 +50,10 @@ class LaavResult:
     seed : int
     motion_count : MotionCount or None
         How C was estimated when :func:`segment` was asked for ``"auto"``.
+    noise_sigma : float or None
+        With ``params.noise_adaptive``: the tracks' pixel noise measured
+        (:func:`laav.noise.estimate_noise`, px per coordinate); the stages ran with
+        ``params.for_noise(noise_sigma)`` (:attr:`run_params`). None otherwise.
     """
 
     labels: np.ndarray
@@ -63,6 +67,13 @@ class LaavResult:
     n_motions: int = 2
     seed: int = 0
     motion_count: object = None
+    noise_sigma: float | None = None
+
+    @property
+    def run_params(self) -> LaavParams:
+        """The parameters the stages ran with: :attr:`params`, adapted to
+        :attr:`noise_sigma` when ``params.noise_adaptive`` (:meth:`LaavParams.for_noise`)."""
+        return self.params if self.noise_sigma is None else self.params.for_noise(self.noise_sigma)
 
     @property
     def unlabelled_code(self) -> np.ndarray:
@@ -162,6 +173,7 @@ class Pipeline:
         self.seed = _check_seed(seed)
         self._lock = threading.Lock()
         self._distances = None
+        self._noise: float | None = None  # the tracks' measured noise (noise_adaptive), px
         self._stages: dict = {}
         self._voting_memo: tuple | None = None
         self._plain_memo: tuple | None = None  # (seed, C, rv_* settings) -> plain RV's runs
@@ -169,7 +181,8 @@ class Pipeline:
 
     def _voting_key(self, init) -> tuple:
         """Everything the fine-tuning's result depends on (its generator comes from the seed)."""
-        rv = tuple((k, v) for k, v in self.params.to_dict().items() if k in STAGE_PARAMS["voting"])
+        rv = tuple((k, v) for k, v in self._run_params().to_dict().items()
+                   if k in STAGE_PARAMS["voting"])
         return (self.seed, self.n_motions, rv, init)
 
     def _same_voting_inputs(self, key: tuple) -> bool:
@@ -179,13 +192,30 @@ class Pipeline:
         return all((a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
                    for a, b in zip(old[3:], key[3:]))
 
+    def _run_params(self) -> LaavParams:
+        """``params``, or with ``noise_adaptive`` its :meth:`LaavParams.for_noise` for the
+        tracks' noise, measured once per sequence (it depends on the coordinates alone)."""
+        if not self.params.noise_adaptive:
+            return self.params
+        if self._noise is None:
+            from .noise import estimate_noise
+
+            self._noise = estimate_noise(self.seq.points,
+                                         None if self.seq.is_complete else self.seq.visible)
+        return self.params.for_noise(self._noise)
+
     def _rng(self, stage: str) -> np.random.Generator:
         return np.random.default_rng(_stage_rngs(self.seed)[stage])
 
     @single_threaded  # one BLAS/OpenMP thread while the stages run (laav/_threads.py)
     def _run(self, start: str) -> LaavResult:
-        p, seq, C = self.params, self.seq, self.n_motions
+        seq, C = self.seq, self.n_motions
         timings = dict.fromkeys(STAGES, 0.0)
+        t = time.perf_counter()
+        measure = self.params.noise_adaptive and self._noise is None  # once per sequence
+        p = self._run_params()  # noise_adaptive: the thresholds for the measured noise
+        if measure:
+            timings["atoms"] += time.perf_counter() - t
         todo = STAGES[STAGES.index(start):]
         st = self._stages
         if self._distances is None:  # kept for every later run: R1/R2 changes reuse it
@@ -224,7 +254,8 @@ class Pipeline:
         return LaavResult(
             labels=st["voting"].labels, atoms=st["atoms"], graph=st["graph"],
             multicut=st["multicut"], coarse=st["coarse"], voting=st["voting"],
-            timings=timings, params=p, n_motions=C, seed=self.seed,
+            timings=timings, params=self.params, n_motions=C, seed=self.seed,
+            noise_sigma=self._noise if self.params.noise_adaptive else None,
         )
 
     def update(self, **changed) -> LaavResult:
