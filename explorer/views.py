@@ -986,6 +986,9 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Votin
     ``total_ms``. ``n_unlabelled``: points the final stage left unlabelled (-1, seen too
     briefly; missing data only), counted as errors in ``error_final`` as
     :func:`laav.misclassification_rate` does; ``visible_share`` of the sequence's entries.
+    ``noise_sigma`` (px, None without ``noise_adaptive``) and ``noise_changes``: the
+    fields the noise-adaptive scales changed, ``{name: (set, ran with)}`` (empty on clean
+    tracks).
     """
     gt = seq.labels
     st = result.stage_labels()
@@ -1007,12 +1010,38 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Votin
             out["error_coarse"] = float(laav.misclassification_rate(gt[covered],
                                                                     np.asarray(st["coarse"])[covered]))
         out["error_final"] = float(laav.misclassification_rate(gt, np.asarray(st["final"])))
+    out.update(_noise_numbers(result))
     out["error_plain"] = None
     out["plain_iterations"] = None if plain is None else len(plain.changed)
     out["plain_converged"] = None if plain is None else bool(plain.converged)
     if gt is not None and plain is not None:
         out["error_plain"] = float(laav.misclassification_rate(gt, np.asarray(plain.labels)))
     return out
+
+
+def _noise_numbers(result: laav.LaavResult) -> dict:
+    """The measured pixel noise and what ``noise_adaptive`` changed for it (stage_numbers)."""
+    if result.noise_sigma is None:
+        return {"noise_sigma": None, "noise_changes": {}}
+    ran = result.run_params
+    changes = {k: (getattr(result.params, k), getattr(ran, k))
+               for k in ("affine_threshold", "edge_scale", "lam", "rv_lambda")
+               if getattr(ran, k) != getattr(result.params, k)}
+    return {"noise_sigma": float(result.noise_sigma), "noise_changes": changes}
+
+
+def noise_line(num: dict) -> str | None:
+    """One sentence on the measured pixel noise and the scales it set (None when not
+    measured, ``noise_adaptive`` off)."""
+    sigma = num.get("noise_sigma")
+    if sigma is None:
+        return None
+    ch = num.get("noise_changes") or {}
+    if not ch:
+        return (f"σ̂ = {sigma:.2f} px measured; thresholds as set "
+                f"(3.35 σ̂ ≤ affine_threshold, `noise_adaptive`)")
+    parts = ", ".join(f"{k} {a:g} → {b:.3g}" for k, (a, b) in ch.items())
+    return f"σ̂ = {sigma:.2f} px measured; **scales widened for the noise**: {parts} (`noise_adaptive`)"
 
 
 def _pct(v) -> str:
@@ -1058,6 +1087,9 @@ def numbers_markdown(num: dict) -> str:
         f"| *plain RV* (random start; same C, seed, RV settings) | {_plain_result(num)} | "
         f"{_pct(num.get('error_plain'))} (all points) | |",
     ]
+    noise = noise_line(num)
+    if noise:
+        rows.append(f"| *pixel noise* | {noise} | | |")
     share = num.get("visible_share", 1.0)
     if share < 1.0:
         rows.append(f"| *input* | {num['n_points']} tracks x {num['n_frames']} frames, "

@@ -14,6 +14,7 @@ import pytest
 import laav
 from explorer import views as V
 from explorer.demo import demo_sequence
+from laav.synthetic import make_sequence
 
 # Machado, Oliveira & Fernandes (2009), deuteranopia at severity 1.0, on linear RGB
 DEUTERANOPIA = np.array([[0.367322, 0.860646, -0.227968],
@@ -390,3 +391,26 @@ def test_z_cells_carry_their_value_only_while_it_fits(demo):
     assert many.multicut.n_models > V.Z_TEXT_MAX
     data, _ = V.z_sources(many, seq)
     assert not any(data["text"]) and len(data["z"]) == many.multicut.n_models ** 2  # hover only
+
+
+# ---------------------------------------------------------------------------- pixel noise
+def test_numbers_card_names_the_measured_noise_and_what_it_widened():
+    """The noise-adaptive scales are a departure from the paper: the card says what ran."""
+    clean = make_sequence(n_objects=2, n_frames=12, n_points=200, noise=0.0, rng=3)
+    noisy = make_sequence(n_objects=2, n_frames=12, n_points=200, noise=1.5, rng=3)
+    got = {}
+    for name, seq in (("clean", clean), ("noisy", noisy)):
+        res = laav.segment(seq, 2, random_state=0)
+        got[name] = V.stage_numbers(seq, res)
+    assert got["clean"]["noise_sigma"] < 0.1 and got["clean"]["noise_changes"] == {}
+    assert "thresholds as set" in V.numbers_markdown(got["clean"])
+    ch = got["noisy"]["noise_changes"]
+    assert set(ch) == {"affine_threshold", "edge_scale", "lam", "rv_lambda"}
+    thr_set, thr_ran = ch["affine_threshold"]
+    assert thr_set == 2.0 and thr_ran == pytest.approx(3.35 * got["noisy"]["noise_sigma"], rel=0.01)
+    md = V.numbers_markdown(got["noisy"])
+    assert "scales widened for the noise" in md and "affine_threshold 2 →" in md
+    # the paper preset measures nothing and says nothing
+    res = laav.segment(noisy, 2, params=laav.LaavParams.paper(), random_state=0)
+    num = V.stage_numbers(noisy, res)
+    assert num["noise_sigma"] is None and "pixel noise" not in V.numbers_markdown(num)
