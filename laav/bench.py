@@ -120,10 +120,18 @@ def _convert(raw: str):
     return raw
 
 
+def _choices(key: str) -> tuple:
+    """The allowed strings of a ``"choice"`` field of :class:`~laav.LaavParams` (else ())."""
+    from .params import _BOUNDS
+
+    return next((lo for name, kind, lo, _ in _BOUNDS if name == key and kind == "choice"), ())
+
+
 def parse_param(text: str) -> tuple[str, object]:
     """Parse ``"key=value"`` into a :class:`~laav.LaavParams` field name and a value.
 
-    Numbers, ``true``/``false`` and ``none`` are converted; an integer given for a float
+    Numbers, ``true``/``false`` and ``none`` are converted (``none`` stays a string for a
+    field that has it among its choices: ``rv_select=none``); an integer given for a float
     field becomes a float. Validation of the value itself is left to ``LaavParams``.
 
     Raises
@@ -138,6 +146,8 @@ def parse_param(text: str) -> tuple[str, object]:
     if key not in names:
         raise BenchError(f"unknown LAAV parameter {key!r} (known: {', '.join(names)})")
     value = _convert(raw)
+    if value is None and raw.strip().lower() in _choices(key):
+        value = raw.strip().lower()  # a choice named "none" (rv_select=none), not None
     default = getattr(LaavParams(), key)
     if isinstance(default, bool) and isinstance(value, int) and value in (0, 1):
         value = bool(value)

@@ -247,6 +247,9 @@ def test_param_parsing():
     assert bench.parse_param("r1 = 15") == ("r1", 15.0)
     assert bench.parse_param("rv_refine=false") == ("rv_refine", False)
     assert bench.parse_param("fine_models=none") == ("fine_models", None)
+    # a choice called "none" stays that string (the paper's rv_select), and builds params
+    assert bench.parse_param("rv_select=none") == ("rv_select", "none")
+    assert bench.params_from_assignments(["rv_select=None"]).rv_select == "none"
     with pytest.raises(BenchError, match="unknown LAAV parameter"):
         bench.parse_param("nope=1")
     with pytest.raises(BenchError, match="key=value"):
