@@ -396,7 +396,8 @@ def main(argv=None) -> int:
          "", "Confusion (held out, seed 0):", "", *_confusion(held, D), "",
          "Per fold, the constants chosen on the other folds:", "",
          "| fold | sequences | L2 inverse strength | one-motion ratio | step weights (gain subspace, "
-         "epipolar; next gain subspace, epipolar) | bias | held-out right |", "|---|---|---|---|---|---|---|"]
+         "epipolar; next gain subspace, epipolar; coding length saved) | bias | held-out right |",
+         "|---|---|---|---|---|---|---|"]
     for k, reg, one, w, b, nk in ch["folds"]:
         ns = [n for n in D.names if D.fold[n] == k]
         L.append(f"| {k} | {nk} | {reg:g} | {one:g} | {', '.join(f'{v:.2f}' for v in w)} | {b:.2f} | "
