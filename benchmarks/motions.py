@@ -62,6 +62,7 @@ def profiles(items, cache: Path) -> dict:
         dt = time.perf_counter() - t
         key = f"{it.name}|{seed}"
         z[key + "|R"], z[key + "|E"], z[key + "|L"] = pr.residuals, pr.epipolar, pr.labels
+        z[key + "|K"] = pr.coding
         z[key + "|meta"] = np.array([it.seq.n_motions, pr.noise2, pr.n_atoms, dt])
         print(f"profile {k + 1}/{len(todo)} {key} {dt * 1e3:.0f} ms", file=sys.stderr, flush=True)
         if (k + 1) % 20 == 0 or k + 1 == len(todo):
@@ -75,7 +76,7 @@ class Data:
         self.names = [it.name for it in items]
         self.true = {it.name: it.seq.n_motions for it in items}
         self.z = z
-        self.levels = {(n, s): M.profile_levels(z[f"{n}|{s}|R"], z[f"{n}|{s}|E"])
+        self.levels = {(n, s): M.profile_levels(z[f"{n}|{s}|R"], z[f"{n}|{s}|E"], z[f"{n}|{s}|K"])
                        for n in self.names for s in SEEDS}
         self.noise = {(n, s): float(z[f"{n}|{s}|meta"][1]) for n in self.names for s in SEEDS}
         self.fold = folds_by_video(self.names, FOLDS, 0)
@@ -395,7 +396,8 @@ def main(argv=None) -> int:
          "", "Confusion (held out, seed 0):", "", *_confusion(held, D), "",
          "Per fold, the constants chosen on the other folds:", "",
          "| fold | sequences | L2 inverse strength | one-motion ratio | step weights (gain subspace, "
-         "epipolar; next gain subspace, epipolar) | bias | held-out right |", "|---|---|---|---|---|---|---|"]
+         "epipolar; next gain subspace, epipolar; coding length saved) | bias | held-out right |",
+         "|---|---|---|---|---|---|---|"]
     for k, reg, one, w, b, nk in ch["folds"]:
         ns = [n for n in D.names if D.fold[n] == k]
         L.append(f"| {k} | {nk} | {reg:g} | {one:g} | {', '.join(f'{v:.2f}' for v in w)} | {b:.2f} | "

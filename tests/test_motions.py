@@ -108,14 +108,15 @@ def test_incomplete_sequence_estimated_on_its_complete_tracks():
 def test_decide_sequential_test():
     """The rule alone, on made-up levels: big gains up to the true C, none after."""
     K = 6
-    lv = np.zeros((2, K))
+    lv = np.zeros((3, K))  # rows: log subspace level, log epipolar level, coding length
     lv[:, 0], lv[:, 1], lv[:, 2] = 3.0, 0.0, -4.0  # gains: 1->2 = 3, 2->3 = 4, then 0
     lv[:, 3:] = -4.0
     C, scores, why = decide(lv, noise2=1e-3, max_motions=5)
     assert C == 3 and scores[1] > 0 and scores[2] <= 0 and "4 motions" in why
-    np.testing.assert_allclose(step_features(lv, 2), [4.0, 4.0, 0.0, 0.0])
+    # (gain subspace, epipolar; next gain subspace, epipolar; coding length saved)
+    np.testing.assert_allclose(step_features(lv, 2), [4.0, 4.0, 0.0, 0.0, 4.0])
     # one motion: the one-motion epipolar level within the noise
-    lv1 = np.full((2, K), np.log(1e-6))
+    lv1 = np.full((3, K), np.log(1e-6))
     assert decide(lv1, noise2=1.0, max_motions=5)[0] == 1
     # a candidate that could not be formed stops the test
     lv[:, 3:] = np.nan
@@ -125,8 +126,11 @@ def test_decide_sequential_test():
 
 def test_profile_levels_nan_for_missing_candidates():
     R = np.array([[1.0, 1.0], [np.inf, np.inf]])
-    lv = profile_levels(R, R)
+    lv = profile_levels(R, R, np.array([2.0, np.nan]))
+    assert lv.shape == (3, 2)
     assert np.isfinite(lv[:, 0]).all() and np.isnan(lv[:, 1]).all()
+    assert lv[2, 0] == 2.0
+    assert np.isnan(profile_levels(R, R)[2]).all()  # no coding lengths given
 
 
 def test_segment_auto():
