@@ -76,7 +76,8 @@ class Data:
         self.names = [it.name for it in items]
         self.true = {it.name: it.seq.n_motions for it in items}
         self.z = z
-        self.levels = {(n, s): M.profile_levels(z[f"{n}|{s}|R"], z[f"{n}|{s}|E"], z[f"{n}|{s}|K"])
+        self.levels = {(n, s): M.profile_levels(z[f"{n}|{s}|R"], z[f"{n}|{s}|E"],
+                                                coding=z[f"{n}|{s}|K"])
                        for n in self.names for s in SEEDS}
         self.noise = {(n, s): float(z[f"{n}|{s}|meta"][1]) for n in self.names for s in SEEDS}
         self.fold = folds_by_video(self.names, FOLDS, 0)

@@ -218,8 +218,8 @@ def _evaluate(ctx: _Context, C: int):
     return lab, R, E, labelling_coding_length(ctx.pipe.seq.points, lab, C, ctx.eps)
 
 
-def profile_levels(residuals: np.ndarray, epipolar: np.ndarray, coding=None,
-                   unit2: float = 1.0) -> np.ndarray:
+def profile_levels(residuals: np.ndarray, epipolar: np.ndarray, unit2: float = 1.0, *,
+                   coding=None) -> np.ndarray:
     """(3, K): log of the trimmed mean of each candidate's subspace and epipolar residuals,
     floored at 1e-6 px^2 times ``unit2`` (:mod:`laav.refine`), and its coding length per
     point (``coding``, (K,) nats; NaN rows when not given). NaN where a candidate could not
@@ -449,8 +449,8 @@ def _estimate(seq, max_motions, params, seed):
             done.add(c)
             got = _evaluate(ctx, c)
             if got is not None:
-                levels[:, c - 1] = profile_levels(got[1][None], got[2][None], [got[3]],
-                                                  ctx.unit2)[:, 0]
+                levels[:, c - 1] = profile_levels(got[1][None], got[2][None], ctx.unit2,
+                                                  coding=[got[3]])[:, 0]
         return levels[:, c - 1]
 
     C, scores, why = decide(col, ctx.noise2, max_motions, unit2=ctx.unit2)

@@ -126,7 +126,7 @@ def test_decide_sequential_test():
 
 def test_profile_levels_nan_for_missing_candidates():
     R = np.array([[1.0, 1.0], [np.inf, np.inf]])
-    lv = profile_levels(R, R, np.array([2.0, np.nan]))
+    lv = profile_levels(R, R, coding=np.array([2.0, np.nan]))
     assert lv.shape == (3, 2)
     assert np.isfinite(lv[:, 0]).all() and np.isnan(lv[:, 1]).all()
     assert lv[2, 0] == 2.0
