@@ -38,7 +38,7 @@ import numpy as np
 from ._sequence import MIN_POINTS, LaavWarning, Sequence
 from ._threads import single_threaded
 
-__all__ = ["MotionCount", "MotionProfile", "motion_profile", "estimate_motions", "decide",
+__all__ = ["MotionCount", "MotionProfile", "motion_profile", "estimate_motions", "complete_window", "decide",
            "profile_levels"]
 
 RANK = 4  # an affine camera's rigid motion spans a 4-dimensional trajectory subspace
@@ -377,6 +377,65 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     return _estimate_motions(seq_or_points, max_motions, random_state, params)[0]
 
 
+#: Shortest stretch of frames (or the whole sequence when shorter) the count is estimated
+#: on when no track spans every frame (incomplete tracks); set a priori.
+MIN_WINDOW_FRAMES = 10
+#: Stretch lengths tried on incomplete tracks: at most this many, spread geometrically.
+_WINDOW_LENGTHS = 24
+
+
+def complete_window(visible: np.ndarray, min_tracks: int = 2 * MIN_POINTS,
+                    min_frames: int = MIN_WINDOW_FRAMES) -> tuple[int, int, np.ndarray] | None:
+    """The stretch of frames ``[start, stop)`` and the tracks seen in every one of its frames
+    that hold the most entries (tracks x frames), among stretches of at least
+    ``min(min_frames, F)`` frames seen whole by at least ``min_tracks`` tracks.
+
+    ``visible``: (F, P) bool. Returns ``(start, stop, tracks)`` (tracks: int indices), or
+    None when no stretch qualifies. The whole sequence wins whenever its complete tracks
+    hold the most entries. Deterministic; ties go to the longer, then the earlier stretch.
+    """
+    vis = np.asarray(visible, dtype=bool)
+    F, P = vis.shape
+    lo = min(int(min_frames), F)
+    cs = np.zeros((F + 1, P), dtype=np.int32)
+    np.cumsum(vis, axis=0, out=cs[1:])
+    lengths = np.unique(np.round(np.geomspace(lo, F, min(_WINDOW_LENGTHS, F - lo + 1))).astype(int))
+    best = None  # (entries, length, -start)
+    for L in lengths[::-1]:  # longest first: a tie keeps the longer stretch
+        n = ((cs[L:] - cs[:-L]) == L).sum(axis=1)  # (F - L + 1,) tracks seen throughout
+        a = int(np.argmax(n))  # the earliest of the best starts
+        if n[a] >= min_tracks and (best is None or n[a] * L > best[0]):
+            best = (int(n[a]) * int(L), int(L), a)
+    if best is None:
+        return None
+    _, L, a = best
+    return a, a + L, np.flatnonzero(cs[a + L] - cs[a] == L)
+
+
+def _complete_window(seq: Sequence) -> tuple[Sequence, str]:
+    """``seq`` cut to :func:`complete_window` (complete tracks), and the reason's note; a
+    ``ValueError`` naming the file when no stretch has enough tracks."""
+    P, F = seq.n_points, seq.n_frames
+    got = complete_window(seq.visible)
+    if got is None:
+        lo = min(MIN_WINDOW_FRAMES, F)
+        vis = seq.visible
+        most = max(int(vis[a:a + lo].all(axis=0).sum()) for a in range(F - lo + 1))
+        seen = (f"only {most} of the {P} tracks are seen in every frame" if lo == F else
+                f"at most {most} of the {P} tracks are seen in every frame of a stretch of {lo} frames")
+        raise ValueError(
+            f"{seq.source}: {seen}; estimating the "
+            f"number of motions fits whole trajectories and needs at least {2 * MIN_POINTS} "
+            f"such tracks: give C (--motions N)")
+    a, b, idx = got
+    labels = None if seq.labels is None else np.unique(seq.labels[idx], return_inverse=True)[1].reshape(-1)
+    cut = Sequence(points=seq.points[a:b][:, idx], labels=labels, name=seq.name,
+                   image_size=seq.image_size, source=seq.source)
+    where = "every frame" if (a, b) == (0, F) else f"frames {a}-{b - 1} ({b - a} of {F})"
+    return cut, (f"; estimated on the {idx.size} of {P} tracks seen in {where} (the estimate fits "
+                 "whole trajectories; a motion none of whose tracks spans them is not counted)")
+
+
 def _estimate_motions(seq_or_points, max_motions, random_state, params):
     """:func:`estimate_motions`, and LAAV's result with the estimated C when the estimate ran
     on the whole sequence (else None): :func:`laav.segment` with ``"auto"`` takes it instead
@@ -394,18 +453,10 @@ def _estimate_motions(seq_or_points, max_motions, random_state, params):
     basis = ""
     if not seq_or_points.is_complete:
         # the profile fits whole trajectories (rank-4 subspaces): on incomplete data it runs on
-        # the tracks seen in every frame, when they are enough (a motion every one of whose
-        # tracks is broken is then not counted: said in the reason)
-        full = np.flatnonzero(seq_or_points.visible.all(axis=0))
-        P_all = seq_or_points.n_points
-        if full.size < 2 * MIN_POINTS:
-            raise ValueError(
-                f"{seq_or_points.source}: only {full.size} of the {P_all} tracks are seen in every frame; "
-                f"estimating the number of motions fits whole trajectories and needs at least "
-                f"{2 * MIN_POINTS} complete tracks: give C (--motions N)")
-        seq_or_points = seq_or_points.subset(full)
-        basis = (f"; estimated on the {full.size} of {P_all} tracks seen in every frame (the estimate "
-                 "fits whole trajectories; a motion none of whose tracks is complete is not counted)")
+        # the stretch of frames and the tracks seen in all of it that hold the most entries
+        # (a motion none of whose tracks spans the stretch is then not counted: said in the
+        # reason)
+        seq_or_points, basis = _complete_window(seq_or_points)
     seed = as_seed(random_state)
     if seq_or_points.n_points > MAX_ESTIMATE_POINTS:
         # counting the motions needs no more tracks than this, and runs LAAV up to four times

@@ -98,11 +98,45 @@ def test_incomplete_sequence_estimated_on_its_complete_tracks():
     assert f"estimated on the {n_full} of {P} tracks seen in every frame" in got.reason
     alone = estimate_motions(laav.Sequence(seq.points[:, visible.all(axis=0)]))
     assert got.n_motions == alone.n_motions == 2
-    # too few complete tracks: a clear error naming the way out
-    few = np.ones((F, P), dtype=bool)
-    few[-1, 12:] = False
-    with pytest.raises(ValueError, match=r"only 12 of the \d+ tracks are seen in every frame.*--motions N"):
-        estimate_motions(laav.Sequence(seq.points, visible=few))
+    # no track spans every frame: the stretch of frames whose complete tracks hold the most
+    # entries (here frames 0 .. F-2, every track)
+    cut = np.ones((F, P), dtype=bool)
+    cut[-1, 12:] = False
+    got = estimate_motions(laav.Sequence(seq.points, visible=cut))
+    assert f"estimated on the {P} of {P} tracks seen in frames 0-{F - 2} ({F - 1} of {F})" in got.reason
+    assert got.n_motions == estimate_motions(laav.Sequence(seq.points[:-1])).n_motions == 2
+    # no stretch of 10 frames is seen whole by 16 tracks: a clear error naming the way out
+    few = np.zeros((F, P), dtype=bool)
+    for k in range(P):  # track k is seen in 9 consecutive frames, starting at a shifting frame
+        few[(k % (F - 8)) + np.arange(9), k] = True
+    few[:, :12] = True
+    with pytest.raises(ValueError, match=r"(?s)at most 12 of the \d+ tracks are seen in every frame "
+                                         r"of a stretch of 10 frames.*--motions N"):
+        estimate_motions(laav.Sequence(np.where(few[..., None], seq.points, np.nan), visible=few))
+
+
+def test_complete_window_holds_the_most_entries():
+    """Against a direct search over every stretch (not only the geometric grid of lengths)."""
+    from laav.motions import complete_window
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        F, P = int(rng.integers(10, 30)), int(rng.integers(20, 80))
+        start = rng.integers(0, F, P)
+        stop = np.minimum(F, start + rng.integers(3, F + 1, P))
+        vis = (np.arange(F)[:, None] >= start) & (np.arange(F)[:, None] < stop)
+        got = complete_window(vis, min_tracks=4, min_frames=5)
+        best = max((int(vis[a:b].all(axis=0).sum()) * (b - a), a, b) for a in range(F)
+                   for b in range(a + min(5, F), F + 1)
+                   if vis[a:b].all(axis=0).sum() >= 4) if F else None
+        if got is None:
+            assert best is None or best[0] == 0
+            continue
+        a, b, idx = got
+        assert np.array_equal(idx, np.flatnonzero(vis[a:b].all(axis=0))) and b - a >= 5
+        entries = idx.size * (b - a)
+        # the grid of lengths may miss the very best length; never by more than its step
+        assert entries <= best[0] and entries >= best[0] * 0.8
 
 
 def test_decide_sequential_test():
