@@ -65,8 +65,9 @@ def report(rows: list[dict], shares: list[float], out: str, argv: list[str], sec
         return f"{k} / {len(sel)} ({100 * k / max(len(sel), 1):.1f} %)"
 
     keys = ["complete"] + [f"missing {m:.0%}" for m in shares]
+    when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     lines = [
-        f"# The number of motions on incomplete tracks ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())})",
+        f"# The number of motions on incomplete tracks ({when})",
         "",
         f"- Machine: {cpu_model()}, 2 logical cores (shared with other jobs), {platform.system()} "
         f"{platform.release()}",
