@@ -300,11 +300,19 @@ def test_too_little_seen_together_is_a_clear_error():
 
 
 def test_estimating_the_number_of_motions_needs_enough_complete_tracks():
-    """The estimate fits whole trajectories: on incomplete data it runs on the tracks seen
-    in every frame, and says clearly when there are too few (occlude() breaks every track)."""
-    occl = occlude(_scene(0), 0.2, 0)
-    with pytest.raises(ValueError, match="tracks are seen in every frame"):
-        laav.segment(occl, "auto")
+    """The estimate fits whole trajectories: on incomplete data it runs on the stretch of
+    frames and the tracks seen throughout it that hold the most entries (occlude() breaks
+    every track over the whole sequence), and says clearly when no stretch of 10 frames is
+    seen whole by enough tracks."""
+    seq = _scene(0)
+    occl = occlude(seq, 0.2, 0)
+    assert not occl.visible.all(axis=0).any()
+    res = laav.segment(occl, "auto")
+    assert res.n_motions == seq.n_motions and "tracks seen in frames" in res.motion_count.reason
+    assert laav.misclassification_rate(seq.labels, res.labels) <= 0.05
+    few = occl.subset(np.arange(20))  # 20 broken tracks: no stretch is seen whole by 16
+    with pytest.raises(ValueError, match="tracks are seen in every frame of a stretch"):
+        laav.segment(few, "auto")
 
 
 def test_the_coding_merge_falls_back_to_the_epipolar_merge_with_a_warning():
