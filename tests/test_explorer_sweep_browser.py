@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import os
 import re
+import threading
 from pathlib import Path
 
 import pytest
+
+import laav
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -63,7 +66,7 @@ def _open(browser, port, created, i=0):
     return page, ex, errors
 
 
-def test_seed_sweep_in_the_page(tmp_path):
+def test_seed_sweep_in_the_page(tmp_path, monkeypatch):
     seq = _sequence()
     with _served(seq, viser=False) as (port, browser, created):
         page, ex, errors = _open(browser, port, created)
@@ -94,12 +97,25 @@ def test_seed_sweep_in_the_page(tmp_path):
                                timeout=20000)
         page.get_by_text("Showing browser_test").first.wait_for(timeout=20000)
         assert rows.count() == len(SEEDS)  # the rows stay: only the seed changed
-        # a parameter change in the page cancels a running sweep
+        # a parameter change in the page cancels a running sweep. The sweep's seeds wait at
+        # a gate until the change has reached the server: on a fast machine ten small runs
+        # could otherwise end before the page's change arrives (a race, not the behaviour)
+        gate = threading.Event()
+        segment = laav.segment
+
+        def gated(*args, **kw):
+            if threading.current_thread() is not threading.main_thread():
+                gate.wait(60)
+            return segment(*args, **kw)
+
+        monkeypatch.setattr(laav, "segment", gated)
         run.click()
         _wait_for(lambda: ex.sweep_view.sweep.running, 30, "a second sweep", page=page)
         # from the page, as a person does (a change made on the server from this test's
         # thread raced the document's own batches: bokeh "reference ... isn't known")
         assert page.evaluate(JS_SET_SLIDER, ["λ", 4.0]) is not None
+        _wait_for(lambda: ex.w_params["lam"].value == 4.0, 30, "λ = 4 on the server", page=page)
+        gate.set()
         page.get_by_text("Cancelled: the settings changed").first.wait_for(timeout=30000)
         assert not ex.sweep_view.sweep.running
     assert not errors, errors[:5]
