@@ -14,6 +14,7 @@ import numpy as np
 
 import laav
 from laav.geometry import epipolar_lines
+from laav.noise import threshold_factor
 
 __all__ = [
     "COLOR_MODES", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS",
@@ -986,9 +987,9 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Votin
     ``total_ms``. ``n_unlabelled``: points the final stage left unlabelled (-1, seen too
     briefly; missing data only), counted as errors in ``error_final`` as
     :func:`laav.misclassification_rate` does; ``visible_share`` of the sequence's entries.
-    ``noise_sigma`` (px, None without ``noise_adaptive``) and ``noise_changes``: the
+    ``noise_sigma`` (px, None without ``noise_adaptive``), ``noise_changes``: the
     fields the noise-adaptive scales changed, ``{name: (set, ran with)}`` (empty on clean
-    tracks).
+    tracks), and ``noise_k``, the threshold factor k of ``k σ̂``.
     """
     gt = seq.labels
     st = result.stage_labels()
@@ -1023,11 +1024,10 @@ def _noise_numbers(result: laav.LaavResult) -> dict:
     """The measured pixel noise and what ``noise_adaptive`` changed for it (stage_numbers)."""
     if result.noise_sigma is None:
         return {"noise_sigma": None, "noise_changes": {}}
-    ran = result.run_params
-    changes = {k: (getattr(result.params, k), getattr(ran, k))
-               for k in ("affine_threshold", "edge_scale", "lam", "rv_lambda")
-               if getattr(ran, k) != getattr(result.params, k)}
-    return {"noise_sigma": float(result.noise_sigma), "noise_changes": changes}
+    set_, ran = result.params.to_dict(), result.run_params.to_dict()
+    changes = {k: (v, ran[k]) for k, v in set_.items() if k != "noise_adaptive" and ran[k] != v}
+    return {"noise_sigma": float(result.noise_sigma), "noise_changes": changes,
+            "noise_k": threshold_factor(result.params.atom_frames)}
 
 
 def noise_line(num: dict) -> str | None:
@@ -1039,7 +1039,7 @@ def noise_line(num: dict) -> str | None:
     ch = num.get("noise_changes") or {}
     if not ch:
         return (f"σ̂ = {sigma:.2f} px measured; thresholds as set "
-                f"(3.35 σ̂ ≤ affine_threshold, `noise_adaptive`)")
+                f"({num.get('noise_k', 3.35):.2f} σ̂ ≤ affine_threshold, `noise_adaptive`)")
     parts = ", ".join(f"{k} {a:g} → {b:.3g}" for k, (a, b) in ch.items())
     return f"σ̂ = {sigma:.2f} px measured; **scales widened for the noise**: {parts} (`noise_adaptive`)"
 

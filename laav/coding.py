@@ -128,6 +128,19 @@ def coding_lengths(count, total, scatter, dim: int, eps: float) -> np.ndarray:
     return np.where(np.asarray(count) > 0, L, 0.0)
 
 
+def labelling_coding_length(points: np.ndarray, labels: np.ndarray, n_groups: int,
+                            eps: float) -> float:
+    """Lossy coding length (nats) of the trajectories grouped by ``labels``: the sum of
+    :func:`coding_lengths` over the groups (distortion ``eps`` px), without a membership
+    term, in the principal directions of all trajectories (:func:`model_stats`).
+
+    ``points`` (F, P, 2), ``labels`` (P,) in ``0 .. n_groups-1``. LAAV's own chain scores
+    whole labellings with it (:func:`laav.voting.joint_score`), the motion count its
+    candidates (per point, :mod:`laav.motions`)."""
+    st = model_stats(points, labels, n_groups)
+    return float(coding_lengths(st.count, st.total, st.scatter, st.dim, eps).sum())
+
+
 def merge_cost(stats: ModelStats, eps: float) -> np.ndarray:
     """Coding length gained by merging each pair of models, per point (nats), (n, n).
 

@@ -180,22 +180,11 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
                     unit2(pipe.params), float(pipe.params.coding_eps))
 
 
-def labelling_coding_length(points: np.ndarray, labels: np.ndarray, n_groups: int,
-                            eps: float) -> float:
-    """Lossy coding length (nats per point) of the trajectories grouped by ``labels``: the sum
-    of :func:`laav.coding.coding_lengths` over the groups (distortion ``eps`` px), without a
-    membership term; the statistics in the principal directions of all trajectories, as
-    the joint merge keeps them (:func:`laav.coding.model_stats`)."""
-    from .coding import coding_lengths, model_stats
-
-    st = model_stats(points, labels, n_groups)
-    return float(coding_lengths(st.count, st.total, st.scatter, st.dim, eps).sum() / labels.size)
-
-
 def _evaluate(ctx: _Context, C: int):
     """(labels, subspace residuals, epipolar distances, coding length per point) of candidate
     C: LAAV's labels with C motions; None when there is no such labelling (too few points,
     a motion under 8)."""
+    from .coding import labelling_coding_length
     from .refine import motion_distances
 
     if C == 1:
@@ -215,7 +204,8 @@ def _evaluate(ctx: _Context, C: int):
     R = _group_residuals(ctx.W, ctx.norm2, lab, C, ctx.rank, unit2=ctx.unit2).min(axis=0)
     Dm = motion_distances(ctx.pipe.seq.points, lab, C, ctx.pairs, ctx.unit2)
     E = np.where(np.isfinite(Dm), Dm, np.inf).min(axis=0)
-    return lab, R, E, labelling_coding_length(ctx.pipe.seq.points, lab, C, ctx.eps)
+    P = lab.size
+    return lab, R, E, labelling_coding_length(ctx.pipe.seq.points, lab, C, ctx.eps) / P
 
 
 def profile_levels(residuals: np.ndarray, epipolar: np.ndarray, unit2: float = 1.0, *,
@@ -428,8 +418,8 @@ def _complete_window(seq: Sequence) -> tuple[Sequence, str]:
             f"number of motions fits whole trajectories and needs at least {2 * MIN_POINTS} "
             f"such tracks: give C (--motions N)")
     a, b, idx = got
-    labels = None if seq.labels is None else np.unique(seq.labels[idx], return_inverse=True)[1].reshape(-1)
-    cut = Sequence(points=seq.points[a:b][:, idx], labels=labels, name=seq.name,
+    sub = seq.subset(idx)  # seen in every frame of a .. b - 1: complete there
+    cut = Sequence(points=sub.points[a:b], labels=sub.labels, name=seq.name,
                    image_size=seq.image_size, source=seq.source)
     where = "every frame" if (a, b) == (0, F) else f"frames {a}-{b - 1} ({b - a} of {F})"
     return cut, (f"; estimated on the {idx.size} of {P} tracks seen in {where} (the estimate fits "

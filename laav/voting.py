@@ -401,14 +401,13 @@ def joint_score(points: np.ndarray, labels: np.ndarray, n_motions: int,
     params : LaavParams
         Uses ``coding_eps``, ``coarse_epipolar_weight`` and ``rv_lambda``.
     """
-    from .coding import coding_lengths, model_stats
+    from .coding import labelling_coding_length
 
     labels = np.asarray(labels, dtype=np.int64)
     if np.bincount(labels, minlength=n_motions).min() < 8:
         return float("inf")
     u2 = unit2(params)
-    st = model_stats(points, labels, n_motions)
-    coding = float(coding_lengths(st.count, st.total, st.scatter, st.dim, params.coding_eps).sum())
+    coding = labelling_coding_length(points, labels, n_motions, params.coding_eps)
     D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], _JOINT_PAIRS), u2)
     own = D[labels, np.arange(labels.size)]
     if not np.isfinite(own).all():
