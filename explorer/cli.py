@@ -84,7 +84,7 @@ def page_hosts(host: str) -> list[str]:
 def serve_options() -> dict:
     """Keyword arguments for ``pn.serve`` that every server of the explorer needs (and the
     page without MathJax: :func:`no_mathjax`)."""
-    from .cards.files import UPLOAD_CHUNK
+    from .sizes import UPLOAD_CHUNK
 
     assert 2 * UPLOAD_CHUNK < WEBSOCKET_MAX_MESSAGE  # a chunk and its message's framing fit
     no_mathjax()
@@ -108,7 +108,7 @@ def no_mathjax() -> None:
 
 
 def _size(text: str) -> int:
-    from .cards.files import parse_size
+    from .sizes import parse_size
 
     try:
         return parse_size(text)
@@ -229,7 +229,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     3-D view once its server is up (the CLI does for a non-loopback host).
     A session whose address carries settings (``/?r1=25&seed=3``) starts with them
     (validated; problems shown on the page as text). ``max_upload``: the largest upload in
-    bytes (default :data:`explorer.cards.files.DEFAULT_MAX_UPLOAD`); serve with
+    bytes (default :data:`explorer.sizes.DEFAULT_MAX_UPLOAD`); serve with
     :func:`serve_options`. ``video``: the :class:`explorer.video.Video` ``seq`` was tracked
     from (its frames, shared read-only by every tab, go behind the points). ``warm``: the
     first tab's pipeline and plain RV for ``seq`` computed elsewhere (:func:`explorer.warm.first_results`;
@@ -244,7 +244,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
 
     def build():
         from .app import Explorer
-        from .cards.files import DEFAULT_MAX_UPLOAD
+        from .sizes import DEFAULT_MAX_UPLOAD
 
         with lock:
             first, warm_left[0] = warm_left[0], None

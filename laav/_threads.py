@@ -45,9 +45,9 @@ def limited_threads():
 
     with _lock:
         if _pools is None:
-            # threadpoolctl sees only libraries already loaded: load scikit-learn's OpenMP
-            # runtime and scipy's BLAS (imported lazily by the stages) first. Finding the
-            # libraries takes ~3 ms, so it is done once.
+            # threadpoolctl sees only libraries already loaded: load scipy's BLAS (imported
+            # lazily by the stages) first. Finding the libraries takes ~3 ms, so it is done
+            # once.
             from .pipeline import preload
 
             preload()

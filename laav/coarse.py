@@ -13,7 +13,9 @@ measures best): ``Z_jk = mean over samples of exp(-lam d) * exp(-motion_weight m
 with ``m_jk`` the motion difference of the models' mean trajectories (largest frame-to-
 frame velocity difference over the sequence, divided by the spread of all velocities at
 that frame, as in Keuper et al.). The diagonal is 1. Spectral clustering
-(scikit-learn, ``assign_labels="cluster_qr"``) of Z gives C groups.
+of Z (scikit-learn's ``SpectralClustering(affinity="precomputed",
+assign_labels="cluster_qr")``, computed by :func:`laav._spectral.affinity_clustering`
+without importing scikit-learn; the same labels) gives C groups.
 
 **Missing data** (``docs/ALGORITHM.md``, "Missing data"): frame pairs come from
 :func:`laav._visibility.pair_pool`; the pairwise votes and pooled voting use only the
@@ -551,13 +553,10 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     elif coding:
         f2c = _canonical(assign)
     else:
-        from sklearn.cluster import SpectralClustering
+        from ._spectral import affinity_clustering
 
-        sc = SpectralClustering(n_clusters=n_motions, affinity="precomputed",
-                                assign_labels="cluster_qr",
-                                random_state=int(rng.integers(2**31 - 1)))
-        f2c = sc.fit_predict(Z + 1e-9).astype(np.int64)
-        f2c = _canonical(f2c)
+        rng.integers(2**31 - 1)  # (was scikit-learn's random_state: the stream stays as it was)
+        f2c = _canonical(affinity_clustering(Z + 1e-9, n_motions))
     atom_coarse = f2c[multicut.atom_labels]
     coarse_pts = np.where(fine_pts >= 0, f2c[np.maximum(fine_pts, 0)], -1)
 

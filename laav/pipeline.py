@@ -303,15 +303,17 @@ class Pipeline:
 def preload() -> None:
     """Import the modules the pipeline loads on first use.
 
-    ``import laav`` stays light (about 0.07 s) because scikit-learn's spectral clustering
-    and scipy's graph, distance and assignment routines are imported where they are first
-    needed; together they cost about 1 s on the first segmentation. An application that
-    starts a user interface can call this in a background thread meanwhile.
+    ``import laav`` stays light (about 0.07 s) because scipy's graph, distance and
+    assignment routines are imported where they are first needed. An application that
+    starts a user interface can call this in a background thread meanwhile. (The pipeline
+    does not use scikit-learn: its spectral clustering is :mod:`laav._spectral`'s; only
+    the estimators :class:`laav.LAAV` and :class:`laav.RandomVoting` import it.)
     """
+    import scipy.linalg  # noqa: F401
     import scipy.optimize  # noqa: F401
     import scipy.sparse.csgraph  # noqa: F401
+    import scipy.sparse.linalg  # noqa: F401
     import scipy.spatial.distance  # noqa: F401
-    import sklearn.cluster  # noqa: F401
 
 
 def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: int = 0, *,

@@ -184,3 +184,43 @@ def test_epipolar_merge_is_wrong_where_the_coding_merge_is_right():
         cov = co.point_labels >= 0
         errs[merge] = misclassification_rate(seq.labels[cov], co.point_labels[cov])
     assert errs["coding"] < 0.01 < errs["epipolar"], errs
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_affinity_clustering_equals_scikit_learn(seed):
+    """The coarse merge's spectral clustering (laav._spectral.affinity_clustering, a dense
+    eigensolver, no scikit-learn import) labels as scikit-learn's
+    SpectralClustering(affinity="precomputed", assign_labels="cluster_qr") did, on
+    affinities shaped like the merge's: blocks of near-1 entries, noise, a unit diagonal."""
+    from sklearn.cluster import SpectralClustering
+
+    from laav._spectral import affinity_clustering
+
+    rng = np.random.default_rng(seed)
+    C = int(rng.integers(2, 6))
+    n = int(rng.integers(C + 1, 5 * C + 3))  # both sides of scikit-learn's 5 x C switch
+    group = rng.integers(0, C, n)
+    Z = np.where(group[:, None] == group[None, :], rng.uniform(0.4, 1.0, (n, n)),
+                 rng.uniform(0.0, 0.5, (n, n)) ** rng.uniform(1, 4))
+    Z = np.triu(Z, 1)
+    Z = Z + Z.T
+    np.fill_diagonal(Z, 1.0)
+    ref = SpectralClustering(n_clusters=C, affinity="precomputed", assign_labels="cluster_qr",
+                             random_state=seed).fit_predict(Z + 1e-9)
+    ours = affinity_clustering(Z + 1e-9, C)
+    assert ours.dtype == np.int64 and ours.shape == (n,)
+    assert np.array_equal(ours, ref)
+
+
+def test_the_epipolar_merge_does_not_import_scikit_learn():
+    """The merge's spectral clustering is laav's own: a fresh process segments without
+    loading scikit-learn (its import, 0.3-2 s, was the explorer's slow first move)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, laav; from laav.synthetic import make_sequence; "
+            "laav.segment(make_sequence(n_objects=1, n_frames=10, n_points=200, rng=0), 2); "
+            "print(any(m == 'sklearn' or m.startswith('sklearn.') for m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"

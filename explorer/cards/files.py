@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import io
 import json
-import re
 import tempfile
 import threading
 import time
@@ -29,41 +28,11 @@ import laav
 
 from .. import export
 from .. import views as V
+from ..sizes import DEFAULT_MAX_UPLOAD, UPLOAD_CHUNK, fmt_size, parse_size  # noqa: F401 (re-exported)
 from .base import SIDE_W
 
-#: Default upload limit (bytes, decimal units like the upload box's "50 MB").
-DEFAULT_MAX_UPLOAD = 50_000_000
-#: Bytes per websocket message of an upload: far below the server's message limit.
-UPLOAD_CHUNK = 1_000_000
 #: Work shorter than this shows no progress line (a slider move on a small sequence).
 PROGRESS_AFTER = 1.0
-
-_UNITS = {"": 1, "B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "KIB": 2**10, "MIB": 2**20, "GIB": 2**30}
-
-
-def parse_size(text) -> int:
-    """Bytes from ``"50MB"``, ``"750 KB"``, ``"1.5GB"``, ``"20MiB"`` or a plain number of bytes
-    (KB/MB/GB are powers of 1000). Raises ValueError with a readable message."""
-    m = re.fullmatch(r"\s*(\d+(?:\.\d*)?|\.\d+)\s*([A-Za-z]*)\s*", str(text))
-    unit = m.group(2).upper() if m else None
-    if m is None or unit not in _UNITS:
-        raise ValueError(f"a size like 50MB, 750KB or 2GB, got {str(text)[:40]!r}")
-    n = int(float(m.group(1)) * _UNITS[unit])
-    if n < 1:
-        raise ValueError(f"a size of at least 1 byte, got {str(text)[:40]!r}")
-    return n
-
-
-def fmt_size(n: int) -> str:
-    """``812 bytes``, ``3.4 KB``, ``61.2 MB``, ``2.1 GB`` (powers of 1000, as the upload box)."""
-    n = int(n)
-    if n < 1000:
-        return f"{n} byte{'s' if n != 1 else ''}"
-    for unit, f in (("GB", 10**9), ("MB", 10**6), ("KB", 10**3)):
-        if n >= f:
-            v = n / f
-            return f"{v:.0f} {unit}" if v >= 100 or v == int(v) else f"{v:.1f} {unit}"
-    raise AssertionError
 
 
 class UploadBox(pn.widgets.FileDropper):
