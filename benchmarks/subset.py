@@ -1,14 +1,22 @@
-"""Random Voting on a subset of many points (``rv_max_points``): with and without.
+"""Voting on a subset of many points (``rv_max_points``): with and without, per stage.
 
 For each size P, each share of hidden entries and each seed, a synthetic scene
 (``laav.synthetic.make_sequence(n_objects=2, n_frames=F, n_points=P, noise=0.5, rng=seed)``,
-3 motions; then ``laav.synthetic.occlude(seq, missing, rng=seed)``) is segmented by
-:class:`laav.Pipeline` with the default ``rv_max_points`` (voting on a seeded 1,000 of the
-points, the rest placed by :func:`laav.refine.assign_jointly`), then the same pipeline's
-voting is rerun with ``rv_max_points=None`` (every point votes; the stages before it are
-shared, so the two differ in the voting only). Prints one JSON line per run and writes a
-Markdown table with machine, date and git commit. One BLAS thread. Voting seconds are CPU
-seconds of the process (robust to other work on a shared machine).
+3 motions; then ``laav.synthetic.occlude(seq, missing, rng=seed)``) runs stages 1-3 once
+(the pipeline's stage generators for the seed), then three configurations of the two
+stages that ``rv_max_points`` acts on:
+
+- ``both`` (the default, 1,000): the fine-to-coarse stage's pooled voting lets a seeded,
+  per-model stratified 1,000 atom features vote (:func:`laav.coarse.voting_features`), and
+  Random Voting runs on a seeded 1,000 points, the rest placed by
+  :func:`laav.refine.assign_jointly`;
+- ``voting``: every atom feature votes in the coarse stage, Random Voting on 1,000 (the
+  default before the coarse stage was capped);
+- ``none``: every point votes in both.
+
+Prints one JSON line per run (coarse error on the points in atoms, final error, CPU seconds
+of each stage) and writes a Markdown table with machine, date and git commit. One BLAS
+thread. CPU seconds of the process (robust to other work on a shared machine).
 
     python benchmarks/subset.py [--sizes 2000,5000] [--missing 0,0.5] [--seeds 3]
         [--frames 60] [--out docs/bench/subset.md]
@@ -31,10 +39,21 @@ from pathlib import Path  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import cpu_model, git_commit, laav_version  # noqa: E402
 
+#: (name, the coarse stage's rv_max_points, the voting's): None = every point votes
+CONFIGS = (("both", 1000, 1000), ("voting", None, 1000), ("none", None, None))
+
 
 def run(sizes, missing, seeds, frames):
+    import numpy as np
+
     import laav
+    from laav.atoms import build_atoms
+    from laav.coarse import merge_models
+    from laav.graph import atom_graph
+    from laav.multicut import solve_multicut
+    from laav.pipeline import _stage_rngs
     from laav.synthetic import make_sequence, occlude
+    from laav.voting import random_voting
 
     laav.preload()
     rows = []
@@ -44,15 +63,30 @@ def run(sizes, missing, seeds, frames):
                 seq = make_sequence(n_objects=2, n_frames=frames, n_points=P, noise=0.5, rng=seed)
                 if miss:
                     seq = occlude(seq, miss, rng=seed)
-                pipe = laav.Pipeline(seq, seq.n_motions, laav.LaavParams(), seed=seed)
-                limit = pipe.params.rv_max_points
-                for m in (None, limit):  # each a fresh voting run (its memo is per rv_* settings)
+                C, p, rng = seq.n_motions, laav.LaavParams(), _stage_rngs(seed)
+                atoms = build_atoms(seq, p, np.random.default_rng(rng["atoms"]))
+                graph = atom_graph(seq, atoms, p)
+                mc = solve_multicut(graph, p.n_fine(C, seq.is_complete))
+                coarse_memo = {}
+                for name, coarse_cap, voting_cap in CONFIGS:
+                    if coarse_cap not in coarse_memo:
+                        t = time.process_time()
+                        coarse = merge_models(seq, atoms, mc, C, p.replace(rv_max_points=coarse_cap),
+                                              np.random.default_rng(rng["coarse"]))
+                        coarse_memo[coarse_cap] = (coarse, time.process_time() - t)
+                    coarse, coarse_cpu = coarse_memo[coarse_cap]
+                    cov = coarse.point_labels >= 0
                     t = time.process_time()
-                    res = pipe.update(rv_max_points=m)
+                    vot = random_voting(seq, C, p.replace(rv_max_points=voting_cap),
+                                        np.random.default_rng(rng["voting"]),
+                                        init_labels=coarse.point_labels)
                     cpu = time.process_time() - t
-                    row = {"P": P, "missing": miss, "seed": seed, "rv_max_points": m,
-                           "error_pct": round(100 * laav.misclassification_rate(seq.labels, res.labels), 3),
-                           "voting_cpu_s": round(cpu, 2), "selected": res.voting.selected}
+                    row = {"P": P, "missing": miss, "seed": seed, "config": name,
+                           "coarse_pct": round(100 * laav.misclassification_rate(
+                               seq.labels[cov], coarse.point_labels[cov]), 3),
+                           "error_pct": round(100 * laav.misclassification_rate(seq.labels, vot.labels), 3),
+                           "coarse_cpu_s": round(coarse_cpu, 2), "voting_cpu_s": round(cpu, 2),
+                           "selected": vot.selected}
                     rows.append(row)
                     print(json.dumps(row), flush=True)
     return rows
@@ -61,28 +95,37 @@ def run(sizes, missing, seeds, frames):
 def report(rows, path, argv):
     import numpy as np
 
-    lines = [f"# Random Voting on a subset of many points, with and without "
+    lines = [f"# Voting on a subset of many points, with and without, per stage "
              f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())})", "",
              f"- Machine: {cpu_model()}, {os.cpu_count()} logical cores (shared; one BLAS thread), "
              f"{platform.system()} {platform.release()}",
              f"- Software: Python {platform.python_version()}, laav {laav_version()} (git {git_commit()})",
              f"- Command: `python benchmarks/subset.py {' '.join(argv)}`",
              "- Data: `laav.synthetic.make_sequence(n_objects=2, n_points=P, noise=0.5, rng=seed)` "
-             "(3 motions), then `occlude(seq, missing, rng=seed)`; stages 1-4 shared, the voting "
-             "run with the default `rv_max_points` and with None (every point votes).",
-             "- Voting CPU s: the voting stage alone, CPU seconds of the process.", "",
-             "| P | missing | rv_max_points | mean error % | worst % | mean voting CPU s | ratio |",
-             "|---|---|---|---|---|---|---|"]
+             "(3 motions), then `occlude(seq, missing, rng=seed)`; stages 1-3 shared.",
+             "- Configurations: `both` = the default (`rv_max_points=1000`: pooled voting in the "
+             "fine-to-coarse stage on 1,000 atom features, Random Voting on 1,000 points); "
+             "`voting` = every atom feature votes in the coarse stage, Random Voting on 1,000; "
+             "`none` = every point votes in both.",
+             "- CPU s: each stage alone, CPU seconds of the process; ratios against `none`.", "",
+             "| P | missing | config | coarse error % | final error % (mean / worst) | coarse CPU s | "
+             "ratio | voting CPU s | ratio |",
+             "|---|---|---|---|---|---|---|---|---|"]
     keys = sorted({(r["P"], r["missing"]) for r in rows})
     for P, miss in keys:
         group = [r for r in rows if r["P"] == P and r["missing"] == miss]
-        full = np.mean([r["voting_cpu_s"] for r in group if r["rv_max_points"] is None])
-        for m in sorted({r["rv_max_points"] for r in group}, key=lambda v: v is None):
-            g = [r for r in group if r["rv_max_points"] == m]
-            cpu = np.mean([r["voting_cpu_s"] for r in g])
-            lines.append(f"| {P:,} | {miss:.0%} | {m if m is not None else 'None (all)'} | "
-                         f"{np.mean([r['error_pct'] for r in g]):.2f} | "
-                         f"{max(r['error_pct'] for r in g):.2f} | {cpu:.1f} | {cpu / full:.2f} |")
+        ref = [r for r in group if r["config"] == "none"]
+        c0 = np.mean([r["coarse_cpu_s"] for r in ref])
+        v0 = np.mean([r["voting_cpu_s"] for r in ref])
+        for name, _, _ in CONFIGS:
+            g = [r for r in group if r["config"] == name]
+            if not g:
+                continue
+            c, v = np.mean([r["coarse_cpu_s"] for r in g]), np.mean([r["voting_cpu_s"] for r in g])
+            err = [r["error_pct"] for r in g]
+            lines.append(f"| {P:,} | {miss:.0%} | {name} | {np.mean([r['coarse_pct'] for r in g]):.2f} | "
+                         f"{np.mean(err):.2f} / {max(err):.2f} | "
+                         f"{c:.2f} | {c / c0:.2f} | {v:.1f} | {v / v0:.2f} |")
     lines += ["", "Per run:", "", "```", *(json.dumps(r) for r in rows), "```", ""]
     Path(path).write_text("\n".join(lines))
     print(f"wrote {path}")

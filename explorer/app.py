@@ -31,7 +31,7 @@ from laav import LaavParams
 
 from . import views as V
 from .cards.advanced import AdvancedPanel
-from .cards.base import SIDE_W
+from .cards.base import SIDE_W, Markdown
 from .cards.coarse import CoarseView
 from .cards.compare import CompareView
 from .cards.controls import PARAM_SLIDERS, Controls
@@ -268,11 +268,11 @@ class Explorer:
         c, f, s = self.controls, self.files, self.status_bar
 
         def heading(text):
-            return pn.pane.Markdown(f"### {text}", margin=(0, 10))
+            return Markdown(f"### {text}", margin=(0, 10))
 
         self.sidebar = [
             heading("Sequence"), f.seq_info,
-            pn.pane.Markdown("Open another sequence (`.mat`, `.npz` or tracks `.csv`), or a `params.json` "
+            Markdown("Open another sequence (`.mat`, `.npz` or tracks `.csv`), or a `params.json` "
                              "exported here (a video is tracked on the command line only: "
                              "`laav-explore VIDEO`):", margin=(0, 10)),
             f.w_upload, f.upload_hint, c.w_motions,

@@ -38,7 +38,8 @@ from .params import LaavParams
 from .refine import motion_distances
 from .voting import frame_pairs
 
-__all__ = ["Coarse", "Shortlist", "VoteSamples", "merge_models", "point_labels_from_atoms", "pooled_voting"]
+__all__ = ["Coarse", "Shortlist", "VoteSamples", "merge_models", "point_labels_from_atoms", "pooled_voting",
+           "voting_features"]
 
 _PER_ATOM = 6  # features drawn from each atom for one fit
 _POOLED_ALPHA = 0.9  # forgetting factor of pooled voting
@@ -297,10 +298,43 @@ def _motion_distance(points: np.ndarray, groups: list, floor: float = 1e-3) -> n
     return diff.max(axis=-1) if diff.shape[-1] else np.zeros(diff.shape[:2])
 
 
+#: :func:`voting_features` keeps at least this many features of every fine model (all of a
+#: smaller one).
+MIN_MODEL_FEATURES = 32
+
+
+def voting_features(features: np.ndarray, models: np.ndarray, n_models: int, n_keep: int,
+                    rng: np.random.Generator) -> np.ndarray:
+    """A seeded sample of about ``n_keep`` of ``features`` (sorted indices), stratified by
+    fine model: model ``j`` with ``n_j`` of the ``N`` features keeps ``min(n_j, max(MIN,
+    ceil(n_keep n_j / N)))`` of them (``MIN`` = :data:`MIN_MODEL_FEATURES`).
+
+    Parameters
+    ----------
+    features : ndarray of shape (N,), int
+    models : ndarray of shape (N,), int
+        The fine model of each feature, in ``0 .. n_models - 1``.
+    n_models, n_keep : int
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray of shape (K,), int: a sorted subset of ``features``
+    """
+    N = features.size
+    keep = []
+    for j in range(n_models):
+        own = np.flatnonzero(models == j)
+        k = min(own.size, max(MIN_MODEL_FEATURES, int(np.ceil(n_keep * own.size / N))))
+        keep.append(own if k == own.size else rng.choice(own, k, replace=False))
+    return np.sort(features[np.concatenate(keep)]) if keep else features[:0]
+
+
 def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_motions: int,
                   params: LaavParams, rng: np.random.Generator, n_trials: int = 8,
                   max_iter: int = 80, patience: int = 10,
-                  visible: np.ndarray | None = None) -> np.ndarray:
+                  visible: np.ndarray | None = None,
+                  max_features: int | None = None) -> np.ndarray:
     """Random Voting in which every fine model votes as one unit.
 
     Each trial starts from a random assignment of the fine models to ``n_motions``
@@ -329,6 +363,11 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
         both frames), only features seen in both frames are sampled and vote
         (:func:`laav.rv.vote`), and a model none of whose features has voted yet keeps
         its motion. Raises ValueError (from the pool) when no frame pair qualifies.
+    max_features : int, optional
+        With more atom features than this (thousands of tracks), only a seeded sample of
+        this many votes (:func:`voting_features`: every fine model keeps a share in
+        proportion to its size, and at least :data:`MIN_MODEL_FEATURES`); a model's vote
+        is a mean over its features, which a sample of them estimates. None: all vote.
 
     Returns
     -------
@@ -338,6 +377,9 @@ def pooled_voting(points: np.ndarray, fine_labels: np.ndarray, n_models: int, n_
     from .voting import vote
 
     cov = np.flatnonzero(fine_labels >= 0)
+    if max_features is not None and cov.size > max_features:
+        # a child generator: the voting's own draws below stay those of the parent's stream
+        cov = voting_features(cov, fine_labels[cov], n_models, max_features, rng.spawn(1)[0])
     if visible is not None:
         return _pooled_voting_masked(points, visible, fine_labels, cov, n_models, n_motions,
                                      params, rng, n_trials, max_iter, patience)
@@ -409,7 +451,8 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     n_motions : int
         C.
     params : LaavParams
-        Uses ``lam``, ``coarse_frames``, ``coarse_samples``, ``motion_weight``; with
+        Uses ``lam``, ``coarse_frames``, ``coarse_samples``, ``motion_weight``,
+        ``rv_max_points`` (how many atom features pooled voting lets vote); with
         ``noise_adaptive`` the ``lam`` of :meth:`LaavParams.for_noise` for the noise
         measured on ``seq`` (:func:`laav.noise.estimate_noise`).
     rng : numpy.random.Generator
@@ -520,11 +563,13 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     if pooled and vis is not None:
         try:
             assign = pooled_voting(points, fine_pts, n, n_motions, params, rng,
-                                   params.pooled_trials, visible=vis)
+                                   params.pooled_trials, visible=vis,
+                                   max_features=params.rv_max_points)
         except ValueError:  # no frame pair shares enough atom features: pairwise votes only
             pooled = False
     elif pooled:
-        assign = pooled_voting(points, fine_pts, n, n_motions, params, rng, params.pooled_trials)
+        assign = pooled_voting(points, fine_pts, n, n_motions, params, rng, params.pooled_trials,
+                               max_features=params.rv_max_points)
     if pooled:
         coassoc = (assign[:, :, None] == assign[:, None, :]).mean(axis=0)
     else:

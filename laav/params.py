@@ -174,8 +174,10 @@ class LaavParams:
         subspace and fundamental matrices, fitted on the voted points, explain it best
         (:func:`laav.refine.assign_jointly`, the joint reassignment's rule), then, with
         ``rv_reassign``, the joint reassignment runs over every point. None: every
-        point votes (the papers). Hopkins155 has at most 556 points, so the default
-        never acts there (``docs/ALGORITHM.md``, "Thousands of tracks").
+        point votes (the papers). The fine-to-coarse stage's pooled voting likewise lets
+        at most this many atom features vote (:func:`laav.coarse.voting_features`).
+        Hopkins155 has at most 556 points, so the default never acts there
+        (``docs/ALGORITHM.md``, "Thousands of tracks").
 
     Validation
     ----------
@@ -447,7 +449,7 @@ STAGE_PARAMS: dict[str, frozenset] = {
     "coarse": frozenset({"coarse_merge", "coding_eps", "coarse_candidates",
                          "coarse_epipolar_weight", "lam", "coarse_frames", "coarse_samples",
                          "motion_weight", "pooled_trials",
-                         "pairwise_weight"}),
+                         "pairwise_weight", "rv_max_points"}),
     # every Random Voting setting is named rv_*
     "voting": frozenset(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_")),
 }

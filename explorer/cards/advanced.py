@@ -21,7 +21,7 @@ import panel as pn
 
 from .. import views as V
 from ..fields import AUTO, FIELDS, STAGE_TITLES, changed_fields, fmt_value, widget_value
-from .base import SIDE_W, Host
+from .base import SIDE_W, Alert, Host, Markdown
 
 #: Width of a field's widget inside the card (the card's padding and border fit the sidebar).
 FIELD_W = SIDE_W - 30
@@ -55,17 +55,17 @@ class AdvancedPanel:
         for f in FIELDS:
             if f.stage != stage:
                 stage = f.stage
-                rows.append(pn.pane.Markdown(f"**{STAGE_TITLES[stage]}**", margin=(8, 5, 0, 5)))
+                rows.append(Markdown(f"**{STAGE_TITLES[stage]}**", margin=(8, 5, 0, 5)))
             w, row = self._widget(f, getattr(p, f.name))
             w.param.watch(partial(self._on_field, f), "value")
             self.widgets[f.name] = w
             rows.append(row)
-        self.message = pn.pane.Alert("", alert_type="danger", visible=False, width=FIELD_W, margin=(4, 5))
-        self.summary = pn.pane.Markdown("", width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
+        self.message = Alert("", alert_type="danger", visible=False, width=FIELD_W, margin=(4, 5))
+        self.summary = Markdown("", width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
         self.w_reset = pn.widgets.Button(label="Reset every field to its default", color="warning",
                                          width=FIELD_W, margin=(8, 5))
         self.w_reset.on_click(self._on_reset)
-        intro = pn.pane.Markdown(
+        intro = Markdown(
             "Every `LaavParams` field (hover the **?** for its meaning, range and default); a field "
             f"off its default is marked {MARK}. Seed and C stay in the sliders above.",
             width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})

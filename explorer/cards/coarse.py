@@ -9,7 +9,7 @@ from bokeh.palettes import Blues256
 from bokeh.plotting import figure
 
 from .. import views as V
-from .base import Host, card, flex, set_data
+from .base import Host, Markdown, card, flex, set_data
 from .epipolar import EpipolarPanel
 
 
@@ -35,7 +35,7 @@ class CoarseView:
         z.yaxis.axis_label = "fine model → motion"
         z.grid.visible = False
         z.add_layout(ColorBar(color_mapper=self.z_mapper, width=8, padding=2), "right")
-        self.merge_md = pn.pane.Markdown("", width=340, margin=(0, 6))
+        self.merge_md = Markdown("", width=340, margin=(0, 6))
         self.epipolar = EpipolarPanel(host, extent)
         self.card = card("3 · Fine-to-coarse: fine models merged into motions",
                          flex(pn.pane.Bokeh(self.fig_z), self.merge_md, self.epipolar.layout))

@@ -18,7 +18,7 @@ from bokeh.models import ColumnDataSource
 from .. import compare as C
 from .. import views as V
 from ..fields import fmt_value
-from .base import SIDE_W, Host, card, fit_image_figure, flex, image_figure, set_data
+from .base import SIDE_W, Host, Markdown, card, fit_image_figure, flex, image_figure, set_data
 from .frame import EMPTY_POINTS
 
 #: Frame width of each of the two views: side by side from about 1150 px, stacked below.
@@ -39,7 +39,7 @@ class CompareView:
         self.w_pin.on_click(lambda e: self.pin())
         self.w_unpin = pn.widgets.Button(label="Unpin", width=110, margin=(5, 5), disabled=True)
         self.w_unpin.on_click(lambda e: self.unpin())
-        self.pin_md = pn.pane.Markdown("Pin the result shown as A, change parameters, and compare it "
+        self.pin_md = Markdown("Pin the result shown as A, change parameters, and compare it "
                                        "with the live B above card 1.", width=SIDE_W, margin=(0, 10),
                                        styles={"font-size": "0.9em"})
         self.sidebar = [pn.Row(self.w_pin, self.w_unpin, margin=0), self.pin_md]
@@ -58,7 +58,7 @@ class CompareView:
             f.scatter("x", "y", source=self.src_changed[k], marker="circle", size=17, fill_alpha=0,
                       line_color=V.CHANGED_MARK, line_width=2.2)
         self.fig_a, self.fig_b = self.figs["A"], self.figs["B"]
-        self.table = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
+        self.table = Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.w_unpin_card = pn.widgets.Button(label="Unpin A", width=100, margin=(6, 10))
         self.w_unpin_card.on_click(lambda e: self.unpin())
         self.inner = card("A/B compare: pinned A beside the live B",

@@ -12,7 +12,7 @@ import panel as pn
 from bokeh.models import ColumnDataSource, Legend
 
 from .. import views as V
-from .base import Host, fit_image_figure, flex, image_figure, set_data
+from .base import Host, Markdown, fit_image_figure, flex, image_figure, set_data
 
 
 class EpipolarPanel:
@@ -53,7 +53,7 @@ class EpipolarPanel:
             fig.scatter("x", "y", source=src, size=10, fill_alpha=0, line_color="black",
                         line_width=1.5)
 
-        self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=800, margin=(0, 10))
+        self.caption = Markdown("", sizing_mode="stretch_width", max_width=800, margin=(0, 10))
         self.layout = pn.Column(pn.Row(self.w_pair_j, self.w_pair_k),
                                 flex(pn.pane.Bokeh(self.fig_l), pn.pane.Bokeh(self.fig_r)),
                                 self.caption, max_width=580, sizing_mode="stretch_width")

@@ -29,7 +29,7 @@ import laav
 from .. import export
 from .. import views as V
 from ..sizes import DEFAULT_MAX_UPLOAD, UPLOAD_CHUNK, fmt_size, parse_size  # noqa: F401 (re-exported)
-from .base import SIDE_W
+from .base import SIDE_W, Markdown
 
 #: Work shorter than this shows no progress line (a slider move on a small sequence).
 PROGRESS_AFTER = 1.0
@@ -110,13 +110,13 @@ class Files:
                  max_upload: int = DEFAULT_MAX_UPLOAD) -> None:
         self.host, self.state, self.controls, self.status, self._view = host, state, controls, status, view
         self.max_upload = int(max_upload)
-        self.seq_info = pn.pane.Markdown(seq_text(seq), width=SIDE_W, margin=(0, 10))
+        self.seq_info = Markdown(seq_text(seq), width=SIDE_W, margin=(0, 10))
         # any content: the format is taken from the bytes (the box's type filter would also
         # refuse a .mat whose type the browser does not know)
         self.w_upload = UploadBox(self._receive, multiple=False, chunk_size=UPLOAD_CHUNK,
                                   max_file_size=f"{max(self.max_upload // 1000, 1)}KB",
                                   layout="compact", previews=[], width=SIDE_W, margin=(5, 10))
-        self.upload_hint = pn.pane.Markdown(
+        self.upload_hint = Markdown(
             f"Up to {fmt_size(self.max_upload)} (`laav-explore --max-upload`).", margin=(0, 10),
             styles={"font-size": "0.85em", "color": "#555"})
         # the browser reports files its upload box refused (see _ARM_JS)
@@ -128,7 +128,7 @@ class Files:
         self._reading: tuple | None = None  # (token, name, size, t0) of the file being read
         self._work_t0: float | None = None  # since when the state has been busy
         # the progress line of long work (reading, a first computation, a recompute)
-        self.progress_md = pn.pane.Markdown("", margin=(4, 6), sizing_mode="stretch_width")
+        self.progress_md = Markdown("", margin=(4, 6), sizing_mode="stretch_width")
         self.progress_bar = pn.indicators.Progress(value=-1, active=True, width=160, height=14,
                                                    margin=(12, 6), bar_color="primary")
         self.w_cancel = pn.widgets.Button(label="Cancel", color="warning", width=90,

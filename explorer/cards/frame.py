@@ -15,7 +15,7 @@ from bokeh.models import ColumnDataSource, HoverTool, LinearColorMapper
 from bokeh.palettes import Greys256
 
 from .. import views as V
-from .base import Host, card, fit_image_figure, image_figure, move_legend, set_data
+from .base import Host, Markdown, card, fit_image_figure, image_figure, move_legend, set_data
 from .live import LiveFrames, repaint_alone
 
 EMPTY_POINTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "index": []}
@@ -94,7 +94,7 @@ class FrameView:
         self.live.add_text("frame_errors", self._item_errors, "label", legend=leg)
 
         self._caption = ""  # the caption of the last result, without the background's sentence
-        self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=900, margin=(0, 10))
+        self.caption = Markdown("", sizing_mode="stretch_width", max_width=900, margin=(0, 10))
         self.card = card("1 · Atoms: points, trails and atoms in one frame", pn.pane.Bokeh(self.fig),
                          self.caption)
 

@@ -11,7 +11,7 @@ from bokeh.models import ColorBar, ColumnDataSource, HoverTool, LinearColorMappe
 from bokeh.palettes import RdBu11
 
 from .. import views as V
-from .base import Host, card, fit_image_figure, image_figure, move_legend, set_data
+from .base import Host, Markdown, card, fit_image_figure, image_figure, move_legend, set_data
 from .live import LiveFrames, repaint_alone
 
 
@@ -77,7 +77,7 @@ class GraphView:
         self.live.detach_legend(g)
         self.live.add_text("graph_title", g.title, "text")
 
-        self.caption = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
+        self.caption = Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
         self.card = card("2 · Multicut graph of atoms → fine models (GAEC replay)",
                          pn.pane.Bokeh(self.fig), self.w_step, self.caption)
 

@@ -3,15 +3,13 @@ ground truth, the parameters and timings."""
 
 from __future__ import annotations
 
-import panel as pn
-
 from .. import views as V
-from .base import card
+from .base import Markdown, card
 
 
 class NumbersView:
     def __init__(self) -> None:
-        self.numbers = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
+        self.numbers = Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.card = card("5 · Final labels and numbers: every stage against the ground truth",
                          self.numbers)
 

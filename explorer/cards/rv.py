@@ -8,7 +8,7 @@ from bokeh.models import ColumnDataSource, LogAxis
 from bokeh.plotting import figure
 
 from .. import views as V
-from .base import card, flex, set_data
+from .base import Markdown, card, flex, set_data
 
 RV_TOOLS = "pan,wheel_zoom,reset"
 
@@ -38,7 +38,7 @@ class RVView:
             fig.legend.background_fill_alpha = 0.7
             fig.title.text_font_size = "11pt"
         assert isinstance(self.fig_changed.yaxis[0], LogAxis)
-        self.rv_md = pn.pane.Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
+        self.rv_md = Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
         self.card = card("4 · Fine-tuning (Random Voting): LAAV's start vs plain RV",
                          flex(pn.pane.Bokeh(self.fig_changed), pn.pane.Bokeh(self.fig_margin)),
                          self.rv_md)

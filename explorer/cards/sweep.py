@@ -15,7 +15,7 @@ import panel as pn
 
 from .. import views as V
 from ..sweep import SEEDS, SeedSweep, header_line, row_line, table_columns, worst_seed
-from .base import Host, card
+from .base import HTML, Host, Markdown, card
 
 _EMPTY = {k: [] for k in ("seed", "fine", "coarse", "final", "agreement", "converged", "iterations", "time",
                           "note")}
@@ -47,18 +47,18 @@ class SweepView:
         self.w_stop.on_click(self._on_stop)
         self.progress_bar = pn.indicators.Progress(value=0, max=len(SEEDS), width=180, height=14,
                                                    margin=(14, 6), bar_color="primary", visible=False)
-        self.progress_md = pn.pane.Markdown("", margin=(4, 6), sizing_mode="stretch_width")
+        self.progress_md = Markdown("", margin=(4, 6), sizing_mode="stretch_width")
         # the table: a header line and one button per seed (a click loads that seed)
         self.data = dict(_EMPTY)
         self.selected: int | None = None  # the row clicked last
-        self.header = pn.pane.HTML("", margin=(4, 10, 0, 10), styles=_HEAD_STYLE, visible=False)
+        self.header = HTML("", margin=(4, 10, 0, 10), styles=_HEAD_STYLE, visible=False)
         self.row_buttons = []
         for i in range(len(SEEDS)):
             b = pn.widgets.Button(label="", color="light", margin=(1, 10), stylesheets=_ROW_CSS,
                                   visible=False)
             b.on_click(partial(self._on_row, i))
             self.row_buttons.append(b)
-        self.caption = pn.pane.Markdown(
+        self.caption = Markdown(
             "Runs LAAV with the settings shown for every seed, in the background, and lists each "
             "stage's error; click a row to load that seed.", sizing_mode="stretch_width",
             max_width=820, margin=(0, 10))

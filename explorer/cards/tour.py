@@ -13,7 +13,7 @@ from __future__ import annotations
 import panel as pn
 
 from ..tour import TOUR
-from .base import Host
+from .base import Host, Markdown
 
 #: Outline of the card a step is about (the header's navy: a page colour, not a motion's).
 HIGHLIGHT = {"outline": "4px solid #2c4a66", "outline-offset": "2px"}
@@ -95,13 +95,13 @@ class TourView:
         self.w_back.on_click(lambda e: self.go(self.step - 1))
         self.w_next.on_click(lambda e: self.next())
         self.w_end.on_click(lambda e: self.end())
-        self.step_md = pn.pane.Markdown("", margin=(6, 10), styles={"font-size": "18px", "color": "#444"})
-        self.title_md = pn.pane.Markdown("", margin=(0, 10), sizing_mode="stretch_width",
+        self.step_md = Markdown("", margin=(6, 10), styles={"font-size": "18px", "color": "#444"})
+        self.title_md = Markdown("", margin=(0, 10), sizing_mode="stretch_width",
                                          styles={"font-size": "32px", "font-weight": "bold",
                                                  "line-height": "1.2", "color": "#2c4a66"})
-        self.text_md = pn.pane.Markdown("", margin=(0, 10), sizing_mode="stretch_width",
+        self.text_md = Markdown("", margin=(0, 10), sizing_mode="stretch_width",
                                         styles={"font-size": "25px", "line-height": "1.35"})
-        self.hint_md = pn.pane.Markdown("Keyboard: ← →  (Esc ends the tour)", margin=(18, 10),
+        self.hint_md = Markdown("Keyboard: ← →  (Esc ends the tour)", margin=(18, 10),
                                         styles={"font-size": "16px", "color": "#555"})
         # commands to the page (scroll, keys on/off) and the keys it sends back
         self.w_js = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)

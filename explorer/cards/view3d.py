@@ -18,7 +18,7 @@ import threading
 import panel as pn
 
 from .. import views as V
-from .base import Host
+from .base import HTML, Host, Markdown
 
 PLACEHOLDER = ('<div style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
                'display:flex;align-items:center;justify-content:center;color:#666">'
@@ -46,10 +46,10 @@ class View3D:
         self.iframe_shown = False
         self.stale = False  # folded: the scene has not been given the shown result/colours/frame
         if self.want:
-            self.pane = pn.pane.HTML(PLACEHOLDER, height=440, margin=0, sizing_mode="stretch_width",
+            self.pane = HTML(PLACEHOLDER, height=440, margin=0, sizing_mode="stretch_width",
                                      max_width=900)
         else:
-            self.pane = pn.pane.Markdown(f"*{V.md_text('the 3-D view is switched off')}*",
+            self.pane = Markdown(f"*{V.md_text('the 3-D view is switched off')}*",
                                          sizing_mode="stretch_width", height=60)
         self.card = pn.Card(self.pane, title="3-D space-time view (viser): trajectories along the "
                             "frame axis, atoms and their graph", collapsible=True, collapsed=True,
