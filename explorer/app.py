@@ -273,8 +273,8 @@ class Explorer:
         self.sidebar = [
             heading("Sequence"), f.seq_info,
             Markdown("Open another sequence (`.mat`, `.npz` or tracks `.csv`), or a `params.json` "
-                             "exported here (a video is tracked on the command line only: "
-                             "`laav-explore VIDEO`):", margin=(0, 10)),
+                     "exported here (a video is tracked on the command line only: "
+                     "`laav-explore VIDEO`):", margin=(0, 10)),
             f.w_upload, f.upload_hint, c.w_motions,
             heading("View"), self.tour.w_start, c.w_frame, c.w_color, self.frame_view.w_layers,
             self.frame_view.w_background,

@@ -40,8 +40,8 @@ class CompareView:
         self.w_unpin = pn.widgets.Button(label="Unpin", width=110, margin=(5, 5), disabled=True)
         self.w_unpin.on_click(lambda e: self.unpin())
         self.pin_md = Markdown("Pin the result shown as A, change parameters, and compare it "
-                                       "with the live B above card 1.", width=SIDE_W, margin=(0, 10),
-                                       styles={"font-size": "0.9em"})
+                               "with the live B above card 1.", width=SIDE_W, margin=(0, 10),
+                               styles={"font-size": "0.9em"})
         self.sidebar = [pn.Row(self.w_pin, self.w_unpin, margin=0), self.pin_md]
 
         self.src = {}

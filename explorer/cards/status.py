@@ -19,16 +19,16 @@ def header_text(seq: laav.Sequence) -> str:
 class StatusBar:
     def __init__(self, seq: laav.Sequence) -> None:
         self.alert = Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
-                                   margin=(4, 6))
+                           margin=(4, 6))
         self.note = Alert("", alert_type="info", visible=False, sizing_mode="stretch_width",
-                                  margin=(4, 6))
+                          margin=(4, 6))
         # problems with the settings a shared URL carried (kept until the next URL)
         self.url_alert = Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
-                                       margin=(4, 6))
+                               margin=(4, 6))
         self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6))
         self._status_text = "Computing the first result…"
         self.status = Markdown(self._status_text, margin=(4, 6),
-                                       sizing_mode="stretch_width")
+                               sizing_mode="stretch_width")
         self.change_md = Markdown("", margin=(0, 10), visible=False, sizing_mode="stretch_width")
         # the sequence shown, in the page header (the template's own title is fixed at load)
         # the browser tab's title follows the sequence shown (bokeh's document title is sent
@@ -36,7 +36,7 @@ class StatusBar:
         self.tab_title = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
         self.tab_title.jscallback(value="document.title = cb_obj.value")
         self.header_name = Markdown(header_text(seq), margin=(0, 10),
-                                            styles={"color": "white", "font-size": "1.25em"})
+                                    styles={"color": "white", "font-size": "1.25em"})
         self.line = pn.Column(pn.Row(self.spinner, self.status, sizing_mode="stretch_width"), self.change_md,
                               sizing_mode="stretch_width")
 

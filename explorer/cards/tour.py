@@ -97,12 +97,12 @@ class TourView:
         self.w_end.on_click(lambda e: self.end())
         self.step_md = Markdown("", margin=(6, 10), styles={"font-size": "18px", "color": "#444"})
         self.title_md = Markdown("", margin=(0, 10), sizing_mode="stretch_width",
-                                         styles={"font-size": "32px", "font-weight": "bold",
+                                 styles={"font-size": "32px", "font-weight": "bold",
                                                  "line-height": "1.2", "color": "#2c4a66"})
         self.text_md = Markdown("", margin=(0, 10), sizing_mode="stretch_width",
-                                        styles={"font-size": "25px", "line-height": "1.35"})
+                                styles={"font-size": "25px", "line-height": "1.35"})
         self.hint_md = Markdown("Keyboard: ← →  (Esc ends the tour)", margin=(18, 10),
-                                        styles={"font-size": "16px", "color": "#555"})
+                                styles={"font-size": "16px", "color": "#555"})
         # commands to the page (scroll, keys on/off) and the keys it sends back
         self.w_js = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
         self.w_key = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)

@@ -47,10 +47,10 @@ class View3D:
         self.stale = False  # folded: the scene has not been given the shown result/colours/frame
         if self.want:
             self.pane = HTML(PLACEHOLDER, height=440, margin=0, sizing_mode="stretch_width",
-                                     max_width=900)
+                             max_width=900)
         else:
             self.pane = Markdown(f"*{V.md_text('the 3-D view is switched off')}*",
-                                         sizing_mode="stretch_width", height=60)
+                                 sizing_mode="stretch_width", height=60)
         self.card = pn.Card(self.pane, title="3-D space-time view (viser): trajectories along the "
                             "frame axis, atoms and their graph", collapsible=True, collapsed=True,
                             margin=(6, 6), sizing_mode="stretch_width")
