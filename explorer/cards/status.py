@@ -16,6 +16,10 @@ def header_text(seq: laav.Sequence) -> str:
     return f"{V.md_text(seq.name)} · {seq.n_points} points, {seq.n_frames} frames"
 
 
+_SHOWN = {"visibility": "visible"}
+_HIDDEN = {"visibility": "hidden"}
+
+
 class StatusBar:
     def __init__(self, seq: laav.Sequence) -> None:
         self.alert = Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
@@ -25,7 +29,11 @@ class StatusBar:
         # problems with the settings a shared URL carried (kept until the next URL)
         self.url_alert = Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
                                margin=(4, 6))
-        self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6))
+        # always spinning; shown and hidden by its inline style: a change of its value (its
+        # CSS classes) makes bokeh lay out the whole page again (every card's figures:
+        # 0.2-0.5 s in Chromium, twice a move), a change of its style does not
+        self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6),
+                                                    styles=dict(_SHOWN))
         self._status_text = "Computing the first result…"
         self.status = Markdown(self._status_text, margin=(4, 6),
                                sizing_mode="stretch_width")
@@ -61,7 +69,7 @@ class StatusBar:
         self.alert.visible = True
 
     def show_busy(self, busy: bool, has_result: bool) -> None:
-        self.spinner.value = bool(busy)
+        self.spinner.styles = dict(_SHOWN if busy else _HIDDEN)
         if busy and has_result:
             self.status.object = "Recomputing… (the views keep the last result until the new one is ready)"
 
