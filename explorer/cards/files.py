@@ -31,6 +31,8 @@ from .. import views as V
 from ..sizes import DEFAULT_MAX_UPLOAD, UPLOAD_CHUNK, fmt_size, parse_size  # noqa: F401 (re-exported)
 from .base import SIDE_W, Markdown
 
+_SHOWN = {"display": "flex"}
+_HIDDEN = {"display": "none"}
 #: Work shorter than this shows no progress line (a slider move on a small sequence).
 PROGRESS_AFTER = 1.0
 
@@ -134,8 +136,11 @@ class Files:
         self.w_cancel = pn.widgets.Button(label="Cancel", color="warning", width=90,
                                           margin=(6, 6))
         self.w_cancel.on_click(self._on_cancel)
-        self.progress = pn.Row(self.progress_bar, self.progress_md, self.w_cancel, visible=False,
-                               sizing_mode="stretch_width")
+        # shown and hidden by its inline style, not ``visible``: bokeh lays out the whole main
+        # area again (every card's figures) when a ``visible`` changes, twice for every move
+        # that lasts a second; the browser just reflows the page for a style change
+        self.progress = pn.Row(self.progress_bar, self.progress_md, self.w_cancel,
+                               sizing_mode="stretch_width", styles=dict(_HIDDEN))
         self._ticker: threading.Thread | None = None
         self._armed, self._arms = False, 0  # the page reports refused files (see arm)
         self.w_dl_csv = pn.widgets.FileDownload(callback=self.export_csv, filename="labels.csv",
@@ -335,10 +340,14 @@ class Files:
         if text is not None:
             text = self.progress_text()  # now, on the document's thread: the work may be over
         if text is None:
-            self.progress.visible = False
+            self.show_progress(False)
             return
         self.progress_md.object = text
-        self.progress.visible = True
+        self.show_progress(True)
+
+    def show_progress(self, shown: bool) -> None:
+        """Show or hide the progress line (by its style: see ``__init__``)."""
+        self.progress.styles = dict(_SHOWN if shown else _HIDDEN)
 
     def _on_cancel(self, event=None) -> None:
         self.cancel()
@@ -365,7 +374,7 @@ class Files:
         self.host.lock_for_upload(False)
         self.controls.switching = False
         self.controls.show_settings(self.state.settings)
-        self.progress.visible = False
+        self.show_progress(False)
         self._work_t0 = None
         self.status.show_last()
         self.status.show_note(f"**Cancelled** {V.md_text(what)}"

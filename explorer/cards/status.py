@@ -16,8 +16,8 @@ def header_text(seq: laav.Sequence) -> str:
     return f"{V.md_text(seq.name)} · {seq.n_points} points, {seq.n_frames} frames"
 
 
-_SHOWN = {"visibility": "visible"}
-_HIDDEN = {"visibility": "hidden"}
+_SHOWN = {"opacity": "1"}
+_HIDDEN = {"opacity": "0"}
 
 
 class StatusBar:
@@ -29,9 +29,10 @@ class StatusBar:
         # problems with the settings a shared URL carried (kept until the next URL)
         self.url_alert = Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
                                margin=(4, 6))
-        # always spinning; shown and hidden by its inline style: a change of its value (its
-        # CSS classes) makes bokeh lay out the whole page again (every card's figures:
-        # 0.2-0.5 s in Chromium, twice a move), a change of its style does not
+        # always spinning; shown and hidden by its opacity (an inline style; its own style
+        # sheet overrides visibility): a change of its value (its CSS classes) makes bokeh
+        # lay out the whole page again (every card's figures: 0.2-0.5 s in Chromium, twice
+        # a move), a change of its style does not
         self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6),
                                                     styles=dict(_SHOWN))
         self._status_text = "Computing the first result…"
