@@ -610,14 +610,14 @@ def test_what_changed_is_shown_and_ringed():
     ex = Explorer(demo_sequence(), viser=False)
     try:
         assert ex.wait(120)
-        assert not ex.change_md.visible and ex.change is None  # first result: nothing to compare
+        assert ex.change_md.styles.get("display") == "none" and ex.change is None  # nothing to compare yet
         assert "All settings at their defaults" in ex.status.object
         before = ex.result
         ex.w_params["r1"].value = 21.0
         assert ex.wait(120)
         ch = ex.change
         assert ch is not None and ex.state.change_of(ex.result) is ch
-        assert ex.change_md.visible
+        assert ex.change_md.styles.get("display", "shown") is None  # shown (its inline style removed)
         assert _shown(ex.change_md).startswith("**What changed:** R1 20 → 21: coarse ")
         assert f"{ch.moved.size} point" in _shown(ex.change_md)
         # the rings sit on exactly the points whose final motion changed

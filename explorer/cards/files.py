@@ -31,7 +31,7 @@ from .. import views as V
 from ..sizes import DEFAULT_MAX_UPLOAD, UPLOAD_CHUNK, fmt_size, parse_size  # noqa: F401 (re-exported)
 from .base import SIDE_W, Markdown
 
-_SHOWN = {"display": "flex"}
+_SHOWN = {"display": None}  # (None: the inline style removed, the layout's own applies)
 _HIDDEN = {"display": "none"}
 #: Work shorter than this shows no progress line (a slider move on a small sequence).
 PROGRESS_AFTER = 1.0

@@ -38,7 +38,9 @@ class StatusBar:
         self._status_text = "Computing the first result…"
         self.status = Markdown(self._status_text, margin=(4, 6),
                                sizing_mode="stretch_width")
-        self.change_md = Markdown("", margin=(0, 10), visible=False, sizing_mode="stretch_width")
+        # hidden by an inline style until the first change (as the spinner: no page layout)
+        self.change_md = Markdown("", margin=(0, 10), sizing_mode="stretch_width",
+                                  styles={"display": "none"})
         # the sequence shown, in the page header (the template's own title is fixed at load)
         # the browser tab's title follows the sequence shown (bokeh's document title is sent
         # once, with the page): a hidden box whose value the page copies into document.title
@@ -94,4 +96,4 @@ class StatusBar:
                else "All settings at their defaults."))
         self.change_md.object = ("" if change is None else
                                  f"**What changed:** {V.md_text(change.text())}")
-        self.change_md.visible = change is not None
+        self.change_md.styles = {"display": None if change is not None else "none"}
