@@ -48,8 +48,9 @@ def affinity_clustering(affinity: np.ndarray, n_clusters: int) -> np.ndarray:
     eigenvectors with ARPACK (shift-invert, a start vector from its ``random_state``);
     here a dense symmetric solver does, which for the n <= a few dozen nodes of the coarse
     stage's affinity is exact and cheaper. ``cluster_qr`` depends only on the subspace they
-    span, so the labels are scikit-learn's (checked on every Hopkins155 sequence,
-    ``tests/test_spectral.py``), unless the n_clusters-th and next eigenvalues tie.
+    span, so the labels are scikit-learn's unless the n_clusters-th and next eigenvalues tie
+    (``benchmarks/spectral_check.py``: all 5,616 Hopkins155 merges compared agree;
+    ``tests/test_coarse.py`` compares random affinities).
 
     Parameters
     ----------

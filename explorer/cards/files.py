@@ -29,10 +29,8 @@ import laav
 from .. import export
 from .. import views as V
 from ..sizes import DEFAULT_MAX_UPLOAD, UPLOAD_CHUNK, fmt_size, parse_size  # noqa: F401 (re-exported)
-from .base import SIDE_W, Markdown
+from .base import SIDE_W, Markdown, shown_style
 
-_SHOWN = {"display": None}  # (None: the inline style removed, the layout's own applies)
-_HIDDEN = {"display": "none"}
 #: Work shorter than this shows no progress line (a slider move on a small sequence).
 PROGRESS_AFTER = 1.0
 
@@ -136,11 +134,9 @@ class Files:
         self.w_cancel = pn.widgets.Button(label="Cancel", color="warning", width=90,
                                           margin=(6, 6))
         self.w_cancel.on_click(self._on_cancel)
-        # shown and hidden by its inline style, not ``visible``: bokeh lays out the whole main
-        # area again (every card's figures) when a ``visible`` changes, twice for every move
-        # that lasts a second; the browser just reflows the page for a style change
+        # shown and hidden by its inline style, not ``visible`` (see shown_style)
         self.progress = pn.Row(self.progress_bar, self.progress_md, self.w_cancel,
-                               sizing_mode="stretch_width", styles=dict(_HIDDEN))
+                               sizing_mode="stretch_width", styles=shown_style(False))
         self._ticker: threading.Thread | None = None
         self._armed, self._arms = False, 0  # the page reports refused files (see arm)
         self.w_dl_csv = pn.widgets.FileDownload(callback=self.export_csv, filename="labels.csv",
@@ -346,8 +342,8 @@ class Files:
         self.show_progress(True)
 
     def show_progress(self, shown: bool) -> None:
-        """Show or hide the progress line (by its style: see ``__init__``)."""
-        self.progress.styles = dict(_SHOWN if shown else _HIDDEN)
+        """Show or hide the progress line (by its style: :func:`~.base.shown_style`)."""
+        self.progress.styles = shown_style(shown)
 
     def _on_cancel(self, event=None) -> None:
         self.cancel()

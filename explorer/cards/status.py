@@ -9,15 +9,11 @@ import panel as pn
 import laav
 
 from .. import views as V
-from .base import Alert, Markdown
+from .base import Alert, Markdown, shown_style
 
 
 def header_text(seq: laav.Sequence) -> str:
     return f"{V.md_text(seq.name)} · {seq.n_points} points, {seq.n_frames} frames"
-
-
-_SHOWN = {"opacity": "1"}
-_HIDDEN = {"opacity": "0"}
 
 
 class StatusBar:
@@ -29,18 +25,16 @@ class StatusBar:
         # problems with the settings a shared URL carried (kept until the next URL)
         self.url_alert = Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
                                margin=(4, 6))
-        # always spinning; shown and hidden by its opacity (an inline style; its own style
-        # sheet overrides visibility): a change of its value (its CSS classes) makes bokeh
-        # lay out the whole page again (every card's figures: 0.2-0.5 s in Chromium, twice
-        # a move), a change of its style does not
+        # always spinning (a change of its value is one of its CSS classes), shown and hidden
+        # by its opacity (its own style sheet overrides visibility; see shown_style)
         self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6),
-                                                    styles=dict(_SHOWN))
+                                                    styles=shown_style(True, keep_space=True))
         self._status_text = "Computing the first result…"
         self.status = Markdown(self._status_text, margin=(4, 6),
                                sizing_mode="stretch_width")
-        # hidden by an inline style until the first change (as the spinner: no page layout)
+        # hidden by an inline style until the first change (see shown_style)
         self.change_md = Markdown("", margin=(0, 10), sizing_mode="stretch_width",
-                                  styles={"display": "none"})
+                                  styles=shown_style(False))
         # the sequence shown, in the page header (the template's own title is fixed at load)
         # the browser tab's title follows the sequence shown (bokeh's document title is sent
         # once, with the page): a hidden box whose value the page copies into document.title
@@ -72,7 +66,7 @@ class StatusBar:
         self.alert.visible = True
 
     def show_busy(self, busy: bool, has_result: bool) -> None:
-        self.spinner.styles = dict(_SHOWN if busy else _HIDDEN)
+        self.spinner.styles = shown_style(busy, keep_space=True)
         if busy and has_result:
             self.status.object = "Recomputing… (the views keep the last result until the new one is ready)"
 
@@ -96,4 +90,4 @@ class StatusBar:
                else "All settings at their defaults."))
         self.change_md.object = ("" if change is None else
                                  f"**What changed:** {V.md_text(change.text())}")
-        self.change_md.styles = {"display": None if change is not None else "none"}
+        self.change_md.styles = shown_style(change is not None)
