@@ -16,6 +16,7 @@ median time. ``--every N`` takes every N-th sequence by name (a spread subset);
 
     python benchmarks/missing.py [--data DIR] [--levels 0,0.2,0.4] [--seed 0] [--every 1]
                                  [--only GLOB] [--jobs 1] [--out FILE] [--report FILE]
+                                 [--set NAME=VALUE ...]
 """
 
 from __future__ import annotations
@@ -46,7 +47,18 @@ FIELDS = ["sequence", "motions", "points", "frames", "level", "seed", "missing",
 SPREAD = BENCH_SPREAD  # occlude()'s spread: how much the tracks' losses differ
 
 
-def run_sequence(path: str, levels: list[float], seed: int) -> list[dict]:
+def parse_settings(items: list[str]) -> dict:
+    """``--set NAME=VALUE`` items as LaavParams fields (VALUE an int, float or "None")."""
+    out = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        out[name] = None if value == "None" else (int(value) if value.lstrip("-").isdigit()
+                                                 else float(value))
+    laav.LaavParams().replace(**out)  # unknown or invalid settings fail here
+    return out
+
+
+def run_sequence(path: str, levels: list[float], seed: int, settings: dict | None = None) -> list[dict]:
     seq = laav.load_sequence(path)
     rows = []
     for level in levels:
@@ -54,7 +66,7 @@ def run_sequence(path: str, levels: list[float], seed: int) -> list[dict]:
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", laav.LaavWarning)
-            res = laav.segment(occl, seq.n_motions, seed=seed)
+            res = laav.segment(occl, seq.n_motions, laav.LaavParams(**(settings or {})), seed=seed)
         sec = time.perf_counter() - t
         cov = res.coarse.point_labels >= 0
         cerr = (laav.misclassification_rate(seq.labels[cov], res.coarse.point_labels[cov])
@@ -99,7 +111,10 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", default="bench-out/missing.csv")
     ap.add_argument("--report", default=None)
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="a LaavParams field other than its default (repeatable)")
     args = ap.parse_args(argv)
+    settings = parse_settings(args.set)
     levels = [float(v) for v in args.levels.split(",")]
     files = truth_files(data_dir(args.data), args.only)[::max(1, args.every)]
     out = Path(args.out)
@@ -118,7 +133,8 @@ def main(argv=None) -> int:
         w.writerows(rows)
         with ProcessPoolExecutor(max(1, args.jobs)) as ex:
             for k, new in enumerate(ex.map(run_sequence, [str(f) for f in todo],
-                                           [levels] * len(todo), [args.seed] * len(todo))):
+                                           [levels] * len(todo), [args.seed] * len(todo),
+                                           [settings] * len(todo))):
                 w.writerows(new)
                 fh.flush()
                 rows += new
@@ -138,7 +154,7 @@ def main(argv=None) -> int:
                 f"- Software: Python {platform.python_version()}, numpy {np.__version__}, "
                 f"laav {laav.__version__} (git {git_commit()})",
                 f"- Hopkins155: {n_seq} sequences (every {args.every}. by name), seed {args.seed}, "
-                f"default parameters; occlusion `laav.synthetic.occlude(seq, level, rng, "
+                f"parameters {settings or 'default'}; occlusion `laav.synthetic.occlude(seq, level, rng, "
                 f"spread={SPREAD})` seeded by (seed, name, level)",
                 "- `python benchmarks/missing.py " + " ".join(argv or sys.argv[1:]) + "`",
                 "- Error: `laav.misclassification_rate` against the ground truth of all points; "

@@ -25,7 +25,7 @@ __all__ = [
     "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
-    "replay_caption", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
+    "replay_caption", "fine_count_note", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
     "space_time", "cost_limit", "md_text",
 ]
@@ -603,13 +603,28 @@ def replay_labels(result: laav.LaavResult, step: int) -> np.ndarray:
     return rank[inv.ravel()]
 
 
-def replay_caption(result: laav.LaavResult, step: int) -> str:
+def fine_count_note(params: laav.LaavParams, n_motions: int, complete: bool = True) -> str:
+    """How many fine models the multicut is brought to, as a multiple of C where it is one,
+    and whether that is the paper's 2C."""
+    n = params.n_fine(n_motions, complete)
+    k = f"{n // n_motions}C" if n_motions and n % n_motions == 0 else str(n)
+    if k == "2C":
+        return "2C, the paper's"
+    if params.fine_models is not None or params.fine_per_motion is not None:
+        return f"{k}, as set; the paper: 2C"
+    return f"{k}: ours for the {params.merge_for(complete)} merge; the paper: 2C"
+
+
+def replay_caption(result: laav.LaavResult, step: int, complete: bool = True) -> str:
+    """The caption under the multicut replay at GAEC step ``step`` (beyond the last: the
+    final fine models); ``complete`` whether the tracks are (the fine count depends on it)."""
     mc = result.multicut
     K = len(mc.contractions)
     n = result.graph.n_nodes
     if step > K:
+        how = fine_count_note(result.params, result.n_motions, complete)
         return (f"**Final fine models:** {mc.n_models} (GAEC, then Kernighan–Lin moves, then merged or "
-                f"split to 2C). Dashed edges are cut. Drag the step slider left to replay GAEC.")
+                f"split to {how}). Dashed edges are cut. Drag the step slider left to replay GAEC.")
     if step == 0:
         return (f"**GAEC step 0 / {K}:** every one of the {n} atoms is its own cluster. GAEC repeatedly "
                 f"joins the two clusters linked by the largest positive total cost.")

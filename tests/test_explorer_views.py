@@ -414,3 +414,18 @@ def test_numbers_card_names_the_measured_noise_and_what_it_widened():
     res = laav.segment(noisy, 2, params=laav.LaavParams.paper(), random_state=0)
     num = V.stage_numbers(noisy, res)
     assert num["noise_sigma"] is None and "pixel noise" not in V.numbers_markdown(num)
+
+
+def test_replay_caption_names_the_fine_count_and_whether_it_is_the_papers(demo):
+    """The multicut caption says how many fine models the count was brought to (as a
+    multiple of C) and whether that is the paper's 2C (it said 2C whatever ran)."""
+    P = laav.LaavParams
+    assert V.fine_count_note(P(), 2) == "2C, the paper's"
+    assert V.fine_count_note(P(coarse_merge="joint"), 3) == "4C: ours for the joint merge; the paper: 2C"
+    assert V.fine_count_note(P(coarse_merge="joint"), 3, complete=False) == "2C, the paper's"
+    assert V.fine_count_note(P(fine_per_motion=3), 2) == "3C, as set; the paper: 2C"
+    assert V.fine_count_note(P(fine_models=5), 2) == "5, as set; the paper: 2C"
+    seq, _ = demo
+    res = laav.segment(seq, 3, P(coarse_merge="joint"), seed=0)
+    final = V.replay_caption(res, len(res.multicut.contractions) + 1)
+    assert f"**Final fine models:** {res.multicut.n_models} " in final and "4C: ours" in final

@@ -118,7 +118,8 @@ class GraphView:
         self.fig.title.text = live.text(
             "graph_title", f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {{f}} · "
             "{k:graph_nodes.cluster} clusters", f, {"graph_" + k: v for k, v in d.items()})
-        self.caption.object = V.replay_caption(res, step)
+        seq = self.host.sequence
+        self.caption.object = V.replay_caption(res, step, seq is None or seq.is_complete)
         live.commit(f)
 
     # ------------------------------------------------------------------ callbacks
