@@ -420,8 +420,11 @@ class Explorer:
         DataView`` when a result's legend labels came after its data).
 
         With ``freeze`` the document's model graph is walked once at the end instead of after
-        every pane whose text changes (panel sets a Markdown pane's stylesheets with its text,
-        and bokeh then walks every model of the page: ~0.07 s each, several per result).
+        every change of a model reference (bokeh walks every model of the page after each:
+        ~0.07 s). The walk at the end happens whether or not anything changed (0.08 s of a
+        0.10 s apply on the demo page), so results on the same sequence, which change no
+        reference (text panes keep their style sheets: ``cards.base._TextUpdate``; checked by
+        ``tests/test_explorer_styles.py``), are applied without it; a new sequence's are frozen.
 
         ``live``: the batch draws views the page makes itself (:class:`~.cards.live.LiveFrames`):
         ``"draw"`` (a result, colouring or step: their templates go, the made views' changes
@@ -498,7 +501,7 @@ class Explorer:
         t0 = time.perf_counter()
         new_seq = seq is not self._seq_shown
         with self.quiet():
-            with self.hold(one_message=True, freeze=True, live="draw"):
+            with self.hold(one_message=True, freeze=new_seq, live="draw"):
                 unpinned = None
                 if new_seq:
                     self._set_sequence(seq, settings)

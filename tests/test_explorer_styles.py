@@ -82,3 +82,36 @@ def test_a_move_toggles_no_layout_property_in_the_main_area():
         assert changes == []
     finally:
         ex.close()
+
+
+def test_a_result_on_the_same_sequence_walks_the_document_graph_no_time():
+    """Applying a result on the same sequence changes no model reference, so bokeh never
+    walks the page's model graph (a walk is ~0.08 s on the demo page: most of a result's
+    apply when it was forced once per result by freezing the graph). A new sequence's
+    result is applied frozen: one walk, whatever its cards change."""
+    from bokeh.document import Document
+
+    from explorer import Explorer
+    from explorer.demo import demo_sequence
+    from laav.synthetic import make_sequence
+
+    ex = Explorer(demo_sequence(), viser=False)
+    try:
+        assert ex.wait(120)
+        doc = Document()
+        ex.panel().server_doc(doc)
+        assert ex._doc() is doc
+        walks = []
+        real = doc.models.recompute
+        doc.models.recompute = lambda: (walks.append(1), real())[1]
+        for lam in (3.0, 2.5):
+            ex.w_params["lam"].value = lam
+            assert ex.wait(120) and ex.result.params.lam == lam
+        ex.w_seed.value = 5
+        assert ex.wait(120) and ex.result.seed == 5
+        assert walks == []
+        ex.state.load(make_sequence(n_objects=1, n_points=120, n_frames=12, rng=3))
+        assert ex.wait(120) and ex.sequence.n_points == 120
+        assert len(walks) == 1
+    finally:
+        ex.close()
