@@ -21,12 +21,14 @@ in the page's own clock:
   "the glyph holds its source's new x"), then two animation frames so that the browser has
   drawn them. The frame move is thus timed to the redraw, whichever side computes it.
 
-Each control is moved ``--repeats`` times between two values. Prints ONE JSON line and
+Each control is moved ``--repeats`` times between two values, ``--settle`` seconds (default
+0.3) after the previous move's redraw (what a person looking at the result leaves; the
+explorer computes the next seed while idle). Prints ONE JSON line and
 writes it, with date, machine and commit, to ``--out`` (default
 ``bench-out/explorer_browser_latency.md``). Usage::
 
     python benchmarks/explorer_browser_latency.py [--repeats 3] [--out REPORT.md] [--only frame,...]
-        [FILE] [-- COMMAND OPTIONS]
+        [--settle 0.3] [FILE] [-- COMMAND OPTIONS]
 
 ``FILE`` may be a video or a folder of frames (``laav-explore`` tracks it first; its frames
 are then drawn behind the points, which a frame move sends along). ``--only`` measures some
@@ -152,7 +154,7 @@ def frame_x(seq, frame: int) -> list | None:
 
 
 def measure(file: str | None, repeats: int, only: list[str] | None = None,
-            extra: list[str] | None = None) -> dict:
+            extra: list[str] | None = None, settle: float = 0.3) -> dict:
     from playwright import sync_api
 
     port = _free_port("127.0.0.1")
@@ -196,7 +198,8 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
                         xs = frame_x(seq, v) if kind == "frame" else None
                         b0 = received[0]
                         ms = page.evaluate(JS_MOVE, [prefix, v, kind, marker(v), xs])
-                        page.wait_for_timeout(300)  # (what the server sends after the redraw)
+                        # (what the server sends after the redraw; --settle: a person looking)
+                        page.wait_for_timeout(max(300, int(1000 * settle)))
                         sent.setdefault(name, []).append(received[0] - b0)
                         if ms < 0:
                             raise RuntimeError(f"{prefix} = {v}: no result in the page ({ms})")
@@ -218,11 +221,14 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", default="bench-out/explorer_browser_latency.md")
     ap.add_argument("--only", default=None, help="comma-separated controls: lambda,radius,seed,frame")
+    ap.add_argument("--settle", type=float, default=0.3,
+                    help="seconds between a move's redraw and the next move (a person looking)")
     argv = sys.argv[1:] if argv is None else list(argv)
     extra = argv[argv.index("--") + 1:] if "--" in argv else []
     args = ap.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
     only = args.only.split(",") if args.only else None
-    result = measure(args.file, args.repeats, only, extra)
+    result = measure(args.file, args.repeats, only, extra, args.settle)
+    result["settle_s"] = args.settle
     write_json_report(args.out, "Explorer latency in Chromium, control release to views redrawn",
                       f"{result['file']}, {args.repeats} moves of each control between two values, "
                       "viewport 1280x800, headless Chromium (software WebGL)", result)

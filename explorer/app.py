@@ -107,6 +107,9 @@ class Explorer:
         A warm pipeline for ``seq`` (see :class:`ExplorerState`).
     plain_rv : Future, optional
         Plain RV's run for these settings, computed elsewhere (see :class:`ExplorerState`).
+    seeds_ahead : bool
+        Compute the next seed's result while idle, so that a step of the seed slider shows
+        it at once (see :class:`ExplorerState`; ``laav-explore`` turns it on).
     start : bool
         Start computing at once; else call ``explorer.start()`` (the server does so
         once the page is on screen, so the first page is not slowed down by the pipeline).
@@ -126,12 +129,12 @@ class Explorer:
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
                  start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD, video=None,
-                 plain_rv=None):
+                 plain_rv=None, seeds_ahead: bool = False):
         if video is not None and video.sequence is not seq:
             raise ValueError("video must be the one seq was tracked from (video.sequence is seq)")
         self.video = video
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False,
-                                   plain_rv=plain_rv)
+                                   plain_rv=plain_rv, seeds_ahead=seeds_ahead)
         self._session_doc = None
         self._doc_thread = threading.get_ident()
         self._capture_session()
@@ -537,7 +540,7 @@ class Explorer:
                 s.show_note("  \n".join(notes))
                 s.show_result(seq, num["error_final"], self.state.compute_seconds,
                               non_defaults(settings, self.state.default_motions(seq), seq.is_complete),
-                              self.change)
+                              self.change, ahead=self.state.computed_ahead(result))
                 self.view3d.show_first()
                 self.compare.redraw()
             self.view3d.draw(seq, result, self.style["color"], self.controls.w_frame.value, new_seq)

@@ -216,7 +216,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
                 hosts: list[str] | None = None, announce_viser: bool = False,
                 params: laav.LaavParams | None = None, max_upload: int | None = None, video=None,
-                warm=None):
+                warm=None, seeds_ahead: bool = False):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
@@ -233,7 +233,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     :func:`serve_options`. ``video``: the :class:`explorer.video.Video` ``seq`` was tracked
     from (its frames, shared read-only by every tab, go behind the points). ``warm``: the
     first tab's pipeline and plain RV for ``seq`` computed elsewhere (:func:`explorer.warm.first_results`;
-    only the first explorer built takes them).
+    only the first explorer built takes them). ``seeds_ahead``: every tab computes the next
+    seed's result while idle (:class:`explorer.state.ExplorerState`; the command turns it on).
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
@@ -252,7 +253,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                         iframe_host=iframe_host, start=False, page_hosts=hosts,
                         max_upload=DEFAULT_MAX_UPLOAD if max_upload is None else max_upload,
                         video=video, pipeline=None if first is None else first.pipeline,
-                        plain_rv=None if first is None else first.plain_rv)
+                        plain_rv=None if first is None else first.plain_rv, seeds_ahead=seeds_ahead)
 
     if prebuild:
         fut: Future = Future()
@@ -442,7 +443,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
                               announce_viser=not _is_loopback(args.host), params=settings.params,
-                              max_upload=args.max_upload, video=video, warm=first)
+                              max_upload=args.max_upload, video=video, warm=first, seeds_ahead=True)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False, **serve_options())

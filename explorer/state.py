@@ -30,7 +30,7 @@ import json
 import threading
 import time
 import traceback
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
@@ -94,6 +94,10 @@ def plain_rv_of(seq: Sequence, settings: Settings) -> laav.Voting:
     beside LAAV's fine-tuning; computed by :class:`ExplorerState` or :mod:`explorer.warm`)."""
     return laav.random_voting(seq, settings.n_motions, settings.params, settings.seed)
 
+
+#: Most points of a sequence whose next seed is computed ahead (``seeds_ahead``): above,
+#: a second pipeline's memory and seconds of CPU after every result are not spent.
+AHEAD_MAX_POINTS = 2000
 
 #: The parameters plain Random Voting depends on (its cache key).
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_"))
@@ -399,6 +403,12 @@ class ExplorerState:
     plain_rv : Future, optional
         Plain RV's run (:func:`plain_rv_of`) for ``seq`` and the first settings, computed
         elsewhere: used instead of computing it when those settings are shown (None: compute).
+    seeds_ahead : bool
+        While nothing is asked for, compute the result and plain RV for the next seed
+        (seed + 1) on sequences of at most :data:`AHEAD_MAX_POINTS` points, so that a step
+        of the seed slider shows them at once (``laav-explore`` turns it on). The result
+        is that of a fresh :class:`laav.Pipeline` for those settings, as a recomputation
+        gives; any request stops the computation ahead at its next check.
 
     Attributes
     ----------
@@ -416,7 +426,7 @@ class ExplorerState:
 
     def __init__(self, seq: Sequence, n_motions: int | None = None, params: LaavParams | None = None,
                  seed: int = 0, pipeline: Future | Pipeline | None = None, autostart: bool = True,
-                 plain_rv: Future | None = None):
+                 plain_rv: Future | None = None, seeds_ahead: bool = False):
         if n_motions is None:
             if seq.n_motions is None:
                 raise ValueError(f"{seq.name} has no ground truth: the number of motions C is needed")
@@ -458,6 +468,12 @@ class ExplorerState:
             self._worker.submit(laav.preload)
         self._rv_cache: OrderedDict = OrderedDict()
         self._rv_key = None
+        #: compute the next seed's result (and plain RV) while idle (see :meth:`_ahead_job`)
+        self.seeds_ahead = bool(seeds_ahead)
+        self._ahead: OrderedDict = OrderedDict()  # (id(seq), Settings) -> Pipeline
+        #: results shown from a pipeline computed ahead (tests read it)
+        self.ahead_used = 0
+        self._ahead_results: deque = deque(maxlen=4)
         #: the pipeline's and plain RV's computations, interruptible by a newer request
         self.computing = _Interruptible()
         self.rv_computing = _Interruptible()
@@ -546,6 +562,8 @@ class ExplorerState:
 
     def load(self, seq: Sequence, n_motions: int | None = None) -> int | None:
         """Switch to another sequence (C from its ground truth unless given)."""
+        with self._lock:
+            self._ahead.clear()  # pipelines of the sequence shown: of no use for another
         C = n_motions if n_motions is not None else seq.n_motions
         if C is None:
             self._report(f"{seq.name} has no ground-truth labels: set the number of motions C first")
@@ -636,8 +654,14 @@ class ExplorerState:
                             pipe = Pipeline(seq, target.n_motions, target.params, target.seed)
                             result = pipe.result
                     else:
-                        pipe = self._pipe
-                        result = pipe.update(**target.update_kwargs())
+                        pipe = self._take_ahead(seq, target)
+                        if pipe is not None:  # computed while idle: as a fresh Pipeline's
+                            result = pipe.result
+                            t0 -= sum(result.timings.values())  # its own stage times
+                            self._ahead_results.append(result)
+                        else:
+                            pipe = self._pipe
+                            result = pipe.update(**target.update_kwargs())
             except Superseded:
                 return  # a newer request is queued: it starts now
             except ValueError as exc:  # includes laav.SequenceError
@@ -744,14 +768,79 @@ class ExplorerState:
         if key in self._rv_cache:
             if self.on_plain_rv is not None:
                 self.on_plain_rv(self._rv_cache[key], key)
+            self._queue_ahead()
             return None
         if self._closed:
             return None
         seq, s = self.sequence, self.settings
         try:
-            return self._rv_worker.submit(self._rv_job, key, seq, s)
+            fut = self._rv_worker.submit(self._rv_job, key, seq, s)
         except RuntimeError:  # closed, or the interpreter is shutting down
             return None
+        self._queue_ahead()  # after plain RV in the same worker
+        return fut
+
+    # ------------------------------------------------------------------ the next seed, ahead
+    def computed_ahead(self, result) -> bool:
+        """Whether ``result`` was shown from a pipeline computed ahead (``seeds_ahead``)."""
+        return any(r is result for r in self._ahead_results)
+
+    def _queue_ahead(self) -> None:
+        seq, s, gen = self.sequence, self.settings, self._gen
+        if not self.seeds_ahead or self._closed or seq.n_points > AHEAD_MAX_POINTS:
+            return
+        try:
+            self._rv_worker.submit(self._ahead_job, gen, seq, dataclasses.replace(s, seed=s.seed + 1))
+        except RuntimeError:  # closed
+            pass
+
+    def _take_ahead(self, seq: Sequence, target: Settings) -> Pipeline | None:
+        """The pipeline computed ahead for ``target``, if any; the one it replaces is kept in
+        its place for the settings shown (a step back to them is then shown at once too)."""
+        with self._lock:
+            pipe = self._ahead.pop((id(seq), target), None)
+            if pipe is not None and self._pipe is not None and self.sequence is seq:
+                self._ahead[(id(seq), self.settings)] = self._pipe
+                self._trim_ahead()
+        if pipe is not None:
+            self.ahead_used += 1
+        return pipe
+
+    def _trim_ahead(self) -> None:
+        while len(self._ahead) > 3:
+            self._ahead.popitem(last=False)
+
+    def _ahead_job(self, gen: int, seq: Sequence, target: Settings) -> None:
+        """(Plain RV's worker, after plain RV for the settings shown.) A fresh pipeline and
+        plain RV for ``target`` (the next seed), kept for :meth:`_job` and the RV card; any
+        request (a new generation ``gen``) stops it."""
+        def stop():
+            return gen != self._gen or self._closed
+
+        key = (id(seq), target)
+        try:
+            with self.rv_computing(stop):
+                while self._pending > 0 and not stop():  # the job that showed the result
+                    time.sleep(0.01)                     # is still finishing
+                if stop():
+                    return
+                with self._lock:
+                    have = key in self._ahead
+                if not have:
+                    pipe = Pipeline(seq, target.n_motions, target.params, target.seed)
+                    with self._lock:
+                        self._ahead[key] = pipe
+                        self._trim_ahead()
+                pkey = self.plain_rv_key(seq, target)
+                if pkey not in self._rv_cache:
+                    voting = plain_rv_of(seq, target)
+                    self._rv_cache[pkey] = voting
+                    while len(self._rv_cache) > 16:
+                        self._rv_cache.popitem(last=False)
+        except Superseded:
+            return
+        except Exception:  # a computation ahead must never cost the session
+            traceback.print_exc()
 
     def _rv_job(self, key, seq, s: Settings) -> None:
         if key != self._rv_key:
