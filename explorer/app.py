@@ -135,6 +135,7 @@ class Explorer:
         self.video = video
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False,
                                    plain_rv=plain_rv, seeds_ahead=seeds_ahead)
+        self._seeds_ahead = seeds_ahead  # (held back while a lazy page is still being completed)
         self._session_doc = None
         self._doc_thread = threading.get_ident()
         self._capture_session()
@@ -313,6 +314,7 @@ class Explorer:
         if lazy:
             self._rest = {"cards": self.main[n_first:], "loaded": False}
             pn.state.onload(self._page_loaded)
+            self.state.seeds_ahead = False  # not while the page is being completed (_add_rest)
         # one root per area: every extra document root costs a full model walk on page load.
         # The header's button folds the sidebar away.
         return pn.template.BootstrapTemplate(
@@ -344,6 +346,9 @@ class Explorer:
         self._rest = None
         self.main_column.extend(rest["cards"])
         self.state.preload()
+        if self._seeds_ahead:  # the page is complete: the next seed may be computed now
+            self.state.seeds_ahead = True
+            self.state.compute_ahead()
 
     def panel(self) -> pn.viewable.Viewable:
         """The whole explorer as one panel layout (for notebooks)."""

@@ -785,6 +785,12 @@ class ExplorerState:
         """Whether ``result`` was shown from a pipeline computed ahead (``seeds_ahead``)."""
         return any(r is result for r in self._ahead_results)
 
+    def compute_ahead(self) -> None:
+        """Compute the next seed for the result shown (with ``seeds_ahead``), after what
+        plain RV's worker has queued; nothing before the first result."""
+        if self.result is not None:
+            self._queue_ahead()
+
     def _queue_ahead(self) -> None:
         seq, s, gen = self.sequence, self.settings, self._gen
         if not self.seeds_ahead or self._closed or seq.n_points > AHEAD_MAX_POINTS:

@@ -25,6 +25,7 @@ if not CHROMIUM.exists():
 sync_api = pytest.importorskip("playwright.sync_api")
 pn = pytest.importorskip("panel")
 
+import numpy as np  # noqa: E402
 from conftest import two_motion_sequence  # noqa: E402
 
 import laav  # noqa: E402
@@ -96,16 +97,18 @@ def _wait_for(pred, timeout: float, what: str, page=None):
 
 
 @contextmanager
-def _served(seq, viser: bool = True, max_upload: int | None = None, video=None):
+def _served(seq, viser: bool = True, max_upload: int | None = None, video=None,
+            seeds_ahead: bool = False):
     """The app for ``seq`` on a free loopback port and a headless Chromium:
     ``(port, browser, created)``, ``created`` listing each session's Explorer; the server
     stopped, the browser and the explorers closed afterwards. Served as ``laav-explore``
-    serves it (:func:`explorer.cli.serve_options`). ``video``: the tracked video ``seq`` is."""
+    serves it (:func:`explorer.cli.serve_options`). ``video``: the tracked video ``seq`` is.
+    ``seeds_ahead``: as ``laav-explore`` serves it, the next seed computed while idle."""
     created: list = []
     port = _free_port()
     C = None if video is None else video.n_motions
     server = pn.serve({"/": app_factory(seq, C, created=created, viser=viser, max_upload=max_upload,
-                                        video=video)},
+                                        video=video, seeds_ahead=seeds_ahead)},
                       port=port, address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"], show=False,
                       threaded=True, verbose=False, **serve_options())
     try:
@@ -731,3 +734,24 @@ def test_incomplete_sequence_in_chromium_draws_only_visible_points(tmp_path):
             assert all(x == x for x in got["x"])  # no NaN reached the page
             page.screenshot(path=str(shots / f"explorer_incomplete_frame{f}.png"))
     assert not js_errors, js_errors
+
+
+def test_a_seed_step_shows_the_next_seed_computed_while_idle():
+    """As ``laav-explore`` serves it: once the page is complete and the result shown, the
+    next seed is computed while idle; moving the seed slider there shows it at once, said
+    on the status line, with the labels a fresh computation gives."""
+    seq = _sequence()
+    with _served(seq, viser=False, seeds_ahead=True) as (port, browser, created):
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        assert ex.wait(60) and ex.result.seed == 0
+        st = ex.state
+        _wait_for(lambda: any(k[1].seed == 1 for k in st._ahead) and st.plain_rv(
+            settings=st.settings.__class__(st.settings.params, 1, st.settings.n_motions)) is not None,
+            120, "seed 1 computed ahead", page=page)
+        assert page.evaluate(JS_SET_SLIDER, ["seed", 1]) is not None
+        page.get_by_text("ahead, while idle").first.wait_for(timeout=30000)
+        assert ex.result.seed == 1 and st.ahead_used == 1
+        np.testing.assert_array_equal(ex.result.labels, laav.segment(seq, ex.result.n_motions, seed=1).labels)
