@@ -40,6 +40,7 @@ from _machine import cpu_model, git_commit  # noqa: E402 - this folder, on sys.p
 from speed import data_dir, truth_files  # noqa: E402
 
 import laav  # noqa: E402
+from laav.bench import params_from_assignments  # noqa: E402
 from laav.synthetic import BENCH_SPREAD, occlude, occlusion_rng  # noqa: E402
 
 FIELDS = ["sequence", "motions", "points", "frames", "level", "seed", "missing", "error",
@@ -47,18 +48,8 @@ FIELDS = ["sequence", "motions", "points", "frames", "level", "seed", "missing",
 SPREAD = BENCH_SPREAD  # occlude()'s spread: how much the tracks' losses differ
 
 
-def parse_settings(items: list[str]) -> dict:
-    """``--set NAME=VALUE`` items as LaavParams fields (VALUE an int, float or "None")."""
-    out = {}
-    for item in items:
-        name, _, value = item.partition("=")
-        out[name] = None if value == "None" else (int(value) if value.lstrip("-").isdigit()
-                                                 else float(value))
-    laav.LaavParams().replace(**out)  # unknown or invalid settings fail here
-    return out
-
-
-def run_sequence(path: str, levels: list[float], seed: int, settings: dict | None = None) -> list[dict]:
+def run_sequence(path: str, levels: list[float], seed: int,
+                 params: laav.LaavParams | None = None) -> list[dict]:
     seq = laav.load_sequence(path)
     rows = []
     for level in levels:
@@ -66,7 +57,7 @@ def run_sequence(path: str, levels: list[float], seed: int, settings: dict | Non
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", laav.LaavWarning)
-            res = laav.segment(occl, seq.n_motions, laav.LaavParams(**(settings or {})), seed=seed)
+            res = laav.segment(occl, seq.n_motions, params, seed=seed)
         sec = time.perf_counter() - t
         cov = res.coarse.point_labels >= 0
         cerr = (laav.misclassification_rate(seq.labels[cov], res.coarse.point_labels[cov])
@@ -114,7 +105,7 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="a LaavParams field other than its default (repeatable)")
     args = ap.parse_args(argv)
-    settings = parse_settings(args.set)
+    params = params_from_assignments(args.set)  # laav bench's --param parsing
     levels = [float(v) for v in args.levels.split(",")]
     files = truth_files(data_dir(args.data), args.only)[::max(1, args.every)]
     out = Path(args.out)
@@ -134,7 +125,7 @@ def main(argv=None) -> int:
         with ProcessPoolExecutor(max(1, args.jobs)) as ex:
             for k, new in enumerate(ex.map(run_sequence, [str(f) for f in todo],
                                            [levels] * len(todo), [args.seed] * len(todo),
-                                           [settings] * len(todo))):
+                                           [params] * len(todo))):
                 w.writerows(new)
                 fh.flush()
                 rows += new
@@ -154,8 +145,8 @@ def main(argv=None) -> int:
                 f"- Software: Python {platform.python_version()}, numpy {np.__version__}, "
                 f"laav {laav.__version__} (git {git_commit()})",
                 f"- Hopkins155: {n_seq} sequences (every {args.every}. by name), seed {args.seed}, "
-                f"parameters {settings or 'default'}; occlusion `laav.synthetic.occlude(seq, level, rng, "
-                f"spread={SPREAD})` seeded by (seed, name, level)",
+                f"parameters {', '.join(args.set) or 'default'}; occlusion "
+                f"`laav.synthetic.occlude(seq, level, rng, spread={SPREAD})` seeded by (seed, name, level)",
                 "- `python benchmarks/missing.py " + " ".join(argv or sys.argv[1:]) + "`",
                 "- Error: `laav.misclassification_rate` against the ground truth of all points; "
                 "a point left unlabelled (-1) counts as an error. Coarse: the fine-to-coarse "

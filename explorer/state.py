@@ -839,10 +839,7 @@ class ExplorerState:
                         self._trim_ahead()
                 pkey = self.plain_rv_key(seq, target)
                 if pkey not in self._rv_cache:
-                    voting = plain_rv_of(seq, target)
-                    self._rv_cache[pkey] = voting
-                    while len(self._rv_cache) > 16:
-                        self._rv_cache.popitem(last=False)
+                    self._keep_plain_rv(pkey, plain_rv_of(seq, target))
         except Superseded:
             return
         except Exception:  # a computation ahead must never cost the session
@@ -867,11 +864,15 @@ class ExplorerState:
         except Exception:
             traceback.print_exc()
             return
+        self._keep_plain_rv(key, voting)
+        if key == self._rv_key and self.on_plain_rv is not None:
+            self.on_plain_rv(voting, key)
+
+    def _keep_plain_rv(self, key, voting) -> None:
+        """Cache plain RV's run under ``key`` (the 16 latest kept)."""
         self._rv_cache[key] = voting
         while len(self._rv_cache) > 16:
             self._rv_cache.popitem(last=False)
-        if key == self._rv_key and self.on_plain_rv is not None:
-            self.on_plain_rv(voting, key)
 
     def wait_plain_rv(self, timeout: float = 60.0) -> laav.Voting | None:
         deadline = time.monotonic() + timeout
