@@ -586,10 +586,14 @@ def _place_objects(kinds, cam, rng, s, w, h, background, custom=None) -> list[_B
             ends.append((seen[0], seen[-1]))
         if len(bodies) == len(kinds):
             return bodies
-    raise RuntimeError(
+    raise _PlacementError(
         f"could not place {len(kinds)} objects in a {w}x{h} image; "
         "use fewer objects or a larger image"
     )
+
+
+class _PlacementError(RuntimeError):
+    """No layout of the objects was found for this camera (:func:`_place_objects`)."""
 
 
 def _object_points(body: _Body, n: int, cam: _Camera, rng, w: int, h: int, screen_only=False):
@@ -1240,7 +1244,8 @@ def make_family(
     ValueError
         For an unknown ``name`` or a parameter out of range.
     RuntimeError
-        When the objects cannot be placed (not seen at the default sizes).
+        When the objects cannot be placed in any of 8 scenes drawn in turn (not seen at
+        the default sizes; a scene whose camera leaves them no room is drawn again).
 
     Examples
     --------
@@ -1259,8 +1264,20 @@ def make_family(
     w, h = _check_image_size(image_size)
     family = {"small_motion": _family_small_motion, "perspective": _family_perspective,
               "same_direction": _family_same_direction}[name](w, h)
-    return _render(None, n_frames, n_points, noise, 0.0, w, h, _as_generator(rng), name,
-                   family)
+    gen = _as_generator(rng)
+    for attempt in range(_FAMILY_ATTEMPTS):
+        try:
+            return _render(None, n_frames, n_points, noise, 0.0, w, h, gen, name, family)
+        except _PlacementError:
+            # A family's objects are fixed, and for a few cameras their constraints leave no
+            # room (same_direction: 2 of the first 60 seeds): draw the scene again from the
+            # same generator, so a seed still gives one scene
+            if attempt == _FAMILY_ATTEMPTS - 1:
+                raise
+
+
+#: Scenes :func:`make_family` draws before it gives up on placing the family's objects.
+_FAMILY_ATTEMPTS = 8
 
 
 def affine_residual(points: np.ndarray) -> float:
