@@ -44,7 +44,8 @@ from speed import data_dir, truth_files  # noqa: E402
 import laav  # noqa: E402
 
 FIELDS = ["config", "sequence", "motions", "seed", "error", "coarse", "coverage", "converged",
-          "iterations", "trials", "selected", "seconds"]
+          "iterations", "trials", "selected", "seconds", "informed_converged",
+          "informed_iterations"]
 DEFAULT_CONFIGS = {"default": {}, "paper": "paper", "no-plain-rv": {"rv_select": "none"}}
 
 
@@ -116,7 +117,13 @@ def _row(config, seq, seed, labels, coarse, voting, seconds) -> dict:
             "error": f"{100 * err:.4f}", "coarse": f"{100 * cerr:.4f}",
             "coverage": f"{cov.mean():.4f}" if cov is not None else "",
             "converged": int(voting.converged), "iterations": voting.n_iterations,
-            "trials": voting.n_trials, "selected": voting.selected, "seconds": f"{seconds:.5f}"}
+            "trials": voting.n_trials, "selected": voting.selected, "seconds": f"{seconds:.5f}",
+            # LAAV's informed trial alone (the paper's Fig. 3 compares it with plain RV);
+            # empty for plain RV
+            "informed_converged": ("" if voting.informed_converged is None
+                                   else int(voting.informed_converged)),
+            "informed_iterations": ("" if voting.informed_changed is None
+                                    else len(voting.informed_changed))}
 
 
 def summarise(rows: list[dict]) -> list[str]:
@@ -126,8 +133,8 @@ def summarise(rows: list[dict]) -> list[str]:
     rv = {(r["sequence"], str(r["seed"])): r for r in by.get("plain-rv", [])}
     lines = ["| configuration | 2 / 3 / all mean % | worst % | seed range of all-mean (pt) | "
              "coarse <= 1 % / > 10 % (of runs) | converged | iterations / RV (median) | "
-             "time / RV median, 2 / 3 motions |",
-             "|---|---|---|---|---|---|---|---|"]
+             "time / RV median, 2 / 3 motions | LAAV's trial: converged, median iterations |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for name, rs in by.items():
         e = np.array([float(r["error"]) for r in rs])
         m = np.array([int(r["motions"]) for r in rs])
@@ -144,10 +151,13 @@ def summarise(rows: list[dict]) -> list[str]:
             t = np.median([float(r["seconds"]) for r in sub])
             t_rv = np.median([float(rv[(r["sequence"], str(r["seed"]))]["seconds"]) for r in sub])
             ratios.append(f"{t / t_rv:.2f} ({1e3 * t:.0f} / {1e3 * t_rv:.0f} ms)")
+        own = [r for r in rs if r.get("informed_iterations") not in (None, "")]
+        trial = (f"{100 * np.mean([int(r['informed_converged']) for r in own]):.0f} %, "
+                 f"{np.median([int(r['informed_iterations']) for r in own]):.0f}" if own else "-")
         lines.append(
             f"| {name} | {e[m == 2].mean():.2f} / {e[m == 3].mean():.2f} / {e.mean():.2f} | "
             f"{e.max():.1f} | {max(per_seed) - min(per_seed):.2f} | {coarse} | {100 * conv:.0f} % | "
-            f"{it:.0f} / {it_rv:.0f} = {it / max(it_rv, 1):.2f} | {' ; '.join(ratios)} |")
+            f"{it:.0f} / {it_rv:.0f} = {it / max(it_rv, 1):.2f} | {' ; '.join(ratios)} | {trial} |")
     return lines
 
 

@@ -953,8 +953,20 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
         returned = (f"; **returned {md_text(voting.selected)}, not LAAV's informed trial**: the model "
                     f"selection (ours, not in the paper) preferred it; {voting.n_iterations} voting "
                     f"iterations in all, LAAV's informed trial {per[0] if per else 0}")
-    return (f"**{what}:** {n_it} iterations, {conv}{trials}{extra}{returned}"
+    return (f"**{what}:** {n_it} iterations, {conv}{_votes(voting)}{trials}{extra}{returned}"
             f"{_selection(voting)}.")
+
+
+def _votes(voting: laav.Voting) -> str:
+    """How LAAV's informed trial voted: the RV paper's epipolar votes, or ours with the
+    subspace term (a departure from the paper, named as such)."""
+    w = getattr(voting, "informed_subspace_weight", None)
+    if w is None:
+        return ""
+    if w > 0:
+        return (f"; votes: Sampson distance + {w:g} × squared distance to the group's rank-4 "
+                "trajectory subspace (ours, `rv_subspace_weight`; the paper: Sampson alone)")
+    return "; votes: Sampson distance alone (the RV paper's)"
 
 
 def _selection(voting: laav.Voting) -> str:

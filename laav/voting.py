@@ -114,6 +114,10 @@ class Voting:
         whichever candidate was returned; None for plain RV.
     informed_converged : bool or None
         Whether LAAV's informed trial met the convergence test; None for plain RV.
+    informed_subspace_weight : float or None
+        The subspace votes' weight in LAAV's informed trial (``rv_subspace_weight``, ours;
+        0 when it voted as Random Voting does: the paper preset, missing data, or a start
+        labelling under :data:`SUBSPACE_VOTES_MIN_START` of the points); None for plain RV.
     unlabelled_code : ndarray of shape (P,), int8, or None
         Missing data only (None on complete data): why each point has label -1, a key of
         :data:`laav._visibility.UNLABELLED_REASONS` (1: seen too briefly, no voting frame
@@ -140,6 +144,7 @@ class Voting:
     informed_changed: np.ndarray | None = None
     informed_margin: np.ndarray | None = None
     informed_converged: bool | None = None
+    informed_subspace_weight: float | None = None
     unlabelled_code: np.ndarray | None = None
 
 
@@ -335,18 +340,19 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
     if params.rv_select == "laav" and mk is None:
         return _own_candidates(points, C, params, rng, init, labels0, votes0)
+    tp = _trial_params(params, known)
+    weight = tp.rv_subspace_weight if mk is None else 0.0  # missing data: epipolar votes only
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
-        first, _, trials, _ = run_trials(points, C, _trial_params(params, known), rng,
-                                         (labels0, votes0), n_plain=0, masks=masks)
+        first, _, trials, _ = run_trials(points, C, tp, rng, (labels0, votes0), n_plain=0,
+                                         masks=masks)
         return _with_informed(_finish(points, C, params, first, trials, True, "informed", mk=mk),
-                              first)
+                              first, weight)
     # LAAV's start against plain RV: keep the labelling of lower selection score. The
     # informed trial and plain RV's trials each draw from their own generator, so they run
     # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
     streams = rng.spawn(1 + params.rv_trials)  # [informed, plain 0, plain 1, ...]
-    first, _, trials, _ = run_trials(points, C, _trial_params(params, known), None,
-                                     (labels0, votes0), n_plain=0, streams=streams[:1],
-                                     masks=masks)
+    first, _, trials, _ = run_trials(points, C, tp, None, (labels0, votes0), n_plain=0,
+                                     streams=streams[:1], masks=masks)
     plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, masks)
     trials, cands = trials + more, [("informed", first)] + cands
     if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
@@ -357,7 +363,7 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
             trials, cands = trials + more, cands + kc
     polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
-                                  polished=polished, mk=mk), first)
+                                  polished=polished, mk=mk), first, weight)
 
 
 #: Subspace votes (``rv_subspace_weight``) are used only in a trial whose start labels at
@@ -459,11 +465,12 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
         vot = np.zeros((P, C))
         vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
         starts.append((f"missing motion ({g}+{h})", lab, vot, stream, known2))
-    trials, entries, first = [], [], None
+    trials, entries, first, weight = [], [], None, None
     for name, lab, vot, stream, known in starts:
-        res, _, ran, _ = run_trials(points, C, _trial_params(params, known), None, (lab, vot),
-                                    n_plain=0, streams=[stream])
-        first = res if first is None else first
+        tp = _trial_params(params, known)
+        res, _, ran, _ = run_trials(points, C, tp, None, (lab, vot), n_plain=0, streams=[stream])
+        if first is None:
+            first, weight = res, tp.rv_subspace_weight
         trials += ran
         pol = _Polished(points, C, params, res[0])
         entries.append((name, res, pol, joint_score(points, pol.final()[0], C, params)))
@@ -472,7 +479,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
     return _with_informed(_finish(points, C, params, res, trials, True, name, polished=pol,
-                                  costs=costs), first)
+                                  costs=costs), first, weight)
 
 
 def _plain_run(points, C, params, rng, streams, memo, k, masks=None):
@@ -569,10 +576,12 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     return result
 
 
-def _with_informed(voting: Voting, first: tuple) -> Voting:
-    """``voting`` with LAAV's informed trial's own trace attached."""
+def _with_informed(voting: Voting, first: tuple, subspace_weight: float) -> Voting:
+    """``voting`` with LAAV's informed trial's own trace (and its votes' subspace weight)
+    attached."""
     return dataclasses.replace(voting, informed_changed=first[2], informed_margin=first[3],
-                               informed_converged=bool(first[5]))
+                               informed_converged=bool(first[5]),
+                               informed_subspace_weight=float(subspace_weight))
 
 
 class _Polished:

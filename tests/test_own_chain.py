@@ -34,6 +34,34 @@ def test_subspace_votes_change_the_informed_trial():
     assert on.trial_iterations != off.trial_iterations or not np.array_equal(on.votes, off.votes)
 
 
+def test_the_informed_trial_reports_the_votes_it_used():
+    """``Voting.informed_subspace_weight`` says how LAAV's trial voted: the default's
+    weight with a start labelling most points, none from a sparse start, with the paper
+    preset or on missing data; None for plain RV. The explorer names it as ours."""
+    from explorer.views import rv_summary
+    from laav.voting import SUBSPACE_VOTES_MIN_START
+
+    seq = two_motions(2)
+    rng = np.random.default_rng(0)
+    dense = np.where(rng.random(seq.n_points) < 0.7, seq.labels, -1)
+    sparse = np.where(rng.random(seq.n_points) < SUBSPACE_VOTES_MIN_START / 2, seq.labels, -1)
+    p = LaavParams(rv_max_iter=40)
+    on = random_voting(seq, 2, p, seed=0, init_labels=dense)
+    assert on.informed_subspace_weight == p.rv_subspace_weight == 0.3
+    assert random_voting(seq, 2, p, seed=0, init_labels=sparse).informed_subspace_weight == 0.0
+    paper = random_voting(seq, 2, LaavParams.paper(rv_max_iter=40), seed=0, init_labels=dense)
+    assert paper.informed_subspace_weight == 0.0
+    vis = np.ones((seq.n_frames, seq.n_points), dtype=bool)
+    vis[:3, :20] = False
+    holes = Sequence(seq.points, seq.labels, visible=vis)
+    assert random_voting(holes, 2, p, seed=0, init_labels=dense).informed_subspace_weight == 0.0
+    plain = random_voting(seq, 2, p, seed=0)
+    assert plain.informed_subspace_weight is None
+    text = rv_summary(on, plain)
+    assert "0.3 × squared distance" in text and "ours" in text
+    assert "Sampson distance alone (the RV paper's)" in rv_summary(paper, plain)
+
+
 def test_subspace_distances_tell_the_motions_apart():
     """Each motion's points lie near the rank-4 subspace fitted to 16 of them, the other
     motion's far from it (noise-free synthetic scenes)."""
@@ -100,9 +128,11 @@ def test_joint_score_prefers_the_truth_and_needs_eight_points_a_motion():
 
 
 def test_own_chain_preset_and_default():
-    """The own chain is a preset; the default keeps plain RV beside LAAV's trial."""
+    """The own chain is a preset; the default keeps plain RV beside LAAV's trial, whose
+    votes have the subspace term at the cross-validated weight; the paper's have none."""
     own, default = LaavParams.own_chain(), LaavParams()
     assert (own.coarse_merge, own.rv_select, own.rv_subspace_weight) == ("auto", "laav", 1.0)
     assert (default.coarse_merge, default.rv_select, default.rv_subspace_weight) == (
-        "epipolar", "subspace", 0.0)
+        "epipolar", "subspace", 0.3)
+    assert LaavParams.paper().rv_subspace_weight == 0.0
     assert own.n_fine(2) == 8 and own.n_fine(2, complete=False) == 4 and default.n_fine(2) == 4
