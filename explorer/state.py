@@ -826,8 +826,9 @@ class ExplorerState:
         key = (id(seq), target)
         try:
             with self.rv_computing(stop):
-                while self._pending > 0 and not stop():  # the job that showed the result
-                    time.sleep(0.01)                     # is still finishing
+                with self._idle:  # the job that showed the result is still finishing:
+                    while self._pending > 0 and not stop():  # its end notifies (a new
+                        self._idle.wait(0.25)  # request too, as its job ends; close: timeout)
                 if stop():
                     return
                 with self._lock:
