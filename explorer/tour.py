@@ -85,9 +85,10 @@ TOUR: tuple[TourStep, ...] = (
         "Random Voting starts from the coarse labels: in each iteration every motion fits a "
         "fundamental matrix to a few of its points on a random pair of frames, and every point votes "
         "for the motions whose epipolar geometry fits it, older votes fading by α. This labels the "
-        "features no atom took and can undo a wrong merge; by default plain Random Voting from random "
-        "starts runs beside it and the best-scoring labelling is kept (the paper keeps the informed "
-        "run alone).",
+        "features no atom took and can undo a wrong merge; by default the informed run's votes also "
+        "weigh each point's distance to the motion's trajectory subspace, plain Random Voting from "
+        "random starts runs beside it and the best-scoring labelling is kept (the paper: epipolar "
+        "votes, the informed run alone).",
         ("rv",)),
     TourStep(
         "5 · Result: one motion per point, and its error",
