@@ -136,3 +136,20 @@ def test_own_chain_preset_and_default():
         "epipolar", "subspace", 0.3)
     assert LaavParams.paper().rv_subspace_weight == 0.0
     assert own.n_fine(2) == 8 and own.n_fine(2, complete=False) == 4 and default.n_fine(2) == 4
+
+
+def test_the_default_informed_trial_converges_faster_than_plain_rv():
+    """The paper's claim (its Fig. 3), as the explorer's Random Voting card shows it: from
+    the coarse labels, LAAV's informed trial converges, in fewer iterations than plain RV
+    from random starts needs in all. Six seeded three-motion scenes; with the RV paper's
+    votes alone (weight 0) the trial ran to its cap on scene 0 and took 132 on scene 4."""
+    from laav import segment
+
+    for s in range(6):
+        seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=s)
+        res = segment(seq, 3, seed=0)
+        plain = random_voting(seq, 3, seed=0)
+        v = res.voting
+        assert v.informed_converged, s
+        assert len(v.informed_changed) < plain.n_iterations, (s, len(v.informed_changed))
+        assert misclassification_rate(seq.labels, res.labels) == 0.0, s
