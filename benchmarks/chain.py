@@ -9,6 +9,9 @@ all alike), this runs plain Random Voting and LAAV under each named configuratio
 * the final error, and the coarse stage's error on the points in atoms (``coarse``);
 * whether the fine-tuning converged, its voting iterations (``Voting.n_iterations``:
   every iteration of every trial the call ran) and trials, which candidate it returned;
+* whether LAAV's informed trial itself converged and its iterations
+  (``informed_converged``, ``informed_iterations``; empty for plain RV and in rows
+  written before 2026-12-01);
 * seconds of the whole call.
 
 It writes one CSV row per run (``--out``, default ``bench-out/chain.csv``; resumable:
@@ -154,6 +157,8 @@ def summarise(rows: list[dict]) -> list[str]:
         own = [r for r in rs if r.get("informed_iterations") not in (None, "")]
         trial = (f"{100 * np.mean([int(r['informed_converged']) for r in own]):.0f} %, "
                  f"{np.median([int(r['informed_iterations']) for r in own]):.0f}" if own else "-")
+        if own and len(own) < len(rs):  # rows of an older run lack the columns
+            trial += f" (of {len(own)} runs)"
         lines.append(
             f"| {name} | {e[m == 2].mean():.2f} / {e[m == 3].mean():.2f} / {e.mean():.2f} | "
             f"{e.max():.1f} | {max(per_seed) - min(per_seed):.2f} | {coarse} | {100 * conv:.0f} % | "

@@ -616,6 +616,7 @@ class ExplorerState:
         except RuntimeError:  # closed
             with self._lock:
                 self._pending -= 1
+                self._idle.notify_all()
         return gen
 
     def _notify_target(self):
@@ -888,5 +889,6 @@ class ExplorerState:
         self._closed = True
         with self._lock:
             self._gen += 1  # anything still queued is now stale
+            self._idle.notify_all()  # a computation ahead waiting for a job stops now
         self._worker.shutdown(wait=False, cancel_futures=True)
         self._rv_worker.shutdown(wait=False, cancel_futures=True)

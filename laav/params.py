@@ -145,8 +145,8 @@ class LaavParams:
         its squared distance to the subspace (px^2 per frame). 0: the epipolar votes of
         Random Voting alone (the RV and LAAV papers, :meth:`paper`). The default 0.3 was
         chosen by 5-fold cross-validation grouped by source video among 0 / 0.3 / 1 / 3
-        (Hopkins155, 5 seeds: held out 0.52 %, 0 gives 0.57 % on all data; LAAV's trial
-        converges in 78 % of runs instead of 60 %; ``docs/ALGORITHM.md``).
+        (Hopkins155, 5 seeds: held out 0.52 %, 0 gives 0.57 % on all data; LAAV's informed
+        trial converges in 85 % of runs instead of 56 %; ``docs/ALGORITHM.md``).
     rv_subspace_sample : int
         Points per group the subspace of the subspace votes is fitted to (>= 8).
     rv_select : {"none", "subspace", "laav"}
@@ -273,9 +273,11 @@ class LaavParams:
         joint merge on 4C fine models (``coarse_merge="auto"``), subspace votes in the
         informed trials (``rv_subspace_weight=1``) and the choice among LAAV's own trials
         (``rv_select="laav"``). Hopkins155, 5 seeds, σ = 0: 0.42 / 1.00 / 0.55 % (the
-        default 0.57 %), informed trial converged on 93 %, 0.13x plain RV's iterations;
-        not the default: at σ = 1 px about 5 % against the default's 1.6 %, and 36.5 %
-        against 15.4 % on ``small_motion`` (``docs/ALGORITHM.md``, "LAAV's own chain").
+        default then 0.57 %, now 0.51 %), informed trial converged on 93 %, 0.13x plain
+        RV's iterations; not the default: worse under pixel noise (seeds 0-1: 1.28 / 1.32 /
+        4.50 % at σ = 0.5 / 1 / 2 px, the default 0.94 / 1.26 / 2.97 %) and on
+        ``small_motion`` (36.5 % against 15.4 % for the default then, 19.7 % now; seeds
+        0-9) (``docs/ALGORITHM.md``, "LAAV's own chain").
         ``changes`` override fields as in :meth:`replace`."""
         return cls(coarse_merge="auto", rv_subspace_weight=1.0,
                    rv_select="laav").replace(**changes)

@@ -117,7 +117,8 @@ class Voting:
     informed_subspace_weight : float or None
         The subspace votes' weight in LAAV's informed trial (``rv_subspace_weight``, ours;
         0 when it voted as Random Voting does: the paper preset, missing data, or a start
-        labelling under :data:`SUBSPACE_VOTES_MIN_START` of the points); None for plain RV.
+        labelling under :data:`SUBSPACE_VOTES_MIN_START` of the points); None for plain RV
+        and when no voting ran (C = 1, or fewer than 2 frames).
     unlabelled_code : ndarray of shape (P,), int8, or None
         Missing data only (None on complete data): why each point has label -1, a key of
         :data:`laav._visibility.UNLABELLED_REASONS` (1: seen too briefly, no voting frame
