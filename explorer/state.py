@@ -98,6 +98,9 @@ def plain_rv_of(seq: Sequence, settings: Settings) -> laav.Voting:
 #: Most points of a sequence whose next seed is computed ahead (``seeds_ahead``): above,
 #: a second pipeline's memory and seconds of CPU after every result are not spent.
 AHEAD_MAX_POINTS = 2000
+#: Pipelines kept for settings not shown (the next seed, the one a step replaced, and a
+#: seed sweep's ten), oldest dropped first.
+AHEAD_KEEP = 12
 
 #: The parameters plain Random Voting depends on (its cache key).
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_"))
@@ -474,6 +477,7 @@ class ExplorerState:
         #: results shown from a pipeline computed ahead (tests read it)
         self.ahead_used = 0
         self._ahead_results: deque = deque(maxlen=4)
+        self._offered: deque = deque(maxlen=2 * AHEAD_KEEP)  # results of offered pipelines
         #: the pipeline's and plain RV's computations, interruptible by a newer request
         self.computing = _Interruptible()
         self.rv_computing = _Interruptible()
@@ -782,9 +786,13 @@ class ExplorerState:
         return fut
 
     # ------------------------------------------------------------------ the next seed, ahead
-    def computed_ahead(self, result) -> bool:
-        """Whether ``result`` was shown from a pipeline computed ahead (``seeds_ahead``)."""
-        return any(r is result for r in self._ahead_results)
+    def computed_ahead(self, result) -> str | None:
+        """How ``result`` was computed before it was asked for: ``"by the seed sweep"``
+        (:meth:`offer_pipeline`), ``"ahead, while idle"`` (``seeds_ahead``), or None."""
+        if not any(r is result for r in self._ahead_results):
+            return None
+        return ("by the seed sweep" if any(r is result for r in self._offered)
+                else "ahead, while idle")
 
     def compute_ahead(self) -> None:
         """Compute the next seed for the result shown (with ``seeds_ahead``), after what
@@ -814,8 +822,25 @@ class ExplorerState:
         return pipe
 
     def _trim_ahead(self) -> None:
-        while len(self._ahead) > 3:
+        while len(self._ahead) > AHEAD_KEEP:
             self._ahead.popitem(last=False)
+
+    def offer_pipeline(self, seq: Sequence, n_motions: int, params: LaavParams, seed: int,
+                       pipeline: Pipeline) -> bool:
+        """Keep ``pipeline`` (computed elsewhere for these settings, e.g. by the seed sweep)
+        for a later request of exactly them, which then shows its result at once, as the
+        next seed computed ahead is shown. Only for the sequence shown and sequences of at
+        most :data:`AHEAD_MAX_POINTS` points. Returns whether it was kept. (Any thread.)"""
+        if self._closed or seq is not self.sequence or seq.n_points > AHEAD_MAX_POINTS:
+            return False
+        key = (id(seq), Settings(params, int(seed), int(n_motions)))
+        with self._lock:
+            if key in self._ahead:
+                return False
+            self._ahead[key] = pipeline
+            self._trim_ahead()
+            self._offered.append(pipeline.result)
+        return True
 
     def _ahead_job(self, gen: int, seq: Sequence, target: Settings) -> None:
         """(Plain RV's worker, after plain RV for the settings shown.) A fresh pipeline and

@@ -9,6 +9,10 @@ the Numbers card, :func:`explorer.views.stage_numbers`) or, without ground truth
 share of points on which the seed agrees with the first seed's final labels, and how
 Random Voting converged.
 
+Each seed's :class:`laav.Pipeline` (whose result equals :func:`laav.segment`'s) can be
+handed on (``on_pipeline``): the explorer keeps it, so that a click on the seed's row
+shows it at once instead of computing it again.
+
 A newer sweep, :meth:`SeedSweep.cancel` or :meth:`SeedSweep.close` stops the one running
 at its next Python step (the seed being computed is dropped); the explorer cancels it when
 the parameters, C or the sequence change (a seed change keeps it: the rows stay valid).
@@ -172,11 +176,14 @@ class SeedSweep:
     """Runs seed sweeps on a worker thread of its own, one at a time.
 
     ``on_row(sweep_id, row, done, total)`` is called after each seed and
-    ``on_end(sweep_id, rows, cancelled)`` once at the end, both **from the worker thread**.
+    ``on_end(sweep_id, rows, cancelled)`` once at the end, both **from the worker thread**;
+    ``on_pipeline(seq, n_motions, params, seed, pipeline)`` (optional, from the worker
+    thread too) receives each seed's finished :class:`laav.Pipeline` before its row.
     """
 
-    def __init__(self, on_row: Callable | None = None, on_end: Callable | None = None) -> None:
-        self.on_row, self.on_end = on_row, on_end
+    def __init__(self, on_row: Callable | None = None, on_end: Callable | None = None,
+                 on_pipeline: Callable | None = None) -> None:
+        self.on_row, self.on_end, self.on_pipeline = on_row, on_end, on_pipeline
         self._worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-sweep")
         self._lock = threading.Lock()
         self._id = 0  # the newest sweep; an older one stops at its next check
@@ -241,10 +248,16 @@ class SeedSweep:
                     raise Cancelled
                 t0 = time.perf_counter()
                 with interruptible(lambda: sid != self._id):  # raises Cancelled when stale
-                    result = laav.segment(seq, C, params, seed)
+                    pipe = laav.Pipeline(seq, C, params, seed)  # laav.segment's result
+                result = pipe.result
                 dt = time.perf_counter() - t0
                 if sid != self._id:
                     raise Cancelled
+                if self.on_pipeline is not None:
+                    try:
+                        self.on_pipeline(seq, C, params, seed, pipe)
+                    except Exception:  # keeping it is a convenience: the sweep goes on
+                        traceback.print_exc()
                 row = seed_row(seq, result, reference, dt)
                 if reference is None:
                     reference = row.labels

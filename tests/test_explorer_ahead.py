@@ -102,3 +102,34 @@ def test_a_request_stops_the_computation_ahead_and_it_is_off_by_default(monkeypa
         assert len(big._ahead) == 0  # above the size limit: nothing computed ahead
     finally:
         big.close()
+
+
+def test_a_seed_the_sweep_computed_is_shown_from_its_pipeline():
+    """The seed sweep's pipelines are kept (``offer_pipeline``): a request of a swept seed
+    shows that pipeline's result at once, said as such, with a fresh computation's labels;
+    a pipeline for other settings, or another sequence, is not kept."""
+    from explorer.sweep import SeedSweep
+
+    seq = make_sequence(n_objects=1, n_points=150, n_frames=15, rng=4)
+    st = ExplorerState(seq, 2, PARAMS, seed=0)
+    sw = SeedSweep(on_pipeline=st.offer_pipeline)
+    try:
+        assert st.wait(120)
+        sw.start(seq, 2, PARAMS, seeds=(5, 6))
+        assert sw.wait(300) and [r.seed for r in sw.rows] == [5, 6]
+        st.request(seed=6)
+        assert st.wait(120) and st.result.seed == 6 and st.ahead_used == 1
+        assert st.computed_ahead(st.result) == "by the seed sweep"
+        fresh = laav.segment(seq, 2, PARAMS, seed=6)
+        np.testing.assert_array_equal(st.result.labels, fresh.labels)
+        np.testing.assert_array_equal(st.result.coarse.point_labels, fresh.coarse.point_labels)
+        other = make_sequence(n_objects=1, n_points=150, n_frames=15, rng=5)
+        assert not st.offer_pipeline(other, 2, PARAMS, 7, laav.Pipeline(other, 2, PARAMS, 7))
+        st.request(params={"lam": 3.0})  # the swept seed 5 was for other settings
+        assert st.wait(120)
+        st.request(seed=5)
+        assert st.wait(120) and st.result.seed == 5 and st.ahead_used == 1
+        assert st.computed_ahead(st.result) is None
+    finally:
+        sw.close()
+        st.close()

@@ -96,19 +96,22 @@ def test_seed_sweep_in_the_page(tmp_path, monkeypatch):
             if (m.type === 'Slider' && String(m.title).startsWith('seed')) return m.value === 4; }""",
                                timeout=20000)
         page.get_by_text("Showing browser_test").first.wait_for(timeout=20000)
+        # shown from the sweep's own pipeline for seed 4, not computed again
+        page.get_by_text("by the seed sweep").first.wait_for(timeout=20000)
+        assert ex.state.computed_ahead(ex.result) == "by the seed sweep"
         assert rows.count() == len(SEEDS)  # the rows stay: only the seed changed
         # a parameter change in the page cancels a running sweep. The sweep's seeds wait at
         # a gate until the change has reached the server: on a fast machine ten small runs
         # could otherwise end before the page's change arrives (a race, not the behaviour)
         gate = threading.Event()
-        segment = laav.segment
+        pipeline = laav.Pipeline  # what the sweep computes each seed with
 
         def gated(*args, **kw):
             if threading.current_thread() is not threading.main_thread():
                 gate.wait(60)
-            return segment(*args, **kw)
+            return pipeline(*args, **kw)
 
-        monkeypatch.setattr(laav, "segment", gated)
+        monkeypatch.setattr(laav, "Pipeline", gated)
         run.click()
         _wait_for(lambda: ex.sweep_view.sweep.running, 30, "a second sweep", page=page)
         # from the page, as a person does (a change made on the server from this test's

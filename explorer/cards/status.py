@@ -80,14 +80,15 @@ class StatusBar:
         self.url_alert.visible = bool(problems)
 
     def show_result(self, seq, error_final, compute_seconds: float, changed: list[str], change,
-                    ahead: bool = False) -> None:
+                    ahead: str | None = None) -> None:
         """The status line for a shown result (``changed``: the settings off their defaults)
         and what moved since the last (``change``: :class:`state.Change` or None); ``ahead``:
-        computed while idle, before it was asked for (``seeds_ahead``)."""
+        how it was computed before it was asked for (``"ahead, while idle"``, ``"by the seed
+        sweep"``: :meth:`ExplorerState.computed_ahead`), or None."""
         err = "" if error_final is None else f" — final error **{100 * error_final:.1f} %**"
         self.status.object = self._status_text = (
             f"Showing {V.md_text(seq.name)}{err} (computed in "
-            f"{1000 * compute_seconds:.0f} ms{', ahead, while idle' if ahead else ''}). "
+            f"{1000 * compute_seconds:.0f} ms{', ' + ahead if ahead else ''}). "
             + (f"Not at the defaults: {V.md_text(', '.join(changed))}." if changed
                else "All settings at their defaults."))
         self.change_md.object = ("" if change is None else

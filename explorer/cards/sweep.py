@@ -36,7 +36,9 @@ class SweepView:
 
     def __init__(self, host: Host, state, controls) -> None:
         self.host, self.state, self.controls = host, state, controls
-        self.sweep = SeedSweep(on_row=self._row_from_worker, on_end=self._end_from_worker)
+        # each seed's pipeline is kept by the state: a click on its row shows it at once
+        self.sweep = SeedSweep(on_row=self._row_from_worker, on_end=self._end_from_worker,
+                               on_pipeline=state.offer_pipeline)
         self._t0 = 0.0
         self._has_truth = True
         self.w_run = pn.widgets.Button(label=f"Run seeds {SEEDS[0]}-{SEEDS[-1]}", color="primary",
