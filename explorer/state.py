@@ -99,8 +99,14 @@ def plain_rv_of(seq: Sequence, settings: Settings) -> laav.Voting:
 #: a second pipeline's memory and seconds of CPU after every result are not spent.
 AHEAD_MAX_POINTS = 2000
 #: Pipelines kept for settings not shown (the next seed, the one a step replaced, and a
-#: seed sweep's ten), oldest dropped first.
+#: seed sweep's ten), oldest dropped first: at most this many, and at most
+#: :data:`AHEAD_BUDGET_BYTES` by :data:`PIPELINE_BYTES_PER_ENTRY` (at least 3).
 AHEAD_KEEP = 12
+#: Memory the kept pipelines of one tab may take, about.
+AHEAD_BUDGET_BYTES = 128 * 2**20
+#: A pipeline's retained memory per trajectory entry (frame x point): 145 bytes measured
+#: (tracemalloc, 2,000 tracks x 100 frames, 3 motions, default settings: 29 MB).
+PIPELINE_BYTES_PER_ENTRY = 150
 
 #: The parameters plain Random Voting depends on (its cache key).
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_"))
@@ -822,7 +828,10 @@ class ExplorerState:
         return pipe
 
     def _trim_ahead(self) -> None:
-        while len(self._ahead) > AHEAD_KEEP:
+        seq = self.sequence
+        size = 1 if seq is None else seq.n_frames * seq.n_points * PIPELINE_BYTES_PER_ENTRY
+        keep = max(3, min(AHEAD_KEEP, AHEAD_BUDGET_BYTES // size))
+        while len(self._ahead) > keep:
             self._ahead.popitem(last=False)
 
     def offer_pipeline(self, seq: Sequence, n_motions: int, params: LaavParams, seed: int,
