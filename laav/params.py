@@ -138,7 +138,7 @@ class LaavParams:
         (:func:`laav.refine.reassign_labels`). With model selection, every candidate
         labelling is polished so before it is scored.
     rv_subspace_weight : float
-        Subspace votes (ours, :class:`laav.rv.SubspaceVotes`; complete data; LAAV's
+        Subspace votes (ours, :class:`laav.subspace_votes.SubspaceVotes`; complete data; LAAV's
         informed trials only, never plain RV's random starts): every voting group also
         fits a rank-4 trajectory subspace to ``rv_subspace_sample`` of its points, and a
         point's vote uses its Sampson distance plus this weight times

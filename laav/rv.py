@@ -26,17 +26,10 @@ Choices where the RV paper is vague (measured on Hopkins155, ``benchmarks/TUNING
 * **Trials side by side** (``rv_batch``): speed only; the plain trial kept is the first
   *in start order* to converge, exactly as if the trials ran one after another.
 
-One departure of ours, in LAAV's informed trials only (never in plain RV's random starts)
-and only when ``rv_subspace_weight`` > 0 (the default; :meth:`laav.LaavParams.paper`
-sets 0): **subspace votes** (:class:`SubspaceVotes`). Besides its fundamental matrix, every group fits a
-rank-4 trajectory subspace to ``rv_subspace_sample`` of its points (drawn as above), and
-a point's distance becomes its Sampson distance plus ``rv_subspace_weight`` times its
-squared distance to the subspace (px^2 per frame). The epipolar vote alone cannot tell a
-static background from an object translating across it (one fundamental matrix fits
-both); their trajectories do not share one rank-4 subspace.
-
-Everything beyond the paper (refinement, joint reassignment, model selection) is in
-:mod:`laav.voting` and :mod:`laav.refine`.
+One hook for what is ours: an ``extra`` distance term added to the Sampson distances of
+LAAV's informed trial (:func:`run_trials`, :func:`vote`); LAAV passes its subspace votes
+(:mod:`laav.subspace_votes`) there. Everything else beyond the paper (refinement, joint
+reassignment, model selection) is in :mod:`laav.voting` and :mod:`laav.refine`.
 """
 
 from __future__ import annotations
@@ -46,48 +39,10 @@ import numpy as np
 from ._interrupt import check as check_interrupt
 from .geometry import fit_fundamental, sampson_distance
 
-__all__ = ["vote", "run_trials", "consensus", "consensus_seed", "RESET_AT", "SubspaceVotes"]
+__all__ = ["vote", "run_trials", "consensus", "consensus_seed", "RESET_AT"]
 
 #: Plain RV resets its votes once, at this iteration (RV paper).
 RESET_AT = 15
-
-
-class SubspaceVotes:
-    """The trajectories and settings of the subspace votes (complete data only).
-
-    Parameters
-    ----------
-    points : ndarray of shape (F, P, 2)
-    weight : float
-        ``rv_subspace_weight``: squared subspace distance (px^2 per frame) added to the
-        Sampson distance (px^2) before ``exp(-lambda d)``.
-    sample : int
-        ``rv_subspace_sample``: points per group the rank-4 subspace is fitted to.
-    """
-
-    RANK = 4
-
-    def __init__(self, points: np.ndarray, weight: float, sample: int):
-        from .refine import trajectory_matrix
-
-        self.n_frames = points.shape[0]
-        self.W = trajectory_matrix(points)  # (2F, P), origin at the points' corner
-        self.norm2 = np.einsum("ij,ij->j", self.W, self.W)
-        # never more than the points there are (a group smaller than the sample draws
-        # from every point, as the epipolar sample does)
-        self.weight, self.sample = float(weight), min(int(sample), points.shape[1])
-
-    def distances(self, idx: np.ndarray) -> np.ndarray:
-        """Squared distance (px^2 per frame) of every point to each group's subspace.
-
-        ``idx`` (..., C, m): the points each group's subspace is fitted to; returns
-        (..., C, P).
-        """
-        X = np.moveaxis(self.W[:, idx], 0, -2)  # (..., C, 2F, m)
-        U = np.linalg.svd(X, full_matrices=False)[0][..., :self.RANK]  # (..., C, 2F, 4)
-        proj = np.einsum("...dk,dp->...kp", U, self.W)  # (..., C, 4, P)
-        inside = np.einsum("...kp,...kp->...p", proj, proj)
-        return np.maximum(self.norm2 - inside, 0.0) / self.n_frames
 
 
 def _sample_groups(labels, votes, C, m, rng, avail=None):
@@ -130,7 +85,7 @@ def _sample_groups(labels, votes, C, m, rng, avail=None):
 
 def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: float,
          m: int, rng: np.random.Generator, visible: np.ndarray | None = None,
-         subspace: SubspaceVotes | None = None) -> np.ndarray:
+         extra=None) -> np.ndarray:
     """One voting step on frame pair ``pair``: one F per group, the votes of every point.
 
     Parameters
@@ -153,10 +108,10 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
         the fits and receive votes (the others get 0); ``points`` must be finite
         everywhere (hidden entries filled, e.g. with 0) and at least ``m`` points must be
         visible in both frames.
-    subspace : SubspaceVotes, optional
-        Complete data only: each point's squared distance to its group's rank-4
-        trajectory subspace (fitted to a second sample of each group) is added to its
-        Sampson distance, times ``subspace.weight``.
+    extra : callable, optional
+        Not in the RV paper: ``extra(labels, votes, C, rng)`` returns a term (..., C, P)
+        added to the Sampson distances, drawing after the epipolar sample from the same
+        generator(s) (LAAV's subspace votes, :class:`laav.subspace_votes.SubspaceVotes`).
 
     Returns
     -------
@@ -181,9 +136,8 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
         F = fit_fundamental(x1[b, idx], x2[b, idx])  # (B, C, 3, 3)
         x1, x2 = x1[:, None], x2[:, None]
     d = sampson_distance(F, x1, x2)  # (..., C, P)
-    if subspace is not None:
-        sub_idx = _sample_groups(labels, votes, C, subspace.sample, rng)
-        d += subspace.weight * subspace.distances(sub_idx)
+    if extra is not None:
+        d += extra(labels, votes, C, rng)
     v = np.exp(-lam * d)
     other = 1.0 - v
     total_other = np.add.reduce(other, axis=-2, keepdims=True)  # (..., 1, P)
@@ -240,7 +194,7 @@ def _pool_pair(pool: np.ndarray, rng: np.random.Generator) -> tuple[int, int]:
     return (right, left) if rng.random() < 0.5 else (left, right)
 
 
-def _step(points, trials, params, masks=None, subspace=None):
+def _step(points, trials, params, masks=None, extra=None):
     """One voting iteration of every trial in ``trials``, in one batched call; every
     random draw of a trial comes from its own generator. ``masks`` (missing data): the
     ``(visible, pool)`` of :func:`run_trials`."""
@@ -250,7 +204,7 @@ def _step(points, trials, params, masks=None, subspace=None):
     if masks is None:
         pairs = np.array([_frame_pair(F, t.rng) for t in trials])  # (B, 2)
         votes += vote(points, labels, votes, pairs, params.rv_lambda, params.rv_sample_size,
-                      [t.rng for t in trials], subspace=subspace)
+                      [t.rng for t in trials], extra=extra)
     else:
         visible, pool = masks
         pairs = np.array([_pool_pair(pool, t.rng) for t in trials])  # (B, 2)
@@ -285,7 +239,8 @@ def _step(points, trials, params, masks=None, subspace=None):
             t.done = True
 
 
-def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None, masks=None):
+def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None, masks=None,
+               extra=None):
     """Run LAAV's informed trial and plain RV's random-start trials, ``rv_batch`` side by side.
 
     Trials advance in lockstep, one batched numpy call per iteration, each with its own
@@ -318,8 +273,10 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
         only (:func:`vote`), and a point not voted on keeps its label and its votes (the
         forgetting factor applies to the points voted on: each point's histogram decays
         by its own votes). ``points`` must be finite everywhere (hidden entries filled).
-        The subspace votes (``rv_subspace_weight``) are for complete data; with ``masks``
-        the votes are epipolar only.
+    extra : callable, optional
+        Complete data and LAAV's informed trial alone (``n_plain=0``) only: the term
+        :func:`vote` adds to the Sampson distances (ours, not the RV paper's:
+        :func:`laav.subspace_votes.for_informed_trial`).
 
     Returns
     -------
@@ -335,12 +292,8 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
     P = points.shape[1]
     width = params.rv_batch
     n_plain = params.rv_trials if n_plain is None else n_plain
-    # subspace votes are for LAAV's informed trials only (run alone: n_plain=0); plain RV's
-    # random starts vote as the RV paper says (with them plain RV measured 2.48 % against
-    # 0.92 % on Hopkins155, seed 0: a random start locks in)
-    subspace = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
-                if params.rv_subspace_weight > 0 and masks is None and informed is not None
-                and n_plain == 0 else None)
+    if extra is not None and (masks is not None or informed is None or n_plain != 0):
+        raise ValueError("extra votes are for an informed trial alone on complete data")
     if streams is None:
         streams = rng.spawn(1 + n_plain)  # [informed, plain 0, plain 1, ...]
     active: list = []
@@ -365,7 +318,7 @@ def run_trials(points, C, params, rng, informed=None, n_plain=None, streams=None
             plain.append(t)
         if not active:
             break
-        _step(points, active, params, masks, subspace)
+        _step(points, active, params, masks, extra)
         active = [t for t in active if not t.done]
         # the kept plain trial is the first *in start order* to converge, as if the trials
         # ran one after another: a trial that converges sooner than an earlier one is not

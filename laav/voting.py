@@ -52,6 +52,7 @@ from .refine import (
     subspace_cost,
 )
 from .rv import consensus, consensus_seed, run_trials, vote
+from .subspace_votes import SUBSPACE_VOTES_MIN_START, for_informed_trial  # noqa: F401 (re-exported)
 
 __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances", "frame_pairs",
            "labelling_cost", "subspace_cost", "reassign_labels", "joint_score",
@@ -341,19 +342,19 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
     if params.rv_select == "laav" and mk is None:
         return _own_candidates(points, C, params, rng, init, labels0, votes0)
-    tp = _trial_params(params, known)
-    weight = tp.rv_subspace_weight if mk is None else 0.0  # missing data: epipolar votes only
+    extra = for_informed_trial(points, params, known, masks)  # ours: subspace votes
+    weight = 0.0 if extra is None else extra.weight
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
-        first, _, trials, _ = run_trials(points, C, tp, rng, (labels0, votes0), n_plain=0,
-                                         masks=masks)
+        first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,
+                                         masks=masks, extra=extra)
         return _with_informed(_finish(points, C, params, first, trials, True, "informed", mk=mk),
                               first, weight)
     # LAAV's start against plain RV: keep the labelling of lower selection score. The
     # informed trial and plain RV's trials each draw from their own generator, so they run
     # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
     streams = rng.spawn(1 + params.rv_trials)  # [informed, plain 0, plain 1, ...]
-    first, _, trials, _ = run_trials(points, C, tp, None, (labels0, votes0), n_plain=0,
-                                     streams=streams[:1], masks=masks)
+    first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
+                                     streams=streams[:1], masks=masks, extra=extra)
     plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, masks)
     trials, cands = trials + more, [("informed", first)] + cands
     if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
@@ -365,22 +366,6 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
                                   polished=polished, mk=mk), first, weight)
-
-
-#: Subspace votes (``rv_subspace_weight``) are used only in a trial whose start labels at
-#: least this share of the points: from a mostly random start they lock a wrong partition
-#: in, as for plain RV (2.48 % against 0.92 % on Hopkins155, seed 0) and at σ = 1 px, where
-#: the atoms cover 0-30 % of the points (8.5 % against 1.6 % without them, seeds 0-1).
-#: A majority, set a priori; at σ = 0 it changes one run of 775 (truck1 seed 1, 0 % either way).
-SUBSPACE_VOTES_MIN_START = 0.5
-
-
-def _trial_params(params: LaavParams, known: np.ndarray) -> LaavParams:
-    """``params`` for an informed trial whose start labels the points ``known``: without
-    subspace votes when that is under :data:`SUBSPACE_VOTES_MIN_START` of them."""
-    if params.rv_subspace_weight > 0 and np.mean(known) < SUBSPACE_VOTES_MIN_START:
-        return params.replace(rv_subspace_weight=0.0)
-    return params
 
 
 #: A missing-motion start (``rv_select="laav"``) takes the points in no atom whose best
@@ -468,10 +453,11 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
         starts.append((f"missing motion ({g}+{h})", lab, vot, stream, known2))
     trials, entries, first, weight = [], [], None, None
     for name, lab, vot, stream, known in starts:
-        tp = _trial_params(params, known)
-        res, _, ran, _ = run_trials(points, C, tp, None, (lab, vot), n_plain=0, streams=[stream])
+        extra = for_informed_trial(points, params, known)
+        res, _, ran, _ = run_trials(points, C, params, None, (lab, vot), n_plain=0,
+                                    streams=[stream], extra=extra)
         if first is None:
-            first, weight = res, tp.rv_subspace_weight
+            first, weight = res, 0.0 if extra is None else extra.weight
         trials += ran
         pol = _Polished(points, C, params, res[0])
         entries.append((name, res, pol, joint_score(points, pol.final()[0], C, params)))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from laav import LaavParams, Sequence, misclassification_rate, random_voting
-from laav.rv import SubspaceVotes
+from laav.subspace_votes import SubspaceVotes
 from laav.voting import joint_score, missing_motion_start
 
 synthetic = pytest.importorskip("laav.synthetic")
@@ -153,3 +153,30 @@ def test_the_default_informed_trial_converges_faster_than_plain_rv():
         assert v.informed_converged, s
         assert len(v.informed_changed) < plain.n_iterations, (s, len(v.informed_changed))
         assert misclassification_rate(seq.labels, res.labels) == 0.0, s
+
+
+def test_the_paper_rv_module_takes_the_subspace_votes_only_as_an_extra_term():
+    """``laav.rv`` is the RV paper's algorithm: it never reads ``rv_subspace_weight``; the
+    subspace votes (ours) come in as ``extra``, for an informed trial alone on complete
+    data, from ``laav.subspace_votes.for_informed_trial``."""
+    from laav.rv import run_trials
+    from laav.subspace_votes import SUBSPACE_VOTES_MIN_START, for_informed_trial
+
+    seq = two_motions(2)
+    P = seq.n_points
+    p = LaavParams(rv_max_iter=20)
+    known = np.ones(P, dtype=bool)
+    extra = for_informed_trial(seq.points, p, known)
+    assert isinstance(extra, SubspaceVotes) and extra.weight == 0.3
+    assert for_informed_trial(seq.points, p.replace(rv_subspace_weight=0.0), known) is None
+    assert for_informed_trial(seq.points, p, np.arange(P) < SUBSPACE_VOTES_MIN_START * P - 1) is None
+    start = (seq.labels.copy(), np.eye(2)[seq.labels] * 5.0)
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="informed trial alone"):
+        run_trials(seq.points, 2, p, rng, start, n_plain=2, extra=extra)
+    # the weight in the parameters alone changes nothing in laav.rv
+    a = run_trials(seq.points, 2, p, np.random.default_rng(1), start, n_plain=0)[0]
+    b = run_trials(seq.points, 2, p.replace(rv_subspace_weight=3.0), np.random.default_rng(1),
+                   start, n_plain=0)[0]
+    c = run_trials(seq.points, 2, p, np.random.default_rng(1), start, n_plain=0, extra=extra)[0]
+    assert np.array_equal(a[1], b[1]) and not np.array_equal(a[1], c[1])
