@@ -1,5 +1,5 @@
-"""``laav-explore [FILE | VIDEO] [--motions C|auto] [--params P.JSON] [--param NAME=VALUE ...] [--port N]
-[--host H] [--max-upload SIZE] [--no-browser] [tracking options]``.
+"""``laav-explore [FILE | VIDEO] [--motions C|auto] [--preset NAME] [--params P.JSON]
+[--param NAME=VALUE ...] [--port N] [--host H] [--max-upload SIZE] [--no-browser] [tracking options]``.
 
 A VIDEO (anything OpenCV opens) or a folder of frames, told apart from a sequence file by
 content (:func:`explorer.video.is_video`), is tracked first, before the server starts (the
@@ -15,7 +15,9 @@ with code 2 and one line on stderr.
 The page address carries its state: ``/?r1=25&seed=3`` opens with R1 = 25 and seed 3 (keys:
 every :class:`laav.LaavParams` field, ``seed``, ``motions``, ``frame``, ``color``), and moving
 a control updates it, so a copied address shows the same view. ``--params`` loads a
-``params.json`` exported by the page; ``--param`` sets one parameter (repeatable, applied last).
+``params.json`` exported by the page; ``--param`` sets one parameter (repeatable, applied last);
+``--preset paper`` (or ``own-chain``) starts from :meth:`laav.LaavParams.paper` (or
+:meth:`~laav.LaavParams.own_chain`) instead of the defaults, before both.
 
 Serves the explorer page (panel) with its embedded 3-D view (viser, one server per browser
 tab on a free port) from one process, prints the URL and opens the browser. Exit codes:
@@ -151,6 +153,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "interface, open to the network; each tab's 3-D view uses another free port)")
     p.add_argument("--seed", type=int, default=None, help="seed of the random stages (default 0, or the "
                    "one in --params)")
+    p.add_argument("--preset", choices=("default", "paper", "own-chain"), default="default",
+                   help="parameters to start from: ours (default), the paper's stages "
+                        "(LaavParams.paper()) or LAAV's own chain (LaavParams.own_chain()); "
+                        "--params and --param change them")
     p.add_argument("--params", metavar="P.JSON",
                    help="parameters to start with: a params.json exported by the explorer")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
@@ -405,7 +411,9 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(parser, f"--motions {C} exceeds the {seq.n_points} points of {seq.name}")
     from .state import Settings, parse_settings, settings_from_json
 
-    settings = Settings(laav.LaavParams(), 0 if args.seed is None else args.seed, C)
+    start = {"default": laav.LaavParams, "paper": laav.LaavParams.paper,
+             "own-chain": laav.LaavParams.own_chain}[args.preset]()
+    settings = Settings(start, 0 if args.seed is None else args.seed, C)
     if args.params is not None:
         try:
             with open(args.params, "rb") as fh:

@@ -707,13 +707,19 @@ def test_cli_loads_params_json_and_param(monkeypatch, tmp_path, capsys):
     assert seen["seed"] == 5 and seen["n_motions"] == 2
     assert main([str(f), "--no-browser", "--port", "0", "--params", str(pj), "--seed", "1"]) == 0
     assert seen["seed"] == 1
+    # a preset first, then --param on top of it
+    assert main([str(f), "--no-browser", "--port", "0", "--preset", "paper", "--param", "lam=3"]) == 0
+    assert seen["params"] == laav.LaavParams.paper(lam=3.0)
+    assert main([str(f), "--no-browser", "--port", "0", "--preset", "own-chain"]) == 0
+    assert seen["params"] == laav.LaavParams.own_chain()
     capsys.readouterr()
     for args, msg in ((["--param", "lam=abc"], "lam must be a number"),
                       (["--param", "lam"], "NAME=VALUE"),
                       (["--param", "r2=5"], "r2 must be larger than r1"),
                       (["--param", "zz=1"], "unknown setting 'zz'"),
                       (["--params", str(tmp_path / "missing.json")], "No such file"),
-                      (["--params", str(f)], "not a JSON file")):
+                      (["--params", str(f)], "not a JSON file"),
+                      (["--preset", "ours"], "invalid choice")):
         assert main([str(f), "--no-browser", "--port", "0", *args]) == 2
         err = capsys.readouterr().err
         assert msg in err and "Traceback" not in err, (args, err)

@@ -156,6 +156,25 @@ def test_reset_url_and_params_json_reach_the_advanced_card(ex):
     assert {"coarse_samples", "rv_reassign", "coarse_merge", "rv_select", "lam"} == set(adv.marked)
 
 
+def test_presets_in_one_click(ex):
+    """The paper's stages and LAAV's own chain, each one click in the Advanced card: every
+    field as the preset sets it, the sliders and the URL follow, and the Random Voting card
+    says which votes LAAV's trial used (the paper's: Sampson alone)."""
+    adv = ex.advanced
+    adv.w_presets["paper"].clicks += 1
+    assert ex.wait(120)
+    assert ex.state.target.params == laav.LaavParams.paper() == ex.result.params
+    assert adv.widgets["rv_subspace_weight"].value == 0.0 and adv.widgets["rv_select"].value == "none"
+    assert ex.query()["rv_subspace_weight"] == "0" and ex.query()["rv_select"] == "none"
+    assert ex.result.voting.informed_subspace_weight == 0.0
+    assert "Sampson distance alone (the RV paper's)" in ex.rv_view.rv_md.object
+    adv.w_presets["own_chain"].clicks += 1
+    assert ex.wait(120) and ex.result.params == laav.LaavParams.own_chain()
+    assert adv.widgets["coarse_merge"].value == "auto" and ex.result.voting.selected != ""
+    adv.w_reset.clicks += 1
+    assert ex.wait(120) and ex.result.params == laav.LaavParams()
+
+
 def _ring(ex, k):
     return np.c_[ex.compare.src_changed[k].data["x"], ex.compare.src_changed[k].data["y"]]
 

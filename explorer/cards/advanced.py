@@ -1,4 +1,5 @@
-"""The sidebar's Advanced card: every :class:`laav.LaavParams` field, grouped by stage.
+"""The sidebar's Advanced card: every :class:`laav.LaavParams` field, grouped by stage,
+and two presets (:data:`PRESETS`: the paper's stages, LAAV's own chain) in one click.
 
 Folded at first. One widget per field (:data:`explorer.fields.FIELDS`): a number box with
 the field's bounds, a select for a choice (``coarse_merge``, ``atom_frames``,
@@ -19,10 +20,14 @@ from functools import partial
 
 import panel as pn
 
+from laav import LaavParams
+
 from .. import views as V
 from ..fields import AUTO, FIELDS, STAGE_TITLES, changed_fields, fmt_value, widget_value
 from .base import SIDE_W, Alert, Host, Markdown
 
+#: The presets the card sets in one click: LaavParams constructor -> button label.
+PRESETS = {"paper": "Preset: the paper's stages", "own_chain": "Preset: LAAV's own chain"}
 #: Width of a field's widget inside the card (the card's padding and border fit the sidebar).
 FIELD_W = SIDE_W - 30
 #: Marks a field off its default, in its label.
@@ -65,11 +70,21 @@ class AdvancedPanel:
         self.w_reset = pn.widgets.Button(label="Reset every field to its default", color="warning",
                                          width=FIELD_W, margin=(8, 5))
         self.w_reset.on_click(self._on_reset)
+        # the presets (laav.LaavParams): compare ours with the paper's stages by pinning one
+        self.w_presets = {}
+        for name, label in PRESETS.items():
+            b = pn.widgets.Button(label=label, color="light", width=FIELD_W, margin=(2, 5))
+            b.on_click(partial(self._on_preset, name))
+            self.w_presets[name] = b
         intro = Markdown(
             "Every `LaavParams` field (hover the **?** for its meaning, range and default); a field "
-            f"off its default is marked {MARK}. Seed and C stay in the sliders above.",
+            f"off its default is marked {MARK}. Seed and C stay in the sliders above. The presets "
+            "set every field: `LaavParams.paper()` (each stage as the paper writes it) and "
+            "`LaavParams.own_chain()` (ours, no plain RV); pin a result first (Compare) to see "
+            "what our departures change.",
             width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
-        self.card = pn.Card(intro, self.summary, self.message, *rows, self.w_reset,
+        self.card = pn.Card(intro, self.summary, self.message, *self.w_presets.values(), *rows,
+                            self.w_reset,
                             title="Advanced: every parameter", collapsed=True, collapsible=True,
                             sizing_mode="stretch_width", margin=(6, 10))
         self._mark(p)
@@ -115,6 +130,10 @@ class AdvancedPanel:
 
     def _on_reset(self, event=None) -> None:
         self.request({f.name: f.default for f in FIELDS})
+
+    def _on_preset(self, name: str, event=None) -> None:
+        """Every field as the preset ``name`` (a :class:`laav.LaavParams` constructor) sets it."""
+        self.request(getattr(LaavParams, name)().to_dict())
 
     # ------------------------------------------------------------------ settings -> widgets
     def show(self, settings) -> None:
