@@ -417,7 +417,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.params is not None:
         try:
             with open(args.params, "rb") as fh:
-                loaded = settings_from_json(fh.read(), seq, settings)
+                loaded = settings_from_json(fh.read(), seq, settings, defaults=start)
         except OSError as exc:
             return _fail(parser, f"--params {args.params}: {exc.strerror or exc}")
         except ValueError as exc:

@@ -102,6 +102,8 @@ AHEAD_MAX_POINTS = 2000
 #: seed sweep's ten), oldest dropped first: at most this many, and at most
 #: :data:`AHEAD_BUDGET_BYTES` by :data:`PIPELINE_BYTES_PER_ENTRY` (at least 3).
 AHEAD_KEEP = 12
+#: How a result shown at once was computed (the status line says it).
+AHEAD_IDLE, AHEAD_SWEEP = "ahead, while idle", "by the seed sweep"
 #: Memory the kept pipelines of one tab may take, about.
 AHEAD_BUDGET_BYTES = 128 * 2**20
 #: A pipeline's retained memory per trajectory entry (frame x point): 145 bytes measured
@@ -350,10 +352,13 @@ def query_of(settings: Settings, default_motions: int | None, frame: int = 0,
     return q
 
 
-def settings_from_json(text: str | bytes, seq: Sequence, base: Settings) -> Settings:
+def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
+                       defaults: LaavParams | None = None) -> Settings:
     """Settings from a params.json the explorer exported (``{"params": {...}, "seed": ...,
-    "n_motions": ...}``) or a bare ``{field: value}`` object. Raises ValueError (readable)
-    when it is not such a file or a value is invalid; nothing is half-applied."""
+    "n_motions": ...}``) or a bare ``{field: value}`` object; a field it does not name is
+    ``defaults``' (default: ``LaavParams()``; ``laav-explore --preset`` gives its preset).
+    Raises ValueError (readable) when it is not such a file or a value is invalid; nothing
+    is half-applied."""
     try:
         d = json.loads(text)
     except (ValueError, UnicodeDecodeError) as exc:
@@ -368,7 +373,7 @@ def settings_from_json(text: str | bytes, seq: Sequence, base: Settings) -> Sett
     if unknown:
         raise ValueError(f"unknown LAAV parameter(s): {', '.join(map(str, unknown))[:200]}")
     try:
-        new_params = LaavParams(**{**_DEFAULTS.to_dict(), **params})
+        new_params = LaavParams(**{**(_DEFAULTS if defaults is None else defaults).to_dict(), **params})
     except TypeError as exc:
         raise ValueError(f"invalid LAAV parameters: {exc}") from None
     seed = d.get("seed", base.seed)
@@ -479,11 +484,10 @@ class ExplorerState:
         self._rv_key = None
         #: compute the next seed's result (and plain RV) while idle (see :meth:`_ahead_job`)
         self.seeds_ahead = bool(seeds_ahead)
-        self._ahead: OrderedDict = OrderedDict()  # (id(seq), Settings) -> Pipeline
+        self._ahead: OrderedDict = OrderedDict()  # (id(seq), Settings) -> (Pipeline, how)
         #: results shown from a pipeline computed ahead (tests read it)
         self.ahead_used = 0
-        self._ahead_results: deque = deque(maxlen=4)
-        self._offered: deque = deque(maxlen=2 * AHEAD_KEEP)  # results of offered pipelines
+        self._ahead_results: deque = deque(maxlen=4)  # (result, how) of results shown at once
         #: the pipeline's and plain RV's computations, interruptible by a newer request
         self.computing = _Interruptible()
         self.rv_computing = _Interruptible()
@@ -572,8 +576,6 @@ class ExplorerState:
 
     def load(self, seq: Sequence, n_motions: int | None = None) -> int | None:
         """Switch to another sequence (C from its ground truth unless given)."""
-        with self._lock:
-            self._ahead.clear()  # pipelines of the sequence shown: of no use for another
         C = n_motions if n_motions is not None else seq.n_motions
         if C is None:
             self._report(f"{seq.name} has no ground-truth labels: set the number of motions C first")
@@ -614,6 +616,8 @@ class ExplorerState:
         with self._lock:
             self._gen += 1
             gen = self._gen
+            if seq is not self._target_seq:
+                self._ahead.clear()  # pipelines of the sequence shown: of no use for another
             self._target, self._target_seq = target, seq
             self._pending += 1
             # the computation running now (its generation is no longer the newest) and plain
@@ -665,11 +669,13 @@ class ExplorerState:
                             pipe = Pipeline(seq, target.n_motions, target.params, target.seed)
                             result = pipe.result
                     else:
-                        pipe = self._take_ahead(seq, target)
-                        if pipe is not None:  # computed while idle: as a fresh Pipeline's
+                        entry = self._take_ahead(seq, target)
+                        if entry is not None:  # computed ahead: as a fresh Pipeline's
+                            pipe, how = entry
                             result = pipe.result
                             t0 -= sum(result.timings.values())  # its own stage times
-                            self._ahead_results.append(result)
+                            with self._lock:
+                                self._ahead_results.append((result, how))
                         else:
                             pipe = self._pipe
                             result = pipe.update(**target.update_kwargs())
@@ -793,12 +799,11 @@ class ExplorerState:
 
     # ------------------------------------------------------------------ the next seed, ahead
     def computed_ahead(self, result) -> str | None:
-        """How ``result`` was computed before it was asked for: ``"by the seed sweep"``
-        (:meth:`offer_pipeline`), ``"ahead, while idle"`` (``seeds_ahead``), or None."""
-        if not any(r is result for r in self._ahead_results):
-            return None
-        return ("by the seed sweep" if any(r is result for r in self._offered)
-                else "ahead, while idle")
+        """How ``result`` was computed before it was asked for: :data:`AHEAD_SWEEP`
+        (:meth:`offer_pipeline`), :data:`AHEAD_IDLE` (``seeds_ahead``), or None."""
+        with self._lock:
+            shown = list(self._ahead_results)
+        return next((how for r, how in shown if r is result), None)
 
     def compute_ahead(self) -> None:
         """Compute the next seed for the result shown (with ``seeds_ahead``), after what
@@ -815,17 +820,23 @@ class ExplorerState:
         except RuntimeError:  # closed
             pass
 
-    def _take_ahead(self, seq: Sequence, target: Settings) -> Pipeline | None:
-        """The pipeline computed ahead for ``target``, if any; the one it replaces is kept in
-        its place for the settings shown (a step back to them is then shown at once too)."""
+    def _take_ahead(self, seq: Sequence, target: Settings) -> tuple | None:
+        """The pipeline computed ahead for ``target`` and how (see :meth:`computed_ahead`),
+        if any; the one it replaces is kept in its place for the settings shown (a step back
+        to them is then shown at once too)."""
         with self._lock:
-            pipe = self._ahead.pop((id(seq), target), None)
-            if pipe is not None and self._pipe is not None and self.sequence is seq:
-                self._ahead[(id(seq), self.settings)] = self._pipe
-                self._trim_ahead()
-        if pipe is not None:
+            entry = self._ahead.pop((id(seq), target), None)
+            if entry is not None and self._pipe is not None and self.sequence is seq:
+                self._keep_ahead((id(seq), self.settings), self._pipe, AHEAD_IDLE)
+        if entry is not None:
             self.ahead_used += 1
-        return pipe
+        return entry
+
+    def _keep_ahead(self, key, pipe: Pipeline, how: str) -> None:
+        """(Under the lock.) Keep ``pipe`` for ``key`` as the newest entry, then trim."""
+        self._ahead.pop(key, None)  # a rewritten key is the newest, never the one trimmed
+        self._ahead[key] = (pipe, how)
+        self._trim_ahead()
 
     def _trim_ahead(self) -> None:
         seq = self.sequence
@@ -840,15 +851,12 @@ class ExplorerState:
         for a later request of exactly them, which then shows its result at once, as the
         next seed computed ahead is shown. Only for the sequence shown and sequences of at
         most :data:`AHEAD_MAX_POINTS` points. Returns whether it was kept. (Any thread.)"""
-        if self._closed or seq is not self.sequence or seq.n_points > AHEAD_MAX_POINTS:
-            return False
         key = (id(seq), Settings(params, int(seed), int(n_motions)))
-        with self._lock:
-            if key in self._ahead:
+        with self._lock:  # the sequence shown and still asked for (no load since)
+            if (self._closed or seq is not self.sequence or seq is not self._target_seq
+                    or seq.n_points > AHEAD_MAX_POINTS or key in self._ahead):
                 return False
-            self._ahead[key] = pipeline
-            self._trim_ahead()
-            self._offered.append(pipeline.result)
+            self._keep_ahead(key, pipeline, AHEAD_SWEEP)
         return True
 
     def _ahead_job(self, gen: int, seq: Sequence, target: Settings) -> None:
@@ -871,8 +879,8 @@ class ExplorerState:
                 if not have:
                     pipe = Pipeline(seq, target.n_motions, target.params, target.seed)
                     with self._lock:
-                        self._ahead[key] = pipe
-                        self._trim_ahead()
+                        if seq is self._target_seq:  # no other sequence asked for since
+                            self._keep_ahead(key, pipe, AHEAD_IDLE)
                 pkey = self.plain_rv_key(seq, target)
                 if pkey not in self._rv_cache:
                     self._keep_plain_rv(pkey, plain_rv_of(seq, target))

@@ -712,6 +712,11 @@ def test_cli_loads_params_json_and_param(monkeypatch, tmp_path, capsys):
     assert seen["params"] == laav.LaavParams.paper(lam=3.0)
     assert main([str(f), "--no-browser", "--port", "0", "--preset", "own-chain"]) == 0
     assert seen["params"] == laav.LaavParams.own_chain()
+    # a partial params.json changes the preset's fields it names, not the others
+    bare = tmp_path / "bare.json"
+    bare.write_text(json.dumps({"lam": 4.0}))
+    assert main([str(f), "--no-browser", "--port", "0", "--preset", "paper", "--params", str(bare)]) == 0
+    assert seen["params"] == laav.LaavParams.paper(lam=4.0)
     capsys.readouterr()
     for args, msg in ((["--param", "lam=abc"], "lam must be a number"),
                       (["--param", "lam"], "NAME=VALUE"),

@@ -130,6 +130,10 @@ def test_a_seed_the_sweep_computed_is_shown_from_its_pipeline():
         st.request(seed=5)
         assert st.wait(120) and st.result.seed == 5 and st.ahead_used == 1
         assert st.computed_ahead(st.result) is None
+        # once another sequence is asked for, the old one's pipelines are neither kept nor taken
+        st.load(other)
+        assert not st.offer_pipeline(seq, 2, PARAMS, 8, laav.Pipeline(seq, 2, PARAMS, 8))
+        assert st.wait(120) and st.sequence is other and len(st._ahead) == 0
     finally:
         sw.close()
         st.close()
