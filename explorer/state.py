@@ -102,13 +102,13 @@ AHEAD_MAX_POINTS = 2000
 #: seed sweep's ten), oldest dropped first: at most this many, and at most
 #: :data:`AHEAD_BUDGET_BYTES` by :data:`PIPELINE_BYTES_PER_ENTRY` (at least 3).
 AHEAD_KEEP = 12
-#: How a result shown at once was computed (the status line says it).
-AHEAD_IDLE, AHEAD_SWEEP = "ahead, while idle", "by the seed sweep"
 #: Memory the kept pipelines of one tab may take, about.
 AHEAD_BUDGET_BYTES = 128 * 2**20
 #: A pipeline's retained memory per trajectory entry (frame x point): 145 bytes measured
 #: (tracemalloc, 2,000 tracks x 100 frames, 3 motions, default settings: 29 MB).
 PIPELINE_BYTES_PER_ENTRY = 150
+#: How a result shown at once was computed (the status line says it).
+AHEAD_IDLE, AHEAD_SWEEP = "ahead, while idle", "by the seed sweep"
 
 #: The parameters plain Random Voting depends on (its cache key).
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams) if f.name.startswith("rv_"))

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .views import fine_count
+
 __all__ = ["TourStep", "TOUR"]
 
 
@@ -37,9 +39,7 @@ class TourStep:
         merge = params.merge_for(complete)
         text = {"epipolar": self.text_epipolar, "joint": self.text_joint}.get(merge)
         text = text or self.text
-        n = params.n_fine(n_motions, complete)
-        k = n // n_motions if n_motions and n % n_motions == 0 else None
-        return text.replace("{fine}", f"{k}C" if k is not None else str(n))
+        return text.replace("{fine}", fine_count(params, n_motions, complete))
 
 
 TOUR: tuple[TourStep, ...] = (

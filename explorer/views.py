@@ -25,7 +25,8 @@ __all__ = [
     "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
-    "replay_caption", "fine_count_note", "z_sources", "merge_table", "epipolar_sources", "rv_sources",
+    "replay_caption", "fine_count", "fine_count_note", "z_sources", "merge_table", "epipolar_sources",
+    "rv_sources",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
     "space_time", "cost_limit", "md_text",
 ]
@@ -603,11 +604,16 @@ def replay_labels(result: laav.LaavResult, step: int) -> np.ndarray:
     return rank[inv.ravel()]
 
 
-def fine_count_note(params: laav.LaavParams, n_motions: int, complete: bool = True) -> str:
-    """How many fine models the multicut is brought to, as a multiple of C where it is one,
-    and whether that is the paper's 2C."""
+def fine_count(params: laav.LaavParams, n_motions: int, complete: bool = True) -> str:
+    """How many fine models the multicut is brought to: a multiple of C where it is one
+    (``"2C"``, ``"4C"``), else the number."""
     n = params.n_fine(n_motions, complete)
-    k = f"{n // n_motions}C" if n_motions and n % n_motions == 0 else str(n)
+    return f"{n // n_motions}C" if n_motions and n % n_motions == 0 else str(n)
+
+
+def fine_count_note(params: laav.LaavParams, n_motions: int, complete: bool = True) -> str:
+    """:func:`fine_count`, and whether that is the paper's 2C."""
+    k = fine_count(params, n_motions, complete)
     if k == "2C":
         return "2C, the paper's"
     if params.fine_models is not None or params.fine_per_motion is not None:
@@ -960,7 +966,7 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
 def _votes(voting: laav.Voting) -> str:
     """How LAAV's informed trial voted: the RV paper's epipolar votes, or ours with the
     subspace term (a departure from the paper, named as such)."""
-    w = getattr(voting, "informed_subspace_weight", None)
+    w = voting.informed_subspace_weight
     if w is None:
         return ""
     if w > 0:

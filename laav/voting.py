@@ -343,12 +343,11 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     if params.rv_select == "laav" and mk is None:
         return _own_candidates(points, C, params, rng, init, labels0, votes0)
     extra = for_informed_trial(points, params, known, masks)  # ours: subspace votes
-    weight = 0.0 if extra is None else extra.weight
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
         first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,
                                          masks=masks, extra=extra)
         return _with_informed(_finish(points, C, params, first, trials, True, "informed", mk=mk),
-                              first, weight)
+                              first, extra)
     # LAAV's start against plain RV: keep the labelling of lower selection score. The
     # informed trial and plain RV's trials each draw from their own generator, so they run
     # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
@@ -365,7 +364,7 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
             trials, cands = trials + more, cands + kc
     polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
-                                  polished=polished, mk=mk), first, weight)
+                                  polished=polished, mk=mk), first, extra)
 
 
 #: A missing-motion start (``rv_select="laav"``) takes the points in no atom whose best
@@ -451,13 +450,13 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
         vot = np.zeros((P, C))
         vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
         starts.append((f"missing motion ({g}+{h})", lab, vot, stream, known2))
-    trials, entries, first, weight = [], [], None, None
+    trials, entries, first, first_extra = [], [], None, None
     for name, lab, vot, stream, known in starts:
         extra = for_informed_trial(points, params, known)
         res, _, ran, _ = run_trials(points, C, params, None, (lab, vot), n_plain=0,
                                     streams=[stream], extra=extra)
         if first is None:
-            first, weight = res, 0.0 if extra is None else extra.weight
+            first, first_extra = res, extra
         trials += ran
         pol = _Polished(points, C, params, res[0])
         entries.append((name, res, pol, joint_score(points, pol.final()[0], C, params)))
@@ -466,7 +465,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
     return _with_informed(_finish(points, C, params, res, trials, True, name, polished=pol,
-                                  costs=costs), first, weight)
+                                  costs=costs), first, first_extra)
 
 
 def _plain_run(points, C, params, rng, streams, memo, k, masks=None):
@@ -563,12 +562,13 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     return result
 
 
-def _with_informed(voting: Voting, first: tuple, subspace_weight: float) -> Voting:
-    """``voting`` with LAAV's informed trial's own trace (and its votes' subspace weight)
-    attached."""
+def _with_informed(voting: Voting, first: tuple, extra) -> Voting:
+    """``voting`` with LAAV's informed trial's own trace attached, and the weight of the
+    subspace votes it ran with (``extra``: its :class:`~laav.subspace_votes.SubspaceVotes`,
+    or None: 0)."""
     return dataclasses.replace(voting, informed_changed=first[2], informed_margin=first[3],
                                informed_converged=bool(first[5]),
-                               informed_subspace_weight=float(subspace_weight))
+                               informed_subspace_weight=0.0 if extra is None else extra.weight)
 
 
 class _Polished:
