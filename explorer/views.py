@@ -975,6 +975,11 @@ def _votes(voting: laav.Voting) -> str:
     return "; votes: Sampson distance alone (the RV paper's)"
 
 
+#: What the model selection scored candidates by (``Voting.score``), in words.
+_SCORES = {"joint": "coding length + epipolar cost per point, + disagreement with the others",
+           "subspace": "trajectory-subspace cost, + disagreement with the others"}
+
+
 def _selection(voting: laav.Voting) -> str:
     """Which candidate labelling the selection kept, and the candidates' scores.
 
@@ -988,11 +993,13 @@ def _selection(voting: laav.Voting) -> str:
         return ""
     name = md_text(kept) if kept else "(unnamed)"
     score = f" (score {float(costs[kept]):.2f})" if kept in costs else ""
+    by = _SCORES.get(getattr(voting, "score", ""), "")
+    by = f"; scored by {by} (ours)" if by else ""
     others = [(k, v) for k, v in costs.items() if k != kept]
     if len(others) <= 2:
         listed = ", ".join(f"{md_text(k)} {float(v):.2f}" for k, v in others)
-        return f"; kept the *{name}* labelling{score}; other candidates: {listed}"
-    return f"; kept *{name}*{score} of {len(costs)} scored candidates"
+        return f"; kept the *{name}* labelling{score}; other candidates: {listed}{by}"
+    return f"; kept *{name}*{score} of {len(costs)} scored candidates{by}"
 
 
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None) -> str:

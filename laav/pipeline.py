@@ -26,7 +26,7 @@ from .coarse import Coarse, merge_models
 from .graph import AtomGraph, atom_graph
 from .multicut import Multicut, solve_multicut
 from .params import STAGE_PARAMS, STAGES, LaavParams, stages_affected
-from .voting import Voting, random_voting
+from .voting import SELECTION_FIELDS, Voting, random_voting
 
 __all__ = ["LaavResult", "segment", "Pipeline", "preload"]
 
@@ -182,7 +182,7 @@ class Pipeline:
     def _voting_key(self, init) -> tuple:
         """Everything the fine-tuning's result depends on (its generator comes from the seed)."""
         rv = tuple((k, v) for k, v in self._run_params().to_dict().items()
-                   if k in STAGE_PARAMS["voting"])
+                   if k in STAGE_PARAMS["voting"] or k in SELECTION_FIELDS)
         return (self.seed, self.n_motions, rv, init)
 
     def _same_voting_inputs(self, key: tuple) -> bool:

@@ -64,6 +64,11 @@ __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances
 _ARBITRATE_ABOVE = 0.05
 
 
+#: Fields outside ``rv_*`` that the fine-tuning reads: the joint score's (the selection of
+#: ``rv_select="joint"`` and ``"laav"``). A memo of voting results must key on them too.
+SELECTION_FIELDS = ("coarse_epipolar_weight", "coding_eps")
+
+
 def unit2(params: LaavParams) -> float:
     """Squared pixel of :mod:`laav.refine`'s constants, in squared coordinate units.
 
@@ -125,9 +130,13 @@ class Voting:
         :data:`laav._visibility.UNLABELLED_REASONS` (1: seen too briefly, no voting frame
         pair sees it); 0 for a labelled point.
     costs : dict of str -> float
-        Selection score of each candidate compared (empty without ``rv_select``): its
-        subspace cost plus ``rv_select_agreement`` times its mean disagreement with the
-        other candidates (when there are more than two).
+        Selection score of each candidate compared (empty without ``rv_select``): its own
+        cost (:attr:`score`) plus ``rv_select_agreement`` times its mean disagreement with
+        the other candidates (when there are more than two).
+    score : str
+        What the candidates' own cost was: ``"joint"`` (coding length + epipolar cost per
+        point of the reassigned labels, :func:`joint_score`), ``"subspace"`` (the refined
+        labels' :func:`subspace_cost`), or ``""`` when nothing was compared.
     """
 
     labels: np.ndarray
@@ -148,6 +157,7 @@ class Voting:
     informed_converged: bool | None = None
     informed_subspace_weight: float | None = None
     unlabelled_code: np.ndarray | None = None
+    score: str = ""
 
 
 @single_threaded  # one BLAS/OpenMP thread, restored after (laav/_threads.py)
@@ -240,7 +250,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if vis is not None:
         return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo,
                               check_input)
-    select = params.rv_select in ("subspace", "laav")  # plain RV: "laav" selects as "subspace"
+    select = params.rv_select != "none"  # plain RV: "laav" selects as "subspace"
 
     if init_labels is None:  # plain RV
         _, best, trials, ended = run_trials(points, C, params, rng)
@@ -465,7 +475,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
     return _with_informed(_finish(points, C, params, res, trials, True, name, polished=pol,
-                                  costs=costs), first, first_extra)
+                                  costs=costs, score="joint"), first, first_extra)
 
 
 def _plain_run(points, C, params, rng, streams, memo, k, masks=None):
@@ -573,8 +583,9 @@ def _with_informed(voting: Voting, first: tuple, extra) -> Voting:
 
 class _Polished:
     """A candidate labelling refined (:func:`refine_labels`) and, on demand, jointly
-    reassigned (:func:`reassign_labels`); its :func:`subspace_cost` is taken after the
-    refinement, before the reassignment (see :func:`_select`)."""
+    reassigned (:func:`reassign_labels`), with its selection cost (:meth:`cost`: the
+    joint score of the reassigned labelling, or the subspace cost of the refined one;
+    see :func:`_select`)."""
 
     def __init__(self, points, C, params, labels, mk=None):
         self.points, self.C, self.params, self.mk = points, C, params, mk
@@ -584,13 +595,28 @@ class _Polished:
             labels, self.refined, self._distances = refine_labels(
                 points, labels, C, return_distances=True, unit2=unit2(params), **self._kw)
         self.refined_labels = labels
-        self._final = None
+        self._final = self._cost = None
 
     def cost(self) -> float:
-        if self.mk is not None:  # missing data: subspaces fitted on the visible entries
-            return subspace_cost(self.points, self.refined_labels, self.C,
-                                 unit2=unit2(self.params), visible=self.mk.visible)
-        return subspace_cost(self.points, self.refined_labels, self.C, unit2=unit2(self.params))
+        """The selection's own cost of this candidate (lower is better): with
+        ``rv_select="joint"`` on complete data, :func:`joint_score` of the final labelling
+        per point (``inf`` when a motion has fewer than 8 points); otherwise (and on
+        incomplete data, where the coding length is not defined) :func:`subspace_cost`
+        of the refined labelling."""
+        if self._cost is None:
+            if self.mk is None and self.params.rv_select == "joint":
+                self._cost = joint_score(self.points, self.final()[0], self.C,
+                                         self.params) / self.points.shape[1]
+            else:
+                self._cost = self.subspace()
+        return self._cost
+
+    def subspace(self) -> float:
+        """:func:`subspace_cost` of the refined labelling (on incomplete data, subspaces
+        fitted on the visible entries)."""
+        kw = {} if self.mk is None else {"visible": self.mk.visible}
+        return subspace_cost(self.points, self.refined_labels, self.C, unit2=unit2(self.params),
+                             **kw)
 
     def final(self) -> tuple[np.ndarray, int, int]:
         """(labels, points moved by the refinement, points moved by the reassignment)."""
@@ -605,7 +631,7 @@ class _Polished:
 
 
 def _finish(points, C, params, best, trials, initialised, selected, polished=None,
-            costs=None, mk=None) -> Voting:
+            costs=None, mk=None, score="") -> Voting:
     labels, votes, changed, margin, _its, conv = best
     labels, refined, reassigned = (_Polished(points, C, params, labels, mk) if polished is None
                                    else polished).final()
@@ -623,6 +649,7 @@ def _finish(points, C, params, best, trials, initialised, selected, polished=Non
         selected=selected,
         costs=dict(costs or {}),
         reassigned=reassigned,
+        score=score,
     )
 
 
@@ -644,12 +671,16 @@ def _partition_key(labels: np.ndarray) -> bytes:
 def _select(points, C, params, candidates, trials, initialised, polished=None, mk=None) -> Voting:
     """Polish every candidate labelling and return the one of lowest selection score.
 
-    Every candidate is refined (:func:`refine_labels`) and, when the agreement term needs
-    it or it wins, jointly reassigned (:func:`reassign_labels`). The score is the refined
-    labelling's :func:`subspace_cost` plus ``rv_select_agreement`` times its mean
+    Every candidate is refined (:func:`refine_labels`) and, when the score, the agreement
+    term or its win needs it, jointly reassigned (:func:`reassign_labels`). The score is the
+    candidate's own cost (:meth:`_Polished.cost`: with ``rv_select="joint"``, the default,
+    :func:`joint_score` per point of the reassigned labelling; with ``"subspace"`` the
+    refined labelling's :func:`subspace_cost`) plus ``rv_select_agreement`` times its mean
     disagreement (misclassification rate) with the other polished candidates, when there
     are more than two: among many unconverged trials, the labelling the others agree with
-    is the safer pick. (The cost is taken before the reassignment, which fits rank-4
+    is the safer pick. When no candidate has a finite joint score (every one leaves a
+    motion under 8 points), their subspace costs decide. (For ``"subspace"``, the cost is
+    taken before the reassignment, which fits rank-4
     subspaces and so makes every candidate's subspace cost alike; the agreement after it,
     where candidates that differ only by boundary points agree. Measured on Hopkins155,
     10 seeds, weight 2, against cost and agreement both before or both after: LAAV
@@ -673,6 +704,8 @@ def _select(points, C, params, candidates, trials, initialised, polished=None, m
                     polished[key] = done[key]  # plain RV's: the same on every rerun
         entries.append((name, cand) + done[key])
     scores = np.array([e[3] for e in entries])
+    if not np.isfinite(scores).any():  # joint: every candidate has a motion under 8 points
+        scores = np.array([e[2].subspace() for e in entries])
     if n > 2 and params.rv_select_agreement > 0:
         D = np.zeros((n, n))
         for i in range(n):
@@ -684,5 +717,8 @@ def _select(points, C, params, candidates, trials, initialised, polished=None, m
     k = int(np.argmin(scores))  # the first of equal scores: LAAV's start, then the consensus
     name, cand, pol, _ = entries[k]
     costs = {e[0]: float(v) for e, v in zip(entries, scores)}
+    score = "joint" if params.rv_select == "joint" and mk is None else "subspace"
+    if not np.isfinite([e[3] for e in entries]).any():
+        score = "subspace"
     return _finish(points, C, params, cand, trials, initialised, selected=name,
-                   polished=pol, costs=costs, mk=mk)
+                   polished=pol, costs=costs, mk=mk, score=score)

@@ -316,6 +316,14 @@ def test_rv_summary_reads_only_public_fields_and_any_selected_name(demo):
     assert "lowest" not in V.rv_summary(dataclasses.replace(v, selected="a", costs={"a": 2.0, "b": 1.0,
                                                                                        "c": 3.0, "d": 4.0}),
                                         None)
+    # the RV card names what the selection scored by, as the result says
+    four = {"a": 2.0, "b": 1.0, "c": 3.0}
+    assert "coding length + epipolar cost" in V.rv_summary(
+        dataclasses.replace(v, selected="b", costs=four, score="joint"), None)
+    old = V.rv_summary(dataclasses.replace(v, selected="b", costs=four, score="subspace"), None)
+    assert "trajectory-subspace cost" in old and "coding length" not in old
+    assert "scored by" not in V.rv_summary(dataclasses.replace(v, selected="b", costs=four, score=""),
+                                           None)
 
 
 def test_3d_view_gets_linear_colours_so_it_shows_the_2d_ones():

@@ -87,3 +87,20 @@ def test_rv_hopkins_smoke(errors):
     assert np.mean(list(e.values())) <= MEAN_CEILING, e
     bad = {n: v for n, v in e.items() if v > CEILING[n]}
     assert not bad, f"over the per-sequence ceiling: {bad} (all: {e})"
+
+
+def test_joint_selection_keeps_laavs_right_start(hopkins_root):
+    """2T3RCR_g13, seed 3: the coarse labels are right and LAAV's informed trial keeps
+    them, but plain RV's unconverged trials (17 % wrong) have the lower subspace cost, so
+    the selection by subspace cost (the default until 2026-12-01) returned one of them.
+    The joint score (coding length + epipolar cost) ranks LAAV's trial first
+    (benchmarks/TUNING.md, "The selection by the joint score")."""
+    from laav import LaavParams
+
+    seq = load_sequence(hopkins_root / "2T3RCR_g13")
+    joint = segment(seq, seq.n_motions, seed=3)
+    assert joint.params.rv_select == "joint" and joint.voting.selected == "informed"
+    assert misclassification_rate(seq.labels, joint.labels) < 0.01
+    old = segment(seq, seq.n_motions, LaavParams(rv_select="subspace"), seed=3)
+    assert old.voting.selected.startswith("plain")
+    assert misclassification_rate(seq.labels, old.labels) > 0.1

@@ -129,11 +129,12 @@ def test_joint_score_prefers_the_truth_and_needs_eight_points_a_motion():
 
 def test_own_chain_preset_and_default():
     """The own chain is a preset; the default keeps plain RV beside LAAV's trial, whose
-    votes have the subspace term at the cross-validated weight; the paper's have none."""
+    votes have the subspace term at the cross-validated weight, and selects by the joint
+    score; the paper's have none."""
     own, default = LaavParams.own_chain(), LaavParams()
     assert (own.coarse_merge, own.rv_select, own.rv_subspace_weight) == ("auto", "laav", 1.0)
     assert (default.coarse_merge, default.rv_select, default.rv_subspace_weight) == (
-        "epipolar", "subspace", 0.3)
+        "epipolar", "joint", 0.3)
     assert LaavParams.paper().rv_subspace_weight == 0.0
     assert own.n_fine(2) == 8 and own.n_fine(2, complete=False) == 4 and default.n_fine(2) == 4
 

@@ -85,6 +85,7 @@ def assert_same_result(a, b):
     assert np.array_equal(a.voting.labels, b.voting.labels)
     assert np.array_equal(a.voting.changed, b.voting.changed)
     assert a.voting.trial_iterations == b.voting.trial_iterations
+    assert a.voting.costs == b.voting.costs and a.voting.score == b.voting.score
 
 
 def test_segment_is_deterministic():
@@ -118,6 +119,10 @@ UPDATES = [
     {"n_motions": 2},
     {"lam": 0.5, "rv_alpha": 0.95},
     {"graph_neighbors": 3, "rv_lambda": 4.0},
+    # read by the selection's joint score, outside rv_*: the default's epipolar merge ignores
+    # them, so the coarse labels stay and only the voting's memo key can tell
+    {"coarse_epipolar_weight": 50.0},
+    {"coding_eps": 25.0},
 ]
 
 

@@ -240,8 +240,10 @@ def test_fine_tuning_from_a_wrong_start_is_outvoted_by_plain_rv():
     assert misclassification_rate(seq.labels, off.labels) > 0.1
 
 
-def test_selection_prefers_the_labelling_the_other_candidates_agree_with(monkeypatch):
-    """With more than two candidates of near-equal cost, agreement decides."""
+@pytest.mark.parametrize("mode", ["joint", "subspace"])
+def test_selection_prefers_the_labelling_the_other_candidates_agree_with(monkeypatch, mode):
+    """With more than two candidates of near-equal cost, agreement decides, whichever cost
+    the selection uses."""
     import laav.voting as V
 
     seq = scene(1, 3)
@@ -249,16 +251,22 @@ def test_selection_prefers_the_labelling_the_other_candidates_agree_with(monkeyp
     good = seq.labels.copy()
     odd = good.copy()
     odd[:30] = 1 - odd[:30]
-    # the odd labelling gets a slightly lower subspace cost; three copies of the good one
-    # (as renamed trials) disagree with it
-    monkeypatch.setattr(V, "subspace_cost",
-                        lambda p, lab, c, **k: 1.0 if np.array_equal(lab, odd) else 1.01)
+    # the odd labelling gets a slightly lower cost; three copies of the good one (as
+    # renamed trials) disagree with it
+    if mode == "subspace":
+        monkeypatch.setattr(V, "subspace_cost",
+                            lambda p, lab, c, **k: 1.0 if np.array_equal(lab, odd) else 1.01)
+    else:  # the joint score is per point in the selection
+        monkeypatch.setattr(V, "joint_score", lambda p, lab, c, params: seq.n_points * (
+            1.0 if np.array_equal(lab, odd) else 1.01))
+        monkeypatch.setattr(V, "subspace_cost", lambda *a, **k: pytest.fail("not the joint score"))
     monkeypatch.setattr(V, "refine_labels", lambda p, lab, c, **k: (lab.copy(), 0, None))
     trial = lambda lab: (lab, np.zeros((seq.n_points, C)), np.zeros(1, np.int64),  # noqa: E731
                          np.zeros(1), 1, False)
     cands = [("odd", trial(odd)), ("a", trial(good)), ("b", trial(1 - good)), ("c", trial(good))]
     for weight, expected in ((0.0, "odd"), (0.5, "a")):
-        res = V._select(seq.points, C, LaavParams(rv_select_agreement=weight, rv_reassign=False), cands,
+        res = V._select(seq.points, C, LaavParams(rv_select=mode, rv_select_agreement=weight,
+                                                  rv_reassign=False), cands,
                         [c for _, c in cands], initialised=False)
         assert res.selected == expected
         assert res.costs[expected] == min(res.costs.values())
@@ -472,3 +480,36 @@ def test_voting_subset_limit_is_off_in_the_paper_preset_and_below_the_limit():
     np.testing.assert_array_equal(a.labels, b.labels)
     with pytest.raises(ValueError, match="rv_max_points"):
         LaavParams(rv_max_points=10)
+
+
+def test_joint_selection_scores_are_the_joint_score_of_each_polished_candidate():
+    """``rv_select="joint"``: every candidate's score is the joint score (coding length +
+    ``coarse_epipolar_weight`` x epipolar cost) of its refined and reassigned labelling,
+    per point, plus the agreement term; computed here directly from the public steps."""
+    from laav.refine import reassign_labels
+    from laav.voting import joint_score, unit2
+
+    seq = scene(2, 1)
+    C = seq.n_motions
+    p = LaavParams(rv_trials=4, rv_max_iter=6)  # short trials: none converges, 5 candidates
+    res = random_voting(seq, C, p, seed=3)
+    assert not res.converged and len(res.costs) == 5
+    # the candidates again, as random_voting made them (its trials are public through the
+    # same generator streams: rerun them with the paper's ending and keep every trial)
+    from laav.rv import consensus, run_trials
+
+    rng = np.random.default_rng(3)
+    _, best, _, ended = run_trials(seq.points, C, p, rng)
+    assert best is None
+    cands = {"consensus": consensus(ended, C, rng)[0]}
+    cands.update({f"trial {k}": t[0] for k, t in enumerate(ended)})
+    finals = {}
+    for name, lab in cands.items():
+        ref = refine_labels(seq.points, lab, C, unit2=unit2(p))[0]
+        finals[name] = reassign_labels(seq.points, ref, C, unit2=unit2(p))[0]
+    own = {k: joint_score(seq.points, v, C, p) / seq.n_points for k, v in finals.items()}
+    names = list(own)
+    for k in names:
+        agree = np.mean([misclassification_rate(finals[k], finals[j]) for j in names if j != k])
+        assert res.costs[k] == pytest.approx(own[k] + p.rv_select_agreement * agree, rel=1e-9)
+    assert res.selected == min(res.costs, key=res.costs.get)
