@@ -550,7 +550,7 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     sub = filled(points[:, idx], sub_vis)
     init, w = _start_arrays(init_labels, weights, P)
     mk = _Masks(sub_vis, pool)
-    select = params.rv_select in ("subspace", "laav")  # incomplete data: "laav" as "subspace"
+    select = params.rv_select != "none"  # incomplete data: "joint" and "laav" as "subspace"
     if init is None:  # plain RV
         _, best, trials, ended = run_trials(sub, C, params, rng, masks=(mk.visible, mk.pool))
         out = _plain_result(seq, sub, C, params, rng, best, trials, ended, select, mk)

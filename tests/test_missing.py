@@ -325,6 +325,20 @@ def test_the_coding_merge_falls_back_to_the_epipolar_merge_with_a_warning():
     assert laav.misclassification_rate(seq.labels, res.labels) <= 0.02
 
 
+def test_default_selection_runs_on_missing_data_by_the_subspace_cost():
+    """The default's selection (``rv_select="joint"``) needs whole trajectories for its
+    coding length: on incomplete tracks it still runs plain RV beside LAAV's trial and
+    selects, by the masked subspace cost, exactly as ``rv_select="subspace"`` does."""
+    seq = _scene(1)
+    occl = occlude(seq, 0.4, 1)
+    res = _quiet_segment(occl, seq.n_motions)
+    assert res.params.rv_select == "joint"
+    assert res.voting.score == "subspace" and len(res.voting.costs) >= 2
+    old = _quiet_segment(occl, seq.n_motions, LaavParams(rv_select="subspace"))
+    np.testing.assert_array_equal(res.labels, old.labels)
+    assert res.voting.costs == old.voting.costs
+
+
 def test_paper_preset_runs_on_missing_data():
     seq = _scene(0)
     occl = occlude(seq, 0.2, 0)
