@@ -166,8 +166,8 @@ class LaavParams:
         epipolar cost, :func:`laav.voting.joint_score`) plus ``rv_select_agreement`` x
         its mean disagreement with the other candidates. Chosen over ``"subspace"`` by
         5-fold cross-validation grouped by source video (Hopkins155, 5 seeds: held out
-        0.38 % against 0.51 %; σ = 0.5 / 1 px 0.46 / 0.76 % against 0.79 / 1.25 %;
-        ``docs/ALGORITHM.md``). On incomplete data (no coding length) it runs as
+        0.38 % against 0.51 %; σ = 0.5 / 1 / 2 px, seeds 0-1: 0.55 / 0.74 / 1.68 %
+        against 0.93 / 1.26 / 2.97 %; ``docs/ALGORITHM.md``). On incomplete data (no coding length) it runs as
         ``"subspace"``.
         ``"subspace"`` (ours, the default until 2026-12-01): the same, scored by the
         refined labelling's trajectory-subspace cost (:func:`laav.refine.subspace_cost`)
