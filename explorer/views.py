@@ -977,7 +977,8 @@ def _votes(voting: laav.Voting) -> str:
 
 #: What the model selection scored candidates by (``Voting.score``), in words.
 _SCORES = {"joint": "coding length + epipolar cost per point, + disagreement with the others",
-           "subspace": "trajectory-subspace cost, + disagreement with the others"}
+           "subspace": "trajectory-subspace cost, + disagreement with the others",
+           "joint-sum": "coding length + epipolar cost of the whole labelling"}
 
 
 def _selection(voting: laav.Voting) -> str:

@@ -37,7 +37,7 @@ from ._random import as_seed
 from ._sequence import Sequence
 from .params import STAGE_PARAMS, LaavParams
 from .pipeline import segment
-from .voting import random_voting
+from .voting import SELECTION_FIELDS, random_voting
 
 __all__ = ["LAAV", "RandomVoting"]
 
@@ -144,7 +144,9 @@ class RandomVoting(_Estimator):
     n_motions : int, default 2
     random_state : None, int, numpy.random.Generator or RandomState, default None
     **stage_params
-        Every ``rv_*`` field of :class:`laav.LaavParams`, keyword-only, with its default.
+        Every ``rv_*`` field of :class:`laav.LaavParams`, and the two its selection's joint
+        score reads (``coarse_epipolar_weight``, ``coding_eps``:
+        :data:`laav.voting.SELECTION_FIELDS`), keyword-only, with its default.
 
     Attributes
     ----------
@@ -154,7 +156,8 @@ class RandomVoting(_Estimator):
     n_features_in_ : int
     """
 
-    _stage_params = [f.name for f in dataclasses.fields(LaavParams) if f.name in STAGE_PARAMS["voting"]]
+    _stage_params = [f.name for f in dataclasses.fields(LaavParams)
+                     if f.name in STAGE_PARAMS["voting"] or f.name in SELECTION_FIELDS]
     __init__ = _init_with_stage_params(_stage_params)
 
     def fit(self, X, y=None):

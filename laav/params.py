@@ -86,7 +86,8 @@ class LaavParams:
         epipolar merge on incomplete ones, without a warning (``docs/ALGORITHM.md``).
         Default: ``"epipolar"``.
     coding_eps : float
-        Distortion (px) of the coding length (``coarse_merge="coding"`` or ``"joint"``).
+        Distortion (px) of the coding length (``coarse_merge="coding"`` or ``"joint"``, and
+        the selection's joint score, ``rv_select="joint"`` or ``"laav"``).
     coarse_candidates : int
         ``coarse_merge="joint"``: how many partitions of least coding length (each motion
         with 8 points or more) are re-ranked by their epipolar fit.
@@ -94,6 +95,8 @@ class LaavParams:
         ``coarse_merge="joint"``: weight of the epipolar cost (a sum over the points in
         atoms of ``log(1 + d)``, ``d`` the point's Sampson distance to its motion's robust
         fundamental matrices in units of ``2 / lam``) against the coding length (nats).
+        The selection's joint score (``rv_select="joint"`` or ``"laav"``,
+        :func:`laav.voting.joint_score`) weighs its epipolar cost over all points by it too.
     lam : float
         Epipolar voting strength lambda of the fine-to-coarse stage (1/px^2).
     coarse_frames : int
@@ -166,8 +169,9 @@ class LaavParams:
         epipolar cost, :func:`laav.voting.joint_score`) plus ``rv_select_agreement`` x
         its mean disagreement with the other candidates. Chosen over ``"subspace"`` by
         5-fold cross-validation grouped by source video (Hopkins155, 5 seeds: held out
-        0.38 % against 0.51 %; σ = 0.5 / 1 / 2 px, seeds 0-1: 0.55 / 0.74 / 1.68 %
-        against 0.93 / 1.26 / 2.97 %; ``docs/ALGORITHM.md``). On incomplete data (no coding length) it runs as
+        0.38 %; on all data 0.38 % against 0.51 % for ``"subspace"``; σ = 0.5 / 1 / 2 px,
+        seeds 0-1: 0.55 / 0.74 / 1.68 % against 0.93 / 1.26 / 2.97 %;
+        ``docs/ALGORITHM.md``). On incomplete data (no coding length) it runs as
         ``"subspace"``.
         ``"subspace"`` (ours, the default until 2026-12-01): the same, scored by the
         refined labelling's trajectory-subspace cost (:func:`laav.refine.subspace_cost`)
@@ -282,9 +286,9 @@ class LaavParams:
         joint merge on 4C fine models (``coarse_merge="auto"``), subspace votes in the
         informed trials (``rv_subspace_weight=1``) and the choice among LAAV's own trials
         (``rv_select="laav"``). Hopkins155, 5 seeds, σ = 0: 0.42 / 1.00 / 0.55 % (the
-        default then 0.57 %, now 0.51 %), informed trial converged on 93 %, 0.13x plain
+        default then 0.57 %, now 0.38 %), informed trial converged on 93 %, 0.13x plain
         RV's iterations; not the default: worse under pixel noise (seeds 0-1: 1.28 / 1.32 /
-        4.50 % at σ = 0.5 / 1 / 2 px, the default 0.94 / 1.26 / 2.97 %) and on
+        4.50 % at σ = 0.5 / 1 / 2 px, the default now 0.55 / 0.74 / 1.68 %) and on
         ``small_motion`` (36.5 % against 15.4 % for the default then, 19.7 % now; seeds
         0-9) (``docs/ALGORITHM.md``, "LAAV's own chain").
         ``changes`` override fields as in :meth:`replace`."""

@@ -243,8 +243,12 @@ class Pipeline:
                 if self._voting_memo is not None and self._same_voting_inputs(key):
                     st["voting"] = self._voting_memo[1]  # same inputs, same result
                 else:
-                    if self._plain_memo is None or self._plain_memo[0] != key[:3]:
-                        self._plain_memo = (key[:3], {})  # new seed, C or rv_* settings
+                    # plain RV's runs: kept while seed, C and rv_* stay (its polished
+                    # candidates' costs are keyed on the selection's fields inside)
+                    pkey = (key[0], key[1], tuple(kv for kv in key[2]
+                                                  if kv[0] not in SELECTION_FIELDS))
+                    if self._plain_memo is None or self._plain_memo[0] != pkey:
+                        self._plain_memo = (pkey, {})  # new seed, C or rv_* settings
                     # no atom: plain RV, whose input checks segment() made already
                     st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
                                                  plain_memo=self._plain_memo[1],

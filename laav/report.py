@@ -318,8 +318,8 @@ def report_from_csv(path: str | os.PathLike) -> str:
     cv = _convergence(rows)
     lines += ["## Convergence of Random Voting (Fig. 3)", "",
               "Iterations of the voting stage per run, summed over every trial it ran "
-              "(LAAV: the fine-tuning from the atom labels and, with the default "
-              "`rv_select=subspace`, the plain RV trials it is compared with; RV: all trials "
+              "(LAAV: the fine-tuning from the atom labels and, with the default's model "
+              "selection (`rv_select`), the plain RV trials it is compared with; RV: all trials "
               "from random starts), and the share of runs whose returned labelling did not "
               "come from a converged trial.", "",
               "| Method | σ (px) | Runs | Median iterations | p90 iterations | Not converged (%) |",

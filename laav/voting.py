@@ -12,11 +12,14 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
 * **Joint reassignment** (``rv_reassign``). Every point moves to the motion whose robust
   rank-4 trajectory subspace *and* fundamental matrices explain it best together
   (:func:`laav.refine.reassign_labels`).
-* **Model selection** (``rv_select="subspace"``). Voting can converge on, or end at, a
-  wrong partition, and the epipolar fit cannot tell (a static background and a
-  translating object satisfy one fundamental matrix). Candidate labellings are compared
-  after refinement by :func:`subspace_cost` plus ``rv_select_agreement`` times their
-  mean disagreement with the other candidates. Plain RV with no converged trial chooses
+* **Model selection** (``rv_select="joint"``, the default; ``"subspace"`` before
+  2026-12-01). Voting can converge on, or end at, a wrong partition, and the epipolar fit
+  cannot tell (a static background and a translating object satisfy one fundamental
+  matrix). Candidate labellings are compared after refinement and reassignment by
+  :func:`joint_score` per point (lossy coding length + ``coarse_epipolar_weight`` x
+  epipolar cost; with ``"subspace"``, and on incomplete data, after refinement by
+  :func:`subspace_cost`) plus ``rv_select_agreement`` times their mean disagreement with
+  the other candidates. Plain RV with no converged trial chooses
   among the consensus and its trials; LAAV's fine-tuning then also runs plain RV beside
   the informed trial (two more runs when they disagree on more than 5 % of the points)
   and chooses among all. With ``rv_select="none"`` (:meth:`LaavParams.paper`) the
@@ -26,7 +29,9 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
 The refinement, reassignment and selection compare squared distances with a few absolute
 constants (:mod:`laav.refine`); they are in units of ``1 / rv_lambda`` (the squared
 distance at which a vote fades), so that scaling the coordinates by ``s`` and
-``rv_lambda`` by ``1 / s^2`` gives the same labels (:func:`unit2`).
+``rv_lambda`` by ``1 / s^2`` gives the same labels (:func:`unit2`). The joint score's
+coding length has its own distortion ``coding_eps`` in px: scale it by ``s`` too
+(:meth:`LaavParams.scaled` scales both).
 """
 
 from __future__ import annotations
@@ -112,7 +117,7 @@ class Voting:
     selected : str
         Which candidate labelling was returned: ``"trial"`` (a converged trial),
         ``"consensus"`` (co-association of unconverged trials), ``"trial k"`` (the k-th
-        unconverged trial, by subspace cost), ``"informed"`` (LAAV's start); in LAAV's
+        unconverged trial, by the selection's score), ``"informed"`` (LAAV's start); in LAAV's
         fine-tuning the plain RV candidates are named ``"plain trial"``, ``"plain
         consensus"``, ``"plain trial k"``.
     informed_changed, informed_margin : ndarray of shape (T0,) or None
@@ -136,7 +141,9 @@ class Voting:
     score : str
         What the candidates' own cost was: ``"joint"`` (coding length + epipolar cost per
         point of the reassigned labels, :func:`joint_score`), ``"subspace"`` (the refined
-        labels' :func:`subspace_cost`), or ``""`` when nothing was compared.
+        labels' :func:`subspace_cost`), ``"joint-sum"`` (``rv_select="laav"``: the whole
+        labelling's :func:`joint_score`, no agreement term), or ``""`` when nothing was
+        compared.
     """
 
     labels: np.ndarray
@@ -191,7 +198,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         :class:`laav.Pipeline` does when λ or the radii change): an empty dict at first,
         then the same dict again for the same points, C, seed and ``rv_*`` settings. Plain
         RV's runs and their polished candidates (which do not depend on ``init_labels``)
-        are kept in it and reused; the labels are identical to a run without it.
+        are kept in it and reused, the candidates' costs per value of the fields the joint
+        score reads (:data:`SELECTION_FIELDS`); the labels are identical to a run without
+        it.
     visible : ndarray of shape (F, P), bool, optional
         For an array ``seq`` with missing entries (a :class:`Sequence` carries its own).
         When an entry is hidden, the missing-data variant runs (``docs/ALGORITHM.md``,
@@ -372,7 +381,10 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
             _, more, kc = _plain_run(points, C, params, rng, rng.spawn(1 + params.rv_trials),
                                      plain_memo, k, masks)
             trials, cands = trials + more, cands + kc
-    polished = None if plain_memo is None else plain_memo.setdefault("polished", {})
+    # the polished candidates' costs read the selection's fields too: keyed on them, so a
+    # caller may keep the memo across changes of those (plain RV's runs stay valid)
+    polished = None if plain_memo is None else plain_memo.setdefault(
+        ("polished",) + tuple(getattr(params, f) for f in SELECTION_FIELDS), {})
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
                                   polished=polished, mk=mk), first, extra)
 
@@ -475,7 +487,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
     return _with_informed(_finish(points, C, params, res, trials, True, name, polished=pol,
-                                  costs=costs, score="joint"), first, first_extra)
+                                  costs=costs, score="joint-sum"), first, first_extra)
 
 
 def _plain_run(points, C, params, rng, streams, memo, k, masks=None):

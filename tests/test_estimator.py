@@ -43,11 +43,12 @@ def test_is_a_scikit_learn_clusterer(cls):
 
 
 def test_stage_parameters_follow_laavparams():
-    # the signature comes from the dataclass: every field, and RandomVoting's rv_* ones only
+    # the signature comes from the dataclass: every field, and RandomVoting's rv_* ones plus
+    # the two its selection's joint score reads
     fields = set(LaavParams().to_dict())
     assert set(LAAV().get_params()) == fields | {"n_motions", "random_state"}
     rv = set(RandomVoting().get_params()) - {"n_motions", "random_state"}
-    assert rv == {f for f in fields if f.startswith("rv_")}
+    assert rv == {f for f in fields if f.startswith("rv_")} | {"coarse_epipolar_weight", "coding_eps"}
     assert "lam=3.0" in repr(LAAV(lam=3.0)) and "r1" not in repr(LAAV(lam=3.0))
 
 

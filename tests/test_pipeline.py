@@ -337,3 +337,22 @@ def test_update_gives_fresh_label_names_when_plain_rv_is_kept(change):
     res = pipe.update(**change)
     fresh = segment(seq, seq.n_motions, LaavParams(**change), seed=0)
     np.testing.assert_array_equal(res.labels, fresh.labels)
+
+
+@pytest.mark.parametrize("change", [{"coarse_epipolar_weight": 50.0}, {"coding_eps": 25.0}],
+                         ids=lambda d: ",".join(d))
+def test_selection_fields_outside_rv_reach_the_kept_fine_tuning(change):
+    """The selection's joint score reads ``coarse_epipolar_weight`` and ``coding_eps``; the
+    epipolar merge does not, so the coarse labels stay and only the memo keys can tell.
+    On a noisy scene each moves the candidates' scores clearly, and the update must equal a
+    fresh run (plain RV's runs may be kept: they do not read them)."""
+    from laav.bench import add_pixel_noise
+
+    seq = add_pixel_noise(scene(2, 2), 1.0, 0)
+    pipe = Pipeline(seq, 3, seed=0)
+    base = pipe.result
+    res = pipe.update(**change)
+    fresh = segment(seq, 3, LaavParams(**change), seed=0)
+    assert_same_result(res, fresh)
+    common = set(base.voting.costs) & set(res.voting.costs)
+    assert common and max(abs(base.voting.costs[k] - res.voting.costs[k]) for k in common) > 1e-3

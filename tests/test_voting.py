@@ -429,7 +429,7 @@ def test_plain_memo_reuses_plain_rv_and_keeps_the_labels(monkeypatch, max_iter):
     # every plain run after the first call came from the memo: of the calls made with the
     # memo, only the informed trials (n_plain=0) and each plain run's first time remain
     plain_calls = [c for c in calls if c != 0]
-    assert len(plain_calls) == len({k for k in memo if isinstance(k, tuple)})
+    assert len(plain_calls) == len({k for k in memo if isinstance(k, tuple) and k[0] == "run"})
     assert calls.count(0) == len(starts)
     assert (("run", 2) in memo) == (max_iter == 40)  # both paths really ran
 
@@ -512,4 +512,20 @@ def test_joint_selection_scores_are_the_joint_score_of_each_polished_candidate()
     for k in names:
         agree = np.mean([misclassification_rate(finals[k], finals[j]) for j in names if j != k])
         assert res.costs[k] == pytest.approx(own[k] + p.rv_select_agreement * agree, rel=1e-9)
-    assert res.selected == min(res.costs, key=res.costs.get)
+    assert res.selected == min(res.costs, key=res.costs.get) and res.score == "joint"
+
+
+def test_joint_selection_falls_back_to_the_subspace_cost_when_no_joint_score_is_finite(monkeypatch):
+    """Every candidate with a motion under 8 points (joint score inf): the subspace cost
+    and the agreement decide, and the result says so."""
+    import laav.voting as V
+
+    seq = scene(2, 1)
+    C = seq.n_motions
+    p = LaavParams(rv_trials=4, rv_max_iter=6)
+    monkeypatch.setattr(V, "joint_score", lambda *a, **k: float("inf"))
+    res = random_voting(seq, C, p, seed=3)
+    old = random_voting(seq, C, p.replace(rv_select="subspace"), seed=3)
+    assert res.score == "subspace" and old.score == "subspace"
+    assert res.costs == old.costs and np.isfinite(list(res.costs.values())).all()
+    np.testing.assert_array_equal(res.labels, old.labels)
