@@ -87,8 +87,8 @@ TOUR: tuple[TourStep, ...] = (
         "for the motions whose epipolar geometry fits it, older votes fading by α. This labels the "
         "features no atom took and can undo a wrong merge; by default the informed run's votes also "
         "weigh each point's distance to the motion's trajectory subspace, plain Random Voting from "
-        "random starts runs beside it and the best-scoring labelling is kept (the paper: epipolar "
-        "votes, the informed run alone).",
+        "random starts runs beside it and the labelling of least coding length + epipolar cost is "
+        "kept (the paper: epipolar votes, the informed run alone).",
         ("rv",)),
     TourStep(
         "5 · Result: one motion per point, and its error",
