@@ -984,8 +984,9 @@ _SCORES = {"joint": "coding length + epipolar cost per point, + disagreement wit
 def _selection(voting: laav.Voting) -> str:
     """Which candidate labelling the selection kept, and the candidates' scores.
 
-    Only the public ``selected`` (a name, shown as text whatever it is) and ``costs``
-    (name -> score) are read; the name kept need not be among the scored candidates, and
+    Only the public ``selected`` (a name, shown as text whatever it is), ``costs``
+    (name -> score) and ``score`` (what scored them) are read; the name kept need not be
+    among the scored candidates, and
     nothing assumes how the algorithm chose (e.g. the lowest score).
     """
     costs = dict(voting.costs or {})
@@ -994,7 +995,7 @@ def _selection(voting: laav.Voting) -> str:
         return ""
     name = md_text(kept) if kept else "(unnamed)"
     score = f" (score {float(costs[kept]):.2f})" if kept in costs else ""
-    by = _SCORES.get(getattr(voting, "score", ""), "")
+    by = _SCORES.get(voting.score, "")
     by = f"; scored by {by} (ours)" if by else ""
     others = [(k, v) for k, v in costs.items() if k != kept]
     if len(others) <= 2:

@@ -608,6 +608,8 @@ class _Polished:
                 points, labels, C, return_distances=True, unit2=unit2(params), **self._kw)
         self.refined_labels = labels
         self._final = self._cost = None
+        #: the cost :meth:`cost` takes (``Voting.score``): the joint score needs whole tracks
+        self.kind = "joint" if mk is None and params.rv_select == "joint" else "subspace"
 
     def cost(self) -> float:
         """The selection's own cost of this candidate (lower is better): with
@@ -616,7 +618,7 @@ class _Polished:
         incomplete data, where the coding length is not defined) :func:`subspace_cost`
         of the refined labelling."""
         if self._cost is None:
-            if self.mk is None and self.params.rv_select == "joint":
+            if self.kind == "joint":
                 self._cost = joint_score(self.points, self.final()[0], self.C,
                                          self.params) / self.points.shape[1]
             else:
@@ -716,8 +718,9 @@ def _select(points, C, params, candidates, trials, initialised, polished=None, m
                     polished[key] = done[key]  # plain RV's: the same on every rerun
         entries.append((name, cand) + done[key])
     scores = np.array([e[3] for e in entries])
+    score = entries[0][2].kind
     if not np.isfinite(scores).any():  # joint: every candidate has a motion under 8 points
-        scores = np.array([e[2].subspace() for e in entries])
+        scores, score = np.array([e[2].subspace() for e in entries]), "subspace"
     if n > 2 and params.rv_select_agreement > 0:
         D = np.zeros((n, n))
         for i in range(n):
@@ -729,8 +732,5 @@ def _select(points, C, params, candidates, trials, initialised, polished=None, m
     k = int(np.argmin(scores))  # the first of equal scores: LAAV's start, then the consensus
     name, cand, pol, _ = entries[k]
     costs = {e[0]: float(v) for e, v in zip(entries, scores)}
-    score = "joint" if params.rv_select == "joint" and mk is None else "subspace"
-    if not np.isfinite([e[3] for e in entries]).any():
-        score = "subspace"
     return _finish(points, C, params, cand, trials, initialised, selected=name,
                    polished=pol, costs=costs, mk=mk, score=score)
