@@ -19,7 +19,12 @@ in the page's own clock:
   points' glyph in the page holds that frame's coordinates (the renderer's view, i.e. what
   bokeh draws, compared with the sequence's x of each point shown; a video falls back to
   "the glyph holds its source's new x"), then two animation frames so that the browser has
-  drawn them. The frame move is thus timed to the redraw, whichever side computes it.
+  drawn them. The frame move is thus timed to the redraw, whichever side computes it;
+- ``<control>_compute_ms_median``: of those, the server's computation (the status line's
+  "computed in N ms"); ``<control>_patched_ms_median``: from the release until the page
+  had received the document patch with the new status line (for the frame: the first
+  patch), before bokeh handles it (the rest, to the redraw, is the page's own work: bokeh
+  applying the patch and drawing).
 
 Each control is moved ``--repeats`` times between two values, ``--settle`` seconds (default
 0.3) after the previous move's redraw (what a person looking at the result leaves; the
@@ -40,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -86,7 +92,7 @@ JS_POINTS = """() => {
 }"""
 
 #: Set a slider as a released drag does, then wait until ``test(state)`` holds and two
-#: animation frames have passed; the milliseconds (page clock), or -1 after 60 s.
+#: animation frames have passed; [milliseconds (page clock), the status line], or -1 after 60 s.
 #: For the frame, ``xs`` is the frame's x of every point (null: unknown, e.g. a video):
 #: the points' glyph must hold them (else: must hold its source's x, changed by the move).
 JS_MOVE = """async ([prefix, value, kind, marker, xs]) => {
@@ -121,8 +127,39 @@ JS_MOVE = """async ([prefix, value, kind, marker, xs]) => {
     await frame();
   }
   await frame(); await frame();
-  return performance.now() - t0;
+  const got = (window.__laavPatches || []).filter(p => p[0] >= t0 && (kind === 'frame' || p[1]));
+  return [performance.now() - t0, state().status, got.length ? got[0][0] - t0 : -1];
 }"""
+
+#: Records (page clock) when each bokeh PATCH-DOC message has fully arrived, before bokeh
+#: handles its last frame, and whether it changes the status line. A bokeh message is a
+#: header (with ``msgtype`` and ``num_buffers``), metadata, content, then an id frame and a
+#: binary frame per buffer.
+JS_RECORD_PATCHES = """(() => {
+  const Base = window.WebSocket;
+  window.__laavPatches = [];
+  window.WebSocket = function (...args) {
+    const ws = new Base(...args);
+    let left = 0;  // frames still to come of the patch being received
+    let status = false;  // the patch changes the status line
+    ws.addEventListener('message', (ev) => {
+      if (left > 0) {
+        left -= 1;
+        if (typeof ev.data === 'string' && ev.data.includes('Showing')) status = true;
+        if (left === 0) window.__laavPatches.push([performance.now(), status]);
+        return;
+      }
+      if (typeof ev.data === 'string' && ev.data.includes('"msgtype": "PATCH-DOC"')) {
+        const m = ev.data.match(/"num_buffers": (\\d+)/);
+        left = 2 + 2 * (m ? Number(m[1]) : 0);
+        status = false;
+      }
+    });
+    return ws;
+  };
+  window.WebSocket.prototype = Base.prototype;
+  Object.assign(window.WebSocket, {CONNECTING: 0, OPEN: 1, CLOSING: 2, CLOSED: 3});
+})()"""
 
 #: (name in the JSON, slider title prefix, kind, two values, status marker for a value)
 CONTROLS = [
@@ -171,6 +208,7 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
         t_cmd = time.monotonic()
         try:
             page = browser.new_page(viewport={"width": 1280, "height": 800})
+            page.add_init_script(JS_RECORD_PATCHES)
             received = [0]  # bytes the page's websockets received (bokeh's and, if shown, viser's)
             page.on("websocket", lambda ws: ws.on("framereceived", lambda f: received.__setitem__(
                 0, received[0] + len(f if isinstance(f, (bytes, bytearray)) else f.encode()))))
@@ -192,12 +230,21 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
             page.wait_for_timeout(1000)  # the lazily added cards arrive after the first result
             runs: dict = {}
             sent: dict = {}  # bytes received per move, until 300 ms after the redraw
+            server: dict = {}  # the compute time the status line reports, per move
+            wire: dict = {}  # from the release to the result's patch received
             for _ in range(repeats):
                 for name, prefix, kind, values, marker in controls:
                     for v in values:
                         xs = frame_x(seq, v) if kind == "frame" else None
                         b0 = received[0]
                         ms = page.evaluate(JS_MOVE, [prefix, v, kind, marker(v), xs])
+                        ms, status, last = (ms, "", -1) if not isinstance(ms, list) else ms
+                        if last >= 0:
+                            wire.setdefault(name, []).append(last)
+                        if kind == "status":  # the server's share: "computed in N ms" of the line
+                            m = re.search(r"computed in (\d+) ms", status)
+                            if m:
+                                server.setdefault(name, []).append(int(m.group(1)))
                         # (what the server sends after the redraw; --settle: a person looking)
                         page.wait_for_timeout(max(300, int(1000 * settle)))
                         sent.setdefault(name, []).append(received[0] - b0)
@@ -208,6 +255,10 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
                 out[f"{name}_ms_median"] = round(statistics.median(values), 1)
                 out[f"{name}_ms"] = values
                 out[f"{name}_kb_median"] = round(statistics.median(sent[name]) / 1024, 1)
+                if wire.get(name):
+                    out[f"{name}_patched_ms_median"] = round(statistics.median(wire[name]), 1)
+                if server.get(name):
+                    out[f"{name}_compute_ms_median"] = statistics.median(server[name])
         finally:
             proc.terminate()
             proc.wait(30)
