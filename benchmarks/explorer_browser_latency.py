@@ -20,13 +20,20 @@ in the page's own clock:
   bokeh draws, compared with the sequence's x of each point shown; a video falls back to
   "the glyph holds its source's new x"), then two animation frames so that the browser has
   drawn them. The frame move is thus timed to the redraw, whichever side computes it;
+- a move whose result needs plain RV afresh (a seed) first shows a *preview* (LAAV's own
+  fine-tuning, the status line saying plain RV and the selection are still computing;
+  ``ExplorerState.on_preview``): the ``<control>_ms`` wait for the result itself, and
+  ``<control>_preview_ms_median`` is the time to the preview on screen (``<control>_previews``:
+  how many moves had one);
 - ``<control>_compute_ms_median``: of those, the server's computation (the status line's
   "computed in N ms"); ``<control>_patched_ms_median``: from the release until the page
   had received the document patch with the new status line (for the frame: the first
   patch), before bokeh handles it (the rest, to the redraw, is the page's own work: bokeh
   applying the patch and drawing).
 
-Each control is moved ``--repeats`` times between two values, ``--settle`` seconds (default
+Each control is moved ``--repeats`` times between two values (the seed to a new one each
+time, 1, 2, 3, ...: a seed shown before is served from what the explorer kept, plain RV's
+runs or a whole result, and would time a cache), ``--settle`` seconds (default
 0.3) after the previous move's redraw (what a person looking at the result leaves; the
 explorer computes the next seed while idle). Prints ONE JSON line and
 writes it, with date, machine and commit, to ``--out`` (default
@@ -44,6 +51,7 @@ the command (e.g. ``-- --motions 3`` for tracks without ground truth).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import statistics
@@ -54,6 +62,7 @@ from pathlib import Path
 
 from _machine import write_json_report  # this folder, on sys.path
 
+from explorer.cards.status import PREVIEW_STATUS
 from explorer.cli import _free_port
 
 REPO = Path(__file__).resolve().parents[1]
@@ -96,6 +105,7 @@ JS_POINTS = """() => {
 #: For the frame, ``xs`` is the frame's x of every point (null: unknown, e.g. a video):
 #: the points' glyph must hold them (else: must hold its source's x, changed by the move).
 JS_MOVE = """async ([prefix, value, kind, marker, xs]) => {
+  const PREVIEW = """ + json.dumps(PREVIEW_STATUS) + """;
   const state = """ + JS_STATE + """;
   const points = """ + JS_POINTS + """;
   let slider = null;
@@ -118,17 +128,23 @@ JS_MOVE = """async ([prefix, value, kind, marker, xs]) => {
     return true;
   };
   const t0 = performance.now();
+  let first = -1;  // the first view of the new value: a preview's, or the result's
+  let doneAt = -1;
   slider.value = value; slider.value_throttled = value;
   while (true) {
-    const s = state();
-    const done = kind === 'frame' ? s.frame_title.startsWith(marker) && drawn() : s.status.includes(marker);
-    if (done) break;
+    const s = state(), now = performance.now() - t0;
+    if (kind !== 'frame' && first < 0 && s.status.includes(marker)) first = now;
+    const done = kind === 'frame' ? s.frame_title.startsWith(marker) && drawn()
+      : s.status.includes(marker) && !s.status.includes(PREVIEW);
+    if (done) { doneAt = now; break; }
     if (performance.now() - t0 > 60000) return -1;
     await frame();
   }
   await frame(); await frame();
-  const got = (window.__laavPatches || []).filter(p => p[0] >= t0 && (kind === 'frame' || p[1]));
-  return [performance.now() - t0, state().status, got.length ? got[0][0] - t0 : -1];
+  const got = (window.__laavPatches || []).filter(
+    p => p[0] >= t0 && (kind === 'frame' || (p[1] && !p[2])));
+  return [performance.now() - t0, state().status, got.length ? got[0][0] - t0 : -1,
+          first >= 0 && first < doneAt ? first : -1];
 }"""
 
 #: Records (page clock) when each bokeh PATCH-DOC message has fully arrived, before bokeh
@@ -136,23 +152,26 @@ JS_MOVE = """async ([prefix, value, kind, marker, xs]) => {
 #: header (with ``msgtype`` and ``num_buffers``), metadata, content, then an id frame and a
 #: binary frame per buffer.
 JS_RECORD_PATCHES = """(() => {
+  const PREVIEW = """ + json.dumps(PREVIEW_STATUS) + """;
   const Base = window.WebSocket;
   window.__laavPatches = [];
   window.WebSocket = function (...args) {
     const ws = new Base(...args);
     let left = 0;  // frames still to come of the patch being received
     let status = false;  // the patch changes the status line
+    let preview = false;  // ... to a preview's
     ws.addEventListener('message', (ev) => {
       if (left > 0) {
         left -= 1;
         if (typeof ev.data === 'string' && ev.data.includes('Showing')) status = true;
-        if (left === 0) window.__laavPatches.push([performance.now(), status]);
+        if (typeof ev.data === 'string' && ev.data.includes(PREVIEW)) preview = true;
+        if (left === 0) window.__laavPatches.push([performance.now(), status, preview]);
         return;
       }
       if (typeof ev.data === 'string' && ev.data.includes('"msgtype": "PATCH-DOC"')) {
         const m = ev.data.match(/"num_buffers": (\\d+)/);
         left = 2 + 2 * (m ? Number(m[1]) : 0);
-        status = false;
+        status = preview = false;
       }
     });
     return ws;
@@ -232,13 +251,18 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
             sent: dict = {}  # bytes received per move, until 300 ms after the redraw
             server: dict = {}  # the compute time the status line reports, per move
             wire: dict = {}  # from the release to the result's patch received
-            for _ in range(repeats):
+            previews: dict = {}  # from the release to a preview on screen, where one came
+            for rep in range(repeats):
                 for name, prefix, kind, values, marker in controls:
                     for v in values:
+                        if name == "seed":  # a seed never shown before: 1, 2, 3, ...
+                            v = v + len(values) * rep
                         xs = frame_x(seq, v) if kind == "frame" else None
                         b0 = received[0]
                         ms = page.evaluate(JS_MOVE, [prefix, v, kind, marker(v), xs])
-                        ms, status, last = (ms, "", -1) if not isinstance(ms, list) else ms
+                        ms, status, last, first = (ms, "", -1, -1) if not isinstance(ms, list) else ms
+                        if first >= 0:  # a preview came first (drawn, not yet the result)
+                            previews.setdefault(name, []).append(first)
                         if last >= 0:
                             wire.setdefault(name, []).append(last)
                         if kind == "status":  # the server's share: "computed in N ms" of the line
@@ -255,6 +279,9 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
                 out[f"{name}_ms_median"] = round(statistics.median(values), 1)
                 out[f"{name}_ms"] = values
                 out[f"{name}_kb_median"] = round(statistics.median(sent[name]) / 1024, 1)
+                if previews.get(name):
+                    out[f"{name}_preview_ms_median"] = round(statistics.median(previews[name]), 1)
+                    out[f"{name}_previews"] = len(previews[name])
                 if wire.get(name):
                     out[f"{name}_patched_ms_median"] = round(statistics.median(wire[name]), 1)
                 if server.get(name):

@@ -194,6 +194,7 @@ class Explorer:
         self._compose()
 
         self.state.on_result = self._on_result
+        self.state.on_preview = self._on_preview
         self.state.on_error = self._on_error
         self.state.on_busy = self._on_busy
         self.state.on_plain_rv = self._on_plain_rv
@@ -486,6 +487,9 @@ class Explorer:
     def _on_result(self, result, seq, settings, gen) -> None:
         self.schedule(self._apply_result, result, seq, settings, gen)
 
+    def _on_preview(self, result, seq, settings, gen) -> None:
+        self.schedule(self._apply_result, result, seq, settings, gen, True)
+
     def _on_error(self, message: str) -> None:
         self.schedule(self._show_error, message)
 
@@ -503,8 +507,11 @@ class Explorer:
         self.schedule(setattr, self.controls.w_frame, "value", int(frame))
 
     # ------------------------------------------------------------------ results -> cards
-    def _apply_result(self, result, seq, settings, gen) -> None:
-        if gen < self.applied_generation:
+    def _apply_result(self, result, seq, settings, gen, preview: bool = False) -> None:
+        """Every card to ``result``. A ``preview`` (LAAV's own fine-tuning while plain RV and
+        the selection compute; :attr:`ExplorerState.on_preview`) is drawn as a result, its
+        status line saying so, and is not yet the applied generation (:meth:`wait`)."""
+        if gen < self.applied_generation or (preview and gen == self.applied_generation):
             return
         t0 = time.perf_counter()
         new_seq = seq is not self._seq_shown
@@ -517,7 +524,7 @@ class Explorer:
                 self.result, self.sequence, self.settings = result, seq, settings
                 self.change = self.state.change_of(result) if not new_seq else None
                 self.moved = None if self.change is None else self.change.moved
-                plain = self.state.plain_rv()
+                plain = self.state.plain_rv(seq, settings)  # (a preview's: not computed yet)
                 self.style = V.point_style(seq, result, self.controls.color_mode, plain)
                 self.fine_colors = V.fine_colors(seq, result)
                 self.graph_view.to_final_step(result)
@@ -526,7 +533,7 @@ class Explorer:
                 self.graph_view.draw(result, self.frame, self.fine_colors)
                 self.coarse_view.draw(seq, result)
                 self.coarse_view.epipolar.draw(seq, result)
-                self.rv_view.draw(result.voting, self.state.plain_rv())
+                self.rv_view.draw(result.voting, plain, pending=preview)
                 num = self.numbers_view.draw(seq, result, plain)
                 s = self.status_bar
                 s.alert.visible = self.state.error is not None
@@ -543,9 +550,10 @@ class Explorer:
                 self._data_notes = [n for n in data_notes if n]
                 notes = [n for n in (self.style["note"], unpinned) if n] + self._data_notes
                 s.show_note("  \n".join(notes))
-                s.show_result(seq, num["error_final"], self.state.compute_seconds,
+                s.show_result(seq, num["error_final"], self.state.preview_seconds if preview
+                              else self.state.compute_seconds,
                               non_defaults(settings, self.state.default_motions(seq), seq.is_complete),
-                              self.change, ahead=self.state.computed_ahead(result))
+                              self.change, ahead=self.state.computed_ahead(result), preview=preview)
                 self.view3d.show_first()
                 self.compare.redraw()
             self.view3d.draw(seq, result, self.style["color"], self.controls.w_frame.value, new_seq)
@@ -554,6 +562,8 @@ class Explorer:
         self.apply_seconds = time.perf_counter() - t0
         if self._rest is not None and self._rest["loaded"]:
             self.schedule(self._add_rest)  # after this result's message: a message of its own
+        if preview:
+            return
         with self._applied:
             self.applied_generation = gen
             self._applied.notify_all()

@@ -454,6 +454,12 @@ class ExplorerState:
         self.on_error: Callable[[str], None] | None = None
         self.on_busy: Callable[[bool], None] | None = None
         self.on_plain_rv: Callable[[laav.Voting, tuple], None] | None = None
+        #: called (worker thread) with a *preview* of a result on its way: LAAV's own
+        #: fine-tuning alone, while plain RV and the selection still compute (a new seed, C
+        #: or RV setting; :meth:`laav.Pipeline.update`'s ``preview``); then ``on_result``
+        #: with the result, same generation. Not :attr:`result`: the state moves on only
+        #: with the result
+        self.on_preview: Callable[[LaavResult, Sequence, Settings, int], None] | None = None
         #: called with the new :attr:`target` whenever it changes (a request, a load, a
         #: cancel or a failed load falling back): the Advanced panel shows it
         self.on_target: Callable[[Settings], None] | None = None
@@ -465,6 +471,8 @@ class ExplorerState:
         self.change: Change | None = None
         self._changes: OrderedDict = OrderedDict()
         self.compute_seconds = 0.0
+        #: seconds the last preview took from the request (see :attr:`on_preview`)
+        self.preview_seconds = 0.0
         self._target = target
         self._target_seq = seq
         self._pipe: Pipeline | None = None
@@ -665,7 +673,8 @@ class ExplorerState:
                         if warm is not None:  # computed elsewhere: only what differs is rerun
                             pipe, before = warm, warm.result
                             t0 = time.perf_counter()  # (the wait is not this computation's)
-                            result = pipe.update(**target.update_kwargs())
+                            result = pipe.update(**target.update_kwargs(),
+                                                 preview=self._previewer(gen, seq, target, t0))
                             if result is before:  # as computed elsewhere: its own stage times
                                 t0 -= sum(result.timings.values())
                         else:
@@ -681,7 +690,8 @@ class ExplorerState:
                                 self._ahead_results.append((result, how))
                         else:
                             pipe = self._pipe
-                            result = pipe.update(**target.update_kwargs())
+                            result = pipe.update(**target.update_kwargs(),
+                                                 preview=self._previewer(gen, seq, target, t0))
             except Superseded:
                 return  # a newer request is queued: it starts now
             except ValueError as exc:  # includes laav.SequenceError
@@ -720,6 +730,27 @@ class ExplorerState:
                 self._pending -= 1
                 self._idle.notify_all()
             self._notify_busy()
+
+    def _previewer(self, gen: int, seq: Sequence, target: Settings, t0: float):
+        """The ``preview`` hook of one job's :meth:`Pipeline.update` (see :attr:`on_preview`)."""
+        def preview(result: LaavResult) -> None:
+            if gen != self._gen or self.on_preview is None:
+                return  # superseded: its result will not be shown either
+            self.preview_seconds = time.perf_counter() - t0
+            change = None
+            if self.result is not None and self.sequence is seq:
+                try:
+                    change = describe_change(seq, self.result, self.settings, result, target)
+                except Exception:  # a summary must never cost the preview
+                    traceback.print_exc()
+            self._changes[id(result)] = (result, change)
+            while len(self._changes) > 4:
+                self._changes.popitem(last=False)
+            try:
+                self.on_preview(result, seq, target, gen)
+            except Exception:  # a GUI hook must never kill the worker
+                traceback.print_exc()
+        return preview
 
     def _warm_pipeline(self, seq: Sequence, pipeline) -> Pipeline | None:
         """(Worker.) The pipeline computed elsewhere for ``seq`` (given, or left by a first job

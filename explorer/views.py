@@ -1004,9 +1004,17 @@ def _selection(voting: laav.Voting) -> str:
     return f"; kept *{name}*{score} of {len(costs)} scored candidates{by}"
 
 
-def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None) -> str:
-    """Markdown: LAAV's fine-tuning beside plain RV, with their iteration counts."""
+#: The Random Voting card's line under a preview (:attr:`ExplorerState.on_preview`).
+PREVIEW_NOTE = ("*LAAV's own trial, shown first: plain RV's runs and the model selection (ours) "
+                "are still computing, and may replace these labels.*")
+
+
+def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
+               pending: bool = False) -> str:
+    """Markdown: LAAV's fine-tuning beside plain RV, with their iteration counts;
+    ``pending``: ``fine_tuning`` is a preview (:data:`PREVIEW_NOTE`)."""
     return (_rv_line(fine_tuning, "LAAV fine-tuning (RV started from the coarse labels)") + "  \n"
+            + (PREVIEW_NOTE + "  \n" if pending else "")
             + _rv_line(plain, "Plain RV (random start, same sequence and RV settings)"))
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,7 +27,11 @@ from .coarse import Coarse, merge_models
 from .graph import AtomGraph, atom_graph
 from .multicut import Multicut, solve_multicut
 from .params import STAGE_PARAMS, STAGES, LaavParams, stages_affected
-from .voting import SELECTION_FIELDS, Voting, random_voting
+from .voting import SELECTION_FIELDS, Voting, informed_preview, random_voting
+
+#: Plain RV's runs are kept for this many (seed, C, ``rv_*`` settings), the most recent: a
+#: step back to a seed shown before (or an interrupted seed change) reuses them.
+PLAIN_MEMOS = 4
 
 __all__ = ["LaavResult", "segment", "Pipeline", "preload"]
 
@@ -157,8 +162,9 @@ class Pipeline:
     result is identical to a recomputation: the stage's generator depends only on the seed.
     When the coarse labels do change, the default fine-tuning reruns LAAV's informed
     trial only: plain Random Voting's runs beside it (and their polished candidates) do not
-    depend on the coarse labels and are kept while the seed, C and the ``rv_*`` settings
-    stay (``plain_memo`` of :func:`laav.random_voting`; labels identical).
+    depend on the coarse labels and are kept for the last :data:`PLAIN_MEMOS` values of the
+    seed, C and the ``rv_*`` settings (``plain_memo`` of :func:`laav.random_voting`; labels
+    identical), so a step back to a seed shown before reruns only LAAV's own stages.
 
     Examples
     --------
@@ -176,7 +182,8 @@ class Pipeline:
         self._noise: float | None = None  # the tracks' measured noise (noise_adaptive), px
         self._stages: dict = {}
         self._voting_memo: tuple | None = None
-        self._plain_memo: tuple | None = None  # (seed, C, rv_* settings) -> plain RV's runs
+        #: (seed, C, rv_* settings) -> plain RV's runs, the last :data:`PLAIN_MEMOS` kept
+        self._plain_memos: OrderedDict = OrderedDict()
         self.result = self._run("atoms")
 
     def _voting_key(self, init) -> tuple:
@@ -208,7 +215,7 @@ class Pipeline:
         return np.random.default_rng(_stage_rngs(self.seed)[stage])
 
     @single_threaded  # one BLAS/OpenMP thread while the stages run (laav/_threads.py)
-    def _run(self, start: str) -> LaavResult:
+    def _run(self, start: str, preview=None) -> LaavResult:
         seq, C = self.seq, self.n_motions
         timings = dict.fromkeys(STAGES, 0.0)
         t = time.perf_counter()
@@ -247,24 +254,53 @@ class Pipeline:
                     # candidates' costs are keyed on the selection's fields inside)
                     pkey = (key[0], key[1], tuple(kv for kv in key[2]
                                                   if kv[0] not in SELECTION_FIELDS))
-                    if self._plain_memo is None or self._plain_memo[0] != pkey:
-                        self._plain_memo = (pkey, {})  # new seed, C or rv_* settings
+                    memo = self._plain_memos.get(pkey)
+                    if memo is None:  # new seed, C or rv_* settings
+                        memo = self._plain_memos[pkey] = {}
+                        while len(self._plain_memos) > PLAIN_MEMOS:
+                            self._plain_memos.popitem(last=False)
+                        if preview is not None and init is not None and seq.is_complete:
+                            self._preview(preview, p, init, memo, timings, t)
+                    self._plain_memos.move_to_end(pkey)
                     # no atom: plain RV, whose input checks segment() made already
                     st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
-                                                 plain_memo=self._plain_memo[1],
+                                                 plain_memo=memo,
                                                  check_input=False)
                     self._voting_memo = (key, st["voting"])
             timings[stage] += time.perf_counter() - t
+        return self._result(st["voting"], timings)
+
+    def _result(self, voting: Voting, timings: dict) -> LaavResult:
+        st = self._stages
         return LaavResult(
-            labels=st["voting"].labels, atoms=st["atoms"], graph=st["graph"],
-            multicut=st["multicut"], coarse=st["coarse"], voting=st["voting"],
-            timings=timings, params=self.params, n_motions=C, seed=self.seed,
+            labels=voting.labels, atoms=st["atoms"], graph=st["graph"],
+            multicut=st["multicut"], coarse=st["coarse"], voting=voting,
+            timings=timings, params=self.params, n_motions=self.n_motions, seed=self.seed,
             noise_sigma=self._noise if self.params.noise_adaptive else None,
         )
 
-    def update(self, **changed) -> LaavResult:
+    def _preview(self, preview, p: LaavParams, init: np.ndarray, memo: dict, timings: dict,
+                 t: float) -> None:
+        """Hand ``preview`` the result with LAAV's own fine-tuning alone (see :meth:`update`)."""
+        voting = informed_preview(self.seq.points, self.n_motions, p, self._rng("voting"), init,
+                                  plain_memo=memo)
+        if voting is not None:
+            now = dict(timings)
+            now["voting"] += time.perf_counter() - t
+            preview(self._result(voting, now))
+
+    def update(self, *, preview=None, **changed) -> LaavResult:
         """Change parameters (any :class:`LaavParams` field, ``seed`` or ``n_motions``)
         and recompute only the stages downstream of the change.
+
+        ``preview``: a callable that, when the fine-tuning must run plain Random Voting
+        afresh (a new seed, C or ``rv_*`` setting; complete tracks, ``rv_select``
+        ``"joint"`` or ``"subspace"``), is first given the result with LAAV's own
+        fine-tuning alone (:func:`laav.voting.informed_preview`: the informed trial,
+        refined and reassigned, ``voting.selected == "informed"``, no costs), in this thread,
+        before plain RV and the selection run (for a live view: most of a seed change's
+        time is theirs). The trial is not run again after it, and the returned result is
+        the same with or without ``preview``.
 
         Returns
         -------
@@ -296,7 +332,7 @@ class Pipeline:
             if start is None:
                 return self.result
             try:
-                self.result = self._run(start)
+                self.result = self._run(start, preview)
             except Exception:
                 # roll everything back, cached stage results included
                 self.params, self.n_motions, self.seed, self._stages = old

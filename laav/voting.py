@@ -61,7 +61,7 @@ from .subspace_votes import SUBSPACE_VOTES_MIN_START, for_informed_trial  # noqa
 
 __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances", "frame_pairs",
            "labelling_cost", "subspace_cost", "reassign_labels", "joint_score",
-           "missing_motion_start"]
+           "missing_motion_start", "informed_preview"]
 
 #: In LAAV's fine-tuning with model selection, when the informed trial and plain RV's
 #: converged trial disagree on more than this share of the points, two more plain RV
@@ -337,13 +337,10 @@ def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=N
     return out
 
 
-def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo,
-                 mk=None) -> Voting:
-    """LAAV's fine-tuning: the informed trial started from ``init_labels`` and, with the
-    selection, plain RV's runs beside it (see the module docstring). ``mk`` (missing
-    data): a :class:`_Masks`."""
-    masks = None if mk is None else (mk.visible, mk.pool)
-    F, P, _ = points.shape
+def _informed_start(points, C, params, rng, init_labels, weights):
+    """LAAV's start from ``init_labels``: (init, labels0, votes0), the points without a
+    label drawn at random from ``rng`` (the fine-tuning's first draw)."""
+    P = points.shape[1]
     init = np.asarray(init_labels, dtype=np.int64)
     if init.shape != (P,):
         raise ValueError(f"init_labels must have shape ({P},), got {init.shape}")
@@ -359,10 +356,90 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     labels0 = np.where(known, init, rng.integers(0, C, P))
     votes0 = np.zeros((P, C))
     votes0[np.arange(P), labels0] = np.where(known, w, 0.0)
+    return init, labels0, votes0
+
+
+def _first_trial(points, C, params, stream, labels0, votes0, known, masks, memo):
+    """The selection's informed trial on ``stream`` (the first of the fine-tuning's
+    spawned streams): (its end, the trials run, its subspace votes). With ``memo`` (the
+    caller's ``plain_memo``) the last one computed is kept and reused for the same start:
+    :func:`informed_preview` computes it first, the fine-tuning then reuses it."""
+    key = (labels0.tobytes(), votes0.tobytes())
+    hit = None if memo is None else memo.get("informed")
+    if hit is not None and hit[0] == key:
+        return hit[1]
+    extra = for_informed_trial(points, params, known, masks)  # ours: subspace votes
+    first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
+                                     streams=[stream], masks=masks, extra=extra)
+    if memo is not None:
+        memo["informed"] = (key, (first, trials, extra))
+    return first, trials, extra
+
+
+def informed_preview(points: np.ndarray, n_motions: int, params: LaavParams,
+                     rng: np.random.Generator, init_labels: np.ndarray,
+                     plain_memo: dict | None = None) -> Voting | None:
+    """LAAV's own fine-tuning as the default's selection starts it, before plain Random
+    Voting runs: the informed trial from ``init_labels`` on the same random stream
+    (``rng`` a generator in the state :func:`random_voting` would receive), refined and
+    reassigned: the selection's candidate ``"informed"``, the labels returned whenever
+    the selection keeps it. For a live view to draw while plain RV and the selection
+    compute (:meth:`laav.Pipeline.update`'s ``preview``).
+
+    Parameters
+    ----------
+    points : ndarray of shape (F, P, 2)
+        Complete tracks.
+    n_motions : int
+    params : LaavParams
+    rng : numpy.random.Generator
+    init_labels : ndarray of shape (P,)
+        The coarse labels (``-1``: no label).
+    plain_memo : dict, optional
+        The dict :func:`random_voting` will then get: the trial is kept in it and not run
+        again there.
+
+    Returns
+    -------
+    Voting or None
+        ``selected="informed"``, no costs (nothing was compared yet); None where the
+        fine-tuning has no plain RV to wait for (``rv_select`` ``"none"`` or ``"laav"``,
+        one motion, more than ``rv_max_points`` points).
+    """
+    C = int(n_motions)
+    P = points.shape[1]
+    if (params.rv_select in ("none", "laav") or C < 2 or points.shape[0] < 2
+            or (params.rv_max_points is not None and P > params.rv_max_points)):
+        return None
+    init, labels0, votes0 = _informed_start(points, C, params, rng, init_labels, None)
+    streams = rng.spawn(1 + params.rv_trials)  # as _fine_tuning: [informed, plain 0, ...]
+    first, trials, extra = _first_trial(points, C, params, streams[0], labels0, votes0,
+                                        init >= 0, None, plain_memo)
+    pol = _Polished(points, C, params, first[0])
+    if plain_memo is not None:  # the selection's own polish of this candidate: not done again
+        plain_memo["informed polished"] = (_own_key(first[0], params), pol)
+    return _with_informed(_finish(points, C, params, first, trials, True, "informed",
+                                  polished=pol), first, extra)
+
+
+def _own_key(labels: np.ndarray, params: LaavParams) -> tuple:
+    """What LAAV's polished informed candidate depends on beyond the ``plain_memo``'s own
+    key (seed, C, ``rv_*``): its labels and the selection's fields."""
+    return (labels.tobytes(),) + tuple(getattr(params, f) for f in SELECTION_FIELDS)
+
+
+def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo,
+                 mk=None) -> Voting:
+    """LAAV's fine-tuning: the informed trial started from ``init_labels`` and, with the
+    selection, plain RV's runs beside it (see the module docstring). ``mk`` (missing
+    data): a :class:`_Masks`."""
+    masks = None if mk is None else (mk.visible, mk.pool)
+    init, labels0, votes0 = _informed_start(points, C, params, rng, init_labels, weights)
+    known = init >= 0
     if params.rv_select == "laav" and mk is None:
         return _own_candidates(points, C, params, rng, init, labels0, votes0)
-    extra = for_informed_trial(points, params, known, masks)  # ours: subspace votes
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
+        extra = for_informed_trial(points, params, known, masks)  # ours: subspace votes
         first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,
                                          masks=masks, extra=extra)
         return _with_informed(_finish(points, C, params, first, trials, True, "informed", mk=mk),
@@ -371,8 +448,8 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     # informed trial and plain RV's trials each draw from their own generator, so they run
     # apart; plain RV's runs do not depend on the start and may come from ``plain_memo``.
     streams = rng.spawn(1 + params.rv_trials)  # [informed, plain 0, plain 1, ...]
-    first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
-                                     streams=streams[:1], masks=masks, extra=extra)
+    first, trials, extra = _first_trial(points, C, params, streams[0], labels0, votes0, known,
+                                        masks, plain_memo)
     plain, more, cands = _plain_run(points, C, params, rng, streams, plain_memo, 1, masks)
     trials, cands = trials + more, [("informed", first)] + cands
     if plain is not None and misclassification_rate(first[0], plain[0]) > _ARBITRATE_ABOVE:
@@ -385,8 +462,10 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     # caller may keep the memo across changes of those (plain RV's runs stay valid)
     polished = None if plain_memo is None else plain_memo.setdefault(
         ("polished",) + tuple(getattr(params, f) for f in SELECTION_FIELDS), {})
+    own = None if plain_memo is None or mk is not None else plain_memo.get("informed polished")
+    own = own[1] if own is not None and own[0] == _own_key(first[0], params) else None
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
-                                  polished=polished, mk=mk), first, extra)
+                                  polished=polished, mk=mk, own=own), first, extra)
 
 
 #: A missing-motion start (``rv_select="laav"``) takes the points in no atom whose best
@@ -682,7 +761,8 @@ def _partition_key(labels: np.ndarray) -> bytes:
     return order[inverse].astype(np.int64).tobytes()
 
 
-def _select(points, C, params, candidates, trials, initialised, polished=None, mk=None) -> Voting:
+def _select(points, C, params, candidates, trials, initialised, polished=None, mk=None,
+            own=None) -> Voting:
     """Polish every candidate labelling and return the one of lowest selection score.
 
     Every candidate is refined (:func:`refine_labels`) and, when the score, the agreement
@@ -693,7 +773,8 @@ def _select(points, C, params, candidates, trials, initialised, polished=None, m
     disagreement (misclassification rate) with the other polished candidates, when there
     are more than two: among many unconverged trials, the labelling the others agree with
     is the safer pick. When no candidate has a finite joint score (every one leaves a
-    motion under 8 points), their subspace costs decide. (For ``"subspace"``, the cost is
+    motion under 8 points), their subspace costs decide. ``own``: LAAV's informed candidate
+    already polished (by :func:`informed_preview`), used for it. (For ``"subspace"``, the cost is
     taken before the reassignment, which fits rank-4
     subspaces and so makes every candidate's subspace cost alike; the agreement after it,
     where candidates that differ only by boundary points agree. Measured on Hopkins155,
@@ -711,6 +792,8 @@ def _select(points, C, params, candidates, trials, initialised, polished=None, m
             # plain one of the same partition takes its label names, as in a fresh run
             if polished is not None and key in polished and name.startswith("plain"):
                 done[key] = polished[key]
+            elif name == "informed" and own is not None:  # polished by informed_preview
+                done[key] = (own, own.cost())
             else:
                 pol = _Polished(points, C, params, cand[0], mk)
                 done[key] = (pol, pol.cost())

@@ -356,3 +356,69 @@ def test_selection_fields_outside_rv_reach_the_kept_fine_tuning(change):
     assert_same_result(res, fresh)
     common = set(base.voting.costs) & set(res.voting.costs)
     assert common and max(abs(base.voting.costs[k] - res.voting.costs[k]) for k in common) > 1e-3
+
+
+def test_preview_is_laavs_own_fine_tuning_before_plain_rv():
+    """``update(preview=...)``: on a new seed the callable gets, before plain RV runs, the
+    result with LAAV's informed trial alone on the selection's own stream (its trace equals
+    the final result's informed trace), polished as the selection polishes it (the labels
+    returned when the selection keeps "informed"); the final result is a fresh run's."""
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+    pipe = Pipeline(seq, 3)
+    got = []
+    res = pipe.update(seed=2, preview=got.append)
+    assert len(got) == 1
+    pre = got[0]
+    assert pre.voting.selected == "informed" and pre.voting.costs == {} and pre.seed == 2
+    assert pre.coarse is res.coarse and pre.atoms is res.atoms
+    assert pre.voting.n_trials == 1 and pre.voting.n_iterations < res.voting.n_iterations
+    np.testing.assert_array_equal(pre.voting.informed_changed, res.voting.informed_changed)
+    assert res.voting.selected == "informed"  # this scene's selection keeps LAAV's trial
+    np.testing.assert_array_equal(pre.labels, res.labels)
+    assert_same_result(res, segment(seq, 3, seed=2))
+
+
+def test_preview_only_when_plain_rv_runs_afresh():
+    """No preview where nothing waits on plain RV: a λ change (its runs are kept), the
+    paper's fine-tuning (no plain RV), incomplete tracks (another path)."""
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+    calls = []
+    pipe = Pipeline(seq, 3)
+    pipe.update(lam=2.0, preview=calls.append)
+    assert calls == []
+    pipe.update(n_motions=2, preview=calls.append)
+    assert len(calls) == 1
+    Pipeline(seq, 3, LaavParams.paper()).update(seed=1, preview=calls.append)
+    Pipeline(seq, 3, LaavParams.own_chain()).update(seed=1, preview=calls.append)
+    hidden = synthetic.occlude(seq, 0.2, 0)
+    Pipeline(hidden, 3).update(seed=1, preview=calls.append)
+    assert len(calls) == 1
+
+
+def test_a_step_back_to_a_seed_reuses_plain_rvs_runs(monkeypatch):
+    """Plain RV's runs are kept for the last few seeds: a step back (or an interrupted seed
+    change) reruns only LAAV's own stages, and the result is a fresh run's."""
+    import laav.voting as voting_module
+
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+    pipe = Pipeline(seq, 3)
+    real = voting_module.run_trials
+    plain = []
+
+    def counting(points, C, params, rng, start=None, *a, **k):
+        if start is None:
+            plain.append(1)
+        return real(points, C, params, rng, start, *a, **k)
+
+    monkeypatch.setattr(voting_module, "run_trials", counting)
+    pipe.update(seed=1)
+    assert plain  # a new seed: plain RV runs
+    for s in (2, 3, 4, 5):
+        pipe.update(seed=s)
+    del plain[:]
+    back = pipe.update(seed=3)  # one of the last four
+    assert plain == []
+    pipe.update(seed=1)  # five seeds back: no longer kept
+    assert plain
+    monkeypatch.undo()
+    assert_same_result(back, segment(seq, 3, seed=3))

@@ -43,8 +43,10 @@ class RVView:
                          flex(pn.pane.Bokeh(self.fig_changed), pn.pane.Bokeh(self.fig_margin)),
                          self.rv_md)
 
-    def draw(self, laav_voting, plain) -> None:
+    def draw(self, laav_voting, plain, pending: bool = False) -> None:
+        """``pending``: ``laav_voting`` is a preview, LAAV's own trial before plain RV and
+        the selection (:attr:`explorer.state.ExplorerState.on_preview`)."""
         set_data(self.src_rv_laav, V.rv_sources(laav_voting))
         set_data(self.src_rv_plain, V.rv_sources(plain))
         self.plain = plain
-        self.rv_md.object = V.rv_summary(laav_voting, plain)
+        self.rv_md.object = V.rv_summary(laav_voting, plain, pending=pending)

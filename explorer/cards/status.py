@@ -11,6 +11,10 @@ import laav
 from .. import views as V
 from .base import Alert, Markdown, shown_style
 
+#: What the status line says while a preview is shown (``ExplorerState.on_preview``);
+#: a browser benchmark waits for the result by its absence.
+PREVIEW_STATUS = "plain RV and the model selection still computing…"
+
 
 def header_text(seq: laav.Sequence) -> str:
     return f"{V.md_text(seq.name)} · {seq.n_points} points, {seq.n_frames} frames"
@@ -80,15 +84,19 @@ class StatusBar:
         self.url_alert.visible = bool(problems)
 
     def show_result(self, seq, error_final, compute_seconds: float, changed: list[str], change,
-                    ahead: str | None = None) -> None:
+                    ahead: str | None = None, preview: bool = False) -> None:
         """The status line for a shown result (``changed``: the settings off their defaults)
         and what moved since the last (``change``: :class:`state.Change` or None); ``ahead``:
         how it was computed before it was asked for (``"ahead, while idle"``, ``"by the seed
         sweep"``: :meth:`ExplorerState.computed_ahead`), or None."""
         err = "" if error_final is None else f" — final error **{100 * error_final:.1f} %**"
+        if preview:  # LAAV's own trial first (ExplorerState.on_preview)
+            err = "" if error_final is None else f" — error **{100 * error_final:.1f} %**"
+            how = f"LAAV's own fine-tuning in {1000 * compute_seconds:.0f} ms; {PREVIEW_STATUS}"
+        else:
+            how = f"computed in {1000 * compute_seconds:.0f} ms{', ' + ahead if ahead else ''}"
         self.status.object = self._status_text = (
-            f"Showing {V.md_text(seq.name)}{err} (computed in "
-            f"{1000 * compute_seconds:.0f} ms{', ' + ahead if ahead else ''}). "
+            f"Showing {V.md_text(seq.name)}{err} ({how}). "
             + (f"Not at the defaults: {V.md_text(', '.join(changed))}." if changed
                else "All settings at their defaults."))
         self.change_md.object = ("" if change is None else

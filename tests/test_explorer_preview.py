@@ -1,0 +1,68 @@
+"""A seed (or C, or RV setting) change shows LAAV's own fine-tuning first: the result with
+the informed trial alone, while plain RV and the selection (most of the time) still
+compute; then the result. ``laav.Pipeline.update(preview=...)`` makes it; the state hands
+it on as ``on_preview``; the app draws it with a status line that says so."""
+
+from __future__ import annotations
+
+import numpy as np
+
+import laav
+from explorer import Explorer
+from explorer.cards.status import PREVIEW_STATUS
+from explorer.state import ExplorerState
+from explorer.views import PREVIEW_NOTE
+from laav.synthetic import make_sequence
+
+SEQ = make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+
+
+def test_the_state_hands_on_the_preview_before_the_result():
+    st = ExplorerState(SEQ, 3, seed=0)
+    events = []
+    try:
+        assert st.wait(120)
+        st.on_preview = lambda r, seq, s, gen: events.append(("preview", r, s.seed, gen, st.result))
+        st.on_result = lambda r, seq, s, gen: events.append(("result", r, s.seed, gen, st.result))
+        before = st.result
+        st.request(seed=2)
+        assert st.wait(120)
+        assert [e[0] for e in events] == ["preview", "result"]
+        (_, pre, s1, g1, shown), (_, res, s2, g2, _) = events
+        assert s1 == s2 == 2 and g1 == g2
+        assert shown is before  # the preview is not the state's result
+        assert pre.voting.selected == "informed" and pre.voting.costs == {}
+        np.testing.assert_array_equal(pre.voting.informed_changed, res.voting.informed_changed)
+        assert st.result is res and st.change_of(pre) is not None
+        np.testing.assert_array_equal(res.labels, laav.segment(SEQ, 3, seed=2).labels)
+        events.clear()
+        st.request(params={"lam": 3.5})  # plain RV's runs are kept: nothing to wait for
+        assert st.wait(120) and [e[0] for e in events] == ["result"]
+    finally:
+        st.close()
+
+
+def test_the_app_draws_the_preview_then_the_result():
+    ex = Explorer(SEQ, 3, viser=False)
+    try:
+        assert ex.wait(120)
+        seen = []
+        draw = ex._apply_result
+
+        def spy(result, seq, settings, gen, preview=False):
+            draw(result, seq, settings, gen, preview)
+            seen.append((preview, ex.status_bar._status_text, ex.rv_md.object, ex.applied_generation,
+                         gen, ex.result is result))
+
+        ex._apply_result = spy
+        ex.controls.w_seed.value = 2
+        assert ex.wait(120)
+        assert [p for p, *_ in seen] == [True, False]
+        (_, text1, rv1, applied1, gen1, shown1), (_, text2, rv2, applied2, gen2, shown2) = seen
+        assert PREVIEW_STATUS in text1 and "seed \\= 2" in text1 and PREVIEW_NOTE in rv1
+        assert applied1 < gen1 and shown1  # drawn, but not yet the applied result (wait())
+        assert PREVIEW_STATUS not in text2 and "seed \\= 2" in text2 and PREVIEW_NOTE not in rv2
+        assert applied2 == gen2 == gen1 and shown2
+        assert ex.result.seed == 2 and ex.state.result is ex.result
+    finally:
+        ex.close()
