@@ -74,6 +74,21 @@ SHORTCUTS = {
 }
 
 
+class _Template(pn.template.BootstrapTemplate):
+    """The page's template, its document built with bokeh's model index frozen.
+
+    Building the page's document (about 870 models) made bokeh walk every model of the
+    document again after each root added and each JavaScript link panel attached (14 walks,
+    0.6 s of the 1.4 s it took on the demo, measured in-process); frozen, it walks once at
+    the end: the page's HTML is served that much sooner."""
+
+    def server_doc(self, doc=None, title=None, location=True):
+        if doc is None:  # panel finds the document itself
+            return super().server_doc(doc, title, location)
+        with doc.models.freeze():
+            return super().server_doc(doc, title, location)
+
+
 def _is_data_event(event) -> bool:
     from bokeh.document.events import ColumnDataChangedEvent, ModelChangedEvent
     from bokeh.models import ColumnDataSource
@@ -318,7 +333,7 @@ class Explorer:
             self.state.seeds_ahead = False  # not while the page is being completed (_add_rest)
         # one root per area: every extra document root costs a full model walk on page load.
         # The header's button folds the sidebar away.
-        return pn.template.BootstrapTemplate(
+        return _Template(
             title=title, sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
             header=[self.status_bar.header_name], main=[main], sidebar_width=SIDE_W + 35,
             header_background="#2c4a66")
