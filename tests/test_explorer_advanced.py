@@ -58,6 +58,15 @@ def test_advanced_card_has_every_field_folded_with_tooltips(ex):
     assert adv.widgets["coarse_merge"].options == ["auto", "coding", "epipolar", "joint"]
     assert adv.widgets["coarse_merge"].value == "epipolar"
     assert adv.marked == [] and "All fields at their defaults" in adv.summary.object
+    # folded, the card sends none of its fields with the page; the first unfolding does
+    assert len(adv.card.objects) == 0
+    adv.card.collapsed = False
+    assert list(adv.card.objects) == adv.body and adv.w_reset in adv.card.objects
+    assert all(w in adv.card.objects or any(w in getattr(o, "objects", []) for o in adv.card.objects)
+               for w in adv.widgets.values())
+    adv.card.collapsed = True
+    adv.card.collapsed = False
+    assert list(adv.card.objects) == adv.body
 
 
 def test_a_field_recomputes_updates_the_url_and_the_sliders(ex):

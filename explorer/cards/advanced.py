@@ -83,11 +83,19 @@ class AdvancedPanel:
             "`LaavParams.own_chain()` (ours, no plain RV); pin a result first (Compare) to see "
             "what our departures change.",
             width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
-        self.card = pn.Card(intro, self.summary, self.message, *self.w_presets.values(), *rows,
-                            self.w_reset,
-                            title="Advanced: every parameter", collapsed=True, collapsible=True,
+        # folded, the card holds nothing: its ~140 models (a third of the sidebar's) go to the
+        # page when it is first opened, not with the page (served and built that much sooner)
+        self.body = [intro, self.summary, self.message, *self.w_presets.values(), *rows,
+                     self.w_reset]
+        self.card = pn.Card(title="Advanced: every parameter", collapsed=True, collapsible=True,
                             sizing_mode="stretch_width", margin=(6, 10))
+        self.card.param.watch(self._on_unfold, "collapsed")
         self._mark(p)
+
+    def _on_unfold(self, event) -> None:
+        """The card's fields go to the page the first time it is opened."""
+        if not event.new and not self.card.objects:
+            self.card.objects = list(self.body)
 
     @staticmethod
     def _widget(f, value):
