@@ -32,8 +32,9 @@ in the page's own clock:
   applying the patch and drawing).
 
 Each control is moved ``--repeats`` times between two values (the seed to a new one each
-time, 1, 2, 3, ...: a seed shown before is served from what the explorer kept, plain RV's
-runs or a whole result, and would time a cache), ``--settle`` seconds (default
+time, 1, 3, 5, ...: a seed shown before is served from what the explorer kept, plain RV's
+runs or a whole result, and the next seed may have been computed while idle; either would
+time a cache), ``--settle`` seconds (default
 0.3) after the previous move's redraw (what a person looking at the result leaves; the
 explorer computes the next seed while idle). Prints ONE JSON line and
 writes it, with date, machine and commit, to ``--out`` (default
@@ -255,8 +256,8 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
             for rep in range(repeats):
                 for name, prefix, kind, values, marker in controls:
                     for v in values:
-                        if name == "seed":  # a seed never shown before: 1, 2, 3, ...
-                            v = v + len(values) * rep
+                        if name == "seed":  # a seed never shown nor computed ahead: 1, 3, 5, ...
+                            v = 1 + 2 * (len(values) * rep + values.index(v))
                         xs = frame_x(seq, v) if kind == "frame" else None
                         b0 = received[0]
                         ms = page.evaluate(JS_MOVE, [prefix, v, kind, marker(v), xs])

@@ -122,6 +122,8 @@ class Explorer:
         A warm pipeline for ``seq`` (see :class:`ExplorerState`).
     plain_rv : Future, optional
         Plain RV's run for these settings, computed elsewhere (see :class:`ExplorerState`).
+    preview : Future, optional
+        The warm pipeline's preview (see :class:`ExplorerState`).
     seeds_ahead : bool
         Compute the next seed's result while idle, so that a step of the seed slider shows
         it at once (see :class:`ExplorerState`; ``laav-explore`` turns it on).
@@ -144,12 +146,12 @@ class Explorer:
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
                  start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD, video=None,
-                 plain_rv=None, seeds_ahead: bool = False):
+                 plain_rv=None, seeds_ahead: bool = False, preview=None):
         if video is not None and video.sequence is not seq:
             raise ValueError("video must be the one seq was tracked from (video.sequence is seq)")
         self.video = video
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False,
-                                   plain_rv=plain_rv, seeds_ahead=seeds_ahead)
+                                   plain_rv=plain_rv, seeds_ahead=seeds_ahead, preview=preview)
         self._seeds_ahead = seeds_ahead  # (held back while a lazy page is still being completed)
         self._session_doc = None
         self._doc_thread = threading.get_ident()
@@ -160,6 +162,8 @@ class Explorer:
         self._applied = threading.Condition()
         self.applied_generation = 0
         self.applied_plain_key = None
+        #: the views show a preview (LAAV's own fine-tuning; the result is on its way)
+        self.previewing = False
         # what the views show: the result, its sequence, the point colours
         # (views.point_style), the fine models' colours, the points whose motion changed
         self.result: laav.LaavResult | None = None
@@ -528,6 +532,7 @@ class Explorer:
         status line saying so, and is not yet the applied generation (:meth:`wait`)."""
         if gen < self.applied_generation or (preview and gen == self.applied_generation):
             return
+        self.previewing = preview
         t0 = time.perf_counter()
         new_seq = seq is not self._seq_shown
         with self.quiet():
@@ -633,7 +638,15 @@ class Explorer:
         if self._rest is not None and self._rest["loaded"]:
             self.schedule(self._add_rest)
         self.lock_for_upload(False)
+        self.restore_result()
         self.status_bar.show_error(message)
+
+    def restore_result(self) -> None:
+        """(Document thread.) After a cancel or a failure: a preview shown (whose result will
+        not come) gives way to the last result again."""
+        if self.previewing and self.state.result is not None:
+            self._apply_result(self.state.result, self.state.sequence, self.state.settings,
+                               self.applied_generation)
 
     # ------------------------------------------------------------------ view controls
     def _on_frame(self, event=None) -> None:
@@ -656,7 +669,7 @@ class Explorer:
         if self.result is None:
             return
         self.style = V.point_style(self.sequence, self.result, self.controls.color_mode,
-                                   self.state.plain_rv())
+                                   self.state.plain_rv(self.sequence, self.settings))
         with self.hold(live="draw"):
             self._draw_frame()
             self.compare.redraw()

@@ -259,7 +259,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                         iframe_host=iframe_host, start=False, page_hosts=hosts,
                         max_upload=DEFAULT_MAX_UPLOAD if max_upload is None else max_upload,
                         video=video, pipeline=None if first is None else first.pipeline,
-                        plain_rv=None if first is None else first.plain_rv, seeds_ahead=seeds_ahead)
+                        plain_rv=None if first is None else first.plain_rv, seeds_ahead=seeds_ahead,
+                        preview=None if first is None else first.preview)
 
     if prebuild:
         fut: Future = Future()

@@ -420,6 +420,10 @@ class ExplorerState:
     plain_rv : Future, optional
         Plain RV's run (:func:`plain_rv_of`) for ``seq`` and the first settings, computed
         elsewhere: used instead of computing it when those settings are shown (None: compute).
+    preview : Future, optional
+        The preview of ``pipeline`` (a :class:`~laav.LaavResult` with LAAV's own fine-tuning,
+        or None: :mod:`explorer.warm`), shown (:attr:`on_preview`) when it arrives before the
+        first result, if the first settings are still the ones asked for.
     seeds_ahead : bool
         While nothing is asked for, compute the result and plain RV for the next seed
         (seed + 1) on sequences of at most :data:`AHEAD_MAX_POINTS` points, so that a step
@@ -443,7 +447,8 @@ class ExplorerState:
 
     def __init__(self, seq: Sequence, n_motions: int | None = None, params: LaavParams | None = None,
                  seed: int = 0, pipeline: Future | Pipeline | None = None, autostart: bool = True,
-                 plain_rv: Future | None = None, seeds_ahead: bool = False):
+                 plain_rv: Future | None = None, seeds_ahead: bool = False,
+                 preview: Future | None = None):
         if n_motions is None:
             if seq.n_motions is None:
                 raise ValueError(f"{seq.name} has no ground truth: the number of motions C is needed")
@@ -456,9 +461,9 @@ class ExplorerState:
         self.on_plain_rv: Callable[[laav.Voting, tuple], None] | None = None
         #: called (worker thread) with a *preview* of a result on its way: LAAV's own
         #: fine-tuning alone, while plain RV and the selection still compute (a new seed, C
-        #: or RV setting; :meth:`laav.Pipeline.update`'s ``preview``); then ``on_result``
-        #: with the result, same generation. Not :attr:`result`: the state moves on only
-        #: with the result
+        #: or RV setting; :meth:`laav.Pipeline.update`'s ``preview``); then, unless the
+        #: computation is cancelled, fails or is superseded, ``on_result`` with the result,
+        #: same generation. Not :attr:`result`: the state moves on only with the result
         self.on_preview: Callable[[LaavResult, Sequence, Settings, int], None] | None = None
         #: called with the new :attr:`target` whenever it changes (a request, a load, a
         #: cancel or a failed load falling back): the Advanced panel shows it
@@ -504,6 +509,8 @@ class ExplorerState:
         self.rv_computing = _Interruptible()
         self._closed = False
         self._first = pipeline
+        # the preview of that pipeline (explorer.warm), for the settings it was computed with
+        self._first_preview = None if preview is None else (target, preview)
         self._warm: tuple | None = None  # (sequence, Future) of a superseded first job
         # plain RV for the first settings computed elsewhere: (its cache key, Future)
         self._rv_warm = None if plain_rv is None else (self.plain_rv_key(seq, target), plain_rv)
@@ -669,6 +676,7 @@ class ExplorerState:
                     if gen != self._gen:
                         return
                     if kind == "load" or self._pipe is None or self._pipe.seq is not seq:
+                        self._show_first_preview(gen, seq, target)
                         warm = self._warm_pipeline(seq, pipeline)
                         if warm is not None:  # computed elsewhere: only what differs is rerun
                             pipe, before = warm, warm.result
@@ -678,7 +686,8 @@ class ExplorerState:
                             if result is before:  # as computed elsewhere: its own stage times
                                 t0 -= sum(result.timings.values())
                         else:
-                            pipe = Pipeline(seq, target.n_motions, target.params, target.seed)
+                            pipe = Pipeline(seq, target.n_motions, target.params, target.seed,
+                                            preview=self._previewer(gen, seq, target, t0))
                             result = pipe.result
                     else:
                         entry = self._take_ahead(seq, target)
@@ -731,12 +740,35 @@ class ExplorerState:
                 self._idle.notify_all()
             self._notify_busy()
 
-    def _previewer(self, gen: int, seq: Sequence, target: Settings, t0: float):
-        """The ``preview`` hook of one job's :meth:`Pipeline.update` (see :attr:`on_preview`)."""
+    def _show_first_preview(self, gen: int, seq: Sequence, target: Settings) -> None:
+        """(Worker.) Show the warm pipeline's preview (computed elsewhere, see ``preview`` of
+        the constructor) when it arrives, if it is for ``target`` and the result is not shown
+        by then; at most once."""
+        first, self._first_preview = self._first_preview, None
+        if first is None or first[0] != target or seq is not self._target_seq:
+            return
+        show = self._previewer(gen, seq, target, None)
+
+        def arrived(fut: Future) -> None:
+            try:
+                result = fut.result()
+            except Exception:  # noqa: BLE001 - no preview then
+                return
+            if isinstance(result, LaavResult):
+                show(result)
+
+        first[1].add_done_callback(arrived)
+
+    def _previewer(self, gen: int, seq: Sequence, target: Settings, t0: float | None):
+        """The ``preview`` hook of one job's :meth:`Pipeline.update` (see :attr:`on_preview`);
+        ``t0`` None: computed elsewhere (its own stage times are shown)."""
         def preview(result: LaavResult) -> None:
-            if gen != self._gen or self.on_preview is None:
-                return  # superseded: its result will not be shown either
-            self.preview_seconds = time.perf_counter() - t0
+            with self._lock:
+                stale = gen != self._gen or self._published >= gen or self.on_preview is None
+            if stale:
+                return  # superseded, or the result is out already
+            self.preview_seconds = (sum(result.timings.values()) if t0 is None
+                                    else time.perf_counter() - t0)
             change = None
             if self.result is not None and self.sequence is seq:
                 try:

@@ -51,10 +51,14 @@ def pipeline_from_state(data: bytes, seq: laav.Sequence) -> laav.Pipeline:
 
 class Warm(NamedTuple):
     """The first results computed in the child: Futures of the pipeline and of plain RV's
-    run for the same settings (each None when the child could not deliver it)."""
+    run for the same settings (each None when the child could not deliver it), and of the
+    pipeline's preview (:meth:`laav.Pipeline.update`'s ``preview``: the result with LAAV's
+    own fine-tuning, before plain RV and the selection; its value None when there was none;
+    the Future itself None: not computed there)."""
 
     pipeline: Future
     plain_rv: Future
+    preview: Future | None = None
 
 
 def _child(conn, other_end, parent: int, seq, n_motions, params, seed) -> None:
@@ -72,10 +76,18 @@ def _child(conn, other_end, parent: int, seq, n_motions, params, seed) -> None:
     orphaned = lambda: os.getppid() != parent  # noqa: E731 - the parent has gone: stop
     try:
         with interruptible(orphaned):  # checked between stages and once per voting iteration
+            sent = []
+
+            def preview(result):  # LAAV's own fine-tuning: shown while the rest computes
+                conn.send_bytes(pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL))
+                sent.append(True)
+
             try:
-                data = pipeline_state(laav.Pipeline(seq, n_motions, params, seed))
+                data = pipeline_state(laav.Pipeline(seq, n_motions, params, seed, preview=preview))
             except BaseException:  # noqa: BLE001 - the parent then computes it itself
                 data = b""
+            if not sent:
+                conn.send_bytes(b"")  # no preview
             conn.send_bytes(data)
             try:
                 settings = Settings(laav.LaavParams() if params is None else params, seed, n_motions)
@@ -91,8 +103,9 @@ def _child(conn, other_end, parent: int, seq, n_motions, params, seed) -> None:
 
 def first_results(seq: laav.Sequence, n_motions: int, params: laav.LaavParams | None = None,
                   seed: int = 0) -> Warm:
-    """Start computing ``laav.Pipeline(seq, n_motions, params, seed)``, then plain Random
-    Voting's run for the same settings (:func:`explorer.state.plain_rv_of`), in a forked child.
+    """Start computing ``laav.Pipeline(seq, n_motions, params, seed)`` (its preview sent
+    first), then plain Random Voting's run for the same settings
+    (:func:`explorer.state.plain_rv_of`), in a forked child.
 
     Returns their Futures (:class:`Warm`); a Future's value is None when the child could not
     deliver it (no ``fork`` on this platform, the child failed or died): the explorer then
@@ -100,6 +113,7 @@ def first_results(seq: laav.Sequence, n_motions: int, params: laav.LaavParams | 
     the calling thread)."""
     pipe_fut: Future = Future()
     rv_fut: Future = Future()
+    preview_fut: Future = Future()
     try:
         ctx = multiprocessing.get_context("fork")
         recv, send = ctx.Pipe(duplex=False)
@@ -108,12 +122,18 @@ def first_results(seq: laav.Sequence, n_motions: int, params: laav.LaavParams | 
         proc.start()
         send.close()
     except (ValueError, OSError):  # no fork here
-        pipe_fut.set_result(None)
-        rv_fut.set_result(None)
-        return Warm(pipe_fut, rv_fut)
+        for fut in (preview_fut, pipe_fut, rv_fut):
+            fut.set_result(None)
+        return Warm(pipe_fut, rv_fut, preview_fut)
 
     def wait() -> None:
-        pipe = voting = None
+        pipe = voting = preview = None
+        try:
+            data = recv.recv_bytes()
+            preview = pickle.loads(data) if data else None
+        except Exception:  # noqa: BLE001 - EOF (the child died) or an unusable result
+            preview = None
+        preview_fut.set_result(preview if isinstance(preview, laav.LaavResult) else None)
         try:
             data = recv.recv_bytes()
             if data:
@@ -132,4 +152,4 @@ def first_results(seq: laav.Sequence, n_motions: int, params: laav.LaavParams | 
         rv_fut.set_result(voting if isinstance(voting, laav.Voting) else None)
 
     threading.Thread(target=wait, name="laav-explore-first-wait", daemon=True).start()
-    return Warm(pipe_fut, rv_fut)
+    return Warm(pipe_fut, rv_fut, preview_fut)

@@ -147,6 +147,9 @@ class Pipeline:
         C.
     params : LaavParams, optional
     seed : int
+    preview : callable, optional
+        Given the result with LAAV's own fine-tuning alone before plain Random Voting runs
+        (as :meth:`update`'s ``preview``).
 
     Attributes
     ----------
@@ -172,7 +175,8 @@ class Pipeline:
     >>> res = pipe.update(lam=5.0)                  # reuses atoms, graph and multicut
     """
 
-    def __init__(self, seq, n_motions: int, params: LaavParams | None = None, seed: int = 0):
+    def __init__(self, seq, n_motions: int, params: LaavParams | None = None, seed: int = 0, *,
+                 preview=None):
         self.seq, self.n_motions = _check_inputs(seq, n_motions)
         self.params = LaavParams() if params is None else params
         self.params.n_fine(self.n_motions, self.seq.is_complete)
@@ -184,7 +188,7 @@ class Pipeline:
         self._voting_memo: tuple | None = None
         #: (seed, C, rv_* settings) -> plain RV's runs, the last :data:`PLAIN_MEMOS` kept
         self._plain_memos: OrderedDict = OrderedDict()
-        self.result = self._run("atoms")
+        self.result = self._run("atoms", preview)
 
     def _voting_key(self, init) -> tuple:
         """Everything the fine-tuning's result depends on (its generator comes from the seed)."""
@@ -259,9 +263,10 @@ class Pipeline:
                         memo = self._plain_memos[pkey] = {}
                         while len(self._plain_memos) > PLAIN_MEMOS:
                             self._plain_memos.popitem(last=False)
-                        if preview is not None and init is not None and seq.is_complete:
-                            self._preview(preview, p, init, memo, timings, t)
                     self._plain_memos.move_to_end(pkey)
+                    if (preview is not None and ("run", 1) not in memo and init is not None
+                            and seq.is_complete):  # plain RV will run: LAAV's own trial first
+                        t += self._preview(preview, p, init, memo, timings, t)
                     # no atom: plain RV, whose input checks segment() made already
                     st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
                                                  plain_memo=memo,
@@ -280,27 +285,34 @@ class Pipeline:
         )
 
     def _preview(self, preview, p: LaavParams, init: np.ndarray, memo: dict, timings: dict,
-                 t: float) -> None:
-        """Hand ``preview`` the result with LAAV's own fine-tuning alone (see :meth:`update`)."""
+                 t: float) -> float:
+        """Hand ``preview`` the result with LAAV's own fine-tuning alone (see :meth:`update`),
+        its voting time counted from ``t`` (the stage's start); the seconds ``preview`` itself
+        took (not the stage's)."""
         voting = informed_preview(self.seq.points, self.n_motions, p, self._rng("voting"), init,
                                   plain_memo=memo)
-        if voting is not None:
-            now = dict(timings)
-            now["voting"] += time.perf_counter() - t
-            preview(self._result(voting, now))
+        if voting is None:
+            return 0.0
+        now = dict(timings)
+        now["voting"] += time.perf_counter() - t
+        t_call = time.perf_counter()
+        preview(self._result(voting, now))
+        return time.perf_counter() - t_call
 
     def update(self, *, preview=None, **changed) -> LaavResult:
         """Change parameters (any :class:`LaavParams` field, ``seed`` or ``n_motions``)
         and recompute only the stages downstream of the change.
 
         ``preview``: a callable that, when the fine-tuning must run plain Random Voting
-        afresh (a new seed, C or ``rv_*`` setting; complete tracks, ``rv_select``
-        ``"joint"`` or ``"subspace"``), is first given the result with LAAV's own
+        afresh (a new seed, C or ``rv_*`` setting; complete tracks of at most
+        ``rv_max_points`` points, ``rv_select`` ``"joint"`` or ``"subspace"``), is first
+        given the result with LAAV's own
         fine-tuning alone (:func:`laav.voting.informed_preview`: the informed trial,
         refined and reassigned, ``voting.selected == "informed"``, no costs), in this thread,
         before plain RV and the selection run (for a live view: most of a seed change's
-        time is theirs). The trial is not run again after it, and the returned result is
-        the same with or without ``preview``.
+        time is theirs). The trial is not run again after it, the returned result is the
+        same with or without ``preview``, and the time ``preview`` takes is not in the
+        result's ``timings``.
 
         Returns
         -------

@@ -199,8 +199,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         then the same dict again for the same points, C, seed and ``rv_*`` settings. Plain
         RV's runs and their polished candidates (which do not depend on ``init_labels``)
         are kept in it and reused, the candidates' costs per value of the fields the joint
-        score reads (:data:`SELECTION_FIELDS`); the labels are identical to a run without
-        it.
+        score reads (:data:`SELECTION_FIELDS`), and the last informed trial and its polish,
+        keyed on their start (so that :func:`informed_preview` and this call run them
+        once); the labels are identical to a run without it.
     visible : ndarray of shape (F, P), bool, optional
         For an array ``seq`` with missing entries (a :class:`Sequence` carries its own).
         When an entry is hidden, the missing-data variant runs (``docs/ALGORITHM.md``,
@@ -338,8 +339,8 @@ def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=N
 
 
 def _informed_start(points, C, params, rng, init_labels, weights):
-    """LAAV's start from ``init_labels``: (init, labels0, votes0), the points without a
-    label drawn at random from ``rng`` (the fine-tuning's first draw)."""
+    """LAAV's start from ``init_labels`` (P,): (init (P,), labels0 (P,), votes0 (P, C)), the
+    points without a label drawn at random from ``rng`` (the fine-tuning's first draw)."""
     P = points.shape[1]
     init = np.asarray(init_labels, dtype=np.int64)
     if init.shape != (P,):
@@ -359,21 +360,31 @@ def _informed_start(points, C, params, rng, init_labels, weights):
     return init, labels0, votes0
 
 
+class _Weight(tuple):
+    """What :func:`_with_informed` reads of an informed trial's subspace votes (their
+    ``weight``), kept in a memo without their (2F, P) subspace matrix."""
+
+    weight = property(lambda self: self[0])
+
+
 def _first_trial(points, C, params, stream, labels0, votes0, known, masks, memo):
     """The selection's informed trial on ``stream`` (the first of the fine-tuning's
-    spawned streams): (its end, the trials run, its subspace votes). With ``memo`` (the
-    caller's ``plain_memo``) the last one computed is kept and reused for the same start:
-    :func:`informed_preview` computes it first, the fine-tuning then reuses it."""
-    key = (labels0.tobytes(), votes0.tobytes())
+    spawned streams) from ``labels0`` (P,) with ``votes0`` (P, C), ``known`` (P,) the
+    points with a start label: (its end, the trials run, its subspace votes or None).
+    With ``memo`` (the caller's ``plain_memo``) the last one computed is kept and reused
+    for the same start: :func:`informed_preview` computes it first, the fine-tuning then
+    reuses it."""
+    key = (known.tobytes(), labels0.tobytes(), votes0.tobytes(), masks is None)
     hit = None if memo is None else memo.get("informed")
     if hit is not None and hit[0] == key:
         return hit[1]
     extra = for_informed_trial(points, params, known, masks)  # ours: subspace votes
     first, _, trials, _ = run_trials(points, C, params, None, (labels0, votes0), n_plain=0,
                                      streams=[stream], masks=masks, extra=extra)
+    kept = None if extra is None else _Weight((extra.weight,))
     if memo is not None:
-        memo["informed"] = (key, (first, trials, extra))
-    return first, trials, extra
+        memo["informed"] = (key, (first, trials, kept))
+    return first, trials, kept
 
 
 def informed_preview(points: np.ndarray, n_motions: int, params: LaavParams,
@@ -404,11 +415,13 @@ def informed_preview(points: np.ndarray, n_motions: int, params: LaavParams,
     Voting or None
         ``selected="informed"``, no costs (nothing was compared yet); None where the
         fine-tuning has no plain RV to wait for (``rv_select`` ``"none"`` or ``"laav"``,
-        one motion, more than ``rv_max_points`` points).
+        one motion) or runs another way (more than ``rv_max_points`` points), and for
+        arguments :func:`random_voting` refuses.
     """
     C = int(n_motions)
     P = points.shape[1]
     if (params.rv_select in ("none", "laav") or C < 2 or points.shape[0] < 2
+            or params.rv_sample_size > P  # (random_voting then says what is wrong)
             or (params.rv_max_points is not None and P > params.rv_max_points)):
         return None
     init, labels0, votes0 = _informed_start(points, C, params, rng, init_labels, None)

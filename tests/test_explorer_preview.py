@@ -66,3 +66,24 @@ def test_the_app_draws_the_preview_then_the_result():
         assert ex.result.seed == 2 and ex.state.result is ex.result
     finally:
         ex.close()
+
+
+def test_a_preview_gives_way_to_the_last_result_when_its_result_will_not_come():
+    """Cancelled or failed after its preview was drawn: the views go back to the result."""
+    ex = Explorer(SEQ, 3, viser=False)
+    try:
+        assert ex.wait(120)
+        shown = ex.result
+        pre = laav.Pipeline(SEQ, 3, seed=4)
+        got = []
+        laav.Pipeline(SEQ, 3).update(seed=4, preview=got.append)
+        ex._apply_result(got[0], SEQ, ex.settings.__class__(ex.settings.params, 4, 3),
+                         ex.applied_generation + 1, True)
+        assert ex.previewing and ex.result is got[0]
+        assert PREVIEW_STATUS in ex.status_bar._status_text
+        ex.restore_result()
+        assert not ex.previewing and ex.result is shown and ex.state.result is shown
+        assert PREVIEW_STATUS not in ex.status_bar._status_text
+        assert pre.result.seed == 4
+    finally:
+        ex.close()

@@ -50,6 +50,47 @@ def test_the_child_computes_the_pipeline_and_plain_rv_of_this_process(seq):
 def test_a_failing_child_gives_none(seq):
     bad = warm.first_results(seq, 10 ** 6, None, 0)  # C > P: the child fails
     assert bad.pipeline.result(timeout=120) is None and bad.plain_rv.result(timeout=120) is None
+    assert bad.preview.result(timeout=120) is None
+
+
+def test_the_child_sends_its_preview_first_and_the_state_shows_it_before_the_result(seq):
+    """The child's pipeline hands its preview (LAAV's own fine-tuning, before plain RV) back
+    first; the state shows it (``on_preview``) while it waits for the pipeline, then the
+    result; a preview for other settings than the ones asked for is not shown."""
+    w = warm.first_results(seq, 2, None, 1)
+    pre = w.preview.result(timeout=120)
+    pipe = w.pipeline.result(timeout=120)
+    assert isinstance(pre, laav.LaavResult) and pre.voting.selected == "informed"
+    np.testing.assert_array_equal(pre.voting.informed_changed, pipe.result.voting.informed_changed)
+    assert pre.voting.costs == {} and pipe.result.voting.costs
+    # the state, the child slow: the preview arrives first, then the pipeline
+    fut, pfut = Future(), Future()
+    st = ExplorerState(seq, 2, seed=1, pipeline=fut, preview=pfut, autostart=False)
+    events = []
+    st.on_preview = lambda r, s, t, gen: events.append(("preview", r, gen))
+    st.on_result = lambda r, s, t, gen: events.append(("result", r, gen))
+    try:
+        st.start()
+        threading.Timer(0.3, pfut.set_result, (pre,)).start()
+        threading.Timer(1.0, fut.set_result, (pipe,)).start()
+        assert st.wait(120)
+        assert [e[0] for e in events] == ["preview", "result"] and events[0][2] == events[1][2]
+        assert events[0][1] is pre and events[1][1] is pipe.result and st.result is pipe.result
+    finally:
+        st.close()
+    # asked for other settings (a shared URL): that preview is not shown
+    fut2, pfut2 = Future(), Future()
+    st = ExplorerState(seq, 2, seed=1, pipeline=fut2, preview=pfut2, autostart=False)
+    st.retarget(Settings(laav.LaavParams(lam=4.0), 1, 2))
+    shown = []
+    st.on_preview = lambda r, s, t, gen: shown.append(r)
+    try:
+        st.start()
+        pfut2.set_result(pre)
+        fut2.set_result(pipe)
+        assert st.wait(120) and pre not in shown and st.result.params.lam == 4.0
+    finally:
+        st.close()
 
 
 def test_state_takes_plain_rv_from_the_child(seq, monkeypatch):

@@ -384,7 +384,9 @@ def test_preview_only_when_plain_rv_runs_afresh():
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
     calls = []
     pipe = Pipeline(seq, 3)
-    pipe.update(lam=2.0, preview=calls.append)
+    before = pipe.result
+    res = pipe.update(lam=3.0, preview=calls.append)
+    assert res.coarse is not before.coarse and res.params.lam == 3.0  # it did rerun
     assert calls == []
     pipe.update(n_motions=2, preview=calls.append)
     assert len(calls) == 1
@@ -422,3 +424,57 @@ def test_a_step_back_to_a_seed_reuses_plain_rvs_runs(monkeypatch):
     assert plain
     monkeypatch.undo()
     assert_same_result(back, segment(seq, 3, seed=3))
+
+
+def test_with_a_preview_the_informed_trial_and_its_polish_run_once(monkeypatch):
+    import laav.voting as voting_module
+
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+    pipe = Pipeline(seq, 3)
+    real_trials, real_polished = voting_module.run_trials, voting_module._Polished
+    informed, polished = [], []
+
+    def trials(points, C, params, rng, start=None, *a, **k):
+        if start is not None:
+            informed.append(1)
+        return real_trials(points, C, params, rng, start, *a, **k)
+
+    class Polished(real_polished):
+        def __init__(self, *a, **k):
+            polished.append(1)
+            super().__init__(*a, **k)
+
+    monkeypatch.setattr(voting_module, "run_trials", trials)
+    monkeypatch.setattr(voting_module, "_Polished", Polished)
+    got = []
+    pipe.update(seed=1, preview=got.append)
+    n_with = (len(informed), len(polished))
+    other = Pipeline(seq, 3, seed=0)
+    del informed[:], polished[:]
+    other.update(seed=1)  # without a preview: as many of each
+    assert len(got) == 1 and n_with[0] == 1 and n_with == (len(informed), len(polished))
+
+
+def test_a_retry_after_an_interrupted_update_gets_its_preview():
+    """An update stopped after its memo was made (here: its preview raises) leaves it
+    without plain RV's runs; the next try still previews, and ends as a fresh run."""
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+    pipe = Pipeline(seq, 3)
+
+    def boom(result):
+        raise RuntimeError("stop")
+
+    with pytest.raises(RuntimeError):
+        pipe.update(seed=5, preview=boom)
+    assert pipe.seed == 0
+    got = []
+    res = pipe.update(seed=5, preview=got.append)
+    assert len(got) == 1
+    assert_same_result(res, segment(seq, 3, seed=5))
+
+
+def test_a_preview_keeps_the_clear_error_for_bad_settings():
+    seq = synthetic.make_sequence(n_objects=2, n_frames=12, n_points=60, rng=0)
+    pipe = Pipeline(seq, 2)
+    with pytest.raises(ValueError, match="rv_sample_size"):
+        pipe.update(seed=1, rv_sample_size=61, preview=lambda r: None)

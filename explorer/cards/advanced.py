@@ -83,7 +83,7 @@ class AdvancedPanel:
             "`LaavParams.own_chain()` (ours, no plain RV); pin a result first (Compare) to see "
             "what our departures change.",
             width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
-        # folded, the card holds nothing: its ~140 models (a third of the sidebar's) go to the
+        # folded, the card holds nothing: its ~130 models (a third of the sidebar's) go to the
         # page when it is first opened, not with the page (served and built that much sooner)
         self.body = [intro, self.summary, self.message, *self.w_presets.values(), *rows,
                      self.w_reset]

@@ -40,6 +40,8 @@ class Host(Protocol):
     def hold(self, one_message: bool = False, freeze: bool = False, live: str | None = None):
         ...  # context manager: the model changes inside go out as one batch (live: see Explorer.hold)
 
+    def restore_result(self) -> None: ...  # a preview shown gives way to the last result
+
 
 def _same(a, b) -> bool:
     try:

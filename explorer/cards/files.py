@@ -369,6 +369,7 @@ class Files:
         """(Document thread.) Controls back to the shown result's settings, and a note."""
         self.host.lock_for_upload(False)
         self.controls.switching = False
+        self.host.restore_result()  # a preview shown gives way to the last result
         self.controls.show_settings(self.state.settings)
         self.show_progress(False)
         self._work_t0 = None
