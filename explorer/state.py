@@ -716,16 +716,7 @@ class ExplorerState:
             if gen != self._gen:
                 return  # a newer request came in meanwhile: drop this result
             self.compute_seconds = time.perf_counter() - t0
-            change = None
-            if self.result is not None and self.sequence is seq and result is not self.result:
-                try:
-                    change = describe_change(seq, self.result, self.settings, result, target)
-                except Exception:  # a summary must never cost the result
-                    traceback.print_exc()
-            self._changes[id(result)] = (result, change)
-            while len(self._changes) > 4:
-                self._changes.popitem(last=False)
-            self.change = change
+            self.change = self._remember_change(seq, target, result)
             self.result, self.sequence, self.settings = result, seq, target
             self.error = None
             self._published = gen
@@ -739,6 +730,20 @@ class ExplorerState:
                 self._pending -= 1
                 self._idle.notify_all()
             self._notify_busy()
+
+    def _remember_change(self, seq: Sequence, target: Settings, result: LaavResult) -> Change | None:
+        """What ``result`` (for ``target``) changed against the result shown, kept for
+        :meth:`change_of` (the last 8: previews take their places too)."""
+        change = None
+        if self.result is not None and self.sequence is seq and result is not self.result:
+            try:
+                change = describe_change(seq, self.result, self.settings, result, target)
+            except Exception:  # a summary must never cost the result
+                traceback.print_exc()
+        self._changes[id(result)] = (result, change)
+        while len(self._changes) > 8:
+            self._changes.popitem(last=False)
+        return change
 
     def _show_first_preview(self, gen: int, seq: Sequence, target: Settings) -> None:
         """(Worker.) Show the warm pipeline's preview (computed elsewhere, see ``preview`` of
@@ -769,15 +774,7 @@ class ExplorerState:
                 return  # superseded, or the result is out already
             self.preview_seconds = (sum(result.timings.values()) if t0 is None
                                     else time.perf_counter() - t0)
-            change = None
-            if self.result is not None and self.sequence is seq:
-                try:
-                    change = describe_change(seq, self.result, self.settings, result, target)
-                except Exception:  # a summary must never cost the preview
-                    traceback.print_exc()
-            self._changes[id(result)] = (result, change)
-            while len(self._changes) > 4:
-                self._changes.popitem(last=False)
+            self._remember_change(seq, target, result)
             try:
                 self.on_preview(result, seq, target, gen)
             except Exception:  # a GUI hook must never kill the worker

@@ -6,6 +6,7 @@ it on as ``on_preview``; the app draws it with a status line that says so."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import laav
 from explorer import Explorer
@@ -42,48 +43,44 @@ def test_the_state_hands_on_the_preview_before_the_result():
         st.close()
 
 
-def test_the_app_draws_the_preview_then_the_result():
-    ex = Explorer(SEQ, 3, viser=False)
-    try:
-        assert ex.wait(120)
-        seen = []
-        draw = ex._apply_result
-
-        def spy(result, seq, settings, gen, preview=False):
-            draw(result, seq, settings, gen, preview)
-            seen.append((preview, ex.status_bar._status_text, ex.rv_md.object, ex.applied_generation,
-                         gen, ex.result is result))
-
-        ex._apply_result = spy
-        ex.controls.w_seed.value = 2
-        assert ex.wait(120)
-        assert [p for p, *_ in seen] == [True, False]
-        (_, text1, rv1, applied1, gen1, shown1), (_, text2, rv2, applied2, gen2, shown2) = seen
-        assert PREVIEW_STATUS in text1 and "seed \\= 2" in text1 and PREVIEW_NOTE in rv1
-        assert applied1 < gen1 and shown1  # drawn, but not yet the applied result (wait())
-        assert PREVIEW_STATUS not in text2 and "seed \\= 2" in text2 and PREVIEW_NOTE not in rv2
-        assert applied2 == gen2 == gen1 and shown2
-        assert ex.result.seed == 2 and ex.state.result is ex.result
-    finally:
-        ex.close()
+@pytest.fixture
+def ex():
+    e = Explorer(SEQ, 3, viser=False)
+    assert e.wait(120)
+    yield e
+    e.close()
 
 
-def test_a_preview_gives_way_to_the_last_result_when_its_result_will_not_come():
+def test_the_app_draws_the_preview_then_the_result(ex):
+    seen = []
+    draw = ex._apply_result
+
+    def spy(result, seq, settings, gen, preview=False):
+        draw(result, seq, settings, gen, preview)
+        seen.append((preview, ex.status_bar._status_text, ex.rv_md.object, ex.applied_generation,
+                     gen, ex.result is result))
+
+    ex._apply_result = spy
+    ex.controls.w_seed.value = 2
+    assert ex.wait(120)
+    assert [p for p, *_ in seen] == [True, False]
+    (_, text1, rv1, applied1, gen1, shown1), (_, text2, rv2, applied2, gen2, shown2) = seen
+    assert PREVIEW_STATUS in text1 and "seed \\= 2" in text1 and PREVIEW_NOTE in rv1
+    assert applied1 < gen1 and shown1  # drawn, but not yet the applied result (wait())
+    assert PREVIEW_STATUS not in text2 and "seed \\= 2" in text2 and PREVIEW_NOTE not in rv2
+    assert applied2 == gen2 == gen1 and shown2
+    assert ex.result.seed == 2 and ex.state.result is ex.result
+
+
+def test_a_preview_gives_way_to_the_last_result_when_its_result_will_not_come(ex):
     """Cancelled or failed after its preview was drawn: the views go back to the result."""
-    ex = Explorer(SEQ, 3, viser=False)
-    try:
-        assert ex.wait(120)
-        shown = ex.result
-        pre = laav.Pipeline(SEQ, 3, seed=4)
-        got = []
-        laav.Pipeline(SEQ, 3).update(seed=4, preview=got.append)
-        ex._apply_result(got[0], SEQ, ex.settings.__class__(ex.settings.params, 4, 3),
-                         ex.applied_generation + 1, True)
-        assert ex.previewing and ex.result is got[0]
-        assert PREVIEW_STATUS in ex.status_bar._status_text
-        ex.restore_result()
-        assert not ex.previewing and ex.result is shown and ex.state.result is shown
-        assert PREVIEW_STATUS not in ex.status_bar._status_text
-        assert pre.result.seed == 4
-    finally:
-        ex.close()
+    shown = ex.result
+    got = []
+    laav.Pipeline(SEQ, 3).update(seed=4, preview=got.append)
+    ex._apply_result(got[0], SEQ, ex.settings.__class__(ex.settings.params, 4, 3),
+                     ex.applied_generation + 1, True)
+    assert ex.previewing and ex.result is got[0]
+    assert PREVIEW_STATUS in ex.status_bar._status_text
+    ex.restore_result()
+    assert not ex.previewing and ex.result is shown and ex.state.result is shown
+    assert PREVIEW_STATUS not in ex.status_bar._status_text
