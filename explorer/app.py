@@ -164,6 +164,7 @@ class Explorer:
         self.applied_plain_key = None
         #: the views show a preview (LAAV's own fine-tuning; the result is on its way)
         self.previewing = False
+        self._unpinned_note = None  # the compare card's note when a sequence is opened
         # what the views show: the result, its sequence, the point colours
         # (views.point_style), the fine models' colours, the points whose motion changed
         self.result: laav.LaavResult | None = None
@@ -532,7 +533,7 @@ class Explorer:
         status line saying so, and is not yet the applied generation (:meth:`wait`)."""
         if gen < self.applied_generation or (preview and gen == self.applied_generation):
             return
-        self.previewing = preview
+        was_preview, self.previewing = self.previewing, preview
         t0 = time.perf_counter()
         new_seq = seq is not self._seq_shown
         with self.quiet():
@@ -541,6 +542,9 @@ class Explorer:
                 if new_seq:
                     self._set_sequence(seq, settings)
                     unpinned = self.compare.sequence_changed(seq)
+                elif was_preview:  # the preview opened this sequence: its note stays
+                    unpinned = self._unpinned_note
+                self._unpinned_note = unpinned
                 self.result, self.sequence, self.settings = result, seq, settings
                 self.change = self.state.change_of(result) if not new_seq else None
                 self.moved = None if self.change is None else self.change.moved

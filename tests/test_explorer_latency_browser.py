@@ -19,15 +19,21 @@ import pytest
 from test_explorer_browser import ARGS, CHROMIUM, _sequence, _served, _wait_for  # noqa: F401
 
 import laav
+from explorer.cards.status import PREVIEW_STATUS
 from explorer.warm import Warm
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
+#: The page's state; ``status`` is a result's status line (a preview's, which a result
+#: follows, is ``preview``: ExplorerState.on_preview).
 JS_PAGE = """() => {
-  const out = {status: '', points: 0, graph: false, frame_title: ''};
+  const out = {status: '', preview: '', points: 0, graph: false, frame_title: ''};
   if (!(window.Bokeh && Bokeh.documents.length > 0)) return out;
   for (const m of Bokeh.documents[0].all_models) {
-    if (typeof m.text === 'string' && m.text.includes('Showing')) out.status = m.text;
+    if (typeof m.text === 'string' && m.text.includes('Showing')) {
+      if (m.text.includes(""" + json.dumps(PREVIEW_STATUS) + """)) out.preview = m.text;
+      else out.status = m.text;
+    }
     if (m.type === 'ColumnDataSource' && m.data.index !== undefined) out.points = m.data.index.length;
     if (m.type === 'Title' && typeof m.text === 'string' && m.text.includes('atoms,') &&
         m.text.includes('edges')) out.graph = true;
