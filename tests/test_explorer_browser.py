@@ -9,6 +9,7 @@ independent, and saves screenshots (``$LAAV_EXPLORER_SHOTS`` or pytest's tmp dir
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import time
@@ -29,6 +30,7 @@ import numpy as np  # noqa: E402
 from conftest import two_motion_sequence  # noqa: E402
 
 import laav  # noqa: E402
+from explorer.cards.status import PREVIEW_STATUS  # noqa: E402
 from explorer.cli import app_factory, serve_options  # noqa: E402
 
 ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -37,6 +39,7 @@ LOCAL = ("http://127.0.0.1", "ws://127.0.0.1", "http://localhost", "ws://localho
          "about:")
 
 JS_SOURCES = """() => {
+  const PREVIEW = """ + json.dumps(PREVIEW_STATUS) + """;
   const out = {};
   for (const m of Bokeh.documents[0].all_models) {
     if (m.type === 'ColumnDataSource' && m.data.z !== undefined) out.z = Array.from(m.data.z);
@@ -44,6 +47,9 @@ JS_SOURCES = """() => {
     if (m.type === 'ColumnDataSource' && m.data.r1 !== undefined) out.r1 = Array.from(m.data.r1);
     if (m.type === 'Title' && (m.text.startsWith('Affinity Z') || m.text.startsWith('Coding affinity')))
       out.ztitle = m.text;
+    // a result's status line (not a preview's, which a result follows)
+    if (typeof m.text === 'string' && m.text.includes('Showing') && !m.text.includes(PREVIEW))
+      out.status = m.text;
   }
   return out;
 }"""
@@ -160,6 +166,7 @@ def test_explorer_in_chromium(tmp_path):
         ex = _wait_for(lambda: created[0] if created else None, 10, "the session's explorer")
         assert ex.wait(60), "the first result did not arrive"
         page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=20000)
+        page.wait_for_function("(" + JS_SOURCES + ")().status !== undefined", timeout=20000)
         load_s = time.monotonic() - t0
         before = page.evaluate(JS_SOURCES)
         assert before["points"] == seq.n_points
