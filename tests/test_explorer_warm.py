@@ -76,6 +76,9 @@ def test_the_child_sends_its_preview_first_and_the_state_shows_it_before_the_res
         assert st.wait(120)
         assert [e[0] for e in events] == ["preview", "result"] and events[0][2] == events[1][2]
         assert events[0][1] is pre and events[1][1] is pipe.result and st.result is pipe.result
+        # (plain RV's run in the background ends here: a later test's fork must not copy a
+        # thread holding the pipeline's thread-limit lock)
+        assert st.wait_plain_rv(120) is not None
     finally:
         st.close()
     # asked for other settings (a shared URL): that preview is not shown
@@ -89,6 +92,7 @@ def test_the_child_sends_its_preview_first_and_the_state_shows_it_before_the_res
         pfut2.set_result(pre)
         fut2.set_result(pipe)
         assert st.wait(120) and pre not in shown and st.result.params.lam == 4.0
+        assert st.wait_plain_rv(120) is not None
     finally:
         st.close()
 
