@@ -574,7 +574,8 @@ class Explorer:
                 self._data_notes = [n for n in data_notes if n]
                 notes = [n for n in (self.style["note"], unpinned) if n] + self._data_notes
                 s.show_note("  \n".join(notes))
-                s.show_result(seq, num["error_final"], self.state.preview_seconds if preview
+                # a preview's time: its own stages' (what this change reran, or the warm child)
+                s.show_result(seq, num["error_final"], sum(result.timings.values()) if preview
                               else self.state.compute_seconds,
                               non_defaults(settings, self.state.default_motions(seq), seq.is_complete),
                               self.change, ahead=self.state.computed_ahead(result), preview=preview)

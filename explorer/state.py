@@ -476,8 +476,6 @@ class ExplorerState:
         self.change: Change | None = None
         self._changes: OrderedDict = OrderedDict()
         self.compute_seconds = 0.0
-        #: seconds the last preview took from the request (see :attr:`on_preview`)
-        self.preview_seconds = 0.0
         self._target = target
         self._target_seq = seq
         self._pipe: Pipeline | None = None
@@ -682,12 +680,12 @@ class ExplorerState:
                             pipe, before = warm, warm.result
                             t0 = time.perf_counter()  # (the wait is not this computation's)
                             result = pipe.update(**target.update_kwargs(),
-                                                 preview=self._previewer(gen, seq, target, t0))
+                                                 preview=self._previewer(gen, seq, target))
                             if result is before:  # as computed elsewhere: its own stage times
                                 t0 -= sum(result.timings.values())
                         else:
                             pipe = Pipeline(seq, target.n_motions, target.params, target.seed,
-                                            preview=self._previewer(gen, seq, target, t0))
+                                            preview=self._previewer(gen, seq, target))
                             result = pipe.result
                     else:
                         entry = self._take_ahead(seq, target)
@@ -700,7 +698,7 @@ class ExplorerState:
                         else:
                             pipe = self._pipe
                             result = pipe.update(**target.update_kwargs(),
-                                                 preview=self._previewer(gen, seq, target, t0))
+                                                 preview=self._previewer(gen, seq, target))
             except Superseded:
                 return  # a newer request is queued: it starts now
             except ValueError as exc:  # includes laav.SequenceError
@@ -752,7 +750,7 @@ class ExplorerState:
         first, self._first_preview = self._first_preview, None
         if first is None or first[0] != target or seq is not self._target_seq:
             return
-        show = self._previewer(gen, seq, target, None)
+        show = self._previewer(gen, seq, target)
 
         def arrived(fut: Future) -> None:
             try:
@@ -764,16 +762,13 @@ class ExplorerState:
 
         first[1].add_done_callback(arrived)
 
-    def _previewer(self, gen: int, seq: Sequence, target: Settings, t0: float | None):
-        """The ``preview`` hook of one job's :meth:`Pipeline.update` (see :attr:`on_preview`);
-        ``t0`` None: computed elsewhere (its own stage times are shown)."""
+    def _previewer(self, gen: int, seq: Sequence, target: Settings):
+        """The ``preview`` hook of one job's :meth:`Pipeline.update` (see :attr:`on_preview`)."""
         def preview(result: LaavResult) -> None:
             with self._lock:
                 stale = gen != self._gen or self._published >= gen or self.on_preview is None
             if stale:
                 return  # superseded, or the result is out already
-            self.preview_seconds = (sum(result.timings.values()) if t0 is None
-                                    else time.perf_counter() - t0)
             self._remember_change(seq, target, result)
             try:
                 self.on_preview(result, seq, target, gen)

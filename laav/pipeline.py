@@ -254,8 +254,8 @@ class Pipeline:
                 if self._voting_memo is not None and self._same_voting_inputs(key):
                     st["voting"] = self._voting_memo[1]  # same inputs, same result
                 else:
-                    # plain RV's runs: kept while seed, C and rv_* stay (its polished
-                    # candidates' costs are keyed on the selection's fields inside)
+                    # plain RV's runs: kept for the last PLAIN_MEMOS (seed, C, rv_*) (its
+                    # polished candidates' costs are keyed on the selection's fields inside)
                     pkey = (key[0], key[1], tuple(kv for kv in key[2]
                                                   if kv[0] not in SELECTION_FIELDS))
                     memo = self._plain_memos.get(pkey)
