@@ -22,6 +22,7 @@ that cannot be opened or gives no usable tracks: one line on stderr), 130 interr
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import os
 import sys
@@ -317,6 +318,7 @@ def _cmd_segment(args) -> int:
         safe_name,
         segment,
     )
+    from ._sequence import MIN_POINTS
     from .bench import params_from_assignments
 
     params = params_from_assignments(args.param, args.preset)
@@ -325,6 +327,10 @@ def _cmd_segment(args) -> int:
     if C is None:
         raise _UsageError(f"{args.file}: no ground-truth labels in the file; give the number "
                           "of motions with --motions C (or --motions auto)")
+    if C != "auto" and int(C) > 1 and seq.n_points < MIN_POINTS * int(C):  # as laav-explore
+        raise _UsageError(f"{args.file}: {seq.n_points} tracks, fewer than the "
+                          f"{MIN_POINTS * int(C)} LAAV needs for {int(C)} motions (the 8-point "
+                          f"algorithm fits each motion with at least {MIN_POINTS})")
     try:
         if C == "auto":
             from .motions import estimate_motions
@@ -337,7 +343,7 @@ def _cmd_segment(args) -> int:
         else:
             labels = random_voting(seq, C, params, args.seed).labels
     except ValueError as exc:
-        raise _UsageError(f"{args.file}: {exc}") from None
+        raise _UsageError(_named(args.file, exc)) from None
     # a name read from the file is only ever a base name in the current or given folder
     default = f"{safe_name(seq.name)}_labels.csv"
     out = Path(args.out) if args.out else Path(default)
@@ -363,6 +369,12 @@ def _cmd_segment(args) -> int:
         print(f"misclassification: {err:.2f} % ({seq.name}, {seq.n_points} points, "
               f"{C} motions, {args.method}, seed {args.seed})")
     return 0
+
+
+def _named(path, exc) -> str:
+    """``exc``'s message, prefixed with ``path`` unless it already names the file first."""
+    msg = str(exc)
+    return msg if msg.startswith(f"{path}:") else f"{path}: {msg}"
 
 
 def _split(values) -> list[str]:
@@ -444,6 +456,29 @@ def _cmd_report(args) -> int:
     return 0
 
 
+@contextlib.contextmanager
+def _warnings_as_lines(prog: str):
+    """LAAV's warnings (:class:`laav.LaavWarning`) shown as one line each,
+    ``PROG: warning: MESSAGE``, instead of Python's file, line number and source line
+    (the format only: a caller recording warnings still records them)."""
+    import warnings
+
+    from ._sequence import LaavWarning
+
+    plain = warnings.formatwarning
+
+    def one_line(message, category, filename, lineno, line=None):
+        if issubclass(category, LaavWarning):
+            return f"{prog}: warning: {message}\n"
+        return plain(message, category, filename, lineno, line)
+
+    warnings.formatwarning = one_line
+    try:
+        yield
+    finally:
+        warnings.formatwarning = plain
+
+
 def main(argv=None) -> int:
     """Entry point of the ``laav`` console script; returns the exit code."""
     parser = build_parser()
@@ -453,7 +488,8 @@ def main(argv=None) -> int:
     commands = {"segment": _cmd_segment, "bench": _cmd_bench, "report": _cmd_report,
                 "convert": _cmd_convert, "track": _cmd_track}
     try:
-        return commands[args.command](args)
+        with _warnings_as_lines(f"laav {args.command}"):
+            return commands[args.command](args)
     except (_UsageError, BenchError) as exc:
         print(f"laav {args.command}: error: {exc}", file=sys.stderr)
         return 2

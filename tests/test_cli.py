@@ -249,3 +249,34 @@ def test_path_errors_are_one_line_exit_2(tmp_path, capsys, case):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "error" in err and "Traceback" not in err
     assert str(tmp_path) in err
+
+
+def test_segment_too_few_tracks_for_c_exit_2_one_line(tmp_path, capsys):
+    # issue 14 item 9: fewer tracks than C needs (8 per motion) is refused, as laav-explore does
+    seq = make_scene(2, seed=0)
+    path = laav.save_sequence(laav.Sequence(seq.points[:, :20], name="few"), tmp_path / "few.npz")
+    out = tmp_path / "few.csv"
+    assert main(["segment", str(path), "--motions", "3", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "Traceback" not in err
+    assert err.startswith(f"laav segment: error: {path}: 20 tracks, fewer than the 24")
+    assert not out.exists()
+    assert main(["segment", str(path), "--motions", "2", "-o", str(out), *SMALL]) == 0  # enough
+    # too few to estimate C: estimate_motions' own message, the file named once
+    path12 = laav.save_sequence(laav.Sequence(seq.points[:, :12], name="few"), tmp_path / "f12.npz")
+    assert main(["segment", str(path12), "--motions", "auto"]) == 2
+    err = capsys.readouterr().err
+    assert err.count(f"{path12}:") == 1 and "too few to estimate" in err
+
+
+def test_segment_warning_is_one_line(tmp_path):
+    # a LaavWarning from the console command: one line on stderr, no Python source line
+    seq = make_scene(2, seed=0)
+    path = laav.save_sequence(laav.Sequence(seq.points * 1e-3, name="tiny"), tmp_path / "tiny.npz")
+    run = subprocess.run([sys.executable, "-m", "laav.cli", "segment", str(path), "--motions", "2",
+                          "-o", str(tmp_path / "t.csv"), *SMALL], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    err = [ln for ln in run.stderr.splitlines() if ln.strip()]
+    assert len(err) == 1, err
+    assert err[0].startswith(f"laav segment: warning: {path}: the coordinates span")
