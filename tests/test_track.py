@@ -65,14 +65,19 @@ def test_track_drift_against_the_true_motion(tracks, clip):
 
 
 def test_video_to_tracks_to_laav(tracks, clip):
-    # LAAV's stages do not take incomplete tracks yet (issue 14, item 3): segment the tracks
-    # seen in every frame; their labels are the layer under their first observation.
+    # issue 14 item 6: video -> tracks -> LAAV <= 5 % wrong, on every track kept (incomplete
+    # ones included, as laav-explore VIDEO segments them); the labels are the layer under each
+    # track's first observation. Also on the tracks seen in every frame alone (--complete-only).
     labels, _ = clip.track_truth(tracks.points, tracks.visible)
+    assert not tracks.visible.all()  # the occlusion and the re-detection leave incomplete tracks
+    seq = laav.Sequence(tracks.points, labels, name="two_objects", visible=tracks.visible)
+    res = laav.segment(seq, 3, seed=0)
+    assert laav.misclassification_rate(seq.labels, res.labels) <= 0.05  # measured 1.06 %
     keep = np.all(tracks.visible, axis=0)
     assert np.bincount(labels[keep], minlength=3).min() >= 10
-    seq = laav.Sequence(tracks.points[:, keep], labels[keep], name="two_objects")
-    res = laav.segment(seq, 3, seed=0)
-    assert laav.misclassification_rate(seq.labels, res.labels) <= 0.05  # measured 1.4 %
+    full = laav.Sequence(tracks.points[:, keep], labels[keep], name="two_objects")
+    res = laav.segment(full, 3, seed=0)
+    assert laav.misclassification_rate(full.labels, res.labels) <= 0.05  # measured 1.4 %
 
 
 def test_array_input_and_video_file_with_stride(tmp_path, clip, tracks):
