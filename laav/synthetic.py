@@ -28,7 +28,8 @@ seed gives bit-identical arrays.
 
 :func:`add_noise` perturbs an existing sequence with isotropic Gaussian pixel noise;
 :func:`occlude` hides a share of its entries the way trackers lose points (tracks that
-start late, end early and have a gap), for the missing-data stages.
+start late, end early and have a gap), for the missing-data stages; :func:`crop_view`
+sees it through a smaller image, so that objects and background enter and leave the view.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from ._sequence import MIN_FRAMES, Sequence
 
 __all__ = [
     "make_sequence", "make_family", "affine_residual", "add_noise", "occlude", "occlusion_rng",
+    "crop_view",
     "FAMILIES", "MIN_POINTS_PER_MOTION", "MAX_OBJECTS", "BENCH_SPREAD",
 ]
 
@@ -1008,6 +1010,85 @@ def occlude(seq: Sequence, fraction: float, rng: np.random.Generator | int | Non
     vis = (f >= start) & (f < F - end) & ~((f >= where) & (f < where + gap))
     return Sequence(seq.points, labels=seq.labels, name=seq.name, image_size=seq.image_size,
                     source=seq.source, visible=vis)
+
+
+
+def crop_view(seq: Sequence, window, min_frames: int = MIN_FRAMES) -> Sequence:
+    """``seq`` seen through a smaller image: objects and background enter and leave the view.
+
+    The same camera with a smaller sensor (a narrower field of view, or a crop of the
+    image): a point is visible in the frames where it lies inside ``window`` (and where it
+    was visible in ``seq``), so as the camera pans and the objects move, tracks start when
+    their point comes into view, end when it leaves, and have a gap when it leaves and comes
+    back, as a tracker sees them. The motions themselves are unchanged (a crop is a shift of
+    the principal point), so the ground truth holds. Unlike :func:`occlude`, what is hidden
+    follows the geometry: it is the points near the border, and whole objects when they
+    cross it.
+
+    Parameters
+    ----------
+    seq : Sequence
+        Complete or not, with ``image_size`` when ``window`` is a share.
+    window : (x0, y0, x1, y1) or float
+        The visible rectangle in ``seq``'s pixels, or a share ``s`` in (0, 1] of the image
+        width and height: the centred ``s w x s h`` rectangle.
+    min_frames : int, >= 2
+        Tracks visible in fewer frames of the window are dropped (a point that only
+        grazes the view).
+
+    Returns
+    -------
+    Sequence
+        The tracks kept, in their order, with coordinates shifted so that the window's
+        corner is the origin, ``image_size`` the window's (rounded up), ``visible`` set and
+        the labels kept; same name.
+
+    Raises
+    ------
+    ValueError
+        When an argument is out of range, or the window keeps no track of some motion.
+
+    Examples
+    --------
+    >>> seq = crop_view(make_sequence(n_objects=2, rng=0), 0.6)  # doctest: +SKIP
+    """
+    if not isinstance(seq, Sequence):
+        raise ValueError(f"seq must be a laav.Sequence, got {type(seq).__name__}")
+    min_frames = _check_int(min_frames, "min_frames", MIN_FRAMES, seq.n_frames)
+    if isinstance(window, numbers.Real) and not isinstance(window, bool):
+        share = _check_float(window, "window", 0.0, 1.0, hi_open=False)
+        if share == 0.0:
+            raise ValueError("window must be a share in (0, 1], got 0")
+        if seq.image_size is None:
+            raise ValueError(f"{seq.source}: window as a share needs the sequence's image_size")
+        w, h = seq.image_size
+        x0, y0 = (1.0 - share) * w / 2.0, (1.0 - share) * h / 2.0
+        x1, y1 = w - x0, h - y0
+    else:
+        try:
+            x0, y0, x1, y1 = (float(v) for v in window)
+        except (TypeError, ValueError):
+            raise ValueError(f"window must be (x0, y0, x1, y1) or a share in (0, 1], "
+                             f"got {window!r}") from None
+        if not (np.isfinite([x0, y0, x1, y1]).all() and x1 > x0 and y1 > y0):
+            raise ValueError(f"window must have x1 > x0 and y1 > y0 (finite), got {window!r}")
+    pts = seq.points
+    with np.errstate(invalid="ignore"):  # hidden entries are NaN: outside
+        inside = ((pts[..., 0] >= x0) & (pts[..., 0] <= x1)
+                  & (pts[..., 1] >= y0) & (pts[..., 1] <= y1))
+    vis = seq.visible & inside if seq.visible is not None else inside
+    keep = np.flatnonzero(vis.sum(axis=0) >= min_frames)
+    labels = None
+    if seq.labels is not None:
+        have = np.bincount(seq.labels[keep], minlength=seq.n_motions)
+        if (have == 0).any():
+            raise ValueError(f"{seq.source}: the window {(x0, y0, x1, y1)} keeps no track of motion "
+                             f"{int(np.flatnonzero(have == 0)[0])} for {min_frames} frames or more")
+        labels = seq.labels[keep]
+    shifted = pts[:, keep] - np.array([x0, y0])
+    size = (int(np.ceil(x1 - x0)), int(np.ceil(y1 - y0)))
+    return Sequence(shifted, labels=labels, name=seq.name, image_size=size, source=seq.source,
+                    visible=vis[:, keep])
 
 
 # --------------------------------------------------------------------------- hard families
