@@ -954,6 +954,13 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
                     "the points in no atom that no motion explains as the C-th); its coding "
                     f"length + epipolar cost was lower; {voting.n_iterations} voting iterations "
                     f"in all, the coarse labels' trial {per[0] if per else 0}")
+    elif voting.initialised and voting.selected == "coarse":
+        # LAAV's own coarse labels, not voted on: say so, and why
+        returned = ("; **returned LAAV's coarse labels, not its informed trial** (the points in no "
+                    "atom placed by the coarse motions' subspaces and epipolar fits, no voting): "
+                    "the model selection (ours, not in the paper) preferred them, Random Voting "
+                    f"having moved away from them; {voting.n_iterations} voting iterations in "
+                    f"all, LAAV's informed trial {per[0] if per else 0}")
     elif voting.initialised and voting.selected != "informed":
         # the labels shown are not LAAV's own trial: say whose they are, and why
         returned = (f"; **returned {md_text(voting.selected)}, not LAAV's informed trial**: the model "

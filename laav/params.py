@@ -183,6 +183,16 @@ class LaavParams:
         the other candidates in the selection score, when there are more than two: the
         labelling most others agree with is preferred among costs that are close.
         2.0 measured best of 0.5-6 once candidates are reassigned (benchmarks/TUNING.md).
+    rv_coarse_candidate : bool
+        Ours, on incomplete tracks, for the model selection (``rv_select`` ``"joint"`` or
+        ``"subspace"``): LAAV's coarse labels themselves are a candidate beside its
+        informed trial and plain RV's, the points in no atom placed by the coarse motions'
+        trajectory subspaces and fundamental matrices (:func:`laav.refine.assign_jointly`),
+        no voting (``Voting.selected == "coarse"`` when kept). There the informed trial
+        seldom converges and Random Voting can drift far from good coarse labels (two
+        cranes, 40 % missing: 0 % wrong on the points in atoms, the informed trial 31 %
+        after 150 iterations); the selection can now keep them. Complete tracks are
+        unchanged (there it was measured worse: ``docs/ALGORITHM.md``, "Missing data").
     rv_max_points : int or None
         Ours, for thousands of tracks: with more points than this, Random Voting (every
         trial, the refinement and the model selection) runs on a seeded random subset of
@@ -248,6 +258,7 @@ class LaavParams:
     rv_subspace_sample: int = 16
     rv_select: str = "joint"
     rv_select_agreement: float = 2.0
+    rv_coarse_candidate: bool = True
     rv_max_points: int | None = 1000
 
     def __post_init__(self) -> None:
@@ -428,6 +439,7 @@ _BOUNDS = (
     ("rv_subspace_sample", "int", 8, 1000),
     ("rv_select", "choice", ("none", "joint", "subspace", "laav"), None),
     ("rv_select_agreement", "float", 0, _BIG),
+    ("rv_coarse_candidate", "bool", None, None),
     ("rv_max_points", "int|None", 100, 10_000_000),
 )
 

@@ -471,6 +471,9 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
             _, more, kc = _plain_run(points, C, params, rng, rng.spawn(1 + params.rv_trials),
                                      plain_memo, k, masks)
             trials, cands = trials + more, cands + kc
+    if params.rv_coarse_candidate and mk is not None and known.any():
+        # ours, on incomplete tracks: the coarse labels themselves (see _coarse_candidate)
+        cands.append(("coarse", _coarse_candidate(points, C, params, init, labels0, votes0, mk)))
     # the polished candidates' costs read the selection's fields too: keyed on them, so a
     # caller may keep the memo across changes of those (plain RV's runs stay valid)
     polished = None if plain_memo is None else plain_memo.setdefault(
@@ -479,6 +482,22 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     own = own[1] if own is not None and own[0] == _own_key(first[0], params) else None
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
                                   polished=polished, mk=mk, own=own), first, extra)
+
+
+def _coarse_candidate(points, C, params, init, labels0, votes0, mk=None) -> tuple:
+    """LAAV's coarse labels ``init`` (P,) as a candidate labelling of the selection (ours,
+    ``rv_coarse_candidate``), in :func:`laav.rv.run_trials`' form with no voting: the
+    points in no atom (-1) go to the motion whose trajectory subspace and fundamental
+    matrices, fitted on the coarse labels, explain them best
+    (:func:`laav.refine.assign_jointly`); a point it cannot place keeps its label of the
+    informed start ``labels0``. ``votes0`` (P, C): the informed start's votes."""
+    labels = init.copy()
+    rest = np.flatnonzero(init < 0)
+    if rest.size:
+        kw = {} if mk is None else {"visible": mk.visible, "pairs": mk.pairs}
+        labels[rest] = assign_jointly(points, init, C, rest, unit2(params), min_frames=2, **kw)
+    labels = np.where(labels >= 0, labels, labels0)
+    return labels, votes0, np.zeros(0, dtype=np.int64), np.zeros(0), 0, False
 
 
 #: A missing-motion start (``rv_select="laav"``) takes the points in no atom whose best

@@ -378,6 +378,42 @@ def test_default_selection_runs_on_missing_data_by_the_subspace_cost():
     assert res.voting.costs == old.voting.costs
 
 
+def test_coarse_labels_are_a_candidate_on_incomplete_tracks_only():
+    """``rv_coarse_candidate`` (ours, the default): on incomplete tracks LAAV's coarse labels,
+    the points in no atom placed by the coarse motions' fits, are scored beside the informed
+    trial and plain RV's; kept when best; not on complete tracks, nor when switched off."""
+    seq = _scene(1)
+    occl = occlude(seq, 0.4, 1)
+    truth = seq.labels
+    start = truth.copy()
+    start[::5] = -1  # a fifth of the points in no atom
+    kw = dict(visible=occl.visible, init_labels=start)
+    on = laav.random_voting(occl.points, seq.n_motions, LaavParams(), seed=0, **kw)
+    off = laav.random_voting(occl.points, seq.n_motions, LaavParams(rv_coarse_candidate=False),
+                             seed=0, **kw)
+    assert "coarse" in on.costs and "coarse" not in off.costs
+    assert set(on.costs) - {"coarse"} == set(off.costs)
+    # its labels: the start's where known, the others placed by the motions' fits (all right
+    # on this noise-free scene); polished like every candidate
+    from laav._visibility import decidable, filled, pair_pool
+    from laav.voting import _coarse_candidate, _Masks
+
+    pool = pair_pool(occl.visible, 8 * seq.n_motions)
+    idx = np.flatnonzero(decidable(occl.visible, pool))
+    sub_vis = occl.visible[:, idx]
+    mk = _Masks(sub_vis, pool)
+    labels0 = np.where(start[idx] >= 0, start[idx], 0)
+    cand = _coarse_candidate(filled(occl.points[:, idx], sub_vis), seq.n_motions, LaavParams(),
+                             start[idx], labels0, np.zeros((idx.size, seq.n_motions)), mk)
+    np.testing.assert_array_equal(cand[0], truth[idx])
+    assert cand[4] == 0 and cand[5] is False  # no voting
+    assert on.selected in ("informed", "coarse")  # right ones, polished alike (1 of 200 moved)
+    assert laav.misclassification_rate(truth, on.labels) <= 0.01
+    # complete tracks: never a candidate
+    full = laav.random_voting(seq.points, seq.n_motions, LaavParams(), seed=0, init_labels=start)
+    assert "coarse" not in full.costs
+
+
 def test_paper_preset_runs_on_missing_data():
     seq = _scene(0)
     occl = occlude(seq, 0.2, 0)
