@@ -15,8 +15,9 @@
 :class:`laav.LaavParams`, e.g. ``--param rv_max_iter=50 --param lam=3``.
 
 Exit codes: 0 success, 1 some benchmark runs failed, 2 bad input (unreadable sequence,
-bad option, missing number of motions, a path that cannot be read or written, a video
-that cannot be opened or gives no usable tracks: one line on stderr), 130 interrupted.
+bad option, missing number of motions, fewer tracks than 8 per motion, a path that cannot be
+read or written, a video that cannot be opened or gives no usable tracks: one line on
+stderr; LAAV's warnings also print as one line, ``laav CMD: warning: ...``), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -329,7 +330,7 @@ def _cmd_segment(args) -> int:
                           "of motions with --motions C (or --motions auto)")
     if C != "auto" and int(C) > 1 and seq.n_points < MIN_POINTS * int(C):  # as laav-explore
         raise _UsageError(f"{args.file}: {seq.n_points} tracks, fewer than the "
-                          f"{MIN_POINTS * int(C)} LAAV needs for {int(C)} motions (the 8-point "
+                          f"{MIN_POINTS * int(C)} needed for {int(C)} motions (the 8-point "
                           f"algorithm fits each motion with at least {MIN_POINTS})")
     try:
         if C == "auto":

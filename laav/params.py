@@ -184,15 +184,18 @@ class LaavParams:
         labelling most others agree with is preferred among costs that are close.
         2.0 measured best of 0.5-6 once candidates are reassigned (benchmarks/TUNING.md).
     rv_coarse_candidate : bool
-        Ours, on incomplete tracks, for the model selection (``rv_select`` ``"joint"`` or
-        ``"subspace"``): LAAV's coarse labels themselves are a candidate beside its
+        Ours, on incomplete tracks, for the model selection (any ``rv_select`` but
+        ``"none"``): LAAV's coarse labels themselves are a candidate beside its
         informed trial and plain RV's, the points in no atom placed by the coarse motions'
         trajectory subspaces and fundamental matrices (:func:`laav.refine.assign_jointly`),
         no voting (``Voting.selected == "coarse"`` when kept). There the informed trial
         seldom converges and Random Voting can drift far from good coarse labels (two
         cranes, 40 % missing: 0 % wrong on the points in atoms, the informed trial 31 %
-        after 150 iterations); the selection can now keep them. Complete tracks are
-        unchanged (there it was measured worse: ``docs/ALGORITHM.md``, "Missing data").
+        after 150 iterations); the selection can now keep them. A third candidate also
+        brings in the agreement term (``rv_select_agreement``, used with more than two)
+        where LAAV's trial and a converged plain RV trial were the only two: the measured
+        effect includes that. Complete tracks are unchanged (there it was measured worse:
+        ``docs/ALGORITHM.md``, "Missing data").
     rv_max_points : int or None
         Ours, for thousands of tracks: with more points than this, Random Voting (every
         trial, the refinement and the model selection) runs on a seeded random subset of

@@ -1012,7 +1012,6 @@ def occlude(seq: Sequence, fraction: float, rng: np.random.Generator | int | Non
                     source=seq.source, visible=vis)
 
 
-
 def crop_view(seq: Sequence, window, min_frames: int = MIN_FRAMES) -> Sequence:
     """``seq`` seen through a smaller image: objects and background enter and leave the view.
 
@@ -1066,6 +1065,8 @@ def crop_view(seq: Sequence, window, min_frames: int = MIN_FRAMES) -> Sequence:
         x1, y1 = w - x0, h - y0
     else:
         try:
+            if isinstance(window, (str, bytes)) or any(isinstance(v, (bool, np.bool_)) for v in window):
+                raise TypeError
             x0, y0, x1, y1 = (float(v) for v in window)
         except (TypeError, ValueError):
             raise ValueError(f"window must be (x0, y0, x1, y1) or a share in (0, 1], "

@@ -22,7 +22,9 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
   the other candidates. Plain RV with no converged trial chooses
   among the consensus and its trials; LAAV's fine-tuning then also runs plain RV beside
   the informed trial (two more runs when they disagree on more than 5 % of the points)
-  and chooses among all. With ``rv_select="none"`` (:meth:`LaavParams.paper`) the
+  and chooses among all; on incomplete tracks LAAV's coarse labels themselves are a
+  candidate too (``rv_coarse_candidate``, :func:`_coarse_candidate`: Random Voting can
+  drift away from right coarse labels there). With ``rv_select="none"`` (:meth:`LaavParams.paper`) the
   fine-tuning is the informed trial alone, converged or not, and plain RV ends with the
   consensus when no trial converged.
 
@@ -93,9 +95,11 @@ class Voting:
     labels : ndarray of shape (P,), int64
         Final motion label of every point, in ``0 .. C-1``.
     votes : ndarray of shape (P, C)
-        Vote histogram of the returned trial at its end.
+        Vote histogram of the returned trial at its end (for ``selected == "coarse"``, no
+        trial: the informed start's votes, zero for the points in no atom).
     changed : ndarray of shape (T,), int64
-        Number of labels changed at each iteration of the returned trial.
+        Number of labels changed at each iteration of the returned trial (empty for
+        ``"coarse"``, with ``margin`` empty and ``converged`` False).
     margin : ndarray of shape (T,)
         Mean normalised vote margin (best minus second best over their sum) per iteration.
     n_iterations : int
@@ -119,7 +123,10 @@ class Voting:
         ``"consensus"`` (co-association of unconverged trials), ``"trial k"`` (the k-th
         unconverged trial, by the selection's score), ``"informed"`` (LAAV's start); in LAAV's
         fine-tuning the plain RV candidates are named ``"plain trial"``, ``"plain
-        consensus"``, ``"plain trial k"``.
+        consensus"``, ``"plain trial k"`` (``"plain 2 …"``, ``"plain 3 …"`` for the
+        arbitrating runs), ``"coarse"`` the coarse labels themselves (incomplete tracks,
+        ``rv_coarse_candidate``), and with ``rv_select="laav"`` ``"missing motion (g+h)"``
+        the trial from that start.
     informed_changed, informed_margin : ndarray of shape (T0,) or None
         LAAV's informed trial's own trace (labels changed, mean margin per iteration),
         whichever candidate was returned; None for plain RV.

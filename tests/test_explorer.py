@@ -602,6 +602,12 @@ def test_rv_summary_says_when_the_labels_are_not_laavs_own_trial():
     assert "65 voting iterations in all, LAAV's informed trial 40" in text
     plain = laav.random_voting(seq, seq.n_motions, seed=0)  # not initialised: no such note
     assert "not LAAV's" not in rv_summary(None, plain)
+    # the coarse labels themselves (incomplete tracks, rv_coarse_candidate): named as such
+    coarse = dataclasses.replace(v, selected="coarse", trial_iterations=(150, 150),
+                                 n_iterations=300, n_trials=2)
+    text = rv_summary(coarse, None)
+    assert "returned LAAV's coarse labels, not its informed trial" in text
+    assert "no voting" in text and "300 voting iterations in all, LAAV's informed trial 150" in text
 
 
 def test_what_changed_is_shown_and_ringed():

@@ -111,7 +111,7 @@ def test_crop_view_hides_what_leaves_the_view_and_keeps_the_geometry():
 
 def test_crop_view_refuses_bad_input():
     seq = _scene(0)
-    for bad in (0.0, 1.5, -0.2, (10, 10, 5, 50), (0, 0, np.nan, 5), "x"):
+    for bad in (0.0, 1.5, -0.2, (10, 10, 5, 50), (0, 0, np.nan, 5), "x", "1234", (True, 0, 50, 50)):
         with pytest.raises(ValueError, match="window"):
             crop_view(seq, bad)
     with pytest.raises(ValueError, match="image_size"):
@@ -412,6 +412,36 @@ def test_coarse_labels_are_a_candidate_on_incomplete_tracks_only():
     # complete tracks: never a candidate
     full = laav.random_voting(seq.points, seq.n_motions, LaavParams(), seed=0, init_labels=start)
     assert "coarse" not in full.costs
+
+
+def test_the_selection_keeps_the_coarse_labels_when_voting_went_astray(monkeypatch):
+    """Where LAAV's informed trial drifts away from right coarse labels (here: replaced by a
+    random labelling) and plain RV is no better (2 iterations), the selection keeps the
+    coarse labels themselves; without them it returns a worse labelling."""
+    import laav.voting as V
+
+    seq = _scene(1)
+    occl = occlude(seq, 0.4, 1)
+    start = seq.labels.copy()
+    start[::5] = -1
+
+    def astray(points, C, params, stream, labels0, votes0, known, masks, memo):
+        labels = np.random.default_rng(7).integers(0, C, labels0.size)
+        votes = np.zeros((labels0.size, C))
+        trial = (labels, votes, np.zeros(1, np.int64), np.zeros(1), 1, False)
+        return trial, [trial], None
+
+    monkeypatch.setattr(V, "_first_trial", astray)
+    weak = LaavParams(rv_max_iter=2, rv_trials=2)
+    kw = dict(seed=0, init_labels=start, visible=occl.visible)
+    on = laav.random_voting(occl.points, seq.n_motions, weak, **kw)
+    off = laav.random_voting(occl.points, seq.n_motions, weak.replace(rv_coarse_candidate=False), **kw)
+    assert on.selected == "coarse"
+    assert on.costs["coarse"] < min(v for k, v in on.costs.items() if k != "coarse")
+    err_on = laav.misclassification_rate(seq.labels, on.labels)
+    assert err_on <= 0.01  # measured 0.5 %: the polish moves one point
+    assert "coarse" not in off.costs
+    assert laav.misclassification_rate(seq.labels, off.labels) > err_on  # measured 4 %
 
 
 def test_paper_preset_runs_on_missing_data():
