@@ -42,7 +42,7 @@ import laav
 from laav import LaavParams, LaavResult, Pipeline, Sequence
 from laav._interrupt import Interrupted, interruptible
 from laav._interrupt import check as check_interrupt
-from laav.voting import SELECTION_FIELDS
+from laav.voting import NOT_PLAIN_FIELDS, SELECTION_FIELDS
 
 from .views import COLOR_MODES, align_labels, stage_numbers
 
@@ -111,10 +111,10 @@ PIPELINE_BYTES_PER_ENTRY = 150
 #: How a result shown at once was computed (the status line says it).
 AHEAD_IDLE, AHEAD_SWEEP = "ahead, while idle", "by the seed sweep"
 
-#: The parameters plain Random Voting depends on (its cache key): every ``rv_*`` field and
+#: The parameters plain Random Voting depends on (its cache key): every ``rv_*`` field it reads and
 #: those its selection's joint score reads.
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams)
-                  if f.name.startswith("rv_")) + SELECTION_FIELDS
+                  if f.name.startswith("rv_") and f.name not in NOT_PLAIN_FIELDS) + SELECTION_FIELDS
 
 
 @dataclasses.dataclass(frozen=True)

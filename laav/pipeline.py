@@ -27,7 +27,7 @@ from .coarse import Coarse, merge_models
 from .graph import AtomGraph, atom_graph
 from .multicut import Multicut, solve_multicut
 from .params import STAGE_PARAMS, STAGES, LaavParams, stages_affected
-from .voting import SELECTION_FIELDS, Voting, informed_preview, random_voting
+from .voting import NOT_PLAIN_FIELDS, SELECTION_FIELDS, Voting, informed_preview, random_voting
 
 #: Plain RV's runs are kept for this many (seed, C, ``rv_*`` settings), the most recent: a
 #: step back to a seed shown before (or an interrupted seed change) reuses them.
@@ -256,8 +256,8 @@ class Pipeline:
                 else:
                     # plain RV's runs: kept for the last PLAIN_MEMOS (seed, C, rv_*) (its
                     # polished candidates' costs are keyed on the selection's fields inside)
-                    pkey = (key[0], key[1], tuple(kv for kv in key[2]
-                                                  if kv[0] not in SELECTION_FIELDS))
+                    pkey = (key[0], key[1], tuple(kv for kv in key[2] if kv[0] not in
+                                                  SELECTION_FIELDS + NOT_PLAIN_FIELDS))
                     memo = self._plain_memos.get(pkey)
                     if memo is None:  # new seed, C or rv_* settings
                         memo = self._plain_memos[pkey] = {}

@@ -358,6 +358,31 @@ def test_selection_fields_outside_rv_reach_the_kept_fine_tuning(change):
     assert common and max(abs(base.voting.costs[k] - res.voting.costs[k]) for k in common) > 1e-3
 
 
+def test_the_coarse_candidate_switch_keeps_plain_rv_runs(monkeypatch):
+    """``rv_coarse_candidate`` is read by LAAV's fine-tuning only: toggling it on incomplete
+    tracks reruns the selection, not plain RV (its runs are kept), and equals a fresh run."""
+    import laav.voting as V
+    from laav.synthetic import occlude
+
+    seq = occlude(synthetic.make_sequence(n_objects=1, n_frames=20, n_points=200, rng=3), 0.4, 3)
+    pipe = Pipeline(seq, 2, seed=0)
+    runs = []
+    real = V._plain_run
+
+    def counted(*args, **kw):
+        memo, k = args[5], args[6]
+        runs.append(memo is None or ("run", k) not in memo)  # True: plain RV actually runs
+        return real(*args, **kw)
+
+    monkeypatch.setattr(V, "_plain_run", counted)
+    res = pipe.update(rv_coarse_candidate=False)
+    assert runs and not any(runs)  # every plain RV run came from the memo
+    assert "coarse" not in res.voting.costs
+    fresh = segment(seq, 2, LaavParams(rv_coarse_candidate=False), seed=0)
+    np.testing.assert_array_equal(res.labels, fresh.labels)
+    assert res.voting.costs == fresh.voting.costs
+
+
 def test_preview_is_laavs_own_fine_tuning_before_plain_rv():
     """``update(preview=...)``: on a new seed the callable gets, before plain RV runs, the
     result with LAAV's informed trial alone on the selection's own stream (its trace equals
