@@ -494,18 +494,18 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
                                   polished=polished, mk=mk, own=own), first, extra)
 
 
-def _coarse_candidate(points, C, params, init, labels0, votes0, mk=None) -> tuple:
-    """LAAV's coarse labels ``init`` (P,) as a candidate labelling of the selection (ours,
-    ``rv_coarse_candidate``), in :func:`laav.rv.run_trials`' form with no voting: the
-    points in no atom (-1) go to the motion whose trajectory subspace and fundamental
-    matrices, fitted on the coarse labels, explain them best
-    (:func:`laav.refine.assign_jointly`); a point it cannot place keeps its label of the
-    informed start ``labels0``. ``votes0`` (P, C): the informed start's votes."""
+def _coarse_candidate(points, C, params, init, labels0, votes0, mk: _Masks) -> tuple:
+    """LAAV's coarse labels ``init`` (P,) on incomplete tracks (``mk``) as a candidate
+    labelling of the selection (ours, ``rv_coarse_candidate``), in :func:`laav.rv.run_trials`'
+    form with no voting: the points in no atom (-1) go to the motion whose trajectory
+    subspace and fundamental matrices, fitted on the coarse labels' visible entries, explain
+    them best (:func:`laav.refine.assign_jointly`); a point it cannot place keeps its label
+    of the informed start ``labels0``. ``votes0`` (P, C): the informed start's votes."""
     labels = init.copy()
     rest = np.flatnonzero(init < 0)
     if rest.size:
-        kw = {} if mk is None else {"visible": mk.visible, "pairs": mk.pairs}
-        labels[rest] = assign_jointly(points, init, C, rest, unit2(params), min_frames=2, **kw)
+        labels[rest] = assign_jointly(points, init, C, rest, unit2(params), min_frames=2,
+                                      visible=mk.visible, pairs=mk.pairs)
     labels = np.where(labels >= 0, labels, labels0)
     return labels, votes0, np.zeros(0, dtype=np.int64), np.zeros(0), 0, False
 
