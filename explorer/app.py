@@ -434,14 +434,22 @@ class Explorer:
                 traceback.print_exc()
 
     @contextmanager
-    def hold(self, one_message: bool = False, freeze: bool = False, live: str | None = None):
+    def hold(self, freeze: bool = False, live: str | None = None):
         """Send all model changes made inside as one batch (the callers run on the document's
         thread, under its lock).
 
-        With ``one_message`` (and once the page has loaded) the batch goes out as ONE
-        websocket message (panel's ``unlocked``): bokeh's own hold sends one message per
-        changed property, and the browser applies and redraws each in turn (a frame move was
-        about 12 messages, a result about 50; docs/bench/explorer_browser_latency.md). The
+        Once the page has loaded, the batch goes out as ONE websocket message (panel's
+        ``unlocked``): bokeh's own hold sends one message per changed property, and the
+        browser applies and redraws each in turn (a frame move was about 12 messages, a
+        result about 50; docs/bench/explorer_browser_latency.md). Every batch takes that one
+        path: panel writes its message at once, or queues it behind a message bokeh is still
+        writing, while bokeh's hold serialises its messages when the change is made and
+        writes them later, each after the one before. Mixing the two let a later message
+        overtake an earlier one that defined a model it names, and the page failed with
+        bokeh's "reference ... isn't known" (an intermittent failure of the browser tests
+        under load: pinning A sent through bokeh's hold while the Advanced card's fields went
+        through panel's queue; ``test_advanced_and_compare_fit_a_projector`` in
+        ``tests/test_explorer_ab_browser.py`` checks the one path). The
         data sources' changes go last in the message, the page's frame views' ``meta`` the
         very last (the page makes those views when it arrives: every template must be in):
         a legend repainted while a glyph's new data was still being mapped read past its old
@@ -469,7 +477,7 @@ class Explorer:
                 yield
             self._tidy(doc.callbacks._held_events, live)
             return
-        if (one_message and pn.state.curdoc is doc and pn.state.loaded
+        if (pn.state.curdoc is doc and pn.state.loaded
                 and threading.get_ident() == self._doc_thread and doc.session_context.session is not None):
             with unlocked("combine"):
                 with self._frozen(doc if freeze else None):
@@ -537,7 +545,7 @@ class Explorer:
         t0 = time.perf_counter()
         new_seq = seq is not self._seq_shown
         with self.quiet():
-            with self.hold(one_message=True, freeze=new_seq, live="draw"):
+            with self.hold(freeze=new_seq, live="draw"):
                 unpinned = None
                 if new_seq:
                     self._set_sequence(seq, settings)
@@ -660,7 +668,7 @@ class Explorer:
     def _frame_now(self) -> None:
         if self.result is None or self.quieted:
             return
-        with self.hold(one_message=True, live="frame"):
+        with self.hold(live="frame"):
             self._draw_frame()
             self.graph_view.draw(self.result, self.frame, self.fine_colors)
             self.compare.redraw()

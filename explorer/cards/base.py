@@ -37,7 +37,7 @@ class Host(Protocol):
 
     def schedule(self, fn, *args, now_if_on_doc_thread: bool = False) -> None: ...
 
-    def hold(self, one_message: bool = False, freeze: bool = False, live: str | None = None):
+    def hold(self, freeze: bool = False, live: str | None = None):
         ...  # context manager: the model changes inside go out as one batch (live: see Explorer.hold)
 
     def restore_result(self) -> None: ...  # a preview shown gives way to the last result
