@@ -107,3 +107,27 @@ def test_the_legend_draws_stand_ins_that_follow_the_layers(seq):
         assert fv.r_points.level == "overlay" and fv.fig.title.level == "overlay"
     finally:
         ex.close()
+
+
+def test_atom_ids_are_written_up_to_a_limit(seq, monkeypatch):
+    """Atom ids beside the graph's nodes up to MAX_ATOM_IDS atoms; above it (thousands of
+    tracks) they are hidden, and the caption says so and where to find an id."""
+    from explorer.cards import graph
+
+    ex = Explorer(seq, viser=False)
+    try:
+        assert ex.wait(120)
+        gv = ex.graph_view
+        n = ex.result.graph.n_nodes
+        assert 0 < n <= graph.MAX_ATOM_IDS
+        assert gv.r_ids.visible and "Atom ids are written" not in gv.caption.object
+        assert list(gv.src_nodes.data["label"])  # the ids are in the nodes' source
+        monkeypatch.setattr(graph, "MAX_ATOM_IDS", n - 1)
+        gv.draw(ex.result, ex.frame, ex.fine_colors)
+        assert not gv.r_ids.visible
+        assert f"up to {n - 1} atoms (here {n}" in gv.caption.object
+        monkeypatch.setattr(graph, "MAX_ATOM_IDS", n)
+        gv.draw(ex.result, ex.frame, ex.fine_colors)
+        assert gv.r_ids.visible and "Atom ids are written" not in gv.caption.object
+    finally:
+        ex.close()

@@ -14,6 +14,13 @@ from .. import views as V
 from .base import Host, Markdown, card, fit_image_figure, image_figure, move_legend, set_data
 from .live import LiveFrames, repaint_alone
 
+#: Atom ids are written beside the nodes up to this many atoms (every Hopkins155 sequence:
+#: at most 146 with the defaults). Above it (563 atoms at 5,000 tracks) they overlap into a
+#: blot that hides the nodes; a node's hover still gives its id. (The page's frame moves at
+#: 5,000 tracks: 142-145 ms median without them, 145-153 ms with, interleaved: within the
+#: spread; a JavaScript profile had put the ids' measuring at about 20 ms a move.)
+MAX_ATOM_IDS = 200
+
 
 class GraphView:
     """Atoms as nodes at their seeds' positions in the shown frame, kept / cut edges by cost,
@@ -57,8 +64,8 @@ class GraphView:
         r_nodes = g.scatter("x", "y", source=self.src_nodes, size="size", fill_color="color",
                             line_color="black", line_width=0.8, legend_label="atom (colour = cluster)")
         # atom ids beside the nodes; the pair joined at this step on top of everything, ringed
-        g.text("x", "y", text="label", source=self.src_nodes, x_offset=6, y_offset=-4,
-               text_font_size="7pt", text_color="#333333")
+        self.r_ids = g.text("x", "y", text="label", source=self.src_nodes, x_offset=6, y_offset=-4,
+                            text_font_size="7pt", text_color="#333333")
         g.scatter("x", "y", source=self.src_pair, size="size", fill_color="color", line_color="#111111",
                   line_width=3, legend_label="joined at this step (ringed)")
         g.add_tools(HoverTool(renderers=[r_nodes], tooltips=[("atom", "@atom"), ("cluster", "@cluster"),
@@ -105,6 +112,7 @@ class GraphView:
         d = {k: V.instantiate(t, self.specs[k], *track, f) for k, t in self._tpls.items()}
         live = self.live
         live.set_atoms(res)
+        self.r_ids.visible = res.graph.n_nodes <= MAX_ATOM_IDS
         for k, t in self._tpls.items():
             live.template("graph_" + k, t)
         lim = V.cost_limit(res)
@@ -119,7 +127,9 @@ class GraphView:
             "graph_title", f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {{f}} · "
             "{k:graph_nodes.cluster} clusters", f, {"graph_" + k: v for k, v in d.items()})
         seq = self.host.sequence
-        self.caption.object = V.replay_caption(res, step, seq is None or seq.is_complete)
+        self.caption.object = V.replay_caption(res, step, seq is None or seq.is_complete) + (
+            "" if self.r_ids.visible else f" Atom ids are written up to {MAX_ATOM_IDS} atoms (here "
+            f"{res.graph.n_nodes}: they would overlap); hover a node for its id.")
         live.commit(f)
 
     # ------------------------------------------------------------------ callbacks
