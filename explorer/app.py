@@ -53,6 +53,13 @@ __all__ = ["Explorer", "PARAM_SLIDERS", "SIDE_W", "REST_AFTER_S"]
 #: result (a long first computation; see :meth:`Explorer.template`).
 REST_AFTER_S = 3.0
 
+#: Seconds between a result applied and the later cards sent (when they are still to come):
+#: time for the page to draw that result first. Sent at once, their ~300 new models took the
+#: page ~0.7 s to build and lay out before it showed the result's status line (demo, headless
+#: Chromium on the 2-core VM, 8 interleaved starts each: first result 4.12-5.49 s, median 4.46,
+#: against 4.72-6.23 s, median 5.2; the later cards came sooner too).
+REST_GAP_S = 0.4
+
 #: The cards' widgets, sources and panes that tests, benchmarks and notebooks reach on the
 #: explorer itself (the same objects): name -> where it lives.
 SHORTCUTS = {
@@ -322,9 +329,10 @@ class Explorer:
 
         ``lazy`` (default: when served) sends the atoms and 3-D cards first and adds the
         later stages' cards (graph, fine-to-coarse, RV, numbers) once the page has loaded and
-        the first result is shown (or :data:`REST_AFTER_S` after the page loaded, whichever
-        comes first), so that the page and then the first result appear sooner: the browser
-        draws those cards once, with their data, after the status line and the points.
+        the first result is shown (:data:`REST_GAP_S` after it is applied; or
+        :data:`REST_AFTER_S` after the page loaded, whichever comes first), so that the page
+        and then the first result appear sooner: the browser draws those cards once, with
+        their data, after the status line and the points.
         """
         n_first = self.main.index(self.view3d.card) + 1  # status, alerts, note, tour, atoms, 3-D
         if lazy is None:
@@ -349,12 +357,14 @@ class Explorer:
         if self._rest is None:
             return
         self._rest["loaded"] = True
-        if self.result is not None or self.state.error is not None:
-            self.schedule(self._add_rest)
-            return
+        shown = self.result is not None or self.state.error is not None
+        self._add_rest_after(REST_GAP_S if shown else REST_AFTER_S)
+
+    def _add_rest_after(self, seconds: float) -> None:
+        """(Document thread.) :meth:`_add_rest` in ``seconds`` (now without a server)."""
         doc = self._doc()
         if doc is not None and doc.session_context is not None:
-            doc.add_timeout_callback(lambda: self._locked(self._add_rest), int(1000 * REST_AFTER_S))
+            doc.add_timeout_callback(lambda: self._locked(self._add_rest), int(1000 * seconds))
         else:
             self._add_rest()
 
@@ -593,8 +603,8 @@ class Explorer:
             self._seq_shown = seq
             self._sync_url()
         self.apply_seconds = time.perf_counter() - t0
-        if self._rest is not None and self._rest["loaded"]:
-            self.schedule(self._add_rest)  # after this result's message: a message of its own
+        if self._rest is not None and self._rest["loaded"]:  # the later cards: after this result
+            self._add_rest_after(REST_GAP_S)
         if preview:
             return
         with self._applied:

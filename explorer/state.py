@@ -42,6 +42,7 @@ import laav
 from laav import LaavParams, LaavResult, Pipeline, Sequence
 from laav._interrupt import Interrupted, interruptible
 from laav._interrupt import check as check_interrupt
+from laav.params import _BOUNDS
 from laav.voting import NOT_PLAIN_FIELDS, SELECTION_FIELDS
 
 from .views import COLOR_MODES, align_labels, stage_numbers
@@ -213,6 +214,8 @@ def describe_change(seq: Sequence, before: LaavResult, before_settings: Settings
 # ---------------------------------------------------------------------- settings as text
 _FIELDS = {f.name: f for f in dataclasses.fields(LaavParams)}
 _DEFAULTS = LaavParams()
+#: Each field's kind as LaavParams validates it ("int", "int|None", "float", "bool", ...)
+_KINDS = {name: kind for name, kind, _, _ in _BOUNDS}
 #: Colour-by keys in the URL (``color=final``) -> the views' colour modes.
 VIEW_COLORS = tuple(COLOR_MODES.values())
 #: Keys of the page URL's query: every LaavParams field, then the seed, C, frame, colour
@@ -229,25 +232,25 @@ def parse_value(name: str, text: str):
     if name not in _FIELDS:
         raise ValueError(f"unknown parameter {name!r}")
     t = str(text).strip()
-    default = getattr(_DEFAULTS, name)
+    kind = _KINDS.get(name, "choice")  # by the field's kind, not its default (None for some)
     try:
-        if name == "fine_models":
+        if kind == "int|None":
             return None if t.lower() in ("", "none", "auto") else int(t)
-        if isinstance(default, bool):
+        if kind == "bool":
             if t.lower() in _TRUE:
                 return True
             if t.lower() in _FALSE:
                 return False
             raise ValueError
-        if isinstance(default, int):
+        if kind == "int":
             return int(t)
-        if isinstance(default, float):
+        if kind.startswith("float"):
             return float(t)
         return t
     except ValueError:
-        kind = ("a whole number" if isinstance(default, int) and not isinstance(default, bool) else
-                "true or false" if isinstance(default, bool) else "a number")
-        raise ValueError(f"{name} must be {kind}, got {t[:40]!r}") from None
+        what = ("a whole number" + (" or none" if kind == "int|None" else "") if kind.startswith("int")
+                else "true or false" if kind == "bool" else "a number")
+        raise ValueError(f"{name} must be {what}, got {t[:40]!r}") from None
 
 
 def _whole(name: str, text, lo: int, hi: int) -> int:

@@ -88,10 +88,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     seg = sub.add_parser(
         "segment", help="segment one sequence and write its labels",
-        description="Segment the trajectories of one sequence (Hopkins155 *_truth.mat, .npz, or "
-                    "a folder holding one) and write the labels as CSV (point,label). With "
+        description="Segment the trajectories of one sequence (Hopkins155 *_truth.mat, "
+                    "KT3DMoSeg .mat, .npz, tracks .csv, or a folder holding one) and write the "
+                    "labels as CSV (point,label). With "
                     "ground truth in the file, also print the misclassification rate.")
-    seg.add_argument("file", metavar="FILE", help="sequence file (.mat / .npz) or its folder")
+    seg.add_argument("file", metavar="FILE", help="sequence file (.mat / .npz / .csv) or its folder")
     seg.add_argument("--motions", "-C", type=_motions, metavar="C",
                      help="number of motions, or auto to estimate it (default: from the file's "
                           "ground truth)")
@@ -156,11 +157,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _add_complete_only(parser: argparse.ArgumentParser) -> None:
+def _add_complete_only(parser: argparse.ArgumentParser, segment: bool = True) -> None:
     parser.add_argument("--complete-only", action="store_true",
-                        help="keep only the tracks visible in every frame (without it, tracks with "
-                             "missing entries are segmented too, those seen too briefly labelled "
-                             "-1); output rows keep the file's point numbers")
+                        help=("keep only the tracks visible in every frame (without it, tracks with "
+                              "missing entries are segmented too, those seen too briefly labelled "
+                              "-1); output rows keep the file's point numbers") if segment else
+                        "keep only the tracks visible in every frame (without it every track is "
+                        "written, missing entries included)")
 
 
 def _add_convert(sub) -> None:
@@ -175,7 +178,7 @@ def _add_convert(sub) -> None:
     conv.add_argument("output", metavar="OUT", help="file to write")
     conv.add_argument("--format", choices=FORMATS, default=None,
                       help="output format (default: from OUT's extension)")
-    _add_complete_only(conv)
+    _add_complete_only(conv, segment=False)
     _add_max_points(conv)
 
 

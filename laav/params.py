@@ -151,7 +151,7 @@ class LaavParams:
         (Hopkins155, 5 seeds: held out 0.52 %, 0 gives 0.57 % on all data; LAAV's informed
         trial converges in 85 % of runs instead of 56 %; ``docs/ALGORITHM.md``).
     rv_subspace_sample : int
-        Points per group the subspace of the subspace votes is fitted to (>= 8).
+        Points per group the subspace of the subspace votes is fitted to (8-1000).
     rv_select : {"none", "joint", "subspace", "laav"}
         ``"laav"`` (ours, :meth:`own_chain`): LAAV's own candidates, no plain Random
         Voting. The informed trial from the coarse labels, and, for every pair of coarse motions, a trial from
@@ -182,7 +182,9 @@ class LaavParams:
         Weight (>= 0) of a candidate's mean disagreement (misclassification rate) with
         the other candidates in the selection score, when there are more than two: the
         labelling most others agree with is preferred among costs that are close.
-        2.0 measured best of 0.5-6 once candidates are reassigned (benchmarks/TUNING.md).
+        2.0: chosen under the joint score by 5-fold cross-validation grouped by video
+        among 0-4 (in 4 of 5 folds, three fold shuffles; benchmarks/TUNING.md, "The
+        selection by the joint score").
     rv_coarse_candidate : bool
         Ours, on incomplete tracks, for the model selection (any ``rv_select`` but
         ``"none"``): LAAV's coarse labels themselves are a candidate beside its
@@ -213,15 +215,17 @@ class LaavParams:
     Every field is checked on construction against one table (``_BOUNDS`` below): its
     type (numpy scalars are accepted and stored as Python numbers; ``True``/``False``
     are not numbers; NaN and infinity are rejected) and its range. Distances and
-    strengths (``r1``, ``r2``, ``affine_threshold``, ``edge_scale``, ``lam``,
+    strengths (``r1``, ``r2``, ``affine_threshold``, ``edge_scale``, ``coding_eps``, ``lam``,
     ``rv_lambda``) lie in (0, 1e6] (the strengths, in 1/px^2, in (0, 1e12]: coordinates in
     thousandths of a pixel need 1e6 times the default), ``cut_prior`` in [-1e6, 1e6], the other weights in
     [0, 1e6] (``pairwise_weight`` and ``rv_alpha`` in [0, 1] and (0, 1]). Counts have
     upper bounds that keep one run within seconds and memory within a laptop:
     ``ransac_hypotheses`` <= 1000, ``graph_neighbors`` <= 100, ``fine_models`` <= 1000,
-    ``coarse_frames`` <= 100, ``coarse_samples`` <= 1000, ``pooled_trials`` <= 100,
-    ``rv_max_iter`` <= 10000, ``rv_trials`` <= 100, ``rv_sample_size`` in [8, 1000],
-    ``rv_patience`` <= 10000, ``rv_batch`` <= 32, ``atom_min_size`` in [4, 10000].
+    ``fine_per_motion`` <= 100, ``coarse_candidates`` <= 1000, ``coarse_frames`` <= 100,
+    ``coarse_samples`` <= 1000, ``pooled_trials`` <= 100, ``rv_max_iter`` <= 10000,
+    ``rv_trials`` <= 100, ``rv_sample_size`` and ``rv_subspace_sample`` in [8, 1000],
+    ``rv_patience`` <= 10000, ``rv_batch`` <= 32, ``atom_min_size`` in [4, 10000],
+    ``rv_max_points`` in [100, 1e7] or None.
     Also ``r2 > r1``. All problems are reported together in one :class:`ValueError`.
     """
 

@@ -191,7 +191,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     n_motions : int
         C, the number of motions.
     params : LaavParams, optional
-        Uses the ``rv_*`` fields. Defaults to ``LaavParams()``.
+        Uses the ``rv_*`` fields, and with ``rv_select="joint"`` (the default) also
+        ``coding_eps`` and ``coarse_epipolar_weight`` (:data:`SELECTION_FIELDS`). Defaults
+        to ``LaavParams()``.
     seed : int or numpy.random.Generator
         Same seed, same labels.
     random_state : None, int, numpy.random.Generator or RandomState, optional

@@ -206,6 +206,13 @@ def test_url_query_round_trip_and_validation(demo):
     assert query_of(base, None) == {"motions": "3"}  # no ground truth: C is part of the state
     odd = Settings(laav.LaavParams(lam=1 / 3), 0, 3)
     assert parse_settings(query_of(odd, 3), seq, base)[0] == odd  # every digit kept
+    # every preset's address restores it: fields whose default is None but that take an
+    # integer (fine_per_motion), and an integer field set to none (rv_max_points), included
+    for preset in (laav.LaavParams.paper(), laav.LaavParams.own_chain(),
+                   laav.LaavParams(fine_per_motion=4, rv_max_points=None)):
+        s = Settings(preset, 2, 3)
+        got, _, problems = parse_settings(query_of(s, 3), seq, base)
+        assert problems == [] and got == s, problems
     # bad values: a readable message each, everything else applied, never an exception
     s, view, problems = parse_settings(
         {"r1": "abc", "r2": "10", "seed": "-1", "motions": "9999", "frame": "30", "color": "<b>x</b>",
