@@ -575,7 +575,7 @@ class Explorer:
                 self.graph_view.draw(result, self.frame, self.fine_colors)
                 self.coarse_view.draw(seq, result)
                 self.coarse_view.epipolar.draw(seq, result)
-                self.rv_view.draw(result.voting, plain, pending=preview)
+                self.rv_view.draw(result.voting, plain, pending=preview, seq=seq)
                 num = self.numbers_view.draw(seq, result, plain)
                 s = self.status_bar
                 s.alert.visible = self.state.error is not None
@@ -637,7 +637,7 @@ class Explorer:
         if self.result is None or key != self.state.plain_rv_key():
             return
         with self.hold():
-            self.rv_view.draw(self.result.voting, voting)
+            self.rv_view.draw(self.result.voting, voting, seq=self.sequence)
             self.numbers_view.draw(self.sequence, self.result, voting)
             if self.controls.color_mode in ("plain", "errors_plain"):
                 self._color_now()

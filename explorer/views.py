@@ -26,7 +26,7 @@ __all__ = [
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
     "replay_caption", "fine_count", "fine_count_note", "z_sources", "merge_table", "epipolar_sources",
-    "rv_sources",
+    "rv_sources", "rv_error_sources", "trace_errors",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
     "space_time", "cost_limit", "md_text",
 ]
@@ -926,6 +926,46 @@ def rv_sources(voting: laav.Voting | None) -> dict:
             "margin": np.asarray(voting.informed_margin if own else voting.margin, dtype=float)}
 
 
+def trace_errors(trace: np.ndarray, truth: np.ndarray | None) -> np.ndarray:
+    """Per row of a label trace (T, P): the misclassification rate against ``truth`` (P,)
+    (the best one-to-one matching of labels, per row: :func:`laav.misclassification_rate`,
+    over the points with a true label), or without ``truth`` the share of points whose
+    label differs from the last row's (the trial's own end; one trial numbers its labels
+    the same way throughout)."""
+    trace = np.asarray(trace, dtype=np.int64)
+    if trace.size == 0:
+        return np.zeros(trace.shape[0])
+    if truth is None:
+        return (trace != trace[-1]).mean(axis=1)
+    from scipy.optimize import linear_sum_assignment
+
+    truth = np.asarray(truth, dtype=np.int64)
+    ok = truth >= 0
+    tr, gt = trace[:, ok], truth[ok]
+    C, K = int(tr.max()) + 1, int(gt.max()) + 1
+    # every row's confusion matrix at once: counts of (row, label, true label)
+    flat = (np.arange(tr.shape[0])[:, None] * C + tr) * K + gt
+    counts = np.bincount(flat.ravel(), minlength=tr.shape[0] * C * K).reshape(-1, C, K)
+    right = np.array([counts[t][linear_sum_assignment(-counts[t])].sum() for t in range(len(counts))])
+    return 1.0 - right / max(gt.size, 1)
+
+
+def rv_error_sources(seq: laav.Sequence, voting: laav.Voting | None) -> dict:
+    """Error per iteration of the trial the RV card draws (LAAV's informed trial, whichever
+    candidate was returned; plain RV's returned trial): ``iteration`` 0 (the start) to T,
+    ``error`` in % (:func:`trace_errors`: against the ground truth, else against the
+    trial's own last labels). Empty when no trace was recorded for every point (more than
+    ``rv_max_points`` points voted, or the coarse labels were returned)."""
+    empty = {"iteration": np.zeros(0), "error": np.zeros(0)}
+    if voting is None:
+        return empty
+    own = voting.informed_changed is not None
+    trace = voting.informed_label_trace if own else voting.label_trace
+    if trace is None or trace.ndim != 2 or trace.shape[1] != seq.n_points:
+        return empty
+    return {"iteration": np.arange(trace.shape[0]), "error": 100.0 * trace_errors(trace, seq.labels)}
+
+
 def _rv_line(voting: laav.Voting | None, what: str) -> str:
     if voting is None:
         return f"**{what}:** computing…"
@@ -1022,7 +1062,15 @@ def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
     ``pending``: ``fine_tuning`` is a preview (:data:`PREVIEW_NOTE`)."""
     return (_rv_line(fine_tuning, "LAAV fine-tuning (RV started from the coarse labels)") + "  \n"
             + (PREVIEW_NOTE + "  \n" if pending else "")
-            + _rv_line(plain, "Plain RV (random start, same sequence and RV settings)"))
+            + _rv_line(plain, "Plain RV (random start, same sequence and RV settings)") + "  \n"
+            + RV_ERROR_NOTE)
+
+
+#: What the RV card's error chart draws.
+RV_ERROR_NOTE = ("*Error per iteration:* each trial's own voting labels, iteration 0 its start "
+                 "(LAAV's: the coarse labels, the points in no atom at random; plain RV's: every "
+                 "point at random), before the refinement and reassignment that give the final "
+                 "labels. Without ground truth: the share of points not yet at the trial's last labels.")
 
 
 # ---------------------------------------------------------------------- numbers

@@ -156,14 +156,20 @@ class _Trial:
         self.reset, self.kind = reset, kind
         self.changed: list = []
         self.margins: list = []
+        #: the labels at the start and after every iteration (what the explorer draws as
+        #: error per iteration); a record only, never read by the voting
+        self.dtype = np.int8 if votes.shape[-1] <= 127 else np.int32
+        self.history: list = [np.asarray(labels, dtype=self.dtype)]
         self.it = 0
         self.still = 0
         self.converged = False
         self.done = False
 
     def result(self) -> tuple:
+        """(labels, votes, changed, margins, iterations, converged, label trace (T + 1, P)
+        int8 (int32 above 127 motions): the start and every iteration's labels)."""
         return (self.labels, self.votes, np.array(self.changed, dtype=np.int64),
-                np.array(self.margins), self.it, self.converged)
+                np.array(self.margins), self.it, self.converged, np.stack(self.history))
 
 
 def _margins(votes: np.ndarray) -> np.ndarray:
@@ -228,6 +234,7 @@ def _step(points, trials, params, masks=None, extra=None):
         t.labels, t.votes = new[b], votes[b]
         t.changed.append(int(n_changed[b]))
         t.margins.append(float(margins[b]))
+        t.history.append(new[b].astype(t.dtype))
         if t.reset and t.it == RESET_AT:
             t.votes = np.zeros_like(t.votes)
             t.still = 0
@@ -351,5 +358,5 @@ def consensus(trials, C, rng):
 
     labs = np.stack([t[0] for t in trials])  # (T, P)
     labels = coassociation_clustering(labs, C, consensus_seed(rng))
-    last = trials[-1]
-    return labels, last[1], last[2], last[3], last[4], False
+    last = trials[-1]  # its traces stand for the consensus's, as its votes do
+    return (labels, last[1], last[2], last[3], last[4], False) + tuple(last[6:7])

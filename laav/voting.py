@@ -133,6 +133,17 @@ class Voting:
     informed_changed, informed_margin : ndarray of shape (T0,) or None
         LAAV's informed trial's own trace (labels changed, mean margin per iteration),
         whichever candidate was returned; None for plain RV.
+    label_trace : ndarray of shape (T + 1, P'), int8, or None
+        The returned trial's labels at its start (row 0: for LAAV's trial the coarse
+        labels, the points in no atom at random; for plain RV random) and after each of
+        its T iterations (before the refinement and reassignment), over the points that
+        voted (P' = P unless more than ``rv_max_points`` voted: then the seeded subset).
+        A record for the explorer's error-per-iteration chart: ``changed[t]`` is the
+        number of points whose label differs between rows t and t + 1. For a consensus,
+        the last trial's (as ``changed`` and ``margin`` are); None for ``"coarse"``.
+    informed_label_trace : ndarray of shape (T0 + 1, P'), int8, or None
+        The same for LAAV's informed trial, whichever candidate was returned; None for
+        plain RV.
     informed_converged : bool or None
         Whether LAAV's informed trial met the convergence test; None for plain RV.
     informed_subspace_weight : float or None
@@ -175,6 +186,8 @@ class Voting:
     informed_subspace_weight: float | None = None
     unlabelled_code: np.ndarray | None = None
     score: str = ""
+    label_trace: np.ndarray | None = field(default=None, repr=False)
+    informed_label_trace: np.ndarray | None = field(default=None, repr=False)
 
 
 @single_threaded  # one BLAS/OpenMP thread, restored after (laav/_threads.py)
@@ -713,6 +726,7 @@ def _with_informed(voting: Voting, first: tuple, extra) -> Voting:
     or None: 0)."""
     return dataclasses.replace(voting, informed_changed=first[2], informed_margin=first[3],
                                informed_converged=bool(first[5]),
+                               informed_label_trace=first[6] if len(first) > 6 else None,
                                informed_subspace_weight=0.0 if extra is None else extra.weight)
 
 
@@ -769,7 +783,7 @@ class _Polished:
 
 def _finish(points, C, params, best, trials, initialised, selected, polished=None,
             costs=None, mk=None, score="") -> Voting:
-    labels, votes, changed, margin, _its, conv = best
+    labels, votes, changed, margin, _its, conv = best[:6]
     labels, refined, reassigned = (_Polished(points, C, params, labels, mk) if polished is None
                                    else polished).final()
     return Voting(
@@ -787,6 +801,7 @@ def _finish(points, C, params, best, trials, initialised, selected, polished=Non
         costs=dict(costs or {}),
         reassigned=reassigned,
         score=score,
+        label_trace=best[6] if len(best) > 6 else None,
     )
 
 

@@ -341,6 +341,34 @@ def test_plain_rv_comparison_is_cached_and_drawn(ex):
     assert "Plain RV" in ex.rv_md.object
 
 
+def test_rv_card_draws_each_trials_error_per_iteration(ex):
+    """The RV card's first chart (the paper's Fig. 3 in one run): each drawn trial's error
+    per iteration from its label trace, row 0 its start; the misclassification rate of
+    every row against the ground truth, or without one the share off the trial's end."""
+    from explorer.cards.rv import ERROR_TITLES
+    from explorer.views import rv_error_sources, trace_errors
+
+    assert ex.wait(120, plain_rv=True)
+    seq, v, plain = ex.sequence, ex.result.voting, ex.state.plain_rv()
+    rv = ex.rv_view
+    laav_err = np.asarray(rv.src_err_laav.data["error"])
+    assert laav_err.size == v.informed_changed.size + 1  # the start, then each iteration
+    for trace, drawn in ((v.informed_label_trace, laav_err),
+                         (plain.label_trace, np.asarray(rv.src_err_plain.data["error"]))):
+        want = [100 * laav.misclassification_rate(seq.labels, row) for row in trace]
+        np.testing.assert_allclose(drawn, want, atol=1e-9)
+    assert rv.fig_error.title.text == ERROR_TITLES[True]
+    # a random start is far off; LAAV's start (the coarse labels) is closer
+    plain_err = np.asarray(rv.src_err_plain.data["error"])
+    assert plain_err[0] > 20 and laav_err[0] < plain_err[0]
+    # without ground truth: the share of points not yet at the trial's last labels
+    blind = trace_errors(v.informed_label_trace, None)
+    assert blind[-1] == 0 and np.all((blind >= 0) & (blind <= 1))
+    np.testing.assert_allclose(blind[0], np.mean(v.informed_label_trace[0] != v.informed_label_trace[-1]))
+    assert rv_error_sources(seq, None)["error"].size == 0
+    assert "Error per iteration" in ex.rv_md.object
+
+
 def test_newest_request_supersedes_stale_ones(seq):
     st = ExplorerState(seq, autostart=False)
     seen = []

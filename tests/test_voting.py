@@ -397,6 +397,43 @@ def test_fine_tuning_keeps_laavs_own_trial_trace_whatever_it_returns():
     assert np.array_equal(paper.informed_changed, paper.changed) and paper.selected == "informed"
 
 
+def _check_trace(trace, changed, P, C):
+    """A label trace: the start plus one row per iteration, rows differing by ``changed``."""
+    assert trace is not None and trace.dtype == np.int8
+    assert trace.shape == (changed.size + 1, P)
+    assert trace.min() >= 0 and trace.max() < C
+    np.testing.assert_array_equal((trace[1:] != trace[:-1]).sum(axis=1), changed)
+
+
+@pytest.mark.parametrize("init", [False, True])
+def test_label_traces_record_every_iteration_and_not_the_batching(init):
+    """Voting.label_trace / informed_label_trace (the explorer's error per iteration): the
+    start, then each iteration's labels, consistent with ``changed``; LAAV's starts at its
+    start labels; the same whatever rv_batch (one random stream per trial)."""
+    seq = scene(2, 1)
+    noisy = seq.points + np.random.default_rng(5).normal(0.0, 1.5, seq.points.shape)
+    P, C = seq.n_points, seq.n_motions
+    start = np.where(np.arange(P) % 3 == 0, -1, seq.labels) if init else None
+    runs = [random_voting(noisy, C, LaavParams(rv_batch=b), seed=7, init_labels=start)
+            for b in (1, 3)]
+    for r in runs:
+        if r.selected != "coarse":
+            _check_trace(r.label_trace, r.changed, P, C)
+        if init:
+            _check_trace(r.informed_label_trace, r.informed_changed, P, C)
+            known = start >= 0
+            np.testing.assert_array_equal(r.informed_label_trace[0][known], start[known])
+        else:
+            assert r.informed_label_trace is None
+    for name in ("label_trace", "informed_label_trace"):
+        a, b = getattr(runs[0], name), getattr(runs[1], name)
+        assert (a is None and b is None) or np.array_equal(a, b)
+    # a converged plain trial's last row is its voting's labels (before the refinement)
+    plain = random_voting(seq.points, C, LaavParams(rv_refine=False, rv_reassign=False), seed=0)
+    assert plain.converged and plain.selected == "trial"
+    np.testing.assert_array_equal(plain.label_trace[-1], plain.labels)
+
+
 @pytest.mark.parametrize("max_iter", [40, 25])  # 25: no plain trial can converge (consensus)
 def test_plain_memo_reuses_plain_rv_and_keeps_the_labels(monkeypatch, max_iter):
     """With ``plain_memo`` (what Pipeline passes on a λ or radius change) plain RV's runs

@@ -13,14 +13,34 @@ from .base import Markdown, card, flex, set_data
 RV_TOOLS = "pan,wheel_zoom,reset"
 
 
+#: The error chart's title with and without ground truth.
+ERROR_TITLES = {True: "Error per iteration (vs ground truth)",
+                False: "Points off the trial's last labels"}
+
+
 class RVView:
-    """Labels changed and mean vote margin per iteration, for both runs; a summary."""
+    """Error, labels changed and mean vote margin per iteration, for both runs; a summary."""
 
     def __init__(self) -> None:
         self.plain = None  # the plain-RV run drawn (None until it arrives)
         empty_rv = {"iteration": [], "changed": [], "changed_plot": [], "margin": []}
         self.src_rv_laav = ColumnDataSource(dict(empty_rv))
         self.src_rv_plain = ColumnDataSource(dict(empty_rv))
+        # the paper's Fig. 3 in one run: LAAV's trial starts near the answer, plain RV at
+        # random (row 0 of each trial's label trace, laav.Voting.label_trace)
+        self.src_err_laav = ColumnDataSource({"iteration": [], "error": []})
+        self.src_err_plain = ColumnDataSource({"iteration": [], "error": []})
+        self.fig_error = figure(title=ERROR_TITLES[True], width=440, height=235, tools=RV_TOOLS,
+                                toolbar_location="above")
+        self.fig_error.line("iteration", "error", source=self.src_err_laav, line_width=2.5,
+                            color="#222222", legend_label="LAAV's informed trial")
+        self.fig_error.line("iteration", "error", source=self.src_err_plain, line_width=2,
+                            color="#8C8C8C", line_dash="dashed", legend_label="plain RV (random start)")
+        self.fig_error.xaxis.axis_label = "Random Voting iteration (0 = the start)"
+        self.fig_error.yaxis.axis_label = "% of points"
+        self.fig_error.legend.location = "top_right"
+        self.fig_error.legend.background_fill_alpha = 0.7
+        self.fig_error.title.text_font_size = "11pt"
         self.fig_changed = figure(title="Labels changed per iteration", width=440, height=235,
                                   y_axis_type="log", tools=RV_TOOLS, toolbar_location="above")
         self.fig_margin = figure(title="Mean vote margin per iteration", width=440, height=235,
@@ -40,13 +60,19 @@ class RVView:
         assert isinstance(self.fig_changed.yaxis[0], LogAxis)
         self.rv_md = Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
         self.card = card("4 · Fine-tuning (Random Voting): LAAV's start vs plain RV",
-                         flex(pn.pane.Bokeh(self.fig_changed), pn.pane.Bokeh(self.fig_margin)),
+                         flex(pn.pane.Bokeh(self.fig_error), pn.pane.Bokeh(self.fig_changed),
+                              pn.pane.Bokeh(self.fig_margin)),
                          self.rv_md)
 
-    def draw(self, laav_voting, plain, pending: bool = False) -> None:
+    def draw(self, laav_voting, plain, pending: bool = False, seq=None) -> None:
         """``pending``: ``laav_voting`` is a preview, LAAV's own trial before plain RV and
-        the selection (:attr:`explorer.state.ExplorerState.on_preview`)."""
+        the selection (:attr:`explorer.state.ExplorerState.on_preview`); ``seq``: the
+        sequence (its ground truth scores the error chart; None: no error chart)."""
         set_data(self.src_rv_laav, V.rv_sources(laav_voting))
         set_data(self.src_rv_plain, V.rv_sources(plain))
+        if seq is not None:
+            self.fig_error.title.text = ERROR_TITLES[seq.labels is not None]
+            set_data(self.src_err_laav, V.rv_error_sources(seq, laav_voting))
+            set_data(self.src_err_plain, V.rv_error_sources(seq, plain))
         self.plain = plain
         self.rv_md.object = V.rv_summary(laav_voting, plain, pending=pending)
