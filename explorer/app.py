@@ -81,6 +81,47 @@ SHORTCUTS = {
 }
 
 
+#: The upload box's library, FilePond, paints through one loop that asks for an animation
+#: frame 60 times a second for as long as the page is open (``window.__framePainter``;
+#: FilePond itself switches to a timer only while the page is hidden). Every such frame
+#: makes the browser recompute style, layout and paint and commit a frame: on the 2-core VM
+#: the idle page took 121 ms of its main thread per second (plus ~80 ms of compositor
+#: threads) for nothing, time every result and frame move then shared. Once the document
+#: is ready, this routes that one loop's frame requests to a timer at the same rate, as
+#: FilePond does for a hidden page: its readers and writers still run 60 times a second, but
+#: the browser makes a frame only when one of them changes something (idle main thread 121
+#: -> 17 ms per second, measured in headless Chromium). Every other caller keeps the real
+#: ``requestAnimationFrame``.
+JS_THROTTLE_FILEPOND = r"""
+if (window.__laavPainterThrottled) return;
+window.__laavPainterThrottled = true;
+const raf = window.requestAnimationFrame.bind(window);
+const caf = window.cancelAnimationFrame.bind(window);
+const pond = new WeakMap();  // callback -> is FilePond's painter loop
+const timers = new Map();  // our id -> timeout id
+let next = -1;  // our ids are negative: never one of the browser's
+const isPond = (cb) => {
+  if (typeof cb !== 'function') return false;
+  let v = pond.get(cb);
+  if (v === undefined) {
+    v = String(cb).includes('.readers.forEach(') && String(cb).includes('.writers.forEach(');
+    pond.set(cb, v);
+  }
+  return v;
+};
+window.requestAnimationFrame = (cb) => {
+  if (!isPond(cb)) return raf(cb);
+  const id = next--;
+  timers.set(id, setTimeout(() => { timers.delete(id); cb(performance.now()); }, 1000 / 60));
+  return id;
+};
+window.cancelAnimationFrame = (id) => {
+  if (timers.has(id)) { clearTimeout(timers.get(id)); timers.delete(id); return; }
+  caf(id);
+};
+"""
+
+
 class _Template(pn.template.BootstrapTemplate):
     """The page's template, its document built with bokeh's model index frozen.
 
@@ -91,9 +132,14 @@ class _Template(pn.template.BootstrapTemplate):
 
     def server_doc(self, doc=None, title=None, location=True):
         if doc is None:  # panel finds the document itself
-            return super().server_doc(doc, title, location)
-        with doc.models.freeze():
-            return super().server_doc(doc, title, location)
+            doc = super().server_doc(doc, title, location)
+        else:
+            with doc.models.freeze():
+                doc = super().server_doc(doc, title, location)
+        from bokeh.models import CustomJS
+
+        doc.js_on_event("document_ready", CustomJS(code=JS_THROTTLE_FILEPOND))
+        return doc
 
 
 def _is_data_event(event) -> bool:

@@ -242,8 +242,22 @@ JS_INJECTED = """() => {
 }"""
 
 
+#: Over one idle second: animation frames asked for through the browser, and those the
+#: explorer routed to a timer (FilePond's painter loop: explorer.app.JS_THROTTLE_FILEPOND).
+JS_FRAME_REQUESTS = """async () => {
+  const f = window.requestAnimationFrame;
+  let real = 0, routed = 0;
+  window.requestAnimationFrame = (cb) => { const id = f(cb); if (id < 0) routed++; else real++; return id; };
+  await new Promise(r => setTimeout(r, 1000));
+  window.requestAnimationFrame = f;
+  return {real, routed, throttled: window.__laavPainterThrottled === true};
+}"""
+
+
 def test_hostile_names_are_shown_as_text(tmp_path):
-    """File names and names stored in files carry HTML/script payloads: they show as text."""
+    """File names and names stored in files carry HTML/script payloads: they show as text.
+    The upload box works with its painter loop on a timer: an idle page asks for almost no
+    animation frames (FilePond asked for 60 a second, for ever)."""
     import numpy as np
 
     stored = "<script>alert(2)</script><img src=x onerror=alert(3)>"
@@ -261,6 +275,9 @@ def test_hostile_names_are_shown_as_text(tmp_path):
         ex = _wait_for(lambda: created[0] if created else None, 10, "the session's explorer")
         assert ex.wait(60)
         page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=20000)
+        page.wait_for_timeout(1500)  # the page settled
+        frames = page.evaluate(JS_FRAME_REQUESTS)
+        assert frames["throttled"] and frames["routed"] >= 20 and frames["real"] <= 10, frames
 
         # a valid .npz: the file name and the stored name both carry payloads
         page.set_input_files("input[type=file]", files=[{
