@@ -250,14 +250,27 @@ JS_FRAME_REQUESTS = """async () => {
   window.requestAnimationFrame = (cb) => { const id = f(cb); if (id < 0) routed++; else real++; return id; };
   await new Promise(r => setTimeout(r, 1000));
   window.requestAnimationFrame = f;
-  return {real, routed, throttled: window.__laavPainterThrottled === true};
+  // the status line's spinner (hidden while idle): its turning animation, paused
+  let spin = null;
+  const visit = (root) => {
+    for (const el of root.querySelectorAll('*')) {
+      if (el.shadowRoot && typeof el.className === 'string' && el.className.includes('loader spin')) {
+        const d = el.shadowRoot.querySelector('div');
+        if (d) { const a = getComputedStyle(d, '::after'); spin = [a.animationName, a.animationPlayState]; }
+      }
+      if (el.shadowRoot) visit(el.shadowRoot);
+    }
+  };
+  visit(document);
+  return {real, routed, throttled: window.__laavPainterThrottled === true, spin};
 }"""
 
 
 def test_hostile_names_are_shown_as_text(tmp_path):
     """File names and names stored in files carry HTML/script payloads: they show as text.
     The upload box works with its painter loop on a timer: an idle page asks for almost no
-    animation frames (FilePond asked for 60 a second, for ever)."""
+    animation frames (FilePond asked for 60 a second, for ever), and the hidden spinner
+    does not turn (the compositor drew 60 frames a second for it)."""
     import numpy as np
 
     stored = "<script>alert(2)</script><img src=x onerror=alert(3)>"
@@ -278,6 +291,7 @@ def test_hostile_names_are_shown_as_text(tmp_path):
         page.wait_for_timeout(1500)  # the page settled
         frames = page.evaluate(JS_FRAME_REQUESTS)
         assert frames["throttled"] and frames["routed"] >= 20 and frames["real"] <= 10, frames
+        assert frames["spin"] == ["spin", "paused"], frames  # hidden, and not turning
 
         # a valid .npz: the file name and the stored name both carry payloads
         page.set_input_files("input[type=file]", files=[{

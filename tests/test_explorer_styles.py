@@ -70,7 +70,9 @@ def test_a_move_toggles_no_layout_property_in_the_main_area():
                     for v in watched]
         busy = []
         real = ex.status_bar.show_busy
-        ex.status_bar.show_busy = lambda b, h: (busy.append(b), real(b, h))[1]
+        spins = []  # the spinner turns while shown (busy), is paused while hidden
+        ex.status_bar.show_busy = lambda b, h: (busy.append(b), real(b, h),
+                                                spins.append(ex.status_bar.spinner.styles["--laav-spin"]))[1]
         ex.files.show_progress(True)  # a long move's progress line, shown and hidden
         ex.files.show_progress(False)
         for lam in (2.5, 3.0):
@@ -79,6 +81,7 @@ def test_a_move_toggles_no_layout_property_in_the_main_area():
         for v, w in watchers:
             v.param.unwatch(w)
         assert True in busy and False in busy  # the spinner was shown and hidden
+        assert spins == ["running" if b else "paused" for b in busy]
         assert changes == []
     finally:
         ex.close()

@@ -20,6 +20,16 @@ def header_text(seq: laav.Sequence) -> str:
     return f"{V.md_text(seq.name)} · {seq.n_points} points, {seq.n_frames} frames"
 
 
+#: The loading spinner's turn (panel's ``:host(.loader.spin) div::after`` animation) follows
+#: an inline custom property, so that hiding the spinner pauses it without a class change
+SPIN_PAUSABLE = ":host div::after { animation-play-state: var(--laav-spin, running) !important; }"
+
+
+def spinner_style(busy: bool) -> dict:
+    """The spinner's inline styles: shown and turning while busy, else hidden and paused."""
+    return {**shown_style(busy, keep_space=True), "--laav-spin": "running" if busy else "paused"}
+
+
 class StatusBar:
     def __init__(self, seq: laav.Sequence) -> None:
         self.alert = Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
@@ -29,10 +39,13 @@ class StatusBar:
         # problems with the settings a shared URL carried (kept until the next URL)
         self.url_alert = Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
                                margin=(4, 6))
-        # always spinning (a change of its value is one of its CSS classes), shown and hidden
-        # by its opacity (its own style sheet overrides visibility; see shown_style)
+        # always "spinning" (a change of its value is one of its CSS classes), shown and hidden
+        # by its opacity (its own style sheet overrides visibility; see shown_style), its
+        # animation paused while hidden by an inline custom property (SPIN_PAUSABLE): a hidden
+        # spinner that kept turning kept the browser's compositor drawing 60 frames a second
         self.spinner = pn.indicators.LoadingSpinner(value=True, size=22, margin=(8, 6),
-                                                    styles=shown_style(True, keep_space=True))
+                                                    styles=spinner_style(True),
+                                                    stylesheets=[SPIN_PAUSABLE])
         self._status_text = "Computing the first result…"
         self.status = Markdown(self._status_text, margin=(4, 6),
                                sizing_mode="stretch_width")
@@ -70,7 +83,7 @@ class StatusBar:
         self.alert.visible = True
 
     def show_busy(self, busy: bool, has_result: bool) -> None:
-        self.spinner.styles = shown_style(busy, keep_space=True)
+        self.spinner.styles = spinner_style(busy)
         if busy and has_result:
             self.status.object = "Recomputing… (the views keep the last result until the new one is ready)"
 
