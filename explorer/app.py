@@ -81,6 +81,33 @@ SHORTCUTS = {
 }
 
 
+def _keep_panel_queue_moving() -> None:
+    """Mend a race in panel's queue of messages (panel 1.9, ``panel.io.document``).
+
+    ``unlocked`` queues a batch's message when bokeh is writing to the socket and schedules
+    ``_dispatch_msgs`` to send the queue. A dispatch that is still awaiting its writes when
+    another batch is queued then clears the queue's flag on its way out, and the dispatch
+    scheduled for the new batch returns at once on seeing no flag: that message stays queued
+    until some later batch comes (a result's address change never reached the page in one CI
+    run: ``test_url_carries_the_state``). Wrapped: a dispatch that finds messages waiting
+    sends them whatever the flag."""
+    import panel.io.document as pdoc
+
+    if getattr(pdoc._dispatch_msgs, "_laav_mended", False):
+        return
+    original = pdoc._dispatch_msgs
+
+    async def _dispatch_msgs(doc):
+        if doc not in pdoc._WRITE_BLOCK and pdoc._WRITE_MSGS.get(doc):
+            pdoc._WRITE_BLOCK[doc] = True  # messages left behind by a dispatch that ended
+        return await original(doc)
+
+    _dispatch_msgs._laav_mended = True
+    pdoc._dispatch_msgs = _dispatch_msgs  # looked up by name where panel schedules it
+
+
+_keep_panel_queue_moving()
+
 #: The upload box's library, FilePond, paints through one loop that asks for an animation
 #: frame 60 times a second for as long as the page is open (``window.__framePainter``;
 #: FilePond itself switches to a timer only while the page is hidden). Every such frame
@@ -386,6 +413,7 @@ class Explorer:
         main = pn.Column(*(self.main[:n_first] if lazy else self.main), sizing_mode="stretch_width")
         self.main_column = main
         self._rest = None
+        self._rest_timer = None  # the pending _add_rest_after
         if lazy:
             self._rest = {"cards": self.main[n_first:], "loaded": False}
             pn.state.onload(self._page_loaded)
@@ -407,10 +435,18 @@ class Explorer:
         self._add_rest_after(REST_GAP_S if shown else REST_AFTER_S)
 
     def _add_rest_after(self, seconds: float) -> None:
-        """(Document thread.) :meth:`_add_rest` in ``seconds`` (now without a server)."""
+        """(Document thread.) :meth:`_add_rest` in ``seconds`` (now without a server),
+        replacing a timer set before (the 3 s one must not fire just after a result)."""
         doc = self._doc()
         if doc is not None and doc.session_context is not None:
-            doc.add_timeout_callback(lambda: self._locked(self._add_rest), int(1000 * seconds))
+            old, self._rest_timer = self._rest_timer, None
+            if old is not None:
+                try:
+                    doc.remove_timeout_callback(old)
+                except ValueError:  # it has run already
+                    pass
+            self._rest_timer = doc.add_timeout_callback(lambda: self._locked(self._add_rest),
+                                                        int(1000 * seconds))
         else:
             self._add_rest()
 
@@ -536,9 +572,11 @@ class Explorer:
         if (pn.state.curdoc is doc and pn.state.loaded
                 and threading.get_ident() == self._doc_thread and doc.session_context.session is not None):
             with unlocked("combine"):
-                with self._frozen(doc if freeze else None):
-                    yield
-                self._tidy(doc.callbacks._held_events, live)
+                try:
+                    with self._frozen(doc if freeze else None):
+                        yield
+                finally:
+                    self._tidy(doc.callbacks._held_events, live)
             return
         doc.hold("combine")
         try:

@@ -234,8 +234,9 @@ def parse_value(name: str, text: str):
     t = str(text).strip()
     kind = _KINDS.get(name, "choice")  # by the field's kind, not its default (None for some)
     try:
-        if kind == "int|None":
-            return None if t.lower() in ("", "none", "auto") else int(t)
+        if kind == "int|None":  # None: "auto" for the fine-model counts, no cap for rv_max_points
+            words = ("", "none", "auto") if name in ("fine_models", "fine_per_motion") else ("none",)
+            return None if t.lower() in words else int(t)
         if kind == "bool":
             if t.lower() in _TRUE:
                 return True

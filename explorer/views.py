@@ -932,19 +932,21 @@ def trace_errors(trace: np.ndarray, truth: np.ndarray | None) -> np.ndarray:
     over the points with a true label), or without ``truth`` the share of points whose
     label differs from the last row's (the trial's own end; one trial numbers its labels
     the same way throughout)."""
-    trace = np.asarray(trace, dtype=np.int64)
+    trace = np.asarray(trace)
     if trace.size == 0:
         return np.zeros(trace.shape[0])
     if truth is None:
         return (trace != trace[-1]).mean(axis=1)
     from scipy.optimize import linear_sum_assignment
 
-    truth = np.asarray(truth, dtype=np.int64)
+    truth = np.asarray(truth)
     ok = truth >= 0
     tr, gt = trace[:, ok], truth[ok]
     C, K = int(tr.max()) + 1, int(gt.max()) + 1
-    # every row's confusion matrix at once: counts of (row, label, true label)
-    flat = (np.arange(tr.shape[0])[:, None] * C + tr) * K + gt
+    # every row's confusion matrix at once: counts of (row, label, true label), in int32
+    # while it fits (the trace is int8: no int64 copy of it)
+    idx = np.int32 if tr.shape[0] * C * K < 2**31 else np.int64
+    flat = (np.arange(tr.shape[0], dtype=idx)[:, None] * C + tr.astype(idx)) * K + gt.astype(idx)
     counts = np.bincount(flat.ravel(), minlength=tr.shape[0] * C * K).reshape(-1, C, K)
     right = np.array([counts[t][linear_sum_assignment(-counts[t])].sum() for t in range(len(counts))])
     return 1.0 - right / max(gt.size, 1)
@@ -954,8 +956,9 @@ def rv_error_sources(seq: laav.Sequence, voting: laav.Voting | None) -> dict:
     """Error per iteration of the trial the RV card draws (LAAV's informed trial, whichever
     candidate was returned; plain RV's returned trial): ``iteration`` 0 (the start) to T,
     ``error`` in % (:func:`trace_errors`: against the ground truth, else against the
-    trial's own last labels). Empty when no trace was recorded for every point (more than
-    ``rv_max_points`` points voted, or the coarse labels were returned)."""
+    trial's own last labels). Empty when no trace covers every point: more than
+    ``rv_max_points`` points, missing data where some points are in no voting frame pair
+    (the trials ran on the others), or no trial at all (the coarse labels returned)."""
     empty = {"iteration": np.zeros(0), "error": np.zeros(0)}
     if voting is None:
         return empty

@@ -164,12 +164,16 @@ class _Trial:
         self.still = 0
         self.converged = False
         self.done = False
+        self._result = None
 
     def result(self) -> tuple:
         """(labels, votes, changed, margins, iterations, converged, label trace (T + 1, P)
-        int8 (int32 above 127 motions): the start and every iteration's labels)."""
-        return (self.labels, self.votes, np.array(self.changed, dtype=np.int64),
-                np.array(self.margins), self.it, self.converged, np.stack(self.history))
+        int8 (int32 above 127 motions): the start and every iteration's labels). Made once
+        per trial (a trial is asked for it several times once it ended: one copy)."""
+        if self._result is None or self._result[4] != self.it:
+            self._result = (self.labels, self.votes, np.array(self.changed, dtype=np.int64),
+                            np.array(self.margins), self.it, self.converged, np.stack(self.history))
+        return self._result
 
 
 def _margins(votes: np.ndarray) -> np.ndarray:

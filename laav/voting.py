@@ -133,7 +133,7 @@ class Voting:
     informed_changed, informed_margin : ndarray of shape (T0,) or None
         LAAV's informed trial's own trace (labels changed, mean margin per iteration),
         whichever candidate was returned; None for plain RV.
-    label_trace : ndarray of shape (T + 1, P'), int8, or None
+    label_trace : ndarray of shape (T + 1, P'), int8 (int32 above 127 motions), or None
         The returned trial's labels at its start (row 0: for LAAV's trial the coarse
         labels, the points in no atom at random; for plain RV random) and after each of
         its T iterations (before the refinement and reassignment), over the points that

@@ -118,3 +118,32 @@ def test_a_result_on_the_same_sequence_walks_the_document_graph_no_time():
         assert len(walks) == 1
     finally:
         ex.close()
+
+
+def test_a_message_queued_behind_a_finished_dispatch_is_sent():
+    """panel's queue race (explorer.app._keep_panel_queue_moving): a message left queued
+    with the queue's flag cleared (a dispatch that ended while it was queued) is sent by
+    the next dispatch instead of staying queued."""
+    import asyncio
+
+    import panel.io.document as pdoc
+    from bokeh.document import Document
+
+    import explorer.app  # noqa: F401  (mends the queue on import)
+
+    sent = []
+
+    class Conn:  # a connection whose socket is no tornado handler: panel's other writer
+        _socket = object()
+
+    doc = Document()
+    pdoc._WRITE_MSGS[doc] = {Conn(): ["a message"]}
+    pdoc._WRITE_BLOCK.pop(doc, None)  # the flag a finished dispatch cleared
+    real = pdoc.dispatch_django
+    pdoc.dispatch_django = lambda conn, msg=None, events=None: (sent.append(msg), [])[1]
+    try:
+        asyncio.run(pdoc._dispatch_msgs(doc))
+    finally:
+        pdoc.dispatch_django = real
+    assert sent == ["a message"]
+    assert doc not in pdoc._WRITE_MSGS and doc not in pdoc._WRITE_BLOCK

@@ -213,6 +213,10 @@ def test_url_query_round_trip_and_validation(demo):
         s = Settings(preset, 2, 3)
         got, _, problems = parse_settings(query_of(s, 3), seq, base)
         assert problems == [] and got == s, problems
+    # "auto" means auto for the fine-model counts only: it never lifts the voting's point cap
+    got, _, problems = parse_settings({"fine_per_motion": "auto", "rv_max_points": "auto"}, seq, base)
+    assert got.params.fine_per_motion is None and got.params.rv_max_points == 1000
+    assert problems == ["rv_max_points must be a whole number or none, got 'auto'"], problems
     # bad values: a readable message each, everything else applied, never an exception
     s, view, problems = parse_settings(
         {"r1": "abc", "r2": "10", "seed": "-1", "motions": "9999", "frame": "30", "color": "<b>x</b>",

@@ -432,6 +432,13 @@ def test_label_traces_record_every_iteration_and_not_the_batching(init):
     plain = random_voting(seq.points, C, LaavParams(rv_refine=False, rv_reassign=False), seed=0)
     assert plain.converged and plain.selected == "trial"
     np.testing.assert_array_equal(plain.label_trace[-1], plain.labels)
+    # one trace per trial, however many of the returned lists name it
+    from laav.rv import run_trials
+
+    first, conv, trials, ended = run_trials(noisy, C, LaavParams(rv_trials=4), np.random.default_rng(3),
+                                            (seq.labels.copy(), np.zeros((P, C))))
+    assert first[6] is trials[0][6]
+    assert all(any(e[6] is t[6] for t in trials) for e in ended)
 
 
 @pytest.mark.parametrize("max_iter", [40, 25])  # 25: no plain trial can converge (consensus)

@@ -71,8 +71,11 @@ class RVView:
         set_data(self.src_rv_laav, V.rv_sources(laav_voting))
         set_data(self.src_rv_plain, V.rv_sources(plain))
         if seq is not None:
-            self.fig_error.title.text = ERROR_TITLES[seq.labels is not None]
-            set_data(self.src_err_laav, V.rv_error_sources(seq, laav_voting))
-            set_data(self.src_err_plain, V.rv_error_sources(seq, plain))
+            own, other = V.rv_error_sources(seq, laav_voting), V.rv_error_sources(seq, plain)
+            drawn = own["error"].size or other["error"].size or plain is None
+            self.fig_error.title.text = ERROR_TITLES[seq.labels is not None] + (
+                "" if drawn else ": not recorded (not every point voted)")
+            set_data(self.src_err_laav, own)
+            set_data(self.src_err_plain, other)
         self.plain = plain
         self.rv_md.object = V.rv_summary(laav_voting, plain, pending=pending)
