@@ -659,7 +659,7 @@ class Explorer:
                 self.graph_view.draw(result, self.frame, self.fine_colors)
                 self.coarse_view.draw(seq, result)
                 self.coarse_view.epipolar.draw(seq, result)
-                self.rv_view.draw(result.voting, plain, pending=preview, seq=seq)
+                self.rv_view.draw(seq, result.voting, plain, pending=preview)
                 num = self.numbers_view.draw(seq, result, plain)
                 s = self.status_bar
                 s.alert.visible = self.state.error is not None
@@ -721,7 +721,7 @@ class Explorer:
         if self.result is None or key != self.state.plain_rv_key():
             return
         with self.hold():
-            self.rv_view.draw(self.result.voting, voting, seq=self.sequence)
+            self.rv_view.draw(self.sequence, self.result.voting, voting)
             self.numbers_view.draw(self.sequence, self.result, voting)
             if self.controls.color_mode in ("plain", "errors_plain"):
                 self._color_now()

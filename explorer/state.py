@@ -232,7 +232,7 @@ def parse_value(name: str, text: str):
     if name not in _FIELDS:
         raise ValueError(f"unknown parameter {name!r}")
     t = str(text).strip()
-    kind = _KINDS.get(name, "choice")  # by the field's kind, not its default (None for some)
+    kind = _KINDS[name]  # by the field's kind, not its default (None for some)
     try:
         if kind == "int|None":  # None: "auto" for the fine-model counts, no cap for rv_max_points
             words = ("", "none", "auto") if name in ("fine_models", "fine_per_motion") else ("none",)

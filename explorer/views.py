@@ -931,7 +931,9 @@ def trace_errors(trace: np.ndarray, truth: np.ndarray | None) -> np.ndarray:
     (the best one-to-one matching of labels, per row: :func:`laav.misclassification_rate`,
     over the points with a true label), or without ``truth`` the share of points whose
     label differs from the last row's (the trial's own end; one trial numbers its labels
-    the same way throughout)."""
+    the same way throughout). Every row's confusion matrix is counted at once: calling
+    :func:`laav.misclassification_rate` per row took ~10 ms of each result's apply on the
+    demo (two traces, 205 rows), this ~1 ms; the explorer's tests check the two agree."""
     trace = np.asarray(trace)
     if trace.size == 0:
         return np.zeros(trace.shape[0])

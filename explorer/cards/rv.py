@@ -64,18 +64,17 @@ class RVView:
                               pn.pane.Bokeh(self.fig_margin)),
                          self.rv_md)
 
-    def draw(self, laav_voting, plain, pending: bool = False, seq=None) -> None:
-        """``pending``: ``laav_voting`` is a preview, LAAV's own trial before plain RV and
-        the selection (:attr:`explorer.state.ExplorerState.on_preview`); ``seq``: the
-        sequence (its ground truth scores the error chart; None: no error chart)."""
+    def draw(self, seq, laav_voting, plain, pending: bool = False) -> None:
+        """``seq``: the sequence (its ground truth scores the error chart); ``pending``:
+        ``laav_voting`` is a preview, LAAV's own trial before plain RV and the selection
+        (:attr:`explorer.state.ExplorerState.on_preview`)."""
         set_data(self.src_rv_laav, V.rv_sources(laav_voting))
         set_data(self.src_rv_plain, V.rv_sources(plain))
-        if seq is not None:
-            own, other = V.rv_error_sources(seq, laav_voting), V.rv_error_sources(seq, plain)
-            drawn = own["error"].size or other["error"].size or plain is None
-            self.fig_error.title.text = ERROR_TITLES[seq.labels is not None] + (
-                "" if drawn else ": not recorded (not every point voted)")
-            set_data(self.src_err_laav, own)
-            set_data(self.src_err_plain, other)
+        own, other = V.rv_error_sources(seq, laav_voting), V.rv_error_sources(seq, plain)
+        drawn = own["error"].size or other["error"].size or plain is None
+        self.fig_error.title.text = ERROR_TITLES[seq.labels is not None] + (
+            "" if drawn else ": not recorded (not every point voted)")
+        set_data(self.src_err_laav, own)
+        set_data(self.src_err_plain, other)
         self.plain = plain
         self.rv_md.object = V.rv_summary(laav_voting, plain, pending=pending)
