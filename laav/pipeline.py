@@ -330,10 +330,12 @@ class Pipeline:
             new_params = self.params.replace(**changed) if changed else self.params
             # the sequence is the one checked at construction: only a new C is checked again
             _, C = _check_inputs(self.seq, C, degenerate=C != self.n_motions)
-            new_params.n_fine(C, self.seq.is_complete)
+            complete = self.seq.is_complete
+            n_fine = new_params.n_fine(C, complete)
             diff = {k for k, v in new_params.to_dict().items() if v != getattr(self.params, k)}
             starts = [stages_affected(diff)] if diff else []
-            if C != self.n_motions:
+            # a coarse-stage field can set the multicut's model count (coarse_merge: 2C/3C/4C)
+            if C != self.n_motions or n_fine != self.params.n_fine(C, complete):
                 starts.append("multicut")
             if seed != self.seed:
                 starts.append("atoms")
@@ -345,8 +347,10 @@ class Pipeline:
                 return self.result
             try:
                 self.result = self._run(start, preview)
-            except Exception:
-                # roll everything back, cached stage results included
+            except BaseException:
+                # roll everything back, cached stage results included (also on Ctrl-C: a
+                # KeyboardInterrupt is no Exception, and the next update must not find the
+                # new settings beside the old result)
                 self.params, self.n_motions, self.seed, self._stages = old
                 raise
             return self.result

@@ -123,6 +123,11 @@ UPDATES = [
     # them, so the coarse labels stay and only the voting's memo key can tell
     {"coarse_epipolar_weight": 50.0},
     {"coding_eps": 25.0},
+    # a coarse-stage field that also sets the number of fine models (2C -> 4C / 3C): the
+    # multicut must run again (it did not: 6 fine models against a fresh run's 12)
+    {"coarse_merge": "joint"},
+    {"coarse_merge": "coding"},
+    {"coarse_merge": "auto", "rv_select": "laav", "rv_subspace_weight": 1.0},
 ]
 
 
@@ -503,3 +508,32 @@ def test_a_preview_keeps_the_clear_error_for_bad_settings():
     pipe = Pipeline(seq, 2)
     with pytest.raises(ValueError, match="rv_sample_size"):
         pipe.update(seed=1, rv_sample_size=61, preview=lambda r: None)
+
+
+def test_an_update_switching_the_merge_counts_its_fine_models_as_a_fresh_run():
+    seq = scene(2, 2)
+    pipe = Pipeline(seq, 3, seed=0)
+    for params in (LaavParams.own_chain(), LaavParams(coarse_merge="coding"), LaavParams()):
+        res = pipe.update(**params.to_dict())
+        assert res.multicut.n_models == params.n_fine(3) == segment(seq, 3, params).multicut.n_models
+
+
+def test_ctrl_c_during_an_update_rolls_the_pipeline_back(monkeypatch):
+    """A KeyboardInterrupt (no Exception) in a stage: the pipeline keeps its settings and
+    result, and the next update is a fresh run's."""
+    import laav.pipeline as pipeline_module
+
+    seq = scene(1, 1)
+    pipe = Pipeline(seq, 2, seed=0)
+    before = pipe.result
+    real = pipeline_module.merge_models
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline_module, "merge_models", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        pipe.update(seed=1)
+    assert pipe.seed == 0 and pipe.result is before and pipe.params == LaavParams()
+    monkeypatch.setattr(pipeline_module, "merge_models", real)
+    assert_same_result(pipe.update(seed=1), segment(seq, 2, seed=1))
