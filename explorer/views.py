@@ -958,17 +958,19 @@ def rv_error_sources(seq: laav.Sequence, voting: laav.Voting | None) -> dict:
     """Error per iteration of the trial the RV card draws (LAAV's informed trial, whichever
     candidate was returned; plain RV's returned trial): ``iteration`` 0 (the start) to T,
     ``error`` in % (:func:`trace_errors`: against the ground truth, else against the
-    trial's own last labels). Empty when no trace covers every point: more than
-    ``rv_max_points`` points, missing data where some points are in no voting frame pair
-    (the trials ran on the others), or no trial at all (the coarse labels returned)."""
+    trial's own last labels) over the points that voted (``Voting.voted``: all of them, a
+    seeded subset above ``rv_max_points`` points, or on incomplete tracks those some voting
+    frame pair sees). Empty when no trial ran (the coarse labels returned)."""
     empty = {"iteration": np.zeros(0), "error": np.zeros(0)}
     if voting is None:
         return empty
     own = voting.informed_changed is not None
     trace = voting.informed_label_trace if own else voting.label_trace
-    if trace is None or trace.ndim != 2 or trace.shape[1] != seq.n_points:
+    voted = np.arange(seq.n_points) if voting.voted is None else voting.voted
+    if trace is None or trace.ndim != 2 or trace.shape[1] != voted.size:
         return empty
-    return {"iteration": np.arange(trace.shape[0]), "error": 100.0 * trace_errors(trace, seq.labels)}
+    truth = None if seq.labels is None else np.asarray(seq.labels)[voted]
+    return {"iteration": np.arange(trace.shape[0]), "error": 100.0 * trace_errors(trace, truth)}
 
 
 def _rv_line(voting: laav.Voting | None, what: str) -> str:

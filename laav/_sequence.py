@@ -202,16 +202,21 @@ def _check_degenerate_masked(src, pts, vis, n_motions) -> None:
 
 
 def warn_single_label(seq, labels: np.ndarray, n_motions: int) -> None:
-    """Warn (:class:`LaavWarning`) when ``labels`` give every labelled point one motion
-    though ``n_motions`` > 1 were asked for (after LAAV or plain Random Voting; points
-    left unlabelled, -1, do not count)."""
+    """Warn (:class:`LaavWarning`) when ``labels`` use fewer than the ``n_motions`` > 1
+    motions asked for: every labelled point in one motion, or some motions left empty
+    (after LAAV or plain Random Voting; points left unlabelled, -1, do not count)."""
     labels = np.asarray(labels)
-    if n_motions > 1 and np.unique(labels[labels >= 0]).size <= 1:
+    used = np.unique(labels[labels >= 0])
+    if n_motions > 1 and used.size < n_motions:
         import warnings
 
-        warnings.warn(f"{getattr(seq, 'source', '<array>')}: every point got the same label "
-                      f"though {n_motions} motions were asked for", LaavWarning,
-                      stacklevel=user_stacklevel())
+        src = getattr(seq, 'source', '<array>')
+        if used.size <= 1:
+            msg = f"every point got the same label though {n_motions} motions were asked for"
+        else:  # e.g. C larger than the scene supports: some motions end empty
+            msg = (f"only {used.size} of the {n_motions} motions asked for got points (labels "
+                   f"{', '.join(map(str, used.tolist()))}); fewer motions may fit the tracks")
+        warnings.warn(f"{src}: {msg}", LaavWarning, stacklevel=user_stacklevel())
 
 
 @dataclass(frozen=True, eq=False)

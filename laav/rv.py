@@ -148,6 +148,50 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
     return np.swapaxes(v, -1, -2)
 
 
+class LabelTrace:
+    """A trial's labels at its start and after every iteration, kept as the changes.
+
+    Row 0 is the start; row k the labels after iteration k. Stored as the start plus, per
+    iteration, the points whose label changed and their new labels, so a trial that runs
+    10,000 iterations over 1,000 points while a few points flip holds kilobytes, not the
+    10 MB of the dense array (every trial of every plain-RV run a :class:`laav.Pipeline`
+    keeps holds one). A record only, never read by the voting.
+
+    Parameters
+    ----------
+    start : ndarray of shape (P,)
+    index : ndarray of shape (N,), int32
+        The changed points of every iteration, one after another.
+    value : ndarray of shape (N,)
+        Their new labels.
+    ends : ndarray of shape (T,), int64
+        ``index[ends[k - 1]:ends[k]]`` changed at iteration k + 1 (``ends[-1] == N``).
+    """
+
+    __slots__ = ("start", "index", "value", "ends")
+
+    def __init__(self, start, index, value, ends):
+        self.start, self.index, self.value, self.ends = start, index, value, ends
+
+    def __len__(self) -> int:
+        return self.ends.size + 1
+
+    @property
+    def nbytes(self) -> int:
+        return self.start.nbytes + self.index.nbytes + self.value.nbytes + self.ends.nbytes
+
+    def dense(self) -> np.ndarray:
+        """The labels of every row: ndarray of shape (T + 1, P), the start's dtype."""
+        out = np.empty((len(self), self.start.size), dtype=self.start.dtype)
+        out[0] = self.start
+        lo = 0
+        for k, hi in enumerate(self.ends.tolist(), start=1):
+            out[k] = out[k - 1]
+            out[k, self.index[lo:hi]] = self.value[lo:hi]
+            lo = hi
+        return out
+
+
 class _Trial:
     """Working state of one voting trial (internal; several run side by side)."""
 
@@ -156,10 +200,11 @@ class _Trial:
         self.reset, self.kind = reset, kind
         self.changed: list = []
         self.margins: list = []
-        #: the labels at the start and after every iteration (what the explorer draws as
-        #: error per iteration); a record only, never read by the voting
+        #: the labels at the start and the changes of every iteration (:class:`LabelTrace`:
+        #: what the explorer draws as error per iteration); a record only
         self.dtype = np.int8 if votes.shape[-1] <= 127 else np.int32
-        self.history: list = [np.asarray(labels, dtype=self.dtype)]
+        self.start = np.array(labels, dtype=self.dtype)
+        self.flips: list = []  # (points, new labels) of every iteration
         self.it = 0
         self.still = 0
         self.converged = False
@@ -167,12 +212,19 @@ class _Trial:
         self._result = None
 
     def result(self) -> tuple:
-        """(labels, votes, changed, margins, iterations, converged, label trace (T + 1, P)
-        int8 (int32 above 127 motions): the start and every iteration's labels). Made once
+        """(labels, votes, changed, margins, iterations, converged, :class:`LabelTrace`:
+        the start and every iteration's labels, int8 (int32 above 127 motions)). Made once
         per trial (a trial is asked for it several times once it ended: one copy)."""
         if self._result is None or self._result[4] != self.it:
-            self._result = (self.labels, self.votes, np.array(self.changed, dtype=np.int64),
-                            np.array(self.margins), self.it, self.converged, np.stack(self.history))
+            counts = np.array(self.changed, dtype=np.int64)
+            if self.flips:
+                index = np.concatenate([f[0] for f in self.flips])
+                value = np.concatenate([f[1] for f in self.flips])
+            else:
+                index, value = np.zeros(0, np.int32), np.zeros(0, self.dtype)
+            trace = LabelTrace(self.start, index, value, np.cumsum(counts))
+            self._result = (self.labels, self.votes, counts, np.array(self.margins), self.it,
+                            self.converged, trace)
         return self._result
 
 
@@ -227,7 +279,8 @@ def _step(points, trials, params, masks=None, extra=None):
     if masks is not None:  # a point not voted on this iteration keeps its label
         seen = masks[0][pairs[:, 0]] & masks[0][pairs[:, 1]]  # (B, P)
         new = np.where(seen, new, labels)
-    n_changed = (new != labels).sum(axis=-1)
+    flipped = new != labels
+    n_changed = flipped.sum(axis=-1)
     if masks is None:
         votes *= params.rv_alpha
     else:  # each point's votes decay on its own clock: by the iterations that voted on it
@@ -238,7 +291,8 @@ def _step(points, trials, params, masks=None, extra=None):
         t.labels, t.votes = new[b], votes[b]
         t.changed.append(int(n_changed[b]))
         t.margins.append(float(margins[b]))
-        t.history.append(new[b].astype(t.dtype))
+        moved = np.flatnonzero(flipped[b]).astype(np.int32)
+        t.flips.append((moved, new[b][moved].astype(t.dtype)))
         if t.reset and t.it == RESET_AT:
             t.votes = np.zeros_like(t.votes)
             t.still = 0

@@ -96,7 +96,8 @@ class Voting:
     Attributes
     ----------
     labels : ndarray of shape (P,), int64
-        Final motion label of every point, in ``0 .. C-1``.
+        Final motion label of every point, in ``0 .. C-1``; on incomplete tracks -1 for a
+        point seen too briefly to decide (``unlabelled_code``).
     votes : ndarray of shape (P, C)
         Vote histogram of the returned trial at its end (for ``selected == "coarse"``, no
         trial: the informed start's votes, zero for the points in no atom).
@@ -137,13 +138,17 @@ class Voting:
         The returned trial's labels at its start (row 0: for LAAV's trial the coarse
         labels, the points in no atom at random; for plain RV random) and after each of
         its T iterations (before the refinement and reassignment), over the points that
-        voted (P' = P unless more than ``rv_max_points`` voted: then the seeded subset).
+        voted: P' = P unless ``voted`` says which (more than ``rv_max_points`` points: a
+        seeded subset voted; incomplete tracks: the points some voting frame pair sees).
         A record for the explorer's error-per-iteration chart: ``changed[t]`` is the
         number of points whose label differs between rows t and t + 1. For a consensus,
         the last trial's (as ``changed`` and ``margin`` are); None for ``"coarse"``.
     informed_label_trace : ndarray of shape (T0 + 1, P'), int8, or None
         The same for LAAV's informed trial, whichever candidate was returned; None for
         plain RV.
+    voted : ndarray of shape (P',), int64, or None
+        The points the voting ran on, in the order of the traces' columns (and of
+        ``votes`` before it was spread over every point); None when every point voted.
     informed_converged : bool or None
         Whether LAAV's informed trial met the convergence test; None for plain RV.
     informed_subspace_weight : float or None
@@ -188,6 +193,7 @@ class Voting:
     score: str = ""
     label_trace: np.ndarray | None = field(default=None, repr=False)
     informed_label_trace: np.ndarray | None = field(default=None, repr=False)
+    voted: np.ndarray | None = field(default=None, repr=False)
 
 
 @single_threaded  # one BLAS/OpenMP thread, restored after (laav/_threads.py)
@@ -339,10 +345,19 @@ def _subset_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     votes[idx] = out.votes
     code = None if vis is None else np.where(labels >= 0, 0, NO_FRAME_PAIR).astype(np.int8)
     result = dataclasses.replace(out, labels=labels, votes=votes, unlabelled_code=code,
-                                 reassigned=out.reassigned + moved)
+                                 reassigned=out.reassigned + moved, voted=_voted(idx, out, P))
     if init_labels is None and warn:
         warn_single_label(seq, labels, C)
     return result
+
+
+def _voted(idx: np.ndarray, inner: Voting, P: int) -> np.ndarray | None:
+    """The points (of the caller's P) a voting run on ``points[:, idx]`` voted with (None:
+    all of them)."""
+    idx = np.asarray(idx, dtype=np.int64)
+    if inner.voted is None:
+        return None if idx.size == P else idx
+    return idx[inner.voted]
 
 
 def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=None,
@@ -501,12 +516,29 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
         cands.append(("coarse", _coarse_candidate(points, C, params, init, labels0, votes0, mk)))
     # the polished candidates' costs read the selection's fields too: keyed on them, so a
     # caller may keep the memo across changes of those (plain RV's runs stay valid)
-    polished = None if plain_memo is None else plain_memo.setdefault(
-        ("polished",) + tuple(getattr(params, f) for f in SELECTION_FIELDS), {})
+    polished = None if plain_memo is None else _polished_memo(plain_memo, params)
     own = None if plain_memo is None or mk is not None else plain_memo.get("informed polished")
     own = own[1] if own is not None and own[0] == _own_key(first[0], params) else None
     return _with_informed(_select(points, C, params, cands, trials, initialised=True,
                                   polished=polished, mk=mk, own=own), first, extra)
+
+
+#: How many values of the selection's fields keep their polished plain-RV candidates in a
+#: plain-RV memo (a slider over ``coding_eps`` would otherwise add one set per value).
+POLISHED_KEPT = 2
+
+
+def _polished_memo(plain_memo: dict, params: LaavParams) -> dict:
+    """The polished candidates of ``plain_memo`` for the selection's present fields, the
+    most recent :data:`POLISHED_KEPT` sets kept (the others are recomputed if asked again,
+    to the same costs)."""
+    key = ("polished",) + tuple(getattr(params, f) for f in SELECTION_FIELDS)
+    polished = plain_memo.pop(key, {})
+    plain_memo[key] = polished  # the most recent last
+    sets = [k for k in plain_memo if isinstance(k, tuple) and k[:1] == ("polished",)]
+    for k in sets[:-POLISHED_KEPT]:
+        del plain_memo[k]
+    return polished
 
 
 def _coarse_candidate(points, C, params, init, labels0, votes0, mk: _Masks) -> tuple:
@@ -714,7 +746,8 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     votes = np.zeros((P, C))
     votes[idx] = out.votes
     code = np.where(labels >= 0, 0, NO_FRAME_PAIR).astype(np.int8)
-    result = dataclasses.replace(out, labels=labels, votes=votes, unlabelled_code=code)
+    result = dataclasses.replace(out, labels=labels, votes=votes, unlabelled_code=code,
+                                 voted=_voted(idx, out, P))
     if init_labels is None and warn:
         warn_single_label(seq, labels, C)
     return result
@@ -726,7 +759,7 @@ def _with_informed(voting: Voting, first: tuple, extra) -> Voting:
     or None: 0)."""
     return dataclasses.replace(voting, informed_changed=first[2], informed_margin=first[3],
                                informed_converged=bool(first[5]),
-                               informed_label_trace=first[6] if len(first) > 6 else None,
+                               informed_label_trace=first[6].dense() if len(first) > 6 else None,
                                informed_subspace_weight=0.0 if extra is None else extra.weight)
 
 
@@ -801,7 +834,7 @@ def _finish(points, C, params, best, trials, initialised, selected, polished=Non
         costs=dict(costs or {}),
         reassigned=reassigned,
         score=score,
-        label_trace=best[6] if len(best) > 6 else None,
+        label_trace=best[6].dense() if len(best) > 6 else None,
     )
 
 

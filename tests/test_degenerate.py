@@ -79,6 +79,19 @@ def test_single_label_result_warns():
     assert any("every point got the same label though 2 motions" in m for m in messages)
 
 
+
+def test_a_result_with_empty_motions_warns():
+    """More motions asked for than the tracks support: some labels end empty, and the
+    caller hears it (it was silent unless all but one were empty)."""
+    base = make_sequence(1, n_frames=10, n_points=60, rng=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = segment(base, 7)
+    used = np.unique(res.labels).size
+    assert 1 < used < 7  # what LAAV does here
+    messages = [str(w.message) for w in caught if w.category is LaavWarning]
+    assert any(f"only {used} of the 7 motions asked for got points" in m for m in messages), messages
+
 # --- plain Random Voting and `laav segment --method rv` check like LAAV (issue 16 item 8) ---
 
 def _static():

@@ -369,6 +369,24 @@ def test_rv_card_draws_each_trials_error_per_iteration(ex):
     assert "Error per iteration" in ex.rv_md.object
 
 
+def test_the_error_per_iteration_covers_the_points_that_voted():
+    """Above rv_max_points a seeded subset votes, on incomplete tracks the points a voting
+    frame pair sees: the chart is the error over those (Voting.voted), not left empty."""
+    from explorer.views import rv_error_sources
+    from laav.bench import hide_entries
+
+    seq = laav.synthetic.make_sequence(n_objects=1, n_frames=15, n_points=200, rng=0)
+    for case, params in ((seq, laav.LaavParams(rv_max_points=120)),
+                         (hide_entries(seq, 0.7, 0), laav.LaavParams())):
+        v = laav.segment(case, 2, params, seed=0).voting
+        assert v.voted is not None and v.voted.size < case.n_points
+        got = rv_error_sources(case, v)["error"]
+        want = [100 * laav.misclassification_rate(case.labels[v.voted], row)
+                for row in v.informed_label_trace]
+        assert got.size == len(want) > 1
+        np.testing.assert_allclose(got, want, atol=1e-9)
+
+
 def test_newest_request_supersedes_stale_ones(seq):
     st = ExplorerState(seq, autostart=False)
     seen = []

@@ -537,3 +537,19 @@ def test_ctrl_c_during_an_update_rolls_the_pipeline_back(monkeypatch):
     assert pipe.seed == 0 and pipe.result is before and pipe.params == LaavParams()
     monkeypatch.setattr(pipeline_module, "merge_models", real)
     assert_same_result(pipe.update(seed=1), segment(seq, 2, seed=1))
+
+
+def test_a_sweep_over_a_selection_field_keeps_few_polished_sets():
+    """Each coding_eps value scores plain RV's candidates anew; the memo keeps the sets of
+    the last POLISHED_KEPT values only (it kept all: ~0.25 MB a value at 1,000 points), and
+    a value asked again scores to the same result."""
+    from laav.voting import POLISHED_KEPT
+
+    seq = scene(1, 1)
+    pipe = Pipeline(seq, 2, seed=0)
+    for eps in (6.0, 7.0, 8.0, 9.0, 10.0, 11.0):
+        pipe.update(coding_eps=eps)
+    for memo in pipe._plain_memos.values():
+        assert sum(isinstance(k, tuple) and k[:1] == ("polished",) for k in memo) <= POLISHED_KEPT
+    assert_same_result(pipe.update(coding_eps=6.0),
+                       segment(seq, 2, LaavParams(coding_eps=6.0), seed=0))

@@ -573,3 +573,49 @@ def test_joint_selection_falls_back_to_the_subspace_cost_when_no_joint_score_is_
     assert res.score == "subspace" and old.score == "subspace"
     assert res.costs == old.costs and np.isfinite(list(res.costs.values())).all()
     np.testing.assert_array_equal(res.labels, old.labels)
+
+
+def test_a_label_trace_is_stored_as_its_changes():
+    """laav.rv.LabelTrace: rebuilds every row; what a kept run holds grows with the points
+    that flip, not with iterations x points (a Pipeline keeps every trial of the plain-RV
+    runs of its last seeds)."""
+    from laav.rv import LabelTrace, run_trials
+
+    rng = np.random.default_rng(0)
+    rows = rng.integers(0, 3, size=(40, 500)).astype(np.int8)
+    rows[5:] = rows[5]  # five iterations of change, then a long still tail
+    flips = [np.flatnonzero(rows[k] != rows[k - 1]) for k in range(1, 40)]
+    trace = LabelTrace(rows[0], np.concatenate(flips).astype(np.int32),
+                       np.concatenate([rows[k][f] for k, f in enumerate(flips, 1)]),
+                       np.cumsum([f.size for f in flips]))
+    np.testing.assert_array_equal(trace.dense(), rows)
+    assert len(trace) == 40 and trace.nbytes < rows.nbytes / 2  # 5 bytes a flip, 34 still rows
+
+    seq = scene(2, 1)
+    noisy = seq.points + np.random.default_rng(5).normal(0.0, 1.5, seq.points.shape)
+    params = LaavParams(rv_max_iter=600, rv_patience=10**4)  # never converges: 600 rows each
+    _, _, trials, _ = run_trials(noisy, 3, params, np.random.default_rng(1), n_plain=3)
+    for t in trials:
+        dense = t[6].dense()
+        assert dense.shape == (601, seq.n_points)
+        np.testing.assert_array_equal(dense[-1], t[0])
+        assert t[6].nbytes < 0.25 * dense.nbytes, (t[6].nbytes, dense.nbytes)
+
+
+def test_voted_names_the_points_whose_labels_the_traces_hold():
+    """Voting.voted: the columns of the label traces (the explorer's error per iteration).
+    LAAV's trace starts at its start labels: here the truth, so row 0 is the truth at
+    exactly those points, on a seeded subset (above rv_max_points) and on incomplete tracks."""
+    from laav.bench import hide_entries
+
+    seq = scene(2, 1)
+    P, C = seq.n_points, seq.n_motions
+    full = random_voting(seq, C, LaavParams(), seed=0, init_labels=seq.labels)
+    assert full.voted is None and full.informed_label_trace.shape[1] == P
+    sub = random_voting(seq, C, LaavParams(rv_max_points=P // 2), seed=0, init_labels=seq.labels)
+    assert sub.voted.size == P // 2 and np.all(np.diff(sub.voted) > 0)
+    np.testing.assert_array_equal(sub.informed_label_trace[0], seq.labels[sub.voted])
+    hidden = hide_entries(seq, 0.7, 0)
+    mv = random_voting(hidden, C, LaavParams(), seed=0, init_labels=seq.labels)
+    assert mv.voted is not None and mv.voted.size == mv.informed_label_trace.shape[1]
+    np.testing.assert_array_equal(mv.informed_label_trace[0], seq.labels[mv.voted])

@@ -72,8 +72,11 @@ class RVView:
         set_data(self.src_rv_plain, V.rv_sources(plain))
         own, other = V.rv_error_sources(seq, laav_voting), V.rv_error_sources(seq, plain)
         drawn = own["error"].size or other["error"].size or plain is None
+        shown = laav_voting if laav_voting is not None else plain
+        some = shown is not None and shown.voted is not None and shown.voted.size < seq.n_points
         self.fig_error.title.text = ERROR_TITLES[seq.labels is not None] + (
-            "" if drawn else ": not recorded (not every point voted)")
+            "" if drawn else ": not recorded (no trial ran)") + (
+            f" (the {shown.voted.size} of {seq.n_points} points that voted)" if some else "")
         set_data(self.src_err_laav, own)
         set_data(self.src_err_plain, other)
         self.plain = plain
