@@ -262,28 +262,33 @@ def _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj, kk, S, la
             pick = np.concatenate([rng.choice(aj, size=(S, 2)), rng.choice(ak, size=(S, 2))], axis=1)
             idx[p, k] = table[pick].reshape(S, 4 * _PER_ATOM)
             valid[p, k] = True
-    fl = np.broadcast_to(pairs[None, :, None, 0], idx.shape[:3])
-    fr = np.broadcast_to(pairs[None, :, None, 1], idx.shape[:3])
-    x1 = points[fl[..., None], idx]
-    x2 = points[fr[..., None], idx]
-    Fm = fit_fundamental(x1, x2)
-    d = sampson_distance(Fm, x1, x2)
     half = 2 * _PER_ATOM
-    depi = np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))  # (pairs, K, S)
+    depi = np.empty((n_pairs, K, S))
     cnt = valid.sum(axis=(1, 2))
+    samples = VoteSamples.empty(n, 4 * _PER_ATOM)
+    per = max(1, _PAIRWISE_BATCH // (K * S))  # model pairs fitted a batch (memory)
+    for lo in range(0, n_pairs, per):
+        ix = idx[lo:lo + per]
+        fl = np.broadcast_to(pairs[None, :, None, 0], ix.shape[:3])
+        fr = np.broadcast_to(pairs[None, :, None, 1], ix.shape[:3])
+        x1 = points[fl[..., None], ix]
+        x2 = points[fr[..., None], ix]
+        Fm = fit_fundamental(x1, x2)
+        d = sampson_distance(Fm, x1, x2)
+        depi[lo:lo + per] = np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))
+        for p in np.flatnonzero(cnt[lo:lo + per] > 0) + lo:
+            ks, ss = np.nonzero(valid[p])
+            order = np.argsort(depi[p, ks, ss], kind="stable")
+            k, s_ = ks[order[order.size // 2]], ss[order[order.size // 2]]
+            for a, b, feats in ((jj[p], kk[p], idx[p, k, s_]),
+                                (kk[p], jj[p], np.roll(idx[p, k, s_], half))):
+                samples.frames[a, b] = pairs[k]
+                samples.fundamental[a, b] = Fm[p - lo, k, s_]
+                samples.points[a, b] = feats
+                samples.distance[a, b] = depi[p, k, s_]
     with np.errstate(invalid="ignore", divide="ignore"):
         vote = np.where(valid, np.exp(-lam * depi), 0.0).sum(axis=(1, 2)) / cnt
         dist = np.where(valid, depi, 0.0).sum(axis=(1, 2)) / cnt
-    samples = VoteSamples.empty(n, 4 * _PER_ATOM)
-    for p in np.flatnonzero(cnt > 0):
-        ks, ss = np.nonzero(valid[p])
-        order = np.argsort(depi[p, ks, ss], kind="stable")
-        k, s_ = ks[order[order.size // 2]], ss[order[order.size // 2]]
-        for a, b, feats in ((jj[p], kk[p], idx[p, k, s_]), (kk[p], jj[p], np.roll(idx[p, k, s_], half))):
-            samples.frames[a, b] = pairs[k]
-            samples.fundamental[a, b] = Fm[p, k, s_]
-            samples.points[a, b] = feats
-            samples.distance[a, b] = depi[p, k, s_]
     return np.where(cnt > 0, vote, np.nan), np.where(cnt > 0, dist, np.nan), samples
 
 
@@ -516,31 +521,16 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     table = np.stack([rng.choice(m, _PER_ATOM, replace=m.size < _PER_ATOM)
                       for m in atoms.members])  # (N, _PER_ATOM)
     jj, kk = np.triu_indices(n, 1)
-    K, S = pairs.shape[0], params.coarse_samples
+    S = params.coarse_samples
     D = np.zeros((n, n))
     if jj.size and vis is not None:
         vote, dist, samples = _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj,
                                                      kk, S, params.lam, rng, n)
         D[jj, kk] = D[kk, jj] = dist
     elif jj.size:
-        pick = np.empty((jj.size, K, S, 4), dtype=np.int64)
-        for p, (j, k) in enumerate(zip(jj, kk)):
-            pick[p, :, :, :2] = rng.choice(model_atoms[j], size=(K, S, 2))
-            pick[p, :, :, 2:] = rng.choice(model_atoms[k], size=(K, S, 2))
-        idx = table[pick].reshape(jj.size, K, S, 4 * _PER_ATOM)
-        fl = np.broadcast_to(pairs[None, :, None, 0], idx.shape[:3])
-        fr = np.broadcast_to(pairs[None, :, None, 1], idx.shape[:3])
-        x1 = points[fl[..., None], idx]  # (pairs, K, S, 4m, 2)
-        x2 = points[fr[..., None], idx]
-        Fm = fit_fundamental(x1, x2)
-        d = sampson_distance(Fm, x1, x2)  # (pairs, K, S, 4m)
-        half = 2 * _PER_ATOM
-        dj = d[..., :half].mean(-1)
-        dk = d[..., half:].mean(-1)
-        depi = np.maximum(dj, dk)  # (pairs, K, S)
-        vote = np.exp(-params.lam * depi).mean(axis=(1, 2))
-        D[jj, kk] = D[kk, jj] = depi.mean(axis=(1, 2))
-        samples = _median_samples(depi, Fm, idx, pairs, jj, kk, n)
+        vote, dist, samples = _pairwise_votes(points, table, model_atoms, pairs, jj, kk, S,
+                                              params.lam, rng, n)
+        D[jj, kk] = D[kk, jj] = dist
     else:
         vote = np.zeros(0)
         samples = VoteSamples.empty(n, 4 * _PER_ATOM)
@@ -647,24 +637,62 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params) -> Shortlist | 
     return Shortlist(assign, coding, epi, score, int(np.argmin(score)))
 
 
-def _median_samples(depi, Fm, idx, pairs, jj, kk, n) -> VoteSamples:
-    """The sample of median distance of every model pair (j < k, mirrored to k > j).
+#: Samples (model pair x frame pair x draw) fitted in one batch by the pairwise votes: the
+#: arrays of one batch take about 3 KB a sample, so ``coarse_frames`` x ``coarse_samples``
+#: up to their bounds (100 x 1,000) stay in tens of MB instead of tens of GB at once.
+_PAIRWISE_BATCH = 16384
 
-    ``depi`` (n_pairs, K, S), ``Fm`` (n_pairs, K, S, 3, 3), ``idx`` (n_pairs, K, S, 4 m)
-    feature indices, ``pairs`` (K, 2) frame pairs.
-    """
-    flat = depi.reshape(depi.shape[0], -1)
-    mid = np.argsort(flat, axis=1, kind="stable")[:, flat.shape[1] // 2]
-    ki, si = np.unravel_index(mid, depi.shape[1:])
-    p = np.arange(depi.shape[0])
-    out = VoteSamples.empty(n, idx.shape[-1])
-    pts = idx[p, ki, si]
+
+def _pairwise_votes(points, table, model_atoms, pairs, jj, kk, S, lam, rng, n):
+    """The paper's pairwise votes on complete tracks: for every model pair (jj, kk) and
+    frame pair, S draws of 2 + 2 atoms (``table``: ``_PER_ATOM`` features each), one
+    fundamental matrix each, the larger of the two models' mean Sampson distances.
+    Returns (votes (n_pairs,): mean ``exp(-lam d)``, mean distances (n_pairs,), the
+    median samples). Model pairs are fitted a batch at a time (:data:`_PAIRWISE_BATCH`
+    samples); each pair's atoms are drawn from ``rng`` in pair order either way."""
+    K = pairs.shape[0]
+    per = max(1, _PAIRWISE_BATCH // (K * S))  # model pairs a batch
+    vote = np.empty(jj.size)
+    dist = np.empty(jj.size)
+    mids = []  # per batch: (frame pair index, fundamental matrix, features) of each median
+    half = 2 * _PER_ATOM
+    for lo in range(0, jj.size, per):
+        sel = slice(lo, min(lo + per, jj.size))
+        pick = np.empty((sel.stop - lo, K, S, 4), dtype=np.int64)
+        for p, (j, k) in enumerate(zip(jj[sel], kk[sel])):
+            pick[p, :, :, :2] = rng.choice(model_atoms[j], size=(K, S, 2))
+            pick[p, :, :, 2:] = rng.choice(model_atoms[k], size=(K, S, 2))
+        idx = table[pick].reshape(pick.shape[0], K, S, 4 * _PER_ATOM)
+        fl = np.broadcast_to(pairs[None, :, None, 0], idx.shape[:3])
+        fr = np.broadcast_to(pairs[None, :, None, 1], idx.shape[:3])
+        x1 = points[fl[..., None], idx]  # (batch, K, S, 4m, 2)
+        x2 = points[fr[..., None], idx]
+        Fm = fit_fundamental(x1, x2)
+        d = sampson_distance(Fm, x1, x2)  # (batch, K, S, 4m)
+        depi = np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))  # (batch, K, S)
+        vote[sel] = np.exp(-lam * depi).mean(axis=(1, 2))
+        dist[sel] = depi.mean(axis=(1, 2))
+        flat = depi.reshape(depi.shape[0], -1)
+        mid = np.argsort(flat, axis=1, kind="stable")[:, flat.shape[1] // 2]
+        ki, si = np.unravel_index(mid, depi.shape[1:])
+        b = np.arange(depi.shape[0])
+        mids.append((ki, Fm[b, ki, si], idx[b, ki, si], depi[b, ki, si]))
+    ki, Fmid, pts, dmid = (np.concatenate(parts) for parts in zip(*mids))
+    return vote, dist, _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n)
+
+
+def _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n) -> VoteSamples:
+    """The sample of median distance of every model pair (j < k, mirrored to k > j), from
+    each pair's median sample: its frame pair index ``ki`` (n_pairs,) into ``pairs`` (K, 2),
+    fundamental matrix ``Fmid`` (n_pairs, 3, 3), features ``pts`` (n_pairs, 4 m) and
+    distance ``dmid`` (n_pairs,)."""
+    out = VoteSamples.empty(n, pts.shape[-1])
     half = pts.shape[-1] // 2
     for a, b, first_a in ((jj, kk, pts), (kk, jj, np.roll(pts, half, axis=-1))):
         out.frames[a, b] = pairs[ki]
-        out.fundamental[a, b] = Fm[p, ki, si]
+        out.fundamental[a, b] = Fmid
         out.points[a, b] = first_a  # [a, b]: model a's features first
-        out.distance[a, b] = depi[p, ki, si]
+        out.distance[a, b] = dmid
     return out
 
 

@@ -395,6 +395,17 @@ class LaavParams:
         return dataclasses.asdict(self)
 
 
+def as_params(params) -> LaavParams:
+    """``params``, or the defaults for None; a clear TypeError for anything else (a dict
+    of settings would otherwise fail deep inside a stage)."""
+    if params is None:
+        return LaavParams()
+    if not isinstance(params, LaavParams):
+        raise TypeError(f"params must be a LaavParams, e.g. LaavParams(lam=3.0) or "
+                        f"LaavParams(**settings), got {type(params).__name__}")
+    return params
+
+
 #: Fine models per motion of each merge when ``fine_per_motion`` is None: the paper's 2C
 #: for the epipolar merge; the coding and joint merges measured best with 3C and 4C
 #: (benchmarks/TUNING.md, "Stage 4 by coding length", "Stage 4: the joint merge").

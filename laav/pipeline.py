@@ -26,7 +26,7 @@ from .atoms import Atoms, MaskedNeighbourhoods, Neighbourhoods, build_atoms
 from .coarse import Coarse, merge_models
 from .graph import AtomGraph, atom_graph
 from .multicut import Multicut, solve_multicut
-from .params import STAGE_PARAMS, STAGES, LaavParams, stages_affected
+from .params import STAGE_PARAMS, STAGES, LaavParams, as_params, stages_affected
 from .voting import NOT_PLAIN_FIELDS, SELECTION_FIELDS, Voting, informed_preview, random_voting
 
 #: Plain RV's runs are kept for this many (seed, C, ``rv_*`` settings), the most recent: a
@@ -129,6 +129,20 @@ def _check_inputs(seq, n_motions, degenerate: bool = True):
     return seq, int(n_motions)
 
 
+def _check_frame_pairs(seq: Sequence, C: int, params: LaavParams) -> None:
+    """Incomplete tracks: raise ValueError, naming the file, before any stage runs when no
+    two frames share the points the fine-tuning's fits need (``max(8, rv_sample_size)``
+    per motion; :func:`laav._visibility.pair_pool`)."""
+    if seq.is_complete or C < 2:
+        return
+    from ._visibility import pair_pool
+
+    try:
+        pair_pool(seq.visible, max(8, params.rv_sample_size) * C)
+    except ValueError as err:
+        raise ValueError(f"{seq.source}: {err}") from None
+
+
 def _check_seed(seed) -> int:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**63:
         raise ValueError(f"seed must be an integer in [0, 2**63), got {seed!r}")
@@ -177,9 +191,10 @@ class Pipeline:
 
     def __init__(self, seq, n_motions: int, params: LaavParams | None = None, seed: int = 0, *,
                  preview=None):
+        self.params = as_params(params)
         self.seq, self.n_motions = _check_inputs(seq, n_motions)
-        self.params = LaavParams() if params is None else params
         self.params.n_fine(self.n_motions, self.seq.is_complete)
+        _check_frame_pairs(self.seq, self.n_motions, self.params)
         self.seed = _check_seed(seed)
         self._lock = threading.Lock()
         self._distances = None
@@ -332,6 +347,7 @@ class Pipeline:
             _, C = _check_inputs(self.seq, C, degenerate=C != self.n_motions)
             complete = self.seq.is_complete
             n_fine = new_params.n_fine(C, complete)
+            _check_frame_pairs(self.seq, C, new_params)
             diff = {k for k, v in new_params.to_dict().items() if v != getattr(self.params, k)}
             starts = [stages_affected(diff)] if diff else []
             # a coarse-stage field can set the multicut's model count (coarse_merge: 2C/3C/4C)

@@ -47,7 +47,7 @@ from ._random import resolve_seed
 from ._sequence import Sequence, as_points, check_degenerate, warn_single_label
 from ._threads import single_threaded
 from .metrics import misclassification_rate
-from .params import LaavParams
+from .params import LaavParams, as_params
 from .refine import (
     assign_by_subspace,
     assign_jointly,
@@ -272,7 +272,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     C = int(n_motions)
     if C > P:
         raise ValueError(f"cannot split {P} points into {C} motions")
-    params = LaavParams() if params is None else params
+    params = as_params(params)
+    if init_labels is None and weights is not None:
+        raise ValueError("weights are the votes of the start labels: give init_labels too")
     if C > 1 and params.rv_sample_size > P:
         raise ValueError(f"rv_sample_size ({params.rv_sample_size}) exceeds the number of "
                          f"points ({P})")

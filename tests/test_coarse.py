@@ -278,3 +278,28 @@ def test_pooled_voting_on_a_sample_of_many_atom_features(monkeypatch):
         for res in (sample, full):
             cov = res.point_labels >= 0
             assert misclassification_rate(seq.labels[cov], res.point_labels[cov]) == 0
+
+
+@pytest.mark.parametrize("hidden", [0.0, 0.4])
+def test_pairwise_votes_batched_by_model_pairs_are_the_same(monkeypatch, hidden):
+    """The pairwise votes fit a batch of model pairs at a time (memory bounded for large
+    coarse_frames x coarse_samples, which took ~47 MB per 100 samples at once): one pair
+    per batch gives the same votes, distances, median samples and labels (complete and
+    incomplete tracks)."""
+    import laav.coarse as coarse_module
+    from laav import Pipeline
+    from laav.bench import hide_entries
+
+    seq, _ = scene_and_atoms(2, 0)
+    if hidden:
+        seq = hide_entries(seq, hidden, 0)
+    params = LaavParams(coarse_frames=9, coarse_samples=11)
+    whole = Pipeline(seq, 3, params, seed=0).result
+    monkeypatch.setattr(coarse_module, "_PAIRWISE_BATCH", 1)
+    single = Pipeline(seq, 3, params, seed=0).result
+    a, b = whole.coarse, single.coarse
+    assert a.pairwise_vote.shape[0] >= 6  # several model pairs
+    for x, y in ((a.pairwise_vote, b.pairwise_vote), (a.epipolar_distance, b.epipolar_distance),
+                 (a.vote_samples.fundamental, b.vote_samples.fundamental),
+                 (a.vote_samples.points, b.vote_samples.points), (whole.labels, single.labels)):
+        np.testing.assert_array_equal(x, y)  # NaN where a model pair has no sample: equal too

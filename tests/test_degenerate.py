@@ -198,3 +198,34 @@ def test_warnings_name_the_callers_line(call):
         run()
     mine = [w for w in caught if issubclass(w.category, LaavWarning)]
     assert mine and all(w.filename == __file__ for w in mine), [(w.filename, w.lineno) for w in mine]
+
+
+def test_settings_of_the_wrong_kind_get_a_clear_error():
+    seq = _scene()
+    for run in (segment, laav.random_voting):
+        with pytest.raises(TypeError, match="params must be a LaavParams"):
+            run(seq, 2, {"lam": 3.0})
+    with pytest.raises(ValueError, match="give init_labels too"):  # was silently ignored
+        laav.random_voting(seq, 2, weights=np.ones(seq.n_points))
+
+
+def test_too_much_missing_is_refused_before_any_stage_runs(monkeypatch):
+    """No two frames share the points one fit per motion needs: the error names the file
+    and comes before the atoms (it came from the voting, after every other stage)."""
+    import laav.pipeline as pipeline_module
+
+    seq = laav.synthetic.occlude(make_sequence(2, n_frames=20, n_points=200, rng=3), 0.85, rng=1)
+    seq = Sequence(seq.points, seq.labels, visible=seq.visible, source="clip.mat")
+
+    def no_atoms(*a, **k):
+        raise AssertionError("a stage ran")
+
+    monkeypatch.setattr(pipeline_module, "build_atoms", no_atoms)
+    with pytest.raises(ValueError, match="clip.mat: no two frames share 24 visible points"):
+        segment(seq, 3)
+    pipe_seq = laav.synthetic.occlude(make_sequence(2, n_frames=20, n_points=200, rng=3), 0.5, rng=1)
+    monkeypatch.undo()
+    pipe = laav.Pipeline(pipe_seq, 3)
+    with pytest.raises(ValueError, match="no two frames share"):
+        pipe.update(rv_sample_size=60)  # 180 points in two frames: refused, state kept
+    assert pipe.params.rv_sample_size == LaavParams().rv_sample_size
