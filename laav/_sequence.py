@@ -140,16 +140,22 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, *,
         warn.append("no point moves (every trajectory is static)")
     centred = pts - pts.mean(axis=1, keepdims=True)
     sv = np.linalg.svd(centred, compute_uv=False)  # (F, 2) per frame
-    if np.all(sv[:, 1] <= TOLERANCE * sv[:, 0] + tol):
+    # (outside the pixel range the scale warning says it: a single track 1e13 px away made
+    # every frame look collinear, the tolerance being relative to it)
+    if _in_pixel_range(spread) and np.all(sv[:, 1] <= TOLERANCE * sv[:, 0] + tol):
         warn.append("the points are collinear in every frame (epipolar geometry is degenerate)")
     _warn(src, warn, spread, pts)
+
+
+def _in_pixel_range(spread: float) -> bool:
+    return PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]
 
 
 def _warn(src, warn: list, spread: float, seen: np.ndarray) -> None:
     """The pixel-scale and distant-origin warnings (from the visible coordinates ``seen``,
     any shape, and their ``spread``) added to ``warn``, then one :class:`LaavWarning` for
     all of them, if any."""
-    if not PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]:
+    if not _in_pixel_range(spread):
         warn.append(f"the coordinates span {spread:.3g} px, outside {PIXEL_SPREAD[0]:g}-"
                     f"{PIXEL_SPREAD[1]:g}: LaavParams lengths are in pixels and strengths in "
                     f"1/px^2, so rescale the coordinates to pixels or, for coordinates s times "
@@ -187,8 +193,8 @@ def _check_degenerate_masked(src, pts, vis, n_motions) -> None:
     lo = np.where(vis[..., None], pts, np.inf).min(axis=0)
     if (hi - lo).max() <= tol:
         warn.append("no point moves (every trajectory is static)")
-    collinear = True
-    for f in range(pts.shape[0]):
+    collinear = _in_pixel_range(spread)  # outside it, the scale warning (see check_degenerate)
+    for f in range(pts.shape[0] if collinear else 0):
         x = pts[f, vis[f]]
         if x.shape[0] < 3:
             continue

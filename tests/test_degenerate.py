@@ -229,3 +229,15 @@ def test_too_much_missing_is_refused_before_any_stage_runs(monkeypatch):
     with pytest.raises(ValueError, match="no two frames share"):
         pipe.update(rv_sample_size=60)  # 180 points in two frames: refused, state kept
     assert pipe.params.rv_sample_size == LaavParams().rv_sample_size
+
+
+def test_one_far_track_is_a_scale_problem_not_collinear_points():
+    """A single track 1e13 px away (a near-zero homogeneous coordinate, say): the warning
+    names the span of the coordinates, not collinearity (the tolerance, relative to the
+    far track, made every frame look collinear)."""
+    pts = make_sequence(1, n_frames=10, n_points=60, rng=0).points.copy()
+    pts[:, 0] *= 1e11
+    with pytest.warns(LaavWarning) as caught:
+        segment(pts, 2, FAST)
+    messages = " ".join(str(w.message) for w in caught)
+    assert "outside 1-1e" in messages and "collinear" not in messages
