@@ -673,6 +673,7 @@ class Explorer:
                 if not seq.is_complete:
                     data_notes.append(V.incomplete_note(seq, result, counts=not (
                         self.video is not None and seq is self.video.sequence)))
+                data_notes += V.result_notes(result)
                 self._data_notes = [n for n in data_notes if n]
                 notes = [n for n in (self.style["note"], unpinned) if n] + self._data_notes
                 s.show_note("  \n".join(notes))

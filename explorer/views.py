@@ -19,7 +19,7 @@ from laav.noise import threshold_factor
 __all__ = [
     "COLOR_MODES", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS",
     "UNLABELLED", "ERROR_MARK", "UNSEEN", "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at",
-    "incomplete_note",
+    "incomplete_note", "result_notes",
     "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "raw_style", "points_source", "frame_sources",
     "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
@@ -115,6 +115,25 @@ def visible_at(seq: laav.Sequence, frame: int) -> np.ndarray:
 def _unlabelled(result: laav.LaavResult) -> np.ndarray:
     """(P,) bool: the points the final stage left unlabelled (seen too briefly)."""
     return np.asarray(result.unlabelled_code) > 0
+
+
+def result_notes(result: laav.LaavResult) -> list[str]:
+    """Markdown notes on a result that says more about the data or the settings than about
+    the method (what ``laav`` warns of, which a page does not show): motions asked for that
+    got no point, and a run in which no atom formed (the fine-tuning then starts from
+    random labels: plain Random Voting)."""
+    notes = []
+    C = result.n_motions
+    used = np.unique(result.labels[result.labels >= 0]).size
+    if C > 1 and used < C:
+        notes.append(f"**Only {used} of the {C} motions asked for got points:** fewer motions "
+                     f"may fit these tracks (try C = {max(used, 1)}).")
+    if C > 1 and result.atoms.n_atoms == 0:
+        p = result.params
+        notes.append(f"**No atom formed** with R1 = {p.r1:g}, R2 = {p.r2:g} px: the fine-tuning "
+                     "started from random labels (plain Random Voting, not LAAV); larger radii "
+                     "or a larger affine threshold let atoms form.")
+    return notes
 
 
 def incomplete_note(seq: laav.Sequence, result: laav.LaavResult | None = None,

@@ -448,3 +448,21 @@ def test_replay_caption_names_the_fine_count_and_whether_it_is_the_papers(demo):
     res = laav.segment(seq, 3, P(coarse_merge="joint"), seed=0)
     final = V.replay_caption(res, len(res.multicut.contractions) + 1)
     assert f"**Final fine models:** {res.multicut.n_models} " in final and "4C: ours" in final
+
+
+def test_result_notes_say_what_laav_only_warns_of():
+    """The page shows no LaavWarning; a result whose motions ended empty, or in which no
+    atom formed (plain RV ran), gets a note; an ordinary one none."""
+    import warnings
+
+    from explorer.views import result_notes
+
+    seq = make_sequence(1, n_frames=10, n_points=60, rng=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", laav.LaavWarning)
+        many = laav.segment(seq, 7, seed=0)
+        tiny = laav.segment(seq, 2, laav.LaavParams(r1=0.5, r2=1.0), seed=0)
+    used = np.unique(many.labels).size
+    assert any(f"Only {used} of the 7 motions" in n for n in result_notes(many))
+    assert tiny.atoms.n_atoms == 0 and any("No atom formed" in n for n in result_notes(tiny))
+    assert result_notes(laav.segment(seq, 2, seed=0)) == []
