@@ -438,6 +438,12 @@ def main(argv: list[str] | None = None) -> int:
         settings, _, problems = parse_settings(pairs, seq, settings)
         if problems:
             return _fail(parser, "--param: " + "; ".join(problems))
+    from .state import check_settings
+
+    try:  # a bad --seed (or the file's) is a bad argument, not a page that never computes
+        check_settings(seq, settings)
+    except ValueError as exc:
+        return _fail(parser, str(exc))
     C = settings.n_motions
     # the first result, computed from now on in a child process (not in this one: the page
     # being served would wait for the GIL); the first tab's explorer takes it

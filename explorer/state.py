@@ -254,6 +254,11 @@ def parse_value(name: str, text: str):
         raise ValueError(f"{name} must be {what}, got {t[:40]!r}") from None
 
 
+#: The largest seed (laav's: seeds are in [0, 2**63)); the URL, params files, the command line
+#: and check_settings all use it.
+SEED_MAX = 2**63 - 1
+
+
 def _whole(name: str, text, lo: int, hi: int) -> int:
     try:
         v = int(str(text).strip())
@@ -286,7 +291,7 @@ def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings
             if key in _FIELDS:
                 values[key] = parse_value(key, raw)
             elif key == "seed":
-                seed = _whole("seed", raw, 0, 2**32 - 1)
+                seed = _whole("seed", raw, 0, SEED_MAX)
             elif key == "motions":
                 C = _whole("motions (C)", raw, 1, seq.n_points)
             elif key == "frame":
@@ -370,6 +375,8 @@ def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
         d = json.loads(text)
     except (ValueError, UnicodeDecodeError) as exc:
         raise ValueError(f"not a JSON file ({exc})") from None
+    except RecursionError:  # thousands of nested brackets: no params file
+        raise ValueError("not a params file (nested too deeply)") from None
     if not isinstance(d, dict):
         raise ValueError("a params file holds one JSON object")
     params = d.get("params", d if "params" not in d else None)
@@ -385,8 +392,8 @@ def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
         raise ValueError(f"invalid LAAV parameters: {exc}") from None
     seed = d.get("seed", base.seed)
     C = d.get("n_motions", base.n_motions)
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        raise ValueError(f"seed must be a whole number >= 0, got {seed!r}")
+    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= SEED_MAX:
+        raise ValueError(f"seed must be a whole number between 0 and {SEED_MAX}, got {str(seed)[:40]}")
     if not isinstance(C, int) or isinstance(C, bool):
         raise ValueError(f"n_motions must be a whole number, got {C!r}")
     new = Settings(new_params, seed, C)
@@ -397,6 +404,9 @@ def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
 def check_settings(seq: Sequence, settings: Settings) -> None:
     """Raise ValueError with a readable message when ``settings`` cannot run on ``seq``."""
     C = settings.n_motions
+    seed = settings.seed
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or not 0 <= seed <= SEED_MAX:
+        raise ValueError(f"seed must be a whole number between 0 and {SEED_MAX}, got {seed!r}")
     if not isinstance(C, int) or C < 1:
         raise ValueError(f"the number of motions C must be a positive integer, got {C!r}")
     if C > seq.n_points:

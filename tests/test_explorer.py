@@ -220,18 +220,12 @@ def test_colour_by_and_gaec_step(ex):
 def test_invalid_slider_combination_shows_a_message_and_keeps_the_result(ex):
     res = ex.result
     z = _data(ex.src_z, "z")
-    ex.w_params["r1"].value = 60.0  # R1 >= R2 (40)
-    assert ex.wait(30)
-    assert ex.alert.visible and "r2 must be larger than r1" in _shown(ex.alert)
-    assert ex.result is res
-    np.testing.assert_array_equal(_data(ex.src_z, "z"), z)
-    ex.w_params["r1"].value = 20.0
-    assert ex.wait(60)
-    assert not ex.alert.visible
-    # 2C < C
+    # 2C < C (R1 >= R2 cannot be set with the sliders: R2 moves along, see below)
     ex.w_params["fine_models"].value = 1
     assert ex.wait(30)
     assert ex.alert.visible and "fine_models" in _shown(ex.alert)
+    assert ex.result is res
+    np.testing.assert_array_equal(_data(ex.src_z, "z"), z)
     ex.w_params["fine_models"].value = 4
     assert ex.wait(60)
     assert not ex.alert.visible
@@ -494,6 +488,15 @@ def test_cli_argument_errors_exit_2_with_a_message(tmp_path, capsys):
     assert main(["--bogus"]) == 2
     assert main([str(unlabelled), "--motions", "1000"]) == 2
     assert "exceeds" in capsys.readouterr().err
+    # a seed laav refuses is a bad argument (the page waited forever on it)
+    assert main(["--seed", "-1", "--no-browser"]) == 2
+    assert "seed must be a whole number between 0 and" in capsys.readouterr().err
+    # a params file nested thousands deep: exit 2, not a RecursionError traceback
+    deep = tmp_path / "nested.json"
+    deep.write_text('{"a":' + "[" * 5000 + "]" * 5000 + "}")
+    assert main(["--params", str(deep), "--no-browser"]) == 2
+    err = capsys.readouterr().err
+    assert "nested too deeply" in err and "Traceback" not in err
 
 
 def test_cli_binds_localhost_by_default(monkeypatch, tmp_path):
@@ -738,6 +741,13 @@ def test_query_and_params_json_set_the_state(seq, tmp_path):
         _upload(ex, "bad.json", b'{"params": {"r1": -1}}')
         assert ex.wait(120) and ex.result is res
         assert ex.alert.visible and "bad.json" in _shown(ex.alert) and "r1 must be in (0" in _shown(ex.alert)
+        _upload(ex, "deep.json", ('{"a":' + "[" * 5000 + "]" * 5000 + "}").encode())
+        assert ex.wait(120) and ex.result is res and "nested too deeply" in _shown(ex.alert)
+        # the URL carries seeds up to laav's bound, as the command line does
+        assert ex.apply_query({"seed": [str(2**40)]}) == []
+        assert ex.wait(120) and ex.result.seed == 2**40
+        ex.apply_query({"seed": ["3"]})
+        assert ex.wait(120)
         # reset brings back every default, also the ones without a control
         ex.w_reset.clicks += 1
         assert ex.wait(120)
@@ -975,3 +985,43 @@ def test_the_page_is_built_with_one_walk_of_its_models(seq, monkeypatch):
         assert len(walks) == 1
     finally:
         ex.close()
+
+
+def test_r2_moves_along_when_r1_passes_it_and_values_stay_round(ex):
+    """R1 dragged past R2 takes R2 along (a refusal held every later change back, with the
+    status line no longer matching the controls); slider values carry no floating-point
+    residue into the run and the URL (0.1 + 67 x 0.1 = 6.800000000000001)."""
+    assert ex.wait(120)
+    r2 = ex.w_params["r2"].value
+    ex.w_params["r1"].value = r2 + 5.0
+    assert ex.wait(120) and not ex.alert.visible
+    assert ex.w_params["r2"].value == r2 + 6.0
+    assert (ex.result.params.r1, ex.result.params.r2) == (r2 + 5.0, r2 + 6.0)
+    ex.w_params["r2"].value = 10.0  # below R1: R1 goes down along
+    assert ex.wait(120) and ex.w_params["r1"].value == 9.0 and ex.result.params.r1 == 9.0
+    ex.w_params["lam"].value = 0.1 + 67 * 0.1
+    assert ex.wait(120) and ex.result.params.lam == 6.8 and ex.query()["lam"] == "6.8"
+    ex.w_reset.clicks += 1
+    assert ex.wait(120)
+
+
+def test_a_file_that_fails_to_compute_leaves_the_status_line_and_no_temp_path(ex):
+    """An upload that reads but cannot be segmented (every trajectory the same): the
+    alert names the file the user gave (not the server's temporary copy) and the status
+    line is back on the shown result (it stayed on "Recomputing…")."""
+    import io
+
+    assert ex.wait(120)
+    res, line = ex.result, ex.status.object
+    seq = ex.sequence
+    buf = io.BytesIO()
+    np.savez(buf, points=np.zeros_like(seq.points), labels=np.asarray(seq.labels))
+    _upload(ex, "zeros.npz", buf.getvalue())
+    assert ex.wait(120) and ex.result is res
+    shown = _shown(ex.alert)
+    assert "zeros.npz" in shown and "laav-explore-" not in shown and "/tmp" not in shown
+    for _ in range(200):  # the busy flag's end is applied on the document's next tick
+        if ex.status.object == line:
+            break
+        time.sleep(0.1)
+    assert ex.status.object == line

@@ -189,10 +189,11 @@ def test_explorer_in_chromium(tmp_path):
         assert after["z"] == pytest.approx(list(ex.result.coarse.affinity.ravel()))
         assert after["r1"] == before["r1"], "atoms changed with λ"
 
-        # an impossible R1 shows a message in the page and keeps the result
+        # an impossible setting (fewer fine models than motions) shows a message in the
+        # page and keeps the result
         res = ex.result
-        assert page.evaluate(JS_SET_SLIDER, ["R1", 90.0]) is not None
-        page.get_by_text("Cannot use these settings").first.wait_for(timeout=20000)
+        assert page.evaluate(JS_SET_SLIDER, ["fine models", 1]) is not None
+        page.get_by_text("Not used: fine_models (1) must be >=").first.wait_for(timeout=20000)
         assert ex.result is res
 
         # the 3-D view is served by this process on 127.0.0.1 and connects once its card

@@ -119,7 +119,9 @@ class Controls:
             if name == "fine_models":
                 v = self._fine_models(int(v), C)
             elif isinstance(getattr(self.defaults, name), float):
-                v = float(v)
+                # 12 significant digits: a slider's steps add up in the page's floating point
+                # (0.1 + 67 x 0.1 = 6.800000000000001), which the URL and the run then carried
+                v = float(f"{float(v):.12g}")
             else:
                 v = int(v)
             out[name] = v
@@ -132,6 +134,16 @@ class Controls:
     def _on_param(self, event=None) -> None:
         if self.host.quieted:
             return
+        r1, r2 = self.w_params["r1"], self.w_params["r2"]
+        if event is not None and event.obj in (r1, r2) and r1.value >= r2.value:
+            # R1 < R2 always (atoms need a ring): the other radius moves along, within its
+            # slider, instead of a refusal that held every later change back
+            with self.host.quiet():
+                if event.obj is r1:
+                    r2.end = max(r2.end, r1.value + r2.step)
+                    r2.value = r1.value + r2.step
+                else:
+                    r1.value = max(r1.start, r2.value - r1.step)
         if event is not None and event.obj is self.w_motions:
             fm = self.w_params["fine_models"]
             old = event.old if isinstance(event.old, int) else None

@@ -15,6 +15,7 @@ keeps the last good result and says so.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import tempfile
@@ -277,6 +278,9 @@ class Files:
                     # is parsed in a child process (scipy's reader can crash the interpreter
                     # on some damaged files, and an upload must never do that)
                     seq = laav.load_sequence(p, isolated=True)  # incomplete tracks too
+                    # named by the file the user gave, not this temporary copy (later
+                    # messages, e.g. of the computation, name the sequence's source)
+                    seq = dataclasses.replace(seq, source=base)
                 except laav.SequenceError as exc:
                     if token is None or self._reading is not None and self._reading[0] is token:
                         self.state.report(_refusal(str(exc).replace(str(p), base), base, p))

@@ -16,6 +16,9 @@ from .base import Alert, Markdown, shown_style
 PREVIEW_STATUS = "plain RV and the model selection still computing…"
 
 
+RECOMPUTING = "Recomputing… (the views keep the last result until the new one is ready)"
+
+
 def header_text(seq: laav.Sequence) -> str:
     return f"{V.md_text(seq.name)} · {seq.n_points} points, {seq.n_frames} frames"
 
@@ -79,13 +82,17 @@ class StatusBar:
         self.status.object = self._status_text
 
     def show_error(self, message: str) -> None:
-        self.alert.object = f"**Cannot use these settings:** {V.md_text(message)}"
+        # settings and files alike ("empty.mat is empty (0 bytes)" is no setting)
+        self.alert.object = f"**Not used:** {V.md_text(message)}"
         self.alert.visible = True
 
     def show_busy(self, busy: bool, has_result: bool) -> None:
         self.spinner.styles = spinner_style(busy)
         if busy and has_result:
-            self.status.object = "Recomputing… (the views keep the last result until the new one is ready)"
+            self.status.object = RECOMPUTING
+        elif not busy and self.status.object == RECOMPUTING:
+            # the work ended without a new result (an error, a cancel): the shown one's line
+            self.status.object = self._status_text
 
     def show_note(self, note: str) -> None:
         self.note.object = note
