@@ -414,6 +414,10 @@ def main(argv: list[str] | None = None) -> int:
 
     start = {"default": laav.LaavParams, "paper": laav.LaavParams.paper,
              "own-chain": laav.LaavParams.own_chain}[args.preset]()
+    from .state import SEED_MAX
+
+    if args.seed is not None and not 0 <= args.seed <= SEED_MAX:
+        return _fail(parser, f"--seed must be a whole number between 0 and {SEED_MAX}, got {args.seed}")
     settings = Settings(start, 0 if args.seed is None else args.seed, C)
     if args.params is not None:
         try:

@@ -885,7 +885,8 @@ class ExplorerState:
 
     def _queue_ahead(self) -> None:
         seq, s, gen = self.sequence, self.settings, self._gen
-        if not self.seeds_ahead or self._closed or seq.n_points > AHEAD_MAX_POINTS:
+        if (not self.seeds_ahead or self._closed or seq.n_points > AHEAD_MAX_POINTS
+                or s.seed >= SEED_MAX):
             return
         try:
             self._rv_worker.submit(self._ahead_job, gen, seq, dataclasses.replace(s, seed=s.seed + 1))

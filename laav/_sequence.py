@@ -106,7 +106,8 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, *,
     Raises :class:`ValueError` when there are fewer distinct trajectories than motions;
     warns (:class:`LaavWarning`) when there are fewer than :data:`MIN_POINTS` points per
     motion (the 8-point algorithm fits each motion's fundamental matrices), when no point
-    moves, when the points are collinear in every frame, or when the coordinates span
+    moves, when the points are collinear in every frame (not tested when they span more
+    than 1e6 pixels: the scale warning covers it), or when the coordinates span
     less than 1 or more than 1e6 pixels (the message names the parameters to scale), or
     lie farther from their origin than :data:`ORIGIN_RATIO` times their spread.
     Reads the coordinates only: results never change.
@@ -140,9 +141,9 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, *,
         warn.append("no point moves (every trajectory is static)")
     centred = pts - pts.mean(axis=1, keepdims=True)
     sv = np.linalg.svd(centred, compute_uv=False)  # (F, 2) per frame
-    # (outside the pixel range the scale warning says it: a single track 1e13 px away made
+    # (above the pixel range the scale warning says it: a single track 1e13 px away made
     # every frame look collinear, the tolerance being relative to it)
-    if _in_pixel_range(spread) and np.all(sv[:, 1] <= TOLERANCE * sv[:, 0] + tol):
+    if spread <= PIXEL_SPREAD[1] and np.all(sv[:, 1] <= TOLERANCE * sv[:, 0] + tol):
         warn.append("the points are collinear in every frame (epipolar geometry is degenerate)")
     _warn(src, warn, spread, pts)
 
@@ -193,7 +194,7 @@ def _check_degenerate_masked(src, pts, vis, n_motions) -> None:
     lo = np.where(vis[..., None], pts, np.inf).min(axis=0)
     if (hi - lo).max() <= tol:
         warn.append("no point moves (every trajectory is static)")
-    collinear = _in_pixel_range(spread)  # outside it, the scale warning (see check_degenerate)
+    collinear = spread <= PIXEL_SPREAD[1]  # above it, the scale warning (see check_degenerate)
     for f in range(pts.shape[0] if collinear else 0):
         x = pts[f, vis[f]]
         if x.shape[0] < 3:

@@ -637,9 +637,10 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params) -> Shortlist | 
     return Shortlist(assign, coding, epi, score, int(np.argmin(score)))
 
 
-#: Samples (model pair x frame pair x draw) fitted in one batch by the pairwise votes: the
-#: arrays of one batch take about 3 KB a sample, so ``coarse_frames`` x ``coarse_samples``
-#: up to their bounds (100 x 1,000) stay in tens of MB instead of tens of GB at once.
+#: Samples (model pair x frame pair x draw) fitted in one batch by the pairwise votes, about
+#: 3 KB each: a batch is whole model pairs, so it holds max(this, ``coarse_frames`` x
+#: ``coarse_samples``) samples (at the defaults, 56 per pair, every pair at once; at the
+#: bounds, 100 x 1,000, one pair: ~300 MB, instead of every pair's at once).
 _PAIRWISE_BATCH = 16384
 
 

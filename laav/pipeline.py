@@ -347,7 +347,8 @@ class Pipeline:
             _, C = _check_inputs(self.seq, C, degenerate=C != self.n_motions)
             complete = self.seq.is_complete
             n_fine = new_params.n_fine(C, complete)
-            _check_frame_pairs(self.seq, C, new_params)
+            if C != self.n_motions or new_params.rv_sample_size != self.params.rv_sample_size:
+                _check_frame_pairs(self.seq, C, new_params)
             diff = {k for k, v in new_params.to_dict().items() if v != getattr(self.params, k)}
             starts = [stages_affected(diff)] if diff else []
             # a coarse-stage field can set the multicut's model count (coarse_merge: 2C/3C/4C)

@@ -301,5 +301,7 @@ def test_pairwise_votes_batched_by_model_pairs_are_the_same(monkeypatch, hidden)
     assert a.pairwise_vote.shape[0] >= 6  # several model pairs
     for x, y in ((a.pairwise_vote, b.pairwise_vote), (a.epipolar_distance, b.epipolar_distance),
                  (a.vote_samples.fundamental, b.vote_samples.fundamental),
-                 (a.vote_samples.points, b.vote_samples.points), (whole.labels, single.labels)):
+                 (a.vote_samples.points, b.vote_samples.points),
+                 (a.vote_samples.frames, b.vote_samples.frames),
+                 (a.vote_samples.distance, b.vote_samples.distance), (whole.labels, single.labels)):
         np.testing.assert_array_equal(x, y)  # NaN where a model pair has no sample: equal too

@@ -119,9 +119,13 @@ class Controls:
             if name == "fine_models":
                 v = self._fine_models(int(v), C)
             elif isinstance(getattr(self.defaults, name), float):
-                # 12 significant digits: a slider's steps add up in the page's floating point
-                # (0.1 + 67 x 0.1 = 6.800000000000001), which the URL and the run then carried
-                v = float(f"{float(v):.12g}")
+                v = float(v)
+                if v != getattr(self.state.target.params, name):
+                    # a value the page moved: 12 significant digits, since a slider's steps
+                    # add up in its floating point (0.1 + 67 x 0.1 = 6.800000000000001),
+                    # which the URL and the run then carried; an unmoved slider keeps the
+                    # exact value a URL or a params file put there
+                    v = float(f"{v:.12g}")
             else:
                 v = int(v)
             out[name] = v
@@ -179,7 +183,9 @@ class Controls:
                 if name != "fine_models":
                     w.start, w.end = min(w.start, v), max(w.end, v)
                 w.value = v
-            self.w_seed.end = max(self.w_seed.end, settings.seed)
+            # the page's numbers are doubles: the slider's end stays below 2**53 (a larger
+            # seed is kept by the state and the URL, the slider shows its end)
+            self.w_seed.end = max(self.w_seed.end, min(settings.seed, 2**53 - 1))
             self.w_seed.value = settings.seed
             self.w_motions.value = C
 
