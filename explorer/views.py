@@ -19,7 +19,7 @@ from laav.noise import threshold_factor
 __all__ = [
     "COLOR_MODES", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS",
     "UNLABELLED", "ERROR_MARK", "UNSEEN", "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at",
-    "incomplete_note", "result_notes",
+    "incomplete_note", "result_notes", "counted",
     "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "raw_style", "points_source", "frame_sources",
     "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
@@ -115,6 +115,11 @@ def visible_at(seq: laav.Sequence, frame: int) -> np.ndarray:
 def _unlabelled(result: laav.LaavResult) -> np.ndarray:
     """(P,) bool: the points the final stage left unlabelled (seen too briefly)."""
     return np.asarray(result.unlabelled_code) > 0
+
+
+def counted(n: int, noun: str) -> str:
+    """``1 motion``, ``2 motions``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def result_notes(result: laav.LaavResult) -> list[str]:
@@ -1210,7 +1215,8 @@ def numbers_markdown(num: dict) -> str:
         f"| 2 atom graph | {num['n_edges']} edges | – | {_ms(t, 'graph')} |",
         f"| 3 multicut | {num['n_fine']} fine models | {_pct(num['error_fine'])} "
         f"(points in atoms; a fine model counts as its majority motion) | {_ms(t, 'multicut')} |",
-        f"| 4 fine → coarse | {num['n_motions']} motions | {_pct(num['error_coarse'])} (points in atoms) | "
+        f"| 4 fine → coarse | {counted(num['n_motions'], 'motion')} | {_pct(num['error_coarse'])} "
+        "(points in atoms) | "
         f"{_ms(t, 'coarse')} |",
         f"| 5 Random Voting | {labelled} | **{_pct(num['error_final'])}** "
         f"{final_note} | {_ms(t, 'voting')} |",

@@ -466,3 +466,7 @@ def test_result_notes_say_what_laav_only_warns_of():
     assert any(f"Only {used} of the 7 motions" in n for n in result_notes(many))
     assert tiny.atoms.n_atoms == 0 and any("No atom formed" in n for n in result_notes(tiny))
     assert result_notes(laav.segment(seq, 2, seed=0)) == []
+
+
+def test_counts_read_as_english():
+    assert (V.counted(1, "motion"), V.counted(2, "motion")) == ("1 motion", "2 motions")

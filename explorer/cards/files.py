@@ -96,7 +96,7 @@ def _refusal(message: str, name: str, path: Path) -> str:
 
 
 def seq_text(seq: laav.Sequence) -> str:
-    gt = f"{seq.n_motions} motions in the ground truth" if seq.labels is not None else \
+    gt = f"{V.counted(seq.n_motions, 'motion')} in the ground truth" if seq.labels is not None else \
         "**no ground truth** (set C below)"
     return f"**{V.md_text(seq.name)}**: {seq.n_points} points, {seq.n_frames} frames, {gt}."
 
