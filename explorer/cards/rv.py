@@ -54,7 +54,9 @@ class RVView:
                      line_dash="dashed", legend_label="plain RV (random start)")
             fig.xaxis.axis_label = "Random Voting iteration"
             fig.yaxis.axis_label = ylab
-            fig.legend.location = "top_right" if col == "changed_plot" else "bottom_right"
+            # top right in both: the counts fall and the margins settle low after the start
+            # (bottom right, the margins' legend covered plain RV's curve)
+            fig.legend.location = "top_right"
             fig.legend.background_fill_alpha = 0.7
             fig.title.text_font_size = "11pt"
         assert isinstance(self.fig_changed.yaxis[0], LogAxis)
