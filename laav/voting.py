@@ -326,10 +326,13 @@ def _subset_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     P = points.shape[1]
     init, w = _start_arrays(init_labels, weights, P)
     idx = np.sort(rng.spawn(1)[0].choice(P, params.rv_max_points, replace=False))
-    out = random_voting(points[:, idx], C, params.replace(rv_max_points=None), rng,
-                        None if init is None else init[idx], None if w is None else w[idx],
-                        plain_memo=plain_memo, visible=None if vis is None else vis[:, idx],
-                        check_input=False)
+    try:
+        out = random_voting(points[:, idx], C, params.replace(rv_max_points=None), rng,
+                            None if init is None else init[idx], None if w is None else w[idx],
+                            plain_memo=plain_memo, visible=None if vis is None else vis[:, idx],
+                            check_input=False)
+    except ValueError as err:  # the subset is an array: name the sequence's file instead
+        raise ValueError(_named(seq, err)) from None
     labels = np.full(P, -1, dtype=np.int64)
     labels[idx] = out.labels
     rest = np.setdiff1d(np.arange(P), idx)
@@ -351,6 +354,15 @@ def _subset_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     if init_labels is None and warn:
         warn_single_label(seq, labels, C)
     return result
+
+
+def _named(seq, err: ValueError) -> str:
+    """``err``'s message naming ``seq``'s source (once: an inner call on an array said
+    ``<array>``)."""
+    msg, src = str(err), getattr(seq, "source", "<array>")
+    if msg.startswith("<array>: "):
+        msg = msg[len("<array>: "):]
+    return msg if msg.startswith(f"{src}: ") else f"{src}: {msg}"
 
 
 def _voted(idx: np.ndarray, inner: Voting, P: int) -> np.ndarray | None:
@@ -725,7 +737,10 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     from ._visibility import MIN_ASSIGN_FRAMES, NO_FRAME_PAIR, decidable, filled, pair_pool
 
     P = points.shape[1]
-    pool = pair_pool(vis, max(8, params.rv_sample_size) * C)  # ValueError when none qualifies
+    try:
+        pool = pair_pool(vis, max(8, params.rv_sample_size) * C)
+    except ValueError as err:  # none qualifies: say which file
+        raise ValueError(_named(seq, err)) from None
     keep = decidable(vis, pool)  # at least the points of one pool pair: enough to vote
     idx = np.flatnonzero(keep)
     sub_vis = vis[:, idx]

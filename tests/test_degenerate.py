@@ -241,3 +241,13 @@ def test_one_far_track_is_a_scale_problem_not_collinear_points():
         segment(pts, 2, FAST)
     messages = " ".join(str(w.message) for w in caught)
     assert "outside 1-1e" in messages and "collinear" not in messages
+
+
+@pytest.mark.parametrize("max_points", [None, 150])
+def test_plain_voting_names_the_file_when_too_much_is_missing(max_points):
+    """Random Voting alone (and on its seeded subset above rv_max_points, an array) names
+    the sequence's file when no frame pair has enough points."""
+    seq = laav.synthetic.occlude(make_sequence(2, n_frames=20, n_points=200, rng=3), 0.85, rng=1)
+    seq = Sequence(seq.points, seq.labels, visible=seq.visible, source="clip.mat")
+    with pytest.raises(ValueError, match=r"^clip\.mat: no two frames share"):
+        laav.random_voting(seq, 3, LaavParams(rv_max_points=max_points), seed=0)
