@@ -147,3 +147,21 @@ def test_a_message_queued_behind_a_finished_dispatch_is_sent():
         pdoc.dispatch_django = real
     assert sent == ["a message"]
     assert doc not in pdoc._WRITE_MSGS and doc not in pdoc._WRITE_BLOCK
+
+
+def test_foldable_cards_draw_their_arrow():
+    """The 3-D and Advanced cards fold; their arrow is stroked with a colour panel's
+    Bootstrap design leaves undefined, so each card defines it (the arrow was invisible:
+    a folded card looked like a plain title bar; seen in Chromium at 1280x800)."""
+    import laav
+    from explorer.app import Explorer
+    from explorer.cards.base import FOLD_ARROW
+
+    seq = laav.synthetic.make_sequence(1, n_frames=10, n_points=80, rng=0)
+    ex = Explorer(seq, viser=False, start=False)
+    try:
+        for c in (ex.view3d.card, ex.advanced.card):
+            assert c.collapsible and FOLD_ARROW in c.stylesheets
+        assert "--background-text-color" in FOLD_ARROW
+    finally:
+        ex.close()

@@ -24,7 +24,7 @@ from laav import LaavParams
 
 from .. import views as V
 from ..fields import AUTO, FIELDS, STAGE_TITLES, changed_fields, fmt_value, widget_value
-from .base import SIDE_W, Alert, Host, Markdown
+from .base import FOLD_ARROW, SIDE_W, Alert, Host, Markdown
 
 #: The presets the card sets in one click: LaavParams constructor -> button label.
 PRESETS = {"paper": "Preset: the paper's stages", "own_chain": "Preset: LAAV's own chain"}
@@ -88,7 +88,7 @@ class AdvancedPanel:
         self.body = [intro, self.summary, self.message, *self.w_presets.values(), *rows,
                      self.w_reset]
         self.card = pn.Card(title="Advanced: every parameter", collapsed=True, collapsible=True,
-                            sizing_mode="stretch_width", margin=(6, 10))
+                            sizing_mode="stretch_width", margin=(6, 10), stylesheets=[FOLD_ARROW])
         self.card.param.watch(self._on_unfold, "collapsed")
         self._mark(p)
 

@@ -120,6 +120,12 @@ def shown_style(shown: bool, keep_space: bool = False) -> dict:
     return {"display": None if shown else "none"}
 
 
+#: A foldable card's arrow is stroked with ``--background-text-color``, which panel's
+#: Bootstrap design leaves undefined: the arrow was invisible (a folded card looked like a
+#: plain title bar). Set on the card's own root, so its widgets keep their own colours.
+FOLD_ARROW = ":host { --background-text-color: var(--bs-body-color, #212529); }"
+
+
 def card(title: str, *objs, **kw) -> pn.Card:
     kw.setdefault("sizing_mode", "stretch_width")
     return pn.Card(*objs, title=title, collapsible=False, margin=(6, 6), **kw)

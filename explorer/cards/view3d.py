@@ -18,7 +18,7 @@ import threading
 import panel as pn
 
 from .. import views as V
-from .base import HTML, Host, Markdown
+from .base import FOLD_ARROW, HTML, Host, Markdown
 
 PLACEHOLDER = ('<div style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
                'display:flex;align-items:center;justify-content:center;color:#666">'
@@ -53,7 +53,7 @@ class View3D:
                                  sizing_mode="stretch_width", height=60)
         self.card = pn.Card(self.pane, title="3-D space-time view (viser): trajectories along the "
                             "frame axis, atoms and their graph", collapsible=True, collapsed=True,
-                            margin=(6, 6), sizing_mode="stretch_width")
+                            margin=(6, 6), sizing_mode="stretch_width", stylesheets=[FOLD_ARROW])
         self.card.param.watch(self._on_fold, "collapsed")
 
     @property
