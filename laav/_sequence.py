@@ -11,7 +11,7 @@ import numpy as np
 from .params import PIXEL_PARAMS, STRENGTH_PARAMS
 
 __all__ = ["Sequence", "SequenceError", "IncompleteSequenceError", "LaavWarning", "MIN_POINTS",
-           "MIN_FRAMES", "check_degenerate", "require_complete", "warn_single_label"]
+           "MIN_FRAMES", "check_degenerate", "require_complete", "warn_missing_motions"]
 
 #: Fewest trajectories a sequence may hold (the 8-point algorithm needs eight).
 MIN_POINTS = 8
@@ -148,15 +148,11 @@ def check_degenerate(seq: Sequence | np.ndarray, n_motions: int, *,
     _warn(src, warn, spread, pts)
 
 
-def _in_pixel_range(spread: float) -> bool:
-    return PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]
-
-
 def _warn(src, warn: list, spread: float, seen: np.ndarray) -> None:
     """The pixel-scale and distant-origin warnings (from the visible coordinates ``seen``,
     any shape, and their ``spread``) added to ``warn``, then one :class:`LaavWarning` for
     all of them, if any."""
-    if not _in_pixel_range(spread):
+    if not PIXEL_SPREAD[0] <= spread <= PIXEL_SPREAD[1]:
         warn.append(f"the coordinates span {spread:.3g} px, outside {PIXEL_SPREAD[0]:g}-"
                     f"{PIXEL_SPREAD[1]:g}: LaavParams lengths are in pixels and strengths in "
                     f"1/px^2, so rescale the coordinates to pixels or, for coordinates s times "
@@ -208,7 +204,7 @@ def _check_degenerate_masked(src, pts, vis, n_motions) -> None:
     _warn(src, warn, spread, seen)
 
 
-def warn_single_label(seq, labels: np.ndarray, n_motions: int) -> None:
+def warn_missing_motions(seq, labels: np.ndarray, n_motions: int) -> None:
     """Warn (:class:`LaavWarning`) when ``labels`` use fewer than the ``n_motions`` > 1
     motions asked for: every labelled point in one motion, or some motions left empty
     (after LAAV or plain Random Voting; points left unlabelled, -1, do not count)."""

@@ -268,14 +268,7 @@ def _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj, kk, S, la
     samples = VoteSamples.empty(n, 4 * _PER_ATOM)
     per = max(1, _PAIRWISE_BATCH // (K * S))  # model pairs fitted a batch (memory)
     for lo in range(0, n_pairs, per):
-        ix = idx[lo:lo + per]
-        fl = np.broadcast_to(pairs[None, :, None, 0], ix.shape[:3])
-        fr = np.broadcast_to(pairs[None, :, None, 1], ix.shape[:3])
-        x1 = points[fl[..., None], ix]
-        x2 = points[fr[..., None], ix]
-        Fm = fit_fundamental(x1, x2)
-        d = sampson_distance(Fm, x1, x2)
-        depi[lo:lo + per] = np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))
+        Fm, depi[lo:lo + per] = _sample_fits(points, pairs, idx[lo:lo + per])
         for p in np.flatnonzero(cnt[lo:lo + per] > 0) + lo:
             ks, ss = np.nonzero(valid[p])
             order = np.argsort(depi[p, ks, ss], kind="stable")
@@ -644,6 +637,21 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params) -> Shortlist | 
 _PAIRWISE_BATCH = 16384
 
 
+def _sample_fits(points, pairs, idx):
+    """One fundamental matrix per sample and its distance: ``idx`` (batch, K, S, 4 m) the
+    features of two atoms of each model (model j's first), ``pairs`` (K, 2) the frame pairs.
+    Returns (F (batch, K, S, 3, 3), the larger of the two models' mean Sampson distances
+    (batch, K, S))."""
+    fl = np.broadcast_to(pairs[None, :, None, 0], idx.shape[:3])
+    fr = np.broadcast_to(pairs[None, :, None, 1], idx.shape[:3])
+    x1 = points[fl[..., None], idx]  # (batch, K, S, 4m, 2)
+    x2 = points[fr[..., None], idx]
+    Fm = fit_fundamental(x1, x2)
+    d = sampson_distance(Fm, x1, x2)  # (batch, K, S, 4m)
+    half = 2 * _PER_ATOM
+    return Fm, np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))
+
+
 def _pairwise_votes(points, table, model_atoms, pairs, jj, kk, S, lam, rng, n):
     """The paper's pairwise votes on complete tracks: for every model pair (jj, kk) and
     frame pair, S draws of 2 + 2 atoms (``table``: ``_PER_ATOM`` features each), one
@@ -656,7 +664,6 @@ def _pairwise_votes(points, table, model_atoms, pairs, jj, kk, S, lam, rng, n):
     vote = np.empty(jj.size)
     dist = np.empty(jj.size)
     mids = []  # per batch: (frame pair index, fundamental matrix, features) of each median
-    half = 2 * _PER_ATOM
     for lo in range(0, jj.size, per):
         sel = slice(lo, min(lo + per, jj.size))
         pick = np.empty((sel.stop - lo, K, S, 4), dtype=np.int64)
@@ -664,13 +671,7 @@ def _pairwise_votes(points, table, model_atoms, pairs, jj, kk, S, lam, rng, n):
             pick[p, :, :, :2] = rng.choice(model_atoms[j], size=(K, S, 2))
             pick[p, :, :, 2:] = rng.choice(model_atoms[k], size=(K, S, 2))
         idx = table[pick].reshape(pick.shape[0], K, S, 4 * _PER_ATOM)
-        fl = np.broadcast_to(pairs[None, :, None, 0], idx.shape[:3])
-        fr = np.broadcast_to(pairs[None, :, None, 1], idx.shape[:3])
-        x1 = points[fl[..., None], idx]  # (batch, K, S, 4m, 2)
-        x2 = points[fr[..., None], idx]
-        Fm = fit_fundamental(x1, x2)
-        d = sampson_distance(Fm, x1, x2)  # (batch, K, S, 4m)
-        depi = np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))  # (batch, K, S)
+        Fm, depi = _sample_fits(points, pairs, idx)
         vote[sel] = np.exp(-lam * depi).mean(axis=(1, 2))
         dist[sel] = depi.mean(axis=(1, 2))
         flat = depi.reshape(depi.shape[0], -1)

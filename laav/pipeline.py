@@ -20,7 +20,7 @@ import numpy as np
 
 from ._interrupt import check as check_interrupt
 from ._random import resolve_seed
-from ._sequence import Sequence, check_degenerate, warn_single_label
+from ._sequence import Sequence, check_degenerate, warn_missing_motions
 from ._threads import single_threaded
 from .atoms import Atoms, MaskedNeighbourhoods, Neighbourhoods, build_atoms
 from .coarse import Coarse, merge_models
@@ -436,6 +436,6 @@ def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: i
         from dataclasses import replace
 
         result = replace(result, motion_count=count)
-    warn_single_label(seq, result.labels, result.n_motions)  # names segment's caller
+    warn_missing_motions(seq, result.labels, result.n_motions)  # names segment's caller
     return result
 

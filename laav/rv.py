@@ -168,10 +168,11 @@ class LabelTrace:
         ``index[ends[k - 1]:ends[k]]`` changed at iteration k + 1 (``ends[-1] == N``).
     """
 
-    __slots__ = ("start", "index", "value", "ends")
+    __slots__ = ("start", "index", "value", "ends", "_dense")
 
     def __init__(self, start, index, value, ends):
         self.start, self.index, self.value, self.ends = start, index, value, ends
+        self._dense = None
 
     def __len__(self) -> int:
         return self.ends.size + 1
@@ -181,15 +182,20 @@ class LabelTrace:
         return self.start.nbytes + self.index.nbytes + self.value.nbytes + self.ends.nbytes
 
     def dense(self) -> np.ndarray:
-        """The labels of every row: ndarray of shape (T + 1, P), the start's dtype."""
-        out = np.empty((len(self), self.start.size), dtype=self.start.dtype)
-        out[0] = self.start
-        lo = 0
-        for k, hi in enumerate(self.ends.tolist(), start=1):
-            out[k] = out[k - 1]
-            out[k, self.index[lo:hi]] = self.value[lo:hi]
-            lo = hi
-        return out
+        """The labels of every row: ndarray of shape (T + 1, P), the start's dtype. Made
+        once: a trial that is both LAAV's informed one and the one returned gives one
+        array to both of a :class:`laav.Voting`'s traces (and to its preview's)."""
+        if self._dense is None:
+            out = np.empty((len(self), self.start.size), dtype=self.start.dtype)
+            out[0] = self.start
+            lo = 0
+            for k, hi in enumerate(self.ends.tolist(), start=1):
+                out[k] = out[k - 1]
+                out[k, self.index[lo:hi]] = self.value[lo:hi]
+                lo = hi
+            out.flags.writeable = False  # shared: nobody may change it
+            self._dense = out
+        return self._dense
 
 
 class _Trial:

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._random import resolve_seed
-from ._sequence import Sequence, as_points, check_degenerate, warn_single_label
+from ._sequence import Sequence, as_points, check_degenerate, warn_missing_motions
 from ._threads import single_threaded
 from .metrics import misclassification_rate
 from .params import LaavParams, as_params
@@ -352,7 +352,7 @@ def _subset_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     result = dataclasses.replace(out, labels=labels, votes=votes, unlabelled_code=code,
                                  reassigned=out.reassigned + moved, voted=_voted(idx, out, P))
     if init_labels is None and warn:
-        warn_single_label(seq, labels, C)
+        warn_missing_motions(seq, labels, C)
     return result
 
 
@@ -388,7 +388,7 @@ def _plain_result(seq, points, C, params, rng, best, trials, ended, select, mk=N
         out = _finish(points, C, params, consensus(ended, C, rng), trials, False, "consensus",
                       mk=mk)
     if mk is None and warn:
-        warn_single_label(seq, out.labels, C)
+        warn_missing_motions(seq, out.labels, C)
     return out
 
 
@@ -766,7 +766,7 @@ def _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
     result = dataclasses.replace(out, labels=labels, votes=votes, unlabelled_code=code,
                                  voted=_voted(idx, out, P))
     if init_labels is None and warn:
-        warn_single_label(seq, labels, C)
+        warn_missing_motions(seq, labels, C)
     return result
 
 

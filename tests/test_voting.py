@@ -619,3 +619,15 @@ def test_voted_names_the_points_whose_labels_the_traces_hold():
     mv = random_voting(hidden, C, LaavParams(), seed=0, init_labels=seq.labels)
     assert mv.voted is not None and mv.voted.size == mv.informed_label_trace.shape[1]
     np.testing.assert_array_equal(mv.informed_label_trace[0], seq.labels[mv.voted])
+
+
+def test_the_informed_trial_returned_shares_one_dense_trace():
+    """When LAAV's informed trial is the candidate returned, both traces of the Voting are
+    one array (stop 30 made them share one; rebuilding it per use doubled it)."""
+    seq = scene(2, 1)
+    for s in ("none", "joint"):
+        r = random_voting(seq, seq.n_motions, LaavParams(rv_select=s), seed=0,
+                          init_labels=seq.labels)
+        assert r.selected == "informed"  # started at the truth: LAAV's trial is kept
+        assert r.label_trace is r.informed_label_trace
+        assert not r.label_trace.flags.writeable
