@@ -16,8 +16,9 @@ The page address carries its state: ``/?r1=25&seed=3`` opens with R1 = 25 and se
 every :class:`laav.LaavParams` field, ``seed``, ``motions``, ``frame``, ``color``), and moving
 a control updates it, so a copied address shows the same view. ``--params`` loads a
 ``params.json`` exported by the page; ``--param`` sets one parameter (repeatable, applied last);
-``--preset paper`` (or ``own-chain``) starts from :meth:`laav.LaavParams.paper` (or
-:meth:`~laav.LaavParams.own_chain`) instead of the defaults, before both.
+``--preset paper`` (or ``with-plain-rv``) starts from :meth:`laav.LaavParams.paper` (or
+:meth:`~laav.LaavParams.with_plain_rv`) instead of the defaults, before both (``own-chain``,
+the defaults since 2026-12-02, is accepted as ``default``).
 
 Serves the explorer page (panel) with its embedded 3-D view (viser, one server per browser
 tab on a free port) from one process, prints the URL and opens the browser. Exit codes:
@@ -153,10 +154,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "interface, open to the network; each tab's 3-D view uses another free port)")
     p.add_argument("--seed", type=int, default=None, help="seed of the random stages (default 0, or the "
                    "one in --params)")
-    p.add_argument("--preset", choices=("default", "paper", "own-chain"), default="default",
-                   help="parameters to start from: ours (default), the paper's stages "
-                        "(LaavParams.paper()) or LAAV's own chain (LaavParams.own_chain()); "
-                        "--params and --param change them")
+    p.add_argument("--preset", choices=("default", "paper", "with-plain-rv", "own-chain"),
+                   default="default",
+                   help="parameters to start from: ours, LAAV's own chain (default; own-chain is "
+                        "the same), the paper's stages (LaavParams.paper()) or ours with plain "
+                        "RV beside LAAV's trial (LaavParams.with_plain_rv()); --params and "
+                        "--param change them")
     p.add_argument("--params", metavar="P.JSON",
                    help="parameters to start with: a params.json exported by the explorer")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
@@ -413,7 +416,8 @@ def main(argv: list[str] | None = None) -> int:
     from .state import Settings, parse_settings, settings_from_json
 
     start = {"default": laav.LaavParams, "paper": laav.LaavParams.paper,
-             "own-chain": laav.LaavParams.own_chain}[args.preset]()
+             "with-plain-rv": laav.LaavParams.with_plain_rv,
+             "own-chain": laav.LaavParams}[args.preset]()
     from .state import SEED_MAX
 
     if args.seed is not None and not 0 <= args.seed <= SEED_MAX:

@@ -72,7 +72,7 @@ TOUR: tuple[TourStep, ...] = (
             "both explains both when they move as one rigid body, and the votes form the affinity Z. "
             "Spectral clustering splits Z into C motions, as the paper does; the option coarse_merge = "
             "coding instead picks the grouping whose trajectories take the fewest bits to describe."),
-        # the text when the joint merge decided (coarse_merge = "joint", an option of ours)
+        # the text when the joint merge decided (coarse_merge = "auto", the default, or "joint")
         text_joint=(
             "The fine models are grouped into C motions by the joint merge: of the groupings whose "
             "trajectories take the fewest bits to describe (up to a distortion ε), with at least 8 "
@@ -88,9 +88,10 @@ TOUR: tuple[TourStep, ...] = (
         "shows each run's error per iteration: started from the coarse labels it begins near the "
         "answer, from a random start far from it (the paper's claim: faster convergence). This labels the "
         "features no atom took and can undo a wrong merge; by default the informed run's votes also "
-        "weigh each point's distance to the motion's trajectory subspace, plain Random Voting from "
-        "random starts runs beside it and the labelling of least coding length + epipolar cost is "
-        "kept (the paper: epipolar votes, the informed run alone).",
+        "weigh each point's distance to the motion's trajectory subspace, runs from starts that give "
+        "a motion the atoms missed its own label go beside it, and the labelling of least coding "
+        "length + epipolar cost is kept (the paper: epipolar votes, the informed run alone); plain "
+        "Random Voting runs here only for the comparison.",
         ("rv",)),
     TourStep(
         "5 · Result: one motion per point, and its error",

@@ -157,12 +157,13 @@ def parse_param(text: str) -> tuple[str, object]:
 
 
 #: Named starting points of the parameters (``--preset``).
-PRESETS = {"default": LaavParams, "paper": LaavParams.paper}
+PRESETS = {"default": LaavParams, "paper": LaavParams.paper, "with-plain-rv": LaavParams.with_plain_rv}
 
 
 def params_from_assignments(assignments: Iterable[str] | None, preset: str = "default") -> LaavParams:
     """A :class:`~laav.LaavParams` with the ``key=value`` assignments applied to a preset:
-    ``"default"`` (``LaavParams()``, ours) or ``"paper"`` (:meth:`LaavParams.paper`).
+    ``"default"`` (``LaavParams()``, ours), ``"paper"`` (:meth:`LaavParams.paper`) or
+    ``"with-plain-rv"`` (:meth:`LaavParams.with_plain_rv`).
 
     Raises
     ------

@@ -82,9 +82,9 @@ class LaavParams:
         of least coding length with 8 or more points per motion, the one of least coding
         length + ``coarse_epipolar_weight`` x epipolar cost. The coding and joint merges
         need complete tracks (on incomplete ones the epipolar merge runs, with a
-        warning). ``"auto"`` (:meth:`own_chain`): the joint merge on complete tracks, the
-        epipolar merge on incomplete ones, without a warning (``docs/ALGORITHM.md``).
-        Default: ``"epipolar"``.
+        warning). ``"auto"`` (the default since 2026-12-02): the joint merge on complete
+        tracks, the epipolar merge on incomplete ones, without a warning
+        (``docs/ALGORITHM.md``, "LAAV's own chain").
     coding_eps : float
         Distortion (px) of the coding length (``coarse_merge="coding"`` or ``"joint"``, and
         the selection's joint score, ``rv_select="joint"`` or ``"laav"``).
@@ -146,37 +146,38 @@ class LaavParams:
         fits a rank-4 trajectory subspace to ``rv_subspace_sample`` of its points, and a
         point's vote uses its Sampson distance plus this weight times
         its squared distance to the subspace (px^2 per frame). 0: the epipolar votes of
-        Random Voting alone (the RV and LAAV papers, :meth:`paper`). The default 0.3 was
-        chosen by 5-fold cross-validation grouped by source video among 0 / 0.3 / 1 / 3
-        (Hopkins155, 5 seeds: held out 0.52 %, 0 gives 0.57 % on all data; LAAV's informed
-        trial converges in 85 % of runs instead of 56 %; ``docs/ALGORITHM.md``).
+        Random Voting alone (the RV and LAAV papers, :meth:`paper`). The default 1 was
+        chosen for LAAV's own chain by 5-fold cross-validation grouped by source video
+        among 0 / 0.3 / 1 / 3 (Hopkins155, 5 seeds: held out 0.62 %; 0 gives 0.76 % on
+        all data; LAAV's informed trial converges in 93 % of runs instead of 60 %;
+        ``docs/bench/chain_own.md``). :meth:`with_plain_rv` uses 0.3, chosen the same way
+        for that chain.
     rv_subspace_sample : int
         Points per group the subspace of the subspace votes is fitted to (8-1000).
-    rv_select : {"none", "joint", "subspace", "laav"}
-        ``"laav"`` (ours, :meth:`own_chain`): LAAV's own candidates, no plain Random
-        Voting. The informed trial from the coarse labels, and, for every pair of coarse motions, a trial from
-        a *missing-motion start* (the pair as one motion; the points in no atom that the
-        other motions explain worst as the C-th), each refined and reassigned; the one of
-        least coding length plus ``coarse_epipolar_weight`` x epipolar cost over all
-        points (the joint merge's score) is kept (:func:`laav.voting.joint_score`). On
-        incomplete data it runs as ``"subspace"``.
-        ``"joint"`` (ours, the default): model selection between candidate labellings;
-        plain RV with no converged trial keeps the best of the trials and their
-        co-association labelling, and LAAV's fine-tuning also runs plain RV (two more
-        runs when the two results disagree on more than 5 % of the points) and keeps the
-        best of all. A candidate's score is the joint merge's score of its refined and
-        reassigned labelling per point (coding length plus ``coarse_epipolar_weight`` x
-        epipolar cost, :func:`laav.voting.joint_score`) plus ``rv_select_agreement`` x
-        its mean disagreement with the other candidates. Chosen over ``"subspace"`` by
-        5-fold cross-validation grouped by source video (Hopkins155, 5 seeds: held out
-        0.38 %; on all data 0.38 % against 0.51 % for ``"subspace"``; σ = 0.5 / 1 / 2 px,
-        seeds 0-1: 0.55 / 0.74 / 1.68 % against 0.93 / 1.26 / 2.97 %;
-        ``docs/ALGORITHM.md``). On incomplete data (no coding length) it runs as
-        ``"subspace"``.
-        ``"subspace"`` (ours, the default until 2026-12-01): the same, scored by the
-        refined labelling's trajectory-subspace cost (:func:`laav.refine.subspace_cost`)
-        and agreement. ``"none"`` (the LAAV paper): LAAV's fine-tuning is its informed
-        trial alone, converged or not; plain RV with no converged trial ends with the
+    rv_select : {"laav", "none", "joint", "subspace"}
+        ``"laav"`` (ours, the default since 2026-12-02): LAAV's own candidates, **no plain
+        Random Voting** on complete tracks. The informed trial from the coarse labels, and,
+        for every pair of coarse motions, a trial from a *missing-motion start* (the pair
+        as one motion; the points in no atom that the other motions explain worst as the
+        C-th), each refined and reassigned; the one of least coding length plus
+        ``coarse_epipolar_weight`` x epipolar cost over all points (the joint merge's
+        score) is kept (:func:`laav.voting.joint_score`). On incomplete data it runs as
+        ``"subspace"`` (with plain RV: ``docs/ALGORITHM.md``, "Missing data"). Plain Random
+        Voting called alone (:func:`laav.random_voting` without ``init_labels``) selects
+        among its own trials as with ``"joint"``.
+        ``"joint"`` (ours, the default 2026-12-01 to 12-02, :meth:`with_plain_rv`): model
+        selection between candidate labellings; plain RV with no converged trial keeps the
+        best of the trials and their co-association labelling, and LAAV's fine-tuning
+        also runs plain RV (two more runs when the two results disagree on more than 5 %
+        of the points) and keeps the best of all. A candidate's score is the joint merge's
+        score of its refined and reassigned labelling per point (coding length plus
+        ``coarse_epipolar_weight`` x epipolar cost, :func:`laav.voting.joint_score`) plus
+        ``rv_select_agreement`` x its mean disagreement with the other candidates. On
+        incomplete data (no coding length) it runs as ``"subspace"``.
+        ``"subspace"`` (ours, before 2026-12-01): the same, scored by the refined
+        labelling's trajectory-subspace cost (:func:`laav.refine.subspace_cost`) and
+        agreement. ``"none"`` (the LAAV paper): LAAV's fine-tuning is its informed trial
+        alone, converged or not; plain RV with no converged trial ends with the
         co-association labelling.
     rv_select_agreement : float
         Weight (>= 0) of a candidate's mean disagreement (misclassification rate) with
@@ -241,7 +242,7 @@ class LaavParams:
     cut_prior: float = 0.0
     fine_models: int | None = None
     fine_per_motion: int | None = None
-    coarse_merge: str = "epipolar"
+    coarse_merge: str = "auto"
     coding_eps: float = 10.0
     coarse_candidates: int = 10
     coarse_epipolar_weight: float = 2.0
@@ -261,9 +262,9 @@ class LaavParams:
     rv_batch: int = 2
     rv_refine: bool = True
     rv_reassign: bool = True
-    rv_subspace_weight: float = 0.3
+    rv_subspace_weight: float = 1.0
     rv_subspace_sample: int = 16
-    rv_select: str = "joint"
+    rv_select: str = "laav"
     rv_select_agreement: float = 2.0
     rv_coarse_candidate: bool = True
     rv_max_points: int | None = 1000
@@ -299,19 +300,24 @@ class LaavParams:
                    noise_adaptive=False).replace(**changes)
 
     @classmethod
-    def own_chain(cls, **changes) -> LaavParams:
-        """LAAV's own chain (issue 12), no plain Random Voting on complete tracks: the
-        joint merge on 4C fine models (``coarse_merge="auto"``), subspace votes in the
-        informed trials (``rv_subspace_weight=1``) and the choice among LAAV's own trials
-        (``rv_select="laav"``). Hopkins155, 5 seeds, σ = 0: 0.42 / 1.00 / 0.55 % (the
-        default then 0.57 %, now 0.38 %), informed trial converged on 93 %, 0.13x plain
-        RV's iterations; not the default: worse under pixel noise (seeds 0-1: 1.28 / 1.32 /
-        4.50 % at σ = 0.5 / 1 / 2 px, the default now 0.55 / 0.74 / 1.68 %) and on
-        ``small_motion`` (36.5 % against 15.4 % for the default then, 19.7 % now; seeds
-        0-9) (``docs/ALGORITHM.md``, "LAAV's own chain").
+    def with_plain_rv(cls, **changes) -> LaavParams:
+        """Ours plus plain Random Voting (the default from 2026-12-01 to 2026-12-02): the
+        paper's epipolar merge of 2C fine models with pooled voting in Z
+        (``coarse_merge="epipolar"``), subspace votes of weight 0.3 in LAAV's informed
+        trial, and plain RV's runs beside it, the candidate of least joint score plus
+        agreement kept (``rv_select="joint"``). Not LAAV's mechanism (the result is often
+        a plain-RV trial), and slower, but the most accurate chain measured on Hopkins155
+        (5 seeds, σ = 0: 0.25 / 0.81 / 0.38 %, grouped-CV 0.38 %; σ = 1 px, seeds 0-1:
+        0.74 %) and on ``small_motion`` (``docs/ALGORITHM.md``, the presets table).
         ``changes`` override fields as in :meth:`replace`."""
-        return cls(coarse_merge="auto", rv_subspace_weight=1.0,
-                   rv_select="laav").replace(**changes)
+        return cls(coarse_merge="epipolar", rv_subspace_weight=0.3,
+                   rv_select="joint").replace(**changes)
+
+    @classmethod
+    def own_chain(cls, **changes) -> LaavParams:
+        """LAAV's own chain, the default since 2026-12-02 (``LaavParams(**changes)``; kept
+        so that code written against the preset runs unchanged)."""
+        return cls().replace(**changes)
 
     def scaled(self, s: float) -> LaavParams:
         """The parameters for coordinates ``s`` times larger: lengths (:data:`PIXEL_PARAMS`)

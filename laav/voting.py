@@ -293,7 +293,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if vis is not None:
         return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo,
                               check_input)
-    select = params.rv_select != "none"  # plain RV: "laav" selects as "subspace"
+    select = params.rv_select != "none"  # plain RV: "laav" selects as "joint"
 
     if init_labels is None:  # plain RV
         _, best, trials, ended = run_trials(points, C, params, rng)
@@ -796,7 +796,7 @@ class _Polished:
         self.refined_labels = labels
         self._final = self._cost = None
         #: the cost :meth:`cost` takes (``Voting.score``): the joint score needs whole tracks
-        self.kind = "joint" if mk is None and params.rv_select == "joint" else "subspace"
+        self.kind = "joint" if mk is None and params.rv_select in ("joint", "laav") else "subspace"
 
     def cost(self) -> float:
         """The selection's own cost of this candidate (lower is better): with

@@ -154,17 +154,10 @@ def test_point_labels_from_atoms_rules():
     assert lab.tolist() == [1, 1, 0, 0, 0, 1, 1, 1, -1]
 
 
-#: The clean scene on which the default coarse stage is known to be wrong (measured
-#: 2026-11-30: 3-motion scene 0, seed 0: the multicut's 2C fine models are pure, the
-#: epipolar merge puts two of them in the wrong motion; the coding merge gets it right,
-#: see the test below). Strict: a fix shows as a failure here.
-COARSE_KNOWN_WRONG = {(2, 0)}
-
-
-@pytest.mark.parametrize("n_objects, seed", [
-    pytest.param(*case, marks=pytest.mark.xfail(strict=True, reason="known wrong merge, see "
-                                                 "COARSE_KNOWN_WRONG"))
-    if case in COARSE_KNOWN_WRONG else case for case in SCENES[::2]])
+#: The default's coarse stage (the joint merge on 4C fine models since 2026-12-02) is right
+#: on every scene here; the epipolar merge of the default before it was wrong on 3-motion
+#: scene 0 (the strict xfail here until then; the test below keeps that scene).
+@pytest.mark.parametrize("n_objects, seed", SCENES[::2])
 def test_segment_coarse_labels_match_truth_on_covered_points(n_objects, seed):
     seq = synthetic.make_sequence(n_objects=n_objects, n_frames=20, n_points=300, rng=seed)
     res = segment(seq, seq.n_motions, seed=0)
@@ -175,7 +168,8 @@ def test_segment_coarse_labels_match_truth_on_covered_points(n_objects, seed):
 
 def test_epipolar_merge_is_wrong_where_the_coding_merge_is_right():
     """The scene the paper's merge gets wrong (3 motions, scene 0, seed 0): kept as the
-    measured reason for the default ``coarse_merge="coding"``; strict both ways."""
+    measured reason for a coding-length merge (the default's ``"auto"`` is the joint one);
+    strict both ways."""
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
     errs = {}
     for merge, k in (("coding", 3), ("epipolar", 2)):
@@ -253,7 +247,7 @@ def test_pooled_voting_on_a_sample_of_many_atom_features(monkeypatch):
     from laav.multicut import solve_multicut
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=1500, rng=5)
-    p = LaavParams()
+    p = LaavParams.with_plain_rv()  # the epipolar merge, whose pooled voting is capped
     atoms = build_atoms(seq, p, np.random.default_rng(0))
     mc = solve_multicut(atom_graph(seq, atoms, p), p.n_fine(3, True))
     n_feat = int((point_labels_from_atoms(atoms, mc.atom_labels) >= 0).sum())

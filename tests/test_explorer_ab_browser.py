@@ -78,7 +78,7 @@ def test_advanced_fields_and_a_b_compare_in_the_page(tmp_path):
         page.locator("select:has(option[value='coding'])").select_option("coding")
         _wait_for(lambda: ex.result.params.coarse_merge == "coding" and ex.wait(1), 60, "the coding merge")
         page.wait_for_function("location.search.includes('coarse_merge=coding')", timeout=30000)
-        page.get_by_text("● coarse_merge · default epipolar").first.wait_for(timeout=20000)
+        page.get_by_text("● coarse_merge · default auto").first.wait_for(timeout=20000)
         # a number typed into its box
         box = page.get_by_label("rv_trials", exact=True)
         box.fill("20")

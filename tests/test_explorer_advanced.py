@@ -56,7 +56,7 @@ def test_advanced_card_has_every_field_folded_with_tooltips(ex):
             assert (w.start, w.end) == (f.low, f.high)
             assert w.description == V.md_text(f.tooltip())  # Markdown: every character literal
     assert adv.widgets["coarse_merge"].options == ["auto", "coding", "epipolar", "joint"]
-    assert adv.widgets["coarse_merge"].value == "epipolar"
+    assert adv.widgets["coarse_merge"].value == "auto"
     assert adv.marked == [] and "All fields at their defaults" in adv.summary.object
     # folded, the card sends none of its fields with the page; the first unfolding does
     assert len(adv.card.objects) == 0
@@ -166,7 +166,7 @@ def test_reset_url_and_params_json_reach_the_advanced_card(ex):
 
 
 def test_presets_in_one_click(ex):
-    """The paper's stages and LAAV's own chain, each one click in the Advanced card: every
+    """The paper's stages and ours with plain RV, each one click in the Advanced card: every
     field as the preset sets it, the sliders and the URL follow, and the Random Voting card
     says which votes LAAV's trial used (the paper's: Sampson alone)."""
     adv = ex.advanced
@@ -177,9 +177,10 @@ def test_presets_in_one_click(ex):
     assert ex.query()["rv_subspace_weight"] == "0" and ex.query()["rv_select"] == "none"
     assert ex.result.voting.informed_subspace_weight == 0.0
     assert "Sampson distance alone (the RV paper's)" in ex.rv_view.rv_md.object
-    adv.w_presets["own_chain"].clicks += 1
-    assert ex.wait(120) and ex.result.params == laav.LaavParams.own_chain()
-    assert adv.widgets["coarse_merge"].value == "auto" and ex.result.voting.selected != ""
+    adv.w_presets["with_plain_rv"].clicks += 1
+    assert ex.wait(120) and ex.result.params == laav.LaavParams.with_plain_rv()
+    assert adv.widgets["coarse_merge"].value == "epipolar" and adv.widgets["rv_select"].value == "joint"
+    assert ex.query()["rv_select"] == "joint" and ex.result.voting.costs  # plain RV's candidates
     adv.w_reset.clicks += 1
     assert ex.wait(120) and ex.result.params == laav.LaavParams()
 

@@ -53,7 +53,7 @@ def test_every_field_once_with_the_validation_tables_bounds():
     assert stages == sorted(stages, key=["atoms", "graph", "multicut", "coarse", "voting"].index)
     by_name = {f.name: f for f in FIELDS}
     assert by_name["coarse_merge"].choices == ("auto", "coding", "epipolar", "joint")
-    assert by_name["coarse_merge"].default == "epipolar"
+    assert by_name["coarse_merge"].default == "auto"
     assert by_name["rv_refine"].kind == "bool" and by_name["fine_models"].kind == "int|None"
 
 
@@ -109,7 +109,7 @@ def test_params_diff_names_every_setting_that_differs():
     a = Settings(laav.LaavParams(), 0, 2)
     assert C.params_diff(a, a) == []
     b = Settings(laav.LaavParams(lam=3.5, coarse_merge="coding", fine_models=5), 4, 3)
-    assert C.params_diff(a, b) == [("fine_models", None, 5), ("coarse_merge", "epipolar", "coding"),
+    assert C.params_diff(a, b) == [("fine_models", None, 5), ("coarse_merge", "auto", "coding"),
                                    ("lam", 2.0, 3.5), ("seed", 0, 4), ("motions", 2, 3)]
     assert C.params_diff(b, a)[0] == ("fine_models", 5, None)
 

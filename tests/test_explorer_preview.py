@@ -1,7 +1,9 @@
 """A seed (or C, or RV setting) change shows LAAV's own fine-tuning first: the result with
 the informed trial alone, while plain RV and the selection (most of the time) still
 compute; then the result. ``laav.Pipeline.update(preview=...)`` makes it; the state hands
-it on as ``on_preview``; the app draws it with a status line that says so."""
+it on as ``on_preview``; the app draws it with a status line that says so. Only with plain
+RV beside LAAV's trial (``LaavParams.with_plain_rv()``, the default until 2026-12-02): the
+default runs no plain RV, so there is nothing to wait for and no preview."""
 
 from __future__ import annotations
 
@@ -16,10 +18,11 @@ from explorer.views import PREVIEW_NOTE
 from laav.synthetic import make_sequence
 
 SEQ = make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+PLAIN = laav.LaavParams.with_plain_rv()
 
 
 def test_the_state_hands_on_the_preview_before_the_result():
-    st = ExplorerState(SEQ, 3, seed=0)
+    st = ExplorerState(SEQ, 3, PLAIN, seed=0)
     events = []
     try:
         assert st.wait(120)
@@ -35,7 +38,7 @@ def test_the_state_hands_on_the_preview_before_the_result():
         assert pre.voting.selected == "informed" and pre.voting.costs == {}
         np.testing.assert_array_equal(pre.voting.informed_changed, res.voting.informed_changed)
         assert st.result is res and st.change_of(pre) is not None
-        np.testing.assert_array_equal(res.labels, laav.segment(SEQ, 3, seed=2).labels)
+        np.testing.assert_array_equal(res.labels, laav.segment(SEQ, 3, PLAIN, seed=2).labels)
         events.clear()
         st.request(params={"lam": 3.5})  # plain RV's runs are kept: nothing to wait for
         assert st.wait(120) and [e[0] for e in events] == ["result"]
@@ -45,7 +48,7 @@ def test_the_state_hands_on_the_preview_before_the_result():
 
 @pytest.fixture
 def ex():
-    e = Explorer(SEQ, 3, viser=False)
+    e = Explorer(SEQ, 3, PLAIN, viser=False)
     assert e.wait(120)
     yield e
     e.close()
@@ -76,7 +79,7 @@ def test_a_preview_gives_way_to_the_last_result_when_its_result_will_not_come(ex
     """Cancelled or failed after its preview was drawn: the views go back to the result."""
     shown = ex.result
     got = []
-    laav.Pipeline(SEQ, 3).update(seed=4, preview=got.append)
+    laav.Pipeline(SEQ, 3, PLAIN).update(seed=4, preview=got.append)
     ex._apply_result(got[0], SEQ, ex.settings.__class__(ex.settings.params, 4, 3),
                      ex.applied_generation + 1, True)
     assert ex.previewing and ex.result is got[0]
@@ -84,3 +87,17 @@ def test_a_preview_gives_way_to_the_last_result_when_its_result_will_not_come(ex
     ex.restore_result()
     assert not ex.previewing and ex.result is shown and ex.state.result is shown
     assert PREVIEW_STATUS not in ex.status_bar._status_text
+
+
+def test_the_default_has_no_preview():
+    """The default (LAAV's own chain) runs no plain RV: a seed change draws the result once."""
+    st = ExplorerState(SEQ, 3, seed=0)
+    events = []
+    try:
+        assert st.wait(120)
+        st.on_preview = lambda r, seq, s, gen: events.append("preview")
+        st.on_result = lambda r, seq, s, gen: events.append("result")
+        st.request(seed=2)
+        assert st.wait(120) and events == ["result"]
+    finally:
+        st.close()

@@ -439,7 +439,9 @@ def test_replay_caption_names_the_fine_count_and_whether_it_is_the_papers(demo):
     """The multicut caption says how many fine models the count was brought to (as a
     multiple of C) and whether that is the paper's 2C (it said 2C whatever ran)."""
     P = laav.LaavParams
-    assert V.fine_count_note(P(), 2) == "2C, the paper's"
+    assert V.fine_count_note(P(), 2) == "4C: ours for the joint merge; the paper: 2C"
+    assert V.fine_count_note(P.with_plain_rv(), 2) == "2C, the paper's"
+    assert V.fine_count_note(P(), 2, complete=False) == "2C, the paper's"
     assert V.fine_count_note(P(coarse_merge="joint"), 3) == "4C: ours for the joint merge; the paper: 2C"
     assert V.fine_count_note(P(coarse_merge="joint"), 3, complete=False) == "2C, the paper's"
     assert V.fine_count_note(P(fine_per_motion=3), 2) == "3C, as set; the paper: 2C"

@@ -57,7 +57,8 @@ def test_the_child_sends_its_preview_first_and_the_state_shows_it_before_the_res
     """The child's pipeline hands its preview (LAAV's own fine-tuning, before plain RV) back
     first; the state shows it (``on_preview``) while it waits for the pipeline, then the
     result; a preview for other settings than the ones asked for is not shown."""
-    w = warm.first_results(seq, 2, None, 1)
+    plain = laav.LaavParams.with_plain_rv()  # the preview exists where plain RV runs
+    w = warm.first_results(seq, 2, plain, 1)
     pre = w.preview.result(timeout=120)
     pipe = w.pipeline.result(timeout=120)
     assert isinstance(pre, laav.LaavResult) and pre.voting.selected == "informed"
@@ -65,7 +66,7 @@ def test_the_child_sends_its_preview_first_and_the_state_shows_it_before_the_res
     assert pre.voting.costs == {} and pipe.result.voting.costs
     # the state, the child slow: the preview arrives first, then the pipeline
     fut, pfut = Future(), Future()
-    st = ExplorerState(seq, 2, seed=1, pipeline=fut, preview=pfut, autostart=False)
+    st = ExplorerState(seq, 2, plain, seed=1, pipeline=fut, preview=pfut, autostart=False)
     events = []
     st.on_preview = lambda r, s, t, gen: events.append(("preview", r, gen))
     st.on_result = lambda r, s, t, gen: events.append(("result", r, gen))
@@ -83,8 +84,8 @@ def test_the_child_sends_its_preview_first_and_the_state_shows_it_before_the_res
         st.close()
     # asked for other settings (a shared URL): that preview is not shown
     fut2, pfut2 = Future(), Future()
-    st = ExplorerState(seq, 2, seed=1, pipeline=fut2, preview=pfut2, autostart=False)
-    st.retarget(Settings(laav.LaavParams(lam=4.0), 1, 2))
+    st = ExplorerState(seq, 2, plain, seed=1, pipeline=fut2, preview=pfut2, autostart=False)
+    st.retarget(Settings(plain.replace(lam=4.0), 1, 2))
     shown = []
     st.on_preview = lambda r, s, t, gen: shown.append(r)
     try:

@@ -94,13 +94,17 @@ def test_joint_selection_keeps_laavs_right_start(hopkins_root):
     them, but plain RV's unconverged trials (17 % wrong) have the lower subspace cost, so
     the selection by subspace cost (the default until 2026-12-01) returned one of them.
     The joint score (coding length + epipolar cost) ranks LAAV's trial first
-    (benchmarks/TUNING.md, "The selection by the joint score")."""
+    (benchmarks/TUNING.md, "The selection by the joint score"). Both with plain RV beside
+    LAAV's trial (``LaavParams.with_plain_rv()``, the default until 2026-12-02); the default
+    since, with no plain RV, keeps LAAV's right trial too."""
     from laav import LaavParams
 
     seq = load_sequence(hopkins_root / "2T3RCR_g13")
-    joint = segment(seq, seq.n_motions, seed=3)
+    joint = segment(seq, seq.n_motions, LaavParams.with_plain_rv(), seed=3)
     assert joint.params.rv_select == "joint" and joint.voting.selected == "informed"
     assert misclassification_rate(seq.labels, joint.labels) < 0.01
-    old = segment(seq, seq.n_motions, LaavParams(rv_select="subspace"), seed=3)
+    own = segment(seq, seq.n_motions, seed=3)
+    assert own.voting.selected == "informed" and misclassification_rate(seq.labels, own.labels) < 0.01
+    old = segment(seq, seq.n_motions, LaavParams.with_plain_rv(rv_select="subspace"), seed=3)
     assert old.voting.selected.startswith("plain")
     assert misclassification_rate(seq.labels, old.labels) > 0.1

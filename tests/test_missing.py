@@ -365,17 +365,20 @@ def test_the_coding_merge_falls_back_to_the_epipolar_merge_with_a_warning():
 
 
 def test_default_selection_runs_on_missing_data_by_the_subspace_cost():
-    """The default's selection (``rv_select="joint"``) needs whole trajectories for its
-    coding length: on incomplete tracks it still runs plain RV beside LAAV's trial and
-    selects, by the masked subspace cost, exactly as ``rv_select="subspace"`` does."""
+    """The default's selection (``rv_select="laav"``, LAAV's own candidates) and the joint
+    one need whole trajectories for their coding length: on incomplete tracks both still
+    run plain RV beside LAAV's trial and select, by the masked subspace cost, exactly as
+    ``rv_select="subspace"`` does; so the default and ``with_plain_rv()`` (the default
+    until 2026-12-02) give the same labels there."""
     seq = _scene(1)
     occl = occlude(seq, 0.4, 1)
     res = _quiet_segment(occl, seq.n_motions)
-    assert res.params.rv_select == "joint"
+    assert res.params.rv_select == "laav"
     assert res.voting.score == "subspace" and len(res.voting.costs) >= 2
-    old = _quiet_segment(occl, seq.n_motions, LaavParams(rv_select="subspace"))
-    np.testing.assert_array_equal(res.labels, old.labels)
-    assert res.voting.costs == old.voting.costs
+    for other in (LaavParams(rv_select="subspace"), LaavParams.with_plain_rv()):
+        old = _quiet_segment(occl, seq.n_motions, other)
+        np.testing.assert_array_equal(res.labels, old.labels)
+        assert res.voting.costs == old.voting.costs
 
 
 def test_coarse_labels_are_a_candidate_on_incomplete_tracks_only():

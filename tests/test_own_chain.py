@@ -47,7 +47,7 @@ def test_the_informed_trial_reports_the_votes_it_used():
     sparse = np.where(rng.random(seq.n_points) < SUBSPACE_VOTES_MIN_START / 2, seq.labels, -1)
     p = LaavParams(rv_max_iter=40)
     on = random_voting(seq, 2, p, seed=0, init_labels=dense)
-    assert on.informed_subspace_weight == p.rv_subspace_weight == 0.3
+    assert on.informed_subspace_weight == p.rv_subspace_weight == 1.0
     assert random_voting(seq, 2, p, seed=0, init_labels=sparse).informed_subspace_weight == 0.0
     paper = random_voting(seq, 2, LaavParams.paper(rv_max_iter=40), seed=0, init_labels=dense)
     assert paper.informed_subspace_weight == 0.0
@@ -58,7 +58,7 @@ def test_the_informed_trial_reports_the_votes_it_used():
     plain = random_voting(seq, 2, p, seed=0)
     assert plain.informed_subspace_weight is None
     text = rv_summary(on, plain)
-    assert "0.3 × squared distance" in text and "ours" in text
+    assert "1 × squared distance" in text and "ours" in text
     assert "Sampson distance alone (the RV paper's)" in rv_summary(paper, plain)
 
 
@@ -127,16 +127,19 @@ def test_joint_score_prefers_the_truth_and_needs_eight_points_a_motion():
     assert joint_score(seq.points, tiny, 2, p) == float("inf")
 
 
-def test_own_chain_preset_and_default():
-    """The own chain is a preset; the default keeps plain RV beside LAAV's trial, whose
-    votes have the subspace term at the cross-validated weight, and selects by the joint
-    score; the paper's have none."""
-    own, default = LaavParams.own_chain(), LaavParams()
-    assert (own.coarse_merge, own.rv_select, own.rv_subspace_weight) == ("auto", "laav", 1.0)
-    assert (default.coarse_merge, default.rv_select, default.rv_subspace_weight) == (
-        "epipolar", "joint", 0.3)
+def test_own_chain_is_the_default_and_the_presets():
+    """The default is LAAV's own chain since 2026-12-02 (the joint merge on 4C fine models,
+    subspace votes at the cross-validated weight 1, LAAV's own candidates, no plain RV);
+    ``own_chain()`` is kept as the default; ``with_plain_rv()`` is the previous default
+    (the epipolar merge on 2C, weight 0.3, plain RV and the joint selection); the paper's
+    informed trial has no subspace votes."""
+    own, default, plain = LaavParams.own_chain(), LaavParams(), LaavParams.with_plain_rv()
+    assert own == default
+    assert (default.coarse_merge, default.rv_select, default.rv_subspace_weight) == ("auto", "laav", 1.0)
+    assert (plain.coarse_merge, plain.rv_select, plain.rv_subspace_weight) == ("epipolar", "joint", 0.3)
+    assert LaavParams.with_plain_rv(lam=3.0).lam == 3.0
     assert LaavParams.paper().rv_subspace_weight == 0.0
-    assert own.n_fine(2) == 8 and own.n_fine(2, complete=False) == 4 and default.n_fine(2) == 4
+    assert default.n_fine(2) == 8 and default.n_fine(2, complete=False) == 4 and plain.n_fine(2) == 4
 
 
 def test_the_default_informed_trial_converges_faster_than_plain_rv():
@@ -168,7 +171,7 @@ def test_the_paper_rv_module_takes_the_subspace_votes_only_as_an_extra_term():
     p = LaavParams(rv_max_iter=20)
     known = np.ones(P, dtype=bool)
     extra = for_informed_trial(seq.points, p, known)
-    assert isinstance(extra, SubspaceVotes) and extra.weight == 0.3
+    assert isinstance(extra, SubspaceVotes) and extra.weight == 1.0
     assert for_informed_trial(seq.points, p.replace(rv_subspace_weight=0.0), known) is None
     assert for_informed_trial(seq.points, p, np.arange(P) < SUBSPACE_VOTES_MIN_START * P - 1) is None
     start = (seq.labels.copy(), np.eye(2)[seq.labels] * 5.0)

@@ -20,6 +20,11 @@ synthetic = pytest.importorskip("laav.synthetic")
 _cache: dict = {}
 
 
+#: The preset with plain RV beside LAAV's trial (the default until 2026-12-02): the plain-RV
+#: memo and the preview exist for it.
+PLAIN = LaavParams.with_plain_rv()
+
+
 def scene(n_objects=1, seed=0, n_points=200, n_frames=15):
     key = (n_objects, seed, n_points, n_frames)
     if key not in _cache:
@@ -105,7 +110,7 @@ def test_result_structure():
     assert set(st) == {"fine", "coarse", "final"}
     assert st["final"] is res.labels
     assert np.array_equal(st["coarse"] >= 0, st["fine"] >= 0)
-    assert res.multicut.n_models == res.params.n_fine(2) == 2 * 2  # fine_per_motion C
+    assert res.multicut.n_models == res.params.n_fine(2) == 4 * 2  # the joint merge's 4C
     assert res.voting.initialised
 
 
@@ -394,7 +399,7 @@ def test_preview_is_laavs_own_fine_tuning_before_plain_rv():
     the final result's informed trace), polished as the selection polishes it (the labels
     returned when the selection keeps "informed"); the final result is a fresh run's."""
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
-    pipe = Pipeline(seq, 3)
+    pipe = Pipeline(seq, 3, PLAIN)
     got = []
     res = pipe.update(seed=2, preview=got.append)
     assert len(got) == 1
@@ -405,7 +410,7 @@ def test_preview_is_laavs_own_fine_tuning_before_plain_rv():
     np.testing.assert_array_equal(pre.voting.informed_changed, res.voting.informed_changed)
     assert res.voting.selected == "informed"  # this scene's selection keeps LAAV's trial
     np.testing.assert_array_equal(pre.labels, res.labels)
-    assert_same_result(res, segment(seq, 3, seed=2))
+    assert_same_result(res, segment(seq, 3, PLAIN, seed=2))
 
 
 def test_preview_only_when_plain_rv_runs_afresh():
@@ -413,7 +418,7 @@ def test_preview_only_when_plain_rv_runs_afresh():
     paper's fine-tuning (no plain RV), incomplete tracks (another path)."""
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
     calls = []
-    pipe = Pipeline(seq, 3)
+    pipe = Pipeline(seq, 3, PLAIN)
     before = pipe.result
     res = pipe.update(lam=3.0, preview=calls.append)
     assert res.coarse is not before.coarse and res.params.lam == 3.0  # it did rerun
@@ -421,9 +426,9 @@ def test_preview_only_when_plain_rv_runs_afresh():
     pipe.update(n_motions=2, preview=calls.append)
     assert len(calls) == 1
     Pipeline(seq, 3, LaavParams.paper()).update(seed=1, preview=calls.append)
-    Pipeline(seq, 3, LaavParams.own_chain()).update(seed=1, preview=calls.append)
+    Pipeline(seq, 3).update(seed=1, preview=calls.append)  # the default: no plain RV
     hidden = synthetic.occlude(seq, 0.2, 0)
-    Pipeline(hidden, 3).update(seed=1, preview=calls.append)
+    Pipeline(hidden, 3, PLAIN).update(seed=1, preview=calls.append)
     assert len(calls) == 1
 
 
@@ -433,7 +438,7 @@ def test_a_step_back_to_a_seed_reuses_plain_rvs_runs(monkeypatch):
     import laav.voting as voting_module
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
-    pipe = Pipeline(seq, 3)
+    pipe = Pipeline(seq, 3, PLAIN)
     real = voting_module.run_trials
     plain = []
 
@@ -453,14 +458,14 @@ def test_a_step_back_to_a_seed_reuses_plain_rvs_runs(monkeypatch):
     pipe.update(seed=1)  # five seeds back: no longer kept
     assert plain
     monkeypatch.undo()
-    assert_same_result(back, segment(seq, 3, seed=3))
+    assert_same_result(back, segment(seq, 3, PLAIN, seed=3))
 
 
 def test_with_a_preview_the_informed_trial_and_its_polish_run_once(monkeypatch):
     import laav.voting as voting_module
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
-    pipe = Pipeline(seq, 3)
+    pipe = Pipeline(seq, 3, PLAIN)
     real_trials, real_polished = voting_module.run_trials, voting_module._Polished
     informed, polished = [], []
 
@@ -479,7 +484,7 @@ def test_with_a_preview_the_informed_trial_and_its_polish_run_once(monkeypatch):
     got = []
     pipe.update(seed=1, preview=got.append)
     n_with = (len(informed), len(polished))
-    other = Pipeline(seq, 3, seed=0)
+    other = Pipeline(seq, 3, PLAIN, seed=0)
     del informed[:], polished[:]
     other.update(seed=1)  # without a preview: as many of each
     assert len(got) == 1 and n_with[0] == 1 and n_with == (len(informed), len(polished))
@@ -489,7 +494,7 @@ def test_a_retry_after_an_interrupted_update_gets_its_preview():
     """An update stopped after its memo was made (here: its preview raises) leaves it
     without plain RV's runs; the next try still previews, and ends as a fresh run."""
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
-    pipe = Pipeline(seq, 3)
+    pipe = Pipeline(seq, 3, PLAIN)
 
     def boom(result):
         raise RuntimeError("stop")
@@ -500,7 +505,7 @@ def test_a_retry_after_an_interrupted_update_gets_its_preview():
     got = []
     res = pipe.update(seed=5, preview=got.append)
     assert len(got) == 1
-    assert_same_result(res, segment(seq, 3, seed=5))
+    assert_same_result(res, segment(seq, 3, PLAIN, seed=5))
 
 
 def test_a_preview_keeps_the_clear_error_for_bad_settings():

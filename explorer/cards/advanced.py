@@ -27,7 +27,7 @@ from ..fields import AUTO, FIELDS, STAGE_TITLES, changed_fields, fmt_value, widg
 from .base import FOLD_ARROW, SIDE_W, Alert, Host, Markdown
 
 #: The presets the card sets in one click: LaavParams constructor -> button label.
-PRESETS = {"paper": "Preset: the paper's stages", "own_chain": "Preset: LAAV's own chain"}
+PRESETS = {"paper": "Preset: the paper's stages", "with_plain_rv": "Preset: ours + plain RV"}
 #: Width of a field's widget inside the card (the card's padding and border fit the sidebar).
 FIELD_W = SIDE_W - 30
 #: Marks a field off its default, in its label.
@@ -80,8 +80,8 @@ class AdvancedPanel:
             "Every `LaavParams` field (hover the **?** for its meaning, range and default); a field "
             f"off its default is marked {MARK}. Seed and C stay in the sliders above. The presets "
             "set every field: `LaavParams.paper()` (each stage as the paper writes it) and "
-            "`LaavParams.own_chain()` (ours, no plain RV); pin a result first (Compare) to see "
-            "what our departures change.",
+            "`LaavParams.with_plain_rv()` (ours with plain RV beside LAAV's trial and a selection, "
+            "the default until 2026-12-02); pin a result first (Compare) to see what changes.",
             width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
         # folded, the card holds nothing: its ~130 models (a third of the sidebar's) go to the
         # page when it is first opened, not with the page (served and built that much sooner)
