@@ -654,22 +654,48 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
         vot = np.zeros((P, C))
         vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
         starts.append((f"missing motion ({g}+{h})", lab, vot, stream, known2))
-    trials, entries, first, first_extra = [], [], None, None
-    for name, lab, vot, stream, known in starts:
-        extra = for_informed_trial(points, params, known)
-        res, _, ran, _ = run_trials(points, C, params, None, (lab, vot), n_plain=0,
-                                    streams=[stream], extra=extra)
-        if first is None:
-            first, first_extra = res, extra
-        trials += ran
-        pol = _Polished(points, C, params, res[0])
-        entries.append((name, res, pol, joint_score(points, pol.final()[0], C, params)))
+    extras = [for_informed_trial(points, params, known) for *_, known in starts]
+    results = _informed_side_by_side(points, C, params, [s[1:4] for s in starts], extras)
+    first, first_extra = results[0], extras[0]
+    trials, entries, polished = list(results), [], {}
+    for (name, *_), res in zip(starts, results):
+        key = res[0].tobytes()  # trials that end on the same labels share their polish
+        if key not in polished:
+            pol = _Polished(points, C, params, res[0])
+            polished[key] = (pol, joint_score(points, pol.final()[0], C, params))
+        entries.append((name, res) + polished[key])
     scores = np.array([e[3] for e in entries])
     k = int(np.argmin(scores))  # the first of equal scores: the coarse start
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
     return _with_informed(_finish(points, C, params, res, trials, True, name, polished=pol,
                                   costs=costs, score="joint-sum"), first, first_extra)
+
+
+def _informed_side_by_side(points, C, params, starts, extras) -> list:
+    """LAAV's informed trials from several ``starts`` ((labels0, votes0, generator) each),
+    ``rv_batch`` side by side as :func:`laav.rv.run_trials` runs trials: one batched numpy
+    call per iteration, each trial on its own generator and convergence test, so the
+    results (in :func:`laav.rv.run_trials`' tuple form, in ``starts`` order) are those of
+    running them one after another. ``extras`` (one per start): the subspace votes of
+    :func:`for_informed_trial` or None; the trials of each kind share a batch."""
+    from ._interrupt import check as check_interrupt
+    from .rv import _step, _Trial
+
+    trials = [_Trial(lab.copy(), vot.copy(), False, "informed", stream)
+              for lab, vot, stream in starts]
+    kinds = [e is None for e in extras]
+    for kind in dict.fromkeys(kinds):
+        pending = [t for t, k in zip(trials, kinds) if k == kind]
+        extra = extras[kinds.index(kind)]  # every start's is the same term (or None)
+        active: list = []
+        while pending or active:
+            check_interrupt()  # a caller's stop request, once per iteration
+            while len(active) < params.rv_batch and pending:
+                active.append(pending.pop(0))
+            _step(points, active, params, None, extra)
+            active = [t for t in active if not t.done]
+    return [t.result() for t in trials]
 
 
 def _plain_run(points, C, params, rng, streams, memo, k, masks=None):

@@ -184,3 +184,37 @@ def test_the_paper_rv_module_takes_the_subspace_votes_only_as_an_extra_term():
                    start, n_plain=0)[0]
     c = run_trials(seq.points, 2, p, np.random.default_rng(1), start, n_plain=0, extra=extra)[0]
     assert np.array_equal(a[1], b[1]) and not np.array_equal(a[1], c[1])
+
+
+def test_own_candidates_side_by_side_are_their_one_after_another_results(monkeypatch):
+    """LAAV's informed and missing-motion trials run ``rv_batch`` side by side (speed
+    only): every candidate's labels, iterations and score are those of one trial at a
+    time; trials that end on the same labels share one polish (counted)."""
+    import laav.voting as V
+    from explorer.demo import demo_sequence
+    from laav import segment
+
+    seq = demo_sequence()  # seed 1: four trials, one ends on the informed trial's very labels
+    made = []
+    real = V._Polished
+
+    class Counted(real):
+        def __init__(self, *a, **k):
+            made.append(1)
+            super().__init__(*a, **k)
+
+    monkeypatch.setattr(V, "_Polished", Counted)
+    runs = {}
+    for b in (1, 2, 4):
+        del made[:]
+        r = segment(seq, 3, LaavParams(rv_batch=b), seed=1)
+        runs[b] = (r, len(made))
+    one, n_pol = runs[1]
+    assert len(one.voting.costs) == 4 and len(one.voting.trial_iterations) == 4  # 1 + C(C-1)/2
+    assert len(set(one.voting.costs.values())) <= n_pol < 4  # one trial shared its polish
+    for b in (2, 4):
+        r, n = runs[b]
+        np.testing.assert_array_equal(r.labels, one.labels)
+        assert r.voting.costs == one.voting.costs and n == n_pol
+        assert list(r.voting.trial_iterations) == list(one.voting.trial_iterations)
+        np.testing.assert_array_equal(r.voting.informed_changed, one.voting.informed_changed)
