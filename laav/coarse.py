@@ -438,7 +438,7 @@ def _pooled_voting_masked(points, visible, fine_labels, cov, n_models, n_motions
 def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n_motions: int,
                  params: LaavParams | None = None,
                  rng: np.random.Generator | None = None, *,
-                 visible: np.ndarray | None = None) -> Coarse:
+                 visible: np.ndarray | None = None, memo: dict | None = None) -> Coarse:
     """Merge the fine models of the multicut into ``n_motions`` motions.
 
     Parameters
@@ -466,6 +466,13 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         length needs whole trajectories: ``merge_cost`` is NaN and
         ``coarse_merge="coding"`` falls back to the epipolar merge, with a
         :class:`laav.LaavWarning` (``method`` then says ``"epipolar"``).
+    memo : dict, optional
+        Speed only (a live caller's λ moves): a dict the caller keeps for one sequence,
+        ``atoms`` and ``multicut`` (and empties when they change). On complete tracks it
+        keeps what does not depend on ``lam``: the pairwise votes' samples and distances
+        (keyed on the generator's state before they are drawn, which is restored after
+        them as if drawn again) and the joint merge's coding-length shortlist. The result
+        is the same, bit for bit.
 
     Returns
     -------
@@ -521,8 +528,18 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
                                                      kk, S, params.lam, rng, n)
         D[jj, kk] = D[kk, jj] = dist
     elif jj.size:
-        vote, dist, samples = _pairwise_votes(points, table, model_atoms, pairs, jj, kk, S,
-                                              params.lam, rng, n)
+        key = ("pairwise", S, repr(rng.bit_generator.state))  # the draws to come: the same
+        hit = None if memo is None else memo.get(key)
+        if hit is None:
+            depi, samples = _pairwise_distances(points, table, model_atoms, pairs, jj, kk, S,
+                                                rng, n)
+            if memo is not None:
+                memo[key] = (depi, samples, rng.bit_generator.state)
+        else:  # λ alone changed: the same samples, the generator where they left it
+            depi, samples, after = hit
+            rng.bit_generator.state = after
+        vote = np.exp(-params.lam * depi).mean(axis=(1, 2))
+        dist = depi.mean(axis=(1, 2))
         D[jj, kk] = D[kk, jj] = dist
     else:
         vote = np.zeros(0)
@@ -537,8 +554,14 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     pairwise = np.eye(n)
     pairwise[jj, kk] = pairwise[kk, jj] = vote
     if vis is None:
-        stats = model_stats(points, fine_pts, n)
-        gain = merge_cost(stats, params.coding_eps)
+        key = ("coding", params.coding_eps)
+        if memo is not None and key in memo:
+            stats, gain = memo[key]
+        else:
+            stats = model_stats(points, fine_pts, n)
+            gain = merge_cost(stats, params.coding_eps)
+            if memo is not None:
+                memo[key] = (stats, gain)
     else:  # the coding length needs whole trajectories (see the docstring)
         gain = np.full((n, n), np.nan)
         np.fill_diagonal(gain, 0.0)
@@ -570,7 +593,7 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     listed = None
     if coding:  # the partition is searched only when it decides
         if method == "joint" and n > n_motions:
-            listed = _joint_shortlist(points, fine_pts, stats, n_motions, params)
+            listed = _joint_shortlist(points, fine_pts, stats, n_motions, params, memo)
         if listed is not None:
             assign, length = listed.assign[listed.chosen], float(listed.coding_length[listed.chosen])
         else:  # the coding merge (also the joint one when no partition has 8 points a motion)
@@ -608,13 +631,20 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     )
 
 
-def _joint_shortlist(points, fine_pts, stats, n_motions, params) -> Shortlist | None:
+def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> Shortlist | None:
     """The joint merge: the ``coarse_candidates`` partitions of least coding length whose
     motions hold 8 points or more (what one fundamental matrix needs), each scored by its
     coding length plus ``coarse_epipolar_weight`` times its epipolar cost; None when no
-    partition gives every motion 8 points."""
-    assign, coding = shortlist(stats, n_motions, params.coding_eps, params.coarse_candidates,
-                               min_count=8)
+    partition gives every motion 8 points. ``memo``: see :func:`merge_models` (the
+    shortlist does not depend on ``lam``)."""
+    key = ("shortlist", n_motions, params.coding_eps, params.coarse_candidates)
+    if memo is not None and key in memo:
+        assign, coding = memo[key]
+    else:
+        assign, coding = shortlist(stats, n_motions, params.coding_eps,
+                                   params.coarse_candidates, min_count=8)
+        if memo is not None:
+            memo[key] = (assign, coding)
     if assign.shape[0] == 0:
         return None
     cov = fine_pts >= 0
@@ -652,17 +682,17 @@ def _sample_fits(points, pairs, idx):
     return Fm, np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))
 
 
-def _pairwise_votes(points, table, model_atoms, pairs, jj, kk, S, lam, rng, n):
-    """The paper's pairwise votes on complete tracks: for every model pair (jj, kk) and
-    frame pair, S draws of 2 + 2 atoms (``table``: ``_PER_ATOM`` features each), one
-    fundamental matrix each, the larger of the two models' mean Sampson distances.
-    Returns (votes (n_pairs,): mean ``exp(-lam d)``, mean distances (n_pairs,), the
-    median samples). Model pairs are fitted a batch at a time (:data:`_PAIRWISE_BATCH`
-    samples); each pair's atoms are drawn from ``rng`` in pair order either way."""
+def _pairwise_distances(points, table, model_atoms, pairs, jj, kk, S, rng, n):
+    """The samples of the paper's pairwise votes on complete tracks: for every model pair
+    (jj, kk) and frame pair, S draws of 2 + 2 atoms (``table``: ``_PER_ATOM`` features
+    each), one fundamental matrix each, the larger of the two models' mean Sampson
+    distances. Returns (distances d (n_pairs, K, S), the median samples); a pair's vote is
+    the mean of ``exp(-lam d)``. Model pairs are fitted a batch at a time
+    (:data:`_PAIRWISE_BATCH` samples); each pair's atoms are drawn from ``rng`` in pair
+    order either way."""
     K = pairs.shape[0]
     per = max(1, _PAIRWISE_BATCH // (K * S))  # model pairs a batch
-    vote = np.empty(jj.size)
-    dist = np.empty(jj.size)
+    depis = []
     mids = []  # per batch: (frame pair index, fundamental matrix, features) of each median
     for lo in range(0, jj.size, per):
         sel = slice(lo, min(lo + per, jj.size))
@@ -672,15 +702,14 @@ def _pairwise_votes(points, table, model_atoms, pairs, jj, kk, S, lam, rng, n):
             pick[p, :, :, 2:] = rng.choice(model_atoms[k], size=(K, S, 2))
         idx = table[pick].reshape(pick.shape[0], K, S, 4 * _PER_ATOM)
         Fm, depi = _sample_fits(points, pairs, idx)
-        vote[sel] = np.exp(-lam * depi).mean(axis=(1, 2))
-        dist[sel] = depi.mean(axis=(1, 2))
+        depis.append(depi)
         flat = depi.reshape(depi.shape[0], -1)
         mid = np.argsort(flat, axis=1, kind="stable")[:, flat.shape[1] // 2]
         ki, si = np.unravel_index(mid, depi.shape[1:])
         b = np.arange(depi.shape[0])
         mids.append((ki, Fm[b, ki, si], idx[b, ki, si], depi[b, ki, si]))
     ki, Fmid, pts, dmid = (np.concatenate(parts) for parts in zip(*mids))
-    return vote, dist, _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n)
+    return np.concatenate(depis), _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n)
 
 
 def _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n) -> VoteSamples:

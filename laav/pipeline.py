@@ -201,6 +201,9 @@ class Pipeline:
         self._noise: float | None = None  # the tracks' measured noise (noise_adaptive), px
         self._stages: dict = {}
         self._voting_memo: tuple | None = None
+        #: what the coarse stage keeps across λ moves for the present multicut
+        #: (:func:`laav.coarse.merge_models`' ``memo``); emptied when the multicut reruns
+        self._coarse_memo: dict = {}
         #: (seed, C, rv_* settings) -> plain RV's runs, the last :data:`PLAIN_MEMOS` kept
         self._plain_memos: OrderedDict = OrderedDict()
         self.result = self._run("atoms", preview)
@@ -258,9 +261,10 @@ class Pipeline:
                 st["graph"] = atom_graph(seq, st["atoms"], p, self._distances)
             elif stage == "multicut":
                 st["multicut"] = solve_multicut(st["graph"], p.n_fine(C, seq.is_complete))
+                self._coarse_memo = {}
             elif stage == "coarse":
                 st["coarse"] = merge_models(seq, st["atoms"], st["multicut"], C, p,
-                                            self._rng("coarse"))
+                                            self._rng("coarse"), memo=self._coarse_memo)
             elif stage == "voting":
                 init = st["coarse"].point_labels
                 if C == 1 or not (init >= 0).any():
@@ -358,7 +362,7 @@ class Pipeline:
                 starts.append("atoms")
             starts = [s for s in starts if s is not None]
             start = min(starts, key=STAGES.index) if starts else None
-            old = (self.params, self.n_motions, self.seed, dict(self._stages))
+            old = (self.params, self.n_motions, self.seed, dict(self._stages), self._coarse_memo)
             self.params, self.n_motions, self.seed = new_params, C, seed
             if start is None:
                 return self.result
@@ -368,7 +372,8 @@ class Pipeline:
                 # roll everything back, cached stage results included (also on Ctrl-C: a
                 # KeyboardInterrupt is no Exception, and the next update must not find the
                 # new settings beside the old result)
-                self.params, self.n_motions, self.seed, self._stages = old
+                (self.params, self.n_motions, self.seed, self._stages,
+                 self._coarse_memo) = old  # the memo of the multicut kept
                 raise
             return self.result
 

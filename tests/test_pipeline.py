@@ -558,3 +558,68 @@ def test_a_sweep_over_a_selection_field_keeps_few_polished_sets():
         assert sum(isinstance(k, tuple) and k[:1] == ("polished",) for k in memo) <= POLISHED_KEPT
     assert_same_result(pipe.update(coding_eps=6.0),
                        segment(seq, 2, LaavParams(coding_eps=6.0), seed=0))
+
+
+def test_a_lambda_move_reuses_the_coarse_stages_samples_and_shortlist(monkeypatch):
+    """λ enters the coarse stage only through exp(-λ d) and the unit of the joint merge's
+    epipolar cost: a λ update reuses the pairwise samples and the coding shortlist of the
+    present multicut (``merge_models(memo=...)``), and the result is a fresh run's, bit
+    for bit; a seed or radius change (a new multicut) computes them again."""
+    import laav.coarse as coarse_module
+
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+    calls = {"pairwise": 0, "shortlist": 0}
+    real_pw, real_sl = coarse_module._pairwise_distances, coarse_module.shortlist
+
+    def pw(*a, **k):
+        calls["pairwise"] += 1
+        return real_pw(*a, **k)
+
+    def sl(*a, **k):
+        calls["shortlist"] += 1
+        return real_sl(*a, **k)
+
+    monkeypatch.setattr(coarse_module, "_pairwise_distances", pw)
+    monkeypatch.setattr(coarse_module, "shortlist", sl)
+    pipe = Pipeline(seq, 3)
+    assert calls == {"pairwise": 1, "shortlist": 1}
+    for lam in (3.0, 0.7, 2.0):
+        before = dict(calls)
+        res = pipe.update(lam=lam)
+        assert calls == before, lam  # nothing computed again
+        fresh = segment(seq, 3, LaavParams(lam=lam), seed=0)
+        assert_same_result(res, fresh)
+        for f in ("pairwise_vote", "epipolar_distance"):
+            assert np.array_equal(getattr(res.coarse, f), getattr(fresh.coarse, f)), f
+        for f in ("fundamental", "points", "distance", "frames"):
+            assert np.array_equal(getattr(res.coarse.vote_samples, f),
+                                  getattr(fresh.coarse.vote_samples, f), equal_nan=f != "points"), f
+        assert res.coarse.shortlist.score.tolist() == fresh.coarse.shortlist.score.tolist()
+    assert calls == {"pairwise": 4, "shortlist": 4}  # the first run and the three fresh ones
+    pipe.update(seed=1)
+    assert calls == {"pairwise": 5, "shortlist": 5}  # a new multicut: computed again
+    res = pipe.update(lam=3.0)
+    assert calls == {"pairwise": 5, "shortlist": 5}
+    assert_same_result(res, segment(seq, 3, LaavParams(lam=3.0), seed=1))
+
+
+def test_an_interrupted_update_keeps_the_coarse_memo_of_the_multicut_kept(monkeypatch):
+    """A seed change stopped in the fine-tuning (after its own multicut and coarse stage
+    ran) rolls back to the old stages and their coarse memo: the next λ move is a fresh
+    run's, not one built on the abandoned multicut's samples."""
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+    pipe = Pipeline(seq, 3)
+    real = pipeline_module.random_voting
+
+    def stop(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline_module, "random_voting", stop)
+    with pytest.raises(KeyboardInterrupt):
+        pipe.update(seed=4)
+    monkeypatch.setattr(pipeline_module, "random_voting", real)
+    assert pipe.seed == 0
+    res = pipe.update(lam=3.0)
+    fresh = segment(seq, 3, LaavParams(lam=3.0), seed=0)
+    assert_same_result(res, fresh)
+    assert np.array_equal(res.coarse.pairwise_vote, fresh.coarse.pairwise_vote)
