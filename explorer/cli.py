@@ -417,7 +417,7 @@ def main(argv: list[str] | None = None) -> int:
 
     start = {"default": laav.LaavParams, "paper": laav.LaavParams.paper,
              "with-plain-rv": laav.LaavParams.with_plain_rv,
-             "own-chain": laav.LaavParams}[args.preset]()
+             "own-chain": laav.LaavParams.own_chain}[args.preset]()
     from .state import SEED_MAX
 
     if args.seed is not None and not 0 <= args.seed <= SEED_MAX:

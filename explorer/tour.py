@@ -90,8 +90,8 @@ TOUR: tuple[TourStep, ...] = (
         "features no atom took and can undo a wrong merge; by default the informed run's votes also "
         "weigh each point's distance to the motion's trajectory subspace, runs from starts that give "
         "a motion the atoms missed its own label go beside it, and the labelling of least coding "
-        "length + epipolar cost is kept (the paper: epipolar votes, the informed run alone); plain "
-        "Random Voting runs here only for the comparison.",
+        "length + epipolar cost is kept (the paper: epipolar votes, the informed run alone); on "
+        "complete tracks plain Random Voting runs here only for the comparison.",
         ("rv",)),
     TourStep(
         "5 · Result: one motion per point, and its error",

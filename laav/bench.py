@@ -157,7 +157,8 @@ def parse_param(text: str) -> tuple[str, object]:
 
 
 #: Named starting points of the parameters (``--preset``).
-PRESETS = {"default": LaavParams, "paper": LaavParams.paper, "with-plain-rv": LaavParams.with_plain_rv}
+PRESETS = {"default": LaavParams, "paper": LaavParams.paper, "with-plain-rv": LaavParams.with_plain_rv,
+           "own-chain": LaavParams.own_chain}
 
 
 def params_from_assignments(assignments: Iterable[str] | None, preset: str = "default") -> LaavParams:

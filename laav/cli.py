@@ -102,11 +102,12 @@ def build_parser() -> argparse.ArgumentParser:
     seg.add_argument("--out", "-o", metavar="CSV",
                      help="labels file, or folder to write it in (default: <sequence name>_labels.csv "
                           "in the current folder, the name reduced to letters, digits and _.+-)")
-    seg.add_argument("--preset", choices=("default", "paper", "with-plain-rv"), default="default",
+    seg.add_argument("--preset", choices=("default", "paper", "with-plain-rv", "own-chain"),
+                     default="default",
                      help="parameters to start from: default (ours), paper (every stage as the "
                           "LAAV paper writes it, LaavParams.paper()) or with-plain-rv (ours with "
-                          "plain RV beside LAAV's trial, LaavParams.with_plain_rv()); --param "
-                          "changes them")
+                          "plain RV beside LAAV's trial, LaavParams.with_plain_rv()); own-chain "
+                          "is the default's chain, LaavParams.own_chain(); --param changes them")
     seg.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help=_param_help())
     _add_max_points(seg)
@@ -138,9 +139,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="run on a Dask distributed cluster, e.g. tcp://10.0.0.5:8786")
     bench.add_argument("--out", "-o", default="bench-out", metavar="DIR",
                        help="output folder (default bench-out)")
-    bench.add_argument("--preset", choices=("default", "paper", "with-plain-rv"), default="default",
-                       help="parameters to start from: default (ours), paper (LaavParams.paper()) "
-                            "or with-plain-rv (LaavParams.with_plain_rv()); --param changes them")
+    bench.add_argument("--preset", choices=("default", "paper", "with-plain-rv", "own-chain"),
+                       default="default",
+                       help="parameters to start from: default (ours), paper (LaavParams.paper()), "
+                            "with-plain-rv (LaavParams.with_plain_rv()) or own-chain (the default's "
+                            "chain, LaavParams.own_chain()); --param changes them")
     bench.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                        help=_param_help())
     _add_max_points(bench)

@@ -533,8 +533,7 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         if hit is None:
             depi, samples = _pairwise_distances(points, table, model_atoms, pairs, jj, kk, S,
                                                 rng, n)
-            if memo is not None:
-                memo[key] = (depi, samples, rng.bit_generator.state)
+            _remember(memo, key, (depi, samples, rng.bit_generator.state))
         else:  # λ alone changed: the same samples, the generator where they left it
             depi, samples, after = hit
             rng.bit_generator.state = after
@@ -554,14 +553,14 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     pairwise = np.eye(n)
     pairwise[jj, kk] = pairwise[kk, jj] = vote
     if vis is None:
-        key = ("coding", params.coding_eps)
-        if memo is not None and key in memo:
-            stats, gain = memo[key]
-        else:
+        stats = None if memo is None else memo.get(("stats",))
+        if stats is None:
             stats = model_stats(points, fine_pts, n)
+            _remember(memo, ("stats",), stats)
+        gain = None if memo is None else memo.get(("gain", params.coding_eps))
+        if gain is None:
             gain = merge_cost(stats, params.coding_eps)
-            if memo is not None:
-                memo[key] = (stats, gain)
+            _remember(memo, ("gain", params.coding_eps), gain)
     else:  # the coding length needs whole trajectories (see the docstring)
         gain = np.full((n, n), np.nan)
         np.fill_diagonal(gain, 0.0)
@@ -631,6 +630,23 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     )
 
 
+#: Entries of each kind a :func:`merge_models` memo keeps (the most recent): a slider over
+#: ``coding_eps`` or ``coarse_samples`` would otherwise add one per value.
+MEMO_KEPT = 4
+
+
+def _remember(memo: dict | None, key: tuple, value) -> None:
+    """``memo[key] = value``, keeping the :data:`MEMO_KEPT` most recent entries of its kind
+    (``key[0]``)."""
+    if memo is None:
+        return
+    memo.pop(key, None)
+    memo[key] = value
+    same = [k for k in memo if k[0] == key[0]]
+    for k in same[:-MEMO_KEPT]:
+        del memo[k]
+
+
 def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> Shortlist | None:
     """The joint merge: the ``coarse_candidates`` partitions of least coding length whose
     motions hold 8 points or more (what one fundamental matrix needs), each scored by its
@@ -643,8 +659,7 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> S
     else:
         assign, coding = shortlist(stats, n_motions, params.coding_eps,
                                    params.coarse_candidates, min_count=8)
-        if memo is not None:
-            memo[key] = (assign, coding)
+        _remember(memo, key, (assign, coding))
     if assign.shape[0] == 0:
         return None
     cov = fine_pts >= 0

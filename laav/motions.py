@@ -59,14 +59,14 @@ MAX_ESTIMATE_POINTS = 1000
 def profile_params():
     """The LAAV settings the profile runs with when none are given: those its constants
     (:data:`STEP_WEIGHTS`, :data:`STEP_BIAS`) were fitted with, LAAV's own chain
-    (the defaults since 2026-12-02, LAAV's own chain: the joint coding-length merge,
-    subspace votes, LAAV's own trials). The count is right more often on its labellings
+    (:meth:`laav.LaavParams.own_chain`, the default since 2026-12-02: the joint
+    coding-length merge, subspace votes, LAAV's own trials). The count is right more often on its labellings
     (``docs/bench/motions.md``, 2026-12-01: 92.3 % of Hopkins155 held out with the coding
     length feature, 90.3 % without it, against 87.7 % with the settings used before, the
     epipolar merge on 2C fine models with plain RV beside LAAV's trial)."""
     from .params import LaavParams
 
-    return LaavParams()
+    return LaavParams.own_chain()
 
 
 @dataclass(frozen=True, eq=False)

@@ -316,9 +316,14 @@ class LaavParams:
 
     @classmethod
     def own_chain(cls, **changes) -> LaavParams:
-        """LAAV's own chain, the default since 2026-12-02 (``LaavParams(**changes)``; kept
-        so that code written against the preset runs unchanged)."""
-        return cls().replace(**changes)
+        """LAAV's own chain (a preset from 2026-11-30, the default since 2026-12-02): the
+        joint merge on 4C fine models (``coarse_merge="auto"``), subspace votes of weight 1
+        in LAAV's informed trials, LAAV's own candidates and no plain RV
+        (``rv_select="laav"``). Spelled out, so that it stays this chain (and
+        :func:`laav.motions.profile_params`, fitted on it, with it) if the default changes.
+        ``changes`` override fields as in :meth:`replace`."""
+        return cls(coarse_merge="auto", rv_subspace_weight=1.0,
+                   rv_select="laav").replace(**changes)
 
     def scaled(self, s: float) -> LaavParams:
         """The parameters for coordinates ``s`` times larger: lengths (:data:`PIXEL_PARAMS`)

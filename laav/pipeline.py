@@ -177,11 +177,14 @@ class Pipeline:
     settings, C and the seed), for instance a λ change that does not alter the merge,
     its previous result is reused (its timing is then only that of the check). The
     result is identical to a recomputation: the stage's generator depends only on the seed.
-    When the coarse labels do change, the default fine-tuning reruns LAAV's informed
-    trial only: plain Random Voting's runs beside it (and their polished candidates) do not
-    depend on the coarse labels and are kept for the last :data:`PLAIN_MEMOS` values of the
-    seed, C and the ``rv_*`` settings (``plain_memo`` of :func:`laav.random_voting`; labels
-    identical), so a step back to a seed shown before reruns only LAAV's own stages.
+    The coarse stage keeps what does not depend on λ for the present multicut (its pairwise
+    samples and coding shortlist: ``merge_models(memo=...)``), so a λ move reruns little.
+    With plain Random Voting beside LAAV's trial (:meth:`LaavParams.with_plain_rv`, and on
+    incomplete tracks) a rerun of the fine-tuning reruns LAAV's informed trial only: plain
+    RV's runs (and their polished candidates) do not depend on the coarse labels and are
+    kept for the last :data:`PLAIN_MEMOS` values of the seed, C and the ``rv_*`` settings
+    (``plain_memo`` of :func:`laav.random_voting`; labels identical), so a step back to a
+    seed shown before reruns only LAAV's own stages.
 
     Examples
     --------

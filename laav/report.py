@@ -318,10 +318,11 @@ def report_from_csv(path: str | os.PathLike) -> str:
     cv = _convergence(rows)
     lines += ["## Convergence of Random Voting (Fig. 3)", "",
               "Iterations of the voting stage per run, summed over every trial it ran "
-              "(LAAV: the fine-tuning from the atom labels and, with the default's model "
-              "selection (`rv_select`), the plain RV trials it is compared with; RV: all trials "
-              "from random starts), and the share of runs whose returned labelling did not "
-              "come from a converged trial.", "",
+              "(LAAV: its trials from the coarse labels, the informed one and, by default, "
+              "those from missing-motion starts; with `LaavParams.with_plain_rv()` also the "
+              "plain RV trials it is compared with; RV: all trials from random starts), and "
+              "the share of runs whose returned labelling did not come from a converged "
+              "trial.", "",
               "| Method | σ (px) | Runs | Median iterations | p90 iterations | Not converged (%) |",
               "|---|---:|---:|---:|---:|---:|"]
     for m in methods:

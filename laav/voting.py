@@ -12,21 +12,26 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
 * **Joint reassignment** (``rv_reassign``). Every point moves to the motion whose robust
   rank-4 trajectory subspace *and* fundamental matrices explain it best together
   (:func:`laav.refine.reassign_labels`).
-* **Model selection** (``rv_select="joint"``, the default; ``"subspace"`` before
-  2026-12-01). Voting can converge on, or end at, a wrong partition, and the epipolar fit
-  cannot tell (a static background and a translating object satisfy one fundamental
-  matrix). Candidate labellings are compared after refinement and reassignment by
-  :func:`joint_score` per point (lossy coding length + ``coarse_epipolar_weight`` x
-  epipolar cost; with ``"subspace"``, and on incomplete data, after refinement by
-  :func:`subspace_cost`) plus ``rv_select_agreement`` times their mean disagreement with
-  the other candidates. Plain RV with no converged trial chooses
-  among the consensus and its trials; LAAV's fine-tuning then also runs plain RV beside
-  the informed trial (two more runs when they disagree on more than 5 % of the points)
-  and chooses among all; on incomplete tracks LAAV's coarse labels themselves are a
-  candidate too (``rv_coarse_candidate``, :func:`_coarse_candidate`: Random Voting can
-  drift away from right coarse labels there). With ``rv_select="none"`` (:meth:`LaavParams.paper`) the
-  fine-tuning is the informed trial alone, converged or not, and plain RV ends with the
-  consensus when no trial converged.
+* **LAAV's own candidates** (``rv_select="laav"``, the default since 2026-12-02; no plain
+  RV on complete tracks): the informed trial and one trial per pair of coarse motions from
+  a *missing-motion start* (:func:`missing_motion_start`), run side by side, each refined
+  and reassigned, the one of least :func:`joint_score` kept (:func:`_own_candidates`).
+  On incomplete tracks it runs as ``"subspace"`` below.
+* **Model selection** (``rv_select="joint"``, :meth:`LaavParams.with_plain_rv`, the
+  default 2026-12-01 to 12-02; ``"subspace"`` before). Voting can converge on, or end at,
+  a wrong partition, and the epipolar fit cannot tell (a static background and a
+  translating object satisfy one fundamental matrix). Candidate labellings are compared
+  after refinement and reassignment by :func:`joint_score` per point (lossy coding length
+  + ``coarse_epipolar_weight`` x epipolar cost; with ``"subspace"``, and on incomplete
+  data, after refinement by :func:`subspace_cost`) plus ``rv_select_agreement`` times
+  their mean disagreement with the other candidates. Plain RV with no converged trial
+  chooses among the consensus and its trials; LAAV's fine-tuning then also runs plain RV
+  beside the informed trial (two more runs when they disagree on more than 5 % of the
+  points) and chooses among all; on incomplete tracks LAAV's coarse labels themselves are
+  a candidate too (``rv_coarse_candidate``, :func:`_coarse_candidate`: Random Voting can
+  drift away from right coarse labels there). With ``rv_select="none"``
+  (:meth:`LaavParams.paper`) the fine-tuning is the informed trial alone, converged or
+  not, and plain RV ends with the consensus when no trial converged.
 
 The refinement, reassignment and selection compare squared distances with a few absolute
 constants (:mod:`laav.refine`); they are in units of ``1 / rv_lambda`` (the squared
@@ -59,7 +64,12 @@ from .refine import (
     subspace_cost,
 )
 from .rv import consensus, consensus_seed, run_trials, vote
-from .subspace_votes import SUBSPACE_VOTES_MIN_START, for_informed_trial  # noqa: F401 (re-exported)
+from .subspace_votes import (  # noqa: F401 (SUBSPACE_VOTES_MIN_START re-exported)
+    SUBSPACE_VOTES_MIN_START,
+    SubspaceVotes,
+    for_informed_trial,
+    votes_with_subspace,
+)
 
 __all__ = ["Voting", "random_voting", "vote", "refine_labels", "motion_distances", "frame_pairs",
            "labelling_cost", "subspace_cost", "reassign_labels", "joint_score",
@@ -210,8 +220,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     n_motions : int
         C, the number of motions.
     params : LaavParams, optional
-        Uses the ``rv_*`` fields, and with ``rv_select="joint"`` (the default) also
-        ``coding_eps`` and ``coarse_epipolar_weight`` (:data:`SELECTION_FIELDS`). Defaults
+        Uses the ``rv_*`` fields, and with ``rv_select`` ``"laav"`` (the default) or
+        ``"joint"`` also ``coding_eps`` and ``coarse_epipolar_weight``
+        (:data:`SELECTION_FIELDS`). Defaults
         to ``LaavParams()``.
     seed : int or numpy.random.Generator
         Same seed, same labels.
@@ -444,7 +455,8 @@ def _first_trial(points, C, params, stream, labels0, votes0, known, masks, memo)
 def informed_preview(points: np.ndarray, n_motions: int, params: LaavParams,
                      rng: np.random.Generator, init_labels: np.ndarray,
                      plain_memo: dict | None = None) -> Voting | None:
-    """LAAV's own fine-tuning as the default's selection starts it, before plain Random
+    """LAAV's own fine-tuning as the selection with plain RV (``rv_select`` ``"joint"`` or
+    ``"subspace"``, :meth:`LaavParams.with_plain_rv`) starts it, before plain Random
     Voting runs: the informed trial from ``init_labels`` on the same random stream
     (``rng`` a generator in the state :func:`random_voting` would receive), refined and
     reassigned: the selection's candidate ``"informed"``, the labels returned whenever
@@ -654,7 +666,10 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
         vot = np.zeros((P, C))
         vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
         starts.append((f"missing motion ({g}+{h})", lab, vot, stream, known2))
-    extras = [for_informed_trial(points, params, known) for *_, known in starts]
+    uses = [votes_with_subspace(params, known) for *_, known in starts]
+    shared = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
+              if any(uses) else None)  # one for every trial that uses it: the same term
+    extras = [shared if u else None for u in uses]
     results = _informed_side_by_side(points, C, params, [s[1:4] for s in starts], extras)
     first, first_extra = results[0], extras[0]
     trials, entries, polished = list(results), [], {}
@@ -902,7 +917,8 @@ def _select(points, C, params, candidates, trials, initialised, polished=None, m
 
     Every candidate is refined (:func:`refine_labels`) and, when the score, the agreement
     term or its win needs it, jointly reassigned (:func:`reassign_labels`). The score is the
-    candidate's own cost (:meth:`_Polished.cost`: with ``rv_select="joint"``, the default,
+    candidate's own cost (:meth:`_Polished.cost`: with ``rv_select="joint"``
+    (:meth:`LaavParams.with_plain_rv`; plain RV alone also under the default ``"laav"``),
     :func:`joint_score` per point of the reassigned labelling; with ``"subspace"`` the
     refined labelling's :func:`subspace_cost`) plus ``rv_select_agreement`` times its mean
     disagreement (misclassification rate) with the other polished candidates, when there

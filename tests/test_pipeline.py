@@ -343,9 +343,9 @@ def test_update_gives_fresh_label_names_when_plain_rv_is_kept(change):
     plain candidate of the same partition as LAAV's own once lent it its names; measured on
     this scene before the fix)."""
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
-    pipe = Pipeline(seq, seq.n_motions)
+    pipe = Pipeline(seq, seq.n_motions, PLAIN)
     res = pipe.update(**change)
-    fresh = segment(seq, seq.n_motions, LaavParams(**change), seed=0)
+    fresh = segment(seq, seq.n_motions, PLAIN.replace(**change), seed=0)
     np.testing.assert_array_equal(res.labels, fresh.labels)
 
 
@@ -359,10 +359,11 @@ def test_selection_fields_outside_rv_reach_the_kept_fine_tuning(change):
     from laav.bench import add_pixel_noise
 
     seq = add_pixel_noise(scene(2, 2), 1.0, 0)
-    pipe = Pipeline(seq, 3, seed=0)
+    pipe = Pipeline(seq, 3, PLAIN, seed=0)  # the epipolar merge (the default's reads them)
     base = pipe.result
+    assert np.array_equal(pipe.update(**change).coarse.point_labels, base.coarse.point_labels)
     res = pipe.update(**change)
-    fresh = segment(seq, 3, LaavParams(**change), seed=0)
+    fresh = segment(seq, 3, PLAIN.replace(**change), seed=0)
     assert_same_result(res, fresh)
     common = set(base.voting.costs) & set(res.voting.costs)
     assert common and max(abs(base.voting.costs[k] - res.voting.costs[k]) for k in common) > 1e-3
@@ -551,13 +552,13 @@ def test_a_sweep_over_a_selection_field_keeps_few_polished_sets():
     from laav.voting import POLISHED_KEPT
 
     seq = scene(1, 1)
-    pipe = Pipeline(seq, 2, seed=0)
+    pipe = Pipeline(seq, 2, PLAIN, seed=0)
     for eps in (6.0, 7.0, 8.0, 9.0, 10.0, 11.0):
         pipe.update(coding_eps=eps)
     for memo in pipe._plain_memos.values():
         assert sum(isinstance(k, tuple) and k[:1] == ("polished",) for k in memo) <= POLISHED_KEPT
     assert_same_result(pipe.update(coding_eps=6.0),
-                       segment(seq, 2, LaavParams(coding_eps=6.0), seed=0))
+                       segment(seq, 2, PLAIN.replace(coding_eps=6.0), seed=0))
 
 
 def test_a_lambda_move_reuses_the_coarse_stages_samples_and_shortlist(monkeypatch):
