@@ -154,8 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "interface, open to the network; each tab's 3-D view uses another free port)")
     p.add_argument("--seed", type=int, default=None, help="seed of the random stages (default 0, or the "
                    "one in --params)")
-    p.add_argument("--preset", choices=("default", "paper", "with-plain-rv", "own-chain"),
-                   default="default",
+    p.add_argument("--preset", choices=tuple(laav.params.PRESETS), default="default",
                    help="parameters to start from: ours, LAAV's own chain (default; own-chain is "
                         "the same), the paper's stages (LaavParams.paper()) or ours with plain "
                         "RV beside LAAV's trial (LaavParams.with_plain_rv()); --params and "
@@ -415,9 +414,7 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(parser, f"--motions {C} exceeds the {seq.n_points} points of {seq.name}")
     from .state import Settings, parse_settings, settings_from_json
 
-    start = {"default": laav.LaavParams, "paper": laav.LaavParams.paper,
-             "with-plain-rv": laav.LaavParams.with_plain_rv,
-             "own-chain": laav.LaavParams.own_chain}[args.preset]()
+    start = laav.params.PRESETS[args.preset]()
     from .state import SEED_MAX
 
     if args.seed is not None and not 0 <= args.seed <= SEED_MAX:

@@ -57,6 +57,7 @@ from . import (
     segment,
 )
 from ._provenance import provenance
+from .params import PRESETS  # the named presets (``--preset``), also read here
 from .synthetic import BENCH_SPREAD, occlude, occlusion_rng
 
 __all__ = [
@@ -154,11 +155,6 @@ def parse_param(text: str) -> tuple[str, object]:
     elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
     return key, value
-
-
-#: Named starting points of the parameters (``--preset``).
-PRESETS = {"default": LaavParams, "paper": LaavParams.paper, "with-plain-rv": LaavParams.with_plain_rv,
-           "own-chain": LaavParams.own_chain}
 
 
 def params_from_assignments(assignments: Iterable[str] | None, preset: str = "default") -> LaavParams:

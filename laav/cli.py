@@ -29,6 +29,8 @@ import os
 import sys
 from pathlib import Path
 
+from .params import PRESETS
+
 __all__ = ["main", "build_parser", "add_track_arguments", "track_options", "TRACK_OPTIONS"]
 
 
@@ -102,8 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
     seg.add_argument("--out", "-o", metavar="CSV",
                      help="labels file, or folder to write it in (default: <sequence name>_labels.csv "
                           "in the current folder, the name reduced to letters, digits and _.+-)")
-    seg.add_argument("--preset", choices=("default", "paper", "with-plain-rv", "own-chain"),
-                     default="default",
+    seg.add_argument("--preset", choices=tuple(PRESETS), default="default",
                      help="parameters to start from: default (ours), paper (every stage as the "
                           "LAAV paper writes it, LaavParams.paper()) or with-plain-rv (ours with "
                           "plain RV beside LAAV's trial, LaavParams.with_plain_rv()); own-chain "
@@ -139,8 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="run on a Dask distributed cluster, e.g. tcp://10.0.0.5:8786")
     bench.add_argument("--out", "-o", default="bench-out", metavar="DIR",
                        help="output folder (default bench-out)")
-    bench.add_argument("--preset", choices=("default", "paper", "with-plain-rv", "own-chain"),
-                       default="default",
+    bench.add_argument("--preset", choices=tuple(PRESETS), default="default",
                        help="parameters to start from: default (ours), paper (LaavParams.paper()), "
                             "with-plain-rv (LaavParams.with_plain_rv()) or own-chain (the default's "
                             "chain, LaavParams.own_chain()); --param changes them")

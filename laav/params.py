@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LaavParams", "STAGE_PARAMS", "stages_affected", "PIXEL_PARAMS", "STRENGTH_PARAMS"]
+__all__ = ["LaavParams", "PRESETS", "STAGE_PARAMS", "stages_affected", "PIXEL_PARAMS", "STRENGTH_PARAMS"]
 
 #: Lengths in pixels: for coordinates ``s`` times pixels, multiply these by ``s`` ...
 PIXEL_PARAMS = ("r1", "r2", "affine_threshold", "edge_scale", "coding_eps")
@@ -501,6 +501,11 @@ def _check(value, kind: str, low, high):
 
 
 #: Which parameters each stage reads; a change reruns that stage and all after it.
+#: The named presets, as ``laav segment``, ``laav bench`` and ``laav-explore`` take them
+#: (``--preset NAME``): NAME -> a constructor of :class:`LaavParams`.
+PRESETS = {"default": LaavParams, "paper": LaavParams.paper,
+           "with-plain-rv": LaavParams.with_plain_rv, "own-chain": LaavParams.own_chain}
+
 STAGE_PARAMS: dict[str, frozenset] = {
     "atoms": frozenset({"r1", "r2", "atom_min_size", "affine_threshold", "ransac_hypotheses",
                         "atom_frames", "noise_adaptive"}),

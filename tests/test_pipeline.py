@@ -524,24 +524,28 @@ def test_an_update_switching_the_merge_counts_its_fine_models_as_a_fresh_run():
         assert res.multicut.n_models == params.n_fine(3) == segment(seq, 3, params).multicut.n_models
 
 
+def _interrupted_update(monkeypatch, pipe, where: str, **change) -> None:
+    """``pipe.update(**change)`` stopped by a KeyboardInterrupt from ``laav.pipeline``'s
+    ``where`` (a stage function); the function is put back after."""
+    real = getattr(pipeline_module, where)
+
+    def stop(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline_module, where, stop)
+    with pytest.raises(KeyboardInterrupt):
+        pipe.update(**change)
+    monkeypatch.setattr(pipeline_module, where, real)
+
+
 def test_ctrl_c_during_an_update_rolls_the_pipeline_back(monkeypatch):
     """A KeyboardInterrupt (no Exception) in a stage: the pipeline keeps its settings and
     result, and the next update is a fresh run's."""
-    import laav.pipeline as pipeline_module
-
     seq = scene(1, 1)
     pipe = Pipeline(seq, 2, seed=0)
     before = pipe.result
-    real = pipeline_module.merge_models
-
-    def interrupted(*a, **k):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(pipeline_module, "merge_models", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        pipe.update(seed=1)
+    _interrupted_update(monkeypatch, pipe, "merge_models", seed=1)
     assert pipe.seed == 0 and pipe.result is before and pipe.params == LaavParams()
-    monkeypatch.setattr(pipeline_module, "merge_models", real)
     assert_same_result(pipe.update(seed=1), segment(seq, 2, seed=1))
 
 
@@ -610,15 +614,7 @@ def test_an_interrupted_update_keeps_the_coarse_memo_of_the_multicut_kept(monkey
     run's, not one built on the abandoned multicut's samples."""
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
     pipe = Pipeline(seq, 3)
-    real = pipeline_module.random_voting
-
-    def stop(*a, **k):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(pipeline_module, "random_voting", stop)
-    with pytest.raises(KeyboardInterrupt):
-        pipe.update(seed=4)
-    monkeypatch.setattr(pipeline_module, "random_voting", real)
+    _interrupted_update(monkeypatch, pipe, "random_voting", seed=4)
     assert pipe.seed == 0
     res = pipe.update(lam=3.0)
     fresh = segment(seq, 3, LaavParams(lam=3.0), seed=0)
