@@ -53,8 +53,8 @@ class CoarseView:
         if method in ("coding", "joint"):
             # λ enters the joint merge as its epipolar cost's unit (2/λ px², see the text)
             lam = f", λ = {res.params.lam:g}" if method == "joint" else ""
-            self.fig_z.title.text = (f"Coding affinity, ε = {res.params.coding_eps:g} px{lam}: "
-                                     f"{len(factors)} models")
+            # (the model count is on the axes: with it the title overran the plot's width)
+            self.fig_z.title.text = f"Coding affinity, ε = {res.params.coding_eps:g} px{lam}"
             how = ("ours: " + ("the partition of least coding length decided"
                                if method == "coding" else
                                "of the partitions of least coding length, the one of least "
