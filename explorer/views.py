@@ -1000,6 +1000,9 @@ def rv_error_sources(seq: laav.Sequence, voting: laav.Voting | None) -> dict:
 def _rv_line(voting: laav.Voting | None, what: str) -> str:
     if voting is None:
         return f"**{what}:** computing…"
+    if np.shape(voting.votes)[-1:] == (1,) and voting.n_iterations == 0:
+        # C = 1: no trial ran (it said "0 iterations, converged" before)
+        return f"**{what}:** C = 1, every point in the one motion: nothing to vote on, no trial ran."
     per = [int(t) for t in voting.trial_iterations]
     own = voting.informed_changed is not None  # LAAV: describe its own informed trial
     done = voting.informed_converged if own else voting.converged

@@ -472,3 +472,16 @@ def test_result_notes_say_what_laav_only_warns_of():
 
 def test_counts_read_as_english():
     assert (V.counted(1, "motion"), V.counted(2, "motion")) == ("1 motion", "2 motions")
+
+
+def test_rv_summary_at_one_motion_says_no_trial_ran():
+    """C = 1: no voting trial runs; the card said "0 iterations, converged (no label
+    changed for the patience window)" for LAAV's and plain RV's run alike."""
+    seq = laav.synthetic.make_sequence(n_objects=1, n_frames=10, n_points=120, rng=0)
+    res = laav.segment(seq, 1, seed=0)
+    plain = laav.random_voting(seq, 1, seed=0)
+    text = V.rv_summary(res.voting, plain)
+    assert text.count("C = 1, every point in the one motion: nothing to vote on") == 2
+    assert "converged" not in text
+    two = V.rv_summary(laav.segment(seq, 2, seed=0).voting, None)
+    assert "nothing to vote on" not in two and "iterations" in two
