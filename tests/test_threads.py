@@ -45,13 +45,16 @@ def test_segment_and_random_voting_run_single_threaded(two_threads, monkeypatch)
     seq = make_sequence(n_objects=1, n_frames=10, n_points=100, rng=0)
     seen: list = []
     _spy(monkeypatch, pipeline_module, "merge_models", seen)  # inside Pipeline._run
-    _spy(monkeypatch, voting_module, "run_trials", seen)  # inside random_voting
+    _spy(monkeypatch, voting_module, "run_trials", seen)  # inside random_voting (plain RV)
+    _spy(monkeypatch, voting_module, "_informed_side_by_side", seen)  # LAAV's own trials
     segment(seq, 2, FAST)
     pipe = laav.Pipeline(seq, 2, FAST)
     assert _threads() == two_threads
     pipe.update(lam=3.0)
     random_voting(seq, 2, FAST)
-    assert len(seen) >= 6  # merge_models 2x, run_trials at least once per voting call
+    # merge_models 3x (segment, Pipeline, the λ update); LAAV's own trials 2x (the λ update
+    # keeps the fine-tuning when the coarse labels stay); plain RV's trials once
+    assert len(seen) >= 6
     assert all(set(s.values()) == {1} for s in seen), seen
     assert _threads() == two_threads  # restored after every call
 
