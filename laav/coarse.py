@@ -553,14 +553,9 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     pairwise = np.eye(n)
     pairwise[jj, kk] = pairwise[kk, jj] = vote
     if vis is None:
-        stats = None if memo is None else memo.get(("stats",))
-        if stats is None:
-            stats = model_stats(points, fine_pts, n)
-            _remember(memo, ("stats",), stats)
-        gain = None if memo is None else memo.get(("gain", params.coding_eps))
-        if gain is None:
-            gain = merge_cost(stats, params.coding_eps)
-            _remember(memo, ("gain", params.coding_eps), gain)
+        stats = _cached(memo, ("stats",), lambda: model_stats(points, fine_pts, n))
+        gain = _cached(memo, ("gain", params.coding_eps),
+                       lambda: merge_cost(stats, params.coding_eps))
     else:  # the coding length needs whole trajectories (see the docstring)
         gain = np.full((n, n), np.nan)
         np.fill_diagonal(gain, 0.0)
@@ -647,19 +642,25 @@ def _remember(memo: dict | None, key: tuple, value) -> None:
         del memo[k]
 
 
+def _cached(memo: dict | None, key: tuple, compute):
+    """``memo[key]``, or ``compute()`` remembered there (:func:`_remember`)."""
+    if memo is not None and key in memo:
+        return memo[key]
+    value = compute()
+    _remember(memo, key, value)
+    return value
+
+
 def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> Shortlist | None:
     """The joint merge: the ``coarse_candidates`` partitions of least coding length whose
     motions hold 8 points or more (what one fundamental matrix needs), each scored by its
     coding length plus ``coarse_epipolar_weight`` times its epipolar cost; None when no
     partition gives every motion 8 points. ``memo``: see :func:`merge_models` (the
     shortlist does not depend on ``lam``)."""
-    key = ("shortlist", n_motions, params.coding_eps, params.coarse_candidates)
-    if memo is not None and key in memo:
-        assign, coding = memo[key]
-    else:
-        assign, coding = shortlist(stats, n_motions, params.coding_eps,
-                                   params.coarse_candidates, min_count=8)
-        _remember(memo, key, (assign, coding))
+    assign, coding = _cached(
+        memo, ("shortlist", n_motions, params.coding_eps, params.coarse_candidates),
+        lambda: shortlist(stats, n_motions, params.coding_eps, params.coarse_candidates,
+                          min_count=8))
     if assign.shape[0] == 0:
         return None
     cov = fine_pts >= 0

@@ -667,11 +667,10 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
         vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
         starts.append((f"missing motion ({g}+{h})", lab, vot, stream, known2))
     uses = [votes_with_subspace(params, known) for *_, known in starts]
-    shared = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
-              if any(uses) else None)  # one for every trial that uses it: the same term
-    extras = [shared if u else None for u in uses]
-    results = _informed_side_by_side(points, C, params, [s[1:4] for s in starts], extras)
-    first, first_extra = results[0], extras[0]
+    extra = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
+             if any(uses) else None)  # one for every trial that uses it: the same term
+    results = _informed_side_by_side(points, params, [s[1:4] for s in starts], extra, uses)
+    first, first_extra = results[0], extra if uses[0] else None
     trials, entries, polished = list(results), [], {}
     for (name, *_), res in zip(starts, results):
         key = res[0].tobytes()  # trials that end on the same labels share their polish
@@ -687,28 +686,26 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
                                   costs=costs, score="joint-sum"), first, first_extra)
 
 
-def _informed_side_by_side(points, C, params, starts, extras) -> list:
+def _informed_side_by_side(points, params, starts, extra, uses) -> list:
     """LAAV's informed trials from several ``starts`` ((labels0, votes0, generator) each),
     ``rv_batch`` side by side as :func:`laav.rv.run_trials` runs trials: one batched numpy
     call per iteration, each trial on its own generator and convergence test, so the
     results (in :func:`laav.rv.run_trials`' tuple form, in ``starts`` order) are those of
-    running them one after another. ``extras`` (one per start): the subspace votes of
-    :func:`for_informed_trial` or None; the trials of each kind share a batch."""
+    running them one after another. ``extra``: the subspace votes, for the starts whose
+    ``uses`` (bool each) is true; the trials of each kind share a batch."""
     from ._interrupt import check as check_interrupt
     from .rv import _step, _Trial
 
     trials = [_Trial(lab.copy(), vot.copy(), False, "informed", stream)
               for lab, vot, stream in starts]
-    kinds = [e is None for e in extras]
-    for kind in dict.fromkeys(kinds):
-        pending = [t for t, k in zip(trials, kinds) if k == kind]
-        extra = extras[kinds.index(kind)]  # every start's is the same term (or None)
+    for with_extra in dict.fromkeys(uses):
+        pending = [t for t, u in zip(trials, uses) if u == with_extra]
         active: list = []
         while pending or active:
             check_interrupt()  # a caller's stop request, once per iteration
             while len(active) < params.rv_batch and pending:
                 active.append(pending.pop(0))
-            _step(points, active, params, None, extra)
+            _step(points, active, params, None, extra if with_extra else None)
             active = [t for t in active if not t.done]
     return [t.result() for t in trials]
 
