@@ -69,8 +69,9 @@ class SubspaceVotes:
         """
         X = np.moveaxis(self.W[:, idx], 0, -2)  # (..., C, 2F, m)
         U = np.linalg.svd(X, full_matrices=False)[0][..., :self.RANK]  # (..., C, 2F, 4)
-        proj = np.einsum("...dk,dp->...kp", U, self.W)  # (..., C, 4, P)
-        inside = np.einsum("...kp,...kp->...p", proj, proj)
+        # a matrix product, not einsum: the same sums, several times faster here
+        proj = np.swapaxes(U, -1, -2) @ self.W  # (..., C, 4, P)
+        inside = np.add.reduce(proj * proj, axis=-2)
         return np.maximum(self.norm2 - inside, 0.0) / self.n_frames
 
     def __call__(self, labels: np.ndarray, votes: np.ndarray, C: int, rng) -> np.ndarray:
