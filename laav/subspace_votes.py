@@ -68,7 +68,12 @@ class SubspaceVotes:
         (..., C, P).
         """
         X = np.moveaxis(self.W[:, idx], 0, -2)  # (..., C, 2F, m)
-        U = np.linalg.svd(X, full_matrices=False)[0][..., :self.RANK]  # (..., C, 2F, 4)
+        # the leading left singular vectors from the m x m Gram matrix (m = the sample, 16
+        # by default, against 2F rows): its top eigenvectors V are X's leading right
+        # singular vectors, X V spans the left ones, orthonormalised by QR (also when the
+        # sample spans fewer than RANK dimensions); about twice as fast as X's SVD
+        _, V = np.linalg.eigh(np.swapaxes(X, -1, -2) @ X)
+        U = np.linalg.qr(X @ V[..., :, -self.RANK:])[0]  # (..., C, 2F, 4)
         # a matrix product, not einsum: the same sums, several times faster here
         proj = np.swapaxes(U, -1, -2) @ self.W  # (..., C, 4, P)
         inside = np.add.reduce(proj * proj, axis=-2)
