@@ -45,13 +45,10 @@ __all__ = ["vote", "run_trials", "consensus", "consensus_seed", "RESET_AT"]
 RESET_AT = 15
 
 
-def _sample_groups(labels, votes, C, m, rng, avail=None):
-    """Indices (..., C, m) of the points each group fits its fundamental matrix to.
-
-    ``labels`` (..., P) and ``votes`` (..., P, C) may carry leading batch axes (trials).
-    ``avail`` (..., P) bool (missing data): only these points are drawn, and a group with
-    fewer than ``m`` of them samples from all available points (there must be ``m``).
-    """
+def _group_weights(labels, votes, C, avail=None):
+    """The sampling weights (..., C, P) of :func:`_sample_groups` before its small-group
+    rule, and each group's member count (..., C): one voting step's epipolar and subspace
+    samples share them."""
     member = labels[..., None, :] == np.arange(C)[:, None]  # (..., C, P)
     if avail is not None:
         member = member & avail[..., None, :]
@@ -69,8 +66,19 @@ def _sample_groups(labels, votes, C, m, rng, avail=None):
     np.maximum(w, 0.0, out=w)
     w /= w.max(axis=-1, keepdims=True) + 1e-12
     w += 0.05  # the floor keeps every member drawable
-    w = np.where(member, w, 0.0)
-    small = member.sum(axis=-1) < m
+    return np.where(member, w, 0.0), member.sum(axis=-1)
+
+
+def _sample_groups(labels, votes, C, m, rng, avail=None, weights=None):
+    """Indices (..., C, m) of the points each group fits its fundamental matrix to.
+
+    ``labels`` (..., P) and ``votes`` (..., P, C) may carry leading batch axes (trials).
+    ``avail`` (..., P) bool (missing data): only these points are drawn, and a group with
+    fewer than ``m`` of them samples from all available points (there must be ``m``).
+    ``weights``: :func:`_group_weights` of the same arguments, when already computed.
+    """
+    w, count = _group_weights(labels, votes, C, avail) if weights is None else weights
+    small = count < m
     if small.any():
         w = np.where(small[..., None], 1.0 if avail is None else avail[..., None, :] * 1.0, w)
     # weighted sampling without replacement (Efraimidis-Spirakis): the m largest keys
@@ -109,9 +117,11 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
         everywhere (hidden entries filled, e.g. with 0) and at least ``m`` points must be
         visible in both frames.
     extra : callable, optional
-        Not in the RV paper: ``extra(labels, votes, C, rng)`` returns a term (..., C, P)
-        added to the Sampson distances, drawing after the epipolar sample from the same
-        generator(s) (LAAV's subspace votes, :class:`laav.subspace_votes.SubspaceVotes`).
+        Not in the RV paper: ``extra(labels, votes, C, rng, weights)`` returns a term
+        (..., C, P) added to the Sampson distances, drawing after the epipolar sample from
+        the same generator(s) (LAAV's subspace votes,
+        :class:`laav.subspace_votes.SubspaceVotes`); ``weights`` are the step's sampling
+        weights (:func:`_group_weights`), for a sample of its own.
 
     Returns
     -------
@@ -126,7 +136,8 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
         avail = visible[pair[..., 0]] & visible[pair[..., 1]]  # (P,) or (B, P)
         if pair.ndim == 1 and labels.ndim > 1:
             avail = np.broadcast_to(avail, labels.shape)
-    idx = _sample_groups(labels, votes, C, m, rng, avail)  # (..., C, m)
+    weights = _group_weights(labels, votes, C, avail)
+    idx = _sample_groups(labels, votes, C, m, rng, avail, weights)  # (..., C, m)
     x1 = points[pair[..., 0]]  # (P, 2), or (B, P, 2) with a pair per trial
     x2 = points[pair[..., 1]]
     if pair.ndim == 1:
@@ -137,7 +148,7 @@ def vote(points: np.ndarray, labels: np.ndarray, votes: np.ndarray, pair, lam: f
         x1, x2 = x1[:, None], x2[:, None]
     d = sampson_distance(F, x1, x2)  # (..., C, P)
     if extra is not None:
-        d += extra(labels, votes, C, rng)
+        d += extra(labels, votes, C, rng, weights)
     v = np.exp(-lam * d)
     other = 1.0 - v
     total_other = np.add.reduce(other, axis=-2, keepdims=True)  # (..., 1, P)

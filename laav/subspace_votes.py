@@ -79,11 +79,13 @@ class SubspaceVotes:
         inside = np.add.reduce(proj * proj, axis=-2)
         return np.maximum(self.norm2 - inside, 0.0) / self.n_frames
 
-    def __call__(self, labels: np.ndarray, votes: np.ndarray, C: int, rng) -> np.ndarray:
+    def __call__(self, labels: np.ndarray, votes: np.ndarray, C: int, rng,
+                 weights=None) -> np.ndarray:
         """The term added to the Sampson distances of one voting step (the ``extra`` of
         :func:`laav.rv.vote`): each group's subspace fitted to a second sample of it,
-        drawn after the epipolar one from the same generator(s); (..., C, P)."""
-        idx = _sample_groups(labels, votes, C, self.sample, rng)
+        drawn after the epipolar one from the same generator(s); (..., C, P).
+        ``weights``: the step's sampling weights (``laav.rv._group_weights``), if known."""
+        idx = _sample_groups(labels, votes, C, self.sample, rng, weights=weights)
         return self.weight * self.distances(idx)
 
 
