@@ -668,10 +668,17 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> S
     unit2 = LaavParams.lam / params.lam  # the Sampson distance's unit: 1 px^2 at the default
     pairs = frame_pairs(points.shape[0], _JOINT_PAIRS)  # deterministic: no draw from rng
     epi = np.empty(assign.shape[0])
+    rows: dict = {}  # a motion's distances, by its fine models: candidates share motions
     for i, a in enumerate(assign):
         lab = a[fine]
-        D = motion_distances(pts, lab, n_motions, pairs, unit2)
-        epi[i] = np.log1p(D[lab, np.arange(lab.size)] / unit2).sum()
+        own = np.empty(lab.size)
+        for g in range(n_motions):
+            key = (a == g).tobytes()
+            mem = lab == g
+            if key not in rows:  # the row motion_distances gives it (its fit sees only it)
+                rows[key] = motion_distances(pts, np.where(mem, 0, 1), 1, pairs, unit2)[0]
+            own[mem] = rows[key][mem]
+        epi[i] = np.log1p(own / unit2).sum()
     score = coding + params.coarse_epipolar_weight * epi
     return Shortlist(assign, coding, epi, score, int(np.argmin(score)))
 
