@@ -69,7 +69,10 @@ class ModelStats:
     def union(self, members: np.ndarray) -> tuple:
         """(count, total, scatter) of the groups ``members`` (G, n) of 0/1 weights."""
         m = np.asarray(members, dtype=np.float64)
-        return m @ self.count, m @ self.total, np.einsum("gm,mij->gij", m, self.scatter)
+        K = self.scatter.shape[-1]
+        # a matrix product over the flattened scatters: 4x faster than the same einsum
+        return (m @ self.count, m @ self.total,
+                (m @ self.scatter.reshape(self.n_models, K * K)).reshape(-1, K, K))
 
 
 def model_stats(points: np.ndarray, fine_labels: np.ndarray, n_models: int,
@@ -106,8 +109,11 @@ def _log_det_1p(S: np.ndarray) -> np.ndarray:
     than the eigenvalues, which cost 60 ms a run for the 4,095 groups of 12 fine models);
     where that fails (``S`` not numerically positive semi-definite), by the eigenvalues
     clipped at 0."""
+    K = S.shape[-1]
+    IS = S.copy()
+    IS.reshape(S.shape[:-2] + (K * K,))[..., ::K + 1] += 1.0  # I + S
     try:
-        L = np.linalg.cholesky(S + np.eye(S.shape[-1]))
+        L = np.linalg.cholesky(IS)
     except np.linalg.LinAlgError:
         return np.log1p(np.clip(np.linalg.eigvalsh(S), 0.0, None)).sum(-1)
     return 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
@@ -133,9 +139,12 @@ def coding_lengths(count, total, scatter, dim: int, eps: float) -> np.ndarray:
     """
     n = np.maximum(np.asarray(count, dtype=np.float64), 1.0)
     mu = total / n[:, None]
-    cov = scatter / n[:, None, None] - mu[:, :, None] * mu[:, None, :]
     e2 = float(eps) ** 2
-    L = ((n + dim) / 2.0 * _log_det_1p(dim / e2 * cov)
+    a = dim / e2
+    # a cov = a (scatter / n - mu mu^T), in place (the groups' K x K arrays are large)
+    S = scatter * (a / n)[:, None, None]
+    S -= a * (mu[:, :, None] * mu[:, None, :])
+    L = ((n + dim) / 2.0 * _log_det_1p(S)
          + n / 2.0 * np.log1p((mu ** 2).sum(1) / e2))
     return np.where(np.asarray(count) > 0, L, 0.0)
 
@@ -211,9 +220,18 @@ def _every_partition(stats: ModelStats, C: int, eps: float) -> tuple:
     cost = np.concatenate([coding_lengths(*stats.union(bits[i:i + 512]), stats.dim, eps)
                            for i in range(0, bits.shape[0], 512)])
     count = bits @ stats.count
-    A = _assignments(n, C)
-    groups = np.stack([(A == c).astype(np.int64) @ (1 << np.arange(n)) for c in range(C)], axis=1)
+    A, groups = _assignments(n, C), _group_codes(n, C)
     return A, cost[groups - 1].sum(1), count[groups - 1]
+
+
+@functools.lru_cache(maxsize=32)
+def _group_codes(n: int, C: int) -> np.ndarray:
+    """For every partition of :func:`_assignments`, each group's models as a bit mask
+    (the index + 1 of its subset in :func:`_every_partition`), (A, C), read-only."""
+    A = _assignments(n, C)
+    codes = np.stack([(A == c).astype(np.int64) @ (1 << np.arange(n)) for c in range(C)], axis=1)
+    codes.flags.writeable = False
+    return codes
 
 
 def best_partition(stats: ModelStats, n_groups: int, eps: float) -> tuple[np.ndarray, float]:
@@ -306,5 +324,9 @@ def shortlist(stats: ModelStats, n_groups: int, eps: float, n_best: int,
         tot = np.array([_total(stats, a, C, eps) for a in A])
         size = np.stack([(A == c) @ stats.count for c in range(C)], axis=1)
     ok = np.flatnonzero(size.min(axis=1) >= min_count)
-    order = ok[np.argsort(tot[ok], kind="stable")][:n_best]
+    t = tot[ok]
+    if t.size > n_best:  # only those up to the n_best-th least length need sorting
+        keep = t <= np.partition(t, n_best - 1)[n_best - 1]
+        ok, t = ok[keep], t[keep]
+    order = ok[np.argsort(t, kind="stable")][:n_best]  # ties: in enumeration order
     return np.array(A[order], dtype=np.int64).reshape(-1, n), tot[order]
