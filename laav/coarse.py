@@ -38,8 +38,8 @@ from .params import LaavParams
 from .refine import motion_distances
 from .voting import frame_pairs
 
-__all__ = ["Coarse", "Shortlist", "VoteSamples", "merge_models", "point_labels_from_atoms", "pooled_voting",
-           "voting_features"]
+__all__ = ["Coarse", "PairwiseVotes", "Shortlist", "VoteSamples", "merge_models",
+           "point_labels_from_atoms", "pooled_voting", "voting_features"]
 
 _PER_ATOM = 6  # features drawn from each atom for one fit
 _POOLED_ALPHA = 0.9  # forgetting factor of pooled voting
@@ -115,7 +115,8 @@ class Coarse:
     affinity : ndarray of shape (n_fine, n_fine)
         The affinity Z that spectral clustering split.
     epipolar_distance : ndarray of shape (n_fine, n_fine)
-        Mean epipolar distance ``d`` of each model pair (px^2), 0 on the diagonal.
+        Mean epipolar distance ``d`` of each model pair (px^2), 0 on the diagonal
+        (``pairwise.distance``).
     motion_distance : ndarray of shape (n_fine, n_fine)
         Motion difference of each model pair.
     atom_labels : ndarray of shape (N,), int64
@@ -137,21 +138,25 @@ class Coarse:
         (:func:`laav.coding.merge_cost`; computed in both methods, for comparison).
     coding_length : float
         Total coding length of the chosen partition (nats); NaN with the epipolar merge.
-    vote_samples : VoteSamples or None
-        One typical sample of every pair's epipolar vote (what the explorer draws).
+    vote_samples : VoteSamples
+        One typical sample of every pair's epipolar vote (what the explorer draws;
+        ``pairwise.samples``).
     shortlist : Shortlist or None
         ``method="joint"``: the partitions compared and their scores.
     pairwise_vote, coassociation : ndarray of shape (n_fine, n_fine) or None
         The two terms of the epipolar merge's Z, apart: the paper's pairwise vote (mean of
-        ``exp(-lam d)`` over the samples) and the co-association of the pooled-voting
-        trials (identity when pooled voting does not run). ``affinity`` is
+        ``exp(-lam d)`` over the samples, ``pairwise.vote``) and the co-association of the
+        pooled-voting trials (identity when pooled voting does not run). ``affinity`` is
         ``(1 - w) coassociation + w pairwise_vote`` times the motion term, w =
         ``pairwise_weight`` (1 without pooled voting).
+    pairwise : PairwiseVotes
+        The paper's pairwise votes. With the joint or coding merge (which do not use
+        them) they are fitted when first read: ``epipolar_distance``, ``pairwise_vote``
+        and ``vote_samples`` read them.
     """
 
     fine_to_coarse: np.ndarray
     affinity: np.ndarray
-    epipolar_distance: np.ndarray
     motion_distance: np.ndarray
     atom_labels: np.ndarray
     fine_point_labels: np.ndarray
@@ -161,10 +166,24 @@ class Coarse:
     method: str = "epipolar"
     merge_cost: np.ndarray | None = None
     coding_length: float = float("nan")
-    vote_samples: VoteSamples | None = None
-    pairwise_vote: np.ndarray | None = None
     coassociation: np.ndarray | None = None
     shortlist: Shortlist | None = None
+    pairwise: PairwiseVotes | None = None
+
+    @property
+    def epipolar_distance(self) -> np.ndarray:
+        """``pairwise.distance``: the mean epipolar distance ``d`` of each model pair (px^2)."""
+        return self.pairwise.distance
+
+    @property
+    def pairwise_vote(self) -> np.ndarray:
+        """``pairwise.vote``: the paper's pairwise vote of each model pair."""
+        return self.pairwise.vote
+
+    @property
+    def vote_samples(self) -> VoteSamples:
+        """``pairwise.samples``: one typical sample of every pair's epipolar vote."""
+        return self.pairwise.samples
 
     def pair_fundamental(self, points: np.ndarray, j: int, k: int) -> np.ndarray:
         """F fitted (normalised 8-point) on every feature of fine models ``j`` and ``k``
@@ -510,10 +529,10 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
                       stacklevel=user_stacklevel())
     if n == 0:
         e = np.zeros((0, 0))
-        return Coarse(np.zeros(0, np.int64), e, e, e, np.zeros(0, np.int64), fine_pts,
-                      fine_pts.copy(), pairs, widest, method, e,
-                      vote_samples=VoteSamples.empty(0, 4 * _PER_ATOM), pairwise_vote=e,
-                      coassociation=e)
+        return Coarse(np.zeros(0, np.int64), e, e, np.zeros(0, np.int64), fine_pts,
+                      fine_pts.copy(), pairs, widest, method, e, coassociation=e,
+                      pairwise=PairwiseVotes.computed(0, np.zeros(0, np.int64), np.zeros(0, np.int64),
+                                                      e, e, VoteSamples.empty(0, 4 * _PER_ATOM)))
 
     model_atoms = [np.flatnonzero(multicut.atom_labels == j) for j in range(n)]
     groups = [np.flatnonzero(fine_pts == j) for j in range(n)]
@@ -522,27 +541,24 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
                       for m in atoms.members])  # (N, _PER_ATOM)
     jj, kk = np.triu_indices(n, 1)
     S = params.coarse_samples
-    D = np.zeros((n, n))
     if jj.size and vis is not None:
         vote, dist, samples = _pairwise_votes_masked(points, vis, atoms, model_atoms, pairs, jj,
                                                      kk, S, params.lam, rng, n)
-        D[jj, kk] = D[kk, jj] = dist
+        votes = PairwiseVotes.computed(n, jj, kk, vote, dist, samples)
     elif jj.size:
         key = ("pairwise", S, repr(rng.bit_generator.state))  # the draws to come: the same
         hit = None if memo is None else memo.get(key)
-        if hit is None:
-            depi, samples = _pairwise_distances(points, table, model_atoms, pairs, jj, kk, S,
-                                                rng, n)
-            _remember(memo, key, (depi, samples, rng.bit_generator.state))
+        if hit is None:  # drawn now, fitted when read (never, by the joint merge alone)
+            fits = _PairwiseFits(points, pairs, _pairwise_draws(table, model_atoms, pairs.shape[0],
+                                                                S, rng, jj, kk), jj, kk, n)
+            _remember(memo, key, (fits, rng.bit_generator.state))
         else:  # λ alone changed: the same samples, the generator where they left it
-            depi, samples, after = hit
+            fits, after = hit
             rng.bit_generator.state = after
-        vote = np.exp(-params.lam * depi).mean(axis=(1, 2))
-        dist = depi.mean(axis=(1, 2))
-        D[jj, kk] = D[kk, jj] = dist
+        votes = PairwiseVotes(n, params.lam, fits, jj, kk)
     else:
-        vote = np.zeros(0)
-        samples = VoteSamples.empty(n, 4 * _PER_ATOM)
+        votes = PairwiseVotes.computed(n, jj, kk, np.zeros(0), np.zeros(0),
+                                       VoteSamples.empty(n, 4 * _PER_ATOM))
     floor = 1e-3 * np.sqrt(LaavParams.lam / params.lam)  # 1e-3 px at the default lam
     if params.motion_weight <= 0:
         Mdist = np.zeros((n, n))
@@ -550,8 +566,6 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         Mdist = _motion_distance(points, groups, floor)
     else:
         Mdist = _motion_distance_masked(points, vis, groups, floor)
-    pairwise = np.eye(n)
-    pairwise[jj, kk] = pairwise[kk, jj] = vote
     if vis is None:
         stats = _cached(memo, ("stats",), lambda: model_stats(points, fine_pts, n))
         gain = _cached(memo, ("gain", params.coding_eps),
@@ -574,14 +588,16 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         coassoc = (assign[:, :, None] == assign[:, None, :]).mean(axis=0)
     else:
         coassoc = np.eye(n)
-    w = params.pairwise_weight if params.pooled_trials > 0 else 1.0
-    if vis is not None and not pooled:
-        w = 1.0
-    Z = (1.0 - w) * coassoc + w * pairwise
-    if vis is not None:  # no pairwise sample: the co-association alone (0 without it)
-        Z = np.where(np.isnan(pairwise), coassoc if pooled else 0.0, Z)
-    Z = Z * np.exp(-params.motion_weight * Mdist)
-    np.fill_diagonal(Z, 1.0)
+    if not coding:  # the epipolar merge's Z (the coding merges build their own below)
+        w = params.pairwise_weight if params.pooled_trials > 0 else 1.0
+        if vis is not None and not pooled:
+            w = 1.0
+        pairwise = votes.vote
+        Z = (1.0 - w) * coassoc + w * pairwise
+        if vis is not None:  # no pairwise sample: the co-association alone (0 without it)
+            Z = np.where(np.isnan(pairwise), coassoc if pooled else 0.0, Z)
+        Z = Z * np.exp(-params.motion_weight * Mdist)
+        np.fill_diagonal(Z, 1.0)
 
     length = float("nan")
     listed = None
@@ -608,7 +624,6 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     return Coarse(
         fine_to_coarse=f2c,
         affinity=Z,
-        epipolar_distance=D,
         motion_distance=Mdist,
         atom_labels=atom_coarse,
         fine_point_labels=fine_pts,
@@ -618,10 +633,9 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         method=method,
         merge_cost=gain,
         coding_length=length,
-        vote_samples=samples,
-        pairwise_vote=pairwise,
         coassociation=coassoc,
         shortlist=listed,
+        pairwise=votes,
     )
 
 
@@ -705,34 +719,117 @@ def _sample_fits(points, pairs, idx):
     return Fm, np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))
 
 
-def _pairwise_distances(points, table, model_atoms, pairs, jj, kk, S, rng, n):
-    """The samples of the paper's pairwise votes on complete tracks: for every model pair
-    (jj, kk) and frame pair, S draws of 2 + 2 atoms (``table``: ``_PER_ATOM`` features
-    each), one fundamental matrix each, the larger of the two models' mean Sampson
-    distances. Returns (distances d (n_pairs, K, S), the median samples); a pair's vote is
-    the mean of ``exp(-lam d)``. Model pairs are fitted a batch at a time
-    (:data:`_PAIRWISE_BATCH` samples); each pair's atoms are drawn from ``rng`` in pair
-    order either way."""
-    K = pairs.shape[0]
+def _pairwise_draws(table, model_atoms, K, S, rng, jj, kk) -> list:
+    """The draws of the paper's pairwise votes on complete tracks: for every model pair
+    (jj, kk), frame pair and draw, 2 + 2 atoms (``table``: ``_PER_ATOM`` features each),
+    in pair order from ``rng``. Returns their features, a list of (batch, K, S, 4 m)
+    arrays of whole model pairs (:data:`_PAIRWISE_BATCH` samples a batch)."""
     per = max(1, _PAIRWISE_BATCH // (K * S))  # model pairs a batch
-    depis = []
-    mids = []  # per batch: (frame pair index, fundamental matrix, features) of each median
+    batches = []
     for lo in range(0, jj.size, per):
         sel = slice(lo, min(lo + per, jj.size))
         pick = np.empty((sel.stop - lo, K, S, 4), dtype=np.int64)
         for p, (j, k) in enumerate(zip(jj[sel], kk[sel])):
             pick[p, :, :, :2] = rng.choice(model_atoms[j], size=(K, S, 2))
             pick[p, :, :, 2:] = rng.choice(model_atoms[k], size=(K, S, 2))
-        idx = table[pick].reshape(pick.shape[0], K, S, 4 * _PER_ATOM)
-        Fm, depi = _sample_fits(points, pairs, idx)
-        depis.append(depi)
-        flat = depi.reshape(depi.shape[0], -1)
-        mid = np.argsort(flat, axis=1, kind="stable")[:, flat.shape[1] // 2]
-        ki, si = np.unravel_index(mid, depi.shape[1:])
-        b = np.arange(depi.shape[0])
-        mids.append((ki, Fm[b, ki, si], idx[b, ki, si], depi[b, ki, si]))
-    ki, Fmid, pts, dmid = (np.concatenate(parts) for parts in zip(*mids))
-    return np.concatenate(depis), _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n)
+        batches.append(table[pick].reshape(pick.shape[0], K, S, 4 * _PER_ATOM))
+    return batches
+
+
+class _PairwiseFits:
+    """The λ-free part of the paper's pairwise votes on complete tracks, fitted when first
+    asked (:meth:`get`): one fundamental matrix per drawn sample (:func:`_pairwise_draws`),
+    the larger of the two models' mean Sampson distances. The joint and coding merges do
+    not use the votes (a viewer may draw them), so they are not fitted unless read."""
+
+    def __init__(self, points, pairs, batches, jj, kk, n):
+        self._args = (points, pairs, batches, jj, kk, n)
+        self._out = None
+
+    def get(self) -> tuple:
+        """(distances d (n_pairs, K, S), the median samples (:class:`VoteSamples`))."""
+        if self._out is None:
+            points, pairs, batches, jj, kk, n = self._args
+            depis = []
+            mids = []  # per batch: (frame pair index, F, features, d) of each median sample
+            for idx in batches:
+                Fm, depi = _sample_fits(points, pairs, idx)
+                depis.append(depi)
+                flat = depi.reshape(depi.shape[0], -1)
+                mid = np.argsort(flat, axis=1, kind="stable")[:, flat.shape[1] // 2]
+                ki, si = np.unravel_index(mid, depi.shape[1:])
+                b = np.arange(depi.shape[0])
+                mids.append((ki, Fm[b, ki, si], idx[b, ki, si], depi[b, ki, si]))
+            ki, Fmid, pts, dmid = (np.concatenate(parts) for parts in zip(*mids))
+            self._out = (np.concatenate(depis), _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n))
+            self._args = None  # the points and draws are no longer needed
+        return self._out
+
+    def __getstate__(self):  # pickled (a pipeline's state sent between processes): fitted
+        self.get()
+        return {"_args": None, "_out": self._out}
+
+
+class PairwiseVotes:
+    """The paper's pairwise epipolar votes of every pair of fine models, and what they were
+    built from (Z's term in the epipolar merge).
+
+    Attributes (each (n_fine, n_fine); read-only properties)
+    ----------
+    distance : ndarray
+        Mean epipolar distance ``d`` of each model pair over its samples (px^2), 0 on the
+        diagonal (NaN on incomplete tracks where a pair has no sample).
+    vote : ndarray
+        Mean of ``exp(-lam d)`` over the samples, 1 on the diagonal (NaN as ``distance``).
+    samples : VoteSamples
+        The sample of median distance of every pair.
+
+    On complete tracks the samples are drawn when the merge runs, so the generator's
+    stream is the same whether or not they are read, and fitted when one of these is
+    first read: the joint and coding merges do not need them (the default on complete
+    tracks), the epipolar merge and a viewer do.
+    """
+
+    def __init__(self, n: int, lam: float, fits: _PairwiseFits | None = None, jj=None, kk=None,
+                 vote=None, distance=None, samples: VoteSamples | None = None):
+        self._n, self._lam, self._fits, self._jj, self._kk = n, lam, fits, jj, kk
+        self._vote, self._distance, self._samples = vote, distance, samples
+
+    @classmethod
+    def computed(cls, n: int, jj, kk, vote, distance, samples: VoteSamples) -> PairwiseVotes:
+        """Votes already computed: ``vote``, ``distance`` (n_pairs,) for the pairs (jj, kk)."""
+        out = cls(n, float("nan"))
+        out._fill(jj, kk, vote, distance, samples)
+        return out
+
+    def _fill(self, jj, kk, vote, distance, samples) -> None:
+        D = np.zeros((self._n, self._n))
+        D[jj, kk] = D[kk, jj] = distance
+        V = np.eye(self._n)
+        V[jj, kk] = V[kk, jj] = vote
+        self._distance, self._vote, self._samples = D, V, samples
+
+    def _ensure(self) -> None:
+        if self._vote is None:
+            depi, samples = self._fits.get()
+            self._fill(self._jj, self._kk, np.exp(-self._lam * depi).mean(axis=(1, 2)),
+                       depi.mean(axis=(1, 2)), samples)
+            self._fits = None
+
+    @property
+    def distance(self) -> np.ndarray:
+        self._ensure()
+        return self._distance
+
+    @property
+    def vote(self) -> np.ndarray:
+        self._ensure()
+        return self._vote
+
+    @property
+    def samples(self) -> VoteSamples:
+        self._ensure()
+        return self._samples
 
 
 def _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n) -> VoteSamples:

@@ -133,6 +133,36 @@ def test_paper_pairwise_votes_match_direct_computation(n_objects, seed):
     assert Z[same & off].mean() > 10 * Z[~same].mean()
 
 
+@pytest.mark.parametrize("seed", [0, 2])
+def test_the_joint_merge_reads_the_pairwise_votes_only_when_asked_and_they_are_the_papers(
+        seed, monkeypatch):
+    """The default (joint) merge does not use the paper's pairwise votes: their samples are
+    drawn (the generator's stream must not depend on whether they are read) but fitted only
+    when read; then they equal the direct computation, as the paper preset's do."""
+    import laav.coarse as coarse_module
+
+    seq = synthetic.make_sequence(n_objects=1, n_frames=12, n_points=240, noise=0.5, rng=seed)
+    atoms, mc, members = one_atom_models(seq, 2, np.random.default_rng(seed))
+    fits = []
+    real = coarse_module._sample_fits
+    monkeypatch.setattr(coarse_module, "_sample_fits", lambda *a: fits.append(1) or real(*a))
+    params = LaavParams(coarse_frames=3, coarse_samples=2)
+    assert params.merge_for(True) == "joint"
+    rng = np.random.default_rng(seed)
+    co = merge_models(seq, atoms, mc, seq.n_motions, params, rng)
+    after = rng.bit_generator.state
+    assert co.method == "joint" and fits == []  # decided without them
+    D, Z = direct_pair_votes(seq.points, members, co.frame_pairs, params.lam)
+    np.testing.assert_allclose(co.epipolar_distance, D, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(co.pairwise_vote, Z, rtol=1e-6, atol=1e-9)
+    assert len(fits) == 1  # once, for all three
+    assert co.vote_samples.distance.shape == (len(members), len(members)) and len(fits) == 1
+    # the draws were made when the merge ran: reading them later moved no generator
+    rng2 = np.random.default_rng(seed)
+    merge_models(seq, atoms, mc, seq.n_motions, params, rng2).pairwise_vote  # noqa: B018
+    assert rng2.bit_generator.state == after
+
+
 def test_default_blend_is_pairwise_votes_plus_coassociation():
     """The epipolar merge's Z is (1 - w) co-association of its pooled-voting trials + w
     pairwise votes: with the pairwise part computed directly, what is left must be a co-association,

@@ -573,8 +573,9 @@ def test_a_lambda_move_reuses_the_coarse_stages_samples_and_shortlist(monkeypatc
     import laav.coarse as coarse_module
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
-    calls = {"pairwise": 0, "shortlist": 0}
-    real_pw, real_sl = coarse_module._pairwise_distances, coarse_module.shortlist
+    calls = {"pairwise": 0, "shortlist": 0, "fits": 0}
+    real_pw, real_sl = coarse_module._pairwise_draws, coarse_module.shortlist
+    real_fit = coarse_module._sample_fits
 
     def pw(*a, **k):
         calls["pairwise"] += 1
@@ -584,15 +585,26 @@ def test_a_lambda_move_reuses_the_coarse_stages_samples_and_shortlist(monkeypatc
         calls["shortlist"] += 1
         return real_sl(*a, **k)
 
-    monkeypatch.setattr(coarse_module, "_pairwise_distances", pw)
+    def fit(*a, **k):
+        calls["fits"] += 1
+        return real_fit(*a, **k)
+
+    monkeypatch.setattr(coarse_module, "_pairwise_draws", pw)
     monkeypatch.setattr(coarse_module, "shortlist", sl)
+    monkeypatch.setattr(coarse_module, "_sample_fits", fit)
     pipe = Pipeline(seq, 3)
-    assert calls == {"pairwise": 1, "shortlist": 1}
+    # the joint merge decides without the pairwise votes: drawn, not fitted until read
+    assert calls == {"pairwise": 1, "shortlist": 1, "fits": 0}
+    n = pipe.result.multicut.n_models
+    assert pipe.result.coarse.pairwise_vote.shape == (n, n)
+    assert calls == {"pairwise": 1, "shortlist": 1, "fits": 1}
     for lam in (3.0, 0.7, 2.0):
         before = dict(calls)
         res = pipe.update(lam=lam)
+        res.coarse.pairwise_vote  # noqa: B018 - read: the samples' fits are the memo's
         assert calls == before, lam  # nothing computed again
         fresh = segment(seq, 3, LaavParams(lam=lam), seed=0)
+        calls["fits"] -= 1  # the fresh run's own fits, once its votes are read below
         assert_same_result(res, fresh)
         for f in ("pairwise_vote", "epipolar_distance"):
             assert np.array_equal(getattr(res.coarse, f), getattr(fresh.coarse, f)), f
@@ -600,11 +612,11 @@ def test_a_lambda_move_reuses_the_coarse_stages_samples_and_shortlist(monkeypatc
             assert np.array_equal(getattr(res.coarse.vote_samples, f),
                                   getattr(fresh.coarse.vote_samples, f), equal_nan=f != "points"), f
         assert res.coarse.shortlist.score.tolist() == fresh.coarse.shortlist.score.tolist()
-    assert calls == {"pairwise": 4, "shortlist": 4}  # the first run and the three fresh ones
+    assert calls == {"pairwise": 4, "shortlist": 4, "fits": 1}  # the first run, three fresh ones
     pipe.update(seed=1)
-    assert calls == {"pairwise": 5, "shortlist": 5}  # a new multicut: computed again
+    assert calls == {"pairwise": 5, "shortlist": 5, "fits": 1}  # a new multicut: drawn again
     res = pipe.update(lam=3.0)
-    assert calls == {"pairwise": 5, "shortlist": 5}
+    assert calls == {"pairwise": 5, "shortlist": 5, "fits": 1}
     assert_same_result(res, segment(seq, 3, LaavParams(lam=3.0), seed=1))
 
 
