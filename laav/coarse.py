@@ -35,7 +35,7 @@ from .geometry import fit_fundamental, sampson_distance
 from .multicut import Multicut
 from .noise import adapted_params
 from .params import LaavParams
-from .refine import motion_distances
+from .refine import TINY2, capped_mean, pair_distances
 from .voting import frame_pairs
 
 __all__ = ["Coarse", "PairwiseVotes", "Shortlist", "VoteSamples", "merge_models",
@@ -681,20 +681,38 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> S
     pts, fine = points[:, cov], fine_pts[cov]
     unit2 = LaavParams.lam / params.lam  # the Sampson distance's unit: 1 px^2 at the default
     pairs = frame_pairs(points.shape[0], _JOINT_PAIRS)  # deterministic: no draw from rng
+    x1, x2 = pts[pairs[:, 0]], pts[pairs[:, 1]]
+    floor2 = TINY2 * _coordinate_unit2(pts)  # the fits' floor: in the coordinates' unit, not λ's
     epi = np.empty(assign.shape[0])
-    rows: dict = {}  # a motion's distances, by its fine models: candidates share motions
+    # a motion's per-pair distances, by its fine models: candidates share motions, and the
+    # fits do not depend on λ (kept in the memo across λ moves for the present multicut)
+    rows = _cached(memo, ("joint rows",), dict)
+    if len(rows) > 1024:  # (many coding_eps values over one multicut)
+        rows.clear()
     for i, a in enumerate(assign):
         lab = a[fine]
         own = np.empty(lab.size)
         for g in range(n_motions):
             key = (a == g).tobytes()
             mem = lab == g
-            if key not in rows:  # the row motion_distances gives it (its fit sees only it)
-                rows[key] = motion_distances(pts, np.where(mem, 0, 1), 1, pairs, unit2)[0]
-            own[mem] = rows[key][mem]
+            if key not in rows:
+                rows[key] = pair_distances(x1, x2, np.flatnonzero(mem), floor2)
+            own[mem] = capped_mean(rows[key][:, mem], unit2)
         epi[i] = np.log1p(own / unit2).sum()
     score = coding + params.coarse_epipolar_weight * epi
     return Shortlist(assign, coding, epi, score, int(np.argmin(score)))
+
+
+def _coordinate_unit2(points: np.ndarray) -> float:
+    """A squared length unit of the coordinates, 1.0 for a spread of 128-256 px: the
+    power of two 4^(e - 8), 2^e the coordinates' RMS distance from their centroid rounded
+    up to a power of two. Scaling the coordinates by a power of two scales it exactly; it
+    takes the place of λ's unit for the joint merge's fit floor (:data:`laav.refine.TINY2`),
+    so that the fits do not depend on λ."""
+    x = points.reshape(-1, 2)
+    c = np.add.reduce(x, axis=0) / x.shape[0]
+    spread = np.sqrt(np.add.reduce(((x - c) ** 2).sum(axis=1)) / x.shape[0])
+    return float(np.ldexp(1.0, 2 * (int(np.frexp(max(spread, 1e-300))[1]) - 8)))
 
 
 #: Samples (model pair x frame pair x draw) fitted in one batch by the pairwise votes, about

@@ -248,15 +248,29 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
         mem = np.flatnonzero(labels == g)
         if mem.size < 8:
             continue
-        m1, m2 = x1[:, mem], x2[:, mem]
-        Fm = fit_fundamental(m1, m2)  # (K, 3, 3)
-        for _ in range(2):
-            dm = sampson_distance(Fm, m1, m2)  # (K, n)
-            w = 1.0 / (1.0 + dm / (np.median(dm, axis=1, keepdims=True) * 4.0 + TINY2 * unit2))
-            Fm = fit_fundamental(m1, m2, w)
-        D[g] = np.add.reduce(np.minimum(sampson_distance(Fm, x1, x2), SAMPSON_CAP * unit2),
-                             axis=0) / len(pairs)
+        D[g] = capped_mean(pair_distances(x1, x2, mem, TINY2 * unit2), unit2)
     return D
+
+
+def pair_distances(x1: np.ndarray, x2: np.ndarray, members: np.ndarray,
+                   floor2: float) -> np.ndarray:
+    """Sampson distances (K, P) of every point to one motion's robust fundamental matrix
+    of each frame pair: fitted on its ``members`` (>= 8 indices) by :func:`motion_distances`'
+    reweighted least squares, ``floor2`` (px^2) added to the median in the weights.
+    ``x1``, ``x2`` (K, P, 2): the points in each pair's two frames."""
+    m1, m2 = x1[:, members], x2[:, members]
+    Fm = fit_fundamental(m1, m2)  # (K, 3, 3)
+    for _ in range(2):
+        dm = sampson_distance(Fm, m1, m2)  # (K, n)
+        w = 1.0 / (1.0 + dm / (np.median(dm, axis=1, keepdims=True) * 4.0 + floor2))
+        Fm = fit_fundamental(m1, m2, w)
+    return sampson_distance(Fm, x1, x2)
+
+
+def capped_mean(d: np.ndarray, unit2: float = 1.0) -> np.ndarray:
+    """:func:`motion_distances`' distance of every point from its per-pair distances
+    ``d`` (K, P): the mean over the pairs, each capped at :data:`SAMPSON_CAP` ``unit2``."""
+    return np.add.reduce(np.minimum(d, SAMPSON_CAP * unit2), axis=0) / d.shape[0]
 
 
 def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,

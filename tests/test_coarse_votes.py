@@ -264,3 +264,18 @@ def test_terms_of_z_are_returned_apart():
     Z = (1 - w) * co.coassociation + w * co.pairwise_vote
     np.fill_diagonal(Z, 1.0)
     np.testing.assert_allclose(co.affinity, Z, rtol=1e-12)
+
+
+def test_the_joint_merges_fit_floor_unit_scales_with_the_coordinates_not_lambda():
+    """The joint merge's fits take their floor in a unit of the coordinates (so a λ move
+    reuses them): a power of two, 1.0 for a 128-256 px spread, scaled exactly with the
+    coordinates by a power of two, unmoved by translation."""
+    from laav.coarse import _coordinate_unit2
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(scale=150.0, size=(10, 50, 2)) + 320.0
+    u = _coordinate_unit2(x)
+    assert u == 1.0
+    for k in (-10, -3, 3, 13):
+        assert _coordinate_unit2(x * 2.0 ** k) == u * 4.0 ** k
+    assert _coordinate_unit2(x + 1e4) == u

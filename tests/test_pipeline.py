@@ -573,9 +573,13 @@ def test_a_lambda_move_reuses_the_coarse_stages_samples_and_shortlist(monkeypatc
     import laav.coarse as coarse_module
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
-    calls = {"pairwise": 0, "shortlist": 0, "fits": 0}
+    calls = {"pairwise": 0, "shortlist": 0, "fits": 0, "rows": 0}
     real_pw, real_sl = coarse_module._pairwise_draws, coarse_module.shortlist
-    real_fit = coarse_module._sample_fits
+    real_fit, real_rows = coarse_module._sample_fits, coarse_module.pair_distances
+
+    def rows(*a, **k):
+        calls["rows"] += 1
+        return real_rows(*a, **k)
 
     def pw(*a, **k):
         calls["pairwise"] += 1
@@ -592,19 +596,22 @@ def test_a_lambda_move_reuses_the_coarse_stages_samples_and_shortlist(monkeypatc
     monkeypatch.setattr(coarse_module, "_pairwise_draws", pw)
     monkeypatch.setattr(coarse_module, "shortlist", sl)
     monkeypatch.setattr(coarse_module, "_sample_fits", fit)
+    monkeypatch.setattr(coarse_module, "pair_distances", rows)
     pipe = Pipeline(seq, 3)
     # the joint merge decides without the pairwise votes: drawn, not fitted until read
-    assert calls == {"pairwise": 1, "shortlist": 1, "fits": 0}
+    n_rows = calls["rows"]
+    assert n_rows > 0 and calls == {"pairwise": 1, "shortlist": 1, "fits": 0, "rows": n_rows}
     n = pipe.result.multicut.n_models
     assert pipe.result.coarse.pairwise_vote.shape == (n, n)
-    assert calls == {"pairwise": 1, "shortlist": 1, "fits": 1}
+    assert calls == {"pairwise": 1, "shortlist": 1, "fits": 1, "rows": n_rows}
     for lam in (3.0, 0.7, 2.0):
         before = dict(calls)
         res = pipe.update(lam=lam)
         res.coarse.pairwise_vote  # noqa: B018 - read: the samples' fits are the memo's
-        assert calls == before, lam  # nothing computed again
+        assert calls == before, lam  # nothing computed again (the joint merge's fits too)
         fresh = segment(seq, 3, LaavParams(lam=lam), seed=0)
         calls["fits"] -= 1  # the fresh run's own fits, once its votes are read below
+        calls["rows"] = before["rows"]  # and its own joint-merge fits
         assert_same_result(res, fresh)
         for f in ("pairwise_vote", "epipolar_distance"):
             assert np.array_equal(getattr(res.coarse, f), getattr(fresh.coarse, f)), f
@@ -612,11 +619,13 @@ def test_a_lambda_move_reuses_the_coarse_stages_samples_and_shortlist(monkeypatc
             assert np.array_equal(getattr(res.coarse.vote_samples, f),
                                   getattr(fresh.coarse.vote_samples, f), equal_nan=f != "points"), f
         assert res.coarse.shortlist.score.tolist() == fresh.coarse.shortlist.score.tolist()
-    assert calls == {"pairwise": 4, "shortlist": 4, "fits": 1}  # the first run, three fresh ones
+    assert calls == {"pairwise": 4, "shortlist": 4, "fits": 1, "rows": n_rows}  # + 3 fresh runs
     pipe.update(seed=1)
-    assert calls == {"pairwise": 5, "shortlist": 5, "fits": 1}  # a new multicut: drawn again
+    assert calls["pairwise"] == 5 and calls["shortlist"] == 5 and calls["fits"] == 1
+    assert calls["rows"] > n_rows  # a new multicut: fitted again
+    before = dict(calls)
     res = pipe.update(lam=3.0)
-    assert calls == {"pairwise": 5, "shortlist": 5, "fits": 1}
+    assert calls == before
     assert_same_result(res, segment(seq, 3, LaavParams(lam=3.0), seed=1))
 
 
