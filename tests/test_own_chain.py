@@ -187,28 +187,40 @@ def test_the_paper_rv_module_takes_the_subspace_votes_only_as_an_extra_term():
 
 
 def test_own_candidates_side_by_side_are_their_one_after_another_results(monkeypatch):
-    """LAAV's informed and missing-motion trials run ``rv_batch`` side by side (speed
-    only): every candidate's labels, iterations and score are those of one trial at a
-    time; trials that end on the same labels share one polish (counted)."""
+    """LAAV's informed and missing-motion trials run all side by side (speed only): every
+    candidate's labels, iterations and score are those of one trial at a time, whatever
+    ``rv_batch``; trials that end on the same labels share one polish (counted)."""
+    import laav.rv as rv
     import laav.voting as V
     from explorer.demo import demo_sequence
     from laav import segment
 
     seq = demo_sequence()  # seed 1: four trials, one ends on the informed trial's very labels
-    made = []
-    real = V._Polished
+    made, batches = [], []
+    real, real_side, real_step = V._Polished, V._informed_side_by_side, rv._step
 
     class Counted(real):
         def __init__(self, *a, **k):
             made.append(1)
             super().__init__(*a, **k)
 
+    def one_at_a_time(points, params, starts, extra, uses):  # the reference
+        return [real_side(points, params, [s], extra, [u])[0] for s, u in zip(starts, uses)]
+
     monkeypatch.setattr(V, "_Polished", Counted)
+    monkeypatch.setattr(rv, "_step", lambda p, trials, *a: batches.append(len(trials)) or
+                        real_step(p, trials, *a))
     runs = {}
     for b in (1, 2, 4):
-        del made[:]
+        del made[:], batches[:]
         r = segment(seq, 3, LaavParams(rv_batch=b), seed=1)
         runs[b] = (r, len(made))
+        assert max(batches) == 4  # all four side by side, whatever rv_batch
+    monkeypatch.setattr(V, "_informed_side_by_side", one_at_a_time)
+    del made[:], batches[:]
+    r = segment(seq, 3, LaavParams(), seed=1)
+    runs[1] = (r, len(made))
+    assert max(batches) == 1
     one, n_pol = runs[1]
     assert len(one.voting.costs) == 4 and len(one.voting.trial_iterations) == 4  # 1 + C(C-1)/2
     assert len(set(one.voting.costs.values())) <= n_pol < 4  # one trial shared its polish
