@@ -727,6 +727,12 @@ class ExplorerState:
             self._pipe = pipe
             if gen != self._gen:
                 return  # a newer request came in meanwhile: drop this result
+            # the cards draw the paper's pairwise votes, which the default merge does not
+            # fit unless read (laav.coarse.PairwiseVotes): fitted here, in the worker, and
+            # counted as this computation's, not on the page's thread
+            pairwise = getattr(result.coarse, "pairwise", None)
+            if pairwise is not None:
+                pairwise.samples  # noqa: B018
             self.compute_seconds = time.perf_counter() - t0
             self.change = self._remember_change(seq, target, result)
             self.result, self.sequence, self.settings = result, seq, target
