@@ -284,6 +284,17 @@ def best_partition(stats: ModelStats, n_groups: int, eps: float) -> tuple[np.nda
     return rank[assign].astype(np.int64), best
 
 
+def _n_least(values: np.ndarray, n: int) -> np.ndarray:
+    """Indices of the ``n`` least ``values`` in increasing order, ties in index order:
+    ``np.argsort(values, kind="stable")[:n]``, sorting only those up to the n-th least
+    (86,526 partitions of 12 models into 3, of which 10 are kept)."""
+    idx = np.arange(values.size)
+    if values.size > n:
+        keep = ~(values > np.partition(values, n - 1)[n - 1])  # (a NaN kept: sorted last)
+        idx, values = idx[keep], values[keep]
+    return idx[np.argsort(values, kind="stable")][:n]
+
+
 def shortlist(stats: ModelStats, n_groups: int, eps: float, n_best: int,
               min_count: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """The ``n_best`` partitions of least total coding length whose groups all hold at
@@ -324,9 +335,5 @@ def shortlist(stats: ModelStats, n_groups: int, eps: float, n_best: int,
         tot = np.array([_total(stats, a, C, eps) for a in A])
         size = np.stack([(A == c) @ stats.count for c in range(C)], axis=1)
     ok = np.flatnonzero(size.min(axis=1) >= min_count)
-    t = tot[ok]
-    if t.size > n_best:  # only those up to the n_best-th least length need sorting
-        keep = t <= np.partition(t, n_best - 1)[n_best - 1]
-        ok, t = ok[keep], t[keep]
-    order = ok[np.argsort(t, kind="stable")][:n_best]  # ties: in enumeration order
+    order = ok[_n_least(tot[ok], n_best)]
     return np.array(A[order], dtype=np.int64).reshape(-1, n), tot[order]

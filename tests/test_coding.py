@@ -178,3 +178,18 @@ def test_shortlist_greedy_path_starts_from_the_greedy_partition(monkeypatch):
     assert np.all(np.diff(total) >= 0) and assign.shape == (5, 18)
     # the others are one model move away from it
     assert all((a != best).sum() == 1 for a in assign[1:])
+
+
+def test_n_least_is_the_stable_sorts_first_n_with_ties_and_nan():
+    """The shortlist sorts only the partitions up to the n-th least length: the same
+    indices, in the same order, as a stable sort of all of them (ties in enumeration
+    order, NaN last)."""
+    from laav.coding import _n_least
+
+    rng = np.random.default_rng(0)
+    for _ in range(500):
+        v = rng.integers(0, 6, size=int(rng.integers(1, 40))).astype(float)
+        if rng.random() < 0.3:
+            v[rng.integers(0, v.size)] = np.nan
+        n = int(rng.integers(1, 12))
+        np.testing.assert_array_equal(_n_least(v, n), np.argsort(v, kind="stable")[:n])
