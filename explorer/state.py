@@ -414,6 +414,15 @@ def check_settings(seq: Sequence, settings: Settings) -> None:
     settings.params.n_fine(C, seq.is_complete)  # at least C fine models
 
 
+def _fit_drawn_votes(result: LaavResult) -> None:
+    """(Worker.) The cards draw the paper's pairwise votes, which the default merge does not
+    fit unless read (:class:`laav.coarse.PairwiseVotes`): fitted here, counted as the
+    computation's, not on the page's thread."""
+    pairwise = getattr(getattr(result, "coarse", None), "pairwise", None)
+    if pairwise is not None:
+        pairwise.samples  # noqa: B018
+
+
 class ExplorerState:
     """One explorer session's data and computation.
 
@@ -713,6 +722,7 @@ class ExplorerState:
                             pipe = self._pipe
                             result = pipe.update(**target.update_kwargs(),
                                                  preview=self._previewer(gen, seq, target))
+                    _fit_drawn_votes(result)
             except Superseded:
                 return  # a newer request is queued: it starts now
             except ValueError as exc:  # includes laav.SequenceError
@@ -727,12 +737,6 @@ class ExplorerState:
             self._pipe = pipe
             if gen != self._gen:
                 return  # a newer request came in meanwhile: drop this result
-            # the cards draw the paper's pairwise votes, which the default merge does not
-            # fit unless read (laav.coarse.PairwiseVotes): fitted here, in the worker, and
-            # counted as this computation's, not on the page's thread
-            pairwise = getattr(result.coarse, "pairwise", None)
-            if pairwise is not None:
-                pairwise.samples  # noqa: B018
             self.compute_seconds = time.perf_counter() - t0
             self.change = self._remember_change(seq, target, result)
             self.result, self.sequence, self.settings = result, seq, target
@@ -791,6 +795,7 @@ class ExplorerState:
                 return  # superseded, or the result is out already
             self._remember_change(seq, target, result)
             try:
+                _fit_drawn_votes(result)
                 self.on_preview(result, seq, target, gen)
             except Exception:  # a GUI hook must never kill the worker
                 traceback.print_exc()

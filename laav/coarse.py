@@ -24,6 +24,7 @@ features seen in both frames of a pair; the coding merge falls back to this epip
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -488,10 +489,11 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     memo : dict, optional
         Speed only (a live caller's λ moves): a dict the caller keeps for one sequence,
         ``atoms`` and ``multicut`` (and empties when they change). On complete tracks it
-        keeps what does not depend on ``lam``: the pairwise votes' samples and distances
+        keeps what does not depend on ``lam``: the pairwise votes' samples and their fits
         (keyed on the generator's state before they are drawn, which is restored after
-        them as if drawn again) and the joint merge's coding-length shortlist. The result
-        is the same, bit for bit.
+        them as if drawn again), the coding statistics and merge gains, and the joint
+        merge's coding-length shortlist and its motions' robust fits (at most
+        :data:`_JOINT_ROWS_KEPT` distances). The result is the same, bit for bit.
 
     Returns
     -------
@@ -549,8 +551,9 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         key = ("pairwise", S, repr(rng.bit_generator.state))  # the draws to come: the same
         hit = None if memo is None else memo.get(key)
         if hit is None:  # drawn now, fitted when read (never, by the joint merge alone)
-            fits = _PairwiseFits(points, pairs, _pairwise_draws(table, model_atoms, pairs.shape[0],
-                                                                S, rng, jj, kk), jj, kk, n)
+            fits = _PairwiseFits(points, pairs, table,
+                                 _pairwise_draws(model_atoms, pairs.shape[0], S, rng, jj, kk),
+                                 jj, kk, n)
             _remember(memo, key, (fits, rng.bit_generator.state))
         else:  # λ alone changed: the same samples, the generator where they left it
             fits, after = hit
@@ -686,9 +689,7 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> S
     epi = np.empty(assign.shape[0])
     # a motion's per-pair distances, by its fine models: candidates share motions, and the
     # fits do not depend on λ (kept in the memo across λ moves for the present multicut)
-    rows = _cached(memo, ("joint rows",), dict)
-    if len(rows) > 1024:  # (many coding_eps values over one multicut)
-        rows.clear()
+    rows = _cached(memo, ("joint rows",), dict)  # (K, its members) per motion
     for i, a in enumerate(assign):
         lab = a[fine]
         own = np.empty(lab.size)
@@ -696,11 +697,17 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> S
             key = (a == g).tobytes()
             mem = lab == g
             if key not in rows:
-                rows[key] = pair_distances(x1, x2, np.flatnonzero(mem), floor2)
-            own[mem] = capped_mean(rows[key][:, mem], unit2)
+                if sum(r.size for r in rows.values()) > _JOINT_ROWS_KEPT:
+                    rows.clear()  # (many coding_eps values over one multicut)
+                rows[key] = pair_distances(x1, x2, np.flatnonzero(mem), floor2)[:, mem]
+            own[mem] = capped_mean(rows[key], unit2)
         epi[i] = np.log1p(own / unit2).sum()
     score = coding + params.coarse_epipolar_weight * epi
     return Shortlist(assign, coding, epi, score, int(np.argmin(score)))
+
+
+#: Most distances (floats) the joint merge keeps for λ moves (:func:`_joint_shortlist`): 32 MB.
+_JOINT_ROWS_KEPT = 4_000_000
 
 
 def _coordinate_unit2(points: np.ndarray) -> float:
@@ -712,7 +719,8 @@ def _coordinate_unit2(points: np.ndarray) -> float:
     x = points.reshape(-1, 2)
     c = np.add.reduce(x, axis=0) / x.shape[0]
     spread = np.sqrt(np.add.reduce(((x - c) ** 2).sum(axis=1)) / x.shape[0])
-    return float(np.ldexp(1.0, 2 * (int(np.frexp(max(spread, 1e-300))[1]) - 8)))
+    e = min(max(int(np.frexp(spread)[1]) - 8, -500), 500)  # (no 0 for a point cloud of one)
+    return float(np.ldexp(1.0, 2 * e))
 
 
 #: Samples (model pair x frame pair x draw) fitted in one batch by the pairwise votes, about
@@ -737,67 +745,81 @@ def _sample_fits(points, pairs, idx):
     return Fm, np.maximum(d[..., :half].mean(-1), d[..., half:].mean(-1))
 
 
-def _pairwise_draws(table, model_atoms, K, S, rng, jj, kk) -> list:
+def _pairwise_draws(model_atoms, K, S, rng, jj, kk) -> list:
     """The draws of the paper's pairwise votes on complete tracks: for every model pair
-    (jj, kk), frame pair and draw, 2 + 2 atoms (``table``: ``_PER_ATOM`` features each),
-    in pair order from ``rng``. Returns their features, a list of (batch, K, S, 4 m)
-    arrays of whole model pairs (:data:`_PAIRWISE_BATCH` samples a batch)."""
+    (jj, kk), frame pair and draw, 2 + 2 atoms, in pair order from ``rng``. Returns the
+    atoms drawn, a list of (batch, K, S, 4) int32 arrays of whole model pairs
+    (:data:`_PAIRWISE_BATCH` samples a batch; their features are ``table[pick]``)."""
     per = max(1, _PAIRWISE_BATCH // (K * S))  # model pairs a batch
     batches = []
     for lo in range(0, jj.size, per):
         sel = slice(lo, min(lo + per, jj.size))
-        pick = np.empty((sel.stop - lo, K, S, 4), dtype=np.int64)
+        pick = np.empty((sel.stop - lo, K, S, 4), dtype=np.int32)
         for p, (j, k) in enumerate(zip(jj[sel], kk[sel])):
             pick[p, :, :, :2] = rng.choice(model_atoms[j], size=(K, S, 2))
             pick[p, :, :, 2:] = rng.choice(model_atoms[k], size=(K, S, 2))
-        batches.append(table[pick].reshape(pick.shape[0], K, S, 4 * _PER_ATOM))
+        batches.append(pick)
     return batches
 
 
 class _PairwiseFits:
     """The λ-free part of the paper's pairwise votes on complete tracks, fitted when first
-    asked (:meth:`get`): one fundamental matrix per drawn sample (:func:`_pairwise_draws`),
-    the larger of the two models' mean Sampson distances. The joint and coding merges do
-    not use the votes (a viewer may draw them), so they are not fitted unless read."""
+    asked (:meth:`get`): one fundamental matrix per drawn sample (:func:`_pairwise_draws`;
+    ``table`` (N, ``_PER_ATOM``) the features drawn from each atom), the larger of the two
+    models' mean Sampson distances. The joint and coding merges do not use the votes (a
+    viewer may draw them), so they are not fitted unless read. Thread-safe (the explorer's
+    worker and page threads may both read them); holds ``points`` until fitted (a copy
+    when the caller's array is writeable)."""
 
-    def __init__(self, points, pairs, batches, jj, kk, n):
-        self._args = (points, pairs, batches, jj, kk, n)
+    def __init__(self, points, pairs, table, batches, jj, kk, n):
+        if points.flags.writeable:  # the caller may change it before the votes are read
+            points = points.copy()
+        self._args = (points, pairs, table, batches, jj, kk, n)
         self._out = None
+        self._lock = threading.Lock()
 
     def get(self) -> tuple:
         """(distances d (n_pairs, K, S), the median samples (:class:`VoteSamples`))."""
-        if self._out is None:
-            points, pairs, batches, jj, kk, n = self._args
-            depis = []
-            mids = []  # per batch: (frame pair index, F, features, d) of each median sample
-            for idx in batches:
-                Fm, depi = _sample_fits(points, pairs, idx)
-                depis.append(depi)
-                flat = depi.reshape(depi.shape[0], -1)
-                mid = np.argsort(flat, axis=1, kind="stable")[:, flat.shape[1] // 2]
-                ki, si = np.unravel_index(mid, depi.shape[1:])
-                b = np.arange(depi.shape[0])
-                mids.append((ki, Fm[b, ki, si], idx[b, ki, si], depi[b, ki, si]))
-            ki, Fmid, pts, dmid = (np.concatenate(parts) for parts in zip(*mids))
-            self._out = (np.concatenate(depis), _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n))
-            self._args = None  # the points and draws are no longer needed
-        return self._out
+        with self._lock:
+            if self._out is None:
+                self._out = self._fit(*self._args)
+                self._args = None  # the points and draws are no longer needed
+            return self._out
+
+    @staticmethod
+    def _fit(points, pairs, table, batches, jj, kk, n) -> tuple:
+        depis = []
+        mids = []  # per batch: (frame pair index, F, features, d) of each median sample
+        for pick in batches:
+            K, S = pick.shape[1:3]
+            idx = table[pick].reshape(pick.shape[0], K, S, 4 * _PER_ATOM)
+            Fm, depi = _sample_fits(points, pairs, idx)
+            depis.append(depi)
+            flat = depi.reshape(depi.shape[0], -1)
+            mid = np.argsort(flat, axis=1, kind="stable")[:, flat.shape[1] // 2]
+            ki, si = np.unravel_index(mid, depi.shape[1:])
+            b = np.arange(depi.shape[0])
+            mids.append((ki, Fm[b, ki, si], idx[b, ki, si], depi[b, ki, si]))
+        ki, Fmid, pts, dmid = (np.concatenate(parts) for parts in zip(*mids))
+        return np.concatenate(depis), _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n)
 
     def __getstate__(self):  # pickled (a pipeline's state sent between processes): fitted
-        self.get()
-        return {"_args": None, "_out": self._out}
+        return {"_out": self.get()}
+
+    def __setstate__(self, state):
+        self._args, self._out, self._lock = None, state["_out"], threading.Lock()
 
 
 class PairwiseVotes:
     """The paper's pairwise epipolar votes of every pair of fine models, and what they were
     built from (Z's term in the epipolar merge).
 
-    Attributes (each (n_fine, n_fine); read-only properties)
+    Attributes (read-only properties)
     ----------
-    distance : ndarray
+    distance : ndarray of shape (n_fine, n_fine)
         Mean epipolar distance ``d`` of each model pair over its samples (px^2), 0 on the
         diagonal (NaN on incomplete tracks where a pair has no sample).
-    vote : ndarray
+    vote : ndarray of shape (n_fine, n_fine)
         Mean of ``exp(-lam d)`` over the samples, 1 on the diagonal (NaN as ``distance``).
     samples : VoteSamples
         The sample of median distance of every pair.
@@ -825,14 +847,15 @@ class PairwiseVotes:
         D[jj, kk] = D[kk, jj] = distance
         V = np.eye(self._n)
         V[jj, kk] = V[kk, jj] = vote
-        self._distance, self._vote, self._samples = D, V, samples
+        self._distance, self._samples = D, samples
+        self._vote = V  # last: a reader that sees it sees the others
 
     def _ensure(self) -> None:
-        if self._vote is None:
-            depi, samples = self._fits.get()
+        fits = self._fits
+        if self._vote is None and fits is not None:  # (two threads may both get here: the
+            depi, samples = fits.get()  # fits are made once, the same values filled twice)
             self._fill(self._jj, self._kk, np.exp(-self._lam * depi).mean(axis=(1, 2)),
                        depi.mean(axis=(1, 2)), samples)
-            self._fits = None
 
     @property
     def distance(self) -> np.ndarray:

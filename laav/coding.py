@@ -106,9 +106,12 @@ def model_stats(points: np.ndarray, fine_labels: np.ndarray, n_models: int,
 def _log_det_1p(S: np.ndarray) -> np.ndarray:
     """``log det(I + S)`` = the sum of ``log1p`` of the eigenvalues of the symmetric
     positive semi-definite ``S`` (G, K, K), by a Cholesky factorisation (about 4x faster
-    than the eigenvalues, which cost 60 ms a run for the 4,095 groups of 12 fine models);
-    where that fails (``S`` not numerically positive semi-definite), by the eigenvalues
-    clipped at 0."""
+    than the eigenvalues, which cost 60 ms a run for the 4,095 groups of 12 fine models).
+    Rounding may leave ``S`` slightly indefinite; its tiny negative eigenvalues then count
+    as they are (the eigenvalue route clipped them at 0: a difference far below the
+    lengths' own rounding). Should ``I + S`` not be positive definite (an eigenvalue of
+    ``S`` at or below -1, never for a covariance), the whole batch goes by the
+    eigenvalues clipped at 0."""
     K = S.shape[-1]
     IS = S.copy()
     IS.reshape(S.shape[:-2] + (K * K,))[..., ::K + 1] += 1.0  # I + S

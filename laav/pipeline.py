@@ -178,7 +178,8 @@ class Pipeline:
     its previous result is reused (its timing is then only that of the check). The
     result is identical to a recomputation: the stage's generator depends only on the seed.
     The coarse stage keeps what does not depend on λ for the present multicut (its pairwise
-    samples and coding shortlist: ``merge_models(memo=...)``), so a λ move reruns little.
+    samples and their fits, the coding statistics and shortlist, the joint merge's robust
+    fits: ``merge_models(memo=...)``), so a λ move reruns little.
     With plain Random Voting beside LAAV's trial (:meth:`LaavParams.with_plain_rv`, and on
     incomplete tracks) a rerun of the fine-tuning reruns LAAV's informed trial only: plain
     RV's runs (and their polished candidates) do not depend on the coarse labels and are
