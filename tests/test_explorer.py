@@ -247,6 +247,7 @@ def test_empty_upload_says_so_and_c_box_is_bounded(ex, seq):
     assert (ex.w_motions.start, ex.w_motions.end) == (1, seq.n_points)
     # set from Python past them: a message, the result kept
     for bad, msg in ((0, "must be a positive integer"), (-2, "must be a positive integer"),
+                     (2.5, "must be a positive integer, got 2.5"),
                      (seq.n_points + 1, f"more than the {seq.n_points} points")):
         ex.w_motions.value = bad
         assert ex.wait(60) and ex.result is res

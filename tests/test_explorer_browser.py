@@ -195,6 +195,12 @@ def test_explorer_in_chromium(tmp_path):
         assert page.evaluate(JS_SET_SLIDER, ["fine models", 1]) is not None
         page.get_by_text("Not used: fine_models (1) must be >=").first.wait_for(timeout=20000)
         assert ex.result is res
+        # C typed as "2.5": refused with a message (an integer box in the page read "25")
+        box = page.get_by_label("C — number of motions")
+        box.fill("2.5")
+        box.press("Enter")
+        page.get_by_text("must be a positive integer, got 2.5").first.wait_for(timeout=20000)
+        assert ex.result is res and ex.controls.w_motions.value == 2.5
 
         # the 3-D view is served by this process on 127.0.0.1 and connects once its card
         # is unfolded (it starts folded)

@@ -73,9 +73,11 @@ class Controls:
                                            value=st.seed, width=SIDE_W)
         self.w_seed.param.watch(self._on_param, "value")
         self.w_seed._debounce = 0
-        # C: at least 1 and at most the number of points (the browser's box clamps to these)
-        self.w_motions = pn.widgets.IntInput(label="C — number of motions", start=1, end=seq.n_points,
-                                             value=st.n_motions, width=140)
+        # C: at least 1 and at most the number of points (the browser's box clamps to these).
+        # A number box, not an integer one: the page's integer box drops what is not a
+        # digit as it is typed, so "2.5" became C = 25; a fraction is refused with a message
+        self.w_motions = pn.widgets.FloatInput(label="C — number of motions", start=1, end=seq.n_points,
+                                               value=st.n_motions, step=1, width=140)
         self.w_motions.param.watch(self._on_param, "value")
         self.w_reset = pn.widgets.Button(label="Reset parameters to defaults", color="warning",
                                          width=SIDE_W)
@@ -131,9 +133,10 @@ class Controls:
             out[name] = v
         return out
 
-    def _motions(self) -> int | None:
-        """C to request: None (keep the state's) while another sequence is being loaded."""
-        return None if self.switching or self.w_motions.value is None else int(self.w_motions.value)
+    def _motions(self):
+        """C to request: None (keep the state's) while another sequence is being loaded; a
+        whole number as an int, anything else as typed (the state refuses it, saying why)."""
+        return None if self.switching or self.w_motions.value is None else _whole(self.w_motions.value)
 
     def _on_param(self, event=None) -> None:
         if self.host.quieted:
@@ -150,7 +153,8 @@ class Controls:
                     r1.value = max(r1.start, r2.value - r1.step)
         if event is not None and event.obj is self.w_motions:
             fm = self.w_params["fine_models"]
-            old = event.old if isinstance(event.old, int) else None
+            old, new = _whole(event.old), _whole(event.new)
+            old = old if isinstance(old, int) and isinstance(new, int) else None
             # the fine models follow C (k C by default)
             k = self.state.target.params.replace(fine_models=None).n_fine(1, self._complete())
             if old is not None and fm.value == k * old:
@@ -221,3 +225,10 @@ class Controls:
             self.w_color.value = "final (after Random Voting)"
         elif seq.labels is not None and shown_seq is not None and shown_seq.labels is None:
             self.w_color.value = "ground truth"
+
+
+def _whole(v):
+    """``v`` as an int when it is a whole number (the C box's 3.0), else unchanged."""
+    if isinstance(v, float) and v.is_integer():
+        return int(v)
+    return v
