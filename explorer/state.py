@@ -418,9 +418,8 @@ def _fit_drawn_votes(result: LaavResult) -> None:
     """(Worker.) The cards draw the paper's pairwise votes, which the default merge does not
     fit unless read (:class:`laav.coarse.PairwiseVotes`): fitted here, counted as the
     computation's, not on the page's thread."""
-    pairwise = getattr(getattr(result, "coarse", None), "pairwise", None)
-    if pairwise is not None:
-        pairwise.samples  # noqa: B018
+    if result.coarse is not None:
+        result.coarse.vote_samples  # noqa: B018
 
 
 class ExplorerState:

@@ -130,6 +130,10 @@ class Coarse:
         Frame pairs used for voting.
     pair_frames : ndarray of shape (2,), int64
         The frame pair of :meth:`pair_fundamental` (the first and the last frame).
+    pairwise : PairwiseVotes
+        The paper's pairwise votes. With the joint or coding merge (which do not use
+        them) they are fitted when first read: ``epipolar_distance``, ``pairwise_vote``
+        and ``vote_samples`` read them.
     method : str
         ``params.coarse_merge``: ``"coding"`` (the partition of least coding length
         decided; ``affinity`` is then ``exp(-max(merge_cost, 0))``) or ``"epipolar"``
@@ -150,10 +154,6 @@ class Coarse:
         pooled-voting trials (identity when pooled voting does not run). ``affinity`` is
         ``(1 - w) coassociation + w pairwise_vote`` times the motion term, w =
         ``pairwise_weight`` (1 without pooled voting).
-    pairwise : PairwiseVotes
-        The paper's pairwise votes. With the joint or coding merge (which do not use
-        them) they are fitted when first read: ``epipolar_distance``, ``pairwise_vote``
-        and ``vote_samples`` read them.
     """
 
     fine_to_coarse: np.ndarray
@@ -164,12 +164,12 @@ class Coarse:
     point_labels: np.ndarray
     frame_pairs: np.ndarray
     pair_frames: np.ndarray
+    pairwise: PairwiseVotes
     method: str = "epipolar"
     merge_cost: np.ndarray | None = None
     coding_length: float = float("nan")
     coassociation: np.ndarray | None = None
     shortlist: Shortlist | None = None
-    pairwise: PairwiseVotes | None = None
 
     @property
     def epipolar_distance(self) -> np.ndarray:
@@ -531,10 +531,10 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
                       stacklevel=user_stacklevel())
     if n == 0:
         e = np.zeros((0, 0))
-        return Coarse(np.zeros(0, np.int64), e, e, np.zeros(0, np.int64), fine_pts,
-                      fine_pts.copy(), pairs, widest, method, e, coassociation=e,
-                      pairwise=PairwiseVotes.computed(0, np.zeros(0, np.int64), np.zeros(0, np.int64),
-                                                      e, e, VoteSamples.empty(0, 4 * _PER_ATOM)))
+        none = np.zeros(0, np.int64)
+        return Coarse(none, e, e, none, fine_pts, fine_pts.copy(), pairs, widest,
+                      PairwiseVotes.computed(0, none, none, e, e, VoteSamples.empty(0, 4 * _PER_ATOM)),
+                      method, e, coassociation=e)
 
     model_atoms = [np.flatnonzero(multicut.atom_labels == j) for j in range(n)]
     groups = [np.flatnonzero(fine_pts == j) for j in range(n)]
@@ -830,15 +830,16 @@ class PairwiseVotes:
     tracks), the epipolar merge and a viewer do.
     """
 
-    def __init__(self, n: int, lam: float, fits: _PairwiseFits | None = None, jj=None, kk=None,
-                 vote=None, distance=None, samples: VoteSamples | None = None):
+    def __init__(self, n: int, lam: float, fits: _PairwiseFits | None, jj, kk):
+        """Votes of strength ``lam`` for the model pairs (jj, kk) of ``n`` fine models,
+        from ``fits`` when first read (see :meth:`computed` for votes already made)."""
         self._n, self._lam, self._fits, self._jj, self._kk = n, lam, fits, jj, kk
-        self._vote, self._distance, self._samples = vote, distance, samples
+        self._vote = self._distance = self._samples = None
 
     @classmethod
     def computed(cls, n: int, jj, kk, vote, distance, samples: VoteSamples) -> PairwiseVotes:
         """Votes already computed: ``vote``, ``distance`` (n_pairs,) for the pairs (jj, kk)."""
-        out = cls(n, float("nan"))
+        out = cls(n, float("nan"), None, jj, kk)
         out._fill(jj, kk, vote, distance, samples)
         return out
 

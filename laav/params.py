@@ -132,9 +132,9 @@ class LaavParams:
         starts, and LAAV's informed trial beside them in ``with_plain_rv()`` and on
         incomplete tracks; LAAV's own informed and missing-motion trials, at most
         1 + C(C-1)/2, which all run to their end, run all side by side whatever its
-        value). Speed only: each trial draws from
-        its own random stream and keeps its own convergence test, and the trial kept is
-        the same as if they ran one after another, so a seed's labels do not depend on it.
+        value). Speed only: each trial draws from its own random stream and keeps its own
+        convergence test, and the trial kept is the same as if they ran one after another,
+        so a seed's labels do not depend on it.
     rv_refine : bool
         After voting, reassign each point to the motion whose fundamental matrices (fitted
         on the motion's points over many frame pairs) explain it best.
@@ -502,12 +502,12 @@ def _check(value, kind: str, low, high):
     return value, ""
 
 
-#: Which parameters each stage reads; a change reruns that stage and all after it.
 #: The named presets, as ``laav segment``, ``laav bench`` and ``laav-explore`` take them
 #: (``--preset NAME``): NAME -> a constructor of :class:`LaavParams`.
 PRESETS = {"default": LaavParams, "paper": LaavParams.paper,
            "with-plain-rv": LaavParams.with_plain_rv, "own-chain": LaavParams.own_chain}
 
+#: Which parameters each stage reads; a change reruns that stage and all after it.
 STAGE_PARAMS: dict[str, frozenset] = {
     "atoms": frozenset({"r1", "r2", "atom_min_size", "affine_threshold", "ransac_hypotheses",
                         "atom_frames", "noise_adaptive"}),
