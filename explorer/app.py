@@ -158,6 +158,8 @@ class _Template(pn.template.BootstrapTemplate):
     the end: the page's HTML is served that much sooner."""
 
     def server_doc(self, doc=None, title=None, location=True):
+        # (panel's Location is kept: its template embeds it; the address is written by the
+        # status bar's own box, StatusBar.address)
         if doc is None:  # panel finds the document itself
             doc = super().server_doc(doc, title, location)
         else:
@@ -321,7 +323,6 @@ class Explorer:
         # and a worker thread must never touch them during that).
         cur = pn.state.curdoc
         self._session_doc = cur if cur is not None and cur.session_context is not None else None
-        self._location = pn.state.location if self._session_doc is not None else None
         self._doc_thread = threading.get_ident()  # the session's event-loop thread
 
     def attach_session(self) -> None:
@@ -386,7 +387,7 @@ class Explorer:
             heading("Parameters"), *c.w_params.values(), c.w_seed, c.w_reset, self.advanced.card,
             heading("Compare"), *self.compare.sidebar,
             heading("Export"), *f.downloads,
-            s.tab_title, f.w_refused,
+            s.tab_title, s.address, f.w_refused,
         ]
         s.line.insert(1, f.progress)  # long work: its progress and a Cancel button
         # cards in the order of the stages; each lays its parts out in a wrapping FlexBox, so
@@ -419,11 +420,14 @@ class Explorer:
             pn.state.onload(self._page_loaded)
             self.state.seeds_ahead = False  # not while the page is being completed (_add_rest)
         # one root per area: every extra document root costs a full model walk on page load.
-        # The header's button folds the sidebar away.
+        # The header's button folds the sidebar away. No panel busy indicator: it turned on
+        # and off around every change from the page (two more messages per move, each making
+        # the browser lay the whole page out again; the frame player had been exempted);
+        # the status line's own spinner shows a computation.
         return _Template(
             title=title, sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
             header=[self.status_bar.header_name], main=[main], sidebar_width=SIDE_W + 35,
-            header_background="#2c4a66")
+            header_background="#2c4a66", busy_indicator=None)
 
     def _page_loaded(self) -> None:
         """(Document thread.) The page is on screen: the later cards follow the first result
@@ -826,14 +830,12 @@ class Explorer:
                         self.tour.step if self.tour.active else None)
 
     def _sync_url(self) -> None:
-        """(Document thread.) The page address carries the shown state (pushState, no reload)."""
-        loc = self._location
-        if loc is None or self.result is None:
+        """(Document thread.) The page address carries the shown state (no reload; the page
+        writes it once the views are redrawn: :attr:`StatusBar.address`)."""
+        if self._session_doc is None or self.result is None:
             return
         q = self.query()
-        search = "?" + urllib.parse.urlencode(q) if q else ""
-        if loc.search != search:
-            loc.search = search
+        self.status_bar.address.value = "?" + urllib.parse.urlencode(q) if q else ""
 
     def load_params(self, data: bytes | str, filename: str = "params.json") -> bool:
         """Apply a params.json (as exported here). False, and a message, when it is not valid."""

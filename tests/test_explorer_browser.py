@@ -464,9 +464,12 @@ def test_url_carries_the_state(tmp_path):
             if (m.type === 'Spinner' && String(m.title).startsWith('C ')) return [m.low, m.high];
         }""")
         assert lims == [1, seq.n_points]
-        # moving λ updates the address (no reload: the same session)
+        # moving λ updates the address (no reload: the same session), replacing it: a change
+        # of settings is no history entry (Back would change the address, not the page)
+        entries = page.evaluate("history.length")
         assert page.evaluate(JS_SET_SLIDER, ["λ", 3.5]) is not None
         page.wait_for_function("location.search.includes('lam=3.5')", timeout=30000)
+        assert page.evaluate("history.length") == entries
         q = dict(x.split("=") for x in page.evaluate("location.search")[1:].split("&"))
         assert q == {"r1": "25", "lam": "3.5", "seed": "3", "frame": "4", "color": "final"}
         assert len(created) == 1

@@ -44,10 +44,6 @@ class Controls:
         # a value that comes during a computation supersedes it (ExplorerState), so there is
         # nothing to gather, and the wait was 50 ms of every parameter change's latency.
         self.w_frame._debounce = 0
-        # the page draws a frame move itself (explorer/cards/live.py): panel's busy indicator
-        # would toggle twice per move (two messages, each making the browser lay the whole
-        # page out again, ~70 ms of its main thread) for ~5 ms of the server's bookkeeping
-        self.w_frame._busy__ignore = ["value", "value_throttled"]
         self.w_color = pn.widgets.Select(label="Colour points by", options=list(V.COLOR_MODES),
                                          value="ground truth" if seq.labels is not None
                                          else "final (after Random Voting)", width=SIDE_W)

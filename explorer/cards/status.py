@@ -28,6 +28,17 @@ def header_text(seq: laav.Sequence) -> str:
 SPIN_PAUSABLE = ":host div::after { animation-play-state: var(--laav-spin, running) !important; }"
 
 
+#: The address box's page side: the query into the address bar after the next paint.
+JS_ADDRESS = """
+const search = cb_obj.value || '';
+requestAnimationFrame(() => setTimeout(() => {
+  if (cb_obj.value === search && window.location.search !== search)
+    window.history.replaceState(window.history.state, '',
+                                window.location.pathname + search + window.location.hash);
+}, 0));
+"""
+
+
 def spinner_style(busy: bool) -> dict:
     """The spinner's inline styles: shown and turning while busy, else hidden and paused."""
     return {**shown_style(busy, keep_space=True), "--laav-spin": "running" if busy else "paused"}
@@ -60,6 +71,14 @@ class StatusBar:
         # once, with the page): a hidden box whose value the page copies into document.title
         self.tab_title = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
         self.tab_title.jscallback(value="document.title = cb_obj.value")
+        # the page address carries the state shown (Explorer._sync_url): a hidden box whose
+        # value the page puts in the address bar with replaceState once the views are drawn
+        # (after the next paint: off the redraw's path; panel's Location did a pushState
+        # inside it, about 25 ms of the page's main thread a move in Chromium, and sent the
+        # new address back to the server). A change of settings is not a new history entry
+        # (Back leaves the page, as it would have: nothing restored the state on Back).
+        self.address = pn.widgets.TextInput(value=None, visible=False, margin=0, width=0)
+        self.address.jscallback(value=JS_ADDRESS)
         self.header_name = Markdown(header_text(seq), margin=(0, 10),
                                     styles={"color": "white", "font-size": "1.25em"})
         self.line = pn.Column(pn.Row(self.spinner, self.status, sizing_mode="stretch_width"), self.change_md,
