@@ -98,6 +98,13 @@ def test_advanced_fields_and_a_b_compare_in_the_page(tmp_path):
         box.press("Enter")
         page.get_by_text("affine_threshold must be in (0, 1e+06]").first.wait_for(timeout=30000)
         assert ex.wait(30) and ex.result is res
+        # a fraction typed into an integer field: refused with a message (an integer box in
+        # the page dropped the point as it was typed: "2.5" became rv_trials = 25)
+        box = page.get_by_label("● rv_trials · default")  # (marked: 20 is off the default)
+        box.fill("2.5")
+        box.press("Enter")
+        page.get_by_text("rv_trials must be an integer, got 2.5").first.wait_for(timeout=30000)
+        assert ex.wait(30) and ex.result is res and ex.result.params.rv_trials == 20
         page.screenshot(path=str(shots / "advanced_open.png"))
 
         # pin A, move λ with its slider: the compare card shows A and B and the difference

@@ -46,10 +46,14 @@ def test_advanced_card_has_every_field_folded_with_tooltips(ex):
     for f in FIELDS:
         w = adv.widgets[f.name]
         assert w.value == getattr(d, f.name) and w.label == f.name
-        kind = {"bool": pn.widgets.Checkbox, "choice": pn.widgets.Select, "int": pn.widgets.IntInput,
-                "int|None": pn.widgets.IntInput, "float": pn.widgets.FloatInput,
+        # integer fields too are number boxes (panel's integer box read "2.5" typed as 25),
+        # stepping by 1; LaavParams refuses a fraction
+        kind = {"bool": pn.widgets.Checkbox, "choice": pn.widgets.Select, "int": pn.widgets.FloatInput,
+                "int|None": pn.widgets.FloatInput, "float": pn.widgets.FloatInput,
                 "float>": pn.widgets.FloatInput}[f.kind]
         assert type(w) is kind, f.name
+        if f.kind in ("int", "int|None"):
+            assert w.step == 1, f.name
         if f.kind == "choice":
             assert w.options == list(f.choices)
         elif f.kind != "bool":

@@ -114,7 +114,9 @@ class AdvancedPanel:
                   width=FIELD_W, margin=(4, 5))
         auto = f"auto ({AUTO.get(f.name, 'auto')})" if f.kind.endswith("|None") else ""
         if f.kind in ("int", "int|None"):
-            w = pn.widgets.IntInput(step=1, placeholder=auto, **kw)
+            # a number box, not panel's integer box: that one drops what is not a digit as it
+            # is typed ("2.5" became 25); a fraction reaches LaavParams, which refuses it
+            w = pn.widgets.FloatInput(step=1, placeholder=auto, **kw)
         else:
             w = pn.widgets.FloatInput(step=_step(f.default), placeholder=auto, **kw)
         return w, w
