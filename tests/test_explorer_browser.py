@@ -252,6 +252,22 @@ JS_INJECTED = """() => {
 #: Over one idle second: animation frames asked for through the browser, and those the
 #: explorer routed to a timer (FilePond's painter loop: explorer.app.JS_THROTTLE_FILEPOND).
 JS_FRAME_REQUESTS = """async () => {
+  // idle means after the style sheets of the later cards have loaded: panel asks for a
+  // frame when each loads (one-off; on a slow machine they were still loading here)
+  const links = () => {
+    const out = [];
+    const visit = (root) => {
+      for (const el of root.querySelectorAll('*')) {
+        if (el.tagName === 'LINK' && el.rel === 'stylesheet') out.push(el);
+        if (el.shadowRoot) visit(el.shadowRoot);
+      }
+    };
+    visit(document);
+    return out;
+  };
+  const pause = (ms) => new Promise(r => setTimeout(r, ms));
+  for (let t = 0; t < 100 && links().some(l => l.sheet === null); t++) await pause(100);
+  await new Promise(r => setTimeout(r, 200));
   const f = window.requestAnimationFrame;
   let real = 0, routed = 0;
   window.requestAnimationFrame = (cb) => { const id = f(cb); if (id < 0) routed++; else real++; return id; };
@@ -316,6 +332,8 @@ def test_hostile_names_are_shown_as_text(tmp_path):
         assert ex.sequence.name == stored  # the last good result is kept
         # and the status line no longer says "Reading …" (it shows the kept result again)
         _wait_for(lambda: ex.status.object.startswith("Showing"), 20, "the status line back")
+        # the upload box is emptied: it said "Upload complete" for the file not used
+        page.wait_for_function("(" + JS_UPLOAD_FILES + ")() === 0", timeout=20000)
         page.wait_for_timeout(1000)  # let any image error handler fire (and its dialog arrive)
         assert page.evaluate(JS_INJECTED) == {"imgs": 0, "scripts": 0, "svgs": 0}
         # the header and the tab name the sequence shown (the upload), as text
@@ -631,6 +649,16 @@ def test_uploads_past_the_limit_and_long_work(tmp_path):
         _wait_for(lambda: ex.result.params.lam == 2.5 and ex.wait(1), 60, "a result after cancelling")
         assert ex.sequence.name == "padded_22MB"
     assert not js_errors, js_errors[:5]
+
+
+#: How many files the page's upload box lists (its FilePond), -1 before it is up.
+JS_UPLOAD_FILES = """() => {
+  for (const m of Bokeh.documents[0].all_models) {
+    const v = Bokeh.index.find_one(m);
+    if (v && v._file_pond) return v._file_pond.getFiles().length;
+  }
+  return -1;
+}"""
 
 
 #: Where the frame view draws the points ``pts`` ([[x, y], ...], image coordinates), in page

@@ -57,8 +57,15 @@ class UploadBox(pn.widgets.FileDropper):
 # (see Files.arm; repeated until the browser answers ``armed``): files the upload box refuses
 # (over the limit) or that are empty are reported to the server through that box, so the
 # page names them in its alert too; an empty file is removed from the box (it would
-# otherwise wait for an upload that never ends).
+# otherwise wait for an upload that never ends). The server writes ``clear:N`` when it has
+# refused a file the box sent: the box is emptied (it said "Upload complete" beside the
+# page's alert that the file was not used).
 _ARM_JS = """
+if (String(cb_obj.value).startsWith('clear:')) {  // a file the server refused (Files.clear_box)
+  const view = Bokeh.index.find_one(box);
+  if (view != null && view._file_pond != null) view._file_pond.removeFiles();
+  return;
+}
 if (!String(cb_obj.value).startsWith('arm:')) return;
 const tries = [0];
 const hook = () => {
@@ -140,6 +147,7 @@ class Files:
                                sizing_mode="stretch_width", styles=shown_style(False))
         self._ticker: threading.Thread | None = None
         self._armed, self._arms = False, 0  # the page reports refused files (see arm)
+        self._clears = 0  # the server empties the box of a file it refused (clear_box)
         self.w_dl_csv = pn.widgets.FileDownload(callback=self.export_csv, filename="labels.csv",
                                                 label="Labels (CSV)", color="primary",
                                                 embed=False, width=SIDE_W)
@@ -186,12 +194,23 @@ class Files:
         else:
             self._refuse_big(name, size, sent=False)
 
+    def clear_box(self) -> None:
+        """(Any thread.) Empty the page's upload box: the file it sent was not used."""
+        if self.host.on_server:
+            self.host.schedule(self._clear_box_now)
+
+    def _clear_box_now(self) -> None:
+        self._clears += 1
+        self.w_refused.value = f"clear:{self._clears}"
+
     def _refuse_empty(self, name: str) -> None:
         self.state.report(f"{name} is empty (0 bytes): nothing was loaded — still showing the last "
                           "valid result")
 
     def _refuse_big(self, name: str, size: int | None, sent: bool = True) -> None:
         what = f"{name} ({fmt_size(size)})" if size is not None else name
+        if sent:
+            self.clear_box()
         self.state.report(f"{what} is larger than the upload limit of {fmt_size(self.max_upload)}"
                           f"{'' if sent else ' and was not sent'} (start laav-explore with a larger "
                           "--max-upload to open it) — still showing the last valid result")
@@ -232,7 +251,8 @@ class Files:
             self._refuse_big(Path(name).name, len(data))
             return
         if data.lstrip()[:1] == b"{":  # a params.json (a sequence file never starts so)
-            self.host.load_params(data, name)
+            if not self.host.load_params(data, name):
+                self.clear_box()
             return
         if not self.host.on_server:
             self.load_bytes(data, name)
@@ -257,6 +277,7 @@ class Files:
         if not self._load_bytes(data, base, C, token):
             if token is None or self._end_reading(token):
                 self.host.schedule(self.host.lock_for_upload, False)
+            self.clear_box()
             return False
         return True
 
