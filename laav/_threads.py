@@ -18,6 +18,7 @@ thread, so every thread that runs the pipeline limits (and restores) its own. Ne
 from __future__ import annotations
 
 import functools
+import sys
 import threading
 from contextlib import contextmanager
 
@@ -32,26 +33,28 @@ _blas_users = 0
 _blas_limiter = None
 _local = threading.local()  # .depth: nesting in this thread
 _pools = None  # threadpoolctl's controller of the libraries the pipeline uses
+_pools_modules = -1  # len(sys.modules) when _pools was made
 
 
 @contextmanager
 def limited_threads():
     """Cap BLAS/OpenMP thread pools at :data:`MAX_THREADS` inside the block."""
-    global _blas_users, _blas_limiter, _pools
+    global _blas_users, _blas_limiter, _pools, _pools_modules
     if MAX_THREADS is None or getattr(_local, "depth", 0):
         yield  # no cap, or already inside a capped block of this thread
         return
     from threadpoolctl import ThreadpoolController
 
     with _lock:
-        if _pools is None:
+        if _pools is None or _pools_modules != len(sys.modules):
             # threadpoolctl sees only libraries already loaded: load scipy's BLAS (imported
             # lazily by the stages) first. Finding the libraries takes ~3 ms, so it is done
-            # once.
+            # again only when modules were imported since (a library loaded later, e.g.
+            # scikit-learn's OpenMP, was otherwise never capped in this process)
             from .pipeline import preload
 
             preload()
-            _pools = ThreadpoolController()
+            _pools, _pools_modules = ThreadpoolController(), len(sys.modules)
         pools = _pools
         if _blas_users == 0:
             _release_openblas_claim()

@@ -98,3 +98,28 @@ def test_an_error_inside_a_run_restores_the_threads(two_threads, monkeypatch):
     with pytest.raises(RuntimeError, match="stage failed"):
         segment(make_sequence(n_objects=1, n_frames=10, n_points=100, rng=0), 2, FAST)
     assert _threads() == two_threads
+
+
+def test_a_library_loaded_after_the_first_run_is_capped_too():
+    """The controller of the thread pools is made again when modules were imported since:
+    scikit-learn's OpenMP, loaded after a first run, ran at its own thread count inside
+    later runs (test_threads failed when it ran after test_coarse)."""
+    import subprocess
+    import sys
+
+    code = """
+import laav
+from laav._threads import limited_threads
+from threadpoolctl import threadpool_info, threadpool_limits
+with limited_threads():
+    pass
+import sklearn.cluster  # its OpenMP library, loaded after the first run
+with threadpool_limits(limits=2):
+    with limited_threads():
+        inside = {i["filepath"]: i["num_threads"] for i in threadpool_info()}
+print(inside)
+assert any("gomp" in p or "omp" in p for p in inside), inside
+assert set(inside.values()) == {1}, inside
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
