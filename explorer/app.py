@@ -877,8 +877,12 @@ class Explorer:
                     self._applied.wait(left)
         return True
 
-    def close(self) -> None:
+    def close(self, timeout: float | None = 10.0) -> bool:
+        """Stop the computations and the 3-D view's server. The worker threads are joined
+        for up to ``timeout`` seconds (None: not waited for, as when a page's session ends
+        on the server's event loop). True when they have all ended."""
         self.view3d.closed = True  # a 3-D server still starting closes itself
         self.sweep_view.close()
-        self.state.close()
+        ended = self.state.close(timeout)
         self.view3d.close()
+        return ended

@@ -306,7 +306,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                           "only that tab's page knows)", flush=True)
 
             threading.Thread(target=announce, name="laav-explore-announce", daemon=True).start()
-        pn.state.on_session_destroyed(lambda ctx: ex.close())
+        # (on the server's event loop: the workers stop at their next check, not waited for)
+        pn.state.on_session_destroyed(lambda ctx: ex.close(timeout=None))
         pn.state.onload(ex.start)
         doc = pn.state.curdoc
         if doc is not None:

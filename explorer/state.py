@@ -1010,10 +1010,22 @@ class ExplorerState:
             time.sleep(0.02)
         return None
 
-    def close(self) -> None:
+    def close(self, timeout: float | None = 10.0) -> bool:
+        """Stop: queued jobs are dropped, the running ones stop at their next check (every
+        stage checks between steps), and their threads are joined for up to ``timeout``
+        seconds (None: no wait). True when every worker thread has ended."""
         self._closed = True
         with self._lock:
             self._gen += 1  # anything still queued is now stale
             self._idle.notify_all()  # a computation ahead waiting for a job stops now
-        self._worker.shutdown(wait=False, cancel_futures=True)
-        self._rv_worker.shutdown(wait=False, cancel_futures=True)
+        workers = (self._worker, self._rv_worker)
+        for w in workers:
+            w.shutdown(wait=False, cancel_futures=True)
+        if timeout is None:
+            return False
+        deadline = time.monotonic() + timeout
+        # (the executors' threads: ThreadPoolExecutor keeps them in ``_threads``)
+        threads = [t for w in workers for t in list(getattr(w, "_threads", ()))]
+        for t in threads:
+            t.join(max(0.0, deadline - time.monotonic()))
+        return not any(t.is_alive() for t in threads)

@@ -562,6 +562,20 @@ def test_no_thread_leaks_after_close(seq):
     assert threading.active_count() <= before + 2
 
 
+def test_close_joins_the_workers_even_mid_computation(seq):
+    """close() returns once its worker threads have ended: the one computing stops at its
+    next check (here a new seed's result and plain RV were being computed)."""
+    ex = Explorer(seq, viser=False)
+    assert ex.wait(60)
+    ex.state.request(seed=7)
+    ex.state.request_plain_rv()
+    t0 = time.monotonic()
+    assert ex.close(timeout=30) is True
+    assert time.monotonic() - t0 < 30
+    names = [t.name for t in threading.enumerate()]
+    assert not [n for n in names if n.startswith(("laav-explore-pipeline", "laav-explore-plain-rv"))], names
+
+
 def test_rv_summary_names_the_points_each_polishing_step_moved():
     from explorer.views import rv_summary
     from laav.synthetic import make_sequence
