@@ -1017,6 +1017,7 @@ class ExplorerState:
         self._closed = True
         with self._lock:
             self._gen += 1  # anything still queued is now stale
+            self._rv_key = None  # plain RV computing now stops at its next check
             self._idle.notify_all()  # a computation ahead waiting for a job stops now
         workers = (self._worker, self._rv_worker)
         for w in workers:

@@ -397,6 +397,8 @@ def preload() -> None:
     import scipy.sparse.linalg  # noqa: F401
     import scipy.spatial.distance  # noqa: F401
 
+    from . import _spectral  # noqa: F401  (imported by the stages where first needed)
+
 
 def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: int = 0, *,
             random_state=None) -> LaavResult:

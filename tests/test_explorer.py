@@ -562,18 +562,29 @@ def test_no_thread_leaks_after_close(seq):
     assert threading.active_count() <= before + 2
 
 
-def test_close_joins_the_workers_even_mid_computation(seq):
+def test_close_joins_the_workers_even_mid_computation(seq, monkeypatch):
     """close() returns once its worker threads have ended: the one computing stops at its
     next check (here a new seed's result and plain RV were being computed)."""
     ex = Explorer(seq, viser=False)
     assert ex.wait(60)
+    from laav._interrupt import check
+
+    started = threading.Event()
+
+    def long_plain_rv(*args, **kwargs):  # plain RV that only a stop request ends
+        started.set()
+        while True:
+            check()
+            time.sleep(0.01)
+
+    monkeypatch.setattr(laav, "random_voting", long_plain_rv)
     ex.state.request(seed=7)
     ex.state.request_plain_rv()
-    t0 = time.monotonic()
-    assert ex.close(timeout=30) is True
-    assert time.monotonic() - t0 < 30
-    names = [t.name for t in threading.enumerate()]
-    assert not [n for n in names if n.startswith(("laav-explore-pipeline", "laav-explore-plain-rv"))], names
+    assert started.wait(30)
+    threads = set(ex.state._worker._threads) | set(ex.state._rv_worker._threads)
+    assert threads
+    assert ex.close(timeout=5) is True
+    assert not [t.name for t in threads if t.is_alive()]
 
 
 def test_rv_summary_names_the_points_each_polishing_step_moved():

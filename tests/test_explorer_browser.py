@@ -515,8 +515,18 @@ def test_url_carries_the_state(tmp_path):
         page.get_by_text(f"lam must be a number, got '{bad}'").first.wait_for(timeout=20000)
         page.get_by_text("r1 must be a number, got 'abc'").first.wait_for(timeout=20000)
         page.get_by_text("unknown setting '<script>alert(2)</script>'").first.wait_for(timeout=20000)
+        # the address keeps what was used, only
+        page.wait_for_function("location.search === '?seed=2'", timeout=20000)
         page.wait_for_timeout(1000)  # let any error handler fire (and its dialog arrive)
         assert page.evaluate(JS_INJECTED) == {"imgs": 0, "scripts": 0, "svgs": 0}
+        page.close()
+
+        # nothing usable: the address is cleaned to none (the first result's query is "")
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(f"http://127.0.0.1:{port}/?r1=abc", wait_until="domcontentloaded")
+        ex3 = _wait_for(lambda: created[2] if len(created) > 2 else None, 30, "the third explorer")
+        assert ex3.wait(60)
+        page.wait_for_function("location.search === ''", timeout=20000)
     assert not dialogs, f"a payload ran: {dialogs}"
 
 

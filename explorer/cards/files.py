@@ -57,13 +57,27 @@ class UploadBox(pn.widgets.FileDropper):
 # (see Files.arm; repeated until the browser answers ``armed``): files the upload box refuses
 # (over the limit) or that are empty are reported to the server through that box, so the
 # page names them in its alert too; an empty file is removed from the box (it would
-# otherwise wait for an upload that never ends). The server writes ``clear:N`` when it has
-# refused a file the box sent: the box is emptied (it said "Upload complete" beside the
-# page's alert that the file was not used).
+# otherwise wait for an upload that never ends). The server writes ``clear:[N, name]`` when
+# it has refused a file the box sent, or its read was cancelled: that file leaves the box (it
+# said "Upload complete" beside the page's alert that the file was not used); another file
+# dropped meanwhile stays.
 _ARM_JS = """
 if (String(cb_obj.value).startsWith('clear:')) {  // a file the server refused (Files.clear_box)
+  const name = JSON.parse(String(cb_obj.value).slice(6))[1];
   const view = Bokeh.index.find_one(box);
-  if (view != null && view._file_pond != null) view._file_pond.removeFiles();
+  const pond = view == null ? null : view._file_pond;
+  // an item still queued, loading or being sent (FilePond's status 9, 7, 3; the server may
+  // refuse a file before the box has finished with it) is removed once it has, or after 10 s
+  const take = (left) => {
+    let busy = false;
+    for (const item of pond.getFiles()) {
+      if (item.filename !== name) continue;
+      if (left > 0 && [3, 7, 9].includes(item.status)) busy = true;
+      else pond.removeFile(item.id);
+    }
+    if (busy) setTimeout(() => take(left - 1), 200);
+  };
+  if (pond != null) take(50);
   return;
 }
 if (!String(cb_obj.value).startsWith('arm:')) return;
@@ -194,14 +208,14 @@ class Files:
         else:
             self._refuse_big(name, size, sent=False)
 
-    def clear_box(self) -> None:
-        """(Any thread.) Empty the page's upload box: the file it sent was not used."""
+    def clear_box(self, name: str) -> None:
+        """(Any thread.) Take the file ``name`` out of the page's upload box: it was not used."""
         if self.host.on_server:
-            self.host.schedule(self._clear_box_now)
+            self.host.schedule(self._clear_box_now, name)
 
-    def _clear_box_now(self) -> None:
+    def _clear_box_now(self, name: str) -> None:
         self._clears += 1
-        self.w_refused.value = f"clear:{self._clears}"
+        self.w_refused.value = "clear:" + json.dumps([self._clears, name])
 
     def _refuse_empty(self, name: str) -> None:
         self.state.report(f"{name} is empty (0 bytes): nothing was loaded — still showing the last "
@@ -210,7 +224,7 @@ class Files:
     def _refuse_big(self, name: str, size: int | None, sent: bool = True) -> None:
         what = f"{name} ({fmt_size(size)})" if size is not None else name
         if sent:
-            self.clear_box()
+            self.clear_box(name)
         self.state.report(f"{what} is larger than the upload limit of {fmt_size(self.max_upload)}"
                           f"{'' if sent else ' and was not sent'} (start laav-explore with a larger "
                           "--max-upload to open it) — still showing the last valid result")
@@ -252,7 +266,7 @@ class Files:
             return
         if data.lstrip()[:1] == b"{":  # a params.json (a sequence file never starts so)
             if not self.host.load_params(data, name):
-                self.clear_box()
+                self.clear_box(Path(name).name)
             return
         if not self.host.on_server:
             self.load_bytes(data, name)
@@ -277,7 +291,7 @@ class Files:
         if not self._load_bytes(data, base, C, token):
             if token is None or self._end_reading(token):
                 self.host.schedule(self.host.lock_for_upload, False)
-            self.clear_box()
+                self.clear_box(base)  # (a cancelled read's file left the box at the cancel)
             return False
         return True
 
@@ -386,6 +400,7 @@ class Files:
             return False
         if reading is not None:
             what = f"reading {reading[1]}"
+            self.clear_box(reading[1])
         shown = self.host.sequence.name if self.host.result is not None else None
         self.host.schedule(self._after_cancel, what, shown)
         return True

@@ -31,11 +31,13 @@ SPIN_PAUSABLE = ":host div::after { animation-play-state: var(--laav-spin, runni
 #: The address box's page side: the query into the address bar after the next paint.
 JS_ADDRESS = """
 const search = cb_obj.value || '';
-requestAnimationFrame(() => setTimeout(() => {
+const write = () => setTimeout(() => {
   if (cb_obj.value === search && window.location.search !== search)
     window.history.replaceState(window.history.state, '',
                                 window.location.pathname + search + window.location.hash);
-}, 0));
+}, 0);
+// after the next paint; a hidden tab paints no frame: at once
+if (document.hidden) write(); else requestAnimationFrame(write);
 """
 
 
@@ -77,7 +79,9 @@ class StatusBar:
         # inside it, about 25 ms of the page's main thread a move in Chromium, and sent the
         # new address back to the server). A change of settings is not a new history entry
         # (Back leaves the page, as it would have: nothing restored the state on Back).
-        self.address = pn.widgets.TextInput(value=None, visible=False, margin=0, width=0)
+        # (its first value is none a query can be: the first result's address, "" too, is
+        # then a change the page acts on, cleaning an address of keys that were not used)
+        self.address = pn.widgets.TextInput(value="(not set)", visible=False, margin=0, width=0)
         self.address.jscallback(value=JS_ADDRESS)
         self.header_name = Markdown(header_text(seq), margin=(0, 10),
                                     styles={"color": "white", "font-size": "1.25em"})
