@@ -107,6 +107,15 @@ class Alert(_TextUpdate, pn.pane.Alert):
     """``pn.pane.Alert`` whose text changes leave its style sheets alone (:class:`_TextUpdate`)."""
 
 
+def page_box(js: str, value: str = "", args: dict | None = None) -> pn.widgets.TextInput:
+    """A hidden text box through which the server hands the page a value: ``js`` runs in the
+    page (``cb_obj`` the box) whenever the server changes it (the tab's title, the address,
+    the upload box's reports)."""
+    box = pn.widgets.TextInput(value=value, visible=False, margin=0, width=0)
+    box.jscallback(args=args or {}, value=js)
+    return box
+
+
 def shown_style(shown: bool, keep_space: bool = False) -> dict:
     """Inline ``styles`` that show or hide a part of the page without a layout change.
 

@@ -30,7 +30,7 @@ import laav
 from .. import export
 from .. import views as V
 from ..sizes import DEFAULT_MAX_UPLOAD, UPLOAD_CHUNK, fmt_size, parse_size  # noqa: F401 (re-exported)
-from .base import SIDE_W, Markdown, shown_style
+from .base import SIDE_W, Markdown, page_box, shown_style
 
 #: Work shorter than this shows no progress line (a slider move on a small sequence).
 PROGRESS_AFTER = 1.0
@@ -62,6 +62,7 @@ class UploadBox(pn.widgets.FileDropper):
 # said "Upload complete" beside the page's alert that the file was not used); another file
 # dropped meanwhile stays.
 _ARM_JS = """
+const out = cb_obj;  // the page's reports go back through the same box
 if (String(cb_obj.value).startsWith('clear:')) {  // a file the server refused (Files.clear_box)
   const name = JSON.parse(String(cb_obj.value).slice(6))[1];
   const view = Bokeh.index.find_one(box);
@@ -142,8 +143,7 @@ class Files:
             f"Up to {fmt_size(self.max_upload)} (`laav-explore --max-upload`).", margin=(0, 10),
             styles={"font-size": "0.85em", "color": "#555"})
         # the browser reports files its upload box refused (see _ARM_JS)
-        self.w_refused = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
-        self.w_refused.jscallback(args={"box": self.w_upload, "out": self.w_refused}, value=_ARM_JS)
+        self.w_refused = page_box(_ARM_JS, args={"box": self.w_upload})
         self.w_refused.param.watch(self._on_refused, "value")
         self._parts: dict = {}  # name -> [chunks, bytes so far] of the upload arriving
         self._upload_lock = threading.Lock()

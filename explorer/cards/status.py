@@ -9,7 +9,7 @@ import panel as pn
 import laav
 
 from .. import views as V
-from .base import Alert, Markdown, shown_style
+from .base import Alert, Markdown, page_box, shown_style
 
 #: What the status line says while a preview is shown (``ExplorerState.on_preview``);
 #: a browser benchmark waits for the result by its absence.
@@ -71,8 +71,7 @@ class StatusBar:
         # the sequence shown, in the page header (the template's own title is fixed at load)
         # the browser tab's title follows the sequence shown (bokeh's document title is sent
         # once, with the page): a hidden box whose value the page copies into document.title
-        self.tab_title = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
-        self.tab_title.jscallback(value="document.title = cb_obj.value")
+        self.tab_title = page_box("document.title = cb_obj.value")
         # the page address carries the state shown (Explorer._sync_url): a hidden box whose
         # value the page puts in the address bar with replaceState once the views are drawn
         # (after the next paint: off the redraw's path; panel's Location did a pushState
@@ -81,8 +80,7 @@ class StatusBar:
         # (Back leaves the page, as it would have: nothing restored the state on Back).
         # (its first value is none a query can be: the first result's address, "" too, is
         # then a change the page acts on, cleaning an address of keys that were not used)
-        self.address = pn.widgets.TextInput(value="(not set)", visible=False, margin=0, width=0)
-        self.address.jscallback(value=JS_ADDRESS)
+        self.address = page_box(JS_ADDRESS, value="(not set)")
         self.header_name = Markdown(header_text(seq), margin=(0, 10),
                                     styles={"color": "white", "font-size": "1.25em"})
         self.line = pn.Column(pn.Row(self.spinner, self.status, sizing_mode="stretch_width"), self.change_md,

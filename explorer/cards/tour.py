@@ -13,7 +13,7 @@ from __future__ import annotations
 import panel as pn
 
 from ..tour import TOUR
-from .base import Host, Markdown
+from .base import Host, Markdown, page_box
 
 #: Outline of the card a step is about (the header's navy: a page colour, not a motion's).
 HIGHLIGHT = {"outline": "4px solid #2c4a66", "outline-offset": "2px"}
@@ -104,9 +104,8 @@ class TourView:
         self.hint_md = Markdown("Keyboard: ← →  (Esc ends the tour)", margin=(18, 10),
                                 styles={"font-size": "16px", "color": "#555"})
         # commands to the page (scroll, keys on/off) and the keys it sends back
-        self.w_js = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
         self.w_key = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
-        self.w_js.jscallback(args={"out": self.w_key}, value=_TOUR_JS)
+        self.w_js = page_box(_TOUR_JS, args={"out": self.w_key})
         self.w_key.param.watch(self._on_key, "value")
         self.panel = pn.Column(
             pn.Row(self.step_md, pn.layout.HSpacer(), self.w_end, sizing_mode="stretch_width"),
