@@ -54,6 +54,34 @@ def test_the_page_gets_the_tracks_once_and_the_templates_per_result(seq):
         ex.close()
 
 
+def test_the_page_remakes_its_views_only_when_what_it_makes_them_from_changed(seq):
+    """A redraw that leaves every track, template, text format and the frame as they were
+    (the same result drawn again; a λ move that merged the fine models as before) sends no
+    new generation: the page's views, already those, are not remade and repainted. A
+    redraw that changes a template (another colouring) or the frame does."""
+    ex = Explorer(seq, viser=False)
+    try:
+        assert ex.wait(120)
+        live, meta = ex.live, ex.live.meta
+        gen = meta.data["gen"][0]
+        st = ex.state
+        ex._apply_result(st.result, st.sequence, st.settings, ex.applied_generation)
+        assert meta.data["gen"][0] == gen  # the same result again: nothing new for the page
+        before = {k: dict(tsrc.data) for k, (_, tsrc, _) in live.views.items()}
+        ex.controls.set_color_mode("atoms")
+        assert ex.wait(60)
+        assert meta.data["gen"][0] > gen  # another colouring: the points' template changed
+        assert any(not all(np.array_equal(np.asarray(v), np.asarray(before[k][c]))
+                           for c, v in tsrc.data.items()) for k, (_, tsrc, _) in live.views.items())
+        gen = meta.data["gen"][0]
+        assert not live.commit(ex.frame) and meta.data["gen"][0] == gen
+        assert live.commit(ex.frame + 1) and meta.data["gen"][0] == gen + 1  # another frame
+        live.text("frame_title", "frame {f} · another format", ex.frame, {})
+        assert live.commit(ex.frame + 1) and meta.data["gen"][0] == gen + 2
+    finally:
+        ex.close()
+
+
 def test_above_the_limit_the_server_draws_every_frame(seq, monkeypatch):
     monkeypatch.setenv("LAAV_EXPLORE_LIVE_MAX", str(seq.n_frames * seq.n_points - 1))
     ex = Explorer(seq, viser=False)

@@ -216,6 +216,9 @@ class LiveFrames:
         self._proxies: dict[str, list] = {}  # view name -> [(legend's stand-in renderer, by)]
         self._stand_in: dict[int, GlyphRenderer] = {}  # id(renderer) -> its legend stand-in
         self._shape = {"points": (0, 0), "atoms": (0, 0)}
+        #: something the page makes its views from changed since the last :meth:`commit`
+        #: (a track, a template, a text's format): the next commit has the page remake them
+        self._changed = True
 
     # ------------------------------------------------------------------ building
     def add(self, name: str, src: ColumnDataSource, spec: dict) -> None:
@@ -292,6 +295,7 @@ class LiveFrames:
         if seq is self._seq:
             return self.enabled
         self._seq = seq
+        self._changed = True
         F, P = seq.n_frames, seq.n_points
         self.enabled = F * P <= self.max_entries
         if not self.enabled:
@@ -313,6 +317,7 @@ class LiveFrames:
         if not self.enabled or result.graph is self._atoms:
             return
         self._atoms = result.graph
+        self._changed = True
         pos, _ = V.atom_track(result)
         self.tracks["atoms"].data = {"x": pos[..., 0].astype(np.float32).ravel(),
                                      "y": pos[..., 1].astype(np.float32).ravel()}
@@ -326,24 +331,35 @@ class LiveFrames:
             set_data(proxy.data_source, {c: rows[c] for c in proxy.data_source.data if c in rows})
         if not self.enabled:
             return
-        set_data(tsrc, {("@" + k[1:]) if k in ("_a", "_b") else "=" + k: np.asarray(v)
-                        for k, v in tpl.items()})
+        if set_data(tsrc, {("@" + k[1:]) if k in ("_a", "_b") else "=" + k: np.asarray(v)
+                           for k, v in tpl.items()}):
+            self._changed = True
 
     def text(self, key: str, fmt: str, frame: int, sources: dict) -> str:
         """Remember ``key``'s format (:func:`explorer.views.fill_text`) and return it filled
         at ``frame`` with ``sources`` (the views made at that frame, by name)."""
+        if self._fmt.get(key) != fmt:
+            self._changed = True
         self._fmt[key] = fmt
         return V.fill_text(fmt, frame, sources)
 
-    def commit(self, frame: int) -> None:
+    def commit(self, frame: int) -> bool:
         """End of a draw: the generation, frame, shapes and formats (sent last in the batch:
-        the page then makes its views again)."""
+        the page then makes its views again). When nothing the page makes its views from
+        changed since the last commit (same tracks, templates, formats and frame: e.g. a λ
+        move that merged the fine models as before), nothing is sent and the page's views,
+        already those, are neither remade nor repainted. Returns whether it was sent."""
         old = self.meta.data
         (pf, pn_), (af, an) = self._shape["points"], self._shape["atoms"]
         data = {"gen": [int(old["gen"][0]) + 1], "frame": [int(frame)], "live": [int(self.enabled)],
                 "points_f": [int(pf)], "points_n": [int(pn_)], "atoms_f": [int(af)], "atoms_n": [int(an)],
                 **{"t_" + k: [v] for k, v in self._fmt.items()}}
+        if not self._changed and set(data) == set(old) and all(
+                list(old[k]) == data[k] for k in data if k != "gen"):
+            return False
+        self._changed = False
         self.meta.data = data
+        return True
 
     @property
     def active(self) -> bool:
