@@ -767,6 +767,7 @@ class Explorer:
     def _frame_now(self) -> None:
         if self.result is None or self.quieted:
             return
+        self.state.touch()  # (not beside the next moves: AHEAD_IDLE_S)
         with self.hold(live="frame"):
             self._draw_frame()
             self.graph_view.draw(self.result, self.frame, self.fine_colors)
@@ -780,6 +781,7 @@ class Explorer:
     def _color_now(self) -> None:
         if self.result is None:
             return
+        self.state.touch()
         self.style = V.point_style(self.sequence, self.result, self.controls.color_mode,
                                    self.state.plain_rv(self.sequence, self.settings))
         with self.hold(live="draw"):

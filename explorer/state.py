@@ -109,6 +109,13 @@ AHEAD_BUDGET_BYTES = 128 * 2**20
 #: A pipeline's retained memory per trajectory entry (frame x point): 145 bytes measured
 #: (tracemalloc, 2,000 tracks x 100 frames, 3 motions, default settings: 29 MB).
 PIPELINE_BYTES_PER_ENTRY = 150
+#: Seconds without a request, a new result or a frame move (:meth:`ExplorerState.touch`)
+#: before the next seed is computed ahead (``seeds_ahead``). Computed at once, it shared the
+#: server's interpreter with the views being drawn and the next move being read: demo λ
+#: moves in Chromium took 271-305 ms against 212-249 with the wait
+#: (docs/bench/explorer_browser_latency_2026-12-02d.md). A person moving a slider moves it
+#: again within this; one looking at a result does not.
+AHEAD_IDLE_S = 1.0
 #: How a result shown at once was computed (the status line says it).
 AHEAD_IDLE, AHEAD_SWEEP = "ahead, while idle", "by the seed sweep"
 
@@ -505,6 +512,7 @@ class ExplorerState:
         self._gen = 0
         self._published = 0
         self._pending = 0
+        self._quiet_since = time.monotonic()  # the last request or result (AHEAD_IDLE_S)
         self._idle = threading.Condition(self._lock)
         self._worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-pipeline")
         self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-plain-rv")
@@ -548,6 +556,12 @@ class ExplorerState:
         if settings != self._target:
             self._target = self.settings = settings
             self._notify_target()
+
+    def touch(self) -> None:
+        """A person is using the page (a frame move, another colouring): the next seed is not
+        computed ahead until :data:`AHEAD_IDLE_S` after this either."""
+        with self._lock:
+            self._quiet_since = max(self._quiet_since, time.monotonic())
 
     def preload(self) -> None:
         """Start the pipeline's first-use imports (:func:`laav.preload`) in a thread of their
@@ -749,6 +763,7 @@ class ExplorerState:
         finally:
             with self._lock:
                 self._pending -= 1
+                self._quiet_since = time.monotonic()
                 self._idle.notify_all()
             self._notify_busy()
 
@@ -953,8 +968,14 @@ class ExplorerState:
         try:
             with self.rv_computing(stop):
                 with self._idle:  # the job that showed the result is still finishing:
-                    while self._pending > 0 and not stop():  # its end notifies (a new
-                        self._idle.wait(0.25)  # request too, as its job ends; close: timeout)
+                    while not stop():  # its end notifies (a new request too, as its job
+                        if self._pending > 0:  # ends; close: timeout); then AHEAD_IDLE_S
+                            self._idle.wait(0.25)  # without a request or result
+                            continue
+                        left = self._quiet_since + AHEAD_IDLE_S - time.monotonic()
+                        if left <= 0:
+                            break
+                        self._idle.wait(min(left, 0.25))
                 if stop():
                     return
                 with self._lock:

@@ -137,3 +137,55 @@ def test_a_seed_the_sweep_computed_is_shown_from_its_pipeline():
     finally:
         sw.close()
         st.close()
+
+
+def test_the_computation_ahead_waits_until_nothing_was_asked_for_a_while(monkeypatch):
+    """The next seed is computed only after ``AHEAD_IDLE_S`` without a request or a result:
+    not beside the views being drawn and the next move of a slider (each request restarts
+    the wait)."""
+    import explorer.state as S
+
+    monkeypatch.setattr(S, "AHEAD_IDLE_S", 2.0)
+    started = []
+
+    class Watched(laav.Pipeline):
+        def __init__(self, *a, **k):
+            started.append(time.monotonic())
+            super().__init__(*a, **k)
+
+    seq = make_sequence(n_objects=1, n_points=150, n_frames=15, rng=4)
+    st = ExplorerState(seq, 2, PARAMS, seed=3, seeds_ahead=True)
+    try:
+        assert st.wait(120)
+        monkeypatch.setattr(S, "Pipeline", Watched)
+        for lam in (2.5, 3.0, 3.5):  # a slider moved every 0.5 s: nothing computed ahead
+            st.request(params={"lam": lam})
+            assert st.wait(120)
+            t_result = st._quiet_since
+            time.sleep(0.5)
+        assert started == []
+        assert _wait(_ahead_ready(st, 4))  # then, once quiet for 2 s
+        assert started and started[0] >= t_result + 2.0
+        assert st.result.params.lam == 3.5
+    finally:
+        st.close()
+
+
+def test_frame_moves_hold_the_computation_ahead_back_too(monkeypatch):
+    """A person scrubbing the frames (no request to the state) is using the page: the next
+    seed waits until ``AHEAD_IDLE_S`` after the last frame move as well."""
+    import explorer.state as S
+    from explorer import Explorer
+
+    monkeypatch.setattr(S, "AHEAD_IDLE_S", 1.5)
+    seq = make_sequence(n_objects=1, n_points=150, n_frames=15, rng=4)
+    ex = Explorer(seq, 2, params=PARAMS, seed=3, viser=False, seeds_ahead=True)
+    try:
+        assert ex.wait(120)
+        for f in range(1, 9):  # a frame every 0.4 s for 3.2 s
+            ex.w_frame.value = f
+            time.sleep(0.4)
+            assert not _ahead_ready(ex.state, 4)()
+        assert _wait(_ahead_ready(ex.state, 4))
+    finally:
+        ex.close()
