@@ -336,6 +336,26 @@ def test_plain_rv_comparison_is_cached_and_drawn(ex):
     assert "Plain RV" in ex.rv_md.object
 
 
+def test_the_rv_card_is_not_redrawn_for_the_same_runs(ex, monkeypatch):
+    """A change that leaves the fine-tuning and plain RV's run as they were (λ on a merge
+    that stays, another colouring) does not rebuild the RV card; another run does."""
+    import explorer.cards.rv as R
+
+    assert ex.wait(120, plain_rv=True)
+    calls = []
+    real = R.V.rv_sources
+    monkeypatch.setattr(R.V, "rv_sources", lambda v: calls.append(v) or real(v))
+    seq, v, plain = ex.sequence, ex.result.voting, ex.state.plain_rv()
+    ex.rv_view.draw(seq, v, plain)
+    assert calls == []
+    ex.rv_view.draw(seq, v, plain, pending=True)  # the same runs, now a preview: drawn
+    assert len(calls) == 2
+    ex.rv_view.draw(seq, v, None)
+    assert len(calls) == 4
+    ex.rv_view.draw(seq, v, plain)
+    assert len(calls) == 6
+
+
 def test_rv_card_draws_each_trials_error_per_iteration(ex):
     """The RV card's first chart (the paper's Fig. 3 in one run): each drawn trial's error
     per iteration from its label trace, row 0 its start; the misclassification rate of

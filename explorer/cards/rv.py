@@ -23,6 +23,7 @@ class RVView:
 
     def __init__(self) -> None:
         self.plain = None  # the plain-RV run drawn (None until it arrives)
+        self._drawn = None  # what the card shows: (sequence, LAAV's voting, plain RV's, pending)
         empty_rv = {"iteration": [], "changed": [], "changed_plot": [], "margin": []}
         self.src_rv_laav = ColumnDataSource(dict(empty_rv))
         self.src_rv_plain = ColumnDataSource(dict(empty_rv))
@@ -69,7 +70,13 @@ class RVView:
     def draw(self, seq, laav_voting, plain, pending: bool = False) -> None:
         """``seq``: the sequence (its ground truth scores the error chart); ``pending``:
         ``laav_voting`` is a preview, LAAV's own trial before plain RV and the selection
-        (:attr:`explorer.state.ExplorerState.on_preview`)."""
+        (:attr:`explorer.state.ExplorerState.on_preview`). The same runs again (a λ or
+        colour change that left the fine-tuning as it was) are not drawn again."""
+        drawn = (seq, laav_voting, plain, bool(pending))
+        if self._drawn is not None and all(a is b for a, b in zip(drawn[:3], self._drawn[:3])) \
+                and drawn[3] == self._drawn[3]:
+            return
+        self._drawn = drawn
         set_data(self.src_rv_laav, V.rv_sources(laav_voting))
         set_data(self.src_rv_plain, V.rv_sources(plain))
         own, other = V.rv_error_sources(seq, laav_voting), V.rv_error_sources(seq, plain)
