@@ -750,6 +750,7 @@ class Explorer:
         if self._rest is not None and self._rest["loaded"]:
             self.schedule(self._add_rest)
         self.lock_for_upload(False)
+        self.files.not_opened()
         self.restore_result()
         self.status_bar.show_error(message)
 

@@ -133,6 +133,8 @@ def test_a_long_first_computation_can_be_cancelled(ex):
     t = np.linspace(0, 1, 30)[:, None, None]
     pts = rng.uniform(0, 500, (1, 3000, 2)) + t * rng.normal(0, 30, (1, 3000, 2))
     big = laav.Sequence(pts, np.r_[np.zeros(1500, int), np.ones(1500, int)], name="big_one")
+    cleared = []
+    ex.files.clear_box = cleared.append  # (what the page's upload box is told)
     assert ex.files.load_bytes(_npz(big), "big_one.npz")  # read; its computation queued
     text = None
     deadline = time.monotonic() + 30
@@ -148,9 +150,36 @@ def test_a_long_first_computation_can_be_cancelled(ex):
     stopped = time.monotonic() - t0
     assert stopped < 10, stopped
     assert ex.result is res and ex.sequence is shown
+    assert cleared == ["big_one.npz"]  # the file whose result will not come leaves the box
     assert ex.note.visible and "Cancelled" in ex.note.object and "big\\_one" in ex.note.object
     assert "still showing s with its last result" in ex.note.object
     assert not ex.controls.switching and not ex.w_motions.disabled and ex.files.progress_text() is None
     assert not ex.files.cancel()  # nothing left to cancel
     ex.w_params["lam"].value = 3.0  # the page still computes, on the shown sequence
     assert ex.wait(120) and ex.result.params.lam == 3.0 and ex.sequence is shown
+
+
+def test_an_upload_whose_first_computation_fails_leaves_the_box(ex, monkeypatch):
+    """A file read fine whose first computation fails is taken out of the upload box (the
+    page's list), as an unreadable one is; a file shown stays, whatever fails later."""
+    import explorer.state as S
+
+    cleared = []
+    monkeypatch.setattr(ex.files, "clear_box", cleared.append)
+    res, shown = ex.result, ex.sequence
+
+    class Broken(S.Pipeline):
+        def __init__(self, *a, **k):
+            raise ValueError("no motion could be found")
+
+    monkeypatch.setattr(S, "Pipeline", Broken)
+    assert ex.files.load_bytes(_npz(_seq(P=50, seed=4, name="doomed")), "doomed.npz")
+    assert ex.wait(60) and ex.result is res and ex.sequence is shown
+    assert "no motion could be found" in _alert(ex)
+    assert cleared == ["doomed.npz"]
+    monkeypatch.undo()
+    monkeypatch.setattr(ex.files, "clear_box", cleared.append)
+    assert ex.files.load_bytes(_npz(_seq(P=50, seed=5, name="fine")), "fine.npz")
+    assert ex.wait(120) and ex.sequence.name == "fine"
+    ex.state.report("a later problem")  # the shown file stays listed
+    assert cleared == ["doomed.npz"]

@@ -162,6 +162,9 @@ class Files:
         self._ticker: threading.Thread | None = None
         self._armed, self._arms = False, 0  # the page reports refused files (see arm)
         self._clears = 0  # the server empties the box of a file it refused (clear_box)
+        #: (sequence, file name) of an upload read and being computed, until it is shown: a
+        #: first computation that fails or is cancelled takes the file out of the box too
+        self._opened: tuple | None = None
         self.w_dl_csv = pn.widgets.FileDownload(callback=self.export_csv, filename="labels.csv",
                                                 label="Labels (CSV)", color="primary",
                                                 embed=False, width=SIDE_W)
@@ -175,6 +178,18 @@ class Files:
 
     def show_sequence(self, seq: laav.Sequence) -> None:
         self.seq_info.object = seq_text(seq)
+        if self._opened is not None and self._opened[0] is seq:
+            self._opened = None  # the upload is shown: it stays in the box
+
+    def not_opened(self) -> None:
+        """(After a failure or a cancel.) An upload that was read but whose first result will
+        not come (its computation failed or was cancelled: neither shown nor still asked
+        for) leaves the box, as a file that could not be read does."""
+        opened = self._opened
+        if opened is None or self.state.target_sequence is opened[0] or self.host.sequence is opened[0]:
+            return
+        self._opened = None
+        self.clear_box(opened[1])
 
     def name_downloads(self, seq: laav.Sequence) -> None:
         for w, ext in ((self.w_dl_csv, "labels.csv"), (self.w_dl_json, "params.json"),
@@ -325,6 +340,7 @@ class Files:
             return False
         if token is not None and not self._end_reading(token):
             return False  # cancelled while reading: the shown result stays
+        self._opened = (seq, base)
         return self.state.load(seq, None if seq.labels is not None else C) is not None
 
     # ------------------------------------------------------------------ progress and cancel
@@ -409,6 +425,7 @@ class Files:
         """(Document thread.) Controls back to the shown result's settings, and a note."""
         self.host.lock_for_upload(False)
         self.controls.switching = False
+        self.not_opened()
         self.host.restore_result()  # a preview shown gives way to the last result
         self.controls.show_settings(self.state.settings)
         self.show_progress(False)
