@@ -470,7 +470,7 @@ def test_viser_view_follows_the_frame(seq):
         assert abs(ex.viser._plane.position[2] - 7 * ex.viser._map.dz) < 1e-5
         # moving viser's own frame box moves the panel slider
         ex.viser._frame_box.value = 3
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + 30  # it must happen; how fast is a benchmark's question
         while ex.w_frame.value != 3 and time.monotonic() < deadline:
             time.sleep(0.02)
         assert ex.w_frame.value == 3
