@@ -328,6 +328,10 @@ def test_hostile_names_are_shown_as_text(tmp_path):
         page.set_input_files("input[type=file]", files=[{
             "name": "<img src=y onerror=alert(4)>.mat", "mimeType": "application/octet-stream",
             "buffer": bad_mat}])
+        # (the upload box lists the name as soon as it is dropped: wait for the server's
+        # refusal, which comes after the box has sent the file and the server parsed it)
+        _wait_for(lambda: ex.alert.visible and "alert(4)" in ex.alert.object.replace("\\", ""), 90,
+                  "the refusal of the broken file", page)
         page.get_by_text("<img src=y onerror=alert(4)>.mat").first.wait_for(timeout=30000)
         assert ex.sequence.name == stored  # the last good result is kept
         # and the status line no longer says "Reading …" (it shows the kept result again)
