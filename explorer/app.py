@@ -692,6 +692,8 @@ class Explorer:
             self._seq_shown = seq
             self._sync_url()
         self.apply_seconds = time.perf_counter() - t0
+        if not preview:
+            self.files.result_shown(seq)
         if self._rest is not None and self._rest["loaded"]:  # the later cards: after this result
             self._add_rest_after(REST_GAP_S)
         if preview:
@@ -750,8 +752,8 @@ class Explorer:
         if self._rest is not None and self._rest["loaded"]:
             self.schedule(self._add_rest)
         self.lock_for_upload(False)
-        self.files.not_opened()
         self.restore_result()
+        self.files.not_opened()
         self.status_bar.show_error(message)
 
     def restore_result(self) -> None:
@@ -763,12 +765,18 @@ class Explorer:
 
     # ------------------------------------------------------------------ view controls
     def _on_frame(self, event=None) -> None:
+        self.touch()
         self.schedule(self._frame_now, now_if_on_doc_thread=True)
+
+    def touch(self) -> None:
+        """A person moved a view control (a frame, a colouring, the replay's step): the next
+        seed is not computed ahead beside it (:meth:`ExplorerState.touch`)."""
+        if not self.quieted:
+            self.state.touch()
 
     def _frame_now(self) -> None:
         if self.result is None or self.quieted:
             return
-        self.state.touch()  # (not beside the next moves: AHEAD_IDLE_S)
         with self.hold(live="frame"):
             self._draw_frame()
             self.graph_view.draw(self.result, self.frame, self.fine_colors)
@@ -777,12 +785,12 @@ class Explorer:
         self.view3d.set_frame(self.frame)
 
     def _on_color(self, event=None) -> None:
+        self.touch()
         self.schedule(self._color_now, now_if_on_doc_thread=True)
 
     def _color_now(self) -> None:
         if self.result is None:
             return
-        self.state.touch()
         self.style = V.point_style(self.sequence, self.result, self.controls.color_mode,
                                    self.state.plain_rv(self.sequence, self.settings))
         with self.hold(live="draw"):

@@ -109,8 +109,9 @@ AHEAD_BUDGET_BYTES = 128 * 2**20
 #: A pipeline's retained memory per trajectory entry (frame x point): 145 bytes measured
 #: (tracemalloc, 2,000 tracks x 100 frames, 3 motions, default settings: 29 MB).
 PIPELINE_BYTES_PER_ENTRY = 150
-#: Seconds without a request, a new result or a frame move (:meth:`ExplorerState.touch`)
-#: before the next seed is computed ahead (``seeds_ahead``). Computed at once, it shared the
+#: Seconds without a request, a new result or a person moving a view control (a frame, a
+#: colouring, the replay's step: :meth:`ExplorerState.touch`) before the next seed is
+#: computed ahead (``seeds_ahead``). Computed at once, it shared the
 #: server's interpreter with the views being drawn and the next move being read: demo λ
 #: moves in Chromium took 271-305 ms against 212-249 with the wait
 #: (docs/bench/explorer_browser_latency_2026-12-02d.md). A person moving a slider moves it
@@ -512,7 +513,7 @@ class ExplorerState:
         self._gen = 0
         self._published = 0
         self._pending = 0
-        self._quiet_since = time.monotonic()  # the last request or result (AHEAD_IDLE_S)
+        self._quiet_since = time.monotonic()  # the last job's end or touch() (AHEAD_IDLE_S)
         self._idle = threading.Condition(self._lock)
         self._worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-pipeline")
         self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-plain-rv")

@@ -178,14 +178,24 @@ def test_frame_moves_hold_the_computation_ahead_back_too(monkeypatch):
     from explorer import Explorer
 
     monkeypatch.setattr(S, "AHEAD_IDLE_S", 1.5)
+    started = []
+
+    class Watched(laav.Pipeline):
+        def __init__(self, *a, **k):
+            started.append(time.monotonic())
+            super().__init__(*a, **k)
+
     seq = make_sequence(n_objects=1, n_points=150, n_frames=15, rng=4)
     ex = Explorer(seq, 2, params=PARAMS, seed=3, viser=False, seeds_ahead=True)
     try:
         assert ex.wait(120)
-        for f in range(1, 9):  # a frame every 0.4 s for 3.2 s
+        monkeypatch.setattr(S, "Pipeline", Watched)
+        for f in range(1, 9):  # a frame every 0.4 s for 3.2 s: nothing computed ahead
+            last = time.monotonic()  # (the move touches the state as it starts)
             ex.w_frame.value = f
             time.sleep(0.4)
-            assert not _ahead_ready(ex.state, 4)()
-        assert _wait(_ahead_ready(ex.state, 4))
+        assert started == []
+        assert _wait(_ahead_ready(ex.state, 4))  # then, 1.5 s after the last frame move
+        assert started and started[0] >= last + 1.5
     finally:
         ex.close()

@@ -183,3 +183,41 @@ def test_an_upload_whose_first_computation_fails_leaves_the_box(ex, monkeypatch)
     assert ex.wait(120) and ex.sequence.name == "fine"
     ex.state.report("a later problem")  # the shown file stays listed
     assert cleared == ["doomed.npz"]
+
+
+def test_an_upload_cancelled_after_its_preview_leaves_the_box(monkeypatch):
+    """With plain RV in LAAV (``with_plain_rv()``), a new sequence's first computation shows
+    a preview (LAAV's own trial) while plain RV runs; cancelled then, the preview gives way
+    to the last result and the file leaves the upload box."""
+    import laav.voting as LV
+    from laav._interrupt import check
+
+    e = Explorer(_seq(), params=laav.LaavParams.with_plain_rv(), viser=False, max_upload=2_000_000)
+    try:
+        assert e.wait(120)
+        shown = e.sequence
+        cleared = []
+        monkeypatch.setattr(e.files, "clear_box", cleared.append)
+        real = LV._plain_run
+
+        def slow(*a, **k):  # plain RV inside LAAV: long enough to cancel during the preview
+            for _ in range(1200):
+                check()
+                time.sleep(0.05)
+            return real(*a, **k)
+
+        monkeypatch.setattr(LV, "_plain_run", slow)
+        from laav.synthetic import make_sequence
+
+        up = make_sequence(n_objects=1, n_points=200, n_frames=12, rng=6, name="previewed")
+        assert e.files.load_bytes(_npz(up), "previewed.npz")
+        deadline = time.monotonic() + 60
+        while not (e.previewing and e.sequence.name == "previewed") and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert e.previewing and e.sequence.name == "previewed"
+        assert cleared == []  # a preview is not a result: still being computed
+        assert e.files.cancel() and e.wait(30)
+        assert e.sequence is shown and not e.previewing
+        assert cleared == ["previewed.npz"]
+    finally:
+        e.close()

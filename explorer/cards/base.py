@@ -42,6 +42,8 @@ class Host(Protocol):
 
     def restore_result(self) -> None: ...  # a preview shown gives way to the last result
 
+    def touch(self) -> None: ...  # a person moved a view control (no computation ahead now)
+
 
 def _same(a, b) -> bool:
     try:

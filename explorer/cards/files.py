@@ -165,6 +165,7 @@ class Files:
         #: (sequence, file name) of an upload read and being computed, until it is shown: a
         #: first computation that fails or is cancelled takes the file out of the box too
         self._opened: tuple | None = None
+        self._opened_lock = threading.RLock()  # (re-entered: a refusal shown at once, without a server)
         self.w_dl_csv = pn.widgets.FileDownload(callback=self.export_csv, filename="labels.csv",
                                                 label="Labels (CSV)", color="primary",
                                                 embed=False, width=SIDE_W)
@@ -178,17 +179,25 @@ class Files:
 
     def show_sequence(self, seq: laav.Sequence) -> None:
         self.seq_info.object = seq_text(seq)
-        if self._opened is not None and self._opened[0] is seq:
-            self._opened = None  # the upload is shown: it stays in the box
+
+    def result_shown(self, seq: laav.Sequence) -> None:
+        """(Document thread.) A result of ``seq`` is shown (not a preview): an upload of it
+        stays in the box."""
+        with self._opened_lock:
+            if self._opened is not None and self._opened[0] is seq:
+                self._opened = None
 
     def not_opened(self) -> None:
-        """(After a failure or a cancel.) An upload that was read but whose first result will
-        not come (its computation failed or was cancelled: neither shown nor still asked
-        for) leaves the box, as a file that could not be read does."""
-        opened = self._opened
-        if opened is None or self.state.target_sequence is opened[0] or self.host.sequence is opened[0]:
-            return
-        self._opened = None
+        """(Document thread, after a failure or a cancel, once the last result is back.) An
+        upload that was read but whose first result will not come (its computation failed
+        or was cancelled: neither shown nor still asked for) leaves the box, as a file that
+        could not be read does."""
+        with self._opened_lock:
+            opened = self._opened
+            if (opened is None or self.state.target_sequence is opened[0]
+                    or self.host.sequence is opened[0] and not self.host.previewing):
+                return
+            self._opened = None
         self.clear_box(opened[1])
 
     def name_downloads(self, seq: laav.Sequence) -> None:
@@ -340,8 +349,9 @@ class Files:
             return False
         if token is not None and not self._end_reading(token):
             return False  # cancelled while reading: the shown result stays
-        self._opened = (seq, base)
-        return self.state.load(seq, None if seq.labels is not None else C) is not None
+        with self._opened_lock:  # (not_opened never sees it before the state asks for it)
+            self._opened = (seq, base)
+            return self.state.load(seq, None if seq.labels is not None else C) is not None
 
     # ------------------------------------------------------------------ progress and cancel
     def _tick(self) -> None:
@@ -425,8 +435,8 @@ class Files:
         """(Document thread.) Controls back to the shown result's settings, and a note."""
         self.host.lock_for_upload(False)
         self.controls.switching = False
-        self.not_opened()
         self.host.restore_result()  # a preview shown gives way to the last result
+        self.not_opened()
         self.controls.show_settings(self.state.settings)
         self.show_progress(False)
         self._work_t0 = None

@@ -134,6 +134,7 @@ class GraphView:
 
     # ------------------------------------------------------------------ callbacks
     def _on_step(self, event=None) -> None:
+        self.host.touch()
         self.host.schedule(self._step_now, now_if_on_doc_thread=True)
 
     def _step_now(self) -> None:

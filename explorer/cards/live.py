@@ -9,9 +9,10 @@ The server still learns the frame (the player's value), keeps its own copy of ea
 that frame (the same rows, made in Python: exports, tests and the next diff read them) and
 updates what truly needs it (the URL, the video frame behind the points, the compare card,
 the 3-D view); the copies' changes are not sent (:meth:`LiveFrames.models`: the app drops
-their events from the batch). Every draw of a result, colouring or GAEC step bumps a
-generation number (``meta``), sent last: the page then makes its views again, at the frame
-its player shows.
+their events from the batch). A draw of a result, colouring or GAEC step that changed a
+track, a template, a text format or the frame bumps a generation number (``meta``), sent
+last: the page then makes its views again, at the frame its player shows; a draw that
+changed none of them sends nothing (the page's views are already those).
 
 Above :data:`LIVE_MAX_ENTRIES` tracked positions (frames x points) the tracks are not sent
 and a frame move is drawn by the server, as before (docs/bench/explorer_browser_latency.md).
