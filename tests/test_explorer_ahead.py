@@ -139,13 +139,10 @@ def test_a_seed_the_sweep_computed_is_shown_from_its_pipeline():
         st.close()
 
 
-def test_the_computation_ahead_waits_until_nothing_was_asked_for_a_while(monkeypatch):
-    """The next seed is computed only after ``AHEAD_IDLE_S`` without a request or a result:
-    not beside the views being drawn and the next move of a slider (each request restarts
-    the wait)."""
+def _watch_pipelines(monkeypatch) -> list:
+    """From now on, the times (monotonic) at which the state starts a pipeline."""
     import explorer.state as S
 
-    monkeypatch.setattr(S, "AHEAD_IDLE_S", 2.0)
     started = []
 
     class Watched(laav.Pipeline):
@@ -153,11 +150,22 @@ def test_the_computation_ahead_waits_until_nothing_was_asked_for_a_while(monkeyp
             started.append(time.monotonic())
             super().__init__(*a, **k)
 
+    monkeypatch.setattr(S, "Pipeline", Watched)
+    return started
+
+
+def test_the_computation_ahead_waits_until_nothing_was_asked_for_a_while(monkeypatch):
+    """The next seed is computed only after ``AHEAD_IDLE_S`` without a request or a result:
+    not beside the views being drawn and the next move of a slider (each request restarts
+    the wait)."""
+    import explorer.state as S
+
+    monkeypatch.setattr(S, "AHEAD_IDLE_S", 2.0)
     seq = make_sequence(n_objects=1, n_points=150, n_frames=15, rng=4)
     st = ExplorerState(seq, 2, PARAMS, seed=3, seeds_ahead=True)
     try:
         assert st.wait(120)
-        monkeypatch.setattr(S, "Pipeline", Watched)
+        started = _watch_pipelines(monkeypatch)
         for lam in (2.5, 3.0, 3.5):  # a slider moved every 0.5 s: nothing computed ahead
             st.request(params={"lam": lam})
             assert st.wait(120)
@@ -178,18 +186,11 @@ def test_frame_moves_hold_the_computation_ahead_back_too(monkeypatch):
     from explorer import Explorer
 
     monkeypatch.setattr(S, "AHEAD_IDLE_S", 1.5)
-    started = []
-
-    class Watched(laav.Pipeline):
-        def __init__(self, *a, **k):
-            started.append(time.monotonic())
-            super().__init__(*a, **k)
-
     seq = make_sequence(n_objects=1, n_points=150, n_frames=15, rng=4)
     ex = Explorer(seq, 2, params=PARAMS, seed=3, viser=False, seeds_ahead=True)
     try:
         assert ex.wait(120)
-        monkeypatch.setattr(S, "Pipeline", Watched)
+        started = _watch_pipelines(monkeypatch)
         for f in range(1, 9):  # a frame every 0.4 s for 3.2 s: nothing computed ahead
             last = time.monotonic()  # (the move touches the state as it starts)
             ex.w_frame.value = f
