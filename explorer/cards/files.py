@@ -165,7 +165,8 @@ class Files:
         #: (sequence, file name) of an upload read and being computed, until it is shown: a
         #: first computation that fails or is cancelled takes the file out of the box too
         self._opened: tuple | None = None
-        self._opened_lock = threading.RLock()  # (re-entered: a refusal shown at once, without a server)
+        self._asking = False  # the state is being asked for the upload (not_opened waits)
+        self._opened_lock = threading.Lock()  # (never held while calling out)
         self.w_dl_csv = pn.widgets.FileDownload(callback=self.export_csv, filename="labels.csv",
                                                 label="Labels (CSV)", color="primary",
                                                 embed=False, width=SIDE_W)
@@ -188,14 +189,19 @@ class Files:
                 self._opened = None
 
     def not_opened(self) -> None:
-        """(Document thread, after a failure or a cancel, once the last result is back.) An
-        upload that was read but whose first result will not come (its computation failed
-        or was cancelled: neither shown nor still asked for) leaves the box, as a file that
-        could not be read does."""
+        """(After a failure or a cancel, once the last result is back; and once an upload has
+        been asked for.) An upload that was read but whose first result will not come (its
+        computation failed or was cancelled: neither shown nor still asked for) leaves the
+        box, as a file that could not be read does."""
         with self._opened_lock:
             opened = self._opened
-            if (opened is None or self.state.target_sequence is opened[0]
-                    or self.host.sequence is opened[0] and not self.host.previewing):
+            if opened is None or self._asking:
+                return  # (the upload thread checks again once the state has been asked)
+        seq = opened[0]
+        if self.state.target_sequence is seq or self.host.sequence is seq and not self.host.previewing:
+            return
+        with self._opened_lock:
+            if self._opened is not opened:
                 return
             self._opened = None
         self.clear_box(opened[1])
@@ -349,9 +355,18 @@ class Files:
             return False
         if token is not None and not self._end_reading(token):
             return False  # cancelled while reading: the shown result stays
-        with self._opened_lock:  # (not_opened never sees it before the state asks for it)
-            self._opened = (seq, base)
-            return self.state.load(seq, None if seq.labels is not None else C) is not None
+        with self._opened_lock:  # (not_opened waits until the state has been asked for it)
+            self._opened, self._asking = (seq, base), True
+        try:
+            asked = self.state.load(seq, None if seq.labels is not None else C) is not None
+        finally:
+            with self._opened_lock:
+                self._asking = False
+                if not asked:  # refused at once (load_bytes' caller takes it out of the box)
+                    self._opened = None
+        if asked:
+            self.not_opened()  # its computation may have failed already
+        return asked
 
     # ------------------------------------------------------------------ progress and cancel
     def _tick(self) -> None:
