@@ -562,7 +562,7 @@ class ExplorerState:
         """A person is using the page (a frame move, another colouring): the next seed is not
         computed ahead until :data:`AHEAD_IDLE_S` after this either."""
         with self._lock:
-            self._quiet_since = max(self._quiet_since, time.monotonic())
+            self._quiet_since = time.monotonic()
 
     def preload(self) -> None:
         """Start the pipeline's first-use imports (:func:`laav.preload`) in a thread of their

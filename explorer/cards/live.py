@@ -217,8 +217,8 @@ class LiveFrames:
         self._proxies: dict[str, list] = {}  # view name -> [(legend's stand-in renderer, by)]
         self._stand_in: dict[int, GlyphRenderer] = {}  # id(renderer) -> its legend stand-in
         self._shape = {"points": (0, 0), "atoms": (0, 0)}
-        #: something the page makes its views from changed since the last :meth:`commit`
-        #: (a track, a template, a text's format): the next commit has the page remake them
+        #: a track or template changed since the last :meth:`commit` (formats, shapes and the
+        #: frame it compares itself): the next commit has the page remake its views
         self._changed = True
 
     # ------------------------------------------------------------------ building
@@ -339,8 +339,6 @@ class LiveFrames:
     def text(self, key: str, fmt: str, frame: int, sources: dict) -> str:
         """Remember ``key``'s format (:func:`explorer.views.fill_text`) and return it filled
         at ``frame`` with ``sources`` (the views made at that frame, by name)."""
-        if self._fmt.get(key) != fmt:
-            self._changed = True
         self._fmt[key] = fmt
         return V.fill_text(fmt, frame, sources)
 
