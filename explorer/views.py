@@ -1019,6 +1019,8 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
     moved = [f"refinement {voting.refined}"] if voting.refined else []
     if voting.reassigned:
         moved.append(f"joint reassignment {voting.reassigned}")
+    if voting.descended:  # ours: single moves down the selection's own score
+        moved.append(f"the descent on the joint score (ours, `rv_descent`) {voting.descended}")
     extra = f"; points moved by {' and '.join(moved)}" if moved else ""
     returned = ""
     if voting.initialised and voting.selected.startswith("missing motion"):

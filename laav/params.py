@@ -143,6 +143,12 @@ class LaavParams:
         trajectory subspace and fundamental matrices explain it best together
         (:func:`laav.refine.reassign_labels`). With model selection, every candidate
         labelling is polished so before it is scored.
+    rv_descent : bool
+        Ours, with ``rv_select="laav"`` on complete tracks: the labelling kept then
+        descends on the selection's own score, single points moving to another motion
+        while :func:`laav.voting.joint_score` decreases (:func:`laav.joint.joint_descent`;
+        ``Voting.descended`` counts them). Nothing in it was tuned; Hopkins155 seeds 0-1:
+        0.46 -> 0.28 % (``benchmarks/TUNING.md``, "Descent on the joint score").
     rv_subspace_weight : float
         Subspace votes (ours, :class:`laav.subspace_votes.SubspaceVotes`; complete data; LAAV's
         informed trials only, never plain RV's random starts): every voting group also
@@ -265,6 +271,7 @@ class LaavParams:
     rv_batch: int = 2
     rv_refine: bool = True
     rv_reassign: bool = True
+    rv_descent: bool = True
     rv_subspace_weight: float = 1.0
     rv_subspace_sample: int = 16
     rv_select: str = "laav"
@@ -293,12 +300,13 @@ class LaavParams:
         models, fine-to-coarse by spectral clustering of the paper's pairwise four-atom
         epipolar votes alone (``coarse_merge="epipolar"``, no pooled voting), and a
         fine-tuning that is Random Voting started from the coarse labels: one informed
-        trial, no plain RV run, no model selection, no refinement and no joint
-        reassignment, every point voting however many; thresholds fixed whatever the noise
-        (``noise_adaptive=False``). ``changes`` override fields as in :meth:`replace`.
+        trial, no plain RV run, no model selection, no refinement, no joint
+        reassignment and no descent on the joint score, every point voting however many;
+        thresholds fixed whatever the noise (``noise_adaptive=False``). ``changes``
+        override fields as in :meth:`replace`.
         """
         return cls(atom_frames="pair", fine_per_motion=2, coarse_merge="epipolar", pooled_trials=0,
-                   pairwise_weight=1.0, rv_refine=False, rv_reassign=False,
+                   pairwise_weight=1.0, rv_refine=False, rv_reassign=False, rv_descent=False,
                    rv_subspace_weight=0.0, rv_select="none", rv_max_points=None,
                    noise_adaptive=False).replace(**changes)
 
@@ -321,11 +329,12 @@ class LaavParams:
         """LAAV's own chain (a preset from 2026-11-30, the default since 2026-12-02): the
         joint merge on 4C fine models (``coarse_merge="auto"``), subspace votes of weight 1
         in LAAV's informed trials, LAAV's own candidates and no plain RV
-        (``rv_select="laav"``). Spelled out, so that it stays this chain (and
+        (``rv_select="laav"``), the one kept descending on the joint score
+        (``rv_descent``, since 2026-12-02 evening). Spelled out, so that it stays this chain (and
         :func:`laav.motions.profile_params`, fitted on it, with it) if the default changes.
         ``changes`` override fields as in :meth:`replace`."""
         return cls(coarse_merge="auto", rv_subspace_weight=1.0,
-                   rv_select="laav").replace(**changes)
+                   rv_select="laav", rv_descent=True).replace(**changes)
 
     def scaled(self, s: float) -> LaavParams:
         """The parameters for coordinates ``s`` times larger: lengths (:data:`PIXEL_PARAMS`)
@@ -467,6 +476,7 @@ _BOUNDS = (
     ("rv_batch", "int", 1, 32),
     ("rv_refine", "bool", None, None),
     ("rv_reassign", "bool", None, None),
+    ("rv_descent", "bool", None, None),
     ("rv_subspace_weight", "float", 0, _BIG),
     ("rv_subspace_sample", "int", 8, 1000),
     ("rv_select", "choice", ("none", "joint", "subspace", "laav"), None),

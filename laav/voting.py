@@ -15,8 +15,10 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
 * **LAAV's own candidates** (``rv_select="laav"``, the default since 2026-12-02; no plain
   RV on complete tracks): the informed trial and one trial per pair of coarse motions from
   a *missing-motion start* (:func:`missing_motion_start`), run side by side, each refined
-  and reassigned, the one of least :func:`joint_score` kept (:func:`_own_candidates`).
-  On incomplete tracks it runs as ``"subspace"`` below.
+  and reassigned, the one of least :func:`joint_score` kept (:func:`_own_candidates`),
+  which then descends on that score (``rv_descent``, :func:`laav.joint.joint_descent`:
+  single points move while the score decreases). On incomplete tracks it runs as
+  ``"subspace"`` below.
 * **Model selection** (``rv_select="joint"``, :meth:`LaavParams.with_plain_rv`, the
   default 2026-12-01 to 12-02; ``"subspace"`` before). Voting can converge on, or end at,
   a wrong partition, and the epipolar fit cannot tell (a static background and a
@@ -51,6 +53,7 @@ import numpy as np
 from ._random import resolve_seed
 from ._sequence import Sequence, as_points, check_degenerate, warn_missing_motions
 from ._threads import single_threaded
+from .joint import joint_descent, joint_score, unit2
 from .metrics import misclassification_rate
 from .params import LaavParams, as_params
 from .refine import (
@@ -89,16 +92,6 @@ SELECTION_FIELDS = ("coarse_epipolar_weight", "coding_eps")
 NOT_PLAIN_FIELDS = ("rv_coarse_candidate",)
 
 
-def unit2(params: LaavParams) -> float:
-    """Squared pixel of :mod:`laav.refine`'s constants, in squared coordinate units.
-
-    ``default rv_lambda / rv_lambda``: 1.0 exactly at the default ``rv_lambda`` (2 / px^2,
-    tuned on Hopkins155 pixels), so there the constants are the tuned ones;
-    ``s^2`` when ``rv_lambda`` is scaled by ``1 / s^2`` for coordinates scaled by ``s``.
-    """
-    return LaavParams.rv_lambda / params.rv_lambda
-
-
 @dataclass(frozen=True, eq=False)
 class Voting:
     """Result of Random Voting.
@@ -132,6 +125,9 @@ class Voting:
         Points whose label the final refinement changed.
     reassigned : int
         Points whose label the joint reassignment then changed (``rv_reassign``).
+    descended : int
+        Points whose label the descent on the joint score then changed (``rv_descent``,
+        with ``rv_select="laav"`` on complete tracks; :func:`laav.joint.joint_descent`).
     selected : str
         Which candidate labelling was returned: ``"trial"`` (a converged trial),
         ``"consensus"`` (co-association of unconverged trials), ``"trial k"`` (the k-th
@@ -195,6 +191,7 @@ class Voting:
     selected: str = "trial"
     reassigned: int = 0
     costs: dict = field(default_factory=dict)
+    descended: int = 0
     informed_changed: np.ndarray | None = None
     informed_margin: np.ndarray | None = None
     informed_converged: bool | None = None
@@ -586,40 +583,6 @@ def _coarse_candidate(points, C, params, init, labels0, votes0, mk: _Masks) -> t
 #: A missing-motion start (``rv_select="laav"``) takes the points in no atom whose best
 #: subspace distance exceeds this quantile of the covered points' own distances.
 MISSING_MOTION_QUANTILE = 0.95
-#: Epipolar frame pairs of :func:`joint_score` (as the joint merge's, ``laav.coarse``).
-_JOINT_PAIRS = 8
-
-
-def joint_score(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                params: LaavParams) -> float:
-    """The joint merge's score of a whole labelling (lower is better).
-
-    Lossy coding length (nats, distortion ``coding_eps``) of every motion's trajectories
-    (:mod:`laav.coding`) plus ``coarse_epipolar_weight`` times the epipolar cost: the sum
-    over points of ``log(1 + d)``, ``d`` the point's mean Sampson distance to its own
-    motion's robust fundamental matrices over 8 frame pairs, in units of
-    :func:`unit2`. ``inf`` when a motion has fewer than 8 points.
-
-    Parameters
-    ----------
-    points : ndarray of shape (F, P, 2)
-    labels : ndarray of shape (P,)
-    n_motions : int
-    params : LaavParams
-        Uses ``coding_eps``, ``coarse_epipolar_weight`` and ``rv_lambda``.
-    """
-    from .coding import labelling_coding_length
-
-    labels = np.asarray(labels, dtype=np.int64)
-    if np.bincount(labels, minlength=n_motions).min() < 8:
-        return float("inf")
-    u2 = unit2(params)
-    coding = labelling_coding_length(points, labels, n_motions, params.coding_eps)
-    D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], _JOINT_PAIRS), u2)
-    own = D[labels, np.arange(labels.size)]
-    if not np.isfinite(own).all():
-        return float("inf")
-    return coding + params.coarse_epipolar_weight * float(np.log1p(own / u2).sum())
 
 
 def missing_motion_start(points: np.ndarray, init: np.ndarray, n_motions: int, g: int, h: int,
@@ -682,8 +645,12 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     k = int(np.argmin(scores))  # the first of equal scores: the coarse start
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
-    return _with_informed(_finish(points, C, params, res, trials, True, name, polished=pol,
-                                  costs=costs, score="joint-sum"), first, first_extra)
+    out = _finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
+                  score="joint-sum")
+    if params.rv_descent:  # ours: the kept labelling descends on the same score
+        labels, moved = joint_descent(points, out.labels, C, params)
+        out = dataclasses.replace(out, labels=labels, descended=moved)
+    return _with_informed(out, first, first_extra)
 
 
 def _informed_side_by_side(points, params, starts, extra, uses) -> list:

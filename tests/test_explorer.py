@@ -626,6 +626,11 @@ def test_rv_summary_names_the_points_each_polishing_step_moved():
     off = laav.random_voting(seq, seq.n_motions, p.replace(rv_reassign=False, rv_refine=False),
                              seed=0, init_labels=bad)
     assert "points moved" not in rv_summary(off, None)
+    # LAAV's own chain (the default) descends on the joint score: named as ours, with its count
+    own = laav.random_voting(seq, seq.n_motions, laav.LaavParams(rv_max_iter=1, rv_refine=False,
+                                                                 rv_reassign=False), seed=0, init_labels=bad)
+    assert own.descended > 0
+    assert f"the descent on the joint score (ours, `rv_descent`) {own.descended}" in rv_summary(own, None)
 
 
 def test_md_text_renders_names_as_literal_text():
