@@ -89,7 +89,7 @@ _ARBITRATE_ABOVE = 0.05
 SELECTION_FIELDS = ("coarse_epipolar_weight", "coding_eps")
 #: ``rv_*`` fields that plain Random Voting's runs and their polished candidates do not read
 #: (LAAV's fine-tuning does): a cache of plain RV may leave them out of its key.
-NOT_PLAIN_FIELDS = ("rv_coarse_candidate",)
+NOT_PLAIN_FIELDS = ("rv_coarse_candidate", "rv_descent")
 
 
 @dataclass(frozen=True, eq=False)
