@@ -1078,6 +1078,8 @@ def _selection(voting: laav.Voting) -> str:
         return ""
     name = md_text(kept) if kept else "(unnamed)"
     score = f" (score {float(costs[kept]):.2f})" if kept in costs else ""
+    if score and getattr(voting, "descended", 0):  # the labels returned moved after scoring
+        score = score[:-1] + ", before the descent on the joint score)"
     by = _SCORES.get(voting.score, "")
     by = f"; scored by {by} (ours)" if by else ""
     others = [(k, v) for k, v in costs.items() if k != kept]

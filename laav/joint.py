@@ -162,6 +162,7 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
     for _ in range(max_sweeps):
         epi = np.log1p(D / u2)  # (C, P): the matrices of L's motions, as its score took them
         gain = _move_gains(X, L, C, 2 * F, params.coding_eps, epi, params.coarse_epipolar_weight)
+        gain = np.nan_to_num(gain, nan=np.inf, posinf=np.inf)  # a NaN is no move
         to = np.argmin(gain, axis=1)
         g = gain[np.arange(L.size), to]
         order = np.flatnonzero(g < -_GAIN_MIN)

@@ -172,7 +172,10 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
         seq = Sequence(np.asarray(seq, dtype=np.float64))
     with warnings.catch_warnings():  # a candidate's warnings are not the caller's
         warnings.simplefilter("ignore", LaavWarning)
-        pipe = Pipeline(seq, 2, profile_params() if params is None else params, seed)
+        # never the descent on the joint score: the profile's constants were fitted on
+        # labellings without it (profile_params), whatever the caller's settings
+        pipe = Pipeline(seq, 2, profile_params() if params is None
+                        else params.replace(rv_descent=False), seed)
     atoms = pipe.result.atoms
     res = [np.ravel(r) for r in atoms.residuals if np.size(r)]
     noise2 = float(np.median(np.concatenate(res)) ** 2) if res else 0.0

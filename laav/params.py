@@ -147,8 +147,9 @@ class LaavParams:
         Ours, with ``rv_select="laav"`` on complete tracks: the labelling kept then
         descends on the selection's own score, single points moving to another motion
         while :func:`laav.voting.joint_score` decreases (:func:`laav.joint.joint_descent`;
-        ``Voting.descended`` counts them). Nothing in it was tuned; Hopkins155 seeds 0-1:
-        0.46 -> 0.28 % (``benchmarks/TUNING.md``, "Descent on the joint score").
+        ``Voting.descended`` counts them; with more than ``rv_max_points`` points it acts on
+        the voted subset). Nothing in it was tuned; Hopkins155, 5 seeds: 0.55 -> 0.36 %
+        (``benchmarks/TUNING.md``, "Descent on the joint score").
     rv_subspace_weight : float
         Subspace votes (ours, :class:`laav.subspace_votes.SubspaceVotes`; complete data; LAAV's
         informed trials only, never plain RV's random starts): every voting group also
@@ -157,7 +158,8 @@ class LaavParams:
         its squared distance to the subspace (px^2 per frame). 0: the epipolar votes of
         Random Voting alone (the RV and LAAV papers, :meth:`paper`). The default 1 was
         chosen for LAAV's own chain by 5-fold cross-validation grouped by source video
-        among 0 / 0.3 / 1 / 3 (Hopkins155, 5 seeds: held out 0.62 %; 0 gives 0.76 % on
+        among 0 / 0.3 / 1 / 3 (Hopkins155, 5 seeds: held out 0.62 % before the descent
+        on the joint score, 0.43 % with it, ``docs/bench/cv_descent.md``; 0 gives 0.76 % on
         all data; LAAV's informed trial converges in 93 % of runs instead of 60 %;
         ``docs/bench/chain_own.md``). :meth:`with_plain_rv` uses 0.3, chosen the same way
         for that chain.
@@ -210,7 +212,7 @@ class LaavParams:
         ``docs/ALGORITHM.md``, "Missing data").
     rv_max_points : int or None
         Ours, for thousands of tracks: with more points than this, Random Voting (every
-        trial, the refinement and the model selection) runs on a seeded random subset of
+        trial, the refinement, the model selection and the descent) runs on a seeded random subset of
         this many, and every other point then goes to the motion whose trajectory
         subspace and fundamental matrices, fitted on the voted points, explain it best
         (:func:`laav.refine.assign_jointly`, the joint reassignment's rule), then, with
@@ -317,9 +319,11 @@ class LaavParams:
         (``coarse_merge="epipolar"``), subspace votes of weight 0.3 in LAAV's informed
         trial, and plain RV's runs beside it, the candidate of least joint score plus
         agreement kept (``rv_select="joint"``). Not LAAV's mechanism (the result is often
-        a plain-RV trial), and slower, but the most accurate chain measured on Hopkins155
-        (5 seeds, σ = 0: 0.25 / 0.81 / 0.38 %, grouped-CV 0.38 %; σ = 1 px, seeds 0-1:
-        0.74 %) and on ``small_motion`` (``docs/ALGORITHM.md``, the presets table).
+        a plain-RV trial), and slower; on Hopkins155 (5 seeds, σ = 0: 0.25 / 0.81 / 0.38 %,
+        grouped-CV 0.38 %) the default with its descent on the joint score measures as
+        much on all data (0.36 %) but less well held out (0.43 %); under noise (σ = 1 px,
+        seeds 0-1: 0.74 % against 1.27 %) and on ``small_motion`` this preset is the more
+        accurate (``docs/ALGORITHM.md``, the presets table).
         ``changes`` override fields as in :meth:`replace`."""
         return cls(coarse_merge="epipolar", rv_subspace_weight=0.3,
                    rv_select="joint").replace(**changes)

@@ -6,12 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from laav import LaavParams, misclassification_rate, random_voting
+from laav import LaavParams, misclassification_rate, random_voting, synthetic
 from laav.coding import labelling_coding_length
 from laav.joint import _move_gains, joint_descent, joint_score, unit2
 from laav.refine import frame_pairs, motion_distances, trajectory_matrix
-
-synthetic = pytest.importorskip("laav.synthetic")
 
 
 def scene(seed=0, n_objects=2):
@@ -77,8 +75,39 @@ def test_descent_does_not_repair_a_wrong_partition():
     big = np.flatnonzero(L == 0)
     L[L == 2] = 1  # motions 1 and 2 joined
     L[big[: big.size // 2]] = 2  # motion 0 split in two
-    out, _ = joint_descent(seq.points, L, 3, LaavParams())
-    assert misclassification_rate(out, seq.labels) > 0.15
+    out, moved = joint_descent(seq.points, L, 3, LaavParams())
+    assert moved > 0  # it did search (and lowered the score) ...
+    assert joint_score(seq.points, out, 3, LaavParams()) < joint_score(seq.points, L, 3, LaavParams())
+    assert misclassification_rate(out, seq.labels) > 0.15  # ... but not to the truth
+
+
+def test_descent_keeps_every_motion_at_eight_points_or_more():
+    """A motion at the floor (8 points, 2 of them another motion's) loses none of its
+    points in a sweep (others may move into it; once above the floor, a later sweep may take
+    the 2 out); no motion ever ends under 8; the score still falls."""
+    seq = scene(7)
+    C = 3
+    p = LaavParams()
+    L = seq.labels.copy()
+    small = np.flatnonzero(L == 2)
+    L[small[6:]] = 0  # motion 2 keeps 6 of its points ...
+    L[np.flatnonzero(seq.labels == 1)[:2]] = 2  # ... and 2 of motion 1's: 8 in all
+    assert np.count_nonzero(L == 2) == 8
+    one, moved = joint_descent(seq.points, L, C, p, max_sweeps=1)
+    assert moved > 0 and np.all(one[L == 2] == 2)  # nothing left the motion at the floor
+    out, moved = joint_descent(seq.points, L, C, p)
+    assert moved > 0 and np.bincount(out, minlength=C).min() >= 8
+    assert joint_score(seq.points, out, C, p) < joint_score(seq.points, one, C, p)
+
+
+def test_the_motion_count_profile_never_descends():
+    """The profile's constants were fitted on labellings without the descent: whatever the
+    caller's settings, its pipeline runs without it (the command line passes LaavParams())."""
+    from laav.motions import _prepare
+
+    seq = scene(8, n_objects=1)
+    ctx = _prepare(seq, 3, LaavParams(), 0, 4)
+    assert ctx.pipe.params.rv_descent is False
 
 
 def test_descent_leaves_the_truth_and_degenerate_starts_alone():
