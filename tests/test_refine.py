@@ -86,8 +86,10 @@ HOPKINS_CASES = {"2RT3RCT_B_g12": (2.27, 0.0), "arm": (2.60, 0.0), "2RT3RCR_g23"
 def test_reassignment_repairs_laav_on_hopkins(hopkins_root, name):
     seq = load_sequence(hopkins_root / name)
     C = seq.n_motions
-    off = segment(seq, C, LaavParams(rv_reassign=False), seed=0)
-    on = segment(seq, C, seed=0)
+    # the reassignment's own effect: the descent on the joint score after it (the default
+    # since 2026-12-02) mends some of the same points, so it is off in both runs
+    off = segment(seq, C, LaavParams(rv_reassign=False, rv_descent=False), seed=0)
+    on = segment(seq, C, LaavParams(rv_descent=False), seed=0)
     e_off = misclassification_rate(seq.labels, off.labels)
     e_on = misclassification_rate(seq.labels, on.labels)
     assert on.voting.reassigned > 0 and off.voting.reassigned == 0
