@@ -1068,7 +1068,8 @@ def _selection(voting: laav.Voting) -> str:
     """Which candidate labelling the selection kept, and the candidates' scores.
 
     Only the public ``selected`` (a name, shown as text whatever it is), ``costs``
-    (name -> score) and ``score`` (what scored them) are read; the name kept need not be
+    (name -> score), ``score`` (what scored them) and ``descended`` (the kept labels moved
+    after scoring) are read; the name kept need not be
     among the scored candidates, and
     nothing assumes how the algorithm chose (e.g. the lowest score).
     """
@@ -1078,7 +1079,7 @@ def _selection(voting: laav.Voting) -> str:
         return ""
     name = md_text(kept) if kept else "(unnamed)"
     score = f" (score {float(costs[kept]):.2f})" if kept in costs else ""
-    if score and getattr(voting, "descended", 0):  # the labels returned moved after scoring
+    if score and voting.descended:  # the labels returned moved after scoring
         score = score[:-1] + ", before the descent on the joint score)"
     by = _SCORES.get(voting.score, "")
     by = f"; scored by {by} (ours)" if by else ""

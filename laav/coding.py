@@ -88,19 +88,33 @@ def model_stats(points: np.ndarray, fine_labels: np.ndarray, n_models: int,
     rank : int
         K.
     """
-    F, P, _ = points.shape
     cov = fine_labels >= 0
-    W = trajectory_matrix(points)[:, cov]  # origin at the points' corner: translation-free
-    f = fine_labels[cov]
+    return stats_of(principal_trajectories(points, cov, rank), fine_labels[cov], n_models,
+                    2 * points.shape[0])
+
+
+def principal_trajectories(points: np.ndarray, columns=None,
+                           rank: int = PROJECTION_RANK) -> np.ndarray:
+    """The trajectories (:func:`laav.refine.trajectory_matrix`, origin at the points'
+    corner: translation-free) in their ``rank`` principal directions: (K, n), over the
+    points ``columns`` (a mask or indices; None: all P of ``points`` (F, P, 2))."""
+    W = trajectory_matrix(points)
+    if columns is not None:
+        W = W[:, columns]
     k = min(rank, *W.shape)
     U = np.linalg.svd(W, full_matrices=False)[0][:, :k]
-    X = U.T @ W  # (K, n_cov)
-    onehot = np.zeros((n_models, f.size))
-    onehot[f, np.arange(f.size)] = 1.0
+    return U.T @ W
+
+
+def stats_of(X: np.ndarray, labels: np.ndarray, n_models: int, dim: int) -> ModelStats:
+    """:class:`ModelStats` of the groups ``labels`` (n,) in ``0 .. n_models-1`` of the
+    projected trajectories ``X`` (K, n) (:func:`principal_trajectories`); ``dim`` = 2F."""
+    onehot = np.zeros((n_models, labels.size))
+    onehot[labels, np.arange(labels.size)] = 1.0
     count = onehot.sum(1)
     total = onehot @ X.T
     scatter = np.einsum("mp,ip,jp->mij", onehot, X, X)
-    return ModelStats(count, total, scatter, 2 * F)
+    return ModelStats(count, total, scatter, dim)
 
 
 def _log_det_1p(S: np.ndarray) -> np.ndarray:
@@ -153,15 +167,18 @@ def coding_lengths(count, total, scatter, dim: int, eps: float) -> np.ndarray:
 
 
 def labelling_coding_length(points: np.ndarray, labels: np.ndarray, n_groups: int,
-                            eps: float) -> float:
+                            eps: float, projected: np.ndarray | None = None) -> float:
     """Lossy coding length (nats) of the trajectories grouped by ``labels``: the sum of
     :func:`coding_lengths` over the groups (distortion ``eps`` px), without a membership
     term, in the principal directions of all trajectories (:func:`model_stats`).
 
     ``points`` (F, P, 2), ``labels`` (P,) in ``0 .. n_groups-1``. LAAV's own chain scores
     whole labellings with it (:func:`laav.voting.joint_score`), the motion count its
-    candidates (per point, :mod:`laav.motions`)."""
-    st = model_stats(points, labels, n_groups)
+    candidates (per point, :mod:`laav.motions`). ``projected``: the points'
+    :func:`principal_trajectories` (K, P), when the caller scores many labellings of them."""
+    labels = np.asarray(labels)
+    st = (model_stats(points, labels, n_groups) if projected is None
+          else stats_of(projected, labels, n_groups, 2 * points.shape[0]))
     # summed in sorted order: the same partition numbered otherwise gets the same length,
     # bit for bit (LAAV's own chain keeps the first of equal scores)
     return float(np.sort(coding_lengths(st.count, st.total, st.scatter, st.dim, eps)).sum())

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from .params import LaavParams
-from .refine import frame_pairs, motion_distances, trajectory_matrix
+from .refine import frame_pairs, motion_distances
 
 __all__ = ["joint_score", "joint_descent", "unit2", "JOINT_PAIRS", "DESCENT_SWEEPS"]
 
@@ -78,16 +78,18 @@ def joint_score(points: np.ndarray, labels: np.ndarray, n_motions: int,
     return _score_and_distances(points, labels, n_motions, params)[0]
 
 
-def _score_and_distances(points, labels, n_motions, params) -> tuple[float, np.ndarray | None]:
+def _score_and_distances(points, labels, n_motions, params,
+                         projected=None) -> tuple[float, np.ndarray | None]:
     """:func:`joint_score` and the distances (C, P) of every point to every motion's
-    matrices it computed (None when a motion has fewer than 8 points)."""
+    matrices it computed (None when a motion has fewer than 8 points). ``projected``: the
+    points' :func:`laav.coding.principal_trajectories`, when already computed."""
     from .coding import labelling_coding_length
 
     labels = np.asarray(labels, dtype=np.int64)
     if np.bincount(labels, minlength=n_motions).min() < MIN_MOTION_POINTS:
         return float("inf"), None
     u2 = unit2(params)
-    coding = labelling_coding_length(points, labels, n_motions, params.coding_eps)
+    coding = labelling_coding_length(points, labels, n_motions, params.coding_eps, projected)
     D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], JOINT_PAIRS), u2)
     own = D[labels, np.arange(labels.size)]
     if not np.isfinite(own).all():
@@ -95,19 +97,20 @@ def _score_and_distances(points, labels, n_motions, params) -> tuple[float, np.n
     return coding + params.coarse_epipolar_weight * float(np.log1p(own / u2).sum()), D
 
 
-def _move_gains(X: np.ndarray, labels: np.ndarray, C: int, dim: int, eps: float,
+def _move_gains(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, eps: float,
                 epi: np.ndarray, weight: float) -> np.ndarray:
     """(P, C): the joint score's change when each point alone moves to each motion (``inf``
-    for its own motion and for points of a motion at the 8-point floor). ``X`` (P, K): the
-    trajectories in the coding length's principal directions; ``epi`` (C, P): each point's
+    for its own motion and for points of a motion at the 8-point floor). ``projected``
+    (K, P): the trajectories in the coding length's principal directions
+    (:func:`laav.coding.principal_trajectories`); ``epi`` (C, P): each point's
     ``log(1 + d)`` under each motion's matrices."""
-    from .coding import coding_lengths
+    from .coding import coding_lengths, stats_of
 
     P = labels.size
-    onehot = (labels[None, :] == np.arange(C)[:, None]).astype(np.float64)  # (C, P)
-    count, total = onehot.sum(1), onehot @ X
-    scatter = np.einsum("cp,pi,pj->cij", onehot, X, X)
+    st = stats_of(projected, labels, C, dim)
+    count, total, scatter = st.count, st.total, st.scatter
     now = coding_lengths(count, total, scatter, dim, eps)  # (C,)
+    X = projected.T  # (P, K)
     xx = X[:, :, None] * X[:, None, :]  # (P, K, K)
     a = labels
     out = coding_lengths(count[a] - 1, total[a] - X, scatter[a] - xx, dim, eps) - now[a]  # (P,)
@@ -144,24 +147,22 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
     moved : int
         Points whose label differs from the start's.
     """
-    from .coding import PROJECTION_RANK
+    from .coding import principal_trajectories
 
     start = np.asarray(labels, dtype=np.int64)
     C = int(n_motions)
     if C < 2:
         return start.copy(), 0
-    best, D = _score_and_distances(points, start, C, params)
+    proj = principal_trajectories(points)  # (K, P): one projection for every score below
+    best, D = _score_and_distances(points, start, C, params, proj)
     if not np.isfinite(best):
         return start.copy(), 0
     F = points.shape[0]
-    W = trajectory_matrix(points)
-    k = min(PROJECTION_RANK, *W.shape)
-    X = (np.linalg.svd(W, full_matrices=False)[0][:, :k].T @ W).T  # (P, K), as model_stats
     u2 = unit2(params)
     L = start.copy()
     for _ in range(max_sweeps):
         epi = np.log1p(D / u2)  # (C, P): the matrices of L's motions, as its score took them
-        gain = _move_gains(X, L, C, 2 * F, params.coding_eps, epi, params.coarse_epipolar_weight)
+        gain = _move_gains(proj, L, C, 2 * F, params.coding_eps, epi, params.coarse_epipolar_weight)
         gain = np.nan_to_num(gain, nan=np.inf, posinf=np.inf)  # a NaN is no move
         to = np.argmin(gain, axis=1)
         g = gain[np.arange(L.size), to]
@@ -173,7 +174,7 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
         for n in sizes:
             trial = L.copy()
             trial[order[:n]] = to[order[:n]]
-            score, dist = _score_and_distances(points, trial, C, params)
+            score, dist = _score_and_distances(points, trial, C, params, proj)
             if score < best - _SCORE_MIN:
                 L, best, D = trial, score, dist
                 break

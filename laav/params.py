@@ -212,9 +212,9 @@ class LaavParams:
         ``docs/ALGORITHM.md``, "Missing data").
     rv_max_points : int or None
         Ours, for thousands of tracks: with more points than this, Random Voting (every
-        trial, the refinement, the model selection and the descent) runs on a seeded random subset of
-        this many, and every other point then goes to the motion whose trajectory
-        subspace and fundamental matrices, fitted on the voted points, explain it best
+        trial, the refinement, the model selection and the descent) runs on a seeded
+        random subset of this many, and every other point then goes to the motion whose
+        trajectory subspace and fundamental matrices, fitted on the voted points, explain it best
         (:func:`laav.refine.assign_jointly`, the joint reassignment's rule), then, with
         ``rv_reassign``, the joint reassignment runs over every point. None: every
         point votes (the papers). The fine-to-coarse stage's pooled voting likewise lets

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from laav import LaavParams, misclassification_rate, random_voting, synthetic
-from laav.coding import labelling_coding_length
+from laav.coding import labelling_coding_length, principal_trajectories
 from laav.joint import _move_gains, joint_descent, joint_score, unit2
-from laav.refine import frame_pairs, motion_distances, trajectory_matrix
+from laav.refine import frame_pairs, motion_distances
 
 
 def scene(seed=0, n_objects=2):
@@ -36,9 +36,8 @@ def test_move_gains_are_the_score_change_of_each_single_move():
     F = seq.n_frames
     u2 = unit2(p)
     epi = np.log1p(motion_distances(seq.points, L, C, frame_pairs(F, 8), u2) / u2)
-    W = trajectory_matrix(seq.points)
-    X = (np.linalg.svd(W, full_matrices=False)[0][:, :20].T @ W).T
-    gain = _move_gains(X, L, C, 2 * F, p.coding_eps, epi, p.coarse_epipolar_weight)
+    gain = _move_gains(principal_trajectories(seq.points), L, C, 2 * F, p.coding_eps, epi,
+                       p.coarse_epipolar_weight)
     base = labelling_coding_length(seq.points, L, C, p.coding_eps)
     rng = np.random.default_rng(2)
     for i in rng.choice(seq.n_points, 12, replace=False):
