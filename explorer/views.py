@@ -1061,7 +1061,9 @@ def _votes(voting: laav.Voting) -> str:
 #: What the model selection scored candidates by (``Voting.score``), in words.
 _SCORES = {"joint": "coding length + epipolar cost per point, + disagreement with the others",
            "subspace": "trajectory-subspace cost, + disagreement with the others",
-           "joint-sum": "coding length + epipolar cost of the whole labelling"}
+           "joint-sum": "coding length + epipolar cost of the whole labelling",
+           "joint-cleaned": ("coding length + epipolar cost of the whole labelling, each after its "
+                             "best moves of a few points (`rv_select_descent`)")}
 
 
 def _selection(voting: laav.Voting) -> str:

@@ -124,7 +124,8 @@ def _move_gains(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, eps
 
 
 def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                  params: LaavParams, max_sweeps: int = DESCENT_SWEEPS) -> tuple[np.ndarray, int]:
+                  params: LaavParams, max_sweeps: int = DESCENT_SWEEPS,
+                  max_moves: int | None = None) -> tuple[np.ndarray, int]:
     """Move single points between motions while :func:`joint_score` decreases (module
     docstring).
 
@@ -138,6 +139,11 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
     params : LaavParams
         Uses ``coding_eps``, ``coarse_epipolar_weight`` and ``rv_lambda``.
     max_sweeps : int
+    max_moves : int, optional
+        At most this many points end with a label other than the start's: a sweep makes
+        only the best of its moves that keep within it (a point moved already may move
+        again). None: no limit. The selection's cleaning of its candidates
+        (``rv_select_descent``) sets it.
 
     Returns
     -------
@@ -168,6 +174,9 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
         g = gain[np.arange(L.size), to]
         order = np.flatnonzero(g < -_GAIN_MIN)
         order = order[np.argsort(g[order], kind="stable")]  # the best moves first
+        if max_moves is not None:  # the best moves that keep within max_moves moved points
+            fresh = L[order] == start[order]  # these would add one; the others none
+            order = order[np.cumsum(fresh) <= max_moves - np.count_nonzero(L != start)]
         if order.size == 0:
             break
         sizes = sorted({max(1, int(np.ceil(s * order.size))) for s in _SHARES} | {1}, reverse=True)

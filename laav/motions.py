@@ -56,6 +56,12 @@ TRIM = 0.95  # share of points (best explained) in a level
 MAX_ESTIMATE_POINTS = 1000
 
 
+#: What the profile's pipeline never runs, whatever the caller's settings: the descent on the
+#: joint score and the candidates' cleaning before the selection (``rv_descent``,
+#: ``rv_select_descent``, 2026-12-02 and -03), added after its constants were fitted.
+NOT_FITTED = {"rv_descent": False, "rv_select_descent": 0.0}
+
+
 def profile_params():
     """The LAAV settings the profile runs with when none are given: those its constants
     (:data:`STEP_WEIGHTS`, :data:`STEP_BIAS`) were fitted with, LAAV's own chain
@@ -64,11 +70,11 @@ def profile_params():
     (``docs/bench/motions.md``, 2026-12-01: 92.3 % of Hopkins155 held out with the coding
     length feature, 90.3 % without it, against 87.7 % with the settings used before, the
     epipolar merge on 2C fine models with plain RV beside LAAV's trial). Without the
-    descent on the joint score (``rv_descent``, 2026-12-02, after the fit): the profile's
-    labellings stay those its constants were fitted on."""
+    descent on the joint score and the candidates' cleaning (:data:`NOT_FITTED`, added
+    after the fit): the profile's labellings stay those its constants were fitted on."""
     from .params import LaavParams
 
-    return LaavParams.own_chain(rv_descent=False)
+    return LaavParams.own_chain(**NOT_FITTED)
 
 
 @dataclass(frozen=True, eq=False)
@@ -172,10 +178,10 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
         seq = Sequence(np.asarray(seq, dtype=np.float64))
     with warnings.catch_warnings():  # a candidate's warnings are not the caller's
         warnings.simplefilter("ignore", LaavWarning)
-        # never the descent on the joint score: the profile's constants were fitted on
-        # labellings without it (profile_params), whatever the caller's settings
+        # never the descent nor the cleaning (NOT_FITTED): the profile's constants were
+        # fitted on labellings without them, whatever the caller's settings
         pipe = Pipeline(seq, 2, profile_params() if params is None
-                        else params.replace(rv_descent=False), seed)
+                        else params.replace(**NOT_FITTED), seed)
     atoms = pipe.result.atoms
     res = [np.ravel(r) for r in atoms.residuals if np.size(r)]
     noise2 = float(np.median(np.concatenate(res)) ** 2) if res else 0.0

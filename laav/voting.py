@@ -15,10 +15,11 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
 * **LAAV's own candidates** (``rv_select="laav"``, the default since 2026-12-02; no plain
   RV on complete tracks): the informed trial and one trial per pair of coarse motions from
   a *missing-motion start* (:func:`missing_motion_start`), run side by side, each refined
-  and reassigned, the one of least :func:`joint_score` kept (:func:`_own_candidates`),
-  which then descends on that score (``rv_descent``, :func:`laav.joint.joint_descent`:
-  single points move while the score decreases). On incomplete tracks it runs as
-  ``"subspace"`` below.
+  and reassigned, the one of least :func:`joint_score` kept (:func:`_own_candidates`;
+  when they differ, each is scored after its best moves of at most ``rv_select_descent``
+  of the points, so that a few stray points do not decide), which then descends on that
+  score (``rv_descent``, :func:`laav.joint.joint_descent`: single points move while the
+  score decreases). On incomplete tracks it runs as ``"subspace"`` below.
 * **Model selection** (``rv_select="joint"``, :meth:`LaavParams.with_plain_rv`, the
   default 2026-12-01 to 12-02; ``"subspace"`` before). Voting can converge on, or end at,
   a wrong partition, and the epipolar fit cannot tell (a static background and a
@@ -89,7 +90,7 @@ _ARBITRATE_ABOVE = 0.05
 SELECTION_FIELDS = ("coarse_epipolar_weight", "coding_eps")
 #: ``rv_*`` fields that plain Random Voting's runs and their polished candidates do not read
 #: (LAAV's fine-tuning does): a cache of plain RV may leave them out of its key.
-NOT_PLAIN_FIELDS = ("rv_coarse_candidate", "rv_descent")
+NOT_PLAIN_FIELDS = ("rv_coarse_candidate", "rv_descent", "rv_select_descent")
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,8 +175,9 @@ class Voting:
         What the candidates' own cost was: ``"joint"`` (coding length + epipolar cost per
         point of the reassigned labels, :func:`joint_score`), ``"subspace"`` (the refined
         labels' :func:`subspace_cost`), ``"joint-sum"`` (``rv_select="laav"``: the whole
-        labelling's :func:`joint_score`, no agreement term), or ``""`` when nothing was
-        compared.
+        labelling's :func:`joint_score`, no agreement term), ``"joint-cleaned"`` (the same,
+        each candidate scored after its best moves of at most ``rv_select_descent`` of the
+        points), or ``""`` when nothing was compared.
     """
 
     labels: np.ndarray
@@ -634,19 +636,26 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
              if any(uses) else None)  # one for every trial that uses it: the same term
     results = _informed_side_by_side(points, params, [s[1:4] for s in starts], extra, uses)
     first, first_extra = results[0], extra if uses[0] else None
-    trials, entries, polished = list(results), [], {}
-    for (name, *_), res in zip(starts, results):
+    trials, polished = list(results), {}
+    for res in results:
         key = res[0].tobytes()  # trials that end on the same labels share their polish
         if key not in polished:
-            pol = _Polished(points, C, params, res[0])
-            polished[key] = (pol, joint_score(points, pol.final()[0], C, params))
-        entries.append((name, res) + polished[key])
+            polished[key] = _Polished(points, C, params, res[0])
+    finals = {key: pol.final()[0] for key, pol in polished.items()}
+    clean = params.rv_select_descent > 0 and len({f.tobytes() for f in finals.values()}) > 1
+    if clean:  # ours: each scored after its best moves of a few points (rv_select_descent)
+        most = int(np.ceil(params.rv_select_descent * P))
+        finals = {key: joint_descent(points, f, C, params, max_moves=most)[0]
+                  for key, f in finals.items()}
+    cost = {key: joint_score(points, f, C, params) for key, f in finals.items()}
+    entries = [(name, res, polished[res[0].tobytes()], cost[res[0].tobytes()])
+               for (name, *_), res in zip(starts, results)]
     scores = np.array([e[3] for e in entries])
     k = int(np.argmin(scores))  # the first of equal scores: the coarse start
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
     out = _finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
-                  score="joint-sum")
+                  score="joint-cleaned" if clean else "joint-sum")
     if params.rv_descent:  # ours: the kept labelling descends on the same score
         labels, moved = joint_descent(points, out.labels, C, params)
         out = dataclasses.replace(out, labels=labels, descended=moved)
