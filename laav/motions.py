@@ -58,7 +58,7 @@ MAX_ESTIMATE_POINTS = 1000
 
 #: What the profile's pipeline never runs, whatever the caller's settings: the descent on the
 #: joint score and the candidates' cleaning before the selection (``rv_descent``,
-#: ``rv_select_descent``, 2026-12-02 and -03), added after its constants were fitted.
+#: ``rv_select_descent``, 2026-12-02), added after its constants were fitted.
 NOT_FITTED = {"rv_descent": False, "rv_select_descent": 0.0}
 
 

@@ -159,9 +159,10 @@ class LaavParams:
         stray trajectory in a small motion raises a labelling's coding length by hundreds
         of nats, so a right candidate with a few stray points lost to a wrong one; an
         unlimited descent lets wrong candidates overtake (0.59 %). 0: scored as polished
-        (before 2026-12-03). The default 0.03 was chosen by 5-fold cross-validation
-        grouped by video among 0 / 0.01 / 0.02 / 0.03 / 0.05 / 0.1 / 1 (in 4 of 5 folds; Hopkins155,
-        5 seeds: held out 0.25 %, against 0.36 % at 0; ``benchmarks/TUNING.md``,
+        (before 2026-12-02, late evening). The default 0.03 was chosen by 5-fold
+        cross-validation grouped by video among 0 / 0.01 / 0.02 / 0.03 / 0.05 / 0.1 / 1,
+        together with ``rv_subspace_weight`` (in every fold; Hopkins155, 5 seeds: held out
+        0.25 %, against 0.36 % at 0; ``docs/bench/cv_clean.md``, ``benchmarks/TUNING.md``,
         "Cleaning the candidates before the selection").
     rv_subspace_weight : float
         Subspace votes (ours, :class:`laav.subspace_votes.SubspaceVotes`; complete data; LAAV's
@@ -172,7 +173,8 @@ class LaavParams:
         Random Voting alone (the RV and LAAV papers, :meth:`paper`). The default 1 was
         chosen for LAAV's own chain by 5-fold cross-validation grouped by source video
         among 0 / 0.3 / 1 / 3 (Hopkins155, 5 seeds: held out 0.62 % before the descent
-        on the joint score, 0.43 % with it, ``docs/bench/cv_descent.md``; 0 gives 0.76 % on
+        on the joint score, 0.43 % with it, ``docs/bench/cv_descent.md``, 0.25 % chosen
+        together with ``rv_select_descent``, ``docs/bench/cv_clean.md``; 0 gives 0.76 % on
         all data; LAAV's informed trial converges in 93 % of runs instead of 60 %;
         ``docs/bench/chain_own.md``). :meth:`with_plain_rv` uses 0.3, chosen the same way
         for that chain.
@@ -335,10 +337,10 @@ class LaavParams:
         trial, and plain RV's runs beside it, the candidate of least joint score plus
         agreement kept (``rv_select="joint"``). Not LAAV's mechanism (the result is often
         a plain-RV trial), and slower; on Hopkins155 (5 seeds, σ = 0: 0.25 / 0.81 / 0.38 %,
-        grouped-CV 0.38 %) the default with its descent on the joint score measures as
-        much on all data (0.36 %) but less well held out (0.43 %); under noise (σ = 1 px,
-        seeds 0-1: 0.74 % against 1.27 %) and on ``small_motion`` this preset is the more
-        accurate (``docs/ALGORITHM.md``, the presets table).
+        grouped-CV 0.38 %) the default, with its descent on the joint score and its
+        candidates cleaned before the selection, measures 0.25 % on all data and held out;
+        under noise (σ = 1 px, seeds 0-1: 0.74 % against 1.19 %) and on ``small_motion``
+        this preset is the more accurate (``docs/ALGORITHM.md``, the presets table).
         ``changes`` override fields as in :meth:`replace`."""
         return cls(coarse_merge="epipolar", rv_subspace_weight=0.3,
                    rv_select="joint").replace(**changes)
@@ -350,7 +352,7 @@ class LaavParams:
         in LAAV's informed trials, LAAV's own candidates and no plain RV
         (``rv_select="laav"``), the one kept descending on the joint score
         (``rv_descent``, since 2026-12-02 evening), its candidates cleaned by a short one
-        before they are compared (``rv_select_descent``, since 2026-12-03). Spelled out, so
+        before they are compared (``rv_select_descent``, since 2026-12-02, late evening). Spelled out, so
         that it stays this chain (and :func:`laav.motions.profile_params`, fitted on it,
         with it) if the default changes.
         ``changes`` override fields as in :meth:`replace`."""
