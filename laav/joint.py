@@ -125,7 +125,8 @@ def _move_gains(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, eps
 
 def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
                   params: LaavParams, max_sweeps: int = DESCENT_SWEEPS,
-                  max_moves: int | None = None) -> tuple[np.ndarray, int]:
+                  max_moves: int | None = None, *, projected: np.ndarray | None = None,
+                  return_score: bool = False) -> tuple:
     """Move single points between motions while :func:`joint_score` decreases (module
     docstring).
 
@@ -144,6 +145,11 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
         only the best of its moves that keep within it (a point moved already may move
         again). None: no limit. The selection's cleaning of its candidates
         (``rv_select_descent``) sets it.
+    projected : ndarray of shape (K, P), optional
+        :func:`laav.coding.principal_trajectories` of ``points``, when already computed
+        (several descents on the same points: the same numbers, one SVD).
+    return_score : bool
+        Also return the :func:`joint_score` of the labels returned (computed on the way).
 
     Returns
     -------
@@ -152,17 +158,25 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
         or when the start's score is infinite).
     moved : int
         Points whose label differs from the start's.
+    score : float
+        With ``return_score``: :func:`joint_score` of ``labels`` (the same number).
     """
     from .coding import principal_trajectories
 
     start = np.asarray(labels, dtype=np.int64)
     C = int(n_motions)
+
+    def out(L, best):
+        moved = int(np.count_nonzero(L != start))
+        return (L, moved, best) if return_score else (L, moved)
+
     if C < 2:
-        return start.copy(), 0
-    proj = principal_trajectories(points)  # (K, P): one projection for every score below
+        return out(start.copy(), joint_score(points, start, C, params) if return_score else None)
+    # (K, P): one projection for every score below
+    proj = principal_trajectories(points) if projected is None else projected
     best, D = _score_and_distances(points, start, C, params, proj)
     if not np.isfinite(best):
-        return start.copy(), 0
+        return out(start.copy(), best)
     F = points.shape[0]
     u2 = unit2(params)
     L = start.copy()
@@ -189,4 +203,4 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
                 break
         else:
             break  # not even the best single move lowers the exact score
-    return L, int(np.count_nonzero(L != start))
+    return out(L, best)

@@ -54,6 +54,7 @@ import numpy as np
 from ._random import resolve_seed
 from ._sequence import Sequence, as_points, check_degenerate, warn_missing_motions
 from ._threads import single_threaded
+from .coding import principal_trajectories
 from .joint import joint_descent, joint_score, unit2
 from .metrics import misclassification_rate
 from .params import LaavParams, as_params
@@ -643,11 +644,14 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
             polished[key] = _Polished(points, C, params, res[0])
     finals = {key: pol.final()[0] for key, pol in polished.items()}
     clean = params.rv_select_descent > 0 and len({f.tobytes() for f in finals.values()}) > 1
+    proj = None
     if clean:  # ours: each scored after its best moves of a few points (rv_select_descent)
         most = int(np.ceil(params.rv_select_descent * P))
-        finals = {key: joint_descent(points, f, C, params, max_moves=most)[0]
-                  for key, f in finals.items()}
-    cost = {key: joint_score(points, f, C, params) for key, f in finals.items()}
+        proj = principal_trajectories(points)  # one projection for every descent here
+        cost = {key: joint_descent(points, f, C, params, max_moves=most, projected=proj,
+                                   return_score=True)[2] for key, f in finals.items()}
+    else:
+        cost = {key: joint_score(points, f, C, params) for key, f in finals.items()}
     entries = [(name, res, polished[res[0].tobytes()], cost[res[0].tobytes()])
                for (name, *_), res in zip(starts, results)]
     scores = np.array([e[3] for e in entries])
@@ -657,7 +661,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     out = _finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
                   score="joint-cleaned" if clean else "joint-sum")
     if params.rv_descent:  # ours: the kept labelling descends on the same score
-        labels, moved = joint_descent(points, out.labels, C, params)
+        labels, moved = joint_descent(points, out.labels, C, params, projected=proj)
         out = dataclasses.replace(out, labels=labels, descended=moved)
     return _with_informed(out, first, first_extra)
 
