@@ -633,6 +633,20 @@ def test_rv_summary_names_the_points_each_polishing_step_moved():
     assert f"the descent on the joint score (ours, `rv_descent`) {own.descended}" in rv_summary(own, None)
 
 
+def test_rv_card_says_the_candidates_were_scored_after_their_cleaning():
+    """When LAAV's candidates differ, the selection scores each after a short descent
+    (``rv_select_descent``, ours): the RV card says so, and not when it is off."""
+    from explorer.views import rv_summary
+    from test_own_chain import small_motion_uncovered
+
+    seq, init, _ = small_motion_uncovered(0)
+    on = laav.random_voting(seq, 2, laav.LaavParams(), seed=0, init_labels=init)
+    off = laav.random_voting(seq, 2, laav.LaavParams(rv_select_descent=0.0), seed=0, init_labels=init)
+    assert on.score == "joint-cleaned" and len(on.costs) == 2
+    assert "best moves of a few points (`rv_select_descent`)" in rv_summary(on, None)
+    assert "rv_select_descent" not in rv_summary(off, None)
+
+
 def test_md_text_renders_names_as_literal_text():
     """Names from files reach the page as text: no HTML, link, image, math or block markup."""
     from markdown_it import MarkdownIt
