@@ -636,8 +636,9 @@ def test_rv_summary_names_the_points_each_polishing_step_moved():
 def test_rv_card_says_the_candidates_were_scored_after_their_cleaning():
     """When LAAV's candidates differ, the selection scores each after a short descent
     (``rv_select_descent``, ours): the RV card says so, and not when it is off."""
-    from explorer.views import rv_summary
     from test_own_chain import small_motion_uncovered
+
+    from explorer.views import rv_summary
 
     seq, init, _ = small_motion_uncovered(0)
     on = laav.random_voting(seq, 2, laav.LaavParams(), seed=0, init_labels=init)
