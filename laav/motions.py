@@ -482,8 +482,11 @@ def _estimate_motions(seq_or_points, max_motions, random_state, params):
         step_scores=tuple(float(v) for v in scores), noise=noise2, reason=why + basis,
         seed=seed, seconds=time.perf_counter() - t)
     # LAAV's result at the estimate, when it was computed on the caller's whole sequence with
-    # the caller's settings (not with profile_params(), for a caller who gave none)
-    return count, (results.get(int(C)) if seq_or_points is whole and params is not None else None)
+    # the caller's settings: not with profile_params(), for a caller who gave none, nor when
+    # the profile turned off what its constants were not fitted with (NOT_FITTED), which the
+    # caller's result must have
+    same = params is not None and params == params.replace(**NOT_FITTED)
+    return count, (results.get(int(C)) if seq_or_points is whole and same else None)
 
 
 @single_threaded

@@ -166,16 +166,35 @@ def test_profile_levels_nan_for_missing_candidates():
     assert np.isnan(profile_levels(R, R)[2]).all()  # no coding lengths given
 
 
-def test_segment_auto():
+def test_segment_auto(monkeypatch):
+    import laav.pipeline
+    from laav.motions import NOT_FITTED
+
     seq = _scene(3, 0)
-    res = laav.segment(seq, "auto", laav.LaavParams(rv_max_iter=30, rv_trials=2), seed=0)
+    p = laav.LaavParams(rv_max_iter=30, rv_trials=2)
+    res = laav.segment(seq, "auto", p, seed=0)
     assert res.n_motions == 3 and res.motion_count.n_motions == 3
     assert np.unique(res.labels).size == 3
-    # the estimate's own segmentation with C = 3 is returned, not computed again: the same
-    # labels as segmenting with C given
-    fixed = laav.segment(seq, 3, laav.LaavParams(rv_max_iter=30, rv_trials=2), seed=0)
+    # the caller's settings, not the profile's (which never descends nor cleans: NOT_FITTED):
+    # the same labels and parameters as segmenting with C given
+    fixed = laav.segment(seq, 3, p, seed=0)
+    assert res.params == fixed.params == p and res.params.rv_descent
     np.testing.assert_array_equal(res.labels, fixed.labels)
     assert res.voting.n_iterations == fixed.voting.n_iterations
+    # with settings the profile runs as they are, its own segmentation with C = 3 is
+    # returned, not computed again
+    made = []
+
+    class Counting(laav.pipeline.Pipeline):  # counts segment's own runs (the profile's start at C = 2)
+        def __init__(self, seq, n_motions, *a, **k):
+            made.append(n_motions)
+            super().__init__(seq, n_motions, *a, **k)
+
+    monkeypatch.setattr(laav.pipeline, "Pipeline", Counting)
+    plain = p.replace(**NOT_FITTED)
+    again = laav.segment(seq, "auto", plain, seed=0)
+    assert 3 not in made and again.params == plain
+    assert len(laav.segment(seq, "auto", p, seed=0).labels) == seq.n_points and made.count(3) == 1
     with pytest.raises(ValueError, match="'auto'"):
         laav.segment(seq, "many")
 
