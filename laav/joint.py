@@ -19,6 +19,8 @@ result is lower; else the better half of them, a quarter, a tenth, the best one;
 descent stops when not even that lowers the exact score, or after
 :data:`DESCENT_SWEEPS` sweeps. No motion drops below 8 points (where the score is
 infinite). The exact score of the labelling returned is never higher than the start's.
+With ``max_moves`` it moves at most that many points: the selection scores each of LAAV's
+candidates so (``rv_select_descent``) before comparing them.
 
 Nothing in it was tuned: the halving schedule, the sweep cap and the 8-point floor were
 set before it was measured (``benchmarks/TUNING.md``, "Descent on the joint score").
@@ -141,10 +143,11 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
         Uses ``coding_eps``, ``coarse_epipolar_weight`` and ``rv_lambda``.
     max_sweeps : int
     max_moves : int, optional
-        At most this many points end with a label other than the start's: a sweep makes
-        only the best of its moves that keep within it (a point moved already may move
-        again). None: no limit. The selection's cleaning of its candidates
-        (``rv_select_descent``) sets it.
+        At most this many points end with a label other than the start's: a sweep takes
+        its moves best first up to the first that would go over it (a point moved already
+        may move again without counting twice), so the descent stops once the limit is
+        reached and the best move left is a new point's. None: no limit. The selection's
+        cleaning of its candidates (``rv_select_descent``) sets it.
     projected : ndarray of shape (K, P), optional
         :func:`laav.coding.principal_trajectories` of ``points``, when already computed
         (several descents on the same points: the same numbers, one SVD).

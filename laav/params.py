@@ -154,16 +154,18 @@ class LaavParams:
         Ours, with ``rv_select="laav"`` on complete tracks, when its candidates end on
         different labellings: before they are compared, each candidate descends on the
         joint score (:func:`laav.joint.joint_descent`) moving at most this share of the
-        points (rounded up), and is scored as it then stands; the candidate kept is the
+        points (rounded up; of the voted subset above ``rv_max_points``), and is scored as
+        it then stands; the candidate kept is the
         polished one, as before (``rv_descent`` then descends it without a limit). One
-        stray trajectory in a small motion raises a labelling's coding length by hundreds
-        of nats, so a right candidate with a few stray points lost to a wrong one; an
+        stray trajectory in a small motion can raise a labelling's coding length by about
+        1,100 nats, so a right candidate with a few stray points lost to a wrong one; an
         unlimited descent lets wrong candidates overtake (0.59 %). 0: scored as polished
         (before 2026-12-02, late evening). The default 0.03 was chosen by 5-fold
         cross-validation grouped by video among 0 / 0.01 / 0.02 / 0.03 / 0.05 / 0.1 / 1,
-        together with ``rv_subspace_weight`` (in every fold; Hopkins155, 5 seeds: held out
-        0.25 %, against 0.36 % at 0; ``docs/bench/cv_clean.md``, ``benchmarks/TUNING.md``,
-        "Cleaning the candidates before the selection").
+        together with ``rv_subspace_weight`` (0.03 and 0.05, the same errors on every run,
+        in every fold; Hopkins155, 5 seeds: held out 0.25 %, against 0.43 % held out
+        before, ``docs/bench/cv_clean.md``, ``docs/bench/cv_descent.md``;
+        ``benchmarks/TUNING.md``, "Cleaning the candidates before the selection").
     rv_subspace_weight : float
         Subspace votes (ours, :class:`laav.subspace_votes.SubspaceVotes`; complete data; LAAV's
         informed trials only, never plain RV's random starts): every voting group also
