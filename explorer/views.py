@@ -1070,8 +1070,8 @@ def _selection(voting: laav.Voting) -> str:
     """Which candidate labelling the selection kept, and the candidates' scores.
 
     Only the public ``selected`` (a name, shown as text whatever it is), ``costs``
-    (name -> score), ``score`` (what scored them) and ``descended`` (the kept labels moved
-    after scoring) are read; the name kept need not be
+    (name -> score), ``score`` (what scored them; ``"joint-cleaned"``: each candidate after
+    its cleaning) and ``descended`` (the kept labels moved after scoring) are read; the name kept need not be
     among the scored candidates, and
     nothing assumes how the algorithm chose (e.g. the lowest score).
     """
@@ -1081,7 +1081,10 @@ def _selection(voting: laav.Voting) -> str:
         return ""
     name = md_text(kept) if kept else "(unnamed)"
     score = f" (score {float(costs[kept]):.2f})" if kept in costs else ""
-    if score and voting.descended:  # the labels returned moved after scoring
+    if score and voting.score == "joint-cleaned":  # scored after a few moves of its own
+        score = score[:-1] + ", after its cleaning" + (
+            "; the labels returned then descended further)" if voting.descended else ")")
+    elif score and voting.descended:  # the labels returned moved after scoring
         score = score[:-1] + ", before the descent on the joint score)"
     by = _SCORES.get(voting.score, "")
     by = f"; scored by {by} (ours)" if by else ""
