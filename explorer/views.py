@@ -1083,7 +1083,7 @@ def _selection(voting: laav.Voting) -> str:
     score = f" (score {float(costs[kept]):.2f})" if kept in costs else ""
     if score and voting.score == "joint-cleaned":  # scored after a few moves of its own
         score = score[:-1] + ", after its cleaning" + (
-            "; the labels returned then descended further)" if voting.descended else ")")
+            "; the labels returned: the candidate after the full descent)" if voting.descended else ")")
     elif score and voting.descended:  # the labels returned moved after scoring
         score = score[:-1] + ", before the descent on the joint score)"
     by = _SCORES.get(voting.score, "")
