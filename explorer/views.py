@@ -1071,9 +1071,9 @@ def _selection(voting: laav.Voting) -> str:
 
     Only the public ``selected`` (a name, shown as text whatever it is), ``costs``
     (name -> score), ``score`` (what scored them; ``"joint-cleaned"``: each candidate after
-    its cleaning) and ``descended`` (the kept labels moved after scoring) are read; the name kept need not be
-    among the scored candidates, and
-    nothing assumes how the algorithm chose (e.g. the lowest score).
+    its cleaning) and ``descended`` (the kept labels moved after scoring) are read; the
+    name kept need not be among the scored candidates, and nothing assumes how the
+    algorithm chose (e.g. the lowest score).
     """
     costs = dict(voting.costs or {})
     kept = voting.selected

@@ -155,8 +155,8 @@ class LaavParams:
         different labellings: before they are compared, each candidate descends on the
         joint score (:func:`laav.joint.joint_descent`) moving at most this share of the
         points (rounded up; of the voted subset above ``rv_max_points``), and is scored as
-        it then stands; the candidate kept is the
-        polished one, as before (``rv_descent`` then descends it without a limit). One
+        it then stands; the candidate kept is the polished one, as before (``rv_descent``
+        then descends it without a limit). One
         stray trajectory in a small motion can raise a labelling's coding length by about
         1,100 nats, so a right candidate with a few stray points lost to a wrong one; an
         unlimited descent lets wrong candidates overtake (0.59 %). 0: scored as polished
@@ -231,8 +231,8 @@ class LaavParams:
         Ours, for thousands of tracks: with more points than this, Random Voting (every
         trial, the refinement, the model selection and the descent) runs on a seeded
         random subset of this many, and every other point then goes to the motion whose
-        trajectory subspace and fundamental matrices, fitted on the voted points, explain it best
-        (:func:`laav.refine.assign_jointly`, the joint reassignment's rule), then, with
+        trajectory subspace and fundamental matrices, fitted on the voted points, explain
+        it best (:func:`laav.refine.assign_jointly`, the joint reassignment's rule), then, with
         ``rv_reassign``, the joint reassignment runs over every point. None: every
         point votes (the papers). The fine-to-coarse stage's pooled voting likewise lets
         at most this many atom features vote (:func:`laav.coarse.voting_features`).
