@@ -406,17 +406,23 @@ class Explorer:
         the first result is shown (:data:`REST_GAP_S` after it is applied; or
         :data:`REST_AFTER_S` after the page loaded, whichever comes first), so that the page
         and then the first result appear sooner: the browser draws those cards once, with
-        their data, after the status line and the points.
+        their data, after the status line and the points. The tour's panel and the compare
+        card, hidden until asked for, come with them (:meth:`complete_page`).
         """
         n_first = self.main.index(self.view3d.card) + 1  # status, alerts, note, tour, atoms, 3-D
         if lazy is None:
             lazy = self._session_doc is not None
-        main = pn.Column(*(self.main[:n_first] if lazy else self.main), sizing_mode="stretch_width")
+        # the tour's panel and the compare card are hidden until asked for: they come with
+        # the later cards (or at once when asked for first: :meth:`complete_page`)
+        hidden = (id(self.tour.panel), id(self.compare.card))
+        first = [c for c in self.main[:n_first] if not (lazy and id(c) in hidden)]
+        main = pn.Column(*(first if lazy else self.main), sizing_mode="stretch_width")
         self.main_column = main
         self._rest = None
         self._rest_timer = None  # the pending _add_rest_after
         if lazy:
-            self._rest = {"cards": self.main[n_first:], "loaded": False}
+            self._rest = {"cards": [c for c in self.main if all(c is not f for f in first)],
+                          "loaded": False}
             pn.state.onload(self._page_loaded)
             self.state.seeds_ahead = False  # not while the page is being completed (_add_rest)
         # one root per area: every extra document root costs a full model walk on page load.
@@ -461,11 +467,18 @@ class Explorer:
         if rest is None or not rest["loaded"]:
             return
         self._rest = None
-        self.main_column.extend(rest["cards"])
+        self.main_column.objects = list(self.main)  # (in stage order; those shown are kept)
         self.state.preload()
         if self._seeds_ahead:  # the page is complete: the next seed may be computed now
             self.state.seeds_ahead = True
             self.state.compute_ahead()
+
+    def complete_page(self) -> None:
+        """(Document thread.) The later cards onto the page now, if still to come (the tour
+        or a pin asks for its card before they came)."""
+        if self._rest is not None:
+            self._rest["loaded"] = True
+            self._add_rest()
 
     def panel(self) -> pn.viewable.Viewable:
         """The whole explorer as one panel layout (for notebooks)."""

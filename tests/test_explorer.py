@@ -1057,6 +1057,25 @@ def test_the_page_is_built_with_one_walk_of_its_models(seq, monkeypatch):
         ex.close()
 
 
+def test_hidden_cards_come_later_and_at_once_when_asked_for(ex, monkeypatch):
+    """The served page's first document leaves out the tour's panel and the compare card
+    (hidden until asked for) with the later cards; starting the tour (or pinning) before
+    those came puts every card on the page at once, in stage order."""
+    monkeypatch.setattr(pn.state, "onload", lambda *a, **k: None)  # the page never loads here
+    ex.template("LAAV explorer", lazy=True)
+    first = ex.main_column.objects
+    assert all(c is not ex.tour.panel and c is not ex.compare.card for c in first)
+    assert any(c is ex.frame_view.card for c in first) and len(first) < len(ex.main)
+    ex.tour.start()
+    assert ex.tour.panel.visible
+    assert [id(c) for c in ex.main_column.objects] == [id(c) for c in ex.main]
+    ex.tour.end()
+    ex.template("LAAV explorer", lazy=True)
+    assert ex.compare.pin()
+    assert [id(c) for c in ex.main_column.objects] == [id(c) for c in ex.main]
+    assert ex.compare.inner.visible
+
+
 def test_r2_moves_along_when_r1_passes_it_and_values_stay_round(ex):
     """R1 dragged past R2 takes R2 along (a refusal held every later change back, with the
     status line no longer matching the controls); slider values carry no floating-point

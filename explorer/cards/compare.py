@@ -139,6 +139,7 @@ class CompareView:
             if self.table.object != table:
                 self.table.object = table
             self.inner.visible = True
+            self.host.complete_page()  # (this card comes with the later ones)
             self.w_unpin.disabled = False
             line = self._pin_line(a)
             if self.pin_md.object != line:

@@ -119,6 +119,7 @@ class TourView:
     def start(self, step: int = 0) -> None:
         """Enter the tour at ``step`` (0-based)."""
         if not self.active:
+            self.host.schedule(self.host.complete_page, now_if_on_doc_thread=True)  # the panel
             self._saved = {name: (c.visible, dict(c.styles or {})) for name, c in self.cards.items()}
             self._saved["__color"] = self.controls.color_mode
             self.active = True
