@@ -166,6 +166,47 @@ def coding_lengths(count, total, scatter, dim: int, eps: float) -> np.ndarray:
     return np.where(np.asarray(count) > 0, L, 0.0)
 
 
+def coding_lengths_one_moved(count: float, total: np.ndarray, scatter: np.ndarray, X: np.ndarray,
+                             dim: int, eps: float, sign: int) -> np.ndarray:
+    """:func:`coding_lengths` of one group with each point alone added (``sign`` +1) or
+    taken out (``sign`` -1), for every point at once: (P,).
+
+    ``count``, ``total`` (K,), ``scatter`` (K, K): the group's statistics; ``X`` (P, K):
+    the points (a point taken out must be in the group). The same numbers as
+    :func:`coding_lengths` of the P changed groups, to rounding, from one K x K
+    factorisation instead of P: with ``M`` the group's scatter about its mean ``mu`` and
+    ``n' = count + sign``, moving ``x`` changes ``M`` by ``sign n / n' (x - mu)(x - mu)^T``
+    (a rank-one change), so ``det(I + a M' / n') = det(B) (1 + c d^T B^-1 d)`` with
+    ``B = I + a M / n'``, ``d = x - mu``, ``c = sign a n / n'^2``, ``a = dim / eps^2``.
+    A group left empty has length 0.
+    """
+    n = float(count)
+    n1 = n + sign
+    if n1 <= 0 or n <= 0:
+        return np.zeros(X.shape[0])
+    e2 = float(eps) ** 2
+    a = dim / e2
+    K = total.size
+    B = (a / n1) * (scatter - np.outer(total, total) / n)
+    B.flat[::K + 1] += 1.0
+    B = (B + B.T) / 2.0
+    try:
+        Lb = np.linalg.cholesky(B)
+        logdet_b = 2.0 * np.log(np.diagonal(Lb)).sum()
+        # d^T B^-1 d for every point, by the triangular factor: |Lb^-1 d|^2
+        Y = np.linalg.solve(Lb, (X - total / n).T)  # (K, P)
+    except np.linalg.LinAlgError:
+        w, V = np.linalg.eigh(B)
+        w = np.clip(w, 1.0, None)  # (B >= I for a covariance)
+        logdet_b = float(np.log(w).sum())
+        Y = (V / np.sqrt(w)).T @ (X - total / n).T
+    q = np.add.reduce(Y * Y, axis=0)
+    inner = np.maximum(1.0 + (sign * a * n / n1 ** 2) * q, 1e-300)
+    t1 = total + sign * X  # (P, K)
+    return ((n1 + dim) / 2.0 * (logdet_b + np.log(inner))
+            + n1 / 2.0 * np.log1p(np.add.reduce(t1 * t1, axis=1) / (n1 * n1 * e2)))
+
+
 def labelling_coding_length(points: np.ndarray, labels: np.ndarray, n_groups: int,
                             eps: float, projected: np.ndarray | None = None) -> float:
     """Lossy coding length (nats) of the trajectories grouped by ``labels``: the sum of

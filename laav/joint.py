@@ -12,7 +12,9 @@ lack is not a better score but a labelling nearer its minimum.
 motion while that lowers the joint score. Each sweep computes, for every point and every
 other motion, the change a move of that point alone makes: exactly for the coding length
 (each motion's coding length from its sufficient statistics, :mod:`laav.coding`, the
-point's trajectory taken out of one group and added to the other) and with the motions'
+point's trajectory taken out of one group and added to the other: a rank-one change of
+the group's scatter, so one factorisation per motion serves every point,
+:func:`laav.coding.coding_lengths_one_moved`) and with the motions'
 fundamental matrices of the sweep's labelling held fixed for the epipolar cost. The
 points whose best move lowers the score all move at once if the exact joint score of the
 result is lower; else the better half of them, a quarter, a tenth, the best one; the
@@ -106,19 +108,23 @@ def _move_gains(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, eps
     (K, P): the trajectories in the coding length's principal directions
     (:func:`laav.coding.principal_trajectories`); ``epi`` (C, P): each point's
     ``log(1 + d)`` under each motion's matrices."""
-    from .coding import coding_lengths, stats_of
+    from .coding import coding_lengths, coding_lengths_one_moved, stats_of
 
     P = labels.size
     st = stats_of(projected, labels, C, dim)
     count, total, scatter = st.count, st.total, st.scatter
     now = coding_lengths(count, total, scatter, dim, eps)  # (C,)
     X = projected.T  # (P, K)
-    xx = X[:, :, None] * X[:, None, :]  # (P, K, K)
     a = labels
-    out = coding_lengths(count[a] - 1, total[a] - X, scatter[a] - xx, dim, eps) - now[a]  # (P,)
+    out = np.empty(P)  # each point's own motion without it, less that motion's length now
+    for g in range(C):
+        mine = a == g
+        if mine.any():
+            out[mine] = (coding_lengths_one_moved(count[g], total[g], scatter[g], X[mine], dim, eps, -1)
+                         - now[g])
     gain = np.empty((P, C))
     for b in range(C):
-        into = coding_lengths(np.full(P, count[b] + 1), total[b] + X, scatter[b] + xx, dim, eps)
+        into = coding_lengths_one_moved(count[b], total[b], scatter[b], X, dim, eps, +1)
         gain[:, b] = out + (into - now[b]) + weight * (epi[b] - epi[a, np.arange(P)])
     gain[np.arange(P), a] = np.inf
     gain[count[a] <= MIN_MOTION_POINTS] = np.inf

@@ -52,6 +52,27 @@ def test_move_gains_are_the_score_change_of_each_single_move():
             assert gain[i, b] == pytest.approx(direct, rel=1e-6, abs=1e-6)
 
 
+@pytest.mark.parametrize("sign", [1, -1])
+def test_one_point_moved_lengths_are_the_groups_coding_lengths(sign):
+    """The rank-one update gives every point's changed group the length
+    :func:`coding_lengths` computes from that group's own statistics."""
+    from laav.coding import coding_lengths, coding_lengths_one_moved, stats_of
+
+    seq = scene(0)
+    F = seq.n_frames
+    X = principal_trajectories(seq.points)  # (K, P)
+    g = seq.labels == 0
+    st = stats_of(X[:, g], np.zeros(g.sum(), dtype=np.int64), 1, 2 * F)
+    pts = X[:, g if sign < 0 else ~g].T  # taken out: its own points; added: the others
+    got = coding_lengths_one_moved(st.count[0], st.total[0], st.scatter[0], pts, 2 * F, 0.5, sign)
+    xx = pts[:, :, None] * pts[:, None, :]
+    want = coding_lengths(np.full(len(pts), st.count[0] + sign), st.total[0] + sign * pts,
+                          st.scatter[0] + sign * xx, 2 * F, 0.5)
+    assert got.shape == (len(pts),)
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+    assert np.ptp(got) > 1.0  # the points change the length differently: a real check
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_descent_lowers_the_score_and_mends_scattered_errors(seed):
     seq = scene(seed)
