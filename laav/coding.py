@@ -178,13 +178,17 @@ def coding_lengths_one_moved(count: float, total: np.ndarray, scatter: np.ndarra
     ``n' = count + sign``, moving ``x`` changes ``M`` by ``sign n / n' (x - mu)(x - mu)^T``
     (a rank-one change), so ``det(I + a M' / n') = det(B) (1 + c d^T B^-1 d)`` with
     ``B = I + a M / n'``, ``d = x - mu``, ``c = sign a n / n'^2``, ``a = dim / eps^2``.
-    A group left empty has length 0.
+    A group left empty has length 0. Should rounding make ``1 + c d^T B^-1 d`` non-positive
+    for a point taken out (never for a covariance), that point's length is NaN (a caller
+    then skips that move) rather than a huge negative number.
     """
     n = float(count)
     n1 = n + sign
-    if n1 <= 0 or n <= 0:
-        return np.zeros(X.shape[0])
     e2 = float(eps) ** 2
+    if n1 <= 0:
+        return np.zeros(X.shape[0])
+    if n <= 0:  # one point into an empty group: no scatter, its mean term alone
+        return 0.5 * np.log1p(np.add.reduce(X * X, axis=1) / e2)
     a = dim / e2
     K = total.size
     B = (a / n1) * (scatter - np.outer(total, total) / n)
@@ -201,7 +205,8 @@ def coding_lengths_one_moved(count: float, total: np.ndarray, scatter: np.ndarra
         logdet_b = float(np.log(w).sum())
         Y = (V / np.sqrt(w)).T @ (X - total / n).T
     q = np.add.reduce(Y * Y, axis=0)
-    inner = np.maximum(1.0 + (sign * a * n / n1 ** 2) * q, 1e-300)
+    inner = 1.0 + (sign * a * n / n1 ** 2) * q
+    inner[inner <= 0.0] = np.nan
     t1 = total + sign * X  # (P, K)
     return ((n1 + dim) / 2.0 * (logdet_b + np.log(inner))
             + n1 / 2.0 * np.log1p(np.add.reduce(t1 * t1, axis=1) / (n1 * n1 * e2)))

@@ -71,6 +71,9 @@ def test_one_point_moved_lengths_are_the_groups_coding_lengths(sign):
     assert got.shape == (len(pts),)
     np.testing.assert_allclose(got, want, rtol=1e-9)
     assert np.ptp(got) > 1.0  # the points change the length differently: a real check
+    if sign > 0:  # into an empty group: the one-point group's length
+        one = coding_lengths_one_moved(0, 0 * st.total[0], 0 * st.scatter[0], pts, 2 * F, 0.5, 1)
+        np.testing.assert_allclose(one, coding_lengths(np.ones(len(pts)), pts, xx, 2 * F, 0.5), rtol=1e-12)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
