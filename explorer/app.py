@@ -258,6 +258,9 @@ class Explorer:
         self.change = None
         self._seq_shown: laav.Sequence | None = None
         self._rest: dict | None = None  # the later cards, until they are on the page (template)
+        #: called once (document thread) when the served page is complete: its later cards
+        #: added (``laav-explore`` then lets Python's garbage collector run again)
+        self.on_page_complete = None
         self.main_column = None
 
         ext = seq.extent()
@@ -472,6 +475,9 @@ class Explorer:
         if self._seeds_ahead:  # the page is complete: the next seed may be computed now
             self.state.seeds_ahead = True
             self.state.compute_ahead()
+        done, self.on_page_complete = self.on_page_complete, None
+        if done is not None:
+            done()
 
     def complete_page(self) -> None:
         """(Document thread.) The later cards onto the page now, if still to come (the tour

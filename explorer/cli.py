@@ -40,6 +40,7 @@ limit (:data:`WEBSOCKET_MAX_MESSAGE`) does not depend on it.
 from __future__ import annotations
 
 import argparse
+import gc
 import ipaddress
 import socket
 import sys
@@ -59,6 +60,9 @@ DEFAULT_PORT = 5006
 #: any size up to --max-upload fits, and a client sending more is disconnected, alone.
 WEBSOCKET_MAX_MESSAGE = 20 * 1024 * 1024
 _ANY = ("0.0.0.0", "", "::")
+#: Seconds after which ``laav-explore`` lets the garbage collector run again even when no
+#: tab has completed its page (see :class:`_StartupGC`).
+STARTUP_GC_MAX_S = 30.0
 _LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
@@ -220,11 +224,46 @@ def _reachable_name(host: str) -> str:
             return socket.gethostname()
 
 
+class _StartupGC:
+    """Python's cyclic garbage collector held off while ``laav-explore`` starts.
+
+    Importing panel and building the first page make hundreds of thousands of long-lived
+    objects, and each full collection walks all of them: five full collections of 20-190 ms
+    (about 0.35 s in all) fell between the command's start and the first result, on the
+    way to the page, and one more of 130-140 ms just after it, on the first slider move
+    (measured on the 2-core VM, docs/bench/explorer_startup_2026-12-03.md). Held off until
+    the first tab's page is complete (or :data:`STARTUP_GC_MAX_S` at the latest); then
+    what exists is frozen (:func:`gc.freeze`: never walked again, as it lives as long as
+    the server) and collection resumes for what comes later. Reference counting frees
+    everything that is not in a cycle meanwhile."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._on = gc.isenabled()
+        gc.disable()
+        self._timer = threading.Timer(STARTUP_GC_MAX_S, self.end)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def end(self, freeze: bool = True) -> None:
+        """Let the collector run again (once; any thread); ``freeze``: what exists first
+        (not when the server is stopping)."""
+        with self._lock:
+            on, self._on = self._on, None
+        if on is None:
+            return
+        self._timer.cancel()
+        if freeze:
+            gc.freeze()
+        if on:
+            gc.enable()
+
+
 def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: str = "127.0.0.1",
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
                 hosts: list[str] | None = None, announce_viser: bool = False,
                 params: laav.LaavParams | None = None, max_upload: int | None = None, video=None,
-                warm=None, seeds_ahead: bool = False):
+                warm=None, seeds_ahead: bool = False, on_first_page=None):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
@@ -243,6 +282,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     first tab's pipeline and plain RV for ``seq`` computed elsewhere (:func:`explorer.warm.first_results`;
     only the first explorer built takes them). ``seeds_ahead``: every tab computes the next
     seed's result while idle (:class:`explorer.state.ExplorerState`; the command turns it on).
+    ``on_first_page``: called once, on the server's thread, when the first tab's page is
+    complete (:attr:`Explorer.on_page_complete`).
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
@@ -250,6 +291,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     lock = threading.Lock()
 
     warm_left = [warm]  # for the first explorer built only
+    first_page_left = [on_first_page]  # for the first session only
 
     def build():
         from .app import Explorer
@@ -291,6 +333,9 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
         if ex is None:
             ex = build()
         ex.apply_query(dict(pn.state.session_args or {}))  # before the first computation starts
+        with lock:
+            first_page, first_page_left[0] = first_page_left[0], None
+        ex.on_page_complete = first_page
         if created is not None:
             created.append(ex)
         if announce_viser:
@@ -456,6 +501,7 @@ def main(argv: list[str] | None = None) -> int:
     from .warm import first_results
 
     first = first_results(seq, C, settings.params, settings.seed)
+    startup_gc = _StartupGC()  # (after the fork: the child collects as usual)
 
     import panel as pn
 
@@ -464,11 +510,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
                               announce_viser=not _is_loopback(args.host), params=settings.params,
-                              max_upload=args.max_upload, video=video, warm=first, seeds_ahead=True)
+                              max_upload=args.max_upload, video=video, warm=first, seeds_ahead=True,
+                              on_first_page=startup_gc.end)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False, **serve_options())
     except OSError as exc:
+        startup_gc.end(freeze=False)
         return _fail(parser, f"cannot listen on {args.host}:{port}: {exc}")
     local = _is_loopback(args.host)
     url = f"http://{args.host if local else _reachable_name(args.host)}:{port}/"
@@ -488,6 +536,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         pass
     finally:
+        startup_gc.end(freeze=False)
         server.stop()
         factory.close_unclaimed()
     return 0

@@ -180,3 +180,46 @@ def test_a_request_supersedes_the_wait_and_starts_from_the_warm_pipeline(seq, mo
         assert _same(st.result, laav.Pipeline(seq, 2, laav.LaavParams(lam=5.0)).result)
     finally:
         st.close()
+
+
+def test_the_collector_is_held_off_during_start_up_and_resumes_once(monkeypatch):
+    """``laav-explore`` holds Python's cyclic collector off while it starts; ``end`` (the
+    first page complete, or the timer) freezes what exists and lets it run again, once."""
+    import gc
+
+    from explorer import cli
+
+    was = gc.isenabled()
+    frozen = gc.get_freeze_count()
+    try:
+        gc.enable()
+        held = cli._StartupGC()
+        assert not gc.isenabled()
+        held.end()
+        assert gc.isenabled() and gc.get_freeze_count() > frozen
+        gc.disable()  # a second end() must not turn it back on
+        held.end()
+        assert not gc.isenabled()
+    finally:
+        gc.unfreeze()
+        (gc.enable if was else gc.disable)()
+
+
+def test_the_first_page_complete_is_reported_once(seq, monkeypatch):
+    """An explorer's ``on_page_complete`` runs when its later cards are added, and only once."""
+    import panel as pn
+
+    from explorer.app import Explorer
+
+    monkeypatch.setattr(pn.state, "onload", lambda *a, **k: None)  # no page loads here
+    ex = Explorer(seq, viser=False)
+    try:
+        assert ex.wait(120)
+        calls = []
+        ex.template("LAAV explorer", lazy=True)
+        ex.on_page_complete = lambda: calls.append(1)
+        ex.complete_page()
+        ex.complete_page()
+        assert calls == [1] and ex.on_page_complete is None
+    finally:
+        ex.close()
