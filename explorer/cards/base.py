@@ -44,6 +44,8 @@ class Host(Protocol):
 
     def touch(self) -> None: ...  # a person moved a view control (no computation ahead now)
 
+    def complete_page(self) -> None: ...  # the later cards onto the page now (the tour, a pin)
+
 
 def _same(a, b) -> bool:
     try:

@@ -117,9 +117,13 @@ class TourView:
 
     # ------------------------------------------------------------------ navigation
     def start(self, step: int = 0) -> None:
-        """Enter the tour at ``step`` (0-based)."""
+        """Enter the tour at ``step`` (0-based), on the document's thread: its panel comes
+        with the later cards and must be on the page before the page's script is told."""
+        self.host.schedule(self._start, step, now_if_on_doc_thread=True)
+
+    def _start(self, step: int) -> None:
         if not self.active:
-            self.host.schedule(self.host.complete_page, now_if_on_doc_thread=True)  # the panel
+            self.host.complete_page()  # the panel, if the later cards are still to come
             self._saved = {name: (c.visible, dict(c.styles or {})) for name, c in self.cards.items()}
             self._saved["__color"] = self.controls.color_mode
             self.active = True
