@@ -228,10 +228,10 @@ class _StartupGC:
     """Python's cyclic garbage collector held off while ``laav-explore`` starts.
 
     Importing panel and building the first page make hundreds of thousands of long-lived
-    objects, and each full collection walks all of them: five full collections of 20-190 ms
-    (about 0.35 s in all) fell between the command's start and the first result, on the
-    way to the page, and one more of 130-140 ms just after it, on the first slider move
-    (measured on the 2-core VM, docs/bench/explorer_startup_2026-12-03.md). Held off until
+    objects, and each full collection walks all of them: in a traced start on the 2-core VM
+    the server's process made three full collections (73, 84 and 128 ms) before the points
+    were drawn and one of about 200 ms after the first result, where a first slider move
+    lands (docs/bench/explorer_startup_2026-12-03.md). Held off until
     the first tab's page is complete (or :data:`STARTUP_GC_MAX_S` at the latest); then
     what exists is frozen (:func:`gc.freeze`: never walked again, as it lives as long as
     the server) and collection resumes for what comes later. Reference counting frees
