@@ -60,12 +60,6 @@ REST_AFTER_S = 3.0
 #: against 4.72-6.23 s, median 5.2; the later cards came sooner too).
 REST_GAP_S = 0.4
 
-#: Seconds between two of the later cards (sent one at a time): a slider moved while they
-#: are being sent waits for one card, not for all of them (sent together, the server took
-#: 0.6-0.9 s to make and send their ~500 models and the page ~0.7 s to build them, and a
-#: first move landing then waited 1.2-1.4 s; docs/bench/explorer_startup_2026-12-03.md).
-REST_STEP_S = 0.15
-
 #: The cards' widgets, sources and panes that tests, benchmarks and notebooks reach on the
 #: explorer itself (the same objects): name -> where it lives.
 SHORTCUTS = {
@@ -415,9 +409,8 @@ class Explorer:
         the first result is shown (:data:`REST_GAP_S` after it is applied; or
         :data:`REST_AFTER_S` after the page loaded, whichever comes first), so that the page
         and then the first result appear sooner: the browser draws those cards once, with
-        their data, after the status line and the points; one card at a time,
-        :data:`REST_STEP_S` apart. The tour's panel and the compare card, hidden until asked
-        for, come last (or at once when asked for: :meth:`complete_page`).
+        their data, after the status line and the points. The tour's panel and the compare
+        card, hidden until asked for, come with them (:meth:`complete_page`).
         """
         n_first = self.main.index(self.view3d.card) + 1  # status, alerts, note, tour, atoms, 3-D
         if lazy is None:
@@ -430,9 +423,9 @@ class Explorer:
         self.main_column = main
         self._rest = None
         self._rest_timer = None  # the pending _add_rest_after
-        if lazy:  # (those shown first; the hidden ones last)
-            later = [c for c in self.main if all(c is not f for f in first)]
-            self._rest = {"cards": sorted(later, key=lambda c: id(c) in hidden), "loaded": False}
+        if lazy:
+            self._rest = {"cards": [c for c in self.main if all(c is not f for f in first)],
+                          "loaded": False}
             pn.state.onload(self._page_loaded)
             self.state.seeds_ahead = False  # not while the page is being completed (_add_rest)
         # one root per area: every extra document root costs a full model walk on page load.
@@ -470,24 +463,14 @@ class Explorer:
         else:
             self._add_rest()
 
-    def _add_rest(self, all_now: bool = False) -> None:
-        """(Document thread.) The later stages' cards onto the page (see :meth:`template`):
-        served, one card per call, the next :data:`REST_STEP_S` later (``all_now``: every one
-        left); once all are on, the pipeline's first-use imports, if still to do
-        (:meth:`ExplorerState.preload`)."""
+    def _add_rest(self) -> None:
+        """(Document thread.) The later stages' cards onto the page, once (see :meth:`template`);
+        then the pipeline's first-use imports, if still to do (:meth:`ExplorerState.preload`)."""
         rest = self._rest
         if rest is None or not rest["loaded"]:
             return
-        doc = self._doc()
-        served = doc is not None and doc.session_context is not None
-        cards = rest["cards"] if all_now or not served else rest["cards"][:1]
-        rest["cards"] = rest["cards"][len(cards):]
-        on = {id(c) for c in self.main_column.objects} | {id(c) for c in cards}
-        self.main_column.objects = [c for c in self.main if id(c) in on]  # (in stage order)
-        if rest["cards"]:
-            self._add_rest_after(REST_STEP_S)
-            return
         self._rest = None
+        self.main_column.objects = list(self.main)  # (in stage order; those shown are kept)
         self.state.preload()
         if self._seeds_ahead:  # the page is complete: the next seed may be computed now
             self.state.seeds_ahead = True
@@ -501,7 +484,7 @@ class Explorer:
         or a pin asks for its card before they came)."""
         if self._rest is not None:
             self._rest["loaded"] = True
-            self._add_rest(all_now=True)
+            self._add_rest()
 
     def panel(self) -> pn.viewable.Viewable:
         """The whole explorer as one panel layout (for notebooks)."""
