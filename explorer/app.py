@@ -471,13 +471,13 @@ class Explorer:
             return
         self._rest = None
         self.main_column.objects = list(self.main)  # (in stage order; those shown are kept)
+        done, self.on_page_complete = self.on_page_complete, None
+        if done is not None:
+            done()
         self.state.preload()
         if self._seeds_ahead:  # the page is complete: the next seed may be computed now
             self.state.seeds_ahead = True
             self.state.compute_ahead()
-        done, self.on_page_complete = self.on_page_complete, None
-        if done is not None:
-            done()
 
     def complete_page(self) -> None:
         """(Document thread.) The later cards onto the page now, if still to come (the tour
@@ -915,4 +915,17 @@ class Explorer:
         self.sweep_view.close()
         ended = self.state.close(timeout)
         self.view3d.close()
+        self._drop_page_scripts()
         return ended
+
+    def _drop_page_scripts(self) -> None:
+        """Unregister the page scripts attached to this explorer's widgets (``jscallback``):
+        panel keeps them in a class-wide registry whose entries reach back to their widget
+        through the cards, so that no closed tab's explorer was ever freed."""
+        from panel.links import Callback
+
+        mine = {id(o) for root in (*self.sidebar, *self.main) for o in root.select()}
+        for source, callbacks in list(Callback.registry.items()):
+            if id(source) in mine:
+                for cb in list(callbacks):
+                    cb.unwatch()

@@ -231,11 +231,11 @@ class _StartupGC:
     objects, and each full collection walks all of them: in a traced start on the 2-core VM
     the server's process made three full collections (73, 84 and 128 ms) before the points
     were drawn and one of about 200 ms after the first result, where a first slider move
-    lands (docs/bench/explorer_startup_2026-12-03.md). Held off until
-    the first tab's page is complete (or :data:`STARTUP_GC_MAX_S` at the latest); then
-    what exists is frozen (:func:`gc.freeze`: never walked again, as it lives as long as
-    the server) and collection resumes for what comes later. Reference counting frees
-    everything that is not in a cycle meanwhile."""
+    lands (docs/bench/explorer_startup_2026-12-03.md). Held off until a tab's page is
+    complete (or :data:`STARTUP_GC_MAX_S` at the latest). What the imports made is frozen
+    (:meth:`imported`, :func:`gc.freeze`: modules live as long as the server, and are never
+    walked again); the explorers are not (a tab's cycles are collected once it closes).
+    Reference counting frees everything that is not in a cycle meanwhile."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
@@ -245,16 +245,17 @@ class _StartupGC:
         self._timer.daemon = True
         self._timer.start()
 
-    def end(self, freeze: bool = True) -> None:
-        """Let the collector run again (once; any thread); ``freeze``: what exists first
-        (not when the server is stopping)."""
+    def imported(self) -> None:
+        """(After the imports, before any page is built.) Freeze what exists."""
+        gc.freeze()
+
+    def end(self) -> None:
+        """Let the collector run again (once; any thread)."""
         with self._lock:
             on, self._on = self._on, None
         if on is None:
             return
         self._timer.cancel()
-        if freeze:
-            gc.freeze()
         if on:
             gc.enable()
 
@@ -282,8 +283,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     first tab's pipeline and plain RV for ``seq`` computed elsewhere (:func:`explorer.warm.first_results`;
     only the first explorer built takes them). ``seeds_ahead``: every tab computes the next
     seed's result while idle (:class:`explorer.state.ExplorerState`; the command turns it on).
-    ``on_first_page``: called once, on the server's thread, when the first tab's page is
-    complete (:attr:`Explorer.on_page_complete`).
+    ``on_first_page``: called, on the server's thread, when a tab's page is complete
+    (:attr:`Explorer.on_page_complete`; it must do its work once).
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
@@ -291,7 +292,6 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     lock = threading.Lock()
 
     warm_left = [warm]  # for the first explorer built only
-    first_page_left = [on_first_page]  # for the first session only
 
     def build():
         from .app import Explorer
@@ -333,9 +333,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
         if ex is None:
             ex = build()
         ex.apply_query(dict(pn.state.session_args or {}))  # before the first computation starts
-        with lock:
-            first_page, first_page_left[0] = first_page_left[0], None
-        ex.on_page_complete = first_page
+        ex.on_page_complete = on_first_page  # (the first tab to complete its page ends it)
         if created is not None:
             created.append(ex)
         if announce_viser:
@@ -501,10 +499,18 @@ def main(argv: list[str] | None = None) -> int:
     from .warm import first_results
 
     first = first_results(seq, C, settings.params, settings.seed)
-    startup_gc = _StartupGC()  # (after the fork: the child collects as usual)
+    startup_gc = _StartupGC()  # (after the fork: the child holds its own off, explorer.warm)
+    try:
+        return _serve(args, seq, C, settings, port, video, first, startup_gc, parser)
+    finally:
+        startup_gc.end()  # (at once if nothing did it before: the server has stopped)
 
+
+def _serve(args, seq, C, settings, port, video, first, startup_gc, parser) -> int:
+    """:func:`main`'s server: serve until stopped (Ctrl-C)."""
     import panel as pn
 
+    startup_gc.imported()
     hosts = page_hosts(args.host)
     origins = [f"{h}:{port}" for h in hosts]  # the page's websocket: its own origin only
     try:
@@ -516,7 +522,6 @@ def main(argv: list[str] | None = None) -> int:
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False, **serve_options())
     except OSError as exc:
-        startup_gc.end(freeze=False)
         return _fail(parser, f"cannot listen on {args.host}:{port}: {exc}")
     local = _is_loopback(args.host)
     url = f"http://{args.host if local else _reachable_name(args.host)}:{port}/"
@@ -536,7 +541,6 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        startup_gc.end(freeze=False)
         server.stop()
         factory.close_unclaimed()
     return 0

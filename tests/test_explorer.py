@@ -1114,3 +1114,18 @@ def test_a_file_that_fails_to_compute_leaves_the_status_line_and_no_temp_path(ex
             break
         time.sleep(0.1)
     assert ex.status.object == line
+
+
+def test_a_closed_explorer_is_freed(seq):
+    """A tab's explorer, once closed, leaves nothing holding it: panel's class-wide registry
+    of page scripts kept every closed tab's explorer (and its results) for the server's life."""
+    import gc
+    import weakref
+
+    ex = Explorer(seq, viser=False, start=False)
+    ex.template("LAAV explorer", lazy=False)
+    ex.close()
+    ref = weakref.ref(ex)
+    del ex
+    gc.collect()
+    assert ref() is None

@@ -183,24 +183,29 @@ def test_a_request_supersedes_the_wait_and_starts_from_the_warm_pipeline(seq, mo
 
 
 def test_the_collector_is_held_off_during_start_up_and_resumes_once(monkeypatch):
-    """``laav-explore`` holds Python's cyclic collector off while it starts; ``end`` (the
-    first page complete, or the timer) freezes what exists and lets it run again, once."""
+    """``laav-explore`` holds Python's cyclic collector off while it starts; what the imports
+    made is frozen; ``end`` (a page complete, or the timer) lets it run again, once."""
     import gc
 
     from explorer import cli
 
     was = gc.isenabled()
     frozen = gc.get_freeze_count()
+    held = None
     try:
         gc.enable()
         held = cli._StartupGC()
         assert not gc.isenabled()
+        held.imported()
+        assert gc.get_freeze_count() > frozen and not gc.isenabled()
         held.end()
-        assert gc.isenabled() and gc.get_freeze_count() > frozen
+        assert gc.isenabled()
         gc.disable()  # a second end() must not turn it back on
         held.end()
         assert not gc.isenabled()
     finally:
+        if held is not None:
+            held.end()  # (the timer cancelled even when an assertion failed)
         gc.unfreeze()
         (gc.enable if was else gc.disable)()
 
