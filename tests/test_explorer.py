@@ -1129,3 +1129,19 @@ def test_a_closed_explorer_is_freed(seq):
     del ex
     gc.collect()
     assert ref() is None
+
+
+def test_the_first_page_complete_is_reported_once(seq, monkeypatch):
+    """An explorer's ``on_page_complete`` runs when its later cards are added, and only once."""
+    monkeypatch.setattr(pn.state, "onload", lambda *a, **k: None)  # no page loads here
+    ex = Explorer(seq, viser=False)
+    try:
+        assert ex.wait(120)
+        calls = []
+        ex.template("LAAV explorer", lazy=True)
+        ex.on_page_complete = lambda: calls.append(1)
+        ex.complete_page()
+        ex.complete_page()
+        assert calls == [1] and ex.on_page_complete is None
+    finally:
+        ex.close()

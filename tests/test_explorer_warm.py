@@ -208,23 +208,3 @@ def test_the_collector_is_held_off_during_start_up_and_resumes_once(monkeypatch)
             held.end()  # (the timer cancelled even when an assertion failed)
         gc.unfreeze()
         (gc.enable if was else gc.disable)()
-
-
-def test_the_first_page_complete_is_reported_once(seq, monkeypatch):
-    """An explorer's ``on_page_complete`` runs when its later cards are added, and only once."""
-    import panel as pn
-
-    from explorer.app import Explorer
-
-    monkeypatch.setattr(pn.state, "onload", lambda *a, **k: None)  # no page loads here
-    ex = Explorer(seq, viser=False)
-    try:
-        assert ex.wait(120)
-        calls = []
-        ex.template("LAAV explorer", lazy=True)
-        ex.on_page_complete = lambda: calls.append(1)
-        ex.complete_page()
-        ex.complete_page()
-        assert calls == [1] and ex.on_page_complete is None
-    finally:
-        ex.close()
