@@ -10,7 +10,7 @@ folds is chosen, and its error on this fold is what the fold reports. The cross-
 figure is the mean over all sequences of the error they got as held-out data, beside the
 all-data figure of each configuration (which is what tuning on everything would report).
 
-    python benchmarks/cv.py --runs bench-out/chain.csv --grid default,ag0.5,ag6 [--folds 5]
+    python benchmarks/cv.py --runs bench-out/chain.csv[,more.csv] --grid default,ag0.5,ag6 [--folds 5]
 """
 
 from __future__ import annotations
@@ -63,7 +63,9 @@ def cross_validate(errors: dict, motions: dict, n_folds: int = 5, seed: int = 0)
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--runs", required=True)
+    ap.add_argument("--runs", required=True,
+                    help="chain.py CSV(s), comma-separated; a configuration's runs come from "
+                         "the first file that has it")
     ap.add_argument("--grid", required=True, help="comma-separated configuration names")
     ap.add_argument("--folds", type=int, default=5)
     ap.add_argument("--seed", type=int, default=0, help="seed of the fold shuffle")
@@ -73,11 +75,17 @@ def main(argv=None) -> int:
     seeds = None if args.seeds is None else {int(x) for x in args.seeds.split(",")}
     per: dict = {c: {} for c in grid}
     motions = {}
-    with open(args.runs, newline="") as fh:
-        for r in csv.DictReader(fh):
-            if r["config"] in per and (seeds is None or int(r["seed"]) in seeds):
-                per[r["config"]].setdefault(r["sequence"], []).append(float(r["error"]))
-                motions[r["sequence"]] = int(r["motions"])
+    taken: set = set()  # configurations read from an earlier file
+    for path in args.runs.split(","):
+        here: set = set()
+        with open(path, newline="") as fh:
+            for r in csv.DictReader(fh):
+                c = r["config"]
+                if c in per and c not in taken and (seeds is None or int(r["seed"]) in seeds):
+                    per[c].setdefault(r["sequence"], []).append(float(r["error"]))
+                    motions[r["sequence"]] = int(r["motions"])
+                    here.add(c)
+        taken |= here
     missing = [c for c in grid if not per[c]]
     if missing:
         print(f"cv.py: no runs of {', '.join(missing)} in {args.runs}", file=sys.stderr)

@@ -1025,7 +1025,9 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
     returned = ""
     if voting.initialised and voting.selected.startswith("missing motion"):
         # LAAV's own trial, from another start of ours: say which, and why
-        returned = (f"; **returned the trial from the {md_text(voting.selected)} start, not the "
+        start, _, k = voting.selected.partition(", trial ")
+        which = f"trial {k} (of `rv_missing_trials`)" if k else "trial"
+        returned = (f"; **returned the {which} from the {md_text(start)} start, not the "
                     "coarse labels' trial** (ours, not in the paper: two coarse motions as one, "
                     "the points in no atom that no motion explains as the C-th); its coding "
                     f"length + epipolar cost was lower; {voting.n_iterations} voting iterations "

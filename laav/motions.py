@@ -58,8 +58,9 @@ MAX_ESTIMATE_POINTS = 1000
 
 #: What the profile's pipeline never runs, whatever the caller's settings: the descent on the
 #: joint score and the candidates' cleaning before the selection (``rv_descent``,
-#: ``rv_select_descent``, 2026-12-02), added after its constants were fitted.
-NOT_FITTED = {"rv_descent": False, "rv_select_descent": 0.0}
+#: ``rv_select_descent``, 2026-12-02) and a second trial per missing-motion start
+#: (``rv_missing_trials``, 2026-12-03), added after its constants were fitted.
+NOT_FITTED = {"rv_descent": False, "rv_select_descent": 0.0, "rv_missing_trials": 1}
 
 
 def profile_params():
@@ -70,8 +71,9 @@ def profile_params():
     (``docs/bench/motions.md``, 2026-12-01: 92.3 % of Hopkins155 held out with the coding
     length feature, 90.3 % without it, against 87.7 % with the settings used before, the
     epipolar merge on 2C fine models with plain RV beside LAAV's trial). Without the
-    descent on the joint score and the candidates' cleaning (:data:`NOT_FITTED`, added
-    after the fit): the profile's labellings stay those its constants were fitted on."""
+    descent on the joint score, the candidates' cleaning and the second missing-motion
+    trials (:data:`NOT_FITTED`, added after the fit): the profile's labellings stay those
+    its constants were fitted on."""
     from .params import LaavParams
 
     return LaavParams.own_chain(**NOT_FITTED)

@@ -127,6 +127,16 @@ class LaavParams:
         A trial has converged when no label changed for this many iterations.
     rv_label_weight : float
         Initial votes given to atom-labelled features when LAAV initialises Random Voting.
+    rv_missing_trials : int
+        Ours, with ``rv_select="laav"`` on complete tracks: trials run from each
+        missing-motion start (1-100), each on its own random stream (the first on the
+        start's, as with one), all candidates of the selection. From the same start a
+        trial may grow the missing motion or lose it (2T3RCRT seed 3: 28.7 % with one
+        trial, 4.6 % with two). The default 2 was chosen by 5-fold cross-validation grouped
+        by video among 1 / 2 / 3 (2 and 3 the same errors on every run; chosen in every
+        fold; Hopkins155, 5 seeds: 0.25 -> 0.22 %, held out 0.22 %; three-motion median
+        time 0.44 -> 0.54 x plain RV's; ``benchmarks/TUNING.md``, "Two trials per
+        missing-motion start").
     rv_batch : int
         Voting trials run side by side in one batched numpy call (plain RV's random
         starts, and LAAV's informed trial beside them in ``with_plain_rv()`` and on
@@ -287,6 +297,7 @@ class LaavParams:
     rv_sample_size: int = 8
     rv_patience: int = 15
     rv_label_weight: float = 5.0
+    rv_missing_trials: int = 2
     rv_batch: int = 2
     rv_refine: bool = True
     rv_reassign: bool = True
@@ -354,12 +365,14 @@ class LaavParams:
         in LAAV's informed trials, LAAV's own candidates and no plain RV
         (``rv_select="laav"``), the one kept descending on the joint score
         (``rv_descent``, since 2026-12-02 evening), its candidates cleaned by a short one
-        before they are compared (``rv_select_descent``, since 2026-12-02, late evening). Spelled out, so
+        before they are compared (``rv_select_descent``, since 2026-12-02, late evening), two
+        trials from each missing-motion start (``rv_missing_trials``, since 2026-12-03). Spelled out, so
         that it stays this chain (and :func:`laav.motions.profile_params`, fitted on it,
         with it) if the default changes.
         ``changes`` override fields as in :meth:`replace`."""
         return cls(coarse_merge="auto", rv_subspace_weight=1.0,
-                   rv_select="laav", rv_descent=True, rv_select_descent=0.03).replace(**changes)
+                   rv_select="laav", rv_descent=True, rv_select_descent=0.03,
+                   rv_missing_trials=2).replace(**changes)
 
     def scaled(self, s: float) -> LaavParams:
         """The parameters for coordinates ``s`` times larger: lengths (:data:`PIXEL_PARAMS`)
@@ -498,6 +511,7 @@ _BOUNDS = (
     ("rv_sample_size", "int", 8, 1000),
     ("rv_patience", "int", 1, 10_000),
     ("rv_label_weight", "float", 0, _BIG),
+    ("rv_missing_trials", "int", 1, 100),
     ("rv_batch", "int", 1, 32),
     ("rv_refine", "bool", None, None),
     ("rv_reassign", "bool", None, None),

@@ -91,7 +91,7 @@ _ARBITRATE_ABOVE = 0.05
 SELECTION_FIELDS = ("coarse_epipolar_weight", "coding_eps")
 #: ``rv_*`` fields that plain Random Voting's runs and their polished candidates do not read
 #: (LAAV's fine-tuning does): a cache of plain RV may leave them out of its key.
-NOT_PLAIN_FIELDS = ("rv_coarse_candidate", "rv_descent", "rv_select_descent")
+NOT_PLAIN_FIELDS = ("rv_coarse_candidate", "rv_descent", "rv_select_descent", "rv_missing_trials")
 
 
 @dataclass(frozen=True, eq=False)
@@ -616,8 +616,9 @@ def missing_motion_start(points: np.ndarray, init: np.ndarray, n_motions: int, g
 
 
 def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
-    """``rv_select="laav"``: LAAV's informed trial and its missing-motion starts, each
-    polished, the one of least :func:`joint_score` kept (see :class:`LaavParams`)."""
+    """``rv_select="laav"``: LAAV's informed trial and its missing-motion starts
+    (``rv_missing_trials`` trials each), each polished, the one of least
+    :func:`joint_score` kept (see :class:`LaavParams`)."""
     P = points.shape[1]
     pairs = [(g, h) for g in range(C) for h in range(g + 1, C)]
     streams = rng.spawn(1 + len(pairs))  # [coarse start, one per pair]
@@ -628,10 +629,15 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
         if start is None:
             continue
         known2 = start >= 0
-        lab = np.where(known2, start, stream.integers(0, C, P))
-        vot = np.zeros((P, C))
-        vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
-        starts.append((f"missing motion ({g}+{h})", lab, vot, stream, known2))
+        # the first trial on the pair's own stream, as with one trial; the others on
+        # streams spawned from it (spawning draws nothing: the first trial is unchanged)
+        more = stream.spawn(params.rv_missing_trials - 1)
+        for k, trial_rng in enumerate([stream] + more, start=1):
+            lab = np.where(known2, start, trial_rng.integers(0, C, P))
+            vot = np.zeros((P, C))
+            vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
+            name = f"missing motion ({g}+{h})" + (f", trial {k}" if k > 1 else "")
+            starts.append((name, lab, vot, trial_rng, known2))
     uses = [votes_with_subspace(params, known) for *_, known in starts]
     extra = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
              if any(uses) else None)  # one for every trial that uses it: the same term

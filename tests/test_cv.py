@@ -30,3 +30,16 @@ def test_each_fold_is_judged_by_a_choice_made_without_it():
     assert all(best == "a" for _, best, _, _ in res["folds"])
     assert res["cv"][2] == 5.0  # 50 % on v0, held out, 0 elsewhere: mean 5.0
     assert res["all_data"]["a"][2] == 5.0 and res["all_data"]["b"][2] == 9.0
+
+
+def test_runs_from_several_files_take_each_configuration_from_the_first_that_has_it(tmp_path, capsys):
+    """``--runs a.csv,b.csv``: a configuration in both (a rerun of the same code) is read
+    from the first file only, never its runs twice; one only in the second is read there."""
+    head = "config,sequence,motions,seed,error\n"
+    rows = "".join(f"{{c}},v{i},2,0,{{e}}\n" for i in range(10))
+    (tmp_path / "a.csv").write_text(head + rows.format(c="a", e=1.0))
+    (tmp_path / "b.csv").write_text(head + rows.format(c="a", e=9.0) + rows.format(c="b", e=0.0))
+    assert cv.main(["--runs", f"{tmp_path / 'a.csv'},{tmp_path / 'b.csv'}", "--grid", "a,b"]) == 0
+    out = capsys.readouterr().out
+    assert "| all data, a | 1.00 | nan | 1.00 |" in out  # a's from a.csv alone (no 3 motions)
+    assert "| all data, b | 0.00 | nan | 0.00 |" in out

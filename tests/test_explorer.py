@@ -643,7 +643,7 @@ def test_rv_card_says_the_candidates_were_scored_after_their_cleaning():
     seq, init, _ = small_motion_uncovered(0)
     on = laav.random_voting(seq, 2, laav.LaavParams(), seed=0, init_labels=init)
     off = laav.random_voting(seq, 2, laav.LaavParams(rv_select_descent=0.0), seed=0, init_labels=init)
-    assert on.score == "joint-cleaned" and len(on.costs) == 2
+    assert on.score == "joint-cleaned" and len(on.costs) == 1 + laav.LaavParams().rv_missing_trials
     assert "best moves of a few points (`rv_select_descent`)" in rv_summary(on, None)
     assert f"(score {on.costs[on.selected]:.2f}, after its cleaning" in rv_summary(on, None)
     assert "rv_select_descent" not in rv_summary(off, None) and "cleaning" not in rv_summary(off, None)
@@ -1145,3 +1145,21 @@ def test_the_first_page_complete_is_reported_once(seq, monkeypatch):
         assert calls == [1] and ex.on_page_complete is None
     finally:
         ex.close()
+
+
+def test_rv_card_names_the_missing_motion_start_and_trial_returned():
+    """The RV card says which of LAAV's own starts returned the labels: the missing-motion
+    start by its pair, and which of its ``rv_missing_trials`` trials."""
+    import dataclasses
+
+    from test_own_chain import small_motion_uncovered
+
+    from explorer.views import rv_summary
+
+    seq, init, _ = small_motion_uncovered(0)
+    res = laav.random_voting(seq, 2, laav.LaavParams(), seed=0, init_labels=init)
+    assert res.selected == "missing motion (0+1)"
+    assert "returned the trial from the missing motion (0+1) start" in rv_summary(res, None)
+    second = dataclasses.replace(res, selected="missing motion (0+1), trial 2")
+    text = rv_summary(second, None)
+    assert "returned the trial 2 (of `rv_missing_trials`) from the missing motion (0+1) start" in text

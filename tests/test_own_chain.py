@@ -100,7 +100,9 @@ def test_missing_motion_start_finds_the_motion_without_atoms(seed):
     new = start == 1
     assert new.sum() == 30 and (seq.labels[new] != big).all()
     res = random_voting(seq, 2, p, seed=0, init_labels=init)
-    assert res.selected == "missing motion (0+1)" and set(res.costs) == {"informed", res.selected}
+    # the start's own trial kept (its second trial, rv_missing_trials, ends there too)
+    assert res.selected == "missing motion (0+1)"
+    assert set(res.costs) == {"informed", res.selected, res.selected + ", trial 2"}
     assert res.costs[res.selected] < res.costs["informed"]
     assert misclassification_rate(seq.labels, res.labels) < 0.01
     paper = random_voting(seq, 2, LaavParams.paper(), seed=0, init_labels=init)
@@ -195,7 +197,8 @@ def test_own_candidates_side_by_side_are_their_one_after_another_results(monkeyp
     from explorer.demo import demo_sequence
     from laav import segment
 
-    seq = demo_sequence()  # seed 1: four trials, one ends on the informed trial's very labels
+    seq = demo_sequence()  # seed 1: seven trials (the informed one, two per missing-motion
+    # start), one ending on the informed trial's very labels
     made, batches = [], []
     real, real_side, real_step = V._Polished, V._informed_side_by_side, rv._step
 
@@ -215,18 +218,42 @@ def test_own_candidates_side_by_side_are_their_one_after_another_results(monkeyp
         del made[:], batches[:]
         r = segment(seq, 3, LaavParams(rv_batch=b), seed=1)
         runs[b] = (r, len(made))
-        assert max(batches) == 4  # all four side by side, whatever rv_batch
+        assert max(batches) == 7  # all seven side by side, whatever rv_batch
     monkeypatch.setattr(V, "_informed_side_by_side", one_at_a_time)
     del made[:], batches[:]
     r = segment(seq, 3, LaavParams(), seed=1)
     runs[1] = (r, len(made))
     assert max(batches) == 1
     one, n_pol = runs[1]
-    assert len(one.voting.costs) == 4 and len(one.voting.trial_iterations) == 4  # 1 + C(C-1)/2
-    assert len(set(one.voting.costs.values())) <= n_pol < 4  # one trial shared its polish
+    n_trials = 1 + 3 * LaavParams().rv_missing_trials  # 1 + C(C-1)/2 x rv_missing_trials
+    assert len(one.voting.costs) == n_trials == 7 and len(one.voting.trial_iterations) == n_trials
+    assert len(set(one.voting.costs.values())) <= n_pol < n_trials  # trials shared their polish
     for b in (2, 4):
         r, n = runs[b]
         np.testing.assert_array_equal(r.labels, one.labels)
         assert r.voting.costs == one.voting.costs and n == n_pol
         assert list(r.voting.trial_iterations) == list(one.voting.trial_iterations)
         np.testing.assert_array_equal(r.voting.informed_changed, one.voting.informed_changed)
+
+
+def test_second_missing_motion_trials_leave_the_first_ones_as_they_were():
+    """``rv_missing_trials``: each missing-motion start's first trial runs on the start's
+    own stream whatever the count (the others on streams spawned from it, which draws
+    nothing), so with two trials every candidate of one trial is there, with the same
+    iterations and score, and every start has one more, on its own random draws."""
+    from explorer.demo import demo_sequence
+    from laav import segment
+
+    seq = demo_sequence()
+    one = segment(seq, 3, LaavParams(rv_missing_trials=1), seed=1).voting
+    two = segment(seq, 3, LaavParams(rv_missing_trials=2), seed=1).voting
+    assert len(one.costs) == 4 and len(two.costs) == 7
+    for name, cost in one.costs.items():
+        assert two.costs[name] == cost
+    # trials in start order: informed, then each start's first and second
+    assert [two.trial_iterations[0]] + list(two.trial_iterations[1::2]) == list(one.trial_iterations)
+    seconds = two.trial_iterations[2::2]
+    assert len(seconds) == 3 and all(f"{n}, trial 2" in two.costs for n in one.costs if n != "informed")
+    # the second trials are trials of their own, not copies of the first ones
+    assert any(two.costs[n + ", trial 2"] != two.costs[n] for n in one.costs if n != "informed") \
+        or list(seconds) != list(two.trial_iterations[1::2])
