@@ -1154,12 +1154,13 @@ def test_rv_card_names_the_missing_motion_start_and_trial_returned():
 
     from test_own_chain import small_motion_uncovered
 
-    from explorer.views import rv_summary
+    from explorer.views import md_text, rv_summary
 
     seq, init, _ = small_motion_uncovered(0)
     res = laav.random_voting(seq, 2, laav.LaavParams(), seed=0, init_labels=init)
     assert res.selected == "missing motion (0+1)"
-    assert "returned the trial from the missing motion (0+1) start" in rv_summary(res, None)
+    start = md_text("missing motion (0+1)")  # as Markdown shows it
+    assert f"returned the trial from the {start} start" in rv_summary(res, None)
     second = dataclasses.replace(res, selected="missing motion (0+1), trial 2")
     text = rv_summary(second, None)
-    assert "returned the trial 2 (of `rv_missing_trials`) from the missing motion (0+1) start" in text
+    assert f"returned the trial 2 (of `rv_missing_trials`) from the {start} start" in text
