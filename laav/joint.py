@@ -82,11 +82,12 @@ def joint_score(points: np.ndarray, labels: np.ndarray, n_motions: int,
     return _score_and_distances(points, labels, n_motions, params)[0]
 
 
-def _score_and_distances(points, labels, n_motions, params,
-                         projected=None) -> tuple[float, np.ndarray | None]:
+def _score_and_distances(points, labels, n_motions, params, projected=None,
+                         fits=None) -> tuple[float, np.ndarray | None]:
     """:func:`joint_score` and the distances (C, P) of every point to every motion's
     matrices it computed (None when a motion has fewer than 8 points). ``projected``: the
-    points' :func:`laav.coding.principal_trajectories`, when already computed."""
+    points' :func:`laav.coding.principal_trajectories`, when already computed; ``fits``:
+    :func:`laav.refine.fit_memo`."""
     from .coding import labelling_coding_length
 
     labels = np.asarray(labels, dtype=np.int64)
@@ -94,7 +95,8 @@ def _score_and_distances(points, labels, n_motions, params,
         return float("inf"), None
     u2 = unit2(params)
     coding = labelling_coding_length(points, labels, n_motions, params.coding_eps, projected)
-    D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], JOINT_PAIRS), u2)
+    D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], JOINT_PAIRS), u2,
+                         fits=fits)
     own = D[labels, np.arange(labels.size)]
     if not np.isfinite(own).all():
         return float("inf"), D
@@ -134,7 +136,7 @@ def _move_gains(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, eps
 def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
                   params: LaavParams, max_sweeps: int = DESCENT_SWEEPS,
                   max_moves: int | None = None, *, projected: np.ndarray | None = None,
-                  return_score: bool = False) -> tuple:
+                  return_score: bool = False, fits: dict | None = None) -> tuple:
     """Move single points between motions while :func:`joint_score` decreases (module
     docstring).
 
@@ -159,6 +161,10 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
         (several descents on the same points: the same numbers, one SVD).
     return_score : bool
         Also return the :func:`joint_score` of the labels returned (computed on the way).
+    fits : dict, optional
+        :func:`laav.refine.fit_memo`: motions whose fundamental matrices were fitted
+        before (by another descent on the same points, or earlier in this one) are not
+        fitted again; the same numbers.
 
     Returns
     -------
@@ -183,7 +189,7 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
         return out(start.copy(), joint_score(points, start, C, params) if return_score else None)
     # (K, P): one projection for every score below
     proj = principal_trajectories(points) if projected is None else projected
-    best, D = _score_and_distances(points, start, C, params, proj)
+    best, D = _score_and_distances(points, start, C, params, proj, fits)
     if not np.isfinite(best):
         return out(start.copy(), best)
     F = points.shape[0]
@@ -206,7 +212,7 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
         for n in sizes:
             trial = L.copy()
             trial[order[:n]] = to[order[:n]]
-            score, dist = _score_and_distances(points, trial, C, params, proj)
+            score, dist = _score_and_distances(points, trial, C, params, proj, fits)
             if score < best - _SCORE_MIN:
                 L, best, D = trial, score, dist
                 break

@@ -214,7 +214,7 @@ def _motion_distances_masked(points, labels, n_motions, pairs, visible, unit2):
 
 def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
                      pairs: np.ndarray, unit2: float = 1.0,
-                     visible: np.ndarray | None = None) -> np.ndarray:
+                     visible: np.ndarray | None = None, *, fits: dict | None = None) -> np.ndarray:
     """Mean Sampson distance (px^2) of every point to every motion's fundamental matrices.
 
     Each motion fits one F per frame pair on its own points by iteratively reweighted
@@ -234,6 +234,11 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
         fits its matrix for a frame pair on its members visible in both frames, and only
         where there are 8 or more; a point's distance is the mean over the frame pairs it
         is visible in and the motion has a matrix for (``inf`` when there is none).
+    fits : dict, optional
+        Complete data: a memo of the motions fitted so far on these ``points`` (any pairs
+        and ``unit2``, which are in its keys), filled as it goes: a motion whose members
+        were fitted before is not fitted again (the same numbers; several candidate
+        labellings of one selection share most motions). :func:`fit_memo` makes one.
 
     Returns
     -------
@@ -248,8 +253,22 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
         mem = np.flatnonzero(labels == g)
         if mem.size < 8:
             continue
-        D[g] = capped_mean(pair_distances(x1, x2, mem, TINY2 * unit2), unit2)
+        key = None if fits is None else ("epipolar", pairs.tobytes(), float(unit2), mem.tobytes())
+        row = None if key is None else fits.get(key)
+        if row is None:
+            row = capped_mean(pair_distances(x1, x2, mem, TINY2 * unit2), unit2)
+            if key is not None:
+                fits[key] = row
+        D[g] = row
     return D
+
+
+def fit_memo() -> dict:
+    """An empty memo for the ``fits`` of :func:`motion_distances`,
+    :func:`subspace_residuals`, :func:`refine_labels` and :func:`reassign_labels` (and
+    :func:`laav.joint.joint_descent`): one per set of points, kept by the caller for as
+    long as it compares labellings of them."""
+    return {}
 
 
 def pair_distances(x1: np.ndarray, x2: np.ndarray, members: np.ndarray,
@@ -276,7 +295,8 @@ def capped_mean(d: np.ndarray, unit2: float = 1.0) -> np.ndarray:
 def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
                   n_pairs: int = 12, rounds: int = 3, outlier: float = 6.0,
                   return_distances: bool = False, unit2: float = 1.0, *,
-                  visible: np.ndarray | None = None, pairs: np.ndarray | None = None) -> tuple:
+                  visible: np.ndarray | None = None, pairs: np.ndarray | None = None,
+                  fits: dict | None = None) -> tuple:
     """Move points that their own motion does not explain to the motion that does.
 
     A point moves only when its distance to its own motion (:func:`motion_distances`,
@@ -304,6 +324,8 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         one of); a motion's scale is the median over its members' finite distances.
     pairs : ndarray of shape (K, 2), optional
         The frame pairs (default: ``frame_pairs(F, n_pairs)``).
+    fits : dict, optional
+        :func:`fit_memo`: motions fitted before are not fitted again (complete data).
 
     Returns
     -------
@@ -320,7 +342,7 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     cur = labels.copy()
     idx = np.arange(cur.size)
     for _ in range(rounds):
-        D = motion_distances(points, cur, n_motions, pairs, unit2, visible)
+        D = motion_distances(points, cur, n_motions, pairs, unit2, visible, fits=fits)
         if visible is None:
             scale = np.array([np.median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
                               for g in range(n_motions)]) + TINY2 * unit2
@@ -350,7 +372,8 @@ def _finite_median(x: np.ndarray) -> float:
 def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
                        rank: int = REASSIGN_RANK, rounds: int = 5,
                        unit2: float = 1.0, *,
-                       visible: np.ndarray | None = None) -> np.ndarray | None:
+                       visible: np.ndarray | None = None,
+                       fits: dict | None = None) -> np.ndarray | None:
     """Squared distance (px^2, mean over frames) of every point to every motion's subspace.
 
     Each motion's trajectories (2F vectors) get a rank-``rank`` linear subspace fitted by
@@ -381,6 +404,8 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
         its least-squares fit on its visible rows, per visible frame. A point seen in
         ``rank / 2`` frames or fewer is fitted exactly by every subspace (residual 0
         everywhere: no evidence).
+    fits : dict, optional
+        :func:`fit_memo`: motions fitted before are not fitted again (complete data).
 
     Returns
     -------
@@ -395,9 +420,13 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
     R = np.empty((n_motions, P))
     for g in range(n_motions):
         mem = labels == g
-        X, xn2 = W[:, mem], norm2[mem]
-        if X.shape[1] <= rank + 1:
+        if np.count_nonzero(mem) <= rank + 1:
             return None
+        key = None if fits is None else ("subspace", rank, rounds, float(unit2), mem.tobytes())
+        if key is not None and key in fits:
+            R[g] = fits[key]
+            continue
+        X, xn2 = W[:, mem], norm2[mem]
         Xw = X  # the points, scaled by the squared IRLS weights from the second round on
         for k in range(rounds):
             U = np.linalg.eigh(Xw @ X.T)[1][:, -rank:]  # principal subspace, weighted
@@ -407,6 +436,8 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
                 Xw = X * (1.0 / (1.0 + (r / (2.0 * np.median(r) + tiny)) ** 2)) ** 2
         proj = U.T @ W
         R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F
+        if key is not None:
+            fits[key] = R[g].copy()
     return R
 
 
@@ -525,7 +556,8 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
                     rounds: int = 2, min_size: int = 8,
                     distances: np.ndarray | None = None,
                     unit2: float = 1.0, *, visible: np.ndarray | None = None,
-                    pairs: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                    pairs: np.ndarray | None = None,
+                    fits: dict | None = None) -> tuple[np.ndarray, int]:
     """Move every point to the motion that its trajectory subspace and epipolar fit favour.
 
     The score of point ``p`` for motion ``g`` is ``log(r_gp + eps) + epipolar_weight *
@@ -568,6 +600,8 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         any keeps its label.
     pairs : ndarray of shape (K, 2), optional
         The frame pairs of the epipolar term (default ``frame_pairs(F, 12)``).
+    fits : dict, optional
+        :func:`fit_memo`: motions fitted before are not fitted again (complete data).
 
     Returns
     -------
@@ -583,11 +617,11 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
                                 min_size, distances, visible, pairs, unit2)
     pairs = frame_pairs(points.shape[0], 12)
     for _ in range(rounds):
-        R = subspace_residuals(points, cur, n_motions, rank, unit2=unit2)
+        R = subspace_residuals(points, cur, n_motions, rank, unit2=unit2, fits=fits)
         if R is None:
             break
         D = distances if distances is not None and cur is start else motion_distances(
-            points, cur, n_motions, pairs, unit2)
+            points, cur, n_motions, pairs, unit2, fits=fits)
         if not np.isfinite(D).all():
             break
         eps = REASSIGN_FLOOR * unit2

@@ -61,6 +61,7 @@ from .params import LaavParams, as_params
 from .refine import (
     assign_by_subspace,
     assign_jointly,
+    fit_memo,
     frame_pairs,
     labelling_cost,
     motion_distances,
@@ -644,10 +645,11 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     results = _informed_side_by_side(points, params, [s[1:4] for s in starts], extra, uses)
     first, first_extra = results[0], extra if uses[0] else None
     trials, polished = list(results), {}
+    fits = fit_memo()  # candidates share most motions: each motion's fits made once (same numbers)
     for res in results:
         key = res[0].tobytes()  # trials that end on the same labels share their polish
         if key not in polished:
-            polished[key] = _Polished(points, C, params, res[0])
+            polished[key] = _Polished(points, C, params, res[0], fits=fits)
     finals = {key: pol.final()[0] for key, pol in polished.items()}
     clean = params.rv_select_descent > 0 and len({f.tobytes() for f in finals.values()}) > 1
     proj = None
@@ -655,7 +657,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
         most = int(np.ceil(params.rv_select_descent * P))
         proj = principal_trajectories(points)  # one projection for every descent here
         cost = {key: joint_descent(points, f, C, params, max_moves=most, projected=proj,
-                                   return_score=True)[2] for key, f in finals.items()}
+                                   return_score=True, fits=fits)[2] for key, f in finals.items()}
     else:
         cost = {key: joint_score(points, f, C, params) for key, f in finals.items()}
     entries = [(name, res, polished[res[0].tobytes()], cost[res[0].tobytes()])
@@ -667,7 +669,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     out = _finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
                   score="joint-cleaned" if clean else "joint-sum")
     if params.rv_descent:  # ours: the kept labelling descends on the same score
-        labels, moved = joint_descent(points, out.labels, C, params, projected=proj)
+        labels, moved = joint_descent(points, out.labels, C, params, projected=proj, fits=fits)
         out = dataclasses.replace(out, labels=labels, descended=moved)
     return _with_informed(out, first, first_extra)
 
@@ -810,9 +812,10 @@ class _Polished:
     joint score of the reassigned labelling, or the subspace cost of the refined one;
     see :func:`_select`)."""
 
-    def __init__(self, points, C, params, labels, mk=None):
+    def __init__(self, points, C, params, labels, mk=None, fits=None):
         self.points, self.C, self.params, self.mk = points, C, params, mk
-        self._kw = {} if mk is None else {"visible": mk.visible, "pairs": mk.pairs}
+        # complete data: the selection's memo of motion fits (laav.refine.fit_memo), if any
+        self._kw = {"fits": fits} if mk is None else {"visible": mk.visible, "pairs": mk.pairs}
         self.refined, self._distances = 0, None
         if params.rv_refine:
             labels, self.refined, self._distances = refine_labels(

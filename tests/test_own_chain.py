@@ -257,3 +257,19 @@ def test_second_missing_motion_trials_leave_the_first_ones_as_they_were():
     # the second trials are trials of their own, not copies of the first ones
     assert any(two.costs[n + ", trial 2"] != two.costs[n] for n in one.costs if n != "informed") \
         or list(seconds) != list(two.trial_iterations[1::2])
+
+
+def test_the_selections_fit_memo_changes_no_number(monkeypatch):
+    """LAAV's own candidates share one memo of motion fits (speed only): without it, the
+    same labels, candidates' costs and descended points."""
+    import laav.voting as V
+    from explorer.demo import demo_sequence
+    from laav import segment
+
+    seq = demo_sequence()
+    shared = segment(seq, 3, LaavParams(), seed=1)
+    monkeypatch.setattr(V, "fit_memo", lambda: None)
+    alone = segment(seq, 3, LaavParams(), seed=1)
+    np.testing.assert_array_equal(shared.labels, alone.labels)
+    assert shared.voting.costs == alone.voting.costs
+    assert shared.voting.descended == alone.voting.descended

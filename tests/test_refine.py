@@ -135,3 +135,35 @@ def test_assign_jointly_on_incomplete_tracks(three_motions):
     assert (got >= 0).mean() > 0.95  # points hidden in that pair go by their subspaces
     ok = got >= 0
     assert (got[ok] == seq.labels[targets][ok]).mean() > 0.97
+
+
+def test_a_fit_memo_gives_the_same_numbers_and_fits_each_motion_once(three_motions, monkeypatch):
+    """``fits`` (:func:`laav.refine.fit_memo`): a motion whose members were fitted before,
+    on the same pairs and unit, is read back, not fitted again; every number is the one a
+    fresh fit gives. Two labellings that differ in one motion share the other two fits."""
+    import laav.refine as R
+
+    seq = three_motions
+    pts, lab = seq.points, np.asarray(seq.labels)
+    other = lab.copy()
+    other[np.flatnonzero(lab == 2)[:5]] = 1  # motions 1 and 2 differ, motion 0 does not
+    pairs = R.frame_pairs(pts.shape[0], 12)
+    calls = []
+    real = R.pair_distances
+    monkeypatch.setattr(R, "pair_distances", lambda *a: calls.append(1) or real(*a))
+    fits = R.fit_memo()
+    for labels in (lab, other):
+        fresh = R.motion_distances(pts, labels, 3, pairs)
+        n = len(calls)
+        memo = R.motion_distances(pts, labels, 3, pairs, fits=fits)
+        np.testing.assert_array_equal(memo, fresh)
+        assert len(calls) - n == (3 if labels is lab else 2)  # motion 0 read back the 2nd time
+        np.testing.assert_array_equal(R.subspace_residuals(pts, labels, 3, fits=fits),
+                                      R.subspace_residuals(pts, labels, 3))
+    n = len(calls)
+    np.testing.assert_array_equal(R.motion_distances(pts, other, 3, pairs, fits=fits), fresh)
+    assert len(calls) == n  # all three read back
+    # another set of pairs is another fit, not a hit
+    R.motion_distances(pts, other, 3, R.frame_pairs(pts.shape[0], 8), fits=fits)
+    assert len(calls) == n + 3
+    assert sum(k[0] == "subspace" for k in fits) == 5
