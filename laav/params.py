@@ -141,8 +141,8 @@ class LaavParams:
         Voting trials run side by side in one batched numpy call (plain RV's random
         starts, and LAAV's informed trial beside them in ``with_plain_rv()`` and on
         incomplete tracks; LAAV's own informed and missing-motion trials, at most
-        1 + C(C-1)/2, which all run to their end, run all side by side whatever its
-        value). Speed only: each trial draws from its own random stream and keeps its own
+        1 + C(C-1)/2 x ``rv_missing_trials``, which all run to their end, run all side by
+        side whatever its value). Speed only: each trial draws from its own random stream and keeps its own
         convergence test, and the trial kept is the same as if they ran one after another,
         so a seed's labels do not depend on it.
     rv_refine : bool

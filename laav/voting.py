@@ -13,8 +13,9 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
   rank-4 trajectory subspace *and* fundamental matrices explain it best together
   (:func:`laav.refine.reassign_labels`).
 * **LAAV's own candidates** (``rv_select="laav"``, the default since 2026-12-02; no plain
-  RV on complete tracks): the informed trial and one trial per pair of coarse motions from
-  a *missing-motion start* (:func:`missing_motion_start`), run side by side, each refined
+  RV on complete tracks): the informed trial and ``rv_missing_trials`` (2) trials per pair
+  of coarse motions from a *missing-motion start* (:func:`missing_motion_start`), each on its
+  own random stream, run side by side, each refined
   and reassigned, the one of least :func:`joint_score` kept (:func:`_own_candidates`;
   when they differ, each is scored after its best moves of at most ``rv_select_descent``
   of the points, so that a few stray points do not decide), which then descends on that
