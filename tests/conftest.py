@@ -10,6 +10,7 @@ download has no ``sequences.csv``: the table then comes from the files themselve
 from __future__ import annotations
 
 import csv
+import gc
 import os
 from pathlib import Path
 
@@ -19,6 +20,20 @@ import laav
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_HOPKINS = REPO_ROOT.parent / "shared" / "data" / "hopkins155"
+
+
+@pytest.fixture(autouse=True)
+def _collector_as_it_was():
+    """A test that runs ``laav-explore``'s ``main`` in this process freezes the heap
+    (``explorer.cli._StartupGC``: ``gc.freeze()`` after the imports), so whatever garbage
+    exists then would never be collected for the rest of the session; undone after each
+    test, with the collector's on/off state."""
+    was, frozen = gc.isenabled(), gc.get_freeze_count()
+    yield
+    if frozen == 0 and gc.get_freeze_count() > 0:
+        gc.unfreeze()
+    if was and not gc.isenabled():
+        gc.enable()
 
 
 @pytest.fixture(scope="session")

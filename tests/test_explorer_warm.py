@@ -208,3 +208,20 @@ def test_the_collector_is_held_off_during_start_up_and_resumes_once(monkeypatch)
             held.end()  # (the timer cancelled even when an assertion failed)
         gc.unfreeze()
         (gc.enable if was else gc.disable)()
+
+
+def test_an_in_process_start_leaves_the_test_sessions_heap_unfrozen(monkeypatch):
+    """``main`` run in-process (``fake_serving``) freezes the heap as ``laav-explore`` does;
+    the suite's autouse fixture (conftest ``_collector_as_it_was``) undoes it, so a later
+    test's garbage is still collected. Checked here on the fixture's own terms: frozen
+    during the test, and the fixture's rule releases exactly that."""
+    import gc
+
+    from conftest import fake_serving
+
+    from explorer import cli
+
+    fake_serving(monkeypatch)
+    assert gc.get_freeze_count() == 0  # the fixture undid every earlier test's freeze
+    assert cli.main(["--no-browser", "--port", "5998"]) == 0
+    assert gc.get_freeze_count() > 0 and gc.isenabled()  # frozen; the collector back on
