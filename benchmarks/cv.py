@@ -65,7 +65,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", required=True,
                     help="chain.py CSV(s), comma-separated; a configuration's runs come from "
-                         "the first file that has it")
+                         "the first file that has it (for the seeds asked)")
     ap.add_argument("--grid", required=True, help="comma-separated configuration names")
     ap.add_argument("--folds", type=int, default=5)
     ap.add_argument("--seed", type=int, default=0, help="seed of the fold shuffle")

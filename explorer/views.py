@@ -1026,7 +1026,8 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
     if voting.initialised and voting.selected.startswith("missing motion"):
         # LAAV's own trial, from another start of ours: say which, and why
         start, _, k = voting.selected.partition(", trial ")
-        which = f"trial {k} (of `rv_missing_trials`)" if k else "trial"
+        several = k or any(n.startswith(start + ", trial ") for n in (voting.costs or {}))
+        which = f"trial {k or 1} (of `rv_missing_trials`)" if several else "trial"
         returned = (f"; **returned the {which} from the {md_text(start)} start, not the "
                     "coarse labels' trial** (ours, not in the paper: two coarse motions as one, "
                     "the points in no atom that no motion explains as the C-th); its coding "

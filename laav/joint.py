@@ -62,7 +62,7 @@ def unit2(params: LaavParams) -> float:
 
 
 def joint_score(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                params: LaavParams) -> float:
+                params: LaavParams, *, fits: dict | None = None) -> float:
     """The joint merge's score of a whole labelling (lower is better).
 
     Lossy coding length (nats, distortion ``coding_eps``) of every motion's trajectories
@@ -78,8 +78,10 @@ def joint_score(points: np.ndarray, labels: np.ndarray, n_motions: int,
     n_motions : int
     params : LaavParams
         Uses ``coding_eps``, ``coarse_epipolar_weight`` and ``rv_lambda``.
+    fits : dict, optional
+        :func:`laav.refine.fit_memo` of ``points``: motions fitted before are read back.
     """
-    return _score_and_distances(points, labels, n_motions, params)[0]
+    return _score_and_distances(points, labels, n_motions, params, fits=fits)[0]
 
 
 def _score_and_distances(points, labels, n_motions, params, projected=None,

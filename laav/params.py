@@ -195,11 +195,11 @@ class LaavParams:
     rv_select : {"laav", "none", "joint", "subspace"}
         ``"laav"`` (ours, the default since 2026-12-02): LAAV's own candidates, **no plain
         Random Voting** on complete tracks. The informed trial from the coarse labels, and,
-        for every pair of coarse motions, a trial from a *missing-motion start* (the pair
-        as one motion; the points in no atom that the other motions explain worst as the
-        C-th), each refined and reassigned; the one of least coding length plus
-        ``coarse_epipolar_weight`` x epipolar cost over all points (the joint merge's
-        score) is kept (:func:`laav.voting.joint_score`). On incomplete data it runs as
+        for every pair of coarse motions, ``rv_missing_trials`` trials from a
+        *missing-motion start* (the pair as one motion; the points in no atom that the
+        other motions explain worst as the C-th), each refined and reassigned; the one of
+        least coding length plus ``coarse_epipolar_weight`` x epipolar cost over all points
+        (the joint merge's score) is kept (:func:`laav.voting.joint_score`). On incomplete data it runs as
         ``"subspace"`` (with plain RV: ``docs/ALGORITHM.md``, "Missing data"). Plain Random
         Voting called alone (:func:`laav.random_voting` without ``init_labels``) selects
         among its own trials as with ``"joint"``.
@@ -350,9 +350,10 @@ class LaavParams:
         trial, and plain RV's runs beside it, the candidate of least joint score plus
         agreement kept (``rv_select="joint"``). Not LAAV's mechanism (the result is often
         a plain-RV trial), and slower; on Hopkins155 (5 seeds, σ = 0: 0.25 / 0.81 / 0.38 %,
-        grouped-CV 0.38 %) the default, with its descent on the joint score and its
-        candidates cleaned before the selection, measures 0.25 % on all data and held out;
-        under noise (σ = 1 px, seeds 0-1: 0.74 % against 1.19 %) and on ``small_motion``
+        grouped-CV 0.38 %) the default, with its descent on the joint score, its
+        candidates cleaned before the selection and two trials per missing-motion start,
+        measures 0.22 % on all data and held out; under noise (σ = 1 px, seeds 0-1: 0.74 %
+        against 1.20 %) and on ``small_motion``
         this preset is the more accurate (``docs/ALGORITHM.md``, the presets table).
         ``changes`` override fields as in :meth:`replace`."""
         return cls(coarse_merge="epipolar", rv_subspace_weight=0.3,

@@ -254,8 +254,9 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
         if mem.size < 8:
             continue
         key = None if fits is None else ("epipolar", pairs.tobytes(), float(unit2), mem.tobytes())
-        row = None if key is None else fits.get(key)
+        row = None if key is None else _memo(fits, points).get(key)
         if row is None:
+            # a new array, never handed out: D[g] = row copies it
             row = capped_mean(pair_distances(x1, x2, mem, TINY2 * unit2), unit2)
             if key is not None:
                 fits[key] = row
@@ -263,12 +264,22 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
     return D
 
 
-def fit_memo() -> dict:
+def fit_memo(points: np.ndarray) -> dict:
     """An empty memo for the ``fits`` of :func:`motion_distances`,
     :func:`subspace_residuals`, :func:`refine_labels` and :func:`reassign_labels` (and
-    :func:`laav.joint.joint_descent`): one per set of points, kept by the caller for as
-    long as it compares labellings of them."""
-    return {}
+    :func:`laav.joint.joint_descent`) on ``points`` (F, P, 2), the very array they are then
+    called with (another raises ``ValueError``): kept by the caller for as long as it
+    compares labellings of them. It holds one row of P floats per motion fitted (about 60
+    for LAAV's candidates of a three-motion sequence), and is not bounded: make one per
+    comparison, not per session."""
+    return {"points": points}
+
+
+def _memo(fits: dict, points: np.ndarray) -> dict:
+    """``fits``, checked to be :func:`fit_memo` of ``points``."""
+    if fits.get("points") is not points:
+        raise ValueError("fits: a fit_memo(points) of the points these fits are for")
+    return fits
 
 
 def pair_distances(x1: np.ndarray, x2: np.ndarray, members: np.ndarray,
@@ -423,7 +434,7 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
         if np.count_nonzero(mem) <= rank + 1:
             return None
         key = None if fits is None else ("subspace", rank, rounds, float(unit2), mem.tobytes())
-        if key is not None and key in fits:
+        if key is not None and key in _memo(fits, points):
             R[g] = fits[key]
             continue
         X, xn2 = W[:, mem], norm2[mem]
@@ -437,7 +448,7 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
         proj = U.T @ W
         R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F
         if key is not None:
-            fits[key] = R[g].copy()
+            fits[key] = R[g].copy()  # a copy: R goes to the caller
     return R
 
 

@@ -140,7 +140,8 @@ class Voting:
         consensus"``, ``"plain trial k"`` (``"plain 2 …"``, ``"plain 3 …"`` for the
         arbitrating runs), ``"coarse"`` the coarse labels themselves (incomplete tracks,
         ``rv_coarse_candidate``), and with ``rv_select="laav"`` ``"missing motion (g+h)"``
-        the trial from that start.
+        the (first) trial from that start, ``"missing motion (g+h), trial k"`` its k-th
+        (``rv_missing_trials``).
     informed_changed, informed_margin : ndarray of shape (T0,) or None
         LAAV's informed trial's own trace (labels changed, mean margin per iteration),
         whichever candidate was returned; None for plain RV.
@@ -646,7 +647,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     results = _informed_side_by_side(points, params, [s[1:4] for s in starts], extra, uses)
     first, first_extra = results[0], extra if uses[0] else None
     trials, polished = list(results), {}
-    fits = fit_memo()  # candidates share most motions: each motion's fits made once (same numbers)
+    fits = fit_memo(points)  # candidates share most motions: each motion's fits made once (same numbers)
     for res in results:
         key = res[0].tobytes()  # trials that end on the same labels share their polish
         if key not in polished:
@@ -660,7 +661,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
         cost = {key: joint_descent(points, f, C, params, max_moves=most, projected=proj,
                                    return_score=True, fits=fits)[2] for key, f in finals.items()}
     else:
-        cost = {key: joint_score(points, f, C, params) for key, f in finals.items()}
+        cost = {key: joint_score(points, f, C, params, fits=fits) for key, f in finals.items()}
     entries = [(name, res, polished[res[0].tobytes()], cost[res[0].tobytes()])
                for (name, *_), res in zip(starts, results)]
     scores = np.array([e[3] for e in entries])

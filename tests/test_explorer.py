@@ -1149,7 +1149,7 @@ def test_the_first_page_complete_is_reported_once(seq, monkeypatch):
 
 def test_rv_card_names_the_missing_motion_start_and_trial_returned():
     """The RV card says which of LAAV's own starts returned the labels: the missing-motion
-    start by its pair, and which of its ``rv_missing_trials`` trials."""
+    start by its pair, and which of its ``rv_missing_trials`` trials (when it ran several)."""
     import dataclasses
 
     from test_own_chain import small_motion_uncovered
@@ -1160,7 +1160,9 @@ def test_rv_card_names_the_missing_motion_start_and_trial_returned():
     res = laav.random_voting(seq, 2, laav.LaavParams(), seed=0, init_labels=init)
     assert res.selected == "missing motion (0+1)"
     start = md_text("missing motion (0+1)")  # as Markdown shows it
-    assert f"returned the trial from the {start} start" in rv_summary(res, None)
+    assert f"returned the trial 1 (of `rv_missing_trials`) from the {start} start" in rv_summary(res, None)
+    one = dataclasses.replace(res, costs={"informed": 1.0, "missing motion (0+1)": 0.5})
+    assert f"returned the trial from the {start} start" in rv_summary(one, None)  # one trial a start
     second = dataclasses.replace(res, selected="missing motion (0+1), trial 2")
     text = rv_summary(second, None)
     assert f"returned the trial 2 (of `rv_missing_trials`) from the {start} start" in text

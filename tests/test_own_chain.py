@@ -248,6 +248,10 @@ def test_second_missing_motion_trials_leave_the_first_ones_as_they_were():
     one = segment(seq, 3, LaavParams(rv_missing_trials=1), seed=1).voting
     two = segment(seq, 3, LaavParams(rv_missing_trials=2), seed=1).voting
     assert len(one.costs) == 4 and len(two.costs) == 7
+    # as before the second trials existed (c94e670, the same seed): each start's first trial
+    # still runs on the start's own stream, not on one spawned from it
+    assert one.trial_iterations == (106, 150, 50, 62)
+    assert one.costs["missing motion (0+1)"] == pytest.approx(11542.75622046746, rel=1e-9)
     for name, cost in one.costs.items():
         assert two.costs[name] == cost
     # trials in start order: informed, then each start's first and second
@@ -268,7 +272,7 @@ def test_the_selections_fit_memo_changes_no_number(monkeypatch):
 
     seq = demo_sequence()
     shared = segment(seq, 3, LaavParams(), seed=1)
-    monkeypatch.setattr(V, "fit_memo", lambda: None)
+    monkeypatch.setattr(V, "fit_memo", lambda points: None)
     alone = segment(seq, 3, LaavParams(), seed=1)
     np.testing.assert_array_equal(shared.labels, alone.labels)
     assert shared.voting.costs == alone.voting.costs

@@ -151,7 +151,10 @@ def test_a_fit_memo_gives_the_same_numbers_and_fits_each_motion_once(three_motio
     calls = []
     real = R.pair_distances
     monkeypatch.setattr(R, "pair_distances", lambda *a: calls.append(1) or real(*a))
-    fits = R.fit_memo()
+    fits = R.fit_memo(pts)
+    eighs = []
+    real_eigh = np.linalg.eigh
+    monkeypatch.setattr(np.linalg, "eigh", lambda a: eighs.append(1) or real_eigh(a))
     for labels in (lab, other):
         fresh = R.motion_distances(pts, labels, 3, pairs)
         n = len(calls)
@@ -160,10 +163,20 @@ def test_a_fit_memo_gives_the_same_numbers_and_fits_each_motion_once(three_motio
         assert len(calls) - n == (3 if labels is lab else 2)  # motion 0 read back the 2nd time
         np.testing.assert_array_equal(R.subspace_residuals(pts, labels, 3, fits=fits),
                                       R.subspace_residuals(pts, labels, 3))
+    e = len(eighs)
+    R.subspace_residuals(pts, other, 3, fits=fits)  # every motion read back: no fit
+    assert len(eighs) == e
+    R.subspace_residuals(pts, other, 3, rank=5, fits=fits)  # another rank: fitted again
+    assert len(eighs) > e
     n = len(calls)
     np.testing.assert_array_equal(R.motion_distances(pts, other, 3, pairs, fits=fits), fresh)
     assert len(calls) == n  # all three read back
     # another set of pairs is another fit, not a hit
     R.motion_distances(pts, other, 3, R.frame_pairs(pts.shape[0], 8), fits=fits)
     assert len(calls) == n + 3
-    assert sum(k[0] == "subspace" for k in fits) == 5
+    R.motion_distances(pts, other, 3, pairs, unit2=4.0, fits=fits)  # another unit: no hit
+    assert len(calls) == n + 6
+    assert sum(k[0] == "subspace" for k in fits if isinstance(k, tuple)) == 8
+    # a memo is for the points it was made with
+    with pytest.raises(ValueError, match="fit_memo"):
+        R.motion_distances(pts.copy(), other, 3, pairs, fits=fits)
