@@ -1019,7 +1019,11 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
     moved = [f"refinement {voting.refined}"] if voting.refined else []
     if voting.reassigned:
         moved.append(f"joint reassignment {voting.reassigned}")
-    if voting.descended:  # ours: single moves down the selection's own score
+    if voting.unpolished:  # ours: the trial's own labels descended lower than the polished
+        moved.append("the descent on the joint score from the trial's own labels, the "
+                     "refinement and reassignment dropped as they scored higher (ours, "
+                     f"`rv_descent_from_trial`) {voting.descended}")
+    elif voting.descended:  # ours: single moves down the selection's own score
         moved.append(f"the descent on the joint score (ours, `rv_descent`) {voting.descended}")
     extra = f"; points moved by {' and '.join(moved)}" if moved else ""
     returned = ""

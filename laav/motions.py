@@ -60,7 +60,8 @@ MAX_ESTIMATE_POINTS = 1000
 #: joint score and the candidates' cleaning before the selection (``rv_descent``,
 #: ``rv_select_descent``, 2026-12-02) and a second trial per missing-motion start
 #: (``rv_missing_trials``, 2026-12-03), added after its constants were fitted.
-NOT_FITTED = {"rv_descent": False, "rv_select_descent": 0.0, "rv_missing_trials": 1}
+NOT_FITTED = {"rv_descent": False, "rv_select_descent": 0.0, "rv_missing_trials": 1,
+              "rv_descent_from_trial": False}
 
 
 def profile_params():

@@ -93,7 +93,8 @@ _ARBITRATE_ABOVE = 0.05
 SELECTION_FIELDS = ("coarse_epipolar_weight", "coding_eps")
 #: ``rv_*`` fields that plain Random Voting's runs and their polished candidates do not read
 #: (LAAV's fine-tuning does): a cache of plain RV may leave them out of its key.
-NOT_PLAIN_FIELDS = ("rv_coarse_candidate", "rv_descent", "rv_select_descent", "rv_missing_trials")
+NOT_PLAIN_FIELDS = ("rv_coarse_candidate", "rv_descent", "rv_select_descent", "rv_missing_trials",
+                    "rv_descent_from_trial")
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,6 +133,11 @@ class Voting:
     descended : int
         Points whose label the descent on the joint score then changed (``rv_descent``,
         with ``rv_select="laav"`` on complete tracks; :func:`laav.joint.joint_descent`).
+    unpolished : bool
+        True when the labels returned descend from the kept trial's own labels, the
+        refinement and reassignment dropped because that descent scored lower
+        (``rv_descent_from_trial``); ``refined`` and ``reassigned`` are then 0 and
+        ``descended`` counts the points moved from the trial's labels.
     selected : str
         Which candidate labelling was returned: ``"trial"`` (a converged trial),
         ``"consensus"`` (co-association of unconverged trials), ``"trial k"`` (the k-th
@@ -198,6 +204,7 @@ class Voting:
     reassigned: int = 0
     costs: dict = field(default_factory=dict)
     descended: int = 0
+    unpolished: bool = False
     informed_changed: np.ndarray | None = None
     informed_margin: np.ndarray | None = None
     informed_converged: bool | None = None
@@ -671,7 +678,15 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     out = _finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
                   score="joint-cleaned" if clean else "joint-sum")
     if params.rv_descent:  # ours: the kept labelling descends on the same score
-        labels, moved = joint_descent(points, out.labels, C, params, projected=proj, fits=fits)
+        labels, moved, score = joint_descent(points, out.labels, C, params, projected=proj,
+                                             fits=fits, return_score=True)
+        if params.rv_descent_from_trial:  # ours: and so does its trial's own, unpolished
+            raw, raw_moved, raw_score = joint_descent(
+                points, np.asarray(res[0], dtype=np.int64), C, params, projected=proj,
+                fits=fits, return_score=True)
+            if raw_score < score:  # the refinement and reassignment are not kept
+                out = dataclasses.replace(out, refined=0, reassigned=0, unpolished=True)
+                labels, moved = raw, raw_moved
         out = dataclasses.replace(out, labels=labels, descended=moved)
     return _with_informed(out, first, first_extra)
 
