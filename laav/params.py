@@ -362,9 +362,9 @@ class LaavParams:
         agreement kept (``rv_select="joint"``). Not LAAV's mechanism (the result is often
         a plain-RV trial), and slower; on Hopkins155 (5 seeds, σ = 0: 0.25 / 0.81 / 0.38 %,
         grouped-CV 0.38 %) the default, with its descent on the joint score, its
-        candidates cleaned before the selection and two trials per missing-motion start,
-        measures 0.22 % on all data and held out; under noise (σ = 1 px, seeds 0-1: 0.74 %
-        against 1.20 %) and on ``small_motion``
+        candidates cleaned before the selection, two trials per missing-motion start and
+        the unpolished descent, measures 0.19 % on all data and held out; under noise
+        (σ = 1 px, seeds 0-1: 0.74 % against 1.23 %) and on ``small_motion``
         this preset is the more accurate (``docs/ALGORITHM.md``, the presets table).
         ``changes`` override fields as in :meth:`replace`."""
         return cls(coarse_merge="epipolar", rv_subspace_weight=0.3,
