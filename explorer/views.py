@@ -1017,15 +1017,20 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
             shown = ", ".join(map(str, per[:6])) + (", …" if len(per) > 6 else "")
             trials = f"; {voting.n_trials} trials ({shown} iterations)"
     moved = [f"refinement {voting.refined}"] if voting.refined else []
-    if voting.reassigned:
-        moved.append(f"joint reassignment {voting.reassigned}")
     if voting.unpolished:  # ours: the trial's own labels descended lower than the polished
-        moved.append("the descent on the joint score from the trial's own labels, the "
-                     "refinement and reassignment dropped as they scored higher (ours, "
-                     f"`rv_descent_from_trial`) {voting.descended}")
-    elif voting.descended:  # ours: single moves down the selection's own score
-        moved.append(f"the descent on the joint score (ours, `rv_descent`) {voting.descended}")
+        moved.append(f"the descent on the joint score from the trial's own labels "
+                     f"{voting.descended}")
+        if voting.reassigned:  # above rv_max_points: the reassignment over every point, after
+            moved.append(f"then the reassignment over every point {voting.reassigned}")
+    else:
+        if voting.reassigned:
+            moved.append(f"joint reassignment {voting.reassigned}")
+        if voting.descended:  # ours: single moves down the selection's own score
+            moved.append(f"the descent on the joint score (ours, `rv_descent`) {voting.descended}")
     extra = f"; points moved by {' and '.join(moved)}" if moved else ""
+    if voting.unpolished:
+        extra += ("; **the refinement and reassignment were dropped**: the trial's own labels, "
+                  "descended, scored lower (ours, `rv_descent_from_trial`)")
     returned = ""
     if voting.initialised and voting.selected.startswith("missing motion"):
         # LAAV's own trial, from another start of ours: say which, and why
@@ -1090,6 +1095,8 @@ def _selection(voting: laav.Voting) -> str:
     score = f" (score {float(costs[kept]):.2f})" if kept in costs else ""
     if score and voting.score == "joint-cleaned":  # scored after a few moves of its own
         score = score[:-1] + ", after its cleaning" + (
+            "; the labels returned: its trial's own labels after the full descent, unpolished)"
+            if voting.unpolished else
             "; the labels returned: the candidate after the full descent)" if voting.descended else ")")
     elif score and voting.descended:  # the labels returned moved after scoring
         score = score[:-1] + ", before the descent on the joint score)"
@@ -1120,8 +1127,9 @@ def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
 #: What the RV card's error chart draws.
 RV_ERROR_NOTE = ("*Error per iteration:* each trial's own voting labels, iteration 0 its start "
                  "(LAAV's: the coarse labels, the points in no atom at random; plain RV's: every "
-                 "point at random), before the refinement and reassignment that give the final "
-                 "labels. Without ground truth: the share of points not yet at the trial's last labels.")
+                 "point at random), before the refinement, reassignment and descent that give the "
+                 "final labels. Without ground truth: the share of points not yet at the trial's "
+                 "last labels.")
 
 
 # ---------------------------------------------------------------------- numbers

@@ -163,8 +163,8 @@ class LaavParams:
     rv_descent_from_trial : bool
         Ours, with ``rv_descent``: the kept candidate's trial labels, as the trial ended
         (before the refinement and reassignment), descend too, and the lower of the two
-        descents' joint scores is returned (``Voting.descended`` then counts the points
-        whose label differs from the polished labelling's). The refinement and
+        descents' joint scores is returned (``Voting.unpolished``; ``Voting.descended`` then
+        counts the points moved from the trial's labels). The refinement and
         reassignment move points by their own rules, not by the score; where they move
         right points (1RT2RTCRT_B seed 4: the trial 8.9 % wrong, polished 11.9 %), the
         score now says so. Nothing tuned; Hopkins155, 5 seeds: 0.22 -> 0.19 %, worst run

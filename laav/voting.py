@@ -20,7 +20,8 @@ as the LAAV paper says), and then the steps beyond both papers, each a named set
   when they differ, each is scored after its best moves of at most ``rv_select_descent``
   of the points, so that a few stray points do not decide), which then descends on that
   score (``rv_descent``, :func:`laav.joint.joint_descent`: single points move while the
-  score decreases). On incomplete tracks it runs as ``"subspace"`` below.
+  score decreases), from its polished labels and from its trial's own, the lower kept
+  (``rv_descent_from_trial``). On incomplete tracks it runs as ``"subspace"`` below.
 * **Model selection** (``rv_select="joint"``, :meth:`LaavParams.with_plain_rv`, the
   default 2026-12-01 to 12-02; ``"subspace"`` before). Voting can converge on, or end at,
   a wrong partition, and the epipolar fit cannot tell (a static background and a
@@ -136,8 +137,10 @@ class Voting:
     unpolished : bool
         True when the labels returned descend from the kept trial's own labels, the
         refinement and reassignment dropped because that descent scored lower
-        (``rv_descent_from_trial``); ``refined`` and ``reassigned`` are then 0 and
-        ``descended`` counts the points moved from the trial's labels.
+        (``rv_descent_from_trial``); ``refined`` is then 0, ``descended`` counts the points
+        moved from the trial's labels, and ``reassigned`` too is 0, except above
+        ``rv_max_points`` points, where it counts the reassignment over every point that
+        follows the voted subset's descent.
     selected : str
         Which candidate labelling was returned: ``"trial"`` (a converged trial),
         ``"consensus"`` (co-association of unconverged trials), ``"trial k"`` (the k-th
@@ -628,7 +631,8 @@ def missing_motion_start(points: np.ndarray, init: np.ndarray, n_motions: int, g
 def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     """``rv_select="laav"``: LAAV's informed trial and its missing-motion starts
     (``rv_missing_trials`` trials each), each polished, the one of least
-    :func:`joint_score` kept (see :class:`LaavParams`)."""
+    :func:`joint_score` kept and descended (with ``rv_descent_from_trial`` from its polished
+    and its unpolished labels, the lower kept; see :class:`LaavParams`)."""
     P = points.shape[1]
     pairs = [(g, h) for g in range(C) for h in range(g + 1, C)]
     streams = rng.spawn(1 + len(pairs))  # [coarse start, one per pair]
@@ -678,12 +682,16 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     out = _finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
                   score="joint-cleaned" if clean else "joint-sum")
     if params.rv_descent:  # ours: the kept labelling descends on the same score
+        trial = np.asarray(res[0], dtype=np.int64)
+        # ours: the trial's own labels descend too, unless the polish left them as they were
+        both = params.rv_descent_from_trial and not np.array_equal(trial, out.labels)
+        if proj is None and both:
+            proj = principal_trajectories(points)  # one projection for both descents
         labels, moved, score = joint_descent(points, out.labels, C, params, projected=proj,
                                              fits=fits, return_score=True)
-        if params.rv_descent_from_trial:  # ours: and so does its trial's own, unpolished
-            raw, raw_moved, raw_score = joint_descent(
-                points, np.asarray(res[0], dtype=np.int64), C, params, projected=proj,
-                fits=fits, return_score=True)
+        if both:
+            raw, raw_moved, raw_score = joint_descent(points, trial, C, params, projected=proj,
+                                                      fits=fits, return_score=True)
             if raw_score < score:  # the refinement and reassignment are not kept
                 out = dataclasses.replace(out, refined=0, reassigned=0, unpolished=True)
                 labels, moved = raw, raw_moved

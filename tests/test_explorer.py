@@ -1166,3 +1166,27 @@ def test_rv_card_names_the_missing_motion_start_and_trial_returned():
     second = dataclasses.replace(res, selected="missing motion (0+1), trial 2")
     text = rv_summary(second, None)
     assert f"returned the trial 2 (of `rv_missing_trials`) from the {start} start" in text
+
+
+def test_rv_card_says_when_the_refinement_and_reassignment_were_dropped():
+    """``Voting.unpolished`` (``rv_descent_from_trial``, ours): the card says the trial's own
+    labels descended and the polish was dropped, in the order the steps ran (above
+    ``rv_max_points`` the reassignment over every point comes after), and says nothing of
+    it otherwise."""
+    import dataclasses
+
+    from test_own_chain import small_motion_uncovered
+
+    from explorer.views import rv_summary
+
+    seq, init, _ = small_motion_uncovered(0)
+    res = laav.random_voting(seq, 2, laav.LaavParams(), seed=0, init_labels=init)
+    assert not res.unpolished and "dropped" not in rv_summary(res, None)
+    un = dataclasses.replace(res, unpolished=True, refined=0, reassigned=0, descended=3)
+    text = rv_summary(un, None)
+    assert "points moved by the descent on the joint score from the trial's own labels 3;" in text
+    assert "**the refinement and reassignment were dropped**" in text and "`rv_descent_from_trial`" in text
+    assert "its trial's own labels after the full descent, unpolished" in text
+    big = dataclasses.replace(un, reassigned=7)
+    assert ("the trial's own labels 3 and then the reassignment over every point 7"
+            in rv_summary(big, None))

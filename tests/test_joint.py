@@ -155,6 +155,7 @@ def test_the_chain_descends_only_with_rv_descent():
     p = LaavParams(rv_max_iter=2, rv_reassign=False)  # voting and polish leave work to do
     on = random_voting(seq, 3, p, seed=0, init_labels=start)
     off = random_voting(seq, 3, p.replace(rv_descent=False), seed=0, init_labels=start)
+    assert not on.unpolished  # (descended counts moves from the polished labels only then)
     assert on.descended == np.count_nonzero(on.labels != off.labels) > 0
     assert off.descended == 0
     assert joint_score(seq.points, on.labels, 3, p) < joint_score(seq.points, off.labels, 3, p)
@@ -225,6 +226,9 @@ def test_a_few_stray_points_no_longer_decide_the_selection(hopkins_root):
     off = segment(seq, 2, p.replace(rv_select_descent=0.0), seed=0)
     assert off.voting.selected != "informed" and misclassification_rate(seq.labels, off.labels) > 0.1
     assert on.voting.selected == "informed" and misclassification_rate(seq.labels, on.labels) < 0.01
+    default = segment(seq, 2, LaavParams(), seed=0)  # and the default keeps that trial too
+    assert default.voting.selected == "informed"
+    assert misclassification_rate(seq.labels, default.labels) < 0.01
 
 
 @pytest.mark.hopkins
@@ -251,3 +255,26 @@ def test_the_kept_trials_own_labels_descend_too_and_the_lower_score_wins(hopkins
     np.testing.assert_array_equal(on.labels, direct)
     assert on.voting.descended == moved
     assert misclassification_rate(seq.labels, on.labels) < misclassification_rate(seq.labels, off.labels)
+
+
+@pytest.mark.hopkins
+def test_the_unpolished_descent_is_the_kept_candidates_own_and_loses_where_it_scores_higher(
+        hopkins_root):
+    """head, seed 0: the kept candidate is a missing-motion trial (not the informed one), and
+    its own unpolished labels, which no move improves, are returned as they ended: the
+    unpolished descent starts from *that* trial. Seed 1: the polished descent scores lower,
+    so the result is the one with the setting off."""
+    from laav import load_sequence, segment
+
+    seq = load_sequence(hopkins_root / "head")
+    C = seq.n_motions
+    p = LaavParams()
+    r0 = segment(seq, C, p, seed=0)
+    assert r0.voting.selected.startswith("missing motion") and r0.voting.unpolished
+    trial = r0.voting.label_trace[-1].astype(np.int64)  # the kept trial's last labels
+    np.testing.assert_array_equal(r0.labels, joint_descent(seq.points, trial, C, p)[0])
+    assert r0.voting.descended == 0 and np.array_equal(r0.labels, trial)
+    r1 = segment(seq, C, p, seed=1)
+    off = segment(seq, C, p.replace(rv_descent_from_trial=False), seed=1)
+    assert not r1.voting.unpolished and r1.voting.refined + r1.voting.reassigned > 0
+    np.testing.assert_array_equal(r1.labels, off.labels)
