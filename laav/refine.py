@@ -264,6 +264,14 @@ def motion_distances(points: np.ndarray, labels: np.ndarray, n_motions: int,
     return D
 
 
+class _FitMemo(dict):
+    """Motion fits by key (see :func:`fit_memo`), for one array of points (``points``)."""
+
+    def __init__(self, points: np.ndarray):
+        super().__init__()
+        self.points = points
+
+
 def fit_memo(points: np.ndarray) -> dict:
     """An empty memo for the ``fits`` of :func:`motion_distances`,
     :func:`subspace_residuals`, :func:`refine_labels` and :func:`reassign_labels` (and
@@ -272,12 +280,12 @@ def fit_memo(points: np.ndarray) -> dict:
     compares labellings of them. It holds one row of P floats per motion fitted (about 60
     for LAAV's candidates of a three-motion sequence), and is not bounded: make one per
     comparison, not per session."""
-    return {"points": points}
+    return _FitMemo(points)
 
 
 def _memo(fits: dict, points: np.ndarray) -> dict:
     """``fits``, checked to be :func:`fit_memo` of ``points``."""
-    if fits.get("points") is not points:
+    if getattr(fits, "points", None) is not points:
         raise ValueError("fits: a fit_memo(points) of the points these fits are for")
     return fits
 
