@@ -47,6 +47,32 @@ from laav.voting import NOT_PLAIN_FIELDS, SELECTION_FIELDS
 
 from .views import COLOR_MODES, align_labels, stage_numbers
 
+_helper_lock = threading.Lock()
+_helper: list = []  # the server's one VotingHelper, once started (empty: not yet)
+
+
+def shared_helper():
+    """The server's :class:`laav.helper.VotingHelper` (one process for every session),
+    started at the first call; None when ``LAAV_VOTING_HELPER=0`` or it cannot start.
+    Speed only: LAAV's own voting trials run half in it, the labels are the same."""
+    import atexit
+    import os
+
+    from laav.helper import VotingHelper
+
+    if os.environ.get("LAAV_VOTING_HELPER", "1") == "0":
+        return None
+    with _helper_lock:
+        if not _helper:
+            try:
+                helper = VotingHelper()
+            except (OSError, RuntimeError, ValueError):  # no process here: compute alone
+                helper = None
+            else:
+                atexit.register(helper.close)
+            _helper.append(helper)
+        return _helper[0]
+
 __all__ = ["ExplorerState", "Superseded", "Cancelled", "Settings", "RV_FIELDS", "Change", "describe_change",
            "non_defaults", "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of",
            "settings_from_json", "parse_value"]
@@ -478,7 +504,7 @@ class ExplorerState:
     def __init__(self, seq: Sequence, n_motions: int | None = None, params: LaavParams | None = None,
                  seed: int = 0, pipeline: Future | Pipeline | None = None, autostart: bool = True,
                  plain_rv: Future | None = None, seeds_ahead: bool = False,
-                 preview: Future | None = None):
+                 preview: Future | None = None, voting_helper: bool = True):
         if n_motions is None:
             if seq.n_motions is None:
                 raise ValueError(f"{seq.name} has no ground truth: the number of motions C is needed")
@@ -509,6 +535,10 @@ class ExplorerState:
         self._target = target
         self._target_seq = seq
         self._pipe: Pipeline | None = None
+        #: the voting helper the session's pipeline uses (speed only; :func:`shared_helper`,
+        #: attached by :meth:`preload`), or None
+        self.helper = None
+        self._want_helper = voting_helper
         self._lock = threading.Lock()
         self._gen = 0
         self._published = 0
@@ -566,8 +596,14 @@ class ExplorerState:
 
     def preload(self) -> None:
         """Start the pipeline's first-use imports (:func:`laav.preload`) in a thread of their
-        own, if not done yet (the app calls it once the page is complete)."""
-        if not self._preloaded and not self._closed:
+        own, if not done yet, and the voting helper's process (:func:`shared_helper`, unless
+        ``voting_helper=False``): the app calls it once the page is complete, so that
+        neither competes with the first page."""
+        if self._closed:
+            return
+        if self._want_helper and self.helper is None:
+            self.helper = shared_helper()
+        if not self._preloaded:
             self._preloaded = True
             threading.Thread(target=laav.preload, name="laav-explore-preload", daemon=True).start()
 
@@ -715,6 +751,7 @@ class ExplorerState:
                         warm = self._warm_pipeline(seq, pipeline)
                         if warm is not None:  # computed elsewhere: only what differs is rerun
                             pipe, before = warm, warm.result
+                            pipe.helper = self.helper
                             t0 = time.perf_counter()  # (the wait is not this computation's)
                             result = pipe.update(**target.update_kwargs(),
                                                  preview=self._previewer(gen, seq, target))
@@ -722,7 +759,8 @@ class ExplorerState:
                                 t0 -= sum(result.timings.values())
                         else:
                             pipe = Pipeline(seq, target.n_motions, target.params, target.seed,
-                                            preview=self._previewer(gen, seq, target))
+                                            preview=self._previewer(gen, seq, target),
+                                            helper=self.helper)
                             result = pipe.result
                     else:
                         entry = self._take_ahead(seq, target)
@@ -734,6 +772,7 @@ class ExplorerState:
                                 self._ahead_results.append((result, how))
                         else:
                             pipe = self._pipe
+                            pipe.helper = self.helper
                             result = pipe.update(**target.update_kwargs(),
                                                  preview=self._previewer(gen, seq, target))
                     _fit_drawn_votes(result)

@@ -27,8 +27,8 @@ import laav
 __all__ = ["Warm", "first_results", "pipeline_state", "pipeline_from_state"]
 
 #: Attributes of a :class:`laav.Pipeline` that do not travel: the sequence (the parent has
-#: it, and the explorer checks identity) and the lock.
-_LOCAL = ("seq", "_lock")
+#: it, and the explorer checks identity), the lock and the voting helper (a process handle).
+_LOCAL = ("seq", "_lock", "helper")
 
 
 def pipeline_state(pipe: laav.Pipeline) -> bytes:
@@ -44,6 +44,7 @@ def pipeline_from_state(data: bytes, seq: laav.Sequence) -> laav.Pipeline:
     vars(pipe).update(pickle.loads(data))
     pipe.seq = seq
     pipe._lock = threading.Lock()
+    pipe.helper = None
     missing = {"params", "n_motions", "seed", "result", "_stages"} - set(vars(pipe))
     if missing:  # laav.Pipeline changed its attributes: not usable, compute in-process
         raise ValueError(f"pipeline state without {sorted(missing)}")

@@ -164,6 +164,10 @@ class Pipeline:
     preview : callable, optional
         Given the result with LAAV's own fine-tuning alone before plain Random Voting runs
         (as :meth:`update`'s ``preview``).
+    helper : laav.helper.VotingHelper, optional
+        Speed only: LAAV's own voting trials run half in the helper's process (the machine's
+        second core); the labels are those without it. May be set or changed later
+        (the ``helper`` attribute).
 
     Attributes
     ----------
@@ -194,12 +198,14 @@ class Pipeline:
     """
 
     def __init__(self, seq, n_motions: int, params: LaavParams | None = None, seed: int = 0, *,
-                 preview=None):
+                 preview=None, helper=None):
         self.params = as_params(params)
         self.seq, self.n_motions = _check_inputs(seq, n_motions)
         self.params.n_fine(self.n_motions, self.seq.is_complete)
         _check_frame_pairs(self.seq, self.n_motions, self.params)
         self.seed = _check_seed(seed)
+        #: speed only (:class:`laav.helper.VotingHelper`): LAAV's own trials half in its process
+        self.helper = helper
         self._lock = threading.Lock()
         self._distances = None
         self._noise: float | None = None  # the tracks' measured noise (noise_adaptive), px
@@ -293,7 +299,7 @@ class Pipeline:
                     # no atom: plain RV, whose input checks segment() made already
                     st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
                                                  plain_memo=memo,
-                                                 check_input=False)
+                                                 check_input=False, helper=self.helper)
                     self._voting_memo = (key, st["voting"])
             timings[stage] += time.perf_counter() - t
         return self._result(st["voting"], timings)

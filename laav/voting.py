@@ -224,7 +224,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
                   seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
                   weights: np.ndarray | None = None, *, random_state=None,
                   plain_memo: dict | None = None, visible: np.ndarray | None = None,
-                  check_input: bool = True) -> Voting:
+                  check_input: bool = True, helper=None) -> Voting:
     """Segment trajectories into ``n_motions`` rigid motions by Random Voting.
 
     Parameters
@@ -268,6 +268,9 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         duplicate tracks) and about a result with a single label. False for callers that
         made those checks themselves (:func:`laav.segment` when no atom formed), so that
         each warning is given once.
+    helper : laav.helper.VotingHelper, optional
+        Speed only: LAAV's own trials (``rv_select="laav"`` on complete tracks) run half
+        in the helper's process, half here; the labels are those without it.
 
     Returns
     -------
@@ -313,7 +316,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
                       unlabelled_code=None if vis is None else np.zeros(P, np.int8))
     if params.rv_max_points is not None and P > params.rv_max_points:
         return _subset_voting(seq, points, vis, C, params, rng, init_labels, weights,
-                              plain_memo, check_input)
+                              plain_memo, check_input, helper)
     if vis is not None:
         return _masked_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo,
                               check_input)
@@ -323,7 +326,8 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         _, best, trials, ended = run_trials(points, C, params, rng)
         return _plain_result(seq, points, C, params, rng, best, trials, ended, select,
                              warn=check_input)
-    return _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo)
+    return _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo,
+                        helper=helper)
 
 
 def _start_arrays(init_labels, weights, P: int):
@@ -339,7 +343,7 @@ def _start_arrays(init_labels, weights, P: int):
 
 
 def _subset_voting(seq, points, vis, C, params, rng, init_labels, weights, plain_memo,
-                   warn) -> Voting:
+                   warn, helper=None) -> Voting:
     """:func:`random_voting` with more than ``rv_max_points`` points: every step of voting
     on a seeded random subset of that many, then every other point placed by the motions
     fitted on the voted ones (:func:`laav.refine.assign_jointly`), and, with
@@ -354,7 +358,7 @@ def _subset_voting(seq, points, vis, C, params, rng, init_labels, weights, plain
         out = random_voting(points[:, idx], C, params.replace(rv_max_points=None), rng,
                             None if init is None else init[idx], None if w is None else w[idx],
                             plain_memo=plain_memo, visible=None if vis is None else vis[:, idx],
-                            check_input=False)
+                            check_input=False, helper=helper)
     except ValueError as err:  # the subset is an array: name the sequence's file instead
         raise ValueError(_named(seq, err)) from None
     labels = np.full(P, -1, dtype=np.int64)
@@ -521,7 +525,7 @@ def _own_key(labels: np.ndarray, params: LaavParams) -> tuple:
 
 
 def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo,
-                 mk=None) -> Voting:
+                 mk=None, helper=None) -> Voting:
     """LAAV's fine-tuning: the informed trial started from ``init_labels`` and, with the
     selection, plain RV's runs beside it (see the module docstring). ``mk`` (missing
     data): a :class:`_Masks`."""
@@ -529,7 +533,7 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     init, labels0, votes0 = _informed_start(points, C, params, rng, init_labels, weights)
     known = init >= 0
     if params.rv_select == "laav" and mk is None:
-        return _own_candidates(points, C, params, rng, init, labels0, votes0)
+        return _own_candidates(points, C, params, rng, init, labels0, votes0, helper)
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
         extra = for_informed_trial(points, params, known, masks)  # ours: subspace votes
         first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,
@@ -628,7 +632,7 @@ def missing_motion_start(points: np.ndarray, init: np.ndarray, n_motions: int, g
     return np.where(new, C - 1, L)
 
 
-def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
+def _own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -> Voting:
     """``rv_select="laav"``: LAAV's informed trial and its missing-motion starts
     (``rv_missing_trials`` trials each), each polished, the one of least
     :func:`joint_score` kept and descended (with ``rv_descent_from_trial`` from its polished
@@ -655,7 +659,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0) -> Voting:
     uses = [votes_with_subspace(params, known) for *_, known in starts]
     extra = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
              if any(uses) else None)  # one for every trial that uses it: the same term
-    results = _informed_side_by_side(points, params, [s[1:4] for s in starts], extra, uses)
+    results = _trials_with_helper(points, params, [s[1:4] for s in starts], extra, uses, helper)
     first, first_extra = results[0], extra if uses[0] else None
     trials, polished = list(results), {}
     fits = fit_memo(points)  # candidates share most motions: each motion's fits made once (same numbers)
@@ -721,6 +725,35 @@ def _informed_side_by_side(points, params, starts, extra, uses) -> list:
             _step(points, active, params, None, extra if with_extra else None)
             active = [t for t in active if not t.done]
     return [t.result() for t in trials]
+
+
+def _trials_with_helper(points, params, starts, extra, uses, helper) -> list:
+    """:func:`_informed_side_by_side`, every other trial (the informed one stays here) in
+    ``helper``'s process (:class:`laav.helper.VotingHelper`) while this one runs the rest:
+    the same results, each trial drawing from its own stream and ending by its own test."""
+    from ._interrupt import check as check_interrupt
+
+    theirs = list(range(1, len(starts), 2))
+    if helper is None or not theirs:
+        return _informed_side_by_side(points, params, starts, extra, uses)
+    mine = list(range(0, len(starts), 2))
+    part = lambda ks: ([starts[k] for k in ks], extra, [uses[k] for k in ks])  # noqa: E731
+    handle = helper.submit((points, params, *part(theirs)))
+    if handle is None:  # closed or broken: all here
+        return _informed_side_by_side(points, params, starts, extra, uses)
+    try:
+        here = _informed_side_by_side(points, params, *part(mine))
+    except BaseException:
+        helper.stop(handle)
+        raise
+    there = helper.result(handle, check_interrupt)
+    if there is None:  # its process died: its trials here (their streams were never drawn here)
+        there = _informed_side_by_side(points, params, *part(theirs))
+    out = [None] * len(starts)
+    for ks, res in ((mine, here), (theirs, there)):
+        for k, r in zip(ks, res):
+            out[k] = r
+    return out
 
 
 def _plain_run(points, C, params, rng, streams, memo, k, masks=None):

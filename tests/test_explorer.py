@@ -1190,3 +1190,29 @@ def test_rv_card_says_when_the_refinement_and_reassignment_were_dropped():
     big = dataclasses.replace(un, reassigned=7)
     assert ("the trial's own labels 3 and then the reassignment over every point 7"
             in rv_summary(big, None))
+
+
+def test_state_uses_the_voting_helper_after_preload():
+    """Once the page is complete (preload), the session's pipeline runs half of LAAV's own
+    trials in the server's voting helper; the labels stay those of laav.segment."""
+    from explorer.state import shared_helper
+    from laav import synthetic
+
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
+    st = ExplorerState(seq, autostart=True)
+    off = ExplorerState(seq, autostart=False, voting_helper=False)
+    try:
+        assert st.wait(60)
+        st.preload()
+        off.preload()
+        assert st.helper is not None and st.helper is shared_helper() and off.helper is None
+        jobs = st.helper.jobs
+        st.request(params={"r1": 12.0})
+        assert st.wait(60)
+        assert st.helper.jobs == jobs + 1
+        fresh = laav.segment(seq, 3, st.settings.params, seed=0)
+        assert np.array_equal(st.result.labels, fresh.labels)
+        assert st.result.voting.trial_iterations == fresh.voting.trial_iterations
+    finally:
+        st.close()
+        off.close()

@@ -1,0 +1,155 @@
+"""A second process for LAAV's own voting trials: speed only, the labels do not change.
+
+LAAV's fine-tuning (``rv_select="laav"``, the default on complete tracks) runs its informed
+trial and ``rv_missing_trials`` trials from every missing-motion start, 3-7 trials that do
+not depend on one another: each draws from its own random stream and keeps its own
+convergence test (:func:`laav.voting._informed_side_by_side`). With a :class:`VotingHelper`
+(``laav.Pipeline(..., helper=...)``, ``laav.random_voting(..., helper=...)``) every other
+trial runs in the helper's process while this one runs the rest, on the machine's second
+core; the results are those of running them all here (``tests/test_helper.py``).
+
+Numpy's small-array calls hold the interpreter lock, so threads do not help here; a process
+does. The helper is started once (``spawn``: safe beside threads) and kept: a three-motion
+fine-tuning takes 0.1-0.3 s, far too short to start a process for.
+
+A computation stopped by :mod:`laav._interrupt` stops the helper's half too, at its next
+voting iteration. If the helper's process dies, the trials it held run here instead.
+"""
+
+from __future__ import annotations
+
+import itertools
+import multiprocessing
+import threading
+from concurrent.futures import CancelledError, Future, ProcessPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
+from concurrent.futures.process import BrokenProcessPool
+
+__all__ = ["VotingHelper"]
+
+#: How often (s) the caller, waiting for the helper's half, checks its own stop request.
+_POLL_S = 0.01
+
+#: in the helper's process: every job whose id is at most this stops (a shared integer; the
+#: process runs its jobs one at a time, in the order submitted, so a stopped job's id is
+#: never below a job that still runs)
+_cancelled = None
+
+
+def _init(cancelled) -> None:
+    global _cancelled
+    _cancelled = cancelled
+
+
+def _warm() -> None:
+    """In the helper's process: import what a job needs, before the first one."""
+    from . import _interrupt, _threads, voting  # noqa: F401
+
+
+def _run(job: int, args: tuple) -> list:
+    """In the helper's process: the trials of ``args`` side by side, one BLAS thread."""
+    from ._interrupt import interruptible
+    from ._threads import limited_threads
+    from .voting import _informed_side_by_side
+
+    with limited_threads(), interruptible(lambda: _cancelled.value >= job):
+        return _informed_side_by_side(*args)
+
+
+class VotingHelper:
+    """A process that runs part of LAAV's own voting trials (module docstring).
+
+    Parameters
+    ----------
+    start : bool
+        Start the process now (default), so that the first fine-tuning does not wait for
+        it; else at the first use.
+
+    Notes
+    -----
+    One helper may serve several pipelines and threads: its process runs one half at a
+    time, the others wait their turn. :meth:`close` ends it (also at interpreter exit).
+
+    Examples
+    --------
+    >>> helper = VotingHelper()                             # doctest: +SKIP
+    >>> pipe = laav.Pipeline(seq, 3, helper=helper)         # doctest: +SKIP
+    >>> helper.close()                                      # doctest: +SKIP
+    """
+
+    def __init__(self, start: bool = True):
+        self._lock = threading.Lock()
+        self._ctx = multiprocessing.get_context("spawn")
+        self._cancelled = self._ctx.Value("q", -1, lock=False)
+        self._ids = itertools.count()
+        self._pool: ProcessPoolExecutor | None = None
+        self._closed = False
+        #: jobs handed to the process so far (each one half of a fine-tuning's trials)
+        self.jobs = 0
+        if start:
+            with self._lock:
+                self._ensure().submit(_warm)  # the process and its imports, now
+
+    def _ensure(self) -> ProcessPoolExecutor:
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(1, mp_context=self._ctx, initializer=_init,
+                                             initargs=(self._cancelled,))
+        return self._pool
+
+    def submit(self, args: tuple) -> tuple[int, Future] | None:
+        """Start :func:`laav.voting._informed_side_by_side` on ``args`` in the helper's
+        process: (job id, Future), or None when the helper is closed or broken."""
+        with self._lock:
+            if self._closed:
+                return None
+            job = next(self._ids)
+            try:
+                handle = job, self._ensure().submit(_run, job, args)
+                self.jobs += 1
+                return handle
+            except (BrokenProcessPool, RuntimeError):  # died, or shutting down
+                self._pool = None
+                return None
+
+    def result(self, handle: tuple[int, Future], check) -> list | None:
+        """The helper's trials of ``handle``, waiting for them; ``check()`` is called while
+        waiting (the caller's own stop request: it may raise, and the helper's job then
+        stops at its next voting iteration). None when the helper could not deliver them
+        (its process died): the caller runs them itself."""
+        job, fut = handle
+        try:
+            while True:
+                try:
+                    return fut.result(timeout=_POLL_S)
+                except FutureTimeout:
+                    check()
+        except (BrokenProcessPool, CancelledError):
+            with self._lock:
+                self._pool = None  # a new process at the next use
+            return None
+        except BaseException:
+            self.stop(handle)
+            raise
+
+    def stop(self, handle: tuple[int, Future]) -> None:
+        """Stop the job of ``handle``: not started, it never starts; running, it stops at
+        its next voting iteration."""
+        job, fut = handle
+        if not fut.cancel():
+            with self._lock:
+                self._cancelled.value = max(self._cancelled.value, job)
+
+    def close(self) -> None:
+        """End the helper's process (a running job is stopped first)."""
+        with self._lock:
+            self._closed = True
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            self._cancelled.value = 2**62  # every job
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self) -> VotingHelper:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

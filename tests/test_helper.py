@@ -1,0 +1,126 @@
+"""The voting helper (laav.helper): a second process for LAAV's own trials changes no label."""
+
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+import laav
+from laav import synthetic
+from laav._interrupt import Interrupted, interruptible
+from laav.helper import VotingHelper
+
+
+@pytest.fixture(scope="module")
+def helper():
+    h = VotingHelper()
+    yield h
+    h.close()
+
+
+def _scene(seed):
+    return synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=seed)
+
+
+def _same(a, b):
+    va, vb = a.voting, b.voting
+    assert np.array_equal(a.labels, b.labels)
+    assert va.trial_iterations == vb.trial_iterations
+    assert va.costs == vb.costs
+    assert va.selected == vb.selected
+    assert np.array_equal(va.votes, vb.votes)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_same_result_with_the_helper(helper, seed):
+    seq = _scene(seed)
+    alone = laav.Pipeline(seq, 3, seed=seed).result
+    jobs = helper.jobs
+    helped = laav.Pipeline(seq, 3, seed=seed, helper=helper).result
+    # several trials (informed and missing-motion starts), some of them in the helper
+    assert len(helped.voting.trial_iterations) >= 3
+    assert helper.jobs == jobs + 1
+    _same(alone, helped)
+
+
+def test_updates_with_the_helper_match(helper):
+    seq = _scene(3)
+    alone, helped = laav.Pipeline(seq, 3), laav.Pipeline(seq, 3, helper=helper)
+    for r1 in (8.0, 12.0):
+        _same(alone.update(r1=r1), helped.update(r1=r1))
+    _same(alone.update(seed=5), helped.update(seed=5))
+
+
+def test_random_voting_takes_a_helper(helper):
+    seq = _scene(4)
+    init = laav.Pipeline(seq, 3, seed=1).result.stage_labels()["coarse"]
+    a = laav.random_voting(seq, 3, seed=7, init_labels=init)
+    b = laav.random_voting(seq, 3, seed=7, init_labels=init, helper=helper)
+    assert np.array_equal(a.labels, b.labels)
+    assert a.trial_iterations == b.trial_iterations
+
+
+def test_a_closed_helper_leaves_the_work_here():
+    seq = _scene(0)
+    h = VotingHelper(start=False)
+    h.close()
+    assert h.submit(()) is None
+    res = laav.Pipeline(seq, 3, helper=h).result
+    assert h.jobs == 0
+    _same(laav.Pipeline(seq, 3).result, res)
+
+
+def test_a_dead_helper_process_leaves_the_work_here():
+    seq = _scene(1)
+    h = VotingHelper()
+    try:
+        laav.Pipeline(seq, 3, helper=h)  # the process is up and has served a job
+        for pid in list(h._pool._processes):
+            os.kill(pid, signal.SIGKILL)
+        time.sleep(0.5)
+        res = laav.Pipeline(seq, 3, seed=2, helper=h).result
+        _same(laav.Pipeline(seq, 3, seed=2).result, res)
+        # and a new process serves the next call
+        jobs = h.jobs
+        res = laav.Pipeline(seq, 3, seed=3, helper=h).result
+        assert h.jobs == jobs + 1
+        _same(laav.Pipeline(seq, 3, seed=3).result, res)
+    finally:
+        h.close()
+
+
+def test_a_stopped_computation_stops_the_helpers_half(helper):
+    """Stopped while the trials run, the call raises and the helper's job ends at its next
+    iteration: the next call is served at once and gives the labels of a run alone."""
+    seq = _scene(2)
+    pipe = laav.Pipeline(seq, 3, helper=helper)
+    calls = []
+
+    def stop():  # once the voting has begun (a few iterations in)
+        calls.append(1)
+        return len(calls) > 20
+
+    with pytest.raises(Interrupted), interruptible(stop):
+        pipe.update(seed=9)
+    t = time.perf_counter()
+    res = laav.Pipeline(seq, 3, seed=9, helper=helper).result
+    assert time.perf_counter() - t < 30
+    _same(laav.Pipeline(seq, 3, seed=9).result, res)
+
+
+def test_stop_ends_a_running_job(helper):
+    seq = _scene(0)
+    P = seq.points.shape[1]
+    rng = np.random.default_rng(0)
+    params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)  # runs ~10,000 iterations
+    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(1))
+    handle = helper.submit((seq.points, params, [start], None, [False]))
+    time.sleep(0.5)
+    assert not handle[1].done()
+    t = time.perf_counter()
+    helper.stop(handle)
+    with pytest.raises(Interrupted):
+        handle[1].result(timeout=20)
+    assert time.perf_counter() - t < 5
