@@ -1,19 +1,21 @@
-"""A second process for LAAV's own voting trials: speed only, the labels do not change.
+"""A second process for LAAV's own candidates: speed only, the labels do not change.
 
 LAAV's fine-tuning (``rv_select="laav"``, the default on complete tracks) runs its informed
 trial and ``rv_missing_trials`` trials from every missing-motion start, 3-7 trials that do
-not depend on one another: each draws from its own random stream and keeps its own
-convergence test (:func:`laav.voting._informed_side_by_side`). With a :class:`VotingHelper`
+not depend on one another (each draws from its own random stream and keeps its own
+convergence test, :func:`laav.voting._informed_side_by_side`), then polishes each distinct
+result and scores it (:func:`laav.voting.candidate_part`). With a :class:`VotingHelper`
 (``laav.Pipeline(..., helper=...)``, ``laav.random_voting(..., helper=...)``) every other
-trial runs in the helper's process while this one runs the rest, on the machine's second
-core; the results are those of running them all here (``tests/test_helper.py``).
+start's trial, polish and score run in the helper's process while this one does the rest,
+on the machine's second core; the results are those of doing it all here
+(``tests/test_helper.py``).
 
 Numpy's small-array calls hold the interpreter lock, so threads do not help here; a process
 does. The helper is started once (``spawn``: safe beside threads) and kept: a three-motion
 fine-tuning takes 0.1-0.3 s, far too short to start a process for.
 
-A computation stopped by :mod:`laav._interrupt` stops the helper's half too, at its next
-voting iteration. If the helper's process dies, the trials it held run here instead.
+A computation stopped by :mod:`laav._interrupt` stops the helper's part too, at its next
+voting iteration. If the helper's process dies, the part it held runs here instead.
 """
 
 from __future__ import annotations
@@ -50,10 +52,11 @@ def _run(job: int, args: tuple) -> list:
     """In the helper's process: the trials of ``args`` side by side, one BLAS thread."""
     from ._interrupt import interruptible
     from ._threads import limited_threads
-    from .voting import _informed_side_by_side
+    from .voting import candidate_part
 
     with limited_threads(), interruptible(lambda: _cancelled.value >= job):
-        return _informed_side_by_side(*args)
+        results, finished, cost, _ = candidate_part(*args)  # (its memo of fits stays here)
+        return results, finished, cost
 
 
 class VotingHelper:
@@ -97,8 +100,9 @@ class VotingHelper:
         return self._pool
 
     def submit(self, args: tuple) -> tuple[int, Future] | None:
-        """Start :func:`laav.voting._informed_side_by_side` on ``args`` in the helper's
-        process: (job id, Future), or None when the helper is closed or broken."""
+        """Start :func:`laav.voting.candidate_part` on ``args`` in the helper's process (its
+        value without the memo of fits): (job id, Future), or None when the helper is closed
+        or broken."""
         with self._lock:
             if self._closed:
                 return None

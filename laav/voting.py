@@ -659,22 +659,18 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) 
     uses = [votes_with_subspace(params, known) for *_, known in starts]
     extra = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
              if any(uses) else None)  # one for every trial that uses it: the same term
-    results = _trials_with_helper(points, params, [s[1:4] for s in starts], extra, uses, helper)
+    results, finished, cost, fits = _candidates(points, C, params, [s[1:4] for s in starts], extra,
+                                                uses, helper)
     first, first_extra = results[0], extra if uses[0] else None
-    trials, polished = list(results), {}
-    fits = fit_memo(points)  # candidates share most motions: each motion's fits made once (same numbers)
-    for res in results:
-        key = res[0].tobytes()  # trials that end on the same labels share their polish
-        if key not in polished:
-            polished[key] = _Polished(points, C, params, res[0], fits=fits)
-    finals = {key: pol.final()[0] for key, pol in polished.items()}
+    trials = list(results)
+    polished = {key: _Finished(f) for key, f in finished.items()}
+    finals = {key: f[0] for key, f in finished.items()}
     clean = params.rv_select_descent > 0 and len({f.tobytes() for f in finals.values()}) > 1
     proj = None
     if clean:  # ours: each scored after its best moves of a few points (rv_select_descent)
-        most = int(np.ceil(params.rv_select_descent * P))
         proj = principal_trajectories(points)  # one projection for every descent here
-        cost = {key: joint_descent(points, f, C, params, max_moves=most, projected=proj,
-                                   return_score=True, fits=fits)[2] for key, f in finals.items()}
+        missing = {key: f for key, f in finals.items() if key not in cost}
+        cost.update(_cleaned_costs(points, C, params, missing, fits, proj))
     else:
         cost = {key: joint_score(points, f, C, params, fits=fits) for key, f in finals.items()}
     entries = [(name, res, polished[res[0].tobytes()], cost[res[0].tobytes()])
@@ -727,33 +723,75 @@ def _informed_side_by_side(points, params, starts, extra, uses) -> list:
     return [t.result() for t in trials]
 
 
-def _trials_with_helper(points, params, starts, extra, uses, helper) -> list:
-    """:func:`_informed_side_by_side`, every other trial (the informed one stays here) in
-    ``helper``'s process (:class:`laav.helper.VotingHelper`) while this one runs the rest:
-    the same results, each trial drawing from its own stream and ending by its own test."""
+class _Finished:
+    """A candidate polished elsewhere (:func:`candidate_part`): its :meth:`_Polished.final`."""
+
+    def __init__(self, final: tuple):
+        self._final = final
+
+    def final(self) -> tuple:
+        return self._final
+
+
+def _cleaned_costs(points, C, params, finals: dict, fits, proj) -> dict:
+    """The selection's cleaned cost (``rv_select_descent``) of every labelling of ``finals``:
+    its joint score after its best moves of at most that share of the points."""
+    most = int(np.ceil(params.rv_select_descent * points.shape[1]))
+    return {key: joint_descent(points, f, C, params, max_moves=most, projected=proj,
+                               return_score=True, fits=fits)[2] for key, f in finals.items()}
+
+
+def candidate_part(points, C, params, starts, extra, uses, always_cost: bool = False) -> tuple:
+    """Some of LAAV's own candidates (:func:`_own_candidates`): the trials of ``starts``
+    side by side (:func:`_informed_side_by_side`), every distinct trial labelling polished
+    (refinement and reassignment), and, with ``rv_select_descent``, their cleaned costs
+    when ``always_cost`` or when their polished labellings differ (as the selection needs
+    them then). Returns (results, {key: polished (labels, refined, reassigned)},
+    {key: cleaned cost}, the memo of motion fits), keys the trial labels' bytes."""
+    results = _informed_side_by_side(points, params, starts, extra, uses)
+    fits = fit_memo(points)  # candidates share most motions: each motion's fits made once (same numbers)
+    finished: dict = {}
+    for res in results:
+        key = res[0].tobytes()  # trials that end on the same labels share their polish
+        if key not in finished:
+            finished[key] = _Polished(points, C, params, res[0], fits=fits).final()
+    cost: dict = {}
+    if params.rv_select_descent > 0 and (
+            always_cost or len({f[0].tobytes() for f in finished.values()}) > 1):
+        cost = _cleaned_costs(points, C, params, {k: f[0] for k, f in finished.items()}, fits,
+                              principal_trajectories(points))
+    return results, finished, cost, fits
+
+
+def _candidates(points, C, params, starts, extra, uses, helper) -> tuple:
+    """:func:`candidate_part` of every start; with a ``helper``
+    (:class:`laav.helper.VotingHelper`), every other start's part (the informed trial stays
+    here) runs in its process meanwhile, costs included: the same numbers, each trial
+    drawing from its own stream and ending by its own test, each polish and cost a function
+    of the trial's labels alone."""
     from ._interrupt import check as check_interrupt
 
     theirs = list(range(1, len(starts), 2))
     if helper is None or not theirs:
-        return _informed_side_by_side(points, params, starts, extra, uses)
+        return candidate_part(points, C, params, starts, extra, uses)
     mine = list(range(0, len(starts), 2))
     part = lambda ks: ([starts[k] for k in ks], extra, [uses[k] for k in ks])  # noqa: E731
-    handle = helper.submit((points, params, *part(theirs)))
+    handle = helper.submit((points, C, params, *part(theirs), True))
     if handle is None:  # closed or broken: all here
-        return _informed_side_by_side(points, params, starts, extra, uses)
+        return candidate_part(points, C, params, starts, extra, uses)
     try:
-        here = _informed_side_by_side(points, params, *part(mine))
+        here = candidate_part(points, C, params, *part(mine))
     except BaseException:
         helper.stop(handle)
         raise
     there = helper.result(handle, check_interrupt)
-    if there is None:  # its process died: its trials here (their streams were never drawn here)
-        there = _informed_side_by_side(points, params, *part(theirs))
-    out = [None] * len(starts)
-    for ks, res in ((mine, here), (theirs, there)):
+    if there is None:  # its process died: its part here (their streams were never drawn here)
+        there = candidate_part(points, C, params, *part(theirs), True)
+    results = [None] * len(starts)
+    for ks, res in ((mine, here[0]), (theirs, there[0])):
         for k, r in zip(ks, res):
-            out[k] = r
-    return out
+            results[k] = r
+    return results, {**there[1], **here[1]}, {**there[2], **here[2]}, here[3]
 
 
 def _plain_run(points, C, params, rng, streams, memo, k, masks=None):

@@ -116,7 +116,7 @@ def test_stop_ends_a_running_job(helper):
     rng = np.random.default_rng(0)
     params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)  # runs ~10,000 iterations
     start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(1))
-    handle = helper.submit((seq.points, params, [start], None, [False]))
+    handle = helper.submit((seq.points, 3, params, [start], None, [False]))
     time.sleep(0.5)
     assert not handle[1].done()
     t = time.perf_counter()
