@@ -37,6 +37,7 @@ __all__ = [
 from .atoms import Atoms, build_atoms  # noqa: E402
 from .coarse import Coarse, merge_models  # noqa: E402
 from .graph import AtomGraph, atom_graph  # noqa: E402
+from .helper import VotingHelper  # noqa: E402
 from .motions import MotionCount, estimate_motions  # noqa: E402
 from .multicut import Multicut, solve_multicut  # noqa: E402
 from .params import LaavParams  # noqa: E402
@@ -46,7 +47,7 @@ from .voting import Voting, random_voting  # noqa: E402
 __all__ += [
     "LaavParams", "segment", "random_voting", "Pipeline", "LAAV", "RandomVoting",
     "LaavResult", "Atoms", "AtomGraph", "Multicut", "Coarse", "Voting",
-    "build_atoms", "atom_graph", "solve_multicut", "merge_models", "preload",
+    "build_atoms", "atom_graph", "solve_multicut", "merge_models", "preload", "VotingHelper",
 ]
 __all__ += ["estimate_motions", "MotionCount"]
 

@@ -22,7 +22,9 @@ from __future__ import annotations
 
 import itertools
 import multiprocessing
+import os
 import threading
+import time
 from concurrent.futures import CancelledError, Future, ProcessPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from concurrent.futures.process import BrokenProcessPool
@@ -31,6 +33,8 @@ __all__ = ["VotingHelper"]
 
 #: How often (s) the caller, waiting for the helper's half, checks its own stop request.
 _POLL_S = 0.01
+#: How often (s) the helper's process checks that its parent is still there.
+_PARENT_POLL_S = 0.5
 
 #: in the helper's process: every job whose id is at most this stops (a shared integer; the
 #: process runs its jobs one at a time, in the order submitted, so a stopped job's id is
@@ -38,9 +42,19 @@ _POLL_S = 0.01
 _cancelled = None
 
 
-def _init(cancelled) -> None:
+def _init(cancelled, parent: int) -> None:
     global _cancelled
     _cancelled = cancelled
+    # a parent killed without clean-up (SIGTERM, SIGKILL) leaves this process waiting for
+    # work for ever: it ends once the parent has gone
+    threading.Thread(target=_end_with, args=(parent,), name="laav-helper-parent",
+                     daemon=True).start()
+
+
+def _end_with(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(_PARENT_POLL_S)
+    os._exit(0)
 
 
 def _warm() -> None:
@@ -96,7 +110,7 @@ class VotingHelper:
     def _ensure(self) -> ProcessPoolExecutor:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(1, mp_context=self._ctx, initializer=_init,
-                                             initargs=(self._cancelled,))
+                                             initargs=(self._cancelled, os.getpid()))
         return self._pool
 
     def submit(self, args: tuple) -> tuple[int, Future] | None:

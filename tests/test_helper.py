@@ -124,3 +124,36 @@ def test_stop_ends_a_running_job(helper):
     with pytest.raises(Interrupted):
         handle[1].result(timeout=20)
     assert time.perf_counter() - t < 5
+
+
+def test_the_helper_ends_with_its_parent(tmp_path):
+    """A parent killed without clean-up (as a server stopped by SIGTERM) leaves no helper."""
+    import subprocess
+    import sys
+
+    code = ("import laav, time, os\n"
+            "h = laav.VotingHelper()\n"
+            "h._pool.submit(os.getpid).result(timeout=60)\n"
+            "print([p.pid for p in h._pool._processes.values()][0], flush=True)\n"
+            "time.sleep(60)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        child = int(proc.stdout.readline())
+        os.kill(child, 0)  # alive
+        proc.kill()
+        proc.wait(10)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            try:
+                os.kill(child, 0)
+            except ProcessLookupError:
+                break
+            try:  # reap it if it became ours (it does not: it is re-parented to init)
+                os.waitpid(child, os.WNOHANG)
+            except ChildProcessError:
+                pass
+            time.sleep(0.1)
+        else:
+            pytest.fail("the helper outlived its parent")
+    finally:
+        proc.kill()
