@@ -1046,7 +1046,7 @@ class ExplorerState:
                     voting = _await(warm[1])  # kept for later if a new request stops the wait
                     self._rv_warm = None
                 if voting is None:
-                    voting = plain_rv_of(seq, s)
+                    voting = self._plain_rv_of(seq, s)
         except Superseded:
             return
         except Exception:
@@ -1055,6 +1055,25 @@ class ExplorerState:
         self._keep_plain_rv(key, voting)
         if key == self._rv_key and self.on_plain_rv is not None:
             self.on_plain_rv(voting, key)
+
+    def _plain_rv_of(self, seq: Sequence, s: Settings) -> laav.Voting:
+        """(Plain RV's worker.) :func:`plain_rv_of`, in the voting helper's process when there
+        is one (the same labels): here it would hold this process's interpreter lock while
+        the result it accompanies is being sent to the page."""
+        helper = self.helper
+        handle = None if helper is None else helper.submit_call(
+            laav.random_voting, seq, s.n_motions, s.params, s.seed)
+        if handle is not None:
+            try:
+                voting = helper.result(handle, check_interrupt)
+            except Interrupted:
+                raise
+            except Exception:  # (e.g. not picklable): computed here, as without a helper
+                traceback.print_exc()
+                voting = None
+            if voting is not None:
+                return voting
+        return plain_rv_of(seq, s)
 
     def _keep_plain_rv(self, key, voting) -> None:
         """Cache plain RV's run under ``key`` (the 16 latest kept)."""

@@ -62,15 +62,22 @@ def _warm() -> None:
     from . import _interrupt, _threads, voting  # noqa: F401
 
 
-def _run(job: int, args: tuple) -> list:
-    """In the helper's process: the trials of ``args`` side by side, one BLAS thread."""
+def _run(job: int, func, args: tuple):
+    """In the helper's process: ``func(*args)`` with one BLAS thread, stopped (raising
+    :class:`laav._interrupt.Interrupted`) at its next check once the job is stopped."""
     from ._interrupt import interruptible
     from ._threads import limited_threads
-    from .voting import candidate_part
 
     with limited_threads(), interruptible(lambda: _cancelled.value >= job):
-        results, finished, cost, _ = candidate_part(*args)  # (its memo of fits stays here)
-        return results, finished, cost
+        return func(*args)
+
+
+def _candidate_part(*args) -> tuple:
+    """:func:`laav.voting.candidate_part` without its memo of fits (which stays here)."""
+    from .voting import candidate_part
+
+    results, finished, cost, _ = candidate_part(*args)
+    return results, finished, cost
 
 
 class VotingHelper:
@@ -117,23 +124,31 @@ class VotingHelper:
         """Start :func:`laav.voting.candidate_part` on ``args`` in the helper's process (its
         value without the memo of fits): (job id, Future), or None when the helper is closed
         or broken."""
+        return self.submit_call(_candidate_part, *args)
+
+    def submit_call(self, func, *args) -> tuple[int, Future] | None:
+        """Start ``func(*args)`` in the helper's process (``func`` importable by name, the
+        arguments and value picklable; the laav computations in it stop at their checks
+        when the job is stopped): (job id, Future), or None when the helper is closed or
+        broken. The explorer runs plain Random Voting for its RV card so."""
         with self._lock:
             if self._closed:
                 return None
             job = next(self._ids)
             try:
-                handle = job, self._ensure().submit(_run, job, args)
+                handle = job, self._ensure().submit(_run, job, func, args)
                 self.jobs += 1
                 return handle
             except (BrokenProcessPool, RuntimeError):  # died, or shutting down
                 self._pool = None
                 return None
 
-    def result(self, handle: tuple[int, Future], check) -> list | None:
-        """The helper's trials of ``handle``, waiting for them; ``check()`` is called while
+    def result(self, handle: tuple[int, Future], check):
+        """The value of the job of ``handle``, waiting for it; ``check()`` is called while
         waiting (the caller's own stop request: it may raise, and the helper's job then
-        stops at its next voting iteration). None when the helper could not deliver them
-        (its process died): the caller runs them itself."""
+        stops at its next voting iteration). None when the helper could not deliver it
+        (its process died): the caller computes it itself. An exception of the job is
+        raised here."""
         job, fut = handle
         try:
             while True:

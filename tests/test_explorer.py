@@ -1195,7 +1195,7 @@ def test_rv_card_says_when_the_refinement_and_reassignment_were_dropped():
 def test_state_uses_the_voting_helper_after_preload():
     """Once the page is complete (preload), the session's pipeline runs half of LAAV's own
     trials in the server's voting helper; the labels stay those of laav.segment."""
-    from explorer.state import shared_helper
+    from explorer.state import plain_rv_of, shared_helper
     from laav import synthetic
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
@@ -1213,6 +1213,15 @@ def test_state_uses_the_voting_helper_after_preload():
         fresh = laav.segment(seq, 3, st.settings.params, seed=0)
         assert np.array_equal(st.result.labels, fresh.labels)
         assert st.result.voting.trial_iterations == fresh.voting.trial_iterations
+        # a new seed: the pipeline's part, then plain RV for the RV card, both in the helper
+        jobs = st.helper.jobs
+        st.request(seed=4)
+        assert st.wait(60)
+        plain = st.wait_plain_rv(60)
+        assert st.helper.jobs == jobs + 2
+        alone = plain_rv_of(seq, st.settings)
+        assert np.array_equal(plain.labels, alone.labels)
+        assert plain.trial_iterations == alone.trial_iterations
     finally:
         st.close()
         off.close()
