@@ -486,6 +486,10 @@ class ExplorerState:
         of the seed slider shows them at once (``laav-explore`` turns it on). The result
         is that of a fresh :class:`laav.Pipeline` for those settings, as a recomputation
         gives; any request stops the computation ahead at its next check.
+    voting_helper : bool
+        Once :meth:`preload` is called (the app: when the page is complete), run half of
+        LAAV's own voting trials and plain RV for the RV card in the server's voting helper
+        process (:func:`shared_helper`; speed only, the same labels). False: all here.
 
     Attributes
     ----------

@@ -37,7 +37,6 @@ __all__ = [
 from .atoms import Atoms, build_atoms  # noqa: E402
 from .coarse import Coarse, merge_models  # noqa: E402
 from .graph import AtomGraph, atom_graph  # noqa: E402
-from .helper import VotingHelper  # noqa: E402
 from .motions import MotionCount, estimate_motions  # noqa: E402
 from .multicut import Multicut, solve_multicut  # noqa: E402
 from .params import LaavParams  # noqa: E402
@@ -59,4 +58,9 @@ def __getattr__(name: str):
         from . import estimator
 
         return getattr(estimator, name)
+    if name == "VotingHelper":  # (multiprocessing only for those who use it)
+        from .helper import VotingHelper
+
+        return VotingHelper
     raise AttributeError(f"module 'laav' has no attribute {name!r}")
+

@@ -25,7 +25,8 @@ import multiprocessing
 import os
 import threading
 import time
-from concurrent.futures import CancelledError, Future, ProcessPoolExecutor
+import warnings
+from concurrent.futures import CancelledError, ProcessPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from concurrent.futures.process import BrokenProcessPool
 
@@ -36,15 +37,22 @@ _POLL_S = 0.01
 #: How often (s) the helper's process checks that its parent is still there.
 _PARENT_POLL_S = 0.5
 
-#: in the helper's process: every job whose id is at most this stops (a shared integer; the
-#: process runs its jobs one at a time, in the order submitted, so a stopped job's id is
-#: never below a job that still runs)
-_cancelled = None
+#: Jobs stopped, most recent last, in a ring of this many (shared with the process): jobs
+#: are stopped by their exact id. (Not "every job up to an id": the pool hands the process
+#: up to two more jobs than it runs, marked running, so a queued job of another caller can
+#: be stopped while an earlier one runs.)
+_STOPPED_RING = 32
+#: After this many times the process died, the helper closes itself (a process that cannot
+#: start, e.g. a script without ``if __name__ == "__main__":``, would otherwise be started
+#: again for every fine-tuning).
+_MAX_RESTARTS = 3
+
+_stopped = None  # in the helper's process: the shared ring of stopped job ids
 
 
-def _init(cancelled, parent: int) -> None:
-    global _cancelled
-    _cancelled = cancelled
+def _init(stopped, parent: int) -> None:
+    global _stopped
+    _stopped = stopped
     # a parent killed without clean-up (SIGTERM, SIGKILL) leaves this process waiting for
     # work for ever: it ends once the parent has gone
     threading.Thread(target=_end_with, args=(parent,), name="laav-helper-parent",
@@ -68,7 +76,7 @@ def _run(job: int, func, args: tuple):
     from ._interrupt import interruptible
     from ._threads import limited_threads
 
-    with limited_threads(), interruptible(lambda: _cancelled.value >= job):
+    with limited_threads(), interruptible(lambda: job in _stopped[:]):
         return func(*args)
 
 
@@ -91,8 +99,19 @@ class VotingHelper:
 
     Notes
     -----
-    One helper may serve several pipelines and threads: its process runs one half at a
+    One helper may serve several pipelines and threads: its process runs one job at a
     time, the others wait their turn. :meth:`close` ends it (also at interpreter exit).
+    As with any ``multiprocessing`` code, a script must create it under
+    ``if __name__ == "__main__":`` (the process imports the script's main module); if the
+    process cannot start or keeps dying, the helper closes itself after
+    :data:`_MAX_RESTARTS` tries and every computation runs in the caller's process.
+
+    Attributes
+    ----------
+    jobs : int
+        Jobs handed to the process so far.
+    delivered : int
+        Jobs whose value the process delivered (the others were computed by the caller).
 
     Examples
     --------
@@ -104,81 +123,113 @@ class VotingHelper:
     def __init__(self, start: bool = True):
         self._lock = threading.Lock()
         self._ctx = multiprocessing.get_context("spawn")
-        self._cancelled = self._ctx.Value("q", -1, lock=False)
+        self._stopped = self._ctx.Array("q", [-1] * _STOPPED_RING, lock=False)
+        self._next_stop = 0
         self._ids = itertools.count()
         self._pool: ProcessPoolExecutor | None = None
+        self._restarts = 0
         self._closed = False
-        #: jobs handed to the process so far (each one half of a fine-tuning's trials)
         self.jobs = 0
+        self.delivered = 0
         if start:
             with self._lock:
-                self._ensure().submit(_warm)  # the process and its imports, now
+                try:
+                    self._ensure().submit(_warm)  # the process and its imports, now
+                except (BrokenProcessPool, RuntimeError, OSError):
+                    self._broken(self._pool)
 
     def _ensure(self) -> ProcessPoolExecutor:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(1, mp_context=self._ctx, initializer=_init,
-                                             initargs=(self._cancelled, os.getpid()))
+                                             initargs=(self._stopped, os.getpid()))
         return self._pool
 
-    def submit(self, args: tuple) -> tuple[int, Future] | None:
+    def _broken(self, pool) -> None:
+        """(Under the lock.) ``pool``'s process died: a new one at the next use, unless it
+        died too often (then closed for good)."""
+        if pool is not None and pool is self._pool:
+            self._pool = None
+            self._restarts += 1
+            if self._restarts >= _MAX_RESTARTS:
+                self._closed = True
+                warnings.warn(f"laav.VotingHelper: its process died {self._restarts} times; "
+                              "computing without it (in a script, create the helper under "
+                              "`if __name__ == '__main__':`)", RuntimeWarning, stacklevel=3)
+            pool.shutdown(wait=False, cancel_futures=True)
+
+    def submit(self, args: tuple) -> tuple | None:
         """Start :func:`laav.voting.candidate_part` on ``args`` in the helper's process (its
-        value without the memo of fits): (job id, Future), or None when the helper is closed
-        or broken."""
+        value without the memo of fits): a handle for :meth:`result` and :meth:`stop`, or
+        None when the helper is closed or broken."""
         return self.submit_call(_candidate_part, *args)
 
-    def submit_call(self, func, *args) -> tuple[int, Future] | None:
+    def submit_call(self, func, *args) -> tuple | None:
         """Start ``func(*args)`` in the helper's process (``func`` importable by name, the
         arguments and value picklable; the laav computations in it stop at their checks
-        when the job is stopped): (job id, Future), or None when the helper is closed or
-        broken. The explorer runs plain Random Voting for its RV card so."""
+        when the job is stopped): a handle for :meth:`result` and :meth:`stop`, or None when
+        the helper is closed or broken. The explorer runs plain Random Voting for its RV
+        card so."""
         with self._lock:
             if self._closed:
                 return None
             job = next(self._ids)
+            pool = None
             try:
-                handle = job, self._ensure().submit(_run, job, func, args)
-                self.jobs += 1
-                return handle
-            except (BrokenProcessPool, RuntimeError):  # died, or shutting down
-                self._pool = None
+                pool = self._ensure()
+                handle = job, pool.submit(_run, job, func, args), pool
+            except (BrokenProcessPool, RuntimeError, OSError):  # died, shutting down, no process
+                self._broken(pool)
                 return None
+            self.jobs += 1
+            return handle
 
-    def result(self, handle: tuple[int, Future], check):
+    def result(self, handle: tuple, check):
         """The value of the job of ``handle``, waiting for it; ``check()`` is called while
         waiting (the caller's own stop request: it may raise, and the helper's job then
-        stops at its next voting iteration). None when the helper could not deliver it
-        (its process died): the caller computes it itself. An exception of the job is
-        raised here."""
-        job, fut = handle
-        try:
-            while True:
-                try:
-                    return fut.result(timeout=_POLL_S)
-                except FutureTimeout:
-                    check()
-        except (BrokenProcessPool, CancelledError):
-            with self._lock:
-                self._pool = None  # a new process at the next use
-            return None
-        except BaseException:
-            self.stop(handle)
-            raise
+        stops at its next check). None when the helper could not deliver it (its process
+        died, the helper was closed, or the job was stopped by someone else): the caller
+        computes it itself. Another exception of the job is raised here."""
+        from ._interrupt import Interrupted
 
-    def stop(self, handle: tuple[int, Future]) -> None:
+        job, fut, pool = handle
+        while True:
+            try:
+                value = fut.result(timeout=_POLL_S)
+                break
+            except FutureTimeout:
+                pass
+            except (BrokenProcessPool, CancelledError):  # died, or dropped by close()
+                with self._lock:
+                    if not self._closed:
+                        self._broken(pool)
+                return None
+            except Interrupted:  # stopped, and not by this caller (its check() did not raise)
+                return None
+            try:
+                check()
+            except BaseException:
+                self.stop(handle)
+                raise
+        with self._lock:
+            self.delivered += 1
+        return value
+
+    def stop(self, handle: tuple) -> None:
         """Stop the job of ``handle``: not started, it never starts; running, it stops at
-        its next voting iteration."""
-        job, fut = handle
+        its next check. Other jobs are not affected."""
+        job, fut, _ = handle
         if not fut.cancel():
             with self._lock:
-                self._cancelled.value = max(self._cancelled.value, job)
+                self._stopped[self._next_stop % _STOPPED_RING] = job
+                self._next_stop += 1
 
     def close(self) -> None:
-        """End the helper's process (a running job is stopped first)."""
+        """End the helper's process (the jobs queued are dropped, a running one runs to its
+        end or its next check); the callers waiting compute their parts themselves."""
         with self._lock:
             self._closed = True
             pool, self._pool = self._pool, None
         if pool is not None:
-            self._cancelled.value = 2**62  # every job
             pool.shutdown(wait=True, cancel_futures=True)
 
     def __enter__(self) -> VotingHelper:

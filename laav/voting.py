@@ -748,12 +748,15 @@ def candidate_part(points, C, params, starts, extra, uses, always_cost: bool = F
     when ``always_cost`` or when their polished labellings differ (as the selection needs
     them then). Returns (results, {key: polished (labels, refined, reassigned)},
     {key: cleaned cost}, the memo of motion fits), keys the trial labels' bytes."""
+    from ._interrupt import check as check_interrupt
+
     results = _informed_side_by_side(points, params, starts, extra, uses)
     fits = fit_memo(points)  # candidates share most motions: each motion's fits made once (same numbers)
     finished: dict = {}
     for res in results:
         key = res[0].tobytes()  # trials that end on the same labels share their polish
         if key not in finished:
+            check_interrupt()  # a caller's stop request, between polishes
             finished[key] = _Polished(points, C, params, res[0], fits=fits).final()
     cost: dict = {}
     if params.rv_select_descent > 0 and (
@@ -772,7 +775,9 @@ def _candidates(points, C, params, starts, extra, uses, helper) -> tuple:
     from ._interrupt import check as check_interrupt
 
     theirs = list(range(1, len(starts), 2))
-    if helper is None or not theirs:
+    # (an array sent to the process arrives C-contiguous: sums over a strided one could
+    # round otherwise, so such points stay here)
+    if helper is None or not theirs or not points.flags.c_contiguous:
         return candidate_part(points, C, params, starts, extra, uses)
     mine = list(range(0, len(starts), 2))
     part = lambda ks: ([starts[k] for k in ks], extra, [uses[k] for k in ks])  # noqa: E731

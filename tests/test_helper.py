@@ -37,11 +37,11 @@ def _same(a, b):
 def test_same_result_with_the_helper(helper, seed):
     seq = _scene(seed)
     alone = laav.Pipeline(seq, 3, seed=seed).result
-    jobs = helper.jobs
+    jobs, delivered = helper.jobs, helper.delivered
     helped = laav.Pipeline(seq, 3, seed=seed, helper=helper).result
     # several trials (informed and missing-motion starts), some of them in the helper
     assert len(helped.voting.trial_iterations) >= 3
-    assert helper.jobs == jobs + 1
+    assert (helper.jobs, helper.delivered) == (jobs + 1, delivered + 1)
     _same(alone, helped)
 
 
@@ -157,3 +157,58 @@ def test_the_helper_ends_with_its_parent(tmp_path):
             pytest.fail("the helper outlived its parent")
     finally:
         proc.kill()
+
+
+def _long_job(seq, seed=1):
+    """Arguments of a helper job of about 10,000 voting iterations (seconds)."""
+    P = seq.points.shape[1]
+    rng = np.random.default_rng(seed)
+    params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)
+    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(seed + 1))
+    return (seq.points, 3, params, [start], None, [False])
+
+
+def test_stopping_a_queued_job_leaves_the_running_one(helper):
+    """The pool hands its process a job or two beyond the one running, marked running: a
+    stop of such a queued job must not stop the running job of another caller."""
+    seq = _scene(0)
+    P = seq.points.shape[1]
+    params = laav.LaavParams(rv_max_iter=1500, rv_patience=1500)  # about a second
+    rng = np.random.default_rng(3)
+    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(4))
+    first = helper.submit((seq.points, 3, params, [start], None, [False]))
+    second = helper.submit(_long_job(seq))
+    time.sleep(0.2)
+    helper.stop(second)
+    value = helper.result(first, lambda: None)
+    assert value is not None and value[0][0][4] == 1500  # ran all its iterations
+    assert helper.result(second, lambda: None) is None  # stopped (or never started)
+
+
+def test_a_helper_that_dies_mid_job_leaves_the_job_to_the_caller():
+    seq = _scene(0)
+    with VotingHelper() as h:
+        handle = h.submit(_long_job(seq))
+        time.sleep(1.0)
+        for pid in list(h._pool._processes):
+            os.kill(pid, signal.SIGKILL)
+        assert h.result(handle, lambda: None) is None
+        # a new process serves the next job
+        res = laav.Pipeline(seq, 3, seed=2, helper=h).result
+        assert h.delivered == 1
+        _same(laav.Pipeline(seq, 3, seed=2).result, res)
+
+
+def test_a_helper_whose_process_keeps_dying_closes_itself():
+    seq = _scene(0)
+    with VotingHelper() as h:
+        with pytest.warns(RuntimeWarning, match="died 3 times"):
+            for _ in range(3):
+                handle = h.submit(_long_job(seq))
+                assert handle is not None
+                time.sleep(0.5)
+                for pid in list(h._pool._processes):
+                    os.kill(pid, signal.SIGKILL)
+                assert h.result(handle, lambda: None) is None
+        assert h.submit(_long_job(seq)) is None
+        _same(laav.Pipeline(seq, 3).result, laav.Pipeline(seq, 3, helper=h).result)
