@@ -755,7 +755,7 @@ class ExplorerState:
                         warm = self._warm_pipeline(seq, pipeline)
                         if warm is not None:  # computed elsewhere: only what differs is rerun
                             pipe, before = warm, warm.result
-                            pipe.helper = self.helper
+                            pipe.helper, pipe.prefetch_votes = self.helper, True
                             t0 = time.perf_counter()  # (the wait is not this computation's)
                             result = pipe.update(**target.update_kwargs(),
                                                  preview=self._previewer(gen, seq, target))
@@ -765,6 +765,7 @@ class ExplorerState:
                             pipe = Pipeline(seq, target.n_motions, target.params, target.seed,
                                             preview=self._previewer(gen, seq, target),
                                             helper=self.helper)
+                            pipe.prefetch_votes = True  # (for its next updates)
                             result = pipe.result
                     else:
                         entry = self._take_ahead(seq, target)
@@ -776,7 +777,7 @@ class ExplorerState:
                                 self._ahead_results.append((result, how))
                         else:
                             pipe = self._pipe
-                            pipe.helper = self.helper
+                            pipe.helper, pipe.prefetch_votes = self.helper, True
                             result = pipe.update(**target.update_kwargs(),
                                                  preview=self._previewer(gen, seq, target))
                     _fit_drawn_votes(result)

@@ -803,11 +803,29 @@ class _PairwiseFits:
         ki, Fmid, pts, dmid = (np.concatenate(parts) for parts in zip(*mids))
         return np.concatenate(depis), _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n)
 
+    def pending(self) -> tuple | None:
+        """The arguments of :func:`fit_pairwise` still to run, or None when fitted."""
+        with self._lock:
+            return None if self._out is not None else self._args
+
+    def put(self, out: tuple) -> None:
+        """The value of :func:`fit_pairwise` on :meth:`pending`'s arguments, computed
+        elsewhere (the voting helper's process): the same numbers :meth:`get` makes."""
+        with self._lock:
+            if self._out is None:
+                self._out, self._args = out, None
+
     def __getstate__(self):  # pickled (a pipeline's state sent between processes): fitted
         return {"_out": self.get()}
 
     def __setstate__(self, state):
         self._args, self._out, self._lock = None, state["_out"], threading.Lock()
+
+
+def fit_pairwise(*args) -> tuple:
+    """:meth:`_PairwiseFits.get`'s fit on its arguments (:meth:`_PairwiseFits.pending`), by
+    name: what another process runs for it."""
+    return _PairwiseFits._fit(*args)
 
 
 class PairwiseVotes:
@@ -850,6 +868,14 @@ class PairwiseVotes:
         V[jj, kk] = V[kk, jj] = vote
         self._distance, self._samples = D, samples
         self._vote = V  # last: a reader that sees it sees the others
+
+    def unfitted(self):
+        """The fits still to make, for a caller that makes them elsewhere (``pending()``,
+        then ``put(fit_pairwise(*args))``), or None when the votes are fitted already."""
+        fits = self._fits
+        if self._vote is not None or fits is None or fits.pending() is None:
+            return None
+        return fits
 
     def _ensure(self) -> None:
         fits = self._fits

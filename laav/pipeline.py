@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._interrupt import Interrupted
 from ._interrupt import check as check_interrupt
 from ._random import resolve_seed
 from ._sequence import Sequence, check_degenerate, warn_missing_motions
@@ -206,6 +207,10 @@ class Pipeline:
         self.seed = _check_seed(seed)
         #: speed only (:class:`laav.helper.VotingHelper`): LAAV's own trials half in its process
         self.helper = helper
+        #: speed only, with a helper: the paper's pairwise votes of the coarse stage (which
+        #: the default merge leaves unfitted; ``Coarse.vote_samples``, what a viewer draws)
+        #: are fitted in the helper while the voting runs (the explorer sets it)
+        self.prefetch_votes = False
         self._lock = threading.Lock()
         self._distances = None
         self._noise: float | None = None  # the tracks' measured noise (noise_adaptive), px
@@ -296,13 +301,52 @@ class Pipeline:
                     if (preview is not None and ("run", 1) not in memo and init is not None
                             and seq.is_complete):  # plain RV will run: LAAV's own trial first
                         t += self._preview(preview, p, init, memo, timings, t)
-                    # no atom: plain RV, whose input checks segment() made already
-                    st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
-                                                 plain_memo=memo,
-                                                 check_input=False, helper=self.helper)
+                    votes = self._fit_votes_elsewhere(st["coarse"])
+                    try:  # no atom: plain RV, whose input checks segment() made already
+                        st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
+                                                     plain_memo=memo,
+                                                     check_input=False, helper=self.helper)
+                    except BaseException:
+                        if votes is not None:
+                            self.helper.stop(votes[1])
+                        raise
                     self._voting_memo = (key, st["voting"])
+                    waited = time.perf_counter()
+                    self._take_votes(votes)
+                    waited = time.perf_counter() - waited
+                    timings["coarse"] += waited  # (the coarse stage's votes, not the voting)
+                    t += waited
             timings[stage] += time.perf_counter() - t
         return self._result(st["voting"], timings)
+
+    def _fit_votes_elsewhere(self, coarse) -> tuple | None:
+        """With :attr:`prefetch_votes` and a helper: ``coarse``'s unfitted pairwise votes
+        sent to the helper's process, (fits, handle); else None."""
+        if not self.prefetch_votes or self.helper is None or coarse is None:
+            return None
+        fits = coarse.pairwise.unfitted()
+        args = None if fits is None else fits.pending()
+        if args is None:
+            return None
+        from .coarse import fit_pairwise
+
+        handle = self.helper.submit_call(fit_pairwise, *args)
+        return None if handle is None else (fits, handle)
+
+    def _take_votes(self, votes: tuple | None) -> None:
+        """The fits of :meth:`_fit_votes_elsewhere` into the coarse stage's votes (when the
+        helper delivered them; else they are fitted here when first read)."""
+        if votes is None:
+            return
+        fits, handle = votes
+        try:
+            out = self.helper.result(handle, check_interrupt)
+        except Interrupted:
+            raise
+        except Exception:  # noqa: BLE001 - fitted here when read, as without a helper
+            return
+        if out is not None:
+            fits.put(out)
 
     def _result(self, voting: Voting, timings: dict) -> LaavResult:
         st = self._stages

@@ -1211,16 +1211,17 @@ def test_state_uses_the_voting_helper_after_preload():
         st.request(params={"r1": 12.0})
         assert st.wait(60)
         st.wait_plain_rv(60)  # (the same seed: plain RV is cached, no job)
-        assert (st.helper.jobs, st.helper.delivered) == (jobs + 1, delivered + 1)
+        # the coarse stage's pairwise votes (what card 3 draws), then a part of the candidates
+        assert (st.helper.jobs, st.helper.delivered) == (jobs + 2, delivered + 2)
         fresh = laav.segment(seq, 3, st.settings.params, seed=0)
         assert np.array_equal(st.result.labels, fresh.labels)
         assert st.result.voting.trial_iterations == fresh.voting.trial_iterations
-        # a new seed: the pipeline's part, then plain RV for the RV card, both in the helper
+        # a new seed: the votes, the pipeline's part, then plain RV for the RV card, all there
         jobs, delivered = st.helper.jobs, st.helper.delivered
         st.request(seed=4)
         assert st.wait(60)
         plain = st.wait_plain_rv(60)
-        assert (st.helper.jobs, st.helper.delivered) == (jobs + 2, delivered + 2)
+        assert (st.helper.jobs, st.helper.delivered) == (jobs + 3, delivered + 3)
         alone = plain_rv_of(seq, st.settings)
         assert np.array_equal(plain.labels, alone.labels)
         assert plain.trial_iterations == alone.trial_iterations

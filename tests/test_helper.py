@@ -212,3 +212,26 @@ def test_a_helper_whose_process_keeps_dying_closes_itself():
                 assert h.result(handle, lambda: None) is None
         assert h.submit(_long_job(seq)) is None
         _same(laav.Pipeline(seq, 3).result, laav.Pipeline(seq, 3, helper=h).result)
+
+
+def test_prefetched_votes_are_those_fitted_here(helper):
+    """With prefetch_votes, the coarse stage's pairwise votes (which the default merge does
+    not fit; what the explorer draws) are fitted in the helper while the voting runs: the
+    same numbers as fitted here when read."""
+    seq = _scene(5)
+    alone = laav.Pipeline(seq, 3)
+    helped = laav.Pipeline(seq, 3, helper=helper)
+    helped.prefetch_votes = True
+    for r1 in (8.0, 12.0):
+        a = alone.update(r1=r1)
+        delivered = helper.delivered
+        b = helped.update(r1=r1)
+        assert a.coarse.pairwise.unfitted() is not None  # not read yet: not fitted
+        assert b.coarse.pairwise.unfitted() is None  # fitted, by the helper
+        assert helper.delivered == delivered + 2  # the votes and a part of the candidates
+        _same(a, b)
+        np.testing.assert_array_equal(a.coarse.epipolar_distance, b.coarse.epipolar_distance)
+        np.testing.assert_array_equal(a.coarse.pairwise_vote, b.coarse.pairwise_vote)
+        va, vb = a.coarse.vote_samples, b.coarse.vote_samples
+        for name in ("frames", "fundamental", "points", "distance"):
+            np.testing.assert_array_equal(getattr(va, name), getattr(vb, name))
