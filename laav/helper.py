@@ -94,8 +94,9 @@ class VotingHelper:
     Parameters
     ----------
     start : bool
-        Start the process now (default), so that the first fine-tuning does not wait for
-        it; else at the first use.
+        Start the process now (default); else at the first use. Until it is up and has
+        imported what a job needs (:attr:`ready`, a second or two), the callers compute
+        everything themselves: a computation never waits for the process to start.
 
     Notes
     -----
@@ -131,10 +132,11 @@ class VotingHelper:
         self._closed = False
         self.jobs = 0
         self.delivered = 0
+        self._ready = None  # the new process's imports (a Future), while they run
         if start:
             with self._lock:
                 try:
-                    self._ensure().submit(_warm)  # the process and its imports, now
+                    self._ensure()
                 except (BrokenProcessPool, RuntimeError, OSError):
                     self._broken(self._pool)
 
@@ -142,7 +144,36 @@ class VotingHelper:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(1, mp_context=self._ctx, initializer=_init,
                                              initargs=(self._stopped, os.getpid()))
+            # the process and its imports, now (a second or two of one core): until they
+            # are done no job is taken, the callers compute their parts themselves
+            self._ready = self._pool.submit(_warm)
         return self._pool
+
+    @property
+    def ready(self) -> bool:
+        """Whether the process is up and has imported what a job needs (until then, and
+        after it died until a new one is, :meth:`submit` returns None)."""
+        with self._lock:
+            return (not self._closed and self._pool is not None and self._ready is not None
+                    and self._ready.done() and self._ready.exception() is None)
+
+    def wait_ready(self, timeout: float = 60.0) -> bool:
+        """Wait until :attr:`ready` (starting the process if needed); False on timeout or
+        when the helper is closed."""
+        with self._lock:
+            if self._closed:
+                return False
+            try:
+                self._ensure()
+                fut = self._ready
+            except (BrokenProcessPool, RuntimeError, OSError):
+                self._broken(self._pool)
+                return False
+        try:
+            fut.result(timeout=timeout)
+        except Exception:  # noqa: BLE001 - died, or timed out
+            return False
+        return self.ready
 
     def _broken(self, pool) -> None:
         """(Under the lock.) ``pool``'s process died: a new one at the next use, unless it
@@ -172,10 +203,12 @@ class VotingHelper:
         with self._lock:
             if self._closed:
                 return None
-            job = next(self._ids)
             pool = None
             try:
                 pool = self._ensure()
+                if not self._ready.done():  # still starting: the caller computes it now
+                    return None
+                job = next(self._ids)
                 handle = job, pool.submit(_run, job, func, args), pool
             except (BrokenProcessPool, RuntimeError, OSError):  # died, shutting down, no process
                 self._broken(pool)

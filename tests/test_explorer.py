@@ -1207,6 +1207,7 @@ def test_state_uses_the_voting_helper_after_preload():
         st.preload()
         off.preload()
         assert st.helper is not None and st.helper is shared_helper() and off.helper is None
+        assert st.helper.wait_ready()
         jobs, delivered = st.helper.jobs, st.helper.delivered
         st.request(params={"r1": 12.0})
         assert st.wait(60)

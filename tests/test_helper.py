@@ -16,6 +16,7 @@ from laav.helper import VotingHelper
 @pytest.fixture(scope="module")
 def helper():
     h = VotingHelper()
+    assert h.wait_ready()
     yield h
     h.close()
 
@@ -72,17 +73,32 @@ def test_a_closed_helper_leaves_the_work_here():
     _same(laav.Pipeline(seq, 3).result, res)
 
 
+def test_a_helper_not_ready_leaves_the_work_here():
+    """A computation never waits for the process to start: until it is ready the caller
+    computes everything itself."""
+    seq = _scene(2)
+    with VotingHelper(start=False) as h:
+        res = laav.Pipeline(seq, 3, helper=h).result  # starts the process, does not wait
+        assert h.jobs == 0 and not h.ready
+        _same(laav.Pipeline(seq, 3).result, res)
+        assert h.wait_ready() and h.ready
+        laav.Pipeline(seq, 3, helper=h)
+        assert h.jobs == h.delivered == 1
+
+
 def test_a_dead_helper_process_leaves_the_work_here():
     seq = _scene(1)
     h = VotingHelper()
     try:
+        assert h.wait_ready()
         laav.Pipeline(seq, 3, helper=h)  # the process is up and has served a job
         for pid in list(h._pool._processes):
             os.kill(pid, signal.SIGKILL)
         time.sleep(0.5)
         res = laav.Pipeline(seq, 3, seed=2, helper=h).result
         _same(laav.Pipeline(seq, 3, seed=2).result, res)
-        # and a new process serves the next call
+        # and a new process serves the next call, once up
+        assert h.wait_ready()
         jobs = h.jobs
         res = laav.Pipeline(seq, 3, seed=3, helper=h).result
         assert h.jobs == jobs + 1
@@ -188,12 +204,14 @@ def test_stopping_a_queued_job_leaves_the_running_one(helper):
 def test_a_helper_that_dies_mid_job_leaves_the_job_to_the_caller():
     seq = _scene(0)
     with VotingHelper() as h:
+        assert h.wait_ready()
         handle = h.submit(_long_job(seq))
         time.sleep(1.0)
         for pid in list(h._pool._processes):
             os.kill(pid, signal.SIGKILL)
         assert h.result(handle, lambda: None) is None
-        # a new process serves the next job
+        # a new process serves the next job, once up
+        assert h.wait_ready()
         res = laav.Pipeline(seq, 3, seed=2, helper=h).result
         assert h.delivered == 1
         _same(laav.Pipeline(seq, 3, seed=2).result, res)
@@ -204,6 +222,7 @@ def test_a_helper_whose_process_keeps_dying_closes_itself():
     with VotingHelper() as h:
         with pytest.warns(RuntimeWarning, match="died 3 times"):
             for _ in range(3):
+                assert h.wait_ready()
                 handle = h.submit(_long_job(seq))
                 assert handle is not None
                 time.sleep(0.5)
