@@ -51,16 +51,26 @@ _helper_lock = threading.Lock()
 _helper: list = []  # the server's one VotingHelper, once started (empty: not yet)
 
 
+#: Fewest logical cores for the voting helper by default: the server, the helper and the
+#: browser each need one. On the 2-core development VM the helper took 30-50 ms off a
+#: radius move's computation but nothing off what the browser shows, which then shares the
+#: second core (docs/bench/explorer_browser_latency_2026-12-03c.md).
+HELPER_MIN_CORES = 4
+
+
 def shared_helper():
     """The server's :class:`laav.helper.VotingHelper` (one process for every session),
-    started at the first call; None when ``LAAV_VOTING_HELPER=0`` or it cannot start.
-    Speed only: LAAV's own voting trials run half in it, the labels are the same."""
+    started at the first call; None when it cannot start, with ``LAAV_VOTING_HELPER=0``,
+    and, unless ``LAAV_VOTING_HELPER=1``, on machines of fewer than
+    :data:`HELPER_MIN_CORES` logical cores. Speed only: LAAV's own voting trials run half
+    in it, the labels are the same."""
     import atexit
     import os
 
     from laav.helper import VotingHelper
 
-    if os.environ.get("LAAV_VOTING_HELPER", "1") == "0":
+    want = os.environ.get("LAAV_VOTING_HELPER", "")
+    if want == "0" or (want != "1" and (os.cpu_count() or 1) < HELPER_MIN_CORES):
         return None
     with _helper_lock:
         if not _helper:

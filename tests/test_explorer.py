@@ -1192,11 +1192,13 @@ def test_rv_card_says_when_the_refinement_and_reassignment_were_dropped():
             in rv_summary(big, None))
 
 
-def test_state_uses_the_voting_helper_after_preload():
+def test_state_uses_the_voting_helper_after_preload(monkeypatch):
     """Once the page is complete (preload), the session's pipeline runs half of LAAV's own
     trials in the server's voting helper; the labels stay those of laav.segment."""
     from explorer.state import plain_rv_of, shared_helper
     from laav import synthetic
+
+    monkeypatch.setenv("LAAV_VOTING_HELPER", "1")  # (by default only on >= 4 cores)
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
     st = ExplorerState(seq, autostart=True)
@@ -1229,3 +1231,34 @@ def test_state_uses_the_voting_helper_after_preload():
     finally:
         st.close()
         off.close()
+
+
+def test_the_voting_helper_by_default_only_with_a_core_for_each(monkeypatch):
+    """The server, the helper and the browser each need a core: by default no helper below
+    4 cores (on 2 the browser shares the helper's core); LAAV_VOTING_HELPER overrides."""
+    import os
+
+    import explorer.state as S
+
+    monkeypatch.setattr(S, "_helper", [])  # no helper started yet in this process
+    monkeypatch.delenv("LAAV_VOTING_HELPER", raising=False)
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    assert S.shared_helper() is None
+    monkeypatch.setattr(S, "_helper", [])
+    monkeypatch.setattr(os, "cpu_count", lambda: 8)
+    helper = S.shared_helper()
+    try:
+        assert helper is not None and S.shared_helper() is helper
+    finally:
+        helper.close()
+    monkeypatch.setattr(S, "_helper", [])
+    monkeypatch.setenv("LAAV_VOTING_HELPER", "0")
+    assert S.shared_helper() is None
+    monkeypatch.setattr(S, "_helper", [])
+    monkeypatch.setenv("LAAV_VOTING_HELPER", "1")
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    helper = S.shared_helper()
+    try:
+        assert helper is not None
+    finally:
+        helper.close()
