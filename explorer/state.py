@@ -47,6 +47,10 @@ from laav.voting import NOT_PLAIN_FIELDS, SELECTION_FIELDS
 
 from .views import COLOR_MODES, align_labels, stage_numbers
 
+__all__ = ["ExplorerState", "Superseded", "Cancelled", "Settings", "RV_FIELDS", "Change", "describe_change",
+           "non_defaults", "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of",
+           "settings_from_json", "parse_value"]
+
 _helper_lock = threading.Lock()
 _helper: list = []  # the server's one VotingHelper, once started (empty: not yet)
 
@@ -83,9 +87,6 @@ def shared_helper():
             _helper.append(helper)
         return _helper[0]
 
-__all__ = ["ExplorerState", "Superseded", "Cancelled", "Settings", "RV_FIELDS", "Change", "describe_change",
-           "non_defaults", "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of",
-           "settings_from_json", "parse_value"]
 
 #: Raised in the worker when a newer request made its computation useless
 #: (:mod:`laav._interrupt`: between stages and once per voting iteration, never in clean-up code).
@@ -764,18 +765,16 @@ class ExplorerState:
                         self._show_first_preview(gen, seq, target)
                         warm = self._warm_pipeline(seq, pipeline)
                         if warm is not None:  # computed elsewhere: only what differs is rerun
-                            pipe, before = warm, warm.result
-                            pipe.helper, pipe.prefetch_votes = self.helper, True
+                            pipe, before = self._with_helper(warm), warm.result
                             t0 = time.perf_counter()  # (the wait is not this computation's)
                             result = pipe.update(**target.update_kwargs(),
                                                  preview=self._previewer(gen, seq, target))
                             if result is before:  # as computed elsewhere: its own stage times
                                 t0 -= sum(result.timings.values())
                         else:
-                            pipe = Pipeline(seq, target.n_motions, target.params, target.seed,
-                                            preview=self._previewer(gen, seq, target),
-                                            helper=self.helper)
-                            pipe.prefetch_votes = True  # (for its next updates)
+                            pipe = self._with_helper(Pipeline(
+                                seq, target.n_motions, target.params, target.seed,
+                                preview=self._previewer(gen, seq, target), helper=self.helper))
                             result = pipe.result
                     else:
                         entry = self._take_ahead(seq, target)
@@ -786,8 +785,7 @@ class ExplorerState:
                             with self._lock:
                                 self._ahead_results.append((result, how))
                         else:
-                            pipe = self._pipe
-                            pipe.helper, pipe.prefetch_votes = self.helper, True
+                            pipe = self._with_helper(self._pipe)
                             result = pipe.update(**target.update_kwargs(),
                                                  preview=self._previewer(gen, seq, target))
                     _fit_drawn_votes(result)
@@ -1071,6 +1069,12 @@ class ExplorerState:
         if key == self._rv_key and self.on_plain_rv is not None:
             self.on_plain_rv(voting, key)
 
+    def _with_helper(self, pipe: Pipeline) -> Pipeline:
+        """``pipe``, its next computations sped up by the session's voting helper (if any):
+        half of LAAV's own trials and the votes card 3 draws fitted there."""
+        pipe.helper, pipe.prefetch_votes = self.helper, self.helper is not None
+        return pipe
+
     def _plain_rv_of(self, seq: Sequence, s: Settings) -> laav.Voting:
         """(Plain RV's worker.) :func:`plain_rv_of`, in the voting helper's process when there
         is one (the same labels): here it would hold this process's interpreter lock while
@@ -1078,17 +1082,8 @@ class ExplorerState:
         helper = self.helper
         handle = None if helper is None else helper.submit_call(
             laav.random_voting, seq, s.n_motions, s.params, s.seed)
-        if handle is not None:
-            try:
-                voting = helper.result(handle, check_interrupt)
-            except Interrupted:
-                raise
-            except Exception:  # (e.g. not picklable): computed here, as without a helper
-                traceback.print_exc()
-                voting = None
-            if voting is not None:
-                return voting
-        return plain_rv_of(seq, s)
+        voting = None if handle is None else helper.result(handle, check_interrupt)
+        return plain_rv_of(seq, s) if voting is None else voting
 
     def _keep_plain_rv(self, key, voting) -> None:
         """Cache plain RV's run under ``key`` (the 16 latest kept)."""

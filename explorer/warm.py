@@ -45,7 +45,6 @@ def pipeline_from_state(data: bytes, seq: laav.Sequence) -> laav.Pipeline:
     pipe.seq = seq
     pipe._lock = threading.Lock()
     pipe.helper = None
-    vars(pipe).setdefault("prefetch_votes", False)
     missing = {"params", "n_motions", "seed", "result", "_stages"} - set(vars(pipe))
     if missing:  # laav.Pipeline changed its attributes: not usable, compute in-process
         raise ValueError(f"pipeline state without {sorted(missing)}")

@@ -219,11 +219,10 @@ class VotingHelper:
     def result(self, handle: tuple, check):
         """The value of the job of ``handle``, waiting for it; ``check()`` is called while
         waiting (the caller's own stop request: it may raise, and the helper's job then
-        stops at its next check). None when the helper could not deliver it (its process
-        died, the helper was closed, or the job was stopped by someone else): the caller
-        computes it itself. Another exception of the job is raised here."""
-        from ._interrupt import Interrupted
-
+        stops at its next check). None whenever the helper did not deliver it: its process
+        died, the helper was closed, the job was stopped by someone else or failed (e.g.
+        arguments that do not pickle); the caller then computes it itself, and an error of
+        the computation itself is raised there, as without a helper."""
         job, fut, pool = handle
         while True:
             try:
@@ -236,7 +235,7 @@ class VotingHelper:
                     if not self._closed:
                         self._broken(pool)
                 return None
-            except Interrupted:  # stopped, and not by this caller (its check() did not raise)
+            except Exception:  # noqa: BLE001 - stopped elsewhere, or failed: the caller computes it
                 return None
             try:
                 check()

@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._interrupt import Interrupted
 from ._interrupt import check as check_interrupt
 from ._random import resolve_seed
 from ._sequence import Sequence, check_degenerate, warn_missing_motions
@@ -339,12 +338,7 @@ class Pipeline:
         if votes is None:
             return
         fits, handle = votes
-        try:
-            out = self.helper.result(handle, check_interrupt)
-        except Interrupted:
-            raise
-        except Exception:  # noqa: BLE001 - fitted here when read, as without a helper
-            return
+        out = self.helper.result(handle, check_interrupt)
         if out is not None:
             fits.put(out)
 

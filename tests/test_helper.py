@@ -254,3 +254,11 @@ def test_prefetched_votes_are_those_fitted_here(helper):
         va, vb = a.coarse.vote_samples, b.coarse.vote_samples
         for name in ("frames", "fundamental", "points", "distance"):
             np.testing.assert_array_equal(getattr(va, name), getattr(vb, name))
+
+
+def test_a_job_that_fails_there_is_computed_here(helper):
+    """A job the helper cannot run (here: a function that does not pickle) gives None, and
+    the caller computes it: no error of the helper's own reaches the caller."""
+    handle = helper.submit_call(lambda: 1)
+    assert handle is not None
+    assert helper.result(handle, lambda: None) is None
