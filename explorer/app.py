@@ -168,6 +168,8 @@ class _Template(pn.template.BootstrapTemplate):
         from bokeh.models import CustomJS
 
         doc.js_on_event("document_ready", CustomJS(code=JS_THROTTLE_FILEPOND))
+        for script in getattr(self, "ready_scripts", ()):  # the app's own (Explorer.template)
+            doc.js_on_event("document_ready", script)
         return doc
 
 
@@ -433,10 +435,12 @@ class Explorer:
         # and off around every change from the page (two more messages per move, each making
         # the browser lay the whole page out again; the frame player had been exempted);
         # the status line's own spinner shows a computation.
-        return _Template(
+        page = _Template(
             title=title, sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
             header=[self.status_bar.header_name], main=[main], sidebar_width=SIDE_W + 35,
             header_background="#2c4a66", busy_indicator=None)
+        page.ready_scripts = [self.live.clip_script()]  # overlay glyphs clipped to their frame
+        return page
 
     def _page_loaded(self) -> None:
         """(Document thread.) The page is on screen: the later cards follow the first result

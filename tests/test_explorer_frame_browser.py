@@ -186,3 +186,50 @@ def test_the_page_and_the_server_agree_on_an_incomplete_sequence():
                       page=page)
         assert ex.frame == 10 and "frame 10 of" in ex.fig_frame.title.text
         assert not errors, errors
+
+
+#: The frame view's plot in page pixels (``left``, ``top``: its element) and its frame box
+#: (``x``, ``y``, ``w``, ``h``, in the plot's own pixels); with ``zoom`` its ranges are first
+#: narrowed to their middle ``zoom`` share (as the wheel zoom narrows them).
+JS_FRAME_BOX = """(zoom) => {
+  for (const m of Bokeh.documents[0].all_models)
+    if (m.type === 'Figure' && m.title && /^frame \\d+ of/.test(m.title.text)) {
+      if (zoom) for (const r of [m.x_range, m.y_range]) {
+        const v = Bokeh.index.find_one(m), s = r === m.x_range ? v.frame.x_range : v.frame.y_range;
+        const c = (s.start + s.end) / 2, h = (s.end - s.start) * zoom / 2;
+        r.setv({start: c - h, end: c + h});
+      }
+      const v = Bokeh.index.find_one(m), e = v.el.getBoundingClientRect(), b = v.frame.bbox;
+      return {left: e.left, top: e.top, x: b.x, y: b.y, w: b.width, h: b.height};
+    }
+  return null;
+}"""
+
+
+def test_zoomed_points_are_clipped_to_the_frame_in_chromium(tmp_path):
+    """The frame view draws its points, trails and atoms on its overlay canvas (repainted
+    alone on a frame move: :meth:`explorer.cards.live.LiveFrames.repaint_alone`), which bokeh
+    clips to the plot's frame only when asked (:data:`explorer.cards.live.JS_CLIP_OVERLAYS`).
+    Zoomed in to the middle third, most points lie outside the frame: the screenshot's strips
+    beside the frame (the axes: black and grey text and lines only) hold no motion colour, and
+    the frame itself still does (the points inside are drawn)."""
+    from PIL import Image
+
+    seq = _sequence()
+    with _served(seq, viser=False) as (port, browser, created):
+        page, errors, _ = _open_with_result(browser, port)
+        box = page.evaluate(JS_FRAME_BOX, 1 / 3)
+        page.wait_for_timeout(500)  # repainted at the new ranges
+        shot = tmp_path / "zoomed.png"
+        page.screenshot(path=str(shot))
+        assert not errors, errors
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    x0, y0 = round(box["left"] + box["x"]), round(box["top"] + box["y"])
+    x1, y1 = x0 + round(box["w"]), y0 + round(box["h"])
+    coloured = lambda a: int(((a.max(-1) - a.min(-1)) > 80).sum())  # noqa: E731 (saturated pixels)
+    left = img[y0:y1, round(box["left"]) + 2:x0 - 3]  # the y axis beside the frame
+    below = img[y1 + 3:y1 + 30, x0:x1]  # the x axis under it
+    above = img[max(0, y0 - 30):y0 - 3, x0:x1]  # the title's band
+    assert coloured(img[y0:y1, x0:x1]) > 200, "no points drawn inside the zoomed frame"
+    assert (coloured(left), coloured(below), coloured(above)) == (0, 0, 0), \
+        "points drawn outside the plot's frame"

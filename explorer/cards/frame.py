@@ -16,7 +16,7 @@ from bokeh.palettes import Greys256
 
 from .. import views as V
 from .base import Host, Markdown, card, fit_image_figure, image_figure, move_legend, set_data
-from .live import LiveFrames, repaint_alone
+from .live import LiveFrames
 
 EMPTY_POINTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "index": []}
 #: The layers a checkbox shows or hides, in the sidebar's order.
@@ -82,7 +82,7 @@ class FrameView:
         self._item_changed = items.get("changed motion")
 
         # the views the page makes at each frame (explorer/cards/live.py)
-        repaint_alone(f, [self.r_trails, self.r_r2, self.r_r1, self.r_points, self.r_unassigned,
+        self.live.repaint_alone(f, [self.r_trails, self.r_r2, self.r_r1, self.r_points, self.r_unassigned,
                           self.r_changed, self.r_errors])
         for name in self.specs:
             self.live.add("frame_" + name, getattr(self, "src_" + name), self.specs[name])

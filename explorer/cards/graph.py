@@ -12,7 +12,7 @@ from bokeh.palettes import RdBu11
 
 from .. import views as V
 from .base import Host, Markdown, card, fit_image_figure, image_figure, move_legend, set_data
-from .live import LiveFrames, repaint_alone
+from .live import LiveFrames
 
 #: Atom ids are written beside the nodes up to this many atoms (every Hopkins155 sequence:
 #: at most 146 with the defaults). Above it (563 atoms at 5,000 tracks) they overlap into a
@@ -77,7 +77,7 @@ class GraphView:
 
         # the views the page makes at each frame (explorer/cards/live.py)
         live_srcs = (self.src_nodes, self.src_joined, self.src_cut, self.src_step, self.src_pair)
-        repaint_alone(g, [r for r in g.renderers if getattr(r, "data_source", None) in live_srcs])
+        self.live.repaint_alone(g, [r for r in g.renderers if getattr(r, "data_source", None) in live_srcs])
         for name, src in (("nodes", self.src_nodes), ("joined", self.src_joined), ("cut", self.src_cut),
                           ("step_edge", self.src_step), ("pair", self.src_pair)):
             self.live.add("graph_" + name, src, self.specs[name])

@@ -35,6 +35,22 @@ from .base import set_data
 #: before; for measurements).
 LIVE_MAX_ENTRIES = 1_000_000
 
+#: The page's side, once per page: glyph renderers on the overlay level (:meth:`LiveFrames.repaint_alone`)
+#: clipped to the plot's frame. Bokeh clips every renderer of the image, underlay and glyph levels
+#: to the frame, but on the overlay canvas only those whose view asks for it (``needs_clip``),
+#: which a glyph renderer's does not: zoomed or panned, their points were drawn over the axes.
+#: The getter is set on the glyph renderers' view class and answers True for the overlay level
+#: only (other levels as before). ``clip``: a list holding one such renderer, or empty.
+JS_CLIP_OVERLAYS = r"""
+for (const r of clip) {
+  const proto = r.default_view ? r.default_view.prototype : null;
+  if (proto && !Object.prototype.hasOwnProperty.call(proto, 'needs_clip'))
+    Object.defineProperty(proto, 'needs_clip', {configurable: true,
+                                                get() { return this.model.level === 'overlay'; }});
+  break;
+}
+"""
+
 #: The page's side: make every registered view at the frame shown. ``cb_data.frame`` is the
 #: player's value when the player moved; after a draw of the server (``meta`` changed) the
 #: page's last frame, else the server's.
@@ -177,17 +193,6 @@ def _field_of(spec) -> str | None:
     return getattr(spec, "field", None)
 
 
-def repaint_alone(fig, renderers) -> None:
-    """Draw ``renderers`` and ``fig``'s title on the figure's overlay canvas: bokeh repaints
-    only that layer when they change (a frame move), not the axes, grid, legend and colour
-    bar of its primary canvas, which were most of a frame move's painting (measured:
-    docs/bench/explorer_browser_latency.md). They are still clipped to the plot's frame and
-    drawn in their order, over the image and grid as before."""
-    for r in renderers:
-        r.level = "overlay"
-    fig.title.level = "overlay"
-
-
 class LiveFrames:
     """The browser's copy of the views that follow the frame, and the script making them.
 
@@ -210,6 +215,7 @@ class LiveFrames:
         self.views: dict[str, tuple] = {}  # name -> (shown source, template source, spec)
         self.texts: dict[str, tuple] = {}  # key -> (model, attribute, as a value spec)
         self.derive: CustomJS | None = None
+        self.overlays: list = []  # renderers drawn on their figure's overlay canvas
         self.enabled = False  # the tracks of the sequence shown are in the page
         self._seq = None  # the sequence whose tracks were set
         self._atoms = None  # the graph whose atom track was set
@@ -222,6 +228,23 @@ class LiveFrames:
         self._changed = True
 
     # ------------------------------------------------------------------ building
+    def repaint_alone(self, fig, renderers) -> None:
+        """Draw ``renderers`` and ``fig``'s title on the figure's overlay canvas: bokeh repaints
+        only that layer when they change (a frame move), not the axes, grid, legend and colour
+        bar of its primary canvas, which were most of a frame move's painting (measured:
+        docs/bench/explorer_browser_latency.md). They are drawn in their order, over the image
+        and grid as before, and clipped to the plot's frame by the page (:data:`JS_CLIP_OVERLAYS`,
+        run by :meth:`clip_script` when the document is ready and by every derive)."""
+        for r in renderers:
+            r.level = "overlay"
+        fig.title.level = "overlay"
+        self.overlays.extend(renderers)
+
+    def clip_script(self) -> CustomJS:
+        """The script that has the page clip the overlay glyphs to their plot's frame
+        (:data:`JS_CLIP_OVERLAYS`), for the document's ``document_ready`` event."""
+        return CustomJS(args={"clip": self.overlays[:1]}, code=JS_CLIP_OVERLAYS)
+
     def add(self, name: str, src: ColumnDataSource, spec: dict) -> None:
         """Make ``src`` in the page from the template ``name`` (a word: letters, digits, _)
         by ``spec`` (:func:`explorer.views.frame_specs`)."""
@@ -282,8 +305,9 @@ class LiveFrames:
         self.derive = CustomJS(
             args={"meta": self.meta, "tracks": dict(self.tracks),
                   "views": [[n, src, tsrc, spec] for n, (src, tsrc, spec) in self.views.items()],
-                  "texts": [[k, m, a, w, o] for k, (m, a, w, o) in self.texts.items()]},
-            code=JS_DERIVE)
+                  "texts": [[k, m, a, w, o] for k, (m, a, w, o) in self.texts.items()],
+                  "clip": self.overlays[:1]},
+            code=JS_CLIP_OVERLAYS + JS_DERIVE)
         self.meta.js_on_change("data", self.derive)
         player.jscallback(value="derive.execute(cb_obj, {frame: cb_obj.value});",
                           args={"derive": self.derive})
