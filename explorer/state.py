@@ -560,8 +560,11 @@ class ExplorerState:
         self._pending = 0
         self._quiet_since = time.monotonic()  # the last job's end or touch() (AHEAD_IDLE_S)
         self._idle = threading.Condition(self._lock)
-        self._worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-pipeline")
-        self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix="laav-explore-plain-rv")
+        #: the workers' threads are named after this state (close() finds them by name: an
+        #: executor starts its thread within submit, so a thread is listed once it exists)
+        self._thread_tag = f"laav-explore-{id(self):x}"
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-pipeline")
+        self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-plain-rv")
         # the pipeline's first-use imports (~1 s), ahead of the first job: they overlap the
         # page's loading, and stage timings shown to the user do not include them. With a
         # pipeline computed elsewhere the first job needs none of them: the app asks for
@@ -1100,6 +1103,11 @@ class ExplorerState:
             time.sleep(0.02)
         return None
 
+    def threads(self) -> list[threading.Thread]:
+        """The worker threads of this state still running (the pipeline's, plain RV's)."""
+        tag = self._thread_tag + "-"
+        return [t for t in threading.enumerate() if t.name.startswith(tag)]
+
     def close(self, timeout: float | None = 10.0) -> bool:
         """Stop: queued jobs are dropped, the running ones stop at their next check (every
         stage checks between steps), and their threads are joined for up to ``timeout``
@@ -1115,8 +1123,7 @@ class ExplorerState:
         if timeout is None:
             return False
         deadline = time.monotonic() + timeout
-        # (the executors' threads: ThreadPoolExecutor keeps them in ``_threads``)
-        threads = [t for w in workers for t in list(getattr(w, "_threads", ()))]
+        threads = self.threads()
         for t in threads:
             t.join(max(0.0, deadline - time.monotonic()))
         return not any(t.is_alive() for t in threads)

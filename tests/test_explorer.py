@@ -601,8 +601,8 @@ def test_close_joins_the_workers_even_mid_computation(seq, monkeypatch):
     ex.state.request(seed=7)
     ex.state.request_plain_rv()
     assert started.wait(30)
-    threads = set(ex.state._worker._threads) | set(ex.state._rv_worker._threads)
-    assert threads
+    threads = ex.state.threads()
+    assert len(threads) == 2  # the pipeline's worker and plain RV's
     assert ex.close(timeout=5) is True
     assert not [t.name for t in threads if t.is_alive()]
 
