@@ -675,10 +675,9 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> S
     partition gives every motion 8 points. ``memo``: see :func:`merge_models` (the
     shortlist does not depend on ``lam``)."""
     assign, coding = _cached(
-        memo, ("shortlist", n_motions, params.coding_eps, params.coarse_candidates,
-               params.coding_membership),
+        memo, ("shortlist", n_motions, params.coding_eps, params.coarse_candidates),
         lambda: shortlist(stats, n_motions, params.coding_eps, params.coarse_candidates,
-                          min_count=8, membership=params.coding_membership))
+                          min_count=8))
     if assign.shape[0] == 0:
         return None
     cov = fine_pts >= 0

@@ -35,7 +35,7 @@ import numpy as np
 from .refine import trajectory_matrix
 
 __all__ = ["ModelStats", "model_stats", "coding_lengths", "best_partition", "shortlist",
-           "merge_cost", "membership_length"]
+           "merge_cost"]
 
 #: Principal directions of all trajectories the statistics are kept in.
 PROJECTION_RANK = 20
@@ -212,20 +212,8 @@ def coding_lengths_one_moved(count: float, total: np.ndarray, scatter: np.ndarra
             + n1 / 2.0 * np.log1p(np.add.reduce(t1 * t1, axis=1) / (n1 * n1 * e2)))
 
 
-def membership_length(counts) -> np.ndarray:
-    """The membership term of a partition: ``sum over groups of n log(N / n)`` nats (the
-    length of coding each point's group; 0 for an empty group), ``counts`` (..., G) the
-    groups' sizes and N their sum; (...)."""
-    n = np.asarray(counts, dtype=np.float64)
-    N = n.sum(axis=-1, keepdims=True)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(n > 0, n * np.log(N / np.where(n > 0, n, 1.0)), 0.0)
-    return t.sum(axis=-1)
-
-
 def labelling_coding_length(points: np.ndarray, labels: np.ndarray, n_groups: int,
-                            eps: float, projected: np.ndarray | None = None,
-                            membership: float = 0.0) -> float:
+                            eps: float, projected: np.ndarray | None = None) -> float:
     """Lossy coding length (nats) of the trajectories grouped by ``labels``: the sum of
     :func:`coding_lengths` over the groups (distortion ``eps`` px), without a membership
     term, in the principal directions of all trajectories (:func:`model_stats`).
@@ -233,17 +221,13 @@ def labelling_coding_length(points: np.ndarray, labels: np.ndarray, n_groups: in
     ``points`` (F, P, 2), ``labels`` (P,) in ``0 .. n_groups-1``. LAAV's own chain scores
     whole labellings with it (:func:`laav.voting.joint_score`), the motion count its
     candidates (per point, :mod:`laav.motions`). ``projected``: the points'
-    :func:`principal_trajectories` (K, P), when the caller scores many labellings of them.
-    ``membership``: the weight of :func:`membership_length` added (0: none)."""
+    :func:`principal_trajectories` (K, P), when the caller scores many labellings of them."""
     labels = np.asarray(labels)
     st = (model_stats(points, labels, n_groups) if projected is None
           else stats_of(projected, labels, n_groups, 2 * points.shape[0]))
     # summed in sorted order: the same partition numbered otherwise gets the same length,
     # bit for bit (LAAV's own chain keeps the first of equal scores)
-    length = float(np.sort(coding_lengths(st.count, st.total, st.scatter, st.dim, eps)).sum())
-    if membership:
-        length += membership * float(membership_length(np.sort(st.count)))
-    return length
+    return float(np.sort(coding_lengths(st.count, st.total, st.scatter, st.dim, eps)).sum())
 
 
 def merge_cost(stats: ModelStats, eps: float) -> np.ndarray:
@@ -378,7 +362,7 @@ def _n_least(values: np.ndarray, n: int) -> np.ndarray:
 
 
 def shortlist(stats: ModelStats, n_groups: int, eps: float, n_best: int,
-              min_count: int = 1, membership: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+              min_count: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """The ``n_best`` partitions of least total coding length whose groups all hold at
     least ``min_count`` points (the joint merge of :func:`laav.coarse.merge_models`
     re-ranks them by their epipolar fit).
@@ -393,8 +377,7 @@ def shortlist(stats: ModelStats, n_groups: int, eps: float, n_best: int,
         their first model), by increasing total length; K = 0 when no partition has
         ``min_count`` points in every group.
     total : ndarray of shape (K,)
-        Their total coding lengths (nats), plus ``membership`` times their
-        :func:`membership_length` (the groups' point counts), by which they are ranked.
+        Their total coding lengths (nats).
     """
     n, C = stats.n_models, int(n_groups)
     if n <= C:
@@ -417,8 +400,6 @@ def shortlist(stats: ModelStats, n_groups: int, eps: float, n_best: int,
         A = np.unique(np.array(rows, dtype=np.int64), axis=0)
         tot = np.array([_total(stats, a, C, eps) for a in A])
         size = np.stack([(A == c) @ stats.count for c in range(C)], axis=1)
-    if membership:  # (the groups' sizes in sorted order: the same sum however numbered)
-        tot = tot + membership * membership_length(np.sort(size, axis=1))
     ok = np.flatnonzero(size.min(axis=1) >= min_count)
     order = ok[_n_least(tot[ok], n_best)]
     return np.array(A[order], dtype=np.int64).reshape(-1, n), tot[order]

@@ -96,8 +96,7 @@ def _score_and_distances(points, labels, n_motions, params, projected=None,
     if np.bincount(labels, minlength=n_motions).min() < MIN_MOTION_POINTS:
         return float("inf"), None
     u2 = unit2(params)
-    coding = labelling_coding_length(points, labels, n_motions, params.coding_eps, projected,
-                                     membership=params.coding_membership)
+    coding = labelling_coding_length(points, labels, n_motions, params.coding_eps, projected)
     D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], JOINT_PAIRS), u2,
                          fits=fits)
     own = D[labels, np.arange(labels.size)]
@@ -107,13 +106,12 @@ def _score_and_distances(points, labels, n_motions, params, projected=None,
 
 
 def _move_gains(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, eps: float,
-                epi: np.ndarray, weight: float, membership: float = 0.0) -> np.ndarray:
+                epi: np.ndarray, weight: float) -> np.ndarray:
     """(P, C): the joint score's change when each point alone moves to each motion (``inf``
     for its own motion and for points of a motion at the 8-point floor). ``projected``
     (K, P): the trajectories in the coding length's principal directions
     (:func:`laav.coding.principal_trajectories`); ``epi`` (C, P): each point's
-    ``log(1 + d)`` under each motion's matrices; ``membership``: the weight of the
-    membership term (:func:`laav.coding.membership_length`)."""
+    ``log(1 + d)`` under each motion's matrices."""
     from .coding import coding_lengths, coding_lengths_one_moved, stats_of
 
     P = labels.size
@@ -132,15 +130,6 @@ def _move_gains(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, eps
     for b in range(C):
         into = coding_lengths_one_moved(count[b], total[b], scatter[b], X, dim, eps, +1)
         gain[:, b] = out + (into - now[b]) + weight * (epi[b] - epi[a, np.arange(P)])
-    if membership:  # n log(N / n) of the motion left and of the one joined, before and after
-        def f(n):
-            n = np.asarray(n, dtype=np.float64)
-            return np.where(n > 0, n * np.log(P / np.maximum(n, 1.0)), 0.0)
-
-        n = count.astype(np.float64)
-        left = f(n - 1) - f(n)  # (C,) the change of the motion a point leaves
-        joined = f(n + 1) - f(n)  # (C,) the change of the motion it joins
-        gain += membership * (left[a][:, None] + joined[None, :])
     gain[np.arange(P), a] = np.inf
     gain[count[a] <= MIN_MOTION_POINTS] = np.inf
     return gain
@@ -210,8 +199,7 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
     L = start.copy()
     for _ in range(max_sweeps):
         epi = np.log1p(D / u2)  # (C, P): the matrices of L's motions, as its score took them
-        gain = _move_gains(proj, L, C, 2 * F, params.coding_eps, epi, params.coarse_epipolar_weight,
-                           params.coding_membership)
+        gain = _move_gains(proj, L, C, 2 * F, params.coding_eps, epi, params.coarse_epipolar_weight)
         gain = np.nan_to_num(gain, nan=np.inf, posinf=np.inf)  # a NaN is no move
         to = np.argmin(gain, axis=1)
         g = gain[np.arange(L.size), to]

@@ -88,14 +88,6 @@ class LaavParams:
     coding_eps : float
         Distortion (px) of the coding length (``coarse_merge="coding"`` or ``"joint"``, and
         the selection's joint score, ``rv_select="joint"`` or ``"laav"``).
-    coding_membership : float
-        Weight of the membership term of the joint score (ours; 0 = off): ``sum over
-        motions of n log(N / n)`` nats, ``n`` a motion's points and ``N`` all points scored,
-        the length of coding which motion each point belongs to (Ma et al.'s segmentation
-        criterion adds it with weight 1). Added to the coding length in the joint merge's
-        ranking (``coarse_merge="joint"``, over the points in atoms) and in the joint score
-        of the fine-tuning's selection and descent (``rv_select="joint"`` or ``"laav"``).
-        A split of one large motion in two costs about ``n log 2``.
     coarse_candidates : int
         ``coarse_merge="joint"``: how many partitions of least coding length (each motion
         with 8 points or more) are re-ranked by their epipolar fit.
@@ -300,7 +292,6 @@ class LaavParams:
     fine_per_motion: int | None = None
     coarse_merge: str = "auto"
     coding_eps: float = 10.0
-    coding_membership: float = 0.0
     coarse_candidates: int = 10
     coarse_epipolar_weight: float = 2.0
     lam: float = 2.0
@@ -519,7 +510,6 @@ _BOUNDS = (
     ("fine_per_motion", "int|None", 1, 100),
     ("coarse_merge", "choice", ("auto", "coding", "epipolar", "joint"), None),
     ("coding_eps", "float>", 0, _BIG),
-    ("coding_membership", "float", 0, 100),
     ("coarse_candidates", "int", 1, 1000),
     ("coarse_epipolar_weight", "float", 0, _BIG),
     ("lam", "float>", 0, _BIG_STRENGTH),
@@ -588,7 +578,7 @@ STAGE_PARAMS: dict[str, frozenset] = {
                         "atom_frames", "noise_adaptive"}),
     "graph": frozenset({"graph_neighbors", "edge_scale", "cut_prior"}),
     "multicut": frozenset({"fine_models", "fine_per_motion"}),
-    "coarse": frozenset({"coarse_merge", "coding_eps", "coding_membership", "coarse_candidates",
+    "coarse": frozenset({"coarse_merge", "coding_eps", "coarse_candidates",
                          "coarse_epipolar_weight", "lam", "coarse_frames", "coarse_samples",
                          "motion_weight", "pooled_trials",
                          "pairwise_weight", "rv_max_points"}),

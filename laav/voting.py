@@ -91,7 +91,7 @@ _ARBITRATE_ABOVE = 0.05
 
 #: Fields outside ``rv_*`` that the fine-tuning reads: the joint score's (the selection of
 #: ``rv_select="joint"`` and ``"laav"``). A memo of voting results must key on them too.
-SELECTION_FIELDS = ("coarse_epipolar_weight", "coding_eps", "coding_membership")
+SELECTION_FIELDS = ("coarse_epipolar_weight", "coding_eps")
 #: ``rv_*`` fields that plain Random Voting's runs and their polished candidates do not read
 #: (LAAV's fine-tuning does): a cache of plain RV may leave them out of its key.
 NOT_PLAIN_FIELDS = ("rv_coarse_candidate", "rv_descent", "rv_select_descent", "rv_missing_trials",

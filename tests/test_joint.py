@@ -25,22 +25,20 @@ def swapped(labels, share, C, seed=0):
     return out
 
 
-@pytest.mark.parametrize("membership", [0.0, 1.0])
-def test_move_gains_are_the_score_change_of_each_single_move(membership):
+def test_move_gains_are_the_score_change_of_each_single_move():
     """Every point's gain for every other motion, against the joint score's parts computed
-    directly (the coding length of the whole relabelled labelling, with its membership term
-    when weighted; the epipolar term with the motions' matrices of the start held fixed, as
-    a sweep holds them)."""
+    directly (the coding length of the whole relabelled labelling; the epipolar term with
+    the motions' matrices of the start held fixed, as a sweep holds them)."""
     seq = scene(3)
     C = 3
-    p = LaavParams(coding_membership=membership)
+    p = LaavParams()
     L = swapped(seq.labels, 0.05, C, seed=1)
     F = seq.n_frames
     u2 = unit2(p)
     epi = np.log1p(motion_distances(seq.points, L, C, frame_pairs(F, 8), u2) / u2)
     gain = _move_gains(principal_trajectories(seq.points), L, C, 2 * F, p.coding_eps, epi,
-                       p.coarse_epipolar_weight, p.coding_membership)
-    base = labelling_coding_length(seq.points, L, C, p.coding_eps, membership=membership)
+                       p.coarse_epipolar_weight)
+    base = labelling_coding_length(seq.points, L, C, p.coding_eps)
     rng = np.random.default_rng(2)
     for i in rng.choice(seq.n_points, 12, replace=False):
         for b in range(C):
@@ -49,24 +47,9 @@ def test_move_gains_are_the_score_change_of_each_single_move(membership):
                 continue
             T = L.copy()
             T[i] = b
-            direct = (labelling_coding_length(seq.points, T, C, p.coding_eps, membership=membership)
-                      - base + p.coarse_epipolar_weight * (epi[b, i] - epi[L[i], i]))
+            direct = (labelling_coding_length(seq.points, T, C, p.coding_eps) - base
+                      + p.coarse_epipolar_weight * (epi[b, i] - epi[L[i], i]))
             assert gain[i, b] == pytest.approx(direct, rel=1e-6, abs=1e-6)
-
-
-def test_membership_length_is_the_cost_of_coding_each_points_group():
-    """``sum n log(N / n)``: 0 for one group, N log 2 for two halves, N log C for C equal
-    groups, empty groups free; the joint score grows by exactly it times the weight."""
-    from laav.coding import membership_length
-
-    assert membership_length([10, 0]) == 0.0
-    assert membership_length([6, 6]) == pytest.approx(12 * np.log(2))
-    np.testing.assert_allclose(membership_length([[4, 4, 4], [12, 0, 0]]), [12 * np.log(3), 0.0])
-    seq = scene(3)
-    L = seq.labels
-    n = np.bincount(L)
-    off, on = (joint_score(seq.points, L, n.size, LaavParams(coding_membership=w)) for w in (0.0, 2.0))
-    assert on - off == pytest.approx(2.0 * float((n * np.log(L.size / n)).sum()), rel=1e-9)
 
 
 @pytest.mark.parametrize("sign", [1, -1])
