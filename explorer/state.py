@@ -26,6 +26,7 @@ result), so it never slows down the computation the user is waiting for.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import threading
 import time
@@ -467,6 +468,10 @@ def _fit_drawn_votes(result: LaavResult) -> None:
         result.coarse.vote_samples  # noqa: B018
 
 
+#: Numbers the states of this process, for their worker threads' names (ExplorerState.threads).
+_STATE_NUMBERS = itertools.count(1)
+
+
 class ExplorerState:
     """One explorer session's data and computation.
 
@@ -562,7 +567,7 @@ class ExplorerState:
         self._idle = threading.Condition(self._lock)
         #: the workers' threads are named after this state (close() finds them by name: an
         #: executor starts its thread within submit, so a thread is listed once it exists)
-        self._thread_tag = f"laav-explore-{id(self):x}"
+        self._thread_tag = f"laav-explore-state{next(_STATE_NUMBERS)}"
         self._worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-pipeline")
         self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-plain-rv")
         # the pipeline's first-use imports (~1 s), ahead of the first job: they overlap the
