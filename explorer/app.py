@@ -157,6 +157,10 @@ class _Template(pn.template.BootstrapTemplate):
     0.6 s of the 1.4 s it took on the demo, measured in-process); frozen, it walks once at
     the end: the page's HTML is served that much sooner."""
 
+    #: CustomJS scripts run when the served page's document is ready (the app's own:
+    #: :meth:`Explorer.template`)
+    ready_scripts: tuple = ()
+
     def server_doc(self, doc=None, title=None, location=True):
         # (panel's Location is kept: its template embeds it; the address is written by the
         # status bar's own box, StatusBar.address)
@@ -168,7 +172,7 @@ class _Template(pn.template.BootstrapTemplate):
         from bokeh.models import CustomJS
 
         doc.js_on_event("document_ready", CustomJS(code=JS_THROTTLE_FILEPOND))
-        for script in getattr(self, "ready_scripts", ()):  # the app's own (Explorer.template)
+        for script in self.ready_scripts:
             doc.js_on_event("document_ready", script)
         return doc
 
@@ -439,7 +443,7 @@ class Explorer:
             title=title, sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
             header=[self.status_bar.header_name], main=[main], sidebar_width=SIDE_W + 35,
             header_background="#2c4a66", busy_indicator=None)
-        page.ready_scripts = [self.live.clip_script()]  # overlay glyphs clipped to their frame
+        page.ready_scripts = (self.live.clip_script(),)  # overlay glyphs clipped to their frame
         return page
 
     def _page_loaded(self) -> None:

@@ -188,21 +188,39 @@ def test_the_page_and_the_server_agree_on_an_incomplete_sequence():
         assert not errors, errors
 
 
-#: The frame view's plot in page pixels (``left``, ``top``: its element) and its frame box
-#: (``x``, ``y``, ``w``, ``h``, in the plot's own pixels); with ``zoom`` its ranges are first
-#: narrowed to their middle ``zoom`` share (as the wheel zoom narrows them).
+#: The frame view's plot in page pixels (``left``, ``top``: its element), its frame box
+#: (``x``, ``y``, ``w``, ``h``, in the plot's own pixels) and its x range's width (``span``);
+#: with ``zoom`` its ranges are first narrowed to their middle ``zoom`` share (as the wheel
+#: zoom narrows them).
 JS_FRAME_BOX = """(zoom) => {
   for (const m of Bokeh.documents[0].all_models)
     if (m.type === 'Figure' && m.title && /^frame \\d+ of/.test(m.title.text)) {
+      const v = Bokeh.index.find_one(m);
       if (zoom) for (const r of [m.x_range, m.y_range]) {
-        const v = Bokeh.index.find_one(m), s = r === m.x_range ? v.frame.x_range : v.frame.y_range;
+        const s = r === m.x_range ? v.frame.x_range : v.frame.y_range;
         const c = (s.start + s.end) / 2, h = (s.end - s.start) * zoom / 2;
         r.setv({start: c - h, end: c + h});
       }
-      const v = Bokeh.index.find_one(m), e = v.el.getBoundingClientRect(), b = v.frame.bbox;
-      return {left: e.left, top: e.top, x: b.x, y: b.y, w: b.width, h: b.height};
+      const e = v.el.getBoundingClientRect(), b = v.frame.bbox;
+      return {left: e.left, top: e.top, x: b.x, y: b.y, w: b.width, h: b.height,
+              span: Math.abs(v.frame.x_range.end - v.frame.x_range.start)};
     }
   return null;
+}"""
+
+#: The control: the page's clipping undone (the glyph renderers' view getter of
+#: JS_CLIP_OVERLAYS deleted) and the frame view repainted; whether the getter was there.
+JS_UNCLIP = """() => {
+  let proto = null, plot = null;
+  for (const m of Bokeh.documents[0].all_models) {
+    if (proto === null && m.type === 'GlyphRenderer' && m.level === 'overlay')
+      proto = m.default_view.prototype;
+    if (m.type === 'Figure' && m.title && /^frame \\d+ of/.test(m.title.text)) plot = m;
+  }
+  const had = Object.prototype.hasOwnProperty.call(proto, 'needs_clip');
+  delete proto.needs_clip;
+  Bokeh.index.find_one(plot).request_paint();
+  return had;
 }"""
 
 
@@ -212,24 +230,35 @@ def test_zoomed_points_are_clipped_to_the_frame_in_chromium(tmp_path):
     clips to the plot's frame only when asked (:data:`explorer.cards.live.JS_CLIP_OVERLAYS`).
     Zoomed in to the middle third, most points lie outside the frame: the screenshot's strips
     beside the frame (the axes: black and grey text and lines only) hold no motion colour, and
-    the frame itself still does (the points inside are drawn)."""
+    the frame itself still does (the points inside are drawn). The control: with the page's
+    clipping undone, the same strips do hold motion colours (the test sees an unclipped
+    drawing)."""
     from PIL import Image
 
     seq = _sequence()
     with _served(seq, viser=False) as (port, browser, created):
         page, errors, _ = _open_with_result(browser, port)
+        before = page.evaluate(JS_FRAME_BOX, 0)
         box = page.evaluate(JS_FRAME_BOX, 1 / 3)
         page.wait_for_timeout(500)  # repainted at the new ranges
-        shot = tmp_path / "zoomed.png"
-        page.screenshot(path=str(shot))
+        assert page.evaluate(JS_FRAME_BOX, 0)["span"] == pytest.approx(before["span"] / 3, rel=0.01)
+        shots = [tmp_path / "zoomed.png", tmp_path / "unclipped.png"]
+        page.screenshot(path=str(shots[0]))
+        assert page.evaluate(JS_UNCLIP), "the page did not clip (no getter on the view class)"
+        page.wait_for_timeout(500)
+        page.screenshot(path=str(shots[1]))
         assert not errors, errors
-    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    clipped, unclipped = (np.asarray(Image.open(p).convert("RGB")).astype(int) for p in shots)
     x0, y0 = round(box["left"] + box["x"]), round(box["top"] + box["y"])
     x1, y1 = x0 + round(box["w"]), y0 + round(box["h"])
-    coloured = lambda a: int(((a.max(-1) - a.min(-1)) > 80).sum())  # noqa: E731 (saturated pixels)
-    left = img[y0:y1, round(box["left"]) + 2:x0 - 3]  # the y axis beside the frame
-    below = img[y1 + 3:y1 + 30, x0:x1]  # the x axis under it
-    above = img[max(0, y0 - 30):y0 - 3, x0:x1]  # the title's band
-    assert coloured(img[y0:y1, x0:x1]) > 200, "no points drawn inside the zoomed frame"
-    assert (coloured(left), coloured(below), coloured(above)) == (0, 0, 0), \
-        "points drawn outside the plot's frame"
+    assert round(box["left"]) + 2 < x0 - 3 and y0 - 30 >= 0 and y1 + 30 <= clipped.shape[0]
+
+    def outside(img):  # saturated pixels in the y axis's strip, under the frame, above it
+        strips = (img[y0:y1, round(box["left"]) + 2:x0 - 3], img[y1 + 3:y1 + 30, x0:x1],
+                  img[y0 - 30:y0 - 3, x0:x1])
+        return tuple(int(((a.max(-1) - a.min(-1)) > 80).sum()) for a in strips)
+
+    inside = clipped[y0:y1, x0:x1]
+    assert int(((inside.max(-1) - inside.min(-1)) > 80).sum()) > 200, "no points drawn inside"
+    assert outside(clipped) == (0, 0, 0), "points drawn outside the plot's frame"
+    assert sum(outside(unclipped)) > 50, "the control: unclipped points not seen outside the frame"

@@ -82,8 +82,8 @@ class FrameView:
         self._item_changed = items.get("changed motion")
 
         # the views the page makes at each frame (explorer/cards/live.py)
-        self.live.repaint_alone(f, [self.r_trails, self.r_r2, self.r_r1, self.r_points, self.r_unassigned,
-                          self.r_changed, self.r_errors])
+        self.live.repaint_alone(f, [self.r_trails, self.r_r2, self.r_r1, self.r_points,
+                                    self.r_unassigned, self.r_changed, self.r_errors])
         for name in self.specs:
             self.live.add("frame_" + name, getattr(self, "src_" + name), self.specs[name])
         self.live.detach_legend(f)

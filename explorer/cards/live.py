@@ -40,13 +40,22 @@ LIVE_MAX_ENTRIES = 1_000_000
 #: to the frame, but on the overlay canvas only those whose view asks for it (``needs_clip``),
 #: which a glyph renderer's does not: zoomed or panned, their points were drawn over the axes.
 #: The getter is set on the glyph renderers' view class and answers True for the overlay level
-#: only (other levels as before). ``clip``: a list holding one such renderer, or empty.
+#: only (other levels as before); the overlay glyphs already drawn are then drawn again.
+#: ``clip``: a list holding one such renderer, or empty. Run when the document is ready (a
+#: served page), by every derive, and when the figure's range changes (a zoom before either).
 JS_CLIP_OVERLAYS = r"""
 for (const r of clip) {
   const proto = r.default_view ? r.default_view.prototype : null;
-  if (proto && !Object.prototype.hasOwnProperty.call(proto, 'needs_clip'))
+  if (proto && !Object.prototype.hasOwnProperty.call(proto, 'needs_clip')) {
     Object.defineProperty(proto, 'needs_clip', {configurable: true,
                                                 get() { return this.model.level === 'overlay'; }});
+    const doc = r.document, index = window.Bokeh ? Bokeh.index : null;
+    if (doc && index) for (const m of doc.all_models) {
+      if (m.level !== 'overlay' || m.default_view !== r.default_view) continue;
+      const v = index.find_one(m);
+      if (v) v.request_paint();
+    }
+  }
   break;
 }
 """
@@ -239,6 +248,10 @@ class LiveFrames:
             r.level = "overlay"
         fig.title.level = "overlay"
         self.overlays.extend(renderers)
+        if renderers:  # a zoom or pan before the document is ready or a derive ran (notebooks)
+            clip = CustomJS(args={"clip": list(renderers[:1])}, code=JS_CLIP_OVERLAYS)
+            for rng in (fig.x_range, fig.y_range):
+                rng.js_on_change("start", clip)
 
     def clip_script(self) -> CustomJS:
         """The script that has the page clip the overlay glyphs to their plot's frame
