@@ -35,7 +35,9 @@ class CoarseView:
         z.yaxis.axis_label = "fine model → motion"
         z.grid.visible = False
         z.add_layout(ColorBar(color_mapper=self.z_mapper, width=8, padding=2), "right")
-        self.merge_md = Markdown("", width=340, margin=(0, 6))
+        # the tables take the width the heat map leaves (at least 340 px; below it when narrower)
+        self.merge_md = Markdown("", min_width=340, sizing_mode="stretch_width", margin=(0, 6),
+                                 styles={"flex": "1 1 340px"})
         self.epipolar = EpipolarPanel(host, extent)
         self.card = card("3 · Fine-to-coarse: fine models merged into motions",
                          flex(pn.pane.Bokeh(self.fig_z), self.merge_md, self.epipolar.layout))
