@@ -63,4 +63,3 @@ def __getattr__(name: str):
 
         return VotingHelper
     raise AttributeError(f"module 'laav' has no attribute {name!r}")
-
