@@ -133,6 +133,8 @@ class VotingHelper:
         self.jobs = 0
         self.delivered = 0
         self._ready = None  # the new process's imports (a Future), while they run
+        self._unfinished: set = set()  # ids of the jobs handed over and not yet finished
+        self._unfinished_lock = threading.Lock()  # (done callbacks run in the pool's thread)
         if start:
             with self._lock:
                 try:
@@ -209,7 +211,11 @@ class VotingHelper:
                 if not self._ready.done():  # still starting: the caller computes it now
                     return None
                 job = next(self._ids)
-                handle = job, pool.submit(_run, job, func, args), pool
+                fut = pool.submit(_run, job, func, args)
+                handle = job, fut, pool
+                with self._unfinished_lock:
+                    self._unfinished.add(job)
+                fut.add_done_callback(lambda _f, job=job: self._finished(job))
             except (BrokenProcessPool, RuntimeError, OSError):  # died, shutting down, no process
                 self._broken(pool)
                 return None
@@ -252,15 +258,29 @@ class VotingHelper:
         job, fut, _ = handle
         if not fut.cancel():
             with self._lock:
-                self._stopped[self._next_stop % _STOPPED_RING] = job
-                self._next_stop += 1
+                self._stop_id(job)
+
+    def _finished(self, job: int) -> None:
+        with self._unfinished_lock:
+            self._unfinished.discard(job)
+
+    def _stop_id(self, job: int) -> None:
+        """(Under the lock.) Job ``job`` stops at its next check in the process."""
+        self._stopped[self._next_stop % _STOPPED_RING] = job
+        self._next_stop += 1
 
     def close(self) -> None:
-        """End the helper's process (the jobs queued are dropped, a running one runs to its
-        end or its next check); the callers waiting compute their parts themselves."""
+        """End the helper's process: the jobs queued are dropped, a running one stops at its
+        next check (a voting iteration: at interpreter exit nothing waits for a job's end);
+        the callers waiting compute their parts themselves."""
         with self._lock:
             self._closed = True
             pool, self._pool = self._pool, None
+            # the newest ids last: the ring keeps them if there are more than it holds
+            with self._unfinished_lock:
+                unfinished = sorted(self._unfinished)
+            for job in unfinished[-_STOPPED_RING:]:
+                self._stop_id(job)
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
 

@@ -262,3 +262,19 @@ def test_a_job_that_fails_there_is_computed_here(helper):
     handle = helper.submit_call(lambda: 1)
     assert handle is not None
     assert helper.result(handle, lambda: None) is None
+
+
+def test_close_stops_a_running_job():
+    """Closing the helper (also at interpreter exit) does not wait for a running job's end:
+    the job stops at its next check."""
+    h = VotingHelper()
+    assert h.wait_ready()
+    seq = _scene(0)
+    handle = h.submit(_long_job(seq))
+    time.sleep(0.5)
+    assert not handle[1].done()  # running: about 10,000 iterations, tens of seconds
+    t = time.perf_counter()
+    h.close()
+    assert time.perf_counter() - t < 5
+    with pytest.raises(Interrupted):
+        handle[1].result(timeout=0)
