@@ -802,23 +802,18 @@ def merge_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
 def shortlist_table(seq: laav.Sequence, result: laav.LaavResult, rows: int = 5) -> str:
     """Markdown table of the joint merge's shortlist (``coarse_merge="joint"``): the first
     ``rows`` partitions by score, each as its groups of fine models, with its coding length,
-    epipolar cost, graph cost (when ``coarse_graph_weight`` > 0: only the terms that made
-    the score are shown) and score (and, with ground truth, its error on the points in
-    atoms); "" for the other merges."""
+    epipolar cost and score (and, with ground truth, its error on the points in atoms);
+    "" for the other merges."""
     sl = getattr(result.coarse, "shortlist", None)
     if sl is None:
         return ""
     w = result.params.coarse_epipolar_weight
-    wg = result.params.coarse_graph_weight
-    graph = wg > 0 and sl.graph_cost is not None
     fine = np.asarray(result.coarse.fine_point_labels)
     cov = fine >= 0
     truth = seq.labels is not None
-    score = f"score = L + {w:g} E" + (f" + {wg:g} G" if graph else "")
     head = ("| partition (fine models per motion) | coding length | epipolar cost | "
-            + ("graph cost | " if graph else "") + f"{score} |"
-            + (" error on atom points |" if truth else ""))
-    out = [head, "|---|---|---|---|" + ("---|" if graph else "") + ("---|" if truth else "")]
+            f"score = L + {w:g} E |" + (" error on atom points |" if truth else ""))
+    out = [head, "|---|---|---|---|" + ("---|" if truth else "")]
     best = sl.score.min()
     for i in np.argsort(sl.score, kind="stable")[:rows]:
         a = np.asarray(sl.assign[i])
@@ -826,7 +821,7 @@ def shortlist_table(seq: laav.Sequence, result: laav.LaavResult, rows: int = 5) 
                             for c in range(int(a.max()) + 1))
         mark = " **← chosen**" if i == sl.chosen else f" (+{sl.score[i] - best:.1f})"
         row = (f"| {groups}{mark} | {sl.coding_length[i]:.1f} | {sl.epipolar_cost[i]:.1f} | "
-               + (f"{sl.graph_cost[i]:.1f} | " if graph else "") + f"{sl.score[i]:.1f} |")
+               f"{sl.score[i]:.1f} |")
         if truth:
             err = laav.misclassification_rate(np.asarray(seq.labels)[cov], a[fine[cov]])
             row += f" {100 * err:.1f} % |"

@@ -63,31 +63,6 @@ def test_joint_merge_scores_its_shortlist_and_keeps_the_best(seed):
     assert misclassification_rate(seq.labels[cov], co.point_labels[cov]) == 0.0
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_graph_cost_is_the_multicut_cost_of_the_edges_a_partition_cuts(seed):
-    """``coarse_graph_weight``: each shortlisted partition's graph cost is the summed cost
-    of the atom-graph edges whose atoms it puts in different motions (computed here from
-    the graph itself), and the weight adds it to the score."""
-    from laav import atom_graph, build_atoms, solve_multicut
-
-    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=seed)
-    p = LaavParams(coarse_merge="joint", fine_per_motion=3)
-    atoms = build_atoms(seq, p, np.random.default_rng(seed))
-    graph = atom_graph(seq, atoms, p)
-    mc = solve_multicut(graph, 3 * seq.n_motions)
-    e = graph.edges
-    plain = merge_models(seq, atoms, mc, seq.n_motions, p, np.random.default_rng(0)).shortlist
-    for a, g in zip(plain.assign, plain.graph_cost):
-        motion = a[mc.atom_labels]
-        assert g == pytest.approx(graph.costs[motion[e[:, 0]] != motion[e[:, 1]]].sum())
-    assert np.allclose(plain.score, plain.coding_length + p.coarse_epipolar_weight * plain.epipolar_cost)
-    w = 1.5
-    weighted = merge_models(seq, atoms, mc, seq.n_motions, p.replace(coarse_graph_weight=w),
-                            np.random.default_rng(0)).shortlist
-    assert np.allclose(weighted.score, plain.score + w * plain.graph_cost)
-    assert weighted.chosen == int(np.argmin(weighted.score))
-
-
 def test_epipolar_cost_separates_what_coding_length_alone_confuses():
     """A partition that mixes two independently moving objects costs more epipolar
     evidence than the true one; the weight makes it decide between close coding lengths."""
