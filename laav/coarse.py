@@ -61,15 +61,9 @@ class Shortlist:
         Sum over the points in atoms of ``log(1 + d)``, ``d`` the point's mean Sampson
         distance to its motion's robust fundamental matrices (units of ``2 / lam``).
     score : ndarray of shape (K,)
-        ``coding_length + coarse_epipolar_weight * epipolar_cost
-        + coarse_graph_weight * graph_cost``.
+        ``coding_length + coarse_epipolar_weight * epipolar_cost``.
     chosen : int
         Index of the partition of least score.
-    graph_cost : ndarray of shape (K,) or None
-        Summed multicut cost (log-odds, nats) of the atom-graph edges between fine models
-        the partition keeps apart (:attr:`laav.multicut.Multicut.model_costs`): lower when it
-        separates atoms the graph pushes apart, higher when it cuts atoms the graph joins.
-        None when the multicut carries no ``model_costs``.
     """
 
     assign: np.ndarray
@@ -77,7 +71,6 @@ class Shortlist:
     epipolar_cost: np.ndarray
     score: np.ndarray
     chosen: int
-    graph_cost: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -613,8 +606,7 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     listed = None
     if coding:  # the partition is searched only when it decides
         if method == "joint" and n > n_motions:
-            listed = _joint_shortlist(points, fine_pts, stats, n_motions, params, memo,
-                                      multicut.model_costs)
+            listed = _joint_shortlist(points, fine_pts, stats, n_motions, params, memo)
         if listed is not None:
             assign, length = listed.assign[listed.chosen], float(listed.coding_length[listed.chosen])
         else:  # the coding merge (also the joint one when no partition has 8 points a motion)
@@ -676,13 +668,10 @@ def _cached(memo: dict | None, key: tuple, compute):
     return value
 
 
-def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None,
-                     model_costs=None) -> Shortlist | None:
+def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> Shortlist | None:
     """The joint merge: the ``coarse_candidates`` partitions of least coding length whose
     motions hold 8 points or more (what one fundamental matrix needs), each scored by its
-    coding length plus ``coarse_epipolar_weight`` times its epipolar cost plus
-    ``coarse_graph_weight`` times its graph cost (from ``model_costs``, the multicut's
-    :attr:`~laav.multicut.Multicut.model_costs`; 0 without them); None when no
+    coding length plus ``coarse_epipolar_weight`` times its epipolar cost; None when no
     partition gives every motion 8 points. ``memo``: see :func:`merge_models` (the
     shortlist does not depend on ``lam``)."""
     assign, coding = _cached(
@@ -714,13 +703,7 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None,
             own[mem] = capped_mean(rows[key], unit2)
         epi[i] = np.log1p(own / unit2).sum()
     score = coding + params.coarse_epipolar_weight * epi
-    graph = None
-    if model_costs is not None:
-        apart = assign[:, :, None] != assign[:, None, :]  # (K, n, n)
-        graph = np.einsum("kij,ij->k", apart, model_costs) / 2  # each pair counted once
-        if params.coarse_graph_weight > 0:
-            score = score + params.coarse_graph_weight * graph
-    return Shortlist(assign, coding, epi, score, int(np.argmin(score)), graph)
+    return Shortlist(assign, coding, epi, score, int(np.argmin(score)))
 
 
 #: Most distances (floats) the joint merge keeps for λ moves (:func:`_joint_shortlist`): 32 MB.

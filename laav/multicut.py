@@ -58,11 +58,6 @@ class Multicut:
         them one by one rebuilds the GAEC segmentation.
     contraction_costs : ndarray of shape (K,)
         Cost of the contracted edge at each step.
-    model_costs : ndarray of shape (n_models, n_models) or None
-        Summed cost of the graph edges between each two fine models (symmetric, 0 on the
-        diagonal): what the multicut's objective would lose or gain if the two were one.
-        The joint merge's graph term reads it (``coarse_graph_weight``); None for a
-        :class:`Multicut` made without its graph (the term is then 0).
     """
 
     atom_labels: np.ndarray
@@ -73,7 +68,6 @@ class Multicut:
     objective: float
     contractions: np.ndarray
     contraction_costs: np.ndarray
-    model_costs: np.ndarray | None = None
 
 
 def multicut_objective(edges: np.ndarray, costs: np.ndarray, labels: np.ndarray) -> float:
@@ -346,7 +340,7 @@ def solve_multicut(graph: AtomGraph, n_models: int) -> Multicut:
     if N == 0:
         z = np.zeros(0, np.int64)
         return Multicut(z, 0, z, 0, np.zeros(0, bool), 0.0, np.zeros((0, 2), np.int64),
-                        np.zeros(0), np.zeros((0, 0)))
+                        np.zeros(0))
     g_labels, steps, step_costs = gaec(N, graph.edges, graph.costs)
     mc = kernighan_lin(N, graph.edges, graph.costs, g_labels)
     fine = _adjust_count(N, graph.edges, graph.costs, mc, n_models)
@@ -360,21 +354,7 @@ def solve_multicut(graph: AtomGraph, n_models: int) -> Multicut:
         objective=multicut_objective(graph.edges, graph.costs, mc),
         contractions=steps,
         contraction_costs=step_costs,
-        model_costs=model_costs(graph.edges, graph.costs, fine),
     )
-
-
-def model_costs(edges: np.ndarray, costs: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """Summed cost of the edges between each two labels: (L, L), symmetric, 0 on the
-    diagonal (L = ``labels.max() + 1``). ``edges`` (E, 2), ``costs`` (E,), ``labels``
-    (N,) in ``0 .. L-1``."""
-    L = int(labels.max()) + 1 if labels.size else 0
-    M = np.zeros((L, L))
-    if edges.shape[0]:
-        a, b = labels[edges[:, 0]], labels[edges[:, 1]]
-        between = a != b
-        np.add.at(M, (a[between], b[between]), costs[between])
-    return M + M.T
 
 
 def exact_multicut(n_nodes: int, edges: np.ndarray, costs: np.ndarray,

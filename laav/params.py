@@ -97,12 +97,6 @@ class LaavParams:
         fundamental matrices in units of ``2 / lam``) against the coding length (nats).
         The selection's joint score (``rv_select="joint"`` or ``"laav"``,
         :func:`laav.voting.joint_score`) weighs its epipolar cost over all points by it too.
-    coarse_graph_weight : float
-        ``coarse_merge="joint"``: weight of the graph cost (ours; 0 = off): the summed
-        multicut cost of the atom-graph edges between fine models a partition keeps apart
-        (log-odds, nats: :attr:`laav.multicut.Multicut.model_costs`), added to the
-        partition's score. It speaks for keeping apart what the graph pushes apart and
-        against cutting what it joins.
     lam : float
         Epipolar voting strength lambda of the fine-to-coarse stage (1/px^2).
     coarse_frames : int
@@ -300,7 +294,6 @@ class LaavParams:
     coding_eps: float = 10.0
     coarse_candidates: int = 10
     coarse_epipolar_weight: float = 2.0
-    coarse_graph_weight: float = 0.0
     lam: float = 2.0
     coarse_frames: int = 7
     coarse_samples: int = 8
@@ -519,7 +512,6 @@ _BOUNDS = (
     ("coding_eps", "float>", 0, _BIG),
     ("coarse_candidates", "int", 1, 1000),
     ("coarse_epipolar_weight", "float", 0, _BIG),
-    ("coarse_graph_weight", "float", 0, _BIG),
     ("lam", "float>", 0, _BIG_STRENGTH),
     ("coarse_frames", "int", 1, 100),
     ("coarse_samples", "int", 1, 1000),
@@ -587,8 +579,7 @@ STAGE_PARAMS: dict[str, frozenset] = {
     "graph": frozenset({"graph_neighbors", "edge_scale", "cut_prior"}),
     "multicut": frozenset({"fine_models", "fine_per_motion"}),
     "coarse": frozenset({"coarse_merge", "coding_eps", "coarse_candidates",
-                         "coarse_epipolar_weight", "coarse_graph_weight", "lam", "coarse_frames",
-                         "coarse_samples",
+                         "coarse_epipolar_weight", "lam", "coarse_frames", "coarse_samples",
                          "motion_weight", "pooled_trials",
                          "pairwise_weight", "rv_max_points"}),
     # every Random Voting setting is named rv_*
