@@ -45,7 +45,7 @@ from .cards.status import StatusBar
 from .cards.sweep import SweepView
 from .cards.tour import TourView
 from .cards.view3d import View3D
-from .state import ExplorerState, non_defaults, parse_settings, query_of, settings_from_json
+from .state import ExplorerState, Provenance, non_defaults, parse_settings, query_of, settings_from_json
 
 __all__ = ["Explorer", "PARAM_SLIDERS", "SIDE_W", "REST_AFTER_S"]
 
@@ -234,10 +234,13 @@ class Explorer:
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
                  start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD, video=None,
-                 plain_rv=None, seeds_ahead: bool = False, preview=None):
+                 plain_rv=None, seeds_ahead: bool = False, preview=None, provenance=None):
         if video is not None and video.sequence is not seq:
             raise ValueError("video must be the one seq was tracked from (video.sequence is seq)")
         self.video = video
+        #: how the sequences shown came from their files (:class:`explorer.state.Provenance`),
+        #: the command's and the latest uploads'
+        self._provenances = [] if provenance is None else [provenance]
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False,
                                    plain_rv=plain_rv, seeds_ahead=seeds_ahead, preview=preview)
         self._seeds_ahead = seeds_ahead  # (held back while a lazy page is still being completed)
@@ -700,7 +703,8 @@ class Explorer:
                                       "scored.")
                 elif seq.labels is None:
                     data_notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; "
-                                      f"C = {settings.n_motions} is taken from the C box.")
+                                      + V.md_text(self.provenance_of(seq).motions_note(settings.n_motions)))
+                data_notes.append(V.md_text(self.provenance_of(seq).note))
                 if not seq.is_complete:
                     data_notes.append(V.incomplete_note(seq, result, counts=not (
                         self.video is not None and seq is self.video.sequence)))
@@ -741,7 +745,6 @@ class Explorer:
         fm = c.w_params["fine_models"]
         fm.end = max(fm.end, 4 * settings.n_motions)
         self.files.show_sequence(seq)
-        c.w_motions.end = seq.n_points
         self.status_bar.show_sequence(seq)
         self.files.name_downloads(seq)
         c.fit_color(seq, self._seq_shown)
@@ -782,6 +785,17 @@ class Explorer:
         self.restore_result()
         self.files.not_opened()
         self.status_bar.show_error(message)
+
+    def provenance_of(self, seq: laav.Sequence) -> Provenance:
+        """How ``seq`` came from its file (a bare :class:`Provenance` when nothing is known)."""
+        for p in reversed(self._provenances):
+            if p.sequence is seq:
+                return p
+        return Provenance(seq)
+
+    def add_provenance(self, provenance: Provenance) -> None:
+        """Remember how an opened sequence came from its file (the command's and the last few)."""
+        self._provenances = self._provenances[:1] + self._provenances[1:][-3:] + [provenance]
 
     def restore_result(self) -> None:
         """(Document thread.) After a cancel or a failure: a preview shown (whose result will

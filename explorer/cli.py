@@ -176,8 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "time and memory grow about linearly; docs/bench/scale.md)")
     p.add_argument("--complete-only", action="store_true",
                    help="keep only the tracks visible in every frame (by default incomplete tracks are "
-                        "segmented too and drawn only where seen); the page then numbers the kept "
-                        "points 0..K-1")
+                        "segmented too and drawn only where seen); the labels CSV numbers the kept "
+                        "tracks as the file does, like laav segment --complete-only")
     tr = p.add_argument_group("tracking a VIDEO (the options of laav track; every track it keeps is "
                               "used, --complete-only: only those seen in every frame)")
     add_track_arguments(tr, rename={"--max-points": "--track-points"})
@@ -264,7 +264,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
                 hosts: list[str] | None = None, announce_viser: bool = False,
                 params: laav.LaavParams | None = None, max_upload: int | None = None, video=None,
-                warm=None, seeds_ahead: bool = False, on_first_page=None):
+                warm=None, seeds_ahead: bool = False, on_first_page=None, provenance=None):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
@@ -284,7 +284,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     only the first explorer built takes them). ``seeds_ahead``: every tab computes the next
     seed's result while idle (:class:`explorer.state.ExplorerState`; the command turns it on).
     ``on_first_page``: called, on the server's thread, when a tab's page is complete
-    (:attr:`Explorer.on_page_complete`; it must do its work once).
+    (:attr:`Explorer.on_page_complete`; it must do its work once). ``provenance``: how
+    ``seq`` came from its file (:class:`explorer.state.Provenance`), for every tab.
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
@@ -304,7 +305,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                         max_upload=DEFAULT_MAX_UPLOAD if max_upload is None else max_upload,
                         video=video, pipeline=None if first is None else first.pipeline,
                         plain_rv=None if first is None else first.plain_rv, seeds_ahead=seeds_ahead,
-                        preview=None if first is None else first.preview)
+                        preview=None if first is None else first.preview, provenance=provenance)
 
     if prebuild:
         fut: Future = Future()
@@ -404,6 +405,7 @@ def main(argv: list[str] | None = None) -> int:
         if not _port_free(args.host, port):
             return _fail(parser, f"port {port} on {args.host} is already in use; pick another with --port")
     video = None
+    kept = note = estimate = None  # how the sequence came from the file (state.Provenance)
     if args.file is not None:
         from .video import is_video
 
@@ -433,10 +435,12 @@ def main(argv: list[str] | None = None) -> int:
             seq = laav.load_sequence(args.file, isolated=True, max_points=args.max_points)
         if args.complete_only and not seq.is_complete:
             missing = 100 * (1 - seq.visible_share)
+            n_file = seq.n_points
             seq, kept = seq.complete()
-            print(f"--complete-only: kept {kept.size} points (those visible in every frame; "
-                  f"{missing:.1f} % of the entries were missing), numbered 0..{kept.size - 1}",
-                  file=sys.stderr)
+            note = (f"--complete-only: kept the {kept.size} of {n_file} tracks seen in every frame "
+                    f"({missing:.1f} % of the entries were missing); the labels CSV numbers them "
+                    "as the file does")
+            print(note, file=sys.stderr)
         elif not seq.is_complete and video is None:  # (a video's own line says it)
             _say(f"{seq.n_points} tracks, {100 * seq.visible_share:.1f} % of the entries visible "
                  "(incomplete tracks: drawn only where seen; --complete-only keeps the full ones)")
@@ -451,6 +455,7 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             return _fail(None, f"--motions auto: {exc}")
         C = count.n_motions
+        estimate = count
         _say(f"C = {C} estimated ({count.reason})")
     else:
         C = args.motions if args.motions is not None else seq.n_motions
@@ -496,17 +501,20 @@ def main(argv: list[str] | None = None) -> int:
     C = settings.n_motions
     # the first result, computed from now on in a child process (not in this one: the page
     # being served would wait for the GIL); the first tab's explorer takes it
+    from .state import Provenance
     from .warm import first_results
 
+    provenance = Provenance(seq, None if estimate is None else estimate.n_motions,
+                            "" if estimate is None else estimate.reason, kept, note or "")
     first = first_results(seq, C, settings.params, settings.seed)
     startup_gc = _StartupGC()  # (after the fork: the child holds its own off, explorer.warm)
     try:
-        return _serve(args, seq, C, settings, port, video, first, startup_gc, parser)
+        return _serve(args, seq, C, settings, port, video, first, startup_gc, parser, provenance)
     finally:
         startup_gc.end()  # (at once if nothing did it before: the server has stopped)
 
 
-def _serve(args, seq, C, settings, port, video, first, startup_gc, parser) -> int:
+def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, provenance=None) -> int:
     """:func:`main`'s server: serve until stopped (Ctrl-C)."""
     import panel as pn
 
@@ -517,7 +525,7 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser) -> in
         factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
                               announce_viser=not _is_loopback(args.host), params=settings.params,
                               max_upload=args.max_upload, video=video, warm=first, seeds_ahead=True,
-                              on_first_page=startup_gc.end)
+                              on_first_page=startup_gc.end, provenance=provenance)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False, **serve_options())

@@ -18,10 +18,10 @@ _MPL_MARKERS = {"circle": "o", "square": "s", "triangle": "^", "diamond": "D", "
                 "hex": "h"}
 
 
-def labels_csv(seq: laav.Sequence, result: laav.LaavResult) -> str:
+def labels_csv(seq: laav.Sequence, result: laav.LaavResult, point_ids=None) -> str:
     """0-based labels, first columns ``point,label`` as ``laav segment`` writes (see
-    :func:`explorer.views.labels_table`)."""
-    return V.labels_table(seq, result)
+    :func:`explorer.views.labels_table`; ``point_ids``: the file's number of each point)."""
+    return V.labels_table(seq, result, point_ids)
 
 
 def params_json(seq: laav.Sequence, result: laav.LaavResult) -> str:

@@ -50,7 +50,7 @@ from .views import COLOR_MODES, align_labels, stage_numbers
 
 __all__ = ["ExplorerState", "Superseded", "Cancelled", "Settings", "RV_FIELDS", "Change", "describe_change",
            "non_defaults", "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of",
-           "settings_from_json", "parse_value"]
+           "settings_from_json", "parse_value", "Provenance"]
 
 _helper_lock = threading.Lock()
 _helper: list = []  # the server's one VotingHelper, once started (empty: not yet)
@@ -162,6 +162,40 @@ AHEAD_IDLE, AHEAD_SWEEP = "ahead, while idle", "by the seed sweep"
 #: those its selection's joint score reads.
 RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams)
                   if f.name.startswith("rv_") and f.name not in NOT_PLAIN_FIELDS) + SELECTION_FIELDS
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Provenance:
+    """How the explorer's ``sequence`` came from its file: what the page says about it and
+    how the exports number its points.
+
+    Attributes
+    ----------
+    sequence : Sequence
+        The sequence it describes (matched by identity).
+    motions_estimate : int or None
+        C as :func:`laav.estimate_motions` estimated it (a file without ground truth), and
+        ``motions_reason`` its reason; None when C was given or comes from ground truth.
+    point_ids : ndarray of shape (P,), int64, or None
+        The file's number of each point, when they are not ``0 .. P-1`` (``--complete-only``
+        keeps the tracks seen in every frame, as ``laav segment --complete-only`` does).
+    note : str
+        One line for the page (e.g. how many tracks ``--complete-only`` dropped).
+    """
+
+    sequence: Sequence
+    motions_estimate: int | None = None
+    motions_reason: str = ""
+    point_ids: np.ndarray | None = None
+    note: str = ""
+
+    def motions_note(self, n_motions: int) -> str:
+        """Where C = ``n_motions`` (the one computed) comes from, for a file without ground truth."""
+        if self.motions_estimate is None:
+            return f"C = {n_motions} is taken from the C box."
+        if n_motions == self.motions_estimate:
+            return f"C = {n_motions} was estimated ({self.motions_reason}); the C box changes it."
+        return f"C = {n_motions} is taken from the C box (estimated: {self.motions_estimate})."
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1262,25 +1262,34 @@ def numbers_markdown(num: dict) -> str:
     return "\n".join(rows)
 
 
-def labels_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
+def labels_table(seq: laav.Sequence, result: laav.LaavResult,
+                 point_ids: np.ndarray | None = None) -> str:
     """CSV text, one row per point; labels are 0-based like ``laav segment``'s file.
 
-    Columns: ``point`` (0-based index), ``label`` (final motion: the same two columns as
-    ``laav segment --out``), ``x0``, ``y0`` (position in frame 0; empty when the point is
-    not seen there), ``ground_truth`` (empty without), ``owner_atom``, ``fine_model``,
-    ``coarse_motion`` (-1: the stage left the
-    point out, i.e. it is in no atom).
+    Columns: ``point`` (0-based; with ``point_ids`` (P,), the file's number of each point,
+    as ``laav segment --complete-only`` writes it), ``label`` (final motion: the same two
+    columns as ``laav segment --out``), ``x0``, ``y0`` (position in frame 0; empty when the
+    point is not seen there), ``ground_truth`` (empty without), ``atoms`` (how many atoms
+    hold the point; 0: in no atom), ``owner_atom`` (the atom whose R1 core holds it, -1 for
+    none: a point only in atoms' R1-R2 rings, or in no atom), ``fine_model``,
+    ``coarse_motion`` (-1: the stage left the point out, i.e. it is in no atom).
     """
     st = result.stage_labels()
     owner = np.asarray(result.atoms.owner)
+    n_atoms = np.zeros(seq.n_points, dtype=np.int64)
+    for m in result.atoms.members:
+        n_atoms[np.asarray(m)] += 1
+    ids = np.arange(seq.n_points) if point_ids is None else np.asarray(point_ids)
+    if ids.shape != (seq.n_points,):
+        raise ValueError(f"point_ids: {ids.shape[0]} numbers for {seq.n_points} points")
     gt = seq.labels
-    lines = ["point,label,x0,y0,ground_truth,owner_atom,fine_model,coarse_motion"]
+    lines = ["point,label,x0,y0,ground_truth,atoms,owner_atom,fine_model,coarse_motion"]
     p0 = seq.points[0]
     v0 = visible_at(seq, 0)
     for i in range(seq.n_points):
         g = "" if gt is None else str(int(gt[i]))
         xy0 = f"{p0[i, 0]:.3f},{p0[i, 1]:.3f}" if v0[i] else ","
-        lines.append(f"{i},{int(st['final'][i])},{xy0},{g},{int(owner[i])},"
+        lines.append(f"{int(ids[i])},{int(st['final'][i])},{xy0},{g},{int(n_atoms[i])},{int(owner[i])},"
                      f"{int(st['fine'][i])},{int(st['coarse'][i])}")
     return "\n".join(lines) + "\n"
 

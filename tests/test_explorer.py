@@ -243,9 +243,9 @@ def test_empty_upload_says_so_and_c_box_is_bounded(ex, seq):
     _upload(ex, "nothing.npz", b"")
     assert ex.wait(60) and ex.result is res
     assert ex.alert.visible and "nothing.npz is empty (0 bytes)" in _shown(ex.alert)
-    # C: at least 1, at most the number of points (the browser box clamps to these)
-    assert (ex.w_motions.start, ex.w_motions.end) == (1, seq.n_points)
-    # set from Python past them: a message, the result kept
+    # C: at least 1, at most the number of points; the box has no bounds (the page's box
+    # would neither clamp nor send a value past them): the state refuses it, with a message
+    assert (ex.w_motions.start, ex.w_motions.end) == (None, None)
     for bad, msg in ((0, "must be a positive integer"), (-2, "must be a positive integer"),
                      (2.5, "must be a positive integer, got 2.5"),
                      (seq.n_points + 1, f"more than the {seq.n_points} points")):
@@ -272,13 +272,18 @@ def test_bad_upload_shows_a_message_and_keeps_the_result(ex):
 def test_good_upload_replaces_the_sequence(ex, seq):
     other = _two_motion_sequence(n_frames=9, n_points=100, seed=3)
     buf = io.BytesIO()
-    np.savez(buf, points=other.points)  # no labels: C comes from the C box (2)
+    np.savez(buf, points=other.points)  # no labels: C is estimated, as by laav-explore FILE
     assert ex.load_bytes(buf.getvalue(), "unlabelled.npz")
     assert ex.wait(60)
     assert ex.sequence.name == "unlabelled" and ex.sequence.n_points == 100
     assert len(ex.src_points.data["x"]) == 100
     assert ex.w_frame.end == 8
+    C = laav.estimate_motions(laav.Sequence(other.points, None)).n_motions
+    assert ex.result.n_motions == C and ex.w_motions.value == C
     assert ex.note.visible and "no ground truth" in ex.note.object
+    assert V.md_text(f"C = {C} was estimated (") in ex.note.object
+    # the frame view's caption does not count errors it cannot score
+    assert "no ground truth, so no point is marked misclassified" in ex.frame_view.caption.object
     assert ex.w_color.value == "final (after Random Voting)"
 
 
@@ -307,6 +312,12 @@ def test_exports(ex, seq):
     st = ex.result.stage_labels()
     assert [int(r["coarse_motion"]) for r in rows] == np.asarray(st["coarse"]).tolist()  # -1: in no atom
     assert [int(r["owner_atom"]) for r in rows] == np.asarray(ex.result.atoms.owner).tolist()
+    # atoms: how many atoms hold each point, 0 exactly where the coarse stage left it out
+    sets = [set(np.asarray(m).tolist()) for m in ex.result.atoms.members]
+    held = [sum(i in m for m in sets) for i in range(seq.n_points)]
+    assert [int(r["atoms"]) for r in rows] == held
+    assert [int(r["atoms"]) == 0 for r in rows] == [int(r["coarse_motion"]) == -1 for r in rows]
+    assert any(int(r["owner_atom"]) == -1 and int(r["atoms"]) > 0 for r in rows)  # ring points
     # the PNG carries the parameters, errors and legends
     fig = export.views_figure(seq, ex.result, 3, "final", plain=None)
     head = fig._suptitle.get_text()
@@ -996,8 +1007,40 @@ def test_cli_estimates_c_for_a_file_without_ground_truth(monkeypatch, tmp_path, 
     out = capsys.readouterr().out
     expected = laav.estimate_motions(laav.load_sequence(f)).n_motions
     assert seen["n_motions"] == expected and f"C = {expected} estimated (" in out
+    # the page says so too (explorer.state.Provenance), and once C is changed, that it was
+    prov = seen["provenance"]
+    assert prov.sequence is seen["seq"] and prov.motions_estimate == expected and prov.point_ids is None
+    assert prov.motions_note(expected).startswith(f"C = {expected} was estimated (")
+    assert "taken from the C box (estimated: " in prov.motions_note(expected + 1)
     assert main([str(f), "--no-browser", "--port", "0", "--motions", "3"]) == 0
-    assert seen["n_motions"] == 3
+    assert seen["n_motions"] == 3 and seen["provenance"].motions_estimate is None
+
+
+def test_complete_only_exports_the_files_point_numbers(monkeypatch, tmp_path, capsys):
+    """``laav-explore FILE --complete-only``: the labels CSV numbers the kept tracks as the
+    file does (as ``laav segment --complete-only`` writes them), and the page says how many
+    tracks were dropped."""
+    import csv as csvmod
+
+    from laav.synthetic import occlude
+
+    seen = fake_serving(monkeypatch)
+    s = occlude(_two_motion_sequence(n_frames=9, n_points=120, seed=2), 0.05, rng=0)
+    f = tmp_path / "gaps.npz"
+    laav.save_sequence(s, f)
+    assert main([str(f), "--no-browser", "--port", "0", "--complete-only"]) == 0
+    prov = seen["provenance"]
+    kept = np.flatnonzero(s.visible.all(axis=0))
+    assert 0 < kept.size < s.n_points and np.array_equal(prov.point_ids, kept)
+    assert f"kept the {kept.size} of {s.n_points} tracks" in prov.note
+    ex = Explorer(seen["seq"], seen["n_motions"], viser=False, provenance=prov)
+    try:
+        assert ex.wait(120) and ex.result is not None
+        rows = list(csvmod.DictReader(ex.files.export_csv().getvalue().splitlines()))
+        assert [int(r["point"]) for r in rows] == kept.tolist()
+        assert ex.note.visible and V.md_text(f"kept the {kept.size} of {s.n_points} tracks") in ex.note.object
+    finally:
+        ex.close()
 
 
 def test_frame_move_sends_only_the_changed_columns(ex):

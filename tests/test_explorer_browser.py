@@ -480,12 +480,13 @@ def test_url_carries_the_state(tmp_path):
         r1 = page.evaluate("""() => { for (const m of Bokeh.documents[0].all_models)
             if (m.type === 'Slider' && String(m.title).startsWith('R1')) return m.value; }""")
         assert r1 == 25
-        # the C box takes only 1 .. number of points (the browser's spinner clamps to them)
+        # the C box has no bounds in the page (its spinner neither clamped nor sent a value
+        # past them: a typed 0 showed and did nothing); the state refuses it (below)
         lims = page.evaluate("""() => {
           for (const m of Bokeh.documents[0].all_models)
             if (m.type === 'Spinner' && String(m.title).startsWith('C ')) return [m.low, m.high];
         }""")
-        assert lims == [1, seq.n_points]
+        assert lims == [None, None]
         # moving λ updates the address (no reload: the same session), replacing it: a change
         # of settings is no history entry (Back would change the address, not the page)
         entries = page.evaluate("history.length")
@@ -531,6 +532,15 @@ def test_url_carries_the_state(tmp_path):
         ex3 = _wait_for(lambda: created[2] if len(created) > 2 else None, 30, "the third explorer")
         assert ex3.wait(60)
         page.wait_for_function("location.search === ''", timeout=20000)
+        # C = 0 typed in the page's C box (its first text box): a message, the result kept
+        res3 = ex3.result
+        box = page.locator("input.bk-input[type=text]").first
+        assert box.input_value() == str(res3.n_motions)
+        box.fill("0")
+        box.press("Enter")
+        page.get_by_text("the number of motions C must be a positive integer, got 0").first.wait_for(
+            timeout=20000)
+        assert ex3.wait(30) and ex3.result is res3
     assert not dialogs, f"a payload ran: {dialogs}"
 
 

@@ -1,8 +1,8 @@
 """The sidebar's Advanced card: every :class:`laav.LaavParams` field, grouped by stage,
 and two presets (:data:`PRESETS`: the paper's stages, LAAV's own chain) in one click.
 
-Folded at first. One widget per field (:data:`explorer.fields.FIELDS`): a number box with
-the field's bounds, a select for a choice (``coarse_merge``, ``atom_frames``,
+Folded at first. One widget per field (:data:`explorer.fields.FIELDS`): a number box (its
+bounds in its tooltip; the state checks them), a select for a choice (``coarse_merge``, ``atom_frames``,
 ``rv_select``), a checkbox for a switch; its tooltip is the field's description from the
 ``LaavParams`` docstring, its range and its default. A field off its default is marked
 (``● name · default X``). A change only requests (:meth:`ExplorerState.request`, which
@@ -110,8 +110,9 @@ class AdvancedPanel:
             w = pn.widgets.Select(label=label_of(f, value), options=list(f.choices), value=value,
                                   description=tip, width=FIELD_W, margin=(4, 5))
             return w, w
-        kw = dict(label=label_of(f, value), value=value, start=f.low, end=f.high, description=tip,
-                  width=FIELD_W, margin=(4, 5))
+        # no bounds on the box: the page's box neither clamps nor sends a value past them (it
+        # showed the value and nothing happened); LaavParams refuses it, named in the card
+        kw = dict(label=label_of(f, value), value=value, description=tip, width=FIELD_W, margin=(4, 5))
         auto = f"auto ({AUTO.get(f.name, 'auto')})" if f.kind.endswith("|None") else ""
         if f.kind in ("int", "int|None"):
             # a number box, not panel's integer box: that one drops what is not a digit as it
@@ -152,10 +153,6 @@ class AdvancedPanel:
         with self.host.quiet():
             for f in FIELDS:
                 w, v = self.widgets[f.name], getattr(p, f.name)
-                if f.kind in ("int", "int|None", "float", "float>") and v is not None:
-                    # a value past the box's bounds (cannot come from LaavParams, but stay safe)
-                    w.start = min(w.start, v) if w.start is not None else None
-                    w.end = max(w.end, v) if w.end is not None else None
                 if w.value != v:
                     w.value = v
         self.message.visible = False  # what is shown was accepted

@@ -69,11 +69,13 @@ class Controls:
                                            value=st.seed, width=SIDE_W)
         self.w_seed.param.watch(self._on_param, "value")
         self.w_seed._debounce = 0
-        # C: at least 1 and at most the number of points (the browser's box clamps to these).
+        # C: at least 1 and at most the number of points, checked by the state, which says
+        # why a value is refused (no bounds on the box: the page's box neither clamped nor
+        # sent a value beyond them, so a typed 0 showed and did nothing, with no message).
         # A number box, not an integer one: the page's integer box drops what is not a
         # digit as it is typed, so "2.5" became C = 25; a fraction is refused with a message
-        self.w_motions = pn.widgets.FloatInput(label="C — number of motions", start=1, end=seq.n_points,
-                                               value=st.n_motions, step=1, width=140)
+        self.w_motions = pn.widgets.FloatInput(label="C — number of motions", value=st.n_motions,
+                                               step=1, width=140)
         self.w_motions.param.watch(self._on_param, "value")
         self.w_reset = pn.widgets.Button(label="Reset parameters to defaults", color="warning",
                                          width=SIDE_W)

@@ -30,6 +30,7 @@ import laav
 from .. import export
 from .. import views as V
 from ..sizes import DEFAULT_MAX_UPLOAD, UPLOAD_CHUNK, fmt_size, parse_size  # noqa: F401 (re-exported)
+from ..state import Provenance
 from .base import SIDE_W, Markdown, page_box, shown_style
 
 #: Work shorter than this shows no progress line (a slider move on a small sequence).
@@ -353,8 +354,12 @@ class Files:
         except Exception as exc:  # never let an upload kill the session
             self.state.report(f"{base}: could not be read ({type(exc).__name__}: {exc})")
             return False
+        provenance = _estimated_motions(seq)  # without ground truth C is estimated, as by the command
+        if provenance.motions_estimate is not None:
+            C = provenance.motions_estimate
         if token is not None and not self._end_reading(token):
             return False  # cancelled while reading: the shown result stays
+        self.host.add_provenance(provenance)
         with self._opened_lock:  # (not_opened waits until the state has been asked for it)
             self._opened, self._asking = (seq, base), True
         try:
@@ -468,7 +473,7 @@ class Files:
 
     def export_csv(self):
         seq, res = self._need_result()
-        return io.StringIO(export.labels_csv(seq, res))
+        return io.StringIO(export.labels_csv(seq, res, self.host.provenance_of(seq).point_ids))
 
     def export_json(self):
         seq, res = self._need_result()
@@ -478,3 +483,16 @@ class Files:
         seq, res = self._need_result()
         frame, mode, step, plain = self._view()
         return io.BytesIO(export.views_png(seq, res, int(frame), mode, int(step), plain))
+
+
+def _estimated_motions(seq: laav.Sequence) -> Provenance:
+    """An opened file's :class:`Provenance`: for one without ground truth, C estimated as
+    ``laav-explore FILE`` does (:func:`laav.estimate_motions`; when it cannot be, the C box's
+    value is used and the page says so)."""
+    if seq.labels is not None:
+        return Provenance(seq)
+    try:
+        count = laav.estimate_motions(seq)
+    except ValueError:
+        return Provenance(seq)
+    return Provenance(seq, count.n_motions, count.reason)

@@ -179,11 +179,13 @@ class FrameView:
             self._item_errors.label = value(live.text(
                 "frame_errors", f"misclassified ({stage}): {{n:frame_errors}}" if seq.labels is not None
                 else "misclassified: (no truth)", f, named))
+        errors = (f"{int(style['misclassified'].sum())} points misclassified by the {stage} stage (black "
+                  "ring; the colour-by choice picks the stage)" if seq.labels is not None else
+                  "no ground truth, so no point is marked misclassified")
         self._caption = (
             f"{res.atoms.n_atoms} atoms (R1 = {res.atoms.r1:g} px solid, R2 = {res.atoms.r2:g} px dashed, "
             f"drawn at their seeds); {np.asarray(res.atoms.unassigned).size} features in no atom (×); "
-            f"{int(style['misclassified'].sum())} points misclassified by the {stage} stage (black "
-            "ring; the colour-by choice picks the stage). Click legend entries to hide them.")
+            f"{errors}. Click legend entries to hide them.")
         self.caption.object = self._caption + self._background_text(seq, f)
         live.commit(f)
 
