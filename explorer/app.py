@@ -14,6 +14,8 @@ notebooks) results are applied directly, under a lock.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import threading
 import time
 import urllib.parse
@@ -256,6 +258,7 @@ class Explorer:
         #: the views show a preview (LAAV's own fine-tuning; the result is on its way)
         self.previewing = False
         self._unpinned_note = None  # the compare card's note when a sequence is opened
+        self._params_note = None  # (generation, text): about a params.json, with its result
         # what the views show: the result, its sequence, the point colours
         # (views.point_style), the fine models' colours, the points whose motion changed
         self.result: laav.LaavResult | None = None
@@ -710,7 +713,9 @@ class Explorer:
                         self.video is not None and seq is self.video.sequence)))
                 data_notes += V.result_notes(result)
                 self._data_notes = [n for n in data_notes if n]
-                notes = [n for n in (self.style["note"], unpinned) if n] + self._data_notes
+                params_note = (V.md_text(self._params_note[1])
+                               if self._params_note and self._params_note[0] == gen else None)
+                notes = [n for n in (self.style["note"], unpinned, params_note) if n] + self._data_notes
                 s.show_note("  \n".join(notes))
                 # a preview's time: its own stages' (what this change reran, or the warm child)
                 s.show_result(seq, num["error_final"], sum(result.timings.values()) if preview
@@ -751,8 +756,10 @@ class Explorer:
         c.sync_to(settings)
 
     def _draw_frame(self) -> None:
+        # the colouring drawn (the final labels when ground truth was asked for and is missing)
+        shown = {v: k for k, v in V.COLOR_MODES.items()}.get(self.style.get("mode"))
         self.frame_view.draw(self.sequence, self.result, self.frame, self.style, self.moved,
-                             self.controls.w_color.value)
+                             shown or self.controls.w_color.value)
 
     def _apply_plain_rv(self, voting, key) -> None:
         if self.result is None or key != self.state.plain_rv_key():
@@ -891,14 +898,27 @@ class Explorer:
 
     def load_params(self, data: bytes | str, filename: str = "params.json") -> bool:
         """Apply a params.json (as exported here). False, and a message, when it is not valid."""
+        name = Path(filename).name
         try:
             new = settings_from_json(data, self.sequence, self.state.target)
         except ValueError as exc:
-            self.state.report(f"{Path(filename).name}: {exc} — nothing was changed")
+            self.state.report(f"{name}: {exc} — nothing was changed")
             return False
+        note = None
+        source = json.loads(data).get("sequence")  # (valid JSON: settings_from_json read it)
+        if isinstance(source, str) and source != self.sequence.name:
+            # exported for another sequence: its parameters and seed, not its C (a property
+            # of that sequence), and the page says so
+            C = self.state.target.n_motions
+            note = (f"{name} was exported for {source}: its parameters and seed are applied to "
+                    f"{self.sequence.name}" + (f", its C = {new.n_motions} is not (C stays {C})"
+                                               if new.n_motions != C else ""))
+            new = dataclasses.replace(new, n_motions=C)
         self.schedule(self.controls.show_settings, new)
-        return self.state.request(params=new.params.to_dict(), seed=new.seed,
-                                  n_motions=new.n_motions) is not None
+        gen = self.state.request(params=new.params.to_dict(), seed=new.seed, n_motions=new.n_motions)
+        if gen is not None and note:
+            self._params_note = (gen, note)  # shown with that request's result
+        return gen is not None
 
     def load_bytes(self, data: bytes, filename: str) -> bool:
         """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure."""

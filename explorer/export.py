@@ -92,7 +92,8 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
         ax.scatter(np.asarray(p["x"])[sel], np.asarray(p["y"])[sel], c=list(np.asarray(p["color"])[sel]),
                    marker=mk, s=16, edgecolors="#333333", linewidths=0.3, label=lab)
     u = fs["unassigned"]
-    ax.scatter(u["x"], u["y"], marker="x", c=V.NO_ATOM, s=22, lw=1, label="in no atom")
+    # smaller than the points, as on the page: their colour and shape stay readable under it
+    ax.scatter(u["x"], u["y"], marker="x", c=V.NO_ATOM, s=9, lw=0.8, label="in no atom")
     e = fs["errors"]
     ax.scatter(e["x"], e["y"], facecolors="none", edgecolors=V.ERROR_MARK, s=80, lw=1.8,
                label="misclassified")

@@ -354,7 +354,7 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
             sel = m[first[m] < 0]
             first[sel] = i
         color = _palette(first, ATOM_COLORS)
-        label = np.where(first >= 0, "in an atom (colour = atom)", "in no atom")
+        label = np.where(first >= 0, "in an atom (colour = atom)", "in no atom (grey)")
     elif mode == "fine":
         lab = np.asarray(result.coarse.fine_point_labels, dtype=np.int64)
         fc, mot = fine_colors(seq, result, ref), fine_motions(seq, result, ref)
@@ -370,7 +370,8 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
         lab = al[mode] if mode != "plain" else align_labels(plain.labels, gt if gt is not None
                                                              else al["final"])
         color, marker = _motion_palette(lab)
-        label = np.where(lab >= 0, np.char.add("motion ", (lab + 1).astype("U3")), "in no atom")
+        # (the coarse stage's -1: in no atom, which the x overlay counts; a name of its own here)
+        label = np.where(lab >= 0, np.char.add("motion ", (lab + 1).astype("U3")), "no coarse motion")
         if mode != "coarse":  # -1 after the voting: seen too briefly to decide (missing data)
             un = lab < 0
             color = np.where(un, UNSEEN, color).astype("U7")
@@ -389,7 +390,7 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
         raise ValueError(f"unknown colour mode {mode!r}")
     return {"color": np.asarray(color, dtype="U7"), "marker": np.asarray(marker, dtype=object),
             "label": np.asarray(label).astype(str), "misclassified": wrong, "stage": stage,
-            "note": note}
+            "note": note, "mode": mode}
 
 
 def raw_style(seq: laav.Sequence) -> dict:

@@ -415,7 +415,8 @@ def _load_csv(p: Path, header: tuple[str, dict], lim: tuple[int, int]) -> Sequen
                                 f"{float(v[bad][0]):g} on data row {_row(bad)}")
     bad = ~np.isfinite(col["x"]) | ~np.isfinite(col["y"])
     if bad.any():
-        raise SequenceError(f"{p}: NaN or infinite coordinate on data row {_row(bad)}")
+        raise SequenceError(f"{p}: NaN or infinite coordinate on data row {_row(bad)} (a track not "
+                            "seen in a frame has no row for that frame: leave such rows out)")
     tracks, ti = np.unique(col["track"], return_inverse=True)
     frames, fi = np.unique(col["frame"], return_inverse=True)
     P, F = tracks.size, frames.size

@@ -285,6 +285,9 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     # the frame view's caption does not count errors it cannot score
     assert "no ground truth, so no point is marked misclassified" in ex.frame_view.caption.object
     assert ex.w_color.value == "final (after Random Voting)"
+    # asked to colour by a ground truth it does not have: the title names what is drawn
+    ex.w_color.value = "ground truth"
+    assert ex.wait(60) and "colour: final" in ex.frame_view.fig.title.text
 
 
 def test_reset_restores_defaults(ex):

@@ -173,6 +173,17 @@ def test_reset_url_and_params_json_reach_the_advanced_card(ex):
     assert ex.wait(120)
     assert adv.widgets["coarse_samples"].value == 12 and adv.widgets["rv_reassign"].value is False
     assert {"coarse_samples", "rv_reassign", "coarse_merge", "rv_select", "lam"} == set(adv.marked)
+    # one exported for another sequence: its parameters and seed, not its C, and the page says so
+    C = ex.result.n_motions
+    d.update(sequence="another", n_motions=C + 1, seed=4)
+    d["params"]["coarse_samples"] = 10
+    assert ex.load_params(json.dumps(d), "theirs.json")
+    assert ex.wait(120)
+    assert (ex.result.params.coarse_samples, ex.result.seed, ex.result.n_motions) == (10, 4, C)
+    assert "theirs.json was exported for another" in ex.note.object.replace("\\", "")
+    assert f"its C = {C + 1} is not (C stays {C})" in ex.note.object.replace("\\", "")
+    ex.w_seed.value = 5  # the note goes with that file's result
+    assert ex.wait(120) and "theirs.json" not in ex.note.object
 
 
 def test_presets_in_one_click(ex):

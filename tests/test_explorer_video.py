@@ -265,6 +265,14 @@ def test_a_video_uploaded_to_the_page_is_refused_with_a_clear_message(tmp_path):
         msg = ex.state.error
         assert "does not track uploaded videos" in msg and "laav-explore clip.avi" in msg
         assert ex.sequence.name == "shown"
+        # a single image is no video: the message says what to open instead
+        import cv2
+
+        ok, png = cv2.imencode(".png", render_clip(0).frames[0])
+        assert ok and not ex.load_bytes(png.tobytes(), "frame.png")
+        msg = ex.state.error
+        assert "frame.png is an image, not a sequence file" in msg and "laav-explore FOLDER" in msg
+        assert "if it is a video" not in msg and ex.sequence.name == "shown"
     finally:
         ex.close()
 

@@ -299,7 +299,8 @@ def test_csv_gaps_become_missing_entries(tmp_path):
     ("fractional frame", "track,frame,x,y\n0,0,1,2\n0,1.5,1,2\n", "column 'frame' must hold whole "
      "numbers, got 1.5 on data row 2"),
     ("huge track id", "track,frame,x,y\n1e300,0,1,2\n", "column 'track' must hold whole numbers"),
-    ("nan x", "track,frame,x,y\n0,0,1,2\n0,1,nan,2\n", "NaN or infinite coordinate on data row 2"),
+    ("nan x", "track,frame,x,y\n0,0,1,2\n0,1,nan,2\n", "NaN or infinite coordinate on data row 2 (a track "
+     "not seen in a frame has no row"),
     ("inf y", "track,frame,x,y\n0,0,1,2\n0,1,1,-inf\n", "NaN or infinite coordinate on data row 2"),
     ("label changes", "track,frame,x,y,label\n0,0,1,2,1\n0,1,1,2,1\n0,2,1,2,2\n",
      "track 0 has labels 1 and 2 (data row 3)"),

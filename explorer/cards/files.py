@@ -108,8 +108,14 @@ def _refusal(message: str, name: str, path: Path) -> str:
     sequence format has (a video, most likely: :func:`explorer.video.is_video`) it says that
     videos are not tracked in the page (tracking a video takes a while, and an uploaded
     video is never handed to FFmpeg in the server), and how to open one."""
+    from laav.track import IMAGE_EXTENSIONS
+
     from ..video import is_video
 
+    if Path(name).suffix.lower() in IMAGE_EXTENSIONS:
+        return (f"{name} is an image, not a sequence file (.mat, .npz or tracks .csv): a folder of a "
+                f"video's frames opens on the command line, laav-explore FOLDER (it tracks, then "
+                "segments) — still showing the last valid result")
     if is_video(path):
         return (f"{name} is not a sequence file (.mat, .npz or tracks .csv): if it is a video, the page "
                 f"does not track uploaded videos — open it with laav-explore {name} on the command line "
