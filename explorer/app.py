@@ -793,6 +793,12 @@ class Explorer:
         self.files.not_opened()
         self.status_bar.show_error(message)
 
+    @property
+    def data_notes(self) -> list[str]:
+        """The page's notes about the data shown (Markdown): incomplete tracks, where C came
+        from, what the result says about itself; kept when the colouring changes."""
+        return list(getattr(self, "_data_notes", []))
+
     def provenance_of(self, seq: laav.Sequence) -> Provenance:
         """How ``seq`` came from its file (a bare :class:`Provenance` when nothing is known)."""
         for p in reversed(self._provenances):
@@ -845,7 +851,7 @@ class Explorer:
             self._draw_frame()
             self.compare.redraw()
             self.status_bar.show_note("  \n".join(
-                [n for n in [self.style["note"]] if n] + getattr(self, "_data_notes", [])))
+                [n for n in [self.style["note"]] if n] + self.data_notes))
             self._sync_url()
         self.view3d.set_colors(self.style["color"])
 

@@ -157,6 +157,10 @@ def test_the_app_loads_draws_and_counts_an_incomplete_sequence(occ):
         note = re.sub(r"\\(.)", r"\1", ex.note.object)
         assert "140 tracks over 12 frames" in note and "% of the entries visible" in note
         assert f"{BRIEF.size} points are" in note
+        # after a cancel the note says so and keeps what it says about the data
+        ex.files._after_cancel("the recomputation", occ.name)
+        after = re.sub(r"\\(.)", r"\1", ex.note.object)
+        assert after.startswith("**Cancelled** the recomputation") and "% of the entries visible" in after
         for label in V.COLOR_MODES:
             ex.w_color.value = label
             assert len(ex.src_points.data["x"]) == occ.visible[0].sum()

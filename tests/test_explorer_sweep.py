@@ -188,6 +188,7 @@ def test_card_runs_loads_a_seed_and_is_cancelled_by_a_parameter_change(explorer)
     assert not card.sweep.running
     assert card.progress_md.object.startswith("Cancelled: the settings changed")
     assert card.data["seed"] == [] and not any(b.visible for b in card.row_buttons)
+    assert "Rows appear" not in card.caption.object and "rows were cleared" in card.caption.object
     assert ex.wait(60)
     # finished rows of other settings are cleared too
     card.run()

@@ -467,9 +467,10 @@ class Files:
         self.show_progress(False)
         self._work_t0 = None
         self.status.show_last()
-        self.status.show_note(f"**Cancelled** {V.md_text(what)}"
-                              + (f" — still showing {V.md_text(shown)} with its last result."
-                                 if shown else "."))
+        cancelled = (f"**Cancelled** {V.md_text(what)}"
+                     + (f" — still showing {V.md_text(shown)} with its last result." if shown else "."))
+        # the notes about the data shown (incomplete tracks, where C came from) stay
+        self.status.show_note("  \n".join([cancelled] + list(getattr(self.host, "data_notes", []))))
 
     # ------------------------------------------------------------------ exports
     def _need_result(self):

@@ -151,8 +151,10 @@ class SweepView:
             else:
                 n = len(self.data["seed"])
                 self.progress_md.object = f"{why} after {n} of {len(SEEDS)} seeds."
-                if why.startswith("Cancelled"):
+                if why.startswith("Cancelled"):  # rows of other settings: cleared, and said so
                     self._show_table(dict(_EMPTY))
+                    self.caption.object = ("Its rows were cleared (they were for other settings). "
+                                           "Run it again for the settings shown.")
 
     def _summary(self, rows) -> str:
         worst = worst_seed(rows)
