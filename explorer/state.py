@@ -194,7 +194,7 @@ class Provenance:
         if self.motions_estimate is None:
             return f"C = {n_motions} is taken from the C box."
         if n_motions == self.motions_estimate:
-            return f"C = {n_motions} was estimated ({self.motions_reason}); the C box changes it."
+            return f"C = {n_motions} was estimated: {self.motions_reason}. The C box changes it."
         return f"C = {n_motions} is taken from the C box (estimated: {self.motions_estimate})."
 
 

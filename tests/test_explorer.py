@@ -281,7 +281,7 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     C = laav.estimate_motions(laav.Sequence(other.points, None)).n_motions
     assert ex.result.n_motions == C and ex.w_motions.value == C
     assert ex.note.visible and "no ground truth" in ex.note.object
-    assert V.md_text(f"C = {C} was estimated (") in ex.note.object
+    assert V.md_text(f"C = {C} was estimated: ") in ex.note.object
     # the frame view's caption does not count errors it cannot score
     assert "no ground truth, so no point is marked misclassified" in ex.frame_view.caption.object
     assert ex.w_color.value == "final (after Random Voting)"
@@ -1013,7 +1013,7 @@ def test_cli_estimates_c_for_a_file_without_ground_truth(monkeypatch, tmp_path, 
     # the page says so too (explorer.state.Provenance), and once C is changed, that it was
     prov = seen["provenance"]
     assert prov.sequence is seen["seq"] and prov.motions_estimate == expected and prov.point_ids is None
-    assert prov.motions_note(expected).startswith(f"C = {expected} was estimated (")
+    assert prov.motions_note(expected).startswith(f"C = {expected} was estimated: ")
     assert "taken from the C box (estimated: " in prov.motions_note(expected + 1)
     assert main([str(f), "--no-browser", "--port", "0", "--motions", "3"]) == 0
     assert seen["n_motions"] == 3 and seen["provenance"].motions_estimate is None
