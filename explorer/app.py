@@ -19,6 +19,7 @@ import json
 import threading
 import time
 import urllib.parse
+import weakref
 from contextlib import contextmanager
 from functools import partial
 from operator import attrgetter
@@ -225,6 +226,10 @@ class Explorer:
     video : explorer.video.Video, optional
         The tracked video ``seq`` comes from (:func:`explorer.video.open_video`): its frames
         are drawn behind the points, and the page says how the tracks were made.
+    provenance : explorer.state.Provenance, optional
+        How ``seq`` came from its file (``laav-explore FILE``: C estimated, tracks dropped by
+        ``--complete-only``): what the page's note says about it, and the file's point
+        numbers in the labels CSV.
 
     Examples
     --------
@@ -242,7 +247,11 @@ class Explorer:
         self.video = video
         #: how the sequences shown came from their files (:class:`explorer.state.Provenance`),
         #: the command's and the latest uploads'
-        self._provenances = [] if provenance is None else [provenance]
+        # (weak keys, values without their sequence: a replaced upload's sequence is freed)
+        self._provenances = weakref.WeakKeyDictionary()
+        self._provenance_lock = threading.Lock()  # (uploads add from their own thread)
+        if provenance is not None:
+            self.add_provenance(provenance)
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False,
                                    plain_rv=plain_rv, seeds_ahead=seeds_ahead, preview=preview)
         self._seeds_ahead = seeds_ahead  # (held back while a lazy page is still being completed)
@@ -801,14 +810,14 @@ class Explorer:
 
     def provenance_of(self, seq: laav.Sequence) -> Provenance:
         """How ``seq`` came from its file (a bare :class:`Provenance` when nothing is known)."""
-        for p in reversed(self._provenances):
-            if p.sequence is seq:
-                return p
-        return Provenance(seq)
+        with self._provenance_lock:
+            found = self._provenances.get(seq)
+        return Provenance(seq) if found is None else dataclasses.replace(found, sequence=seq)
 
     def add_provenance(self, provenance: Provenance) -> None:
-        """Remember how an opened sequence came from its file (the command's and the last few)."""
-        self._provenances = self._provenances[:1] + self._provenances[1:][-3:] + [provenance]
+        """Remember how an opened sequence came from its file (for as long as the sequence lives)."""
+        with self._provenance_lock:
+            self._provenances[provenance.sequence] = dataclasses.replace(provenance, sequence=None)
 
     def restore_result(self) -> None:
         """(Document thread.) After a cancel or a failure: a preview shown (whose result will
@@ -911,20 +920,30 @@ class Explorer:
             self.state.report(f"{name}: {exc} — nothing was changed")
             return False
         note = None
-        source = json.loads(data).get("sequence")  # (valid JSON: settings_from_json read it)
+        d = json.loads(data)  # (valid JSON: settings_from_json read it)
+        source, C_file = d.get("sequence"), d.get("n_motions")
         if isinstance(source, str) and source != self.sequence.name:
             # exported for another sequence: its parameters and seed, not its C (a property
-            # of that sequence), and the page says so
-            C = self.state.target.n_motions
+            # of that sequence; settings_from_json keeps ours), and the page says so
             note = (f"{name} was exported for {source}: its parameters and seed are applied to "
-                    f"{self.sequence.name}" + (f", its C = {new.n_motions} is not (C stays {C})"
-                                               if new.n_motions != C else ""))
-            new = dataclasses.replace(new, n_motions=C)
+                    f"{self.sequence.name}" + (f", its C = {C_file} is not (C stays {new.n_motions})"
+                                               if isinstance(C_file, int) and C_file != new.n_motions
+                                               else ""))
         self.schedule(self.controls.show_settings, new)
         gen = self.state.request(params=new.params.to_dict(), seed=new.seed, n_motions=new.n_motions)
         if gen is not None and note:
             self._params_note = (gen, note)  # shown with that request's result
+            if gen == self.applied_generation:  # nothing to recompute: shown now
+                self.schedule(self._show_params_note)
         return gen is not None
+
+    def _show_params_note(self) -> None:
+        """(Document thread.) The params.json note, with the page's other notes, when its
+        settings needed no new result."""
+        if self._params_note and self._params_note[0] == self.applied_generation:
+            self.status_bar.show_note("  \n".join(
+                [n for n in (self.style and self.style["note"], V.md_text(self._params_note[1])) if n]
+                + self.data_notes))
 
     def load_bytes(self, data: bytes, filename: str) -> bool:
         """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure."""

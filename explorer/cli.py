@@ -176,8 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "time and memory grow about linearly; docs/bench/scale.md)")
     p.add_argument("--complete-only", action="store_true",
                    help="keep only the tracks visible in every frame (by default incomplete tracks are "
-                        "segmented too and drawn only where seen); the labels CSV numbers the kept "
-                        "tracks as the file does, like laav segment --complete-only")
+                        "segmented too and drawn only where seen); the page numbers the kept points "
+                        "0..K-1, its labels CSV as the file does (like laav segment --complete-only)")
     tr = p.add_argument_group("tracking a VIDEO (the options of laav track; every track it keeps is "
                               "used, --complete-only: only those seen in every frame)")
     add_track_arguments(tr, rename={"--max-points": "--track-points"})

@@ -73,7 +73,8 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
            if seq.labels is not None else "no ground truth: errors cannot be scored"),
         fontsize=11)
     axs = fig.subplots(2, 2)
-    mode_name = {v: k for k, v in V.COLOR_MODES.items()}.get(mode, mode)
+    # the colouring drawn (the final labels when ground truth is asked for and missing)
+    mode_name = {v: k for k, v in V.COLOR_MODES.items()}.get(style["mode"], mode)
 
     ax = axs[0, 0]
     t = fs["trails"]

@@ -69,7 +69,6 @@ def shared_helper():
     and, unless ``LAAV_VOTING_HELPER=1``, on machines of fewer than
     :data:`HELPER_MIN_CORES` logical cores. Speed only: LAAV's own voting trials run half
     in it, the labels are the same."""
-    import atexit
     import os
 
     from laav.helper import VotingHelper
@@ -83,9 +82,7 @@ def shared_helper():
                 helper = VotingHelper()
             except (OSError, RuntimeError, ValueError):  # no process here: compute alone
                 helper = None
-            else:
-                atexit.register(helper.close)
-            _helper.append(helper)
+            _helper.append(helper)  # (it closes itself at interpreter exit)
         return _helper[0]
 
 
@@ -172,7 +169,8 @@ class Provenance:
     Attributes
     ----------
     sequence : Sequence
-        The sequence it describes (matched by identity).
+        The sequence it describes (matched by identity; None in the explorer's store, which
+        holds it by a weak key).
     motions_estimate : int or None
         C as :func:`laav.estimate_motions` estimated it (a file without ground truth), and
         ``motions_reason`` its reason; None when C was given or comes from ground truth.
@@ -183,7 +181,7 @@ class Provenance:
         One line for the page (e.g. how many tracks ``--complete-only`` dropped).
     """
 
-    sequence: Sequence
+    sequence: Sequence | None
     motions_estimate: int | None = None
     motions_reason: str = ""
     point_ids: np.ndarray | None = None
@@ -449,6 +447,8 @@ def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
     """Settings from a params.json the explorer exported (``{"params": {...}, "seed": ...,
     "n_motions": ...}``) or a bare ``{field: value}`` object; a field it does not name is
     ``defaults``' (default: ``LaavParams()``; ``laav-explore --preset`` gives its preset).
+    The file's C (``n_motions``) is taken only when its ``sequence`` is ``seq``'s name (or
+    it names none): another sequence's C stays ``base``'s.
     Raises ValueError (readable) when it is not such a file or a value is invalid; nothing
     is half-applied."""
     try:
@@ -471,7 +471,10 @@ def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
     except TypeError as exc:
         raise ValueError(f"invalid LAAV parameters: {exc}") from None
     seed = d.get("seed", base.seed)
-    C = d.get("n_motions", base.n_motions)
+    source = d.get("sequence")
+    # C is a property of the sequence: a file exported for another one does not set it
+    foreign = isinstance(source, str) and source != seq.name
+    C = base.n_motions if foreign else d.get("n_motions", base.n_motions)
     if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= SEED_MAX:
         raise ValueError(f"seed must be a whole number between 0 and {SEED_MAX}, got {str(seed)[:40]}")
     if not isinstance(C, int) or isinstance(C, bool):

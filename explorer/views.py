@@ -325,7 +325,8 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
     dict with ``color`` (P,) hex strings, ``marker`` (P,) bokeh marker names, ``label`` (P,)
     legend strings, ``misclassified`` (P,) bool: the points the mode's stage got wrong
     (:data:`ERROR_STAGE`, :func:`stage_errors`; all False without ground truth), ``stage``
-    (that stage), ``note`` (str, empty unless the mode cannot be shown as asked).
+    (that stage), ``note`` (str, empty unless the mode cannot be shown as asked), ``mode``
+    (the mode drawn: ``"final"`` when ground truth is asked for and missing).
     ``ref``: without ground truth, the labels the motions are matched to (their colours;
     see :func:`shown_labels`).
     """
@@ -1270,10 +1271,11 @@ def labels_table(seq: laav.Sequence, result: laav.LaavResult,
     Columns: ``point`` (0-based; with ``point_ids`` (P,), the file's number of each point,
     as ``laav segment --complete-only`` writes it), ``label`` (final motion: the same two
     columns as ``laav segment --out``), ``x0``, ``y0`` (position in frame 0; empty when the
-    point is not seen there), ``ground_truth`` (empty without), ``atoms`` (how many atoms
-    hold the point; 0: in no atom), ``owner_atom`` (the atom whose R1 core holds it, -1 for
-    none: a point only in atoms' R1-R2 rings, or in no atom), ``fine_model``,
-    ``coarse_motion`` (-1: the stage left the point out, i.e. it is in no atom).
+    point is not seen there), ``ground_truth`` (empty without), ``owner_atom`` (the atom
+    whose R1 core holds it, -1 for none: a point only in atoms' R1-R2 rings, or in no
+    atom), ``fine_model``, ``coarse_motion`` (-1: the stage left the point out, i.e. it is
+    in no atom), ``atoms`` (how many atoms hold the point; 0: in no atom; last, so that the
+    columns before it keep their places).
     """
     st = result.stage_labels()
     owner = np.asarray(result.atoms.owner)
@@ -1284,14 +1286,14 @@ def labels_table(seq: laav.Sequence, result: laav.LaavResult,
     if ids.shape != (seq.n_points,):
         raise ValueError(f"point_ids: {ids.shape[0]} numbers for {seq.n_points} points")
     gt = seq.labels
-    lines = ["point,label,x0,y0,ground_truth,atoms,owner_atom,fine_model,coarse_motion"]
+    lines = ["point,label,x0,y0,ground_truth,owner_atom,fine_model,coarse_motion,atoms"]
     p0 = seq.points[0]
     v0 = visible_at(seq, 0)
     for i in range(seq.n_points):
         g = "" if gt is None else str(int(gt[i]))
         xy0 = f"{p0[i, 0]:.3f},{p0[i, 1]:.3f}" if v0[i] else ","
-        lines.append(f"{int(ids[i])},{int(st['final'][i])},{xy0},{g},{int(n_atoms[i])},{int(owner[i])},"
-                     f"{int(st['fine'][i])},{int(st['coarse'][i])}")
+        lines.append(f"{int(ids[i])},{int(st['final'][i])},{xy0},{g},{int(owner[i])},"
+                     f"{int(st['fine'][i])},{int(st['coarse'][i])},{int(n_atoms[i])}")
     return "\n".join(lines) + "\n"
 
 

@@ -26,6 +26,7 @@ import os
 import threading
 import time
 import warnings
+import weakref
 from concurrent.futures import CancelledError, ProcessPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from concurrent.futures.process import BrokenProcessPool
@@ -88,6 +89,27 @@ def _candidate_part(*args) -> tuple:
     return results, finished, cost
 
 
+def _close_at_exit(helper: VotingHelper) -> None:
+    """Close ``helper`` when the interpreter exits, before ``concurrent.futures`` waits for
+    the running job (an ``atexit`` handler would run only after that wait): through
+    ``threading``'s exit hooks, which run in reverse order of registration, so after the
+    pool module's own hook was registered (at its import) this one runs first. Weakly: a
+    helper no longer used is not kept alive by it."""
+    ref = weakref.ref(helper)
+
+    def close() -> None:
+        h = ref()
+        if h is not None:
+            h.close()
+
+    try:
+        threading._register_atexit(close)
+    except (AttributeError, RuntimeError):  # no such hook (another Python), or exiting already
+        import atexit
+
+        atexit.register(close)
+
+
 class VotingHelper:
     """A process that runs part of LAAV's own voting trials (module docstring).
 
@@ -101,7 +123,8 @@ class VotingHelper:
     Notes
     -----
     One helper may serve several pipelines and threads: its process runs one job at a
-    time, the others wait their turn. :meth:`close` ends it (also at interpreter exit).
+    time, the others wait their turn. :meth:`close` ends it (also at interpreter exit,
+    without waiting for a running job's end).
     As with any ``multiprocessing`` code, a script must create it under
     ``if __name__ == "__main__":`` (the process imports the script's main module); if the
     process cannot start or keeps dying, the helper closes itself after
@@ -133,6 +156,7 @@ class VotingHelper:
         self.jobs = 0
         self.delivered = 0
         self._ready = None  # the new process's imports (a Future), while they run
+        _close_at_exit(self)
         self._unfinished: set = set()  # ids of the jobs handed over and not yet finished
         self._unfinished_lock = threading.Lock()  # (done callbacks run in the pool's thread)
         if start:
@@ -276,10 +300,9 @@ class VotingHelper:
         with self._lock:
             self._closed = True
             pool, self._pool = self._pool, None
-            # the newest ids last: the ring keeps them if there are more than it holds
             with self._unfinished_lock:
                 unfinished = sorted(self._unfinished)
-            for job in unfinished[-_STOPPED_RING:]:
+            for job in unfinished[:_STOPPED_RING]:  # the oldest: the running one and those handed over
                 self._stop_id(job)
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)

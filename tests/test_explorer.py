@@ -238,7 +238,7 @@ def _upload(ex, name: str, data: bytes) -> None:
     send_chunks(ex, name, data)
 
 
-def test_empty_upload_says_so_and_c_box_is_bounded(ex, seq):
+def test_empty_upload_says_so_and_a_bad_c_is_refused(ex, seq):
     res = ex.result
     _upload(ex, "nothing.npz", b"")
     assert ex.wait(60) and ex.result is res
@@ -246,12 +246,17 @@ def test_empty_upload_says_so_and_c_box_is_bounded(ex, seq):
     # C: at least 1, at most the number of points; the box has no bounds (the page's box
     # would neither clamp nor send a value past them): the state refuses it, with a message
     assert (ex.w_motions.start, ex.w_motions.end) == (None, None)
+    fm = ex.w_params["fine_models"]
+    fine, fine_end, C = fm.value, fm.end, ex.w_motions.value
     for bad, msg in ((0, "must be a positive integer"), (-2, "must be a positive integer"),
                      (2.5, "must be a positive integer, got 2.5"),
-                     (seq.n_points + 1, f"more than the {seq.n_points} points")):
+                     (seq.n_points + 1, f"more than the {seq.n_points} points"), (10**8, "more than")):
         ex.w_motions.value = bad
         assert ex.wait(60) and ex.result is res
         assert ex.alert.visible and msg in _shown(ex.alert)
+        assert (fm.value, fm.end) == (fine, fine_end)  # a refused C does not move the fine models
+    ex.w_motions.value = C  # back: the fine models still follow C (auto), as before
+    assert ex.wait(60) and ex.result.params.fine_models is None
 
 
 def test_bad_upload_shows_a_message_and_keeps_the_result(ex):
@@ -273,12 +278,14 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     other = _two_motion_sequence(n_frames=9, n_points=100, seed=3)
     buf = io.BytesIO()
     np.savez(buf, points=other.points)  # no labels: C is estimated, as by laav-explore FILE
+    C = laav.estimate_motions(laav.Sequence(other.points, None)).n_motions
+    ex.w_motions.value = C + 1  # not the box's C
+    assert ex.wait(60) and ex.result.n_motions == C + 1
     assert ex.load_bytes(buf.getvalue(), "unlabelled.npz")
     assert ex.wait(60)
     assert ex.sequence.name == "unlabelled" and ex.sequence.n_points == 100
     assert len(ex.src_points.data["x"]) == 100
     assert ex.w_frame.end == 8
-    C = laav.estimate_motions(laav.Sequence(other.points, None)).n_motions
     assert ex.result.n_motions == C and ex.w_motions.value == C
     assert ex.note.visible and "no ground truth" in ex.note.object
     assert V.md_text(f"C = {C} was estimated: ") in ex.note.object
@@ -288,6 +295,10 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     # asked to colour by a ground truth it does not have: the title names what is drawn
     ex.w_color.value = "ground truth"
     assert ex.wait(60) and "colour: final" in ex.frame_view.fig.title.text
+    from explorer import export  # the PNG's frame panel too
+
+    fig = export.views_figure(ex.sequence, ex.result, 0, "gt", plain=None)
+    assert fig.axes[0].get_title().startswith("Frame 0, coloured by final")
 
 
 def test_reset_restores_defaults(ex):

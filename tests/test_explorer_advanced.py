@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import re
+import time
 
 import numpy as np
 import pytest
@@ -184,6 +185,19 @@ def test_reset_url_and_params_json_reach_the_advanced_card(ex):
     assert f"its C = {C + 1} is not (C stays {C})" in ex.note.object.replace("\\", "")
     ex.w_seed.value = 5  # the note goes with that file's result
     assert ex.wait(120) and "theirs.json" not in ex.note.object
+    # one that differs only in C: nothing to recompute, the note is shown at once
+    res = ex.result
+    d.update(seed=5, n_motions=C + 2)
+    d["params"] = ex.result.params.to_dict()
+    assert ex.load_params(json.dumps(d), "only_c.json")
+    assert ex.wait(120) and ex.result is res
+    deadline = time.monotonic() + 10
+    while "only_c.json" not in ex.note.object and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert f"its C = {C + 2} is not (C stays {C})" in ex.note.object.replace("\\", "")
+    # a C this sequence could not take does not get the file refused
+    d.update(n_motions=10**6, seed=6)
+    assert ex.load_params(json.dumps(d), "huge_c.json") and ex.wait(120) and ex.result.seed == 6
 
 
 def test_presets_in_one_click(ex):

@@ -278,3 +278,40 @@ def test_close_stops_a_running_job():
     assert time.perf_counter() - t < 5
     with pytest.raises(Interrupted):
         handle[1].result(timeout=0)
+
+
+_EXIT_CHILD = """
+import sys, time
+import numpy as np
+import laav
+from laav.helper import VotingHelper
+from laav import synthetic
+
+if __name__ == "__main__":
+    h = VotingHelper()
+    assert h.wait_ready()
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=1200, rng=0)
+    P = seq.points.shape[1]
+    rng = np.random.default_rng(1)
+    params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)  # seconds
+    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(2))
+    handle = h.submit((seq.points, 3, params, [start], None, [False]))
+    time.sleep(0.5)
+    assert not handle[1].done()
+    print(time.time(), flush=True)  # the script's end: the interpreter exits from here
+"""
+
+
+def test_interpreter_exit_does_not_wait_for_a_running_job(tmp_path):
+    """A script that ends while the helper runs a long job exits at once: the helper closes
+    itself before ``concurrent.futures`` would wait for the job (an ``atexit`` handler ran
+    only after that wait: 6 s for a 10,000-iteration job)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "child.py"
+    script.write_text(_EXIT_CHILD)
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    ended = time.time()
+    assert out.returncode == 0, out.stderr
+    assert ended - float(out.stdout.strip().splitlines()[-1]) < 5

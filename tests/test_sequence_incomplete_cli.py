@@ -145,7 +145,8 @@ def test_explorer_cli_accepts_an_incomplete_file(tmp_path, capsys, monkeypatch):
     # --complete-only keeps working: the 60 full tracks
     assert explore([str(path), "--no-browser", "--complete-only"]) == 0
     cap = capsys.readouterr()
-    assert "--complete-only: kept 60 points" in cap.err and "(60 points, 10 frames, C = 2)" in cap.out
+    assert "--complete-only: kept the 60 of 80 tracks" in cap.err
+    assert "(60 points, 10 frames, C = 2)" in cap.out
 
 
 def test_explorer_cli_estimates_c_of_an_incomplete_file_without_truth(tmp_path, capsys, monkeypatch):

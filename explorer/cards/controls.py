@@ -152,7 +152,10 @@ class Controls:
         if event is not None and event.obj is self.w_motions:
             fm = self.w_params["fine_models"]
             old, new = _whole(event.old), _whole(event.new)
-            old = old if isinstance(old, int) and isinstance(new, int) else None
+            # the fine models follow only a C the state can take (it refuses the others,
+            # saying why; they must not move the slider meanwhile)
+            valid = isinstance(new, int) and 1 <= new <= self.state.target_sequence.n_points
+            old = old if isinstance(old, int) and valid else None
             # the fine models follow C (k C by default)
             k = self.state.target.params.replace(fine_models=None).n_fine(1, self._complete())
             if old is not None and fm.value == k * old:

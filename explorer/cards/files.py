@@ -500,6 +500,6 @@ def _estimated_motions(seq: laav.Sequence) -> Provenance:
         return Provenance(seq)
     try:
         count = laav.estimate_motions(seq)
-    except ValueError:
+    except Exception:  # noqa: BLE001 - never let an upload hang on "Reading": the C box's value
         return Provenance(seq)
     return Provenance(seq, count.n_motions, count.reason)
