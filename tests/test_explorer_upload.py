@@ -221,3 +221,35 @@ def test_an_upload_cancelled_after_its_preview_leaves_the_box(monkeypatch):
         assert cleared == ["previewed.npz"]
     finally:
         e.close()
+
+
+def test_estimating_c_of_an_upload_shows_in_the_progress_line(ex, monkeypatch):
+    """An upload without ground truth has its C estimated while it is read (seconds on
+    thousands of tracks): the progress line says so; the estimate is then used."""
+    import threading
+
+    gate, asked = threading.Event(), threading.Event()
+    real = laav.estimate_motions
+
+    def slow(seq, *a, **kw):
+        asked.set()
+        assert gate.wait(30)
+        return real(seq, *a, **kw)
+
+    monkeypatch.setattr(laav, "estimate_motions", slow)
+    other = _seq(seed=3, name="bare")
+    buf = io.BytesIO()
+    np.savez(buf, points=other.points)  # no labels
+    token = object()
+    ex.files._reading = (token, "bare.npz", 1234, time.monotonic() - 10)  # (as an upload sets it)
+    t = threading.Thread(target=ex.files.load_bytes, args=(buf.getvalue(), "bare.npz", token))
+    t.start()
+    try:
+        assert asked.wait(30)
+        assert "no ground truth: estimating C" in ex.files.progress_text()
+    finally:
+        gate.set()
+        t.join(60)
+    assert ex.wait(120) and ex.sequence.name == "bare"
+    assert ex.result.n_motions == real(laav.Sequence(other.points, None)).n_motions
+    assert ex.files.progress_text() is None

@@ -155,6 +155,7 @@ class Files:
         self._parts: dict = {}  # name -> [chunks, bytes so far] of the upload arriving
         self._upload_lock = threading.Lock()
         self._reading: tuple | None = None  # (token, name, size, t0) of the file being read
+        self._estimating = None  # the token of the read whose C is being estimated
         self._work_t0: float | None = None  # since when the state has been busy
         # the progress line of long work (reading, a first computation, a recompute)
         self.progress_md = Markdown("", margin=(4, 6), sizing_mode="stretch_width")
@@ -360,7 +361,11 @@ class Files:
         except Exception as exc:  # never let an upload kill the session
             self.state.report(f"{base}: could not be read ({type(exc).__name__}: {exc})")
             return False
-        provenance = _estimated_motions(seq)  # without ground truth C is estimated, as by the command
+        self._estimating = token
+        try:  # without ground truth C is estimated, as by the command (a second or a few)
+            provenance = _estimated_motions(seq)
+        finally:
+            self._estimating = None
         if provenance.motions_estimate is not None:
             C = provenance.motions_estimate
         if token is not None and not self._end_reading(token):
@@ -411,7 +416,8 @@ class Files:
             _, name, size, t0 = reading
             if now - t0 < PROGRESS_AFTER:
                 return None
-            return f"Reading **{V.md_text(name)}** ({fmt_size(size)})… {now - t0:.0f} s"
+            doing = " — no ground truth: estimating C" if self._estimating is reading[0] else ""
+            return f"Reading **{V.md_text(name)}** ({fmt_size(size)}){doing}… {now - t0:.0f} s"
         t0 = self._work_t0
         if t0 is None or now - t0 < PROGRESS_AFTER or not self.state.busy:
             return None
