@@ -30,12 +30,16 @@ def parse_size(text) -> int:
 
 
 def fmt_size(n: int) -> str:
-    """``812 bytes``, ``3.4 KB``, ``61.2 MB``, ``2.1 GB`` (powers of 1000, as the upload box)."""
+    """A size as the page's upload box prints it (powers of 1000): ``812 bytes``, whole
+    kilobytes rounded down (``268 KB`` for 268,900 bytes), megabytes to one decimal without a
+    trailing ``.0`` (``61.2 MB``, ``50 MB``), gigabytes to two (``2.10 GB``), so that a message
+    and the box name the same size."""
     n = int(n)
     if n < 1000:
         return f"{n} byte{'s' if n != 1 else ''}"
-    for unit, f in (("GB", 10**9), ("MB", 10**6), ("KB", 10**3)):
-        if n >= f:
-            v = n / f
-            return f"{v:.0f} {unit}" if v >= 100 or v == int(v) else f"{v:.1f} {unit}"
-    raise AssertionError
+    if n < 10**6:
+        return f"{n // 1000} KB"
+    if n < 10**9:
+        text = f"{n / 10**6:.1f}"
+        return f"{text[:-2] if text.endswith('.0') else text} MB"
+    return f"{n / 10**9:.2f} GB"

@@ -76,8 +76,12 @@ def test_bad_sizes_are_refused(text):
 
 
 def test_sizes_print_like_the_upload_box():
-    assert [files.fmt_size(n) for n in (0, 1, 999, 1000, 3_400, 50_000_000, 61_234_567, 2_100_000_000)] == [
-        "0 bytes", "1 byte", "999 bytes", "1 KB", "3.4 KB", "50 MB", "61.2 MB", "2.1 GB"]
+    # (FilePond's own rule: whole kilobytes rounded down, one decimal of a megabyte, two of a
+    # gigabyte; the upload box printed 268 KB where a message said 269 KB)
+    sizes = (0, 1, 999, 1000, 3_400, 268_900, 999_999, 50_000_000, 61_234_567, 2_100_000_000)
+    assert [files.fmt_size(n) for n in sizes] == [
+        "0 bytes", "1 byte", "999 bytes", "1 KB", "3 KB", "268 KB", "999 KB", "50 MB", "61.2 MB",
+        "2.10 GB"]
 
 
 def test_cli_max_upload(capsys):
