@@ -956,6 +956,11 @@ def occlude(seq: Sequence, fraction: float, rng: np.random.Generator | int | Non
     ``round(fraction F P)`` entries are hidden. Hidden entries are independent of the
     tracks' positions and motions (no occluder moves across the image).
 
+    Known bias (``docs/bench/missing.md``, "The occlusion model's bias"): the split is at
+    ``floor(c0 n)`` and ``floor(c1 n)`` with uniform ``c0 < c1 < 1``, so the end run is
+    never empty: every occluded track loses the last frame, and few lose none of the first.
+    Kept as it is for now: every missing-data figure was measured with it.
+
     Parameters
     ----------
     seq : Sequence
