@@ -14,8 +14,6 @@ notebooks) results are applied directly, under a lock.
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import threading
 import time
 import urllib.parse
@@ -48,7 +46,15 @@ from .cards.status import StatusBar
 from .cards.sweep import SweepView
 from .cards.tour import TourView
 from .cards.view3d import View3D
-from .state import ExplorerState, Provenance, non_defaults, parse_settings, query_of, settings_from_json
+from .state import (
+    ExplorerState,
+    Origin,
+    non_defaults,
+    params_file_note,
+    parse_settings,
+    query_of,
+    settings_from_json,
+)
 
 __all__ = ["Explorer", "PARAM_SLIDERS", "SIDE_W", "REST_AFTER_S"]
 
@@ -226,7 +232,7 @@ class Explorer:
     video : explorer.video.Video, optional
         The tracked video ``seq`` comes from (:func:`explorer.video.open_video`): its frames
         are drawn behind the points, and the page says how the tracks were made.
-    provenance : explorer.state.Provenance, optional
+    origin : explorer.state.Origin, optional
         How ``seq`` came from its file (``laav-explore FILE``: C estimated, tracks dropped by
         ``--complete-only``): what the page's note says about it, and the file's point
         numbers in the labels CSV.
@@ -241,17 +247,16 @@ class Explorer:
                  params: LaavParams | None = None, seed: int = 0, *, viser: bool = True,
                  viser_host: str = "127.0.0.1", iframe_host: str | None = None, pipeline=None,
                  start: bool = True, page_hosts=None, max_upload: int = DEFAULT_MAX_UPLOAD, video=None,
-                 plain_rv=None, seeds_ahead: bool = False, preview=None, provenance=None):
+                 plain_rv=None, seeds_ahead: bool = False, preview=None, origin=None):
         if video is not None and video.sequence is not seq:
             raise ValueError("video must be the one seq was tracked from (video.sequence is seq)")
         self.video = video
-        #: how the sequences shown came from their files (:class:`explorer.state.Provenance`),
-        #: the command's and the latest uploads'
-        # (weak keys, values without their sequence: a replaced upload's sequence is freed)
-        self._provenances = weakref.WeakKeyDictionary()
-        self._provenance_lock = threading.Lock()  # (uploads add from their own thread)
-        if provenance is not None:
-            self.add_provenance(provenance)
+        #: how the sequences opened came from their files (:class:`explorer.state.Origin`);
+        #: weak keys: a replaced upload's sequence is freed
+        self._origins = weakref.WeakKeyDictionary()
+        self._origin_lock = threading.Lock()  # (uploads add from their own thread)
+        if origin is not None:
+            self.add_origin(seq, origin)
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False,
                                    plain_rv=plain_rv, seeds_ahead=seeds_ahead, preview=preview)
         self._seeds_ahead = seeds_ahead  # (held back while a lazy page is still being completed)
@@ -268,6 +273,7 @@ class Explorer:
         self.previewing = False
         self._unpinned_note = None  # the compare card's note when a sequence is opened
         self._params_note = None  # (generation, text): about a params.json, with its result
+        self._data_notes: list[str] = []  # the note's lines about the data shown (data_notes)
         # what the views show: the result, its sequence, the point colours
         # (views.point_style), the fine models' colours, the points whose motion changed
         self.result: laav.LaavResult | None = None
@@ -715,8 +721,8 @@ class Explorer:
                                       "scored.")
                 elif seq.labels is None:
                     data_notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; "
-                                      + V.md_text(self.provenance_of(seq).motions_note(settings.n_motions)))
-                data_notes.append(V.md_text(self.provenance_of(seq).note))
+                                      + V.md_text(self.origin_of(seq).motions_note(settings.n_motions)))
+                data_notes.append(V.md_text(self.origin_of(seq).note))
                 if not seq.is_complete:
                     data_notes.append(V.incomplete_note(seq, result, counts=not (
                         self.video is not None and seq is self.video.sequence)))
@@ -724,8 +730,7 @@ class Explorer:
                 self._data_notes = [n for n in data_notes if n]
                 params_note = (V.md_text(self._params_note[1])
                                if self._params_note and self._params_note[0] == gen else None)
-                notes = [n for n in (self.style["note"], unpinned, params_note) if n] + self._data_notes
-                s.show_note("  \n".join(notes))
+                self.show_notes(unpinned, params_note)
                 # a preview's time: its own stages' (what this change reran, or the warm child)
                 s.show_result(seq, num["error_final"], sum(result.timings.values()) if preview
                               else self.state.compute_seconds,
@@ -766,7 +771,7 @@ class Explorer:
 
     def _draw_frame(self) -> None:
         # the colouring drawn (the final labels when ground truth was asked for and is missing)
-        shown = {v: k for k, v in V.COLOR_MODES.items()}.get(self.style.get("mode"))
+        shown = V.COLOR_LABELS.get(self.style.get("mode"))
         self.frame_view.draw(self.sequence, self.result, self.frame, self.style, self.moved,
                              shown or self.controls.w_color.value)
 
@@ -806,18 +811,23 @@ class Explorer:
     def data_notes(self) -> list[str]:
         """The page's notes about the data shown (Markdown): incomplete tracks, where C came
         from, what the result says about itself; kept when the colouring changes."""
-        return list(getattr(self, "_data_notes", []))
+        return list(self._data_notes)
 
-    def provenance_of(self, seq: laav.Sequence) -> Provenance:
-        """How ``seq`` came from its file (a bare :class:`Provenance` when nothing is known)."""
-        with self._provenance_lock:
-            found = self._provenances.get(seq)
-        return Provenance(seq) if found is None else dataclasses.replace(found, sequence=seq)
+    def show_notes(self, *lines) -> None:
+        """(Document thread.) The page's note: the colouring's (when it cannot be shown as
+        asked), then ``lines`` (Markdown; empty ones skipped), then :attr:`data_notes`."""
+        style_note = self.style["note"] if self.style else None
+        self.status_bar.show_note("  \n".join([n for n in (style_note, *lines) if n] + self.data_notes))
 
-    def add_provenance(self, provenance: Provenance) -> None:
-        """Remember how an opened sequence came from its file (for as long as the sequence lives)."""
-        with self._provenance_lock:
-            self._provenances[provenance.sequence] = dataclasses.replace(provenance, sequence=None)
+    def origin_of(self, seq: laav.Sequence) -> Origin:
+        """How ``seq`` came from its file (an empty :class:`Origin` when nothing is known)."""
+        with self._origin_lock:
+            return self._origins.get(seq, Origin())
+
+    def add_origin(self, seq: laav.Sequence, origin: Origin) -> None:
+        """Remember how ``seq`` came from its file (for as long as ``seq`` lives)."""
+        with self._origin_lock:
+            self._origins[seq] = origin
 
     def restore_result(self) -> None:
         """(Document thread.) After a cancel or a failure: a preview shown (whose result will
@@ -859,8 +869,7 @@ class Explorer:
         with self.hold(live="draw"):
             self._draw_frame()
             self.compare.redraw()
-            self.status_bar.show_note("  \n".join(
-                [n for n in [self.style["note"]] if n] + self.data_notes))
+            self.show_notes()
             self._sync_url()
         self.view3d.set_colors(self.style["color"])
 
@@ -919,16 +928,7 @@ class Explorer:
         except ValueError as exc:
             self.state.report(f"{name}: {exc} — nothing was changed")
             return False
-        note = None
-        d = json.loads(data)  # (valid JSON: settings_from_json read it)
-        source, C_file = d.get("sequence"), d.get("n_motions")
-        if isinstance(source, str) and source != self.sequence.name:
-            # exported for another sequence: its parameters and seed, not its C (a property
-            # of that sequence; settings_from_json keeps ours), and the page says so
-            note = (f"{name} was exported for {source}: its parameters and seed are applied to "
-                    f"{self.sequence.name}" + (f", its C = {C_file} is not (C stays {new.n_motions})"
-                                               if isinstance(C_file, int) and C_file != new.n_motions
-                                               else ""))
+        note = params_file_note(data, self.sequence, new, name)  # exported for another sequence
         self.schedule(self.controls.show_settings, new)
         gen = self.state.request(params=new.params.to_dict(), seed=new.seed, n_motions=new.n_motions)
         if gen is not None and note:
@@ -941,9 +941,7 @@ class Explorer:
         """(Document thread.) The params.json note, with the page's other notes, when its
         settings needed no new result."""
         if self._params_note and self._params_note[0] == self.applied_generation:
-            self.status_bar.show_note("  \n".join(
-                [n for n in (self.style and self.style["note"], V.md_text(self._params_note[1])) if n]
-                + self.data_notes))
+            self.show_notes(V.md_text(self._params_note[1]))
 
     def load_bytes(self, data: bytes, filename: str) -> bool:
         """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure."""

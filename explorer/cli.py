@@ -264,7 +264,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
                 hosts: list[str] | None = None, announce_viser: bool = False,
                 params: laav.LaavParams | None = None, max_upload: int | None = None, video=None,
-                warm=None, seeds_ahead: bool = False, on_first_page=None, provenance=None):
+                warm=None, seeds_ahead: bool = False, on_first_page=None, origin=None):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
@@ -284,8 +284,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     only the first explorer built takes them). ``seeds_ahead``: every tab computes the next
     seed's result while idle (:class:`explorer.state.ExplorerState`; the command turns it on).
     ``on_first_page``: called, on the server's thread, when a tab's page is complete
-    (:attr:`Explorer.on_page_complete`; it must do its work once). ``provenance``: how
-    ``seq`` came from its file (:class:`explorer.state.Provenance`), for every tab.
+    (:attr:`Explorer.on_page_complete`; it must do its work once). ``origin``: how
+    ``seq`` came from its file (:class:`explorer.state.Origin`), for every tab.
     """
     iframe_host = None if host in _ANY else host
     hosts = page_hosts(host) if hosts is None else hosts
@@ -305,7 +305,7 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                         max_upload=DEFAULT_MAX_UPLOAD if max_upload is None else max_upload,
                         video=video, pipeline=None if first is None else first.pipeline,
                         plain_rv=None if first is None else first.plain_rv, seeds_ahead=seeds_ahead,
-                        preview=None if first is None else first.preview, provenance=provenance)
+                        preview=None if first is None else first.preview, origin=origin)
 
     if prebuild:
         fut: Future = Future()
@@ -405,7 +405,7 @@ def main(argv: list[str] | None = None) -> int:
         if not _port_free(args.host, port):
             return _fail(parser, f"port {port} on {args.host} is already in use; pick another with --port")
     video = None
-    kept = note = estimate = None  # how the sequence came from the file (state.Provenance)
+    kept = note = estimate = None  # how the sequence came from the file (state.Origin)
     if args.file is not None:
         from .video import is_video
 
@@ -501,20 +501,20 @@ def main(argv: list[str] | None = None) -> int:
     C = settings.n_motions
     # the first result, computed from now on in a child process (not in this one: the page
     # being served would wait for the GIL); the first tab's explorer takes it
-    from .state import Provenance
+    from .state import Origin
     from .warm import first_results
 
-    provenance = Provenance(seq, None if estimate is None else estimate.n_motions,
-                            "" if estimate is None else estimate.reason, kept, note or "")
+    origin = Origin(None if estimate is None else estimate.n_motions,
+                    "" if estimate is None else estimate.reason, kept, note or "")
     first = first_results(seq, C, settings.params, settings.seed)
     startup_gc = _StartupGC()  # (after the fork: the child holds its own off, explorer.warm)
     try:
-        return _serve(args, seq, C, settings, port, video, first, startup_gc, parser, provenance)
+        return _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origin)
     finally:
         startup_gc.end()  # (at once if nothing did it before: the server has stopped)
 
 
-def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, provenance=None) -> int:
+def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origin=None) -> int:
     """:func:`main`'s server: serve until stopped (Ctrl-C)."""
     import panel as pn
 
@@ -525,7 +525,7 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, prove
         factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
                               announce_viser=not _is_loopback(args.host), params=settings.params,
                               max_upload=args.max_upload, video=video, warm=first, seeds_ahead=True,
-                              on_first_page=startup_gc.end, provenance=provenance)
+                              on_first_page=startup_gc.end, origin=origin)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False, **serve_options())

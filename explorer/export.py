@@ -74,7 +74,7 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
         fontsize=11)
     axs = fig.subplots(2, 2)
     # the colouring drawn (the final labels when ground truth is asked for and missing)
-    mode_name = {v: k for k, v in V.COLOR_MODES.items()}.get(style["mode"], mode)
+    mode_name = V.COLOR_LABELS.get(style["mode"], mode)
 
     ax = axs[0, 0]
     t = fs["trails"]

@@ -50,7 +50,7 @@ from .views import COLOR_MODES, align_labels, stage_numbers
 
 __all__ = ["ExplorerState", "Superseded", "Cancelled", "Settings", "RV_FIELDS", "Change", "describe_change",
            "non_defaults", "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of",
-           "settings_from_json", "parse_value", "Provenance"]
+           "settings_from_json", "parse_value", "Origin", "params_file_note", "check_motions"]
 
 _helper_lock = threading.Lock()
 _helper: list = []  # the server's one VotingHelper, once started (empty: not yet)
@@ -161,16 +161,13 @@ RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams)
                   if f.name.startswith("rv_") and f.name not in NOT_PLAIN_FIELDS) + SELECTION_FIELDS
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
-class Provenance:
-    """How the explorer's ``sequence`` came from its file: what the page says about it and
-    how the exports number its points.
+@dataclasses.dataclass(frozen=True)
+class Origin:
+    """How a sequence the explorer shows came from its file: what the page says about it
+    and how the exports number its points (the explorer keeps one per sequence).
 
     Attributes
     ----------
-    sequence : Sequence
-        The sequence it describes (matched by identity; None in the explorer's store, which
-        holds it by a weak key).
     motions_estimate : int or None
         C as :func:`laav.estimate_motions` estimated it (a file without ground truth), and
         ``motions_reason`` its reason; None when C was given or comes from ground truth.
@@ -181,10 +178,9 @@ class Provenance:
         One line for the page (e.g. how many tracks ``--complete-only`` dropped).
     """
 
-    sequence: Sequence | None
     motions_estimate: int | None = None
     motions_reason: str = ""
-    point_ids: np.ndarray | None = None
+    point_ids: np.ndarray | None = dataclasses.field(default=None, compare=False)
     note: str = ""
 
     def motions_note(self, n_motions: int) -> str:
@@ -471,10 +467,8 @@ def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
     except TypeError as exc:
         raise ValueError(f"invalid LAAV parameters: {exc}") from None
     seed = d.get("seed", base.seed)
-    source = d.get("sequence")
     # C is a property of the sequence: a file exported for another one does not set it
-    foreign = isinstance(source, str) and source != seq.name
-    C = base.n_motions if foreign else d.get("n_motions", base.n_motions)
+    C = base.n_motions if _exported_for_another(d, seq) else d.get("n_motions", base.n_motions)
     if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= SEED_MAX:
         raise ValueError(f"seed must be a whole number between 0 and {SEED_MAX}, got {str(seed)[:40]}")
     if not isinstance(C, int) or isinstance(C, bool):
@@ -484,16 +478,40 @@ def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
     return new
 
 
-def check_settings(seq: Sequence, settings: Settings) -> None:
-    """Raise ValueError with a readable message when ``settings`` cannot run on ``seq``."""
-    C = settings.n_motions
-    seed = settings.seed
-    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or not 0 <= seed <= SEED_MAX:
-        raise ValueError(f"seed must be a whole number between 0 and {SEED_MAX}, got {seed!r}")
+def _exported_for_another(d: dict, seq: Sequence) -> bool:
+    """Whether a params file's object ``d`` names a sequence other than ``seq``."""
+    source = d.get("sequence")
+    return isinstance(source, str) and source != seq.name
+
+
+def params_file_note(text: str | bytes, seq: Sequence, used: Settings, name: str) -> str | None:
+    """What the page says about the params file ``name`` (``text``, valid:
+    :func:`settings_from_json` read it into ``used``) when it was exported for another
+    sequence: its parameters and seed are applied, its C is not. None otherwise."""
+    d = json.loads(text)
+    if not _exported_for_another(d, seq):
+        return None
+    C = d.get("n_motions")
+    return (f"{name} was exported for {d['sequence']}: its parameters and seed are applied to "
+            f"{seq.name}" + (f", its C = {C} is not (C stays {used.n_motions})"
+                             if isinstance(C, int) and C != used.n_motions else ""))
+
+
+def check_motions(seq: Sequence, C) -> None:
+    """Raise ValueError with a readable message when ``seq`` cannot be split into ``C`` motions."""
     if not isinstance(C, int) or C < 1:
         raise ValueError(f"the number of motions C must be a positive integer, got {C!r}")
     if C > seq.n_points:
         raise ValueError(f"C = {C} motions is more than the {seq.n_points} points of the sequence")
+
+
+def check_settings(seq: Sequence, settings: Settings) -> None:
+    """Raise ValueError with a readable message when ``settings`` cannot run on ``seq``."""
+    seed = settings.seed
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or not 0 <= seed <= SEED_MAX:
+        raise ValueError(f"seed must be a whole number between 0 and {SEED_MAX}, got {seed!r}")
+    C = settings.n_motions
+    check_motions(seq, C)
     settings.params.n_fine(C, seq.is_complete)  # at least C fine models
 
 

@@ -17,8 +17,8 @@ from laav.geometry import epipolar_lines
 from laav.noise import threshold_factor
 
 __all__ = [
-    "COLOR_MODES", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS",
-    "UNLABELLED", "ERROR_MARK", "UNSEEN", "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at",
+    "COLOR_MODES", "COLOR_LABELS", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS",
+    "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "UNSEEN", "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at",
     "incomplete_note", "result_notes", "counted",
     "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "raw_style", "points_source", "frame_sources",
@@ -44,6 +44,8 @@ COLOR_MODES = {
     "errors: final": "errors",
     "errors: plain RV": "errors_plain",
 }
+#: A colour mode's label in the page (COLOR_MODES inverted).
+COLOR_LABELS = {mode: label for label, mode in COLOR_MODES.items()}
 #: The stage whose errors a colour mode marks (black rings / black points).
 ERROR_STAGE = {"gt": "final", "atoms": "final", "fine": "fine", "coarse": "coarse", "final": "final",
                "plain": "plain", "errors_fine": "fine", "errors_coarse": "coarse", "errors": "final",
@@ -1279,9 +1281,7 @@ def labels_table(seq: laav.Sequence, result: laav.LaavResult,
     """
     st = result.stage_labels()
     owner = np.asarray(result.atoms.owner)
-    n_atoms = np.zeros(seq.n_points, dtype=np.int64)
-    for m in result.atoms.members:
-        n_atoms[np.asarray(m)] += 1
+    n_atoms = result.atoms.membership().sum(axis=0)  # (P,)
     ids = np.arange(seq.n_points) if point_ids is None else np.asarray(point_ids)
     if ids.shape != (seq.n_points,):
         raise ValueError(f"point_ids: {ids.shape[0]} numbers for {seq.n_points} points")

@@ -147,7 +147,7 @@ class FakeServer:
 def fake_serving(monkeypatch) -> dict:
     """``explorer.cli``'s page factory and ``panel.serve`` replaced by stand-ins: ``main``
     sets everything up and returns; the factory's arguments land in the returned dict
-    (``n_motions``, ``seed``, ``params``, ``provenance``, ``seq``)."""
+    (``n_motions``, ``seed``, ``params``, ``origin``, ``seq``)."""
     import panel as pn
 
     import explorer.cli as cli
@@ -156,7 +156,7 @@ def fake_serving(monkeypatch) -> dict:
 
     def fake_factory(seq, n_motions, seed=0, host="127.0.0.1", **kw):
         seen.update(n_motions=n_motions, seed=seed, params=kw.get("params"),
-                    provenance=kw.get("provenance"), seq=seq)
+                    origin=kw.get("origin"), seq=seq)
 
         def make():
             pass

@@ -1021,13 +1021,13 @@ def test_cli_estimates_c_for_a_file_without_ground_truth(monkeypatch, tmp_path, 
     out = capsys.readouterr().out
     expected = laav.estimate_motions(laav.load_sequence(f)).n_motions
     assert seen["n_motions"] == expected and f"C = {expected} estimated (" in out
-    # the page says so too (explorer.state.Provenance), and once C is changed, that it was
-    prov = seen["provenance"]
-    assert prov.sequence is seen["seq"] and prov.motions_estimate == expected and prov.point_ids is None
+    # the page says so too (explorer.state.Origin), and once C is changed, that it was
+    prov = seen["origin"]
+    assert prov.motions_estimate == expected and prov.point_ids is None
     assert prov.motions_note(expected).startswith(f"C = {expected} was estimated: ")
     assert "taken from the C box (estimated: " in prov.motions_note(expected + 1)
     assert main([str(f), "--no-browser", "--port", "0", "--motions", "3"]) == 0
-    assert seen["n_motions"] == 3 and seen["provenance"].motions_estimate is None
+    assert seen["n_motions"] == 3 and seen["origin"].motions_estimate is None
 
 
 def test_complete_only_exports_the_files_point_numbers(monkeypatch, tmp_path, capsys):
@@ -1043,11 +1043,11 @@ def test_complete_only_exports_the_files_point_numbers(monkeypatch, tmp_path, ca
     f = tmp_path / "gaps.npz"
     laav.save_sequence(s, f)
     assert main([str(f), "--no-browser", "--port", "0", "--complete-only"]) == 0
-    prov = seen["provenance"]
+    prov = seen["origin"]
     kept = np.flatnonzero(s.visible.all(axis=0))
     assert 0 < kept.size < s.n_points and np.array_equal(prov.point_ids, kept)
     assert f"kept the {kept.size} of {s.n_points} tracks" in prov.note
-    ex = Explorer(seen["seq"], seen["n_motions"], viser=False, provenance=prov)
+    ex = Explorer(seen["seq"], seen["n_motions"], viser=False, origin=prov)
     try:
         assert ex.wait(120) and ex.result is not None
         rows = list(csvmod.DictReader(ex.files.export_csv().getvalue().splitlines()))

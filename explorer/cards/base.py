@@ -46,6 +46,12 @@ class Host(Protocol):
 
     def complete_page(self) -> None: ...  # the later cards onto the page now (the tour, a pin)
 
+    def show_notes(self, *lines) -> None: ...  # the page's note: these lines and the data's
+
+    def origin_of(self, seq): ...  # how seq came from its file (explorer.state.Origin)
+
+    def add_origin(self, seq, origin) -> None: ...
+
 
 def _same(a, b) -> bool:
     try:

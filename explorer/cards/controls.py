@@ -11,6 +11,7 @@ from __future__ import annotations
 import panel as pn
 
 from .. import views as V
+from ..state import check_motions
 from .base import SIDE_W, Host
 
 #: Parameter sliders: LaavParams field -> (label, type, start, end, step).
@@ -87,7 +88,7 @@ class Controls:
         return V.COLOR_MODES[self.w_color.value]
 
     def set_color_mode(self, mode: str) -> None:
-        self.w_color.value = {v: k for k, v in V.COLOR_MODES.items()}[mode]
+        self.w_color.value = V.COLOR_LABELS[mode]
 
     # ------------------------------------------------------------------ widgets -> request
     def _fine_models(self, v: int, C: int):
@@ -154,8 +155,11 @@ class Controls:
             old, new = _whole(event.old), _whole(event.new)
             # the fine models follow only a C the state can take (it refuses the others,
             # saying why; they must not move the slider meanwhile)
-            valid = isinstance(new, int) and 1 <= new <= self.state.target_sequence.n_points
-            old = old if isinstance(old, int) and valid else None
+            try:
+                check_motions(self.state.target_sequence, new)
+            except ValueError:
+                old = None
+            old = old if isinstance(old, int) else None
             # the fine models follow C (k C by default)
             k = self.state.target.params.replace(fine_models=None).n_fine(1, self._complete())
             if old is not None and fm.value == k * old:

@@ -30,7 +30,7 @@ import laav
 from .. import export
 from .. import views as V
 from ..sizes import DEFAULT_MAX_UPLOAD, UPLOAD_CHUNK, fmt_size, parse_size  # noqa: F401 (re-exported)
-from ..state import Provenance
+from ..state import Origin
 from .base import SIDE_W, Markdown, page_box, shown_style
 
 #: Work shorter than this shows no progress line (a slider move on a small sequence).
@@ -363,14 +363,14 @@ class Files:
             return False
         self._estimating = token
         try:  # without ground truth C is estimated, as by the command (a second or a few)
-            provenance = _estimated_motions(seq)
+            origin = _estimated_motions(seq)
         finally:
             self._estimating = None
-        if provenance.motions_estimate is not None:
-            C = provenance.motions_estimate
+        if origin.motions_estimate is not None:
+            C = origin.motions_estimate
         if token is not None and not self._end_reading(token):
             return False  # cancelled while reading: the shown result stays
-        self.host.add_provenance(provenance)
+        self.host.add_origin(seq, origin)
         with self._opened_lock:  # (not_opened waits until the state has been asked for it)
             self._opened, self._asking = (seq, base), True
         try:
@@ -475,8 +475,7 @@ class Files:
         self.status.show_last()
         cancelled = (f"**Cancelled** {V.md_text(what)}"
                      + (f" — still showing {V.md_text(shown)} with its last result." if shown else "."))
-        # the notes about the data shown (incomplete tracks, where C came from) stay
-        self.status.show_note("  \n".join([cancelled] + list(getattr(self.host, "data_notes", []))))
+        self.host.show_notes(cancelled)  # the notes about the data shown stay
 
     # ------------------------------------------------------------------ exports
     def _need_result(self):
@@ -486,7 +485,7 @@ class Files:
 
     def export_csv(self):
         seq, res = self._need_result()
-        return io.StringIO(export.labels_csv(seq, res, self.host.provenance_of(seq).point_ids))
+        return io.StringIO(export.labels_csv(seq, res, self.host.origin_of(seq).point_ids))
 
     def export_json(self):
         seq, res = self._need_result()
@@ -498,14 +497,14 @@ class Files:
         return io.BytesIO(export.views_png(seq, res, int(frame), mode, int(step), plain))
 
 
-def _estimated_motions(seq: laav.Sequence) -> Provenance:
-    """An opened file's :class:`Provenance`: for one without ground truth, C estimated as
+def _estimated_motions(seq: laav.Sequence) -> Origin:
+    """An opened file's :class:`Origin`: for one without ground truth, C estimated as
     ``laav-explore FILE`` does (:func:`laav.estimate_motions`; when it cannot be, the C box's
     value is used and the page says so)."""
     if seq.labels is not None:
-        return Provenance(seq)
+        return Origin()
     try:
         count = laav.estimate_motions(seq)
     except Exception:  # noqa: BLE001 - never let an upload hang on "Reading": the C box's value
-        return Provenance(seq)
-    return Provenance(seq, count.n_motions, count.reason)
+        return Origin()
+    return Origin(count.n_motions, count.reason)
