@@ -494,7 +494,7 @@ def params_file_note(text: str | bytes, seq: Sequence, used: Settings, name: str
     C = d.get("n_motions")
     return (f"{name} was exported for {d['sequence']}: its parameters and seed are applied to "
             f"{seq.name}" + (f", its C = {C} is not (C stays {used.n_motions})"
-                             if isinstance(C, int) and C != used.n_motions else ""))
+                             if isinstance(C, int) and C != used.n_motions else "") + ".")
 
 
 def check_motions(seq: Sequence, C) -> None:

@@ -156,9 +156,9 @@ class VotingHelper:
         self.jobs = 0
         self.delivered = 0
         self._ready = None  # the new process's imports (a Future), while they run
-        _close_at_exit(self)
         self._unfinished: set = set()  # ids of the jobs handed over and not yet finished
         self._unfinished_lock = threading.Lock()  # (done callbacks run in the pool's thread)
+        _close_at_exit(self)
         if start:
             with self._lock:
                 try:
