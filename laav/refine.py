@@ -420,9 +420,12 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
         unseen entry guessed from the point's nearest seen frame and its motion's mean
         translation (``_impute_by_translation``), with the same reweighting; the origin
         is the corner of the visible points' bounding box; a point's residual is that of
-        its least-squares fit on its visible rows, per visible frame. A point seen in
-        ``rank / 2`` frames or fewer is fitted exactly by every subspace (residual 0
-        everywhere: no evidence).
+        its least-squares fit on its visible rows, per visible frame, over the frames
+        where every motion's basis is determined (:data:`DETERMINED_FACTOR` ``x rank`` of
+        its members seen there; all frames when no point is seen in any such frame), so
+        that all motions judge a point on the same frames. A point seen in ``rank / 2``
+        of them or fewer is fitted exactly by every subspace (residual 0 everywhere: no
+        evidence).
     fits : dict, optional
         :func:`fit_memo`: motions fitted before are not fitted again (complete data).
 
@@ -459,6 +462,13 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
             fits[key] = R[g].copy()  # a copy: R goes to the caller
     return R
 
+
+#: Missing data: a motion's rank-r subspace basis is determined in a frame when at least
+#: this many times r of its members are seen there (set a priori, not tuned: twice the
+#: unknowns of the frame's basis row per coordinate, as a fundamental matrix's 8 points are
+#: about its 8 unknowns); :func:`subspace_residuals` judges points on the frames where every
+#: motion's basis is determined.
+DETERMINED_FACTOR = 2
 
 #: The masked subspace fits' alternating least squares sweeps until one sweep lowers the
 #: (weighted) squared residual by less than this share of it, at most ``_ALS_MAX`` sweeps per
@@ -558,16 +568,51 @@ def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible,
     W = _trajectory_matrix_masked(points, visible)  # the origin at the visible points' corner
     M = np.repeat(visible, 2, axis=0).astype(np.float64)  # (2F, P): x and y rows of a frame
     MW = M * W
-    cnt = visible.sum(axis=0)
-    R = np.empty((n_motions, P))
+    bases = []
+    shared = np.ones(F, dtype=bool)  # the frames every motion's basis is determined in
     for g in range(n_motions):
         mem = labels == g
         if mem.sum() <= rank + 1:
             return None
-        U = _fit_subspace_masked(W[:, mem], M[:, mem], rank, rounds, TINY2 * np.sqrt(unit2))
+        bases.append(_fit_subspace_masked(W[:, mem], M[:, mem], rank, rounds,
+                                          TINY2 * np.sqrt(unit2)))
+        shared &= visible[:, mem].sum(axis=1) >= DETERMINED_FACTOR * rank
+    # every motion judges a point on the same frames: its visible ones where each basis row
+    # is determined (a row fitted on fewer members is whatever the fit left there, and a
+    # point seen in that frame would be far from that motion for no reason of its own)
+    if not shared.all() and np.any(visible & shared[:, None]):
+        vis = visible & shared[:, None]
+        M = np.repeat(vis, 2, axis=0).astype(np.float64)
+        MW = M * W
+    else:
+        vis = visible
+    cnt = np.maximum(vis.sum(axis=0), 1)
+    R = np.empty((n_motions, P))
+    for g, U in enumerate(bases):
         _, r2 = _project_masked(U, MW, M)
         R[g] = np.maximum(r2, 0.0) / cnt
     return R
+
+
+def _masked_scores(R: np.ndarray, D: np.ndarray, eps: float, epipolar_weight: float) -> np.ndarray:
+    """Missing data: the scores (C, P) of :func:`reassign_labels`' rule, each point's motions
+    compared on the evidence they share. ``R`` (C, P) subspace residuals, ``D`` (C, P) mean
+    Sampson distances, ``inf`` where a motion has no matrix for a point's frame pairs.
+
+    A point that some motions have an epipolar distance for and others not is scored by the
+    subspaces alone: a motion's missing matrix (fewer than 8 of its points seen in the pairs
+    the point is seen in) says nothing against it, and ``log(inf)`` would rule it out (a
+    point seen only late in the sequence, where its own motion is thinly tracked, went to
+    another motion although its own subspace fitted it 2,000 times better). A point no
+    motion has a distance for scores ``inf`` everywhere (the callers' rules decide)."""
+    with np.errstate(divide="ignore"):
+        score = np.log(R + eps) + epipolar_weight * np.log(D + eps)
+    finite = np.isfinite(D)
+    partial = finite.any(axis=0) & ~finite.all(axis=0)
+    partial &= np.ptp(R, axis=0) > 0  # the subspaces tell the motions apart (a point seen in
+    # too few frames is fitted exactly by all: then the epipolar distances it has decide)
+    score[:, partial] = np.log(R[:, partial] + eps)
+    return score
 
 
 def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
@@ -614,9 +659,10 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         Squared pixel in the coordinates' units (see the module docstring).
     visible : ndarray of shape (F, P), bool, optional
         Missing data: both terms with the mask (:func:`subspace_residuals` fitted on the
-        visible entries, :func:`motion_distances` over ``pairs``); a motion without a
-        finite epipolar distance for a point is not a choice for it, and a point without
-        any keeps its label.
+        visible entries, :func:`motion_distances` over ``pairs``); a point that only some
+        motions have a finite epipolar distance for is scored by the subspaces alone (the
+        motions compared on the evidence they share, :func:`_masked_scores`), and a point
+        without any keeps its label.
     pairs : ndarray of shape (K, 2), optional
         The frame pairs of the epipolar term (default ``frame_pairs(F, 12)``).
     fits : dict, optional
@@ -662,8 +708,7 @@ def _reassign_masked(points, start, n_motions, rank, epipolar_weight, rounds, mi
             break
         D = distances if distances is not None and cur is start else motion_distances(
             points, cur, n_motions, pairs, unit2, visible)
-        eps = REASSIGN_FLOOR * unit2
-        score = np.log(R + eps) + epipolar_weight * np.log(D + eps)  # inf where D is
+        score = _masked_scores(R, D, REASSIGN_FLOOR * unit2, epipolar_weight)
         known = np.isfinite(score).any(axis=0)
         new = np.where(known, score.argmin(axis=0), cur)
         if (new == cur).all() or np.bincount(new, minlength=n_motions).min() < min_size:
@@ -745,8 +790,10 @@ def assign_jointly(points: np.ndarray, labels: np.ndarray, n_motions: int,
     rank, epipolar_weight : as :func:`reassign_labels`.
     visible : ndarray of shape (F, P), bool, optional
         Missing data: both fits on the visible entries (as :func:`reassign_labels`); a
-        target no motion has a finite epipolar distance for is placed by the subspaces
-        alone when seen in ``min_frames`` frames or more, else gets ``-1``.
+        target only some motions have a finite epipolar distance for is scored by the
+        subspaces alone (:func:`_masked_scores`), and one no motion has a distance for is
+        placed by the subspaces alone when seen in ``min_frames`` frames or more, else
+        gets ``-1``.
     pairs : ndarray of shape (K, 2), optional
         The epipolar term's frame pairs (default ``frame_pairs(F, 12)``).
     min_frames : int
@@ -769,10 +816,13 @@ def assign_jointly(points: np.ndarray, labels: np.ndarray, n_motions: int,
     R = subspace_residuals(points, labels, n_motions, rank, unit2=unit2, visible=visible)
     D = motion_distances(points, labels, n_motions, pairs, unit2, visible)[:, targets]
     eps = REASSIGN_FLOOR * unit2
-    with np.errstate(divide="ignore"):
-        score = epipolar_weight * np.log(D + eps)  # inf where a motion has no matrix
-        if R is not None:
-            score = score + np.log(R[:, targets] + eps)
+    if visible is not None and R is not None:  # compared on the evidence they share
+        score = _masked_scores(R[:, targets], D, eps, epipolar_weight)
+    else:
+        with np.errstate(divide="ignore"):
+            score = epipolar_weight * np.log(D + eps)  # inf where a motion has no matrix
+            if R is not None:
+                score = score + np.log(R[:, targets] + eps)
     known = np.isfinite(score).any(axis=0)
     out[known] = score[:, known].argmin(axis=0)
     if visible is not None and R is not None:  # no epipolar evidence: the subspaces alone

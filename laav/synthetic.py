@@ -948,19 +948,22 @@ def occlude(seq: Sequence, fraction: float, rng: np.random.Generator | int | Non
 
     The occlusion model of the missing-data tests and ``benchmarks/missing.py``: every
     track loses ``n_p`` frames, ``n_p`` about ``fraction x (1 + spread u_p) x F`` with
-    ``u_p`` uniform in [-1, 1] (so tracks differ in how much they lose), split at random
-    into three runs: the track **starts late** (its first frames hidden), **ends early**
-    (its last ones hidden), and has **one gap** of the rest at a random place in between.
-    Every track keeps at least 2 frames, visible on both sides of its gap. The counts are
-    then adjusted one frame at a time (on random tracks with room) so that exactly
-    ``round(fraction F P)`` entries are hidden. Hidden entries are independent of the
-    tracks' positions and motions (no occluder moves across the image).
+    ``u_p`` uniform in [-1, 1] (so tracks differ in how much they lose). The counts are
+    adjusted one frame at a time (on random tracks with room) so that exactly
+    ``round(fraction F P)`` entries are hidden. Each track's ``n_p`` is then split into
+    three runs, uniformly over all ``(n_p + 1)(n_p + 2) / 2`` splits: the track **starts
+    late** (its first frames hidden), **ends early** (its last ones hidden), and has **one
+    gap** of the rest at a random place in between; any run may be empty, and the start
+    and the end are equally likely to be (the model is the same run backwards in time).
+    Every track keeps at least 2 frames, visible on both sides of its gap. Hidden entries
+    are independent of the tracks' positions and motions (no occluder moves across the
+    image).
 
-    Known bias (``docs/bench/missing.md``, "The occlusion model's bias"): the split is at
-    ``floor(c0 n)`` and ``floor(c1 n)`` with uniform ``c0 < c1 < 1``, so the end run is
-    never empty: every occluded track loses the last frame, while about 2 / n of them keep
-    their first.
-    Kept as it is for now: every missing-data figure was measured with it.
+    Until 2026-12-03 (git ecb56ba and before) the split was biased: it cut at
+    ``floor(c0 n)`` and ``floor(c1 n)`` with uniform ``c0 < c1 < 1``, so every occluded
+    track lost its last frame and the last frame held no visible point
+    (``docs/bench/missing.md``, "The occlusion model's bias"). Figures measured before then
+    used that split.
 
     Parameters
     ----------
@@ -1005,10 +1008,14 @@ def occlude(seq: Sequence, fraction: float, rng: np.random.Generator | int | Non
         more = n.sum() < total
         room = np.flatnonzero(n < cap if more else n > 0)
         n[room[gen.integers(room.size)]] += 1 if more else -1
-    cuts = np.sort(gen.uniform(0.0, 1.0, (P, 2)), axis=1)  # n split into start, gap, end
-    start = np.floor(cuts[:, 0] * n).astype(np.int64)
-    gap = np.floor(cuts[:, 1] * n).astype(np.int64) - start
-    end = n - start - gap
+    # n split into start, gap and end, uniformly over the (n + 1)(n + 2) / 2 splits (stars
+    # and bars: two distinct bars among n + 2 slots, the n frames lost around them), so
+    # that a track is as likely to keep its first frame as its last
+    u = gen.integers(0, n + 2)
+    v = gen.integers(0, n + 1)
+    v += v >= u  # distinct from u, uniform over the other n + 1 slots
+    lo, hi = np.minimum(u, v), np.maximum(u, v)
+    start, gap, end = lo, hi - lo - 1, n + 1 - hi
     # the gap lies inside the track's window [start, F - end), one visible frame each side
     window = F - start - end
     where = start + 1 + np.floor(gen.uniform(0.0, 1.0, P) * (window - gap - 1)).astype(np.int64)

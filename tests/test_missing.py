@@ -69,6 +69,23 @@ def test_occlude_hides_the_share_asked_for_as_late_starts_early_ends_and_one_gap
     assert occlude(seq, 0.0, 0) is seq
 
 
+def test_occlude_treats_both_ends_of_the_sequence_alike():
+    """The split of a track's loss into start, gap and end is uniform over all splits: the
+    first and the last frame keep about as many points (until 2026-12-03 every occluded
+    track lost its last frame, which then held no point), the start or the end run is
+    empty for some tracks, and each run holds about a third of the hidden entries."""
+    seq = make_sequence(n_objects=2, n_frames=40, n_points=2000, rng=0)
+    vis = occlude(seq, 0.2, 1).visible
+    first, last = vis[0].sum(), vis[-1].sum()
+    assert min(first, last) > 0.8 * max(first, last) and last > 0
+    start = vis.argmax(axis=0)  # the frames hidden before a track's first seen one
+    end = vis[::-1].argmax(axis=0)  # and after its last
+    lost = (~vis).sum(axis=0)
+    assert ((start == 0) & (lost > 0)).any() and ((end == 0) & (lost > 0)).any()
+    for run in (start, end, lost - start - end):  # the gap: the rest
+        assert 0.28 < run.sum() / lost.sum() < 0.39
+
+
 def test_occlude_refuses_bad_input():
     seq = _scene(0)
     with pytest.raises(ValueError, match="complete sequence"):
