@@ -391,7 +391,7 @@ def _finite_median(x: np.ndarray) -> float:
 def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
                        rank: int = REASSIGN_RANK, rounds: int = 5,
                        unit2: float = 1.0, *,
-                       visible: np.ndarray | None = None,
+                       visible: np.ndarray | None = None, shared_frames: bool = False,
                        fits: dict | None = None) -> np.ndarray | None:
     """Squared distance (px^2, mean over frames) of every point to every motion's subspace.
 
@@ -420,12 +420,15 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
         unseen entry guessed from the point's nearest seen frame and its motion's mean
         translation (``_impute_by_translation``), with the same reweighting; the origin
         is the corner of the visible points' bounding box; a point's residual is that of
-        its least-squares fit on its visible rows, per visible frame, over the frames
+        its least-squares fit on its visible rows, per visible frame. A point seen in
+        ``rank / 2`` frames or fewer is fitted exactly by every subspace (residual 0
+        everywhere: no evidence).
+    shared_frames : bool
+        Missing data, for choosing a point's motion: judge every point only on the frames
         where every motion's basis is determined (:data:`DETERMINED_FACTOR` ``x rank`` of
         its members seen there; all frames when no point is seen in any such frame), so
-        that all motions judge a point on the same frames. A point seen in ``rank / 2``
-        of them or fewer is fitted exactly by every subspace (residual 0 everywhere: no
-        evidence).
+        that all motions judge a point on the same frames. Not for comparing labellings
+        (:func:`subspace_cost`): each labelling would be judged on its own frames.
     fits : dict, optional
         :func:`fit_memo`: motions fitted before are not fitted again (complete data).
 
@@ -434,7 +437,8 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
     R : ndarray of shape (C, P), or None when a motion has ``rank + 1`` points or fewer.
     """
     if visible is not None:
-        return _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible, unit2)
+        return _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible, unit2,
+                                          shared_frames)
     F, P, _ = points.shape
     tiny = TINY2 * np.sqrt(unit2)  # px: the IRLS residuals are RMS distances
     W = trajectory_matrix(points)  # the origin at the points' corner (see there)
@@ -562,7 +566,8 @@ def _fit_subspace_masked(X, M, rank, rounds, tiny, tol=_ALS_TOL, max_sweeps=_ALS
     return U
 
 
-def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible, unit2):
+def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible, unit2,
+                               shared_frames=False):
     """:func:`subspace_residuals` on incomplete data (see there)."""
     F, P, _ = points.shape
     W = _trajectory_matrix_masked(points, visible)  # the origin at the visible points' corner
@@ -580,13 +585,13 @@ def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible,
     # every motion judges a point on the same frames: its visible ones where each basis row
     # is determined (a row fitted on fewer members is whatever the fit left there, and a
     # point seen in that frame would be far from that motion for no reason of its own)
-    if not shared.all() and np.any(visible & shared[:, None]):
+    if shared_frames and not shared.all() and np.any(visible & shared[:, None]):
         vis = visible & shared[:, None]
         M = np.repeat(vis, 2, axis=0).astype(np.float64)
         MW = M * W
+        cnt = np.maximum(vis.sum(axis=0), 1)  # none of them: residual 0 (no evidence)
     else:
-        vis = visible
-    cnt = np.maximum(vis.sum(axis=0), 1)
+        cnt = visible.sum(axis=0)
     R = np.empty((n_motions, P))
     for g, U in enumerate(bases):
         _, r2 = _project_masked(U, MW, M)
@@ -703,7 +708,8 @@ def _reassign_masked(points, start, n_motions, rank, epipolar_weight, rounds, mi
     """:func:`reassign_labels` on incomplete data (see there)."""
     cur = start
     for _ in range(rounds):
-        R = subspace_residuals(points, cur, n_motions, rank, unit2=unit2, visible=visible)
+        R = subspace_residuals(points, cur, n_motions, rank, unit2=unit2, visible=visible,
+                               shared_frames=True)
         if R is None:
             break
         D = distances if distances is not None and cur is start else motion_distances(
@@ -757,7 +763,8 @@ def assign_by_subspace(points: np.ndarray, labels: np.ndarray, n_motions: int,
     if n_motions == 1:
         out[enough] = 0
         return out
-    R = subspace_residuals(points, labels, n_motions, rank, unit2=unit2, visible=visible)
+    R = subspace_residuals(points, labels, n_motions, rank, unit2=unit2, visible=visible,
+                           shared_frames=True)
     if R is None:
         return out
     out[enough] = R[:, targets[enough]].argmin(axis=0)
@@ -813,7 +820,8 @@ def assign_jointly(points: np.ndarray, labels: np.ndarray, n_motions: int,
         return out
     if pairs is None:
         pairs = frame_pairs(points.shape[0], 12)
-    R = subspace_residuals(points, labels, n_motions, rank, unit2=unit2, visible=visible)
+    R = subspace_residuals(points, labels, n_motions, rank, unit2=unit2, visible=visible,
+                           shared_frames=True)
     D = motion_distances(points, labels, n_motions, pairs, unit2, visible)[:, targets]
     eps = REASSIGN_FLOOR * unit2
     if visible is not None and R is not None:  # compared on the evidence they share
