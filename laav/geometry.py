@@ -225,6 +225,9 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return fit_affine_leverage(src, dst)[0]
 
 
+_DIAG3 = np.diag_indices(3)
+
+
 def fit_affine_leverage(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`fit_affine`, and the leverage ``h`` (n,) of every point in the fit.
 
@@ -235,13 +238,18 @@ def fit_affine_leverage(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, n
     # are ill-conditioned (and a ridge scaled by their trace biases the fit), which put
     # predictions ~0.01 px off least squares for 640-px images and pixels off for
     # coordinates in the thousands.
+    # (written for call overhead, the same numbers: one Python loop in the atoms calls it
+    # once or twice per seed)
     n = src.shape[0]
     c = np.add.reduce(src, axis=0) / n  # np.mean bit for bit, less overhead
-    d = np.sqrt(np.add.reduce(((src - c) ** 2).sum(-1)) / n)
+    dev = src - c
+    d = np.sqrt(np.add.reduce((dev ** 2).sum(-1)) / n)
     s = 1.0 / max(d, 1e-12)
-    X = np.hstack([(src - c) * s, np.ones((n, 1))])  # (n, 3)
+    X = np.empty((n, 3))  # homogeneous, normalised
+    X[:, :2] = dev * s
+    X[:, 2] = 1.0
     G = X.T @ X
-    G[np.diag_indices(3)] += 1e-12 * (np.trace(G) + 1.0)  # keeps collinear sets solvable
+    G[_DIAG3] += 1e-12 * (np.trace(G) + 1.0)  # keeps collinear sets solvable
     P = np.linalg.inv(G) @ X.T  # (3, n)
     sol = np.einsum("kn,fnd->fdk", P, dst)  # (F, 2, 3), normalised src
     lin = sol[..., :2] * s
