@@ -40,6 +40,7 @@ frame on the members visible there (``_build_atoms_masked``; ``docs/ALGORITHM.md
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -438,8 +439,18 @@ def _rms_rows(X, sol, Y, n_frames):
     return np.sqrt(np.add.reduce(r * r, axis=-1) / n_frames)
 
 
+@functools.lru_cache(maxsize=64)
+def _all_pairs(m: int) -> np.ndarray:
+    """(m (m - 1) / 2, 2): every pair ``i < j`` of ``range(m)``, in ``np.triu_indices``
+    order; cached (read-only) because RANSAC asks for the same few sizes at every seed."""
+    pairs = np.stack(np.triu_indices(m, 1), axis=1)
+    pairs.flags.writeable = False
+    return pairs
+
+
 def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
-    """Inliers (bool over cand) of the best affine consensus containing cand[seed_pos].
+    """Inliers (bool over cand) of the best affine consensus containing cand[seed_pos], and
+    their least-squares maps (Fn, 2, 3) when the last refit confirmed them (else None).
 
     ``points`` (F, P, 2): the maps go from its frame 0 to every frame, or, with
     ``skip_first``, to every later frame only (the paper's frame pair: ``points`` is then
@@ -452,6 +463,8 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     Predictions are matrix products of the homogeneous candidates ``X`` (n, 3) with the
     maps stacked over frames (3, 2F): a few numpy calls per seed, which is what this
     Python loop over seeds costs.
+
+    Returns ``(None, None)`` when every hypothesis is degenerate.
     """
     n = cand.size
     src = points[0, cand]
@@ -464,8 +477,7 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     B = params.ransac_hypotheses
     # pairs of other candidates (all pairs when few, random otherwise)
     if others.size * (others.size - 1) // 2 <= B:
-        iu = np.triu_indices(others.size, 1)
-        pairs = np.stack([others[iu[0]], others[iu[1]]], axis=1)
+        pairs = others[_all_pairs(others.size)]
     else:
         a = rng.integers(0, others.size, size=(B, 2))
         a[:, 1] = (a[:, 0] + 1 + rng.integers(0, others.size - 1, size=B)) % others.size
@@ -477,7 +489,7 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])  # twice the triangle's area
     ok = area2 > 0.05 * params.r2 ** 2  # reject (near-)collinear samples
     if not ok.any():
-        return None
+        return None, None
     samp = samp[ok]
     sol = np.linalg.solve(X[samp], Y[samp])  # (B, 3, 2F)
     res = _rms_rows(X, sol, Y, Fn)  # (B, n)
@@ -498,9 +510,9 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
         r[mask] = r[mask] / np.maximum(1.0 - h, 1e-3)
         new = r < params.affine_threshold
         if np.array_equal(new, mask):
-            break
+            return mask, A  # A: the fit of exactly these inliers
         mask = new
-    return mask
+    return mask, None
 
 
 def _masked_rms(A, defined, src, dst, vis, loo=None):
@@ -544,8 +556,7 @@ def _ransac_affine_masked(points, vis, cand, seed_pos, ref, params, rng, min_fra
     others[seed_pos:] += 1
     B = params.ransac_hypotheses
     if others.size * (others.size - 1) // 2 <= B:
-        iu = np.triu_indices(others.size, 1)
-        pairs = np.stack([others[iu[0]], others[iu[1]]], axis=1)
+        pairs = others[_all_pairs(others.size)]
     else:
         a = rng.integers(0, others.size, size=(B, 2))
         a[:, 1] = (a[:, 0] + 1 + rng.integers(0, others.size - 1, size=B)) % others.size
@@ -635,7 +646,7 @@ def _build_atoms_masked(points, vis, params, rng, nb) -> Atoms:
             if cand.size < params.atom_min_size:
                 continue
             seed_pos = int(np.searchsorted(cand, s))
-            mask = _ransac_affine(pts[[left, right]], cand, seed_pos, params, rng, skip_first=True)
+            mask, _ = _ransac_affine(pts[[left, right]], cand, seed_pos, params, rng, skip_first=True)
             ref = left
         else:
             counts = vis[:, cand].sum(axis=1) * vis[:, s]  # candidates seen in each seed frame
@@ -744,14 +755,16 @@ def build_atoms(seq: Sequence | np.ndarray, params: LaavParams | None = None,
         if pair_mode:  # the paper: one random, well separated frame pair per atom
             left = int(rng.integers(0, F - gap))
             right = int(rng.integers(left + gap, F))
-            mask = _ransac_affine(points[[left, right]], cand, seed_pos, params, rng,
-                                  skip_first=True)
+            mask, _ = _ransac_affine(points[[left, right]], cand, seed_pos, params, rng,
+                                     skip_first=True)
+            A = None  # (its maps go from frame l, the atom's from frame 0)
         else:
-            mask = _ransac_affine(points, cand, seed_pos, params, rng)
+            mask, A = _ransac_affine(points, cand, seed_pos, params, rng)
         if mask is None or not mask[seed_pos] or mask.sum() < params.atom_min_size:
             continue
         mem = cand[mask]
-        A = fit_affine(points[0, mem], points[:, mem])
+        if A is None:  # (when RANSAC's last refit confirmed the inliers, A is their fit)
+            A = fit_affine(points[0, mem], points[:, mem])
         res = _rms_residuals(A, points[0, mem], points[:, mem])
         if not pair_mode and (res >= params.affine_threshold).any():
             continue  # the final model does not hold all its members: no atom here

@@ -11,6 +11,7 @@ import numpy as np
 __all__ = [
     "hartley_normalization",
     "fit_fundamental",
+    "FundamentalFitter",
     "sampson_distance",
     "fit_affine",
     "fit_affine_leverage",
@@ -92,38 +93,74 @@ def fit_fundamental(x1: np.ndarray, x2: np.ndarray, weights: np.ndarray | None =
         their Frobenius norm into [0.5, 1) (exact, unlike dividing by the norm: see the
         code).
     """
-    # both views at once: one normalisation, one design product (fewer numpy calls: this
-    # runs once per voting iteration, where call overhead is most of the cost)
-    if x1.shape != x2.shape:
-        x1, x2 = np.broadcast_arrays(x1, x2)
-    xs = np.stack([x1, x2])  # (2, ..., n, 2)
-    if mask is None:
-        c, s = _centre_scale(xs)
-    else:
-        mask = np.broadcast_to(mask, x1.shape[:-1])
-        c, s = _centre_scale_masked(xs, np.stack([mask, mask]))
-        weights = mask if weights is None else np.where(mask, weights, 0.0)
-    ab = xs * s[..., None, None] + (-s[..., None] * c)[..., None, :]  # T x, written out
-    h = np.concatenate([ab, np.ones(ab.shape[:-1] + (1,))], axis=-1)  # homogeneous (2, ..., n, 3)
-    # rows of the design: (bx ax, bx ay, bx, by ax, by ay, by, ax, ay, 1)
-    A = (h[1][..., :, None] * h[0][..., None, :]).reshape(h.shape[1:-1] + (9,))
-    if weights is not None:
-        A = A * np.sqrt(np.maximum(weights, 0.0))[..., None]
-    M = np.swapaxes(A, -1, -2) @ A
-    _, vecs = np.linalg.eigh(M)
-    f = vecs[..., :, 0].reshape(x1.shape[:-2] + (3, 3))
-    U, S, Vt = np.linalg.svd(f)
-    S[..., 2] = 0.0
-    f = (U * S[..., None, :]) @ Vt
-    T = _similarity(c, s)  # (2, ..., 3, 3)
-    F = np.swapaxes(T[1], -1, -2) @ f @ T[0]
-    # Frobenius norm brought into [0.5, 1) by a power of two, not to exactly 1. Scaling the
-    # coordinates by a power of two s scales T's entries by powers of two, so F's entries
-    # change by exact powers of two and Sampson distances by exactly s^2, bit for bit;
-    # dividing by the norm itself would round differently at every scale (noise-free data,
-    # whose degenerate 8-point samples make the fit ill-posed, turn that into other labels).
-    _, e = np.frexp(np.linalg.norm(F, axis=(-2, -1), keepdims=True))
-    return np.ldexp(F, -e)
+    return FundamentalFitter(x1, x2, mask).fit(weights)
+
+
+class FundamentalFitter:
+    """:func:`fit_fundamental` of fixed correspondences, for several weightings.
+
+    The Hartley normalisation and the unweighted design matrix depend on the points (and
+    ``mask``) only, so reweighted least squares (:func:`laav.refine.pair_distances`) builds
+    them once: ``FundamentalFitter(x1, x2, mask).fit(w)`` is ``fit_fundamental(x1, x2, w,
+    mask)`` bit for bit (the same operations on the same arrays, only not repeated).
+
+    Parameters
+    ----------
+    x1, x2 : ndarray of shape (..., n, 2)
+    mask : ndarray of shape (..., n), bool, optional
+        As in :func:`fit_fundamental`.
+
+    Attributes
+    ----------
+    A : ndarray of shape (..., n, 9)
+        The unweighted design matrix, in normalised coordinates.
+    T : ndarray of shape (2, ..., 3, 3)
+        The Hartley normalisations of the first and the second view.
+    """
+
+    def __init__(self, x1: np.ndarray, x2: np.ndarray, mask: np.ndarray | None = None):
+        # both views at once: one normalisation, one design product (fewer numpy calls:
+        # this runs once per voting iteration, where call overhead is most of the cost)
+        if x1.shape != x2.shape:
+            x1, x2 = np.broadcast_arrays(x1, x2)
+        self.batch = x1.shape[:-2]
+        xs = np.stack([x1, x2])  # (2, ..., n, 2)
+        if mask is None:
+            c, s = _centre_scale(xs)
+        else:
+            mask = np.broadcast_to(mask, x1.shape[:-1])
+            c, s = _centre_scale_masked(xs, np.stack([mask, mask]))
+        self.mask = mask
+        ab = xs * s[..., None, None] + (-s[..., None] * c)[..., None, :]  # T x, written out
+        h = np.concatenate([ab, np.ones(ab.shape[:-1] + (1,))], axis=-1)  # homogeneous (2, ..., n, 3)
+        # rows of the design: (bx ax, bx ay, bx, by ax, by ay, by, ax, ay, 1)
+        self.A = (h[1][..., :, None] * h[0][..., None, :]).reshape(h.shape[1:-1] + (9,))
+        self.T = _similarity(c, s)  # (2, ..., 3, 3)
+
+    def fit(self, weights: np.ndarray | None = None) -> np.ndarray:
+        """F (..., 3, 3) of the equations weighted by ``weights`` (..., n) (None: all 1, or
+        the mask's)."""
+        if self.mask is not None:
+            weights = self.mask if weights is None else np.where(self.mask, weights, 0.0)
+        A = self.A
+        if weights is not None:
+            A = A * np.sqrt(np.maximum(weights, 0.0))[..., None]
+        M = np.swapaxes(A, -1, -2) @ A
+        _, vecs = np.linalg.eigh(M)
+        f = vecs[..., :, 0].reshape(self.batch + (3, 3))
+        U, S, Vt = np.linalg.svd(f)
+        S[..., 2] = 0.0
+        f = (U * S[..., None, :]) @ Vt
+        T = self.T
+        F = np.swapaxes(T[1], -1, -2) @ f @ T[0]
+        # Frobenius norm brought into [0.5, 1) by a power of two, not to exactly 1. Scaling
+        # the coordinates by a power of two s scales T's entries by powers of two, so F's
+        # entries change by exact powers of two and Sampson distances by exactly s^2, bit
+        # for bit; dividing by the norm itself would round differently at every scale
+        # (noise-free data, whose degenerate 8-point samples make the fit ill-posed, turn
+        # that into other labels).
+        _, e = np.frexp(np.linalg.norm(F, axis=(-2, -1), keepdims=True))
+        return np.ldexp(F, -e)
 
 
 def sampson_distance(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
@@ -188,6 +225,9 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return fit_affine_leverage(src, dst)[0]
 
 
+_DIAG3 = np.diag_indices(3)
+
+
 def fit_affine_leverage(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`fit_affine`, and the leverage ``h`` (n,) of every point in the fit.
 
@@ -198,13 +238,18 @@ def fit_affine_leverage(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, n
     # are ill-conditioned (and a ridge scaled by their trace biases the fit), which put
     # predictions ~0.01 px off least squares for 640-px images and pixels off for
     # coordinates in the thousands.
+    # (written for call overhead, the same numbers: one Python loop in the atoms calls it
+    # once or twice per seed)
     n = src.shape[0]
     c = np.add.reduce(src, axis=0) / n  # np.mean bit for bit, less overhead
-    d = np.sqrt(np.add.reduce(((src - c) ** 2).sum(-1)) / n)
+    dev = src - c
+    d = np.sqrt(np.add.reduce((dev ** 2).sum(-1)) / n)
     s = 1.0 / max(d, 1e-12)
-    X = np.hstack([(src - c) * s, np.ones((n, 1))])  # (n, 3)
+    X = np.empty((n, 3))  # homogeneous, normalised
+    X[:, :2] = dev * s
+    X[:, 2] = 1.0
     G = X.T @ X
-    G[np.diag_indices(3)] += 1e-12 * (np.trace(G) + 1.0)  # keeps collinear sets solvable
+    G[_DIAG3] += 1e-12 * (np.trace(G) + 1.0)  # keeps collinear sets solvable
     P = np.linalg.inv(G) @ X.T  # (3, n)
     sol = np.einsum("kn,fnd->fdk", P, dst)  # (F, 2, 3), normalised src
     lin = sol[..., :2] * s

@@ -62,7 +62,8 @@ def unit2(params: LaavParams) -> float:
 
 
 def joint_score(points: np.ndarray, labels: np.ndarray, n_motions: int,
-                params: LaavParams, *, fits: dict | None = None) -> float:
+                params: LaavParams, *, fits: dict | None = None,
+                projected: np.ndarray | None = None) -> float:
     """The joint merge's score of a whole labelling (lower is better).
 
     Lossy coding length (nats, distortion ``coding_eps``) of every motion's trajectories
@@ -80,8 +81,11 @@ def joint_score(points: np.ndarray, labels: np.ndarray, n_motions: int,
         Uses ``coding_eps``, ``coarse_epipolar_weight`` and ``rv_lambda``.
     fits : dict, optional
         :func:`laav.refine.fit_memo` of ``points``: motions fitted before are read back.
+    projected : ndarray of shape (K, P), optional
+        The points' :func:`laav.coding.principal_trajectories`, when already computed (the
+        same numbers as computing it here).
     """
-    return _score_and_distances(points, labels, n_motions, params, fits=fits)[0]
+    return _score_and_distances(points, labels, n_motions, params, projected, fits)[0]
 
 
 def _score_and_distances(points, labels, n_motions, params, projected=None,

@@ -83,6 +83,69 @@ def _frame_pairs(F: int, max_pairs: int) -> np.ndarray:
     return np.unique(np.round(np.linspace(0, F - 2, n)).astype(np.int64))
 
 
+def _neighbours(a: np.ndarray, k: int) -> np.ndarray:
+    """(n, k): each point's ``k`` nearest among ``a`` (n, 2), itself first (a duplicate
+    point may come first: the same coordinates, the same residual)."""
+    from scipy.spatial import cKDTree  # lazy: off `import laav`
+
+    return cKDTree(a).query(a, k=k)[1]
+
+
+def _centred(coord: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """One coordinate of the centred neighbourhoods, (B, n, k): ``coord`` (B n,) one
+    coordinate of the points, ``rows`` (B, n, k) the indices of each neighbourhood in it.
+
+    ``X - X.mean(axis=-2, keepdims=True)`` of the neighbourhoods ``X`` (B, n, k, 2) bit
+    for bit, a coordinate at a time, several times faster: numpy's mean adds the k
+    neighbours one after another (its inner loop running over the 2 coordinates, which
+    is what makes it slow), and so does the loop below, in the same order (checked on
+    every Hopkins155 sequence).
+    """
+    x = np.take(coord, rows)  # (B, n, k), contiguous
+    total = x[..., 0]
+    for j in range(1, x.shape[-1]):
+        total = total + x[..., j]
+    return x - (total / x.shape[-1])[..., None]
+
+
+def _standardised_residuals(a: np.ndarray, b: np.ndarray, nbr: np.ndarray) -> np.ndarray:
+    """The standardised squared residuals ``z`` (module docstring) of the points whose fit
+    is well posed, pair after pair.
+
+    ``a``, ``b`` (B, n, 2): the points of B frame pairs in frames ``f`` and ``f + 1``;
+    ``nbr`` (B, n, k) their neighbourhoods (:func:`_neighbours` of ``a``). The pairs are
+    fitted side by side, but every number is computed as for one pair alone (element-wise
+    operations, and reductions over an axis of length k with the same memory layout), so
+    the batch moves no bit.
+    """
+    B, n, k = nbr.shape
+    rows = nbr + (n * np.arange(B))[:, None, None]  # into the B n points of a and b
+    a, b = a.reshape(-1, 2), b.reshape(-1, 2)
+    # centred neighbourhoods, by coordinate (B, n, k)
+    x0, x1, y0, y1 = (_centred(np.ascontiguousarray(v[:, c]), rows) for v in (a, b) for c in (0, 1))
+    gxx, gxy, gyy = (x0 * x0).sum(-1), (x0 * x1).sum(-1), (x1 * x1).sum(-1)  # G = X^T X
+    det = gxx * gyy - gxy * gxy
+    tr = gxx + gyy
+    ok = det > 1e-6 * tr * tr  # not (nearly) collinear; scale-free
+    # A = G^-1 X^T Y (y ≈ x A, row vectors), entry by entry
+    b00, b01 = (x0 * y0).sum(-1), (x0 * y1).sum(-1)
+    b10, b11 = (x1 * y0).sum(-1), (x1 * y1).sum(-1)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # (not ok: dropped)
+        a00 = (gyy * b00 - gxy * b10) / det
+        a01 = (gyy * b01 - gxy * b11) / det
+        a10 = (gxx * b10 - gxy * b00) / det
+        a11 = (gxx * b11 - gxy * b01) / det
+        # the point itself (its own neighbour 0), centred, its residual and leverage
+        p0, p1, q0, q1 = x0[..., 0], x1[..., 0], y0[..., 0], y1[..., 0]
+        r0 = q0 - (p0 * a00 + p1 * a10)
+        r1 = q1 - (p0 * a01 + p1 * a11)
+        h = 1.0 / k + (gyy * p0 * p0 - 2.0 * gxy * p0 * p1 + gxx * p1 * p1) / det
+        z = (r0 * r0 / (1.0 + a00 * a00 + a10 * a10)
+             + r1 * r1 / (1.0 + a01 * a01 + a11 * a11)) / (1.0 - h)
+        good = ok & (h < 0.9)
+    return z[good]
+
+
 def estimate_noise(points: np.ndarray, visible: np.ndarray | None = None, *,
                    n_neighbors: int = NOISE_NEIGHBORS, max_pairs: int = NOISE_PAIRS) -> float:
     """Robust estimate of the tracks' pixel noise σ (px, per coordinate).
@@ -107,53 +170,25 @@ def estimate_noise(points: np.ndarray, visible: np.ndarray | None = None, *,
         pair, one frame, or every neighbourhood degenerate). Deterministic (no random
         draw); coordinates scaled by a power of two scale it exactly.
     """
-    from scipy.spatial import cKDTree  # lazy: off `import laav`
-
     points = np.asarray(points, dtype=np.float64)
     F, P, _ = points.shape
     k = int(n_neighbors)
     if k < 4:
         raise ValueError(f"n_neighbors must be >= 4, got {n_neighbors!r}")
+    pairs = _frame_pairs(F, max_pairs)
     zs = []
-    for f in _frame_pairs(F, max_pairs):
-        if visible is None:
-            idx = np.arange(P)
-        else:
+    if visible is None:  # every pair has all P points: one batched pass over the pairs
+        if P >= k and pairs.size:
+            a, b = points[pairs], points[pairs + 1]  # (n_pairs, P, 2)
+            zs.append(_standardised_residuals(a, b, np.stack([_neighbours(x, k) for x in a])))
+    else:
+        for f in pairs:
             idx = np.flatnonzero(visible[f] & visible[f + 1])
-        if idx.size < k:
-            continue
-        a = points[f, idx]  # (n, 2)
-        b = points[f + 1, idx]
-        # (n, k): each point's k nearest, itself first (a duplicate point may come first:
-        # the same coordinates, the same residual)
-        _, nbr = cKDTree(a).query(a, k=k)
-        Xn, Yn = a[nbr], b[nbr]  # (n, k, 2)
-        X = Xn - Xn.mean(axis=1, keepdims=True)  # centred neighbourhoods
-        Y = Yn - Yn.mean(axis=1, keepdims=True)
-        x0, x1, y0, y1 = X[..., 0], X[..., 1], Y[..., 0], Y[..., 1]  # (n, k)
-        gxx, gxy, gyy = (x0 * x0).sum(1), (x0 * x1).sum(1), (x1 * x1).sum(1)  # G = X^T X
-        det = gxx * gyy - gxy * gxy
-        tr = gxx + gyy
-        ok = det > 1e-6 * tr * tr  # not (nearly) collinear; scale-free
-        if not ok.any():
-            continue
-        # A = G^-1 X^T Y (y ≈ x A, row vectors), entry by entry
-        b00, b01 = (x0 * y0).sum(1), (x0 * y1).sum(1)
-        b10, b11 = (x1 * y0).sum(1), (x1 * y1).sum(1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            a00 = (gyy * b00 - gxy * b10) / det
-            a01 = (gyy * b01 - gxy * b11) / det
-            a10 = (gxx * b10 - gxy * b00) / det
-            a11 = (gxx * b11 - gxy * b01) / det
-            # the point itself (its own neighbour 0), centred, its residual and leverage
-            p0, p1, q0, q1 = x0[:, 0], x1[:, 0], y0[:, 0], y1[:, 0]
-            r0 = q0 - (p0 * a00 + p1 * a10)
-            r1 = q1 - (p0 * a01 + p1 * a11)
-            h = 1.0 / k + (gyy * p0 * p0 - 2.0 * gxy * p0 * p1 + gxx * p1 * p1) / det
-            z = (r0 * r0 / (1.0 + a00 * a00 + a10 * a10)
-                 + r1 * r1 / (1.0 + a01 * a01 + a11 * a11)) / (1.0 - h)
-        good = ok & (h < 0.9)
-        zs.append(z[good])
+            if idx.size < k:
+                continue
+            a = points[f, idx]  # (n, 2)
+            b = points[f + 1, idx]
+            zs.append(_standardised_residuals(a[None], b[None], _neighbours(a, k)[None]))
     if not zs:
         return 0.0
     z = np.concatenate(zs)

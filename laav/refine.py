@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .geometry import fit_fundamental, sampson_distance
+from .geometry import FundamentalFitter, sampson_distance
 
 __all__ = ["labelling_cost", "subspace_cost", "motion_distances", "refine_labels",
            "subspace_residuals", "reassign_labels", "assign_by_subspace", "assign_jointly",
@@ -199,11 +199,12 @@ def _motion_distances_masked(points, labels, n_motions, pairs, visible, unit2):
         if not fit.any():
             continue
         m1, m2, mv = m1[fit], m2[fit], mv[fit]
-        Fm = fit_fundamental(m1, m2, mask=mv)
+        fitter = FundamentalFitter(m1, m2, mv)  # one normalisation for the three fits
+        Fm = fitter.fit()
         for _ in range(2):
             dm = sampson_distance(Fm, m1, m2)
             w = 1.0 / (1.0 + dm / (_masked_median(dm, mv) * 4.0 + TINY2 * unit2))
-            Fm = fit_fundamental(m1, m2, w, mask=mv)
+            Fm = fitter.fit(w)
         d = np.minimum(sampson_distance(Fm, x1[fit], x2[fit]), SAMPSON_CAP * unit2)  # (K', P)
         use = V[fit]
         n = use.sum(axis=0)
@@ -297,11 +298,12 @@ def pair_distances(x1: np.ndarray, x2: np.ndarray, members: np.ndarray,
     reweighted least squares, ``floor2`` (px^2) added to the median in the weights.
     ``x1``, ``x2`` (K, P, 2): the points in each pair's two frames."""
     m1, m2 = x1[:, members], x2[:, members]
-    Fm = fit_fundamental(m1, m2)  # (K, 3, 3)
+    fitter = FundamentalFitter(m1, m2)  # one normalisation for the three fits
+    Fm = fitter.fit()  # (K, 3, 3)
     for _ in range(2):
         dm = sampson_distance(Fm, m1, m2)  # (K, n)
         w = 1.0 / (1.0 + dm / (np.median(dm, axis=1, keepdims=True) * 4.0 + floor2))
-        Fm = fit_fundamental(m1, m2, w)
+        Fm = fitter.fit(w)
     return sampson_distance(Fm, x1, x2)
 
 

@@ -668,11 +668,13 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) 
     clean = params.rv_select_descent > 0 and len({f.tobytes() for f in finals.values()}) > 1
     proj = None
     if clean:  # ours: each scored after its best moves of a few points (rv_select_descent)
-        proj = principal_trajectories(points)  # one projection for every descent here
+        proj = _projection(points, fits)  # one projection for every descent here
         missing = {key: f for key, f in finals.items() if key not in cost}
         cost.update(_cleaned_costs(points, C, params, missing, fits, proj))
     else:
-        cost = {key: joint_score(points, f, C, params, fits=fits) for key, f in finals.items()}
+        proj = _projection(points, fits)
+        cost = {key: joint_score(points, f, C, params, fits=fits, projected=proj)
+                for key, f in finals.items()}
     entries = [(name, res, polished[res[0].tobytes()], cost[res[0].tobytes()])
                for (name, *_), res in zip(starts, results)]
     scores = np.array([e[3] for e in entries])
@@ -685,8 +687,6 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) 
         trial = np.asarray(res[0], dtype=np.int64)
         # ours: the trial's own labels descend too, unless the polish left them as they were
         both = params.rv_descent_from_trial and not np.array_equal(trial, out.labels)
-        if proj is None and both:
-            proj = principal_trajectories(points)  # one projection for both descents
         labels, moved, score = joint_descent(points, out.labels, C, params, projected=proj,
                                              fits=fits, return_score=True)
         if both:
@@ -721,6 +721,18 @@ def _informed_side_by_side(points, params, starts, extra, uses) -> list:
             _step(points, active, params, None, extra if with_extra else None)
             active = [t for t in active if not t.done]
     return [t.result() for t in trials]
+
+
+def _projection(points: np.ndarray, fits: dict) -> np.ndarray:
+    """:func:`principal_trajectories` (K, P) of ``points``, made once per ``fits``
+    (:func:`fit_memo` of ``points``): the selection's costs, scores and descents all read
+    the same SVD (computing it again gave the same numbers, at ~2 ms a time)."""
+    key = ("projection",)  # (beside the memo's motion fits: no motion key is a 1-tuple)
+    if fits is None:  # (no memo: made anew each time)
+        return principal_trajectories(points)
+    if key not in fits:
+        fits[key] = principal_trajectories(points)
+    return fits[key]
 
 
 class _Finished:
@@ -762,7 +774,7 @@ def candidate_part(points, C, params, starts, extra, uses, always_cost: bool = F
     if params.rv_select_descent > 0 and (
             always_cost or len({f[0].tobytes() for f in finished.values()}) > 1):
         cost = _cleaned_costs(points, C, params, {k: f[0] for k, f in finished.items()}, fits,
-                              principal_trajectories(points))
+                              _projection(points, fits))
     return results, finished, cost, fits
 
 

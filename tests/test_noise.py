@@ -38,6 +38,14 @@ def test_the_estimate_reads_only_visible_entries():
     assert abs(estimate_noise(pts, vis) - 1.0) < 0.1
 
 
+def test_the_batched_pairs_give_the_numbers_of_one_pair_at_a_time():
+    # complete tracks fit all frame pairs in one batch, missing data one pair at a time:
+    # with every entry visible both read the same points, so the estimate is the same bits
+    for sigma in (0.0, 1.0):
+        pts = _scene(sigma).points
+        assert estimate_noise(pts) == estimate_noise(pts, np.ones(pts.shape[:2], bool))
+
+
 def test_threshold_factor_is_the_chi_square_quantile_of_the_noise_model():
     assert threshold_factor("all") == pytest.approx(math.sqrt(-2 * math.log(0.01) + 2))
     assert threshold_factor("pair") == pytest.approx(math.sqrt(-4 * math.log(0.01)))
