@@ -74,6 +74,11 @@ def threshold_factor(atom_frames: str = "all", quantile: float = NOISE_QUANTILE)
     return math.sqrt(c + 2.0)
 
 
+#: Most (frame pair, point, neighbour) entries one batched pass of :func:`estimate_noise`
+#: holds (about 20 arrays of this many floats: ~160 MB at the bound).
+_BATCH_ENTRIES = 1 << 20
+
+
 def _frame_pairs(F: int, max_pairs: int) -> np.ndarray:
     """Up to ``max_pairs`` first frames ``f`` of consecutive pairs ``(f, f + 1)``, evenly
     spaced."""
@@ -177,9 +182,14 @@ def estimate_noise(points: np.ndarray, visible: np.ndarray | None = None, *,
         raise ValueError(f"n_neighbors must be >= 4, got {n_neighbors!r}")
     pairs = _frame_pairs(F, max_pairs)
     zs = []
-    if visible is None:  # every pair has all P points: one batched pass over the pairs
-        if P >= k and pairs.size:
-            a, b = points[pairs], points[pairs + 1]  # (n_pairs, P, 2)
+    if visible is None:  # every pair has all P points: batched passes over the pairs
+        # at most about _BATCH_ENTRIES (pair, point, neighbour) entries a pass: one pass on
+        # sequences of hundreds of tracks, bounded temporaries on 50,000 (each pair is
+        # computed on its own: the same numbers in any batching)
+        per = max(1, _BATCH_ENTRIES // max(P * k, 1))
+        for lo in range(0, pairs.size if P >= k else 0, per):
+            sel = pairs[lo:lo + per]
+            a, b = points[sel], points[sel + 1]  # (pairs, P, 2)
             zs.append(_standardised_residuals(a, b, np.stack([_neighbours(x, k) for x in a])))
     else:
         for f in pairs:

@@ -428,9 +428,10 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
     shared_frames : bool
         Missing data, for choosing a point's motion: judge every point only on the frames
         where every motion's basis is determined (:data:`DETERMINED_FACTOR` ``x rank`` of
-        its members seen there; all frames when no point is seen in any such frame), so
-        that all motions judge a point on the same frames. Not for comparing labellings
-        (:func:`subspace_cost`): each labelling would be judged on its own frames.
+        its members seen there), so that all motions judge a point on the same frames; a
+        point seen in ``rank / 2`` of those or fewer is judged on all its visible frames.
+        Not for comparing labellings (:func:`subspace_cost`): each labelling would be
+        judged on its own frames.
     fits : dict, optional
         :func:`fit_memo`: motions fitted before are not fitted again (complete data).
 
@@ -587,11 +588,15 @@ def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible,
     # every motion judges a point on the same frames: its visible ones where each basis row
     # is determined (a row fitted on fewer members is whatever the fit left there, and a
     # point seen in that frame would be far from that motion for no reason of its own)
-    if shared_frames and not shared.all() and np.any(visible & shared[:, None]):
+    if shared_frames and not shared.all():
         vis = visible & shared[:, None]
+        # a point seen in rank / 2 of them or fewer would be fitted exactly by every motion
+        # (no evidence): it is judged on all the frames it is seen in instead
+        few = 2 * vis.sum(axis=0) <= rank
+        vis[:, few] = visible[:, few]
         M = np.repeat(vis, 2, axis=0).astype(np.float64)
         MW = M * W
-        cnt = np.maximum(vis.sum(axis=0), 1)  # none of them: residual 0 (no evidence)
+        cnt = vis.sum(axis=0)
     else:
         cnt = visible.sum(axis=0)
     R = np.empty((n_motions, P))
@@ -601,10 +606,13 @@ def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible,
     return R
 
 
-def _masked_scores(R: np.ndarray, D: np.ndarray, eps: float, epipolar_weight: float) -> np.ndarray:
+def _masked_scores(R: np.ndarray, D: np.ndarray, eps: float, epipolar_weight: float,
+                   informative: np.ndarray) -> np.ndarray:
     """Missing data: the scores (C, P) of :func:`reassign_labels`' rule, each point's motions
     compared on the evidence they share. ``R`` (C, P) subspace residuals, ``D`` (C, P) mean
-    Sampson distances, ``inf`` where a motion has no matrix for a point's frame pairs.
+    Sampson distances, ``inf`` where a motion has no matrix for a point's frame pairs;
+    ``informative`` (P,) bool: the point is seen in more than rank / 2 frames (else every
+    subspace fits it exactly and its ``R`` is rounding noise).
 
     A point that some motions have an epipolar distance for and others not is scored by the
     subspaces alone: a motion's missing matrix (fewer than 8 of its points seen in the pairs
@@ -615,9 +623,8 @@ def _masked_scores(R: np.ndarray, D: np.ndarray, eps: float, epipolar_weight: fl
     with np.errstate(divide="ignore"):
         score = np.log(R + eps) + epipolar_weight * np.log(D + eps)
     finite = np.isfinite(D)
-    partial = finite.any(axis=0) & ~finite.all(axis=0)
-    partial &= np.ptp(R, axis=0) > 0  # the subspaces tell the motions apart (a point seen in
-    # too few frames is fitted exactly by all: then the epipolar distances it has decide)
+    # (a point seen in too few frames for the subspaces: the epipolar distances it has decide)
+    partial = finite.any(axis=0) & ~finite.all(axis=0) & informative
     score[:, partial] = np.log(R[:, partial] + eps)
     return score
 
@@ -668,8 +675,8 @@ def reassign_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
         Missing data: both terms with the mask (:func:`subspace_residuals` fitted on the
         visible entries, :func:`motion_distances` over ``pairs``); a point that only some
         motions have a finite epipolar distance for is scored by the subspaces alone (the
-        motions compared on the evidence they share, :func:`_masked_scores`), and a point
-        without any keeps its label.
+        motions compared on the evidence they share), and a point without any keeps its
+        label.
     pairs : ndarray of shape (K, 2), optional
         The frame pairs of the epipolar term (default ``frame_pairs(F, 12)``).
     fits : dict, optional
@@ -716,7 +723,8 @@ def _reassign_masked(points, start, n_motions, rank, epipolar_weight, rounds, mi
             break
         D = distances if distances is not None and cur is start else motion_distances(
             points, cur, n_motions, pairs, unit2, visible)
-        score = _masked_scores(R, D, REASSIGN_FLOOR * unit2, epipolar_weight)
+        score = _masked_scores(R, D, REASSIGN_FLOOR * unit2, epipolar_weight,
+                               2 * visible.sum(axis=0) > rank)
         known = np.isfinite(score).any(axis=0)
         new = np.where(known, score.argmin(axis=0), cur)
         if (new == cur).all() or np.bincount(new, minlength=n_motions).min() < min_size:
@@ -800,7 +808,7 @@ def assign_jointly(points: np.ndarray, labels: np.ndarray, n_motions: int,
     visible : ndarray of shape (F, P), bool, optional
         Missing data: both fits on the visible entries (as :func:`reassign_labels`); a
         target only some motions have a finite epipolar distance for is scored by the
-        subspaces alone (:func:`_masked_scores`), and one no motion has a distance for is
+        subspaces alone (as :func:`reassign_labels`), and one no motion has a distance for is
         placed by the subspaces alone when seen in ``min_frames`` frames or more, else
         gets ``-1``.
     pairs : ndarray of shape (K, 2), optional
@@ -827,7 +835,8 @@ def assign_jointly(points: np.ndarray, labels: np.ndarray, n_motions: int,
     D = motion_distances(points, labels, n_motions, pairs, unit2, visible)[:, targets]
     eps = REASSIGN_FLOOR * unit2
     if visible is not None and R is not None:  # compared on the evidence they share
-        score = _masked_scores(R[:, targets], D, eps, epipolar_weight)
+        score = _masked_scores(R[:, targets], D, eps, epipolar_weight,
+                               2 * visible[:, targets].sum(axis=0) > rank)
     else:
         with np.errstate(divide="ignore"):
             score = epipolar_weight * np.log(D + eps)  # inf where a motion has no matrix

@@ -962,8 +962,8 @@ def occlude(seq: Sequence, fraction: float, rng: np.random.Generator | int | Non
     Until 2026-12-03 (git ecb56ba and before) the split was biased: it cut at
     ``floor(c0 n)`` and ``floor(c1 n)`` with uniform ``c0 < c1 < 1``, so every occluded
     track lost its last frame and the last frame held no visible point
-    (``docs/bench/missing.md``, "The occlusion model's bias"). Figures measured before then
-    used that split.
+    (``docs/bench/missing.md``, "Current figures: a fair occlusion model"). Figures measured
+    before then used that split.
 
     Parameters
     ----------

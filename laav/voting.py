@@ -61,6 +61,7 @@ from .joint import joint_descent, joint_score, unit2
 from .metrics import misclassification_rate
 from .params import LaavParams, as_params
 from .refine import (
+    _memo,
     assign_by_subspace,
     assign_jointly,
     fit_memo,
@@ -730,6 +731,7 @@ def _projection(points: np.ndarray, fits: dict) -> np.ndarray:
     key = ("projection",)  # (beside the memo's motion fits: no motion key is a 1-tuple)
     if fits is None:  # (no memo: made anew each time)
         return principal_trajectories(points)
+    fits = _memo(fits, points)  # a memo of these very points (else ValueError)
     if key not in fits:
         fits[key] = principal_trajectories(points)
     return fits[key]

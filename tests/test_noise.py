@@ -46,6 +46,18 @@ def test_the_batched_pairs_give_the_numbers_of_one_pair_at_a_time():
         assert estimate_noise(pts) == estimate_noise(pts, np.ones(pts.shape[:2], bool))
 
 
+def test_the_batches_are_bounded_and_give_the_same_numbers(monkeypatch):
+    # many tracks: the pairs go in several passes of bounded size, the same bits as one pass
+    import laav.noise as N
+
+    pts = _scene(1.0).points
+    whole = estimate_noise(pts)
+    monkeypatch.setattr(N, "_BATCH_ENTRIES", pts.shape[1] * N.NOISE_NEIGHBORS * 3)  # 3 pairs a pass
+    assert estimate_noise(pts) == whole
+    monkeypatch.setattr(N, "_BATCH_ENTRIES", 1)  # one pair a pass
+    assert estimate_noise(pts) == whole
+
+
 def test_threshold_factor_is_the_chi_square_quantile_of_the_noise_model():
     assert threshold_factor("all") == pytest.approx(math.sqrt(-2 * math.log(0.01) + 2))
     assert threshold_factor("pair") == pytest.approx(math.sqrt(-4 * math.log(0.01)))

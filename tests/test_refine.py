@@ -180,3 +180,55 @@ def test_a_fit_memo_gives_the_same_numbers_and_fits_each_motion_once(three_motio
     # a memo is for the points it was made with
     with pytest.raises(ValueError, match="fit_memo"):
         R.motion_distances(pts.copy(), other, 3, pairs, fits=fits)
+
+
+def _thin_late_motion():
+    """Noise-free scene: motion 1 is seen in frames 20-29 through 2 of its members only (too
+    few to determine its rank-4 basis there: 2 x 4 are needed); five more of its points, the
+    targets, are seen in frames 15-29, and five others (the late ones) in frames 20-29 only."""
+    seq = synthetic.make_sequence(n_objects=2, n_frames=30, n_points=300, rng=0)
+    lab = np.asarray(seq.labels)
+    vis = np.ones((seq.n_frames, seq.n_points), bool)
+    g1 = np.flatnonzero(lab == 1)
+    targets, late = g1[:5], g1[5:10]
+    vis[20:, g1[12:]] = False  # g1[10:12]: the 2 members seen late
+    vis[:15, targets] = False
+    vis[:20, late] = False
+    labels = lab.copy()
+    labels[targets] = labels[late] = -1
+    return seq.points, lab, labels, vis, targets, late
+
+
+def test_points_are_judged_where_every_motion_is_determined():
+    """``shared_frames``: the targets are judged on frames 15-19, where every motion's basis
+    is determined, and go to their own motion; judged on all their frames, motion 1's
+    undetermined rows of frames 20-29 push them away. A point seen in none of the shared
+    frames (the late ones) is judged on its own frames, not given residual 0 everywhere."""
+    from laav.refine import assign_by_subspace, assign_jointly, subspace_residuals
+
+    pts, lab, labels, vis, targets, late = _thin_late_motion()
+    R = subspace_residuals(pts, labels, 3, visible=vis, shared_frames=True)
+    np.testing.assert_array_equal(R[:, targets].argmin(axis=0), lab[targets])
+    every = subspace_residuals(pts, labels, 3, visible=vis)
+    assert (every[:, targets].argmin(axis=0) != lab[targets]).sum() >= 3  # what the rule mends
+    np.testing.assert_array_equal(R[:, late], every[:, late])  # no shared frame: its own ones
+    assert (R[:, late].max(axis=0) > 1.0).all()
+    np.testing.assert_array_equal(assign_by_subspace(pts, labels, 3, vis, targets, 4), lab[targets])
+    np.testing.assert_array_equal(assign_jointly(pts, labels, 3, targets, visible=vis), lab[targets])
+
+
+def test_masked_scores_compare_motions_on_shared_evidence():
+    """A point that only some motions have an epipolar distance for goes by the subspaces
+    (a motion without a matrix is not ruled out); a point seen in too few frames for the
+    subspaces (rank / 2) goes by the epipolar distances it has, whatever rounding left in R."""
+    from laav.refine import _masked_scores
+
+    R = np.array([[5.0, 1e-9], [0.01, 3e-9], [4.0, 2e-9]])  # (C, P): point 0 fits motion 1
+    D = np.array([[1.0, 1.0], [np.inf, np.inf], [50.0, 50.0]])  # motion 1: no matrix
+    s = _masked_scores(R, D, 1e-4, 0.5, informative=np.array([True, False]))
+    assert s[:, 0].argmin() == 1  # the subspaces, not log(inf), decide
+    assert s[:, 1].argmin() == 0  # too few frames: the finite epipolar distances decide
+    assert np.isinf(s[1, 1])
+    D2 = np.full_like(D, 2.0)  # every motion has a distance: the joint rule
+    both = _masked_scores(R, D2, 1e-4, 0.5, informative=np.array([True, True]))
+    np.testing.assert_allclose(both, np.log(R + 1e-4) + 0.5 * np.log(D2 + 1e-4))
