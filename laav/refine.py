@@ -279,7 +279,8 @@ def fit_memo(points: np.ndarray) -> dict:
     :func:`laav.joint.joint_descent`) on ``points`` (F, P, 2), the very array they are then
     called with (another raises ``ValueError``): kept by the caller for as long as it
     compares labellings of them. It holds one row of P floats per motion fitted (about 60
-    for LAAV's candidates of a three-motion sequence), and is not bounded: make one per
+    for LAAV's candidates of a three-motion sequence), plus the selection's principal
+    trajectories (``laav.voting._projection``), and is not bounded: make one per
     comparison, not per session."""
     return _FitMemo(points)
 
@@ -577,18 +578,19 @@ def _subspace_residuals_masked(points, labels, n_motions, rank, rounds, visible,
     M = np.repeat(visible, 2, axis=0).astype(np.float64)  # (2F, P): x and y rows of a frame
     MW = M * W
     bases = []
-    shared = np.ones(F, dtype=bool)  # the frames every motion's basis is determined in
+    shared = np.ones(F, dtype=bool)  # with shared_frames: where every motion's basis is determined
     for g in range(n_motions):
         mem = labels == g
         if mem.sum() <= rank + 1:
             return None
         bases.append(_fit_subspace_masked(W[:, mem], M[:, mem], rank, rounds,
                                           TINY2 * np.sqrt(unit2)))
-        shared &= visible[:, mem].sum(axis=1) >= DETERMINED_FACTOR * rank
+        if shared_frames:
+            shared &= visible[:, mem].sum(axis=1) >= DETERMINED_FACTOR * rank
     # every motion judges a point on the same frames: its visible ones where each basis row
     # is determined (a row fitted on fewer members is whatever the fit left there, and a
     # point seen in that frame would be far from that motion for no reason of its own)
-    if shared_frames and not shared.all():
+    if not shared.all():
         vis = visible & shared[:, None]
         # a point seen in rank / 2 of them or fewer would be fitted exactly by every motion
         # (no evidence): it is judged on all the frames it is seen in instead
