@@ -25,6 +25,12 @@ in the page's own clock:
   ``ExplorerState.on_preview``): the ``<control>_ms`` wait for the result itself, and
   ``<control>_preview_ms_median`` is the time to the preview on screen (``<control>_previews``:
   how many moves had one);
+- ``scroll_paint_ms``: a plot off screen is painted when it comes into view
+  (``explorer/cards/onscreen.py``): after the moves, from scrolling card 4's first plot (the
+  fine-tuning's error per iteration, below the fold) to the top of the view until the plots
+  on screen are painted (no paint left waiting, their views ready, two animation frames);
+  ``scroll_paint_plots_waiting``: how many of the plots then on screen had a paint waiting
+  (0: nothing was left for the scroll);
 - ``<control>_compute_ms_median``: of those, the server's computation (the status line's
   "computed in N ms"); ``<control>_patched_ms_median``: from the release until the page
   had received the document patch with the new status line (for the frame: the first
@@ -182,6 +188,45 @@ JS_RECORD_PATCHES = """(() => {
   Object.assign(window.WebSocket, {CONNECTING: 0, OPEN: 1, CLOSING: 2, CLOSED: 3});
 })()"""
 
+#: Scroll the plot whose title starts with ``text`` to the top of the viewport, then wait
+#: until no plot on screen has a paint left for when it is seen (``explorer/cards/onscreen.py``)
+#: and every such plot's view is ready, plus two animation frames; [milliseconds, how many
+#: plots on screen had a paint waiting], or -1 after 10 s (-2: no such plot). Then back to
+#: the frame view.
+JS_SCROLL_PAINT = """async (text) => {
+  const frame = () => new Promise(r => requestAnimationFrame(() => r()));
+  const views = (pred) => {
+    const out = [];
+    for (const m of Bokeh.documents[0].all_models) {
+      if (m.type !== 'Figure' && m.type !== 'Plot') continue;
+      const v = Bokeh.index.find_one(m);
+      if (v && v.el && pred(m, v)) out.push(v);
+    }
+    return out;
+  };
+  const titled = (t) => views((m) => m.title && t.test(String(m.title.text)));
+  const [head] = titled(new RegExp('^' + text)), [first] = titled(/^frame \\d+ of/);
+  if (!head) return -2;
+  const plots = () => views((m, v) => {
+    const r = v.el.getBoundingClientRect();
+    return r.height > 0 && r.bottom > 0 && r.top < window.innerHeight;
+  });
+  const t0 = performance.now();
+  head.el.scrollIntoView({block: 'start'});
+  await frame();
+  const waiting = plots().filter(v => v._laav_deferred).length;
+  while (plots().some(v => v._laav_deferred)) {
+    if (performance.now() - t0 > 10000) return -1;
+    await frame();
+  }
+  await Promise.all(plots().map(v => v.ready));
+  await frame(); await frame();
+  const ms = performance.now() - t0;
+  if (first) first.el.scrollIntoView({block: 'center'});
+  return [ms, waiting];
+}"""
+
+
 #: (name in the JSON, slider title prefix, kind, two values, status marker for a value)
 CONTROLS = [
     ("lambda", "λ", "status", (3.0, 2.5), lambda v: f"λ = {v:g}"),
@@ -284,6 +329,10 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
                         if ms < 0:
                             raise RuntimeError(f"{prefix} = {v}: no result in the page ({ms})")
                         runs.setdefault(name, []).append(round(ms, 1))
+            if "radius" in runs:  # card 4's plots, below the fold, after the last move
+                got = page.evaluate(JS_SCROLL_PAINT, "Error per iteration")
+                if isinstance(got, list):
+                    out["scroll_paint_ms"], out["scroll_paint_plots_waiting"] = round(got[0], 1), got[1]
             for name, values in runs.items():
                 out[f"{name}_ms_median"] = round(statistics.median(values), 1)
                 out[f"{name}_ms"] = values

@@ -41,6 +41,7 @@ from .cards.frame import FrameView
 from .cards.graph import GraphView
 from .cards.live import LiveFrames
 from .cards.numbers import NumbersView
+from .cards.onscreen import paint_on_screen_script
 from .cards.rv import RVView
 from .cards.status import StatusBar
 from .cards.sweep import SweepView
@@ -68,6 +69,13 @@ REST_AFTER_S = 3.0
 #: Chromium on the 2-core VM, 8 interleaved starts each: first result 4.12-5.49 s, median 4.46,
 #: against 4.72-6.23 s, median 5.2; the later cards came sooner too).
 REST_GAP_S = 0.4
+
+#: Seconds a computation runs before the status line's spinner and "Recomputing…" show: a
+#: shorter one shows its result only. Shown at once, they were two document changes before
+#: every move's computation and one after it, each a message the server wrote (the page's
+#: ~800 models indexed for each: bokeh's PATCH-DOC) and the page applied and laid out, on
+#: moves whose computation took 5 ms (a λ move on the demo).
+BUSY_SHOW_AFTER_S = 0.25
 
 #: The cards' widgets, sources and panes that tests, benchmarks and notebooks reach on the
 #: explorer itself (the same objects): name -> where it lives.
@@ -266,6 +274,9 @@ class Explorer:
         self._defaults = LaavParams()
         self._suppress = 0
         self._apply_lock = threading.RLock()
+        #: the state's busy period (a token; None: idle), for BUSY_SHOW_AFTER_S
+        self._busy_period: object | None = None
+        self._busy_lock = threading.Lock()
         self._applied = threading.Condition()
         self.applied_generation = 0
         self.applied_plain_key = None
@@ -464,7 +475,10 @@ class Explorer:
             title=title, sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
             header=[self.status_bar.header_name], main=[main], sidebar_width=SIDE_W + 35,
             header_background="#2c4a66", busy_indicator=None)
-        page.ready_scripts = (self.live.clip_script(),)  # overlay glyphs clipped to their frame
+        page.ready_scripts = (
+            self.live.clip_script(),  # overlay glyphs clipped to their frame
+            paint_on_screen_script(self.frame_view.fig),  # plots off screen painted when seen
+        )
         return page
 
     def _page_loaded(self) -> None:
@@ -669,7 +683,22 @@ class Explorer:
 
     def _on_busy(self, busy: bool) -> None:
         self.sweep_view.settings_changed()  # other parameters, C or sequence: the sweep stops
-        self.schedule(self._show_busy, busy)
+        with self._busy_lock:
+            if busy and self._busy_period is not None:
+                return  # busy already: its spinner shows, or will when its time has passed
+            period = self._busy_period = object() if busy else None
+        if not busy or BUSY_SHOW_AFTER_S <= 0:
+            self.schedule(self._show_busy, busy)
+            return
+        timer = threading.Timer(BUSY_SHOW_AFTER_S, self._busy_for_long, (period,))
+        timer.daemon = True
+        timer.start()
+
+    def _busy_for_long(self, period: object) -> None:
+        """(A timer's thread.) The busy ``period`` has lasted BUSY_SHOW_AFTER_S: shown, if it
+        has not ended."""
+        if self._busy_period is period:
+            self.schedule(self._show_busy, True)
 
     def _on_plain_rv(self, voting, key) -> None:
         self.schedule(self._apply_plain_rv, voting, key)
@@ -797,6 +826,8 @@ class Explorer:
             self.status_bar.end_reading()
 
     def _show_busy(self, busy: bool) -> None:
+        if busy and self._busy_period is None:
+            return  # (scheduled by the timer just as the period ended)
         self.status_bar.show_busy(busy, self.result is not None)
 
     def _show_error(self, message: str) -> None:

@@ -150,3 +150,70 @@ def test_a_result_is_one_message_and_a_frame_move_sends_no_view_data():
         moved = [ev for ev in _patches(frames[n0:]) if any(e.get("model", {}).get("id") in views for e in ev)]
         assert not moved, "a frame move sent frame views' data (the page makes them)"
         assert not errors, errors
+
+
+#: Every figure of the page: [title, element's top in the viewport (px), height, a paint
+#: waiting for the plot to be seen (explorer/cards/onscreen.py), the x of the glyph view of
+#: its first line or scatter (what bokeh draws) and of that renderer's source].
+JS_PLOTS = """() => {
+  const out = [];
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.type !== 'Figure') continue;
+    const v = Bokeh.index.find_one(m);
+    if (!v || !v.el) continue;
+    const r = v.el.getBoundingClientRect();
+    let glyph = null, source = null;
+    for (const rv of v.renderer_views.values()) {
+      if (!rv.glyph || !rv.model.data_source || rv.model.data_source.data.x === undefined) continue;
+      glyph = Array.from(rv.glyph.x || []); source = Array.from(rv.model.data_source.data.x); break;
+    }
+    out.push([String(m.title.text), r.top, r.height, !!v._laav_deferred, glyph, source]);
+  }
+  return out;
+}"""
+
+
+def test_plots_off_screen_are_painted_when_seen():
+    """A result's plots below the fold keep their paint for when they are scrolled into view
+    (explorer/cards/onscreen.py): after R1 moves no plot on screen has a paint waiting and
+    some plot far below has one, its data applied already (its glyph view holds its
+    source's new data); scrolled into view, it is painted and nothing on screen waits.
+    Scrolled away, the frame view is deferred in its turn on the next move."""
+    seq = _sequence()
+    with _served(seq, viser=False) as (port, browser, created):
+        page, errors, frames = _open_with_result(browser, port)
+
+        def move(value):
+            assert page.evaluate(JS_SET, ["R1", value])
+            page.wait_for_function(f"() => ({JS_PAGE})().status.includes('R1 = {value:g}')", timeout=60000)
+            page.wait_for_timeout(500)
+            return {p[0]: p for p in page.evaluate(JS_PLOTS)}
+
+        def is_frame_view(title):
+            return title.startswith("frame ") and " of " in title
+
+        move(16.0)  # the first move observes every plot; the next defers those off screen
+        plots = move(18.0)
+        on_screen = [p for p in plots.values() if p[2] > 0 and p[1] < 800]
+        assert any(is_frame_view(p[0]) for p in on_screen)
+        assert not [p[0] for p in on_screen if p[3]], "a plot on screen kept its paint"
+        waiting = [p for p in plots.values() if p[3]]
+        assert waiting and all(p[1] > 1000 for p in waiting), "no plot off screen kept its paint"
+        assert any(p[4] is not None for p in waiting)
+        for p in waiting:  # (categorical coordinates: the glyph holds their positions)
+            same = p[4] == p[5] if all(isinstance(x, (int, float)) for x in p[5] or []) else \
+                p[4] is not None and len(p[4]) == len(p[5])
+            assert same, f"the data of {p[0]!r}, off screen, were not applied"
+        title = waiting[-1][0]
+        page.evaluate("""(t) => { for (const m of Bokeh.documents[0].all_models)
+            if (m.type === 'Figure' && m.title.text === t)
+              Bokeh.index.find_one(m).el.scrollIntoView({block: 'start'}); }""", title)
+        page.wait_for_timeout(500)
+        plots = {p[0]: p for p in page.evaluate(JS_PLOTS)}
+        assert 0 <= plots[title][1] < 800, "not scrolled into view"
+        assert not [p[0] for p in plots.values() if p[2] > 0 and 0 <= p[1] < 800 and p[3]], \
+            "scrolled into view, a plot was not painted"
+        plots = move(17.0)
+        frame = next(p for t, p in plots.items() if is_frame_view(t))
+        assert frame[1] < -300 and frame[3], "the frame view, scrolled away, was painted"
+        assert not errors, errors

@@ -15,7 +15,7 @@ import pytest
 from bokeh.document import Document
 from panel.io.state import set_curdoc
 
-from explorer.cards.base import Alert, Markdown
+from explorer.cards.base import HTML, Alert, Markdown
 
 
 def _model(pane):
@@ -47,15 +47,37 @@ def test_a_text_change_leaves_the_style_sheets_alone(kind):
     assert list(model.stylesheets) == after_layout
 
 
-def test_a_move_toggles_no_layout_property_in_the_main_area():
+@pytest.mark.parametrize("kind", [Markdown, Alert, HTML])
+def test_a_text_change_sends_the_text_panel_would(kind):
+    """A change of the text alone sends only the text (``_TextUpdate``'s short path), the
+    same text panel's full re-render computes; other re-rendering changes (CSS classes) take
+    panel's path and reach the model."""
+    pane = kind("first **bold** `code` <b>x</b> & [a](https://example.org)")
+    doc, column = _page(pane)
+    model = _model(pane)
+    events = []
+    model.on_change("text", lambda attr, old, new: events.append(attr))
+    model.on_change("stylesheets", lambda attr, old, new: events.append(attr))
+    with set_curdoc(doc):
+        pane.object = "| a | b |\n|---|---|\n| *1* | 2 < 3 |\n\nnext & <i>line</i>"
+    assert events == ["text"]
+    assert model.text == pane._get_properties(doc)["text"] != ""
+    with set_curdoc(doc):
+        pane.css_classes = ["laav-test"]
+    assert "laav-test" in model.css_classes
+
+
+def test_a_move_toggles_no_layout_property_in_the_main_area(monkeypatch):
     """A slider move (after the first, which shows the "What changed" line) changes no
     ``visible`` or CSS classes in the main area: in the page each such change makes bokeh lay
     out the whole area again, every card's figures (the spinner's value toggled its classes
     twice a move, the progress line its ``visible``: 0.55 s of a 1.07 s move at 5,000 tracks).
-    The busy state is shown by inline styles instead."""
+    The busy state is shown by inline styles instead (here at once: no BUSY_SHOW_AFTER_S)."""
+    import explorer.app
     from explorer import Explorer
     from explorer.demo import demo_sequence
 
+    monkeypatch.setattr(explorer.app, "BUSY_SHOW_AFTER_S", 0.0)
     ex = Explorer(demo_sequence(), viser=False)
     try:
         assert ex.wait(120)
@@ -163,5 +185,51 @@ def test_foldable_cards_draw_their_arrow():
         for c in (ex.view3d.card, ex.advanced.card):
             assert c.collapsible and FOLD_ARROW in c.stylesheets
         assert "--background-text-color" in FOLD_ARROW
+    finally:
+        ex.close()
+
+
+def test_the_spinner_shows_only_for_a_computation_that_lasts(monkeypatch):
+    """The status line's spinner and "Recomputing…" show once the state has been busy for
+    BUSY_SHOW_AFTER_S, and a busy period that ends sooner changes nothing in the page (each
+    change is a message the server writes and the page lays out: three a move, shown at once).
+    A second request inside one busy period does not restart its clock."""
+    import time
+
+    import explorer.app
+    from explorer import Explorer
+    from explorer.cards.status import RECOMPUTING
+    from explorer.demo import demo_sequence
+
+    monkeypatch.setattr(explorer.app, "BUSY_SHOW_AFTER_S", 0.3)
+    ex = Explorer(demo_sequence(), viser=False)
+    try:
+        assert ex.wait(120)
+        bar = ex.status_bar
+        line, idle_style = bar.status.object, dict(bar.spinner.styles)
+        assert idle_style["--laav-spin"] == "paused"
+        changes = []
+        watchers = [(w, w.param.watch(lambda e: changes.append(e.name), [name]))
+                    for w, name in ((bar.spinner, "styles"), (bar.status, "object"))]
+
+        ex._on_busy(True)  # a short computation: over before its time
+        ex._on_busy(False)
+        time.sleep(0.6)
+        assert changes == [] and bar.status.object == line
+
+        ex._on_busy(True)  # a long one: shown once its time has passed, not before
+        time.sleep(0.15)
+        ex._on_busy(True)  # (a second request: the period's clock runs on)
+        assert changes == []
+        time.sleep(0.35)
+        assert bar.spinner.styles["--laav-spin"] == "running" and bar.status.object == RECOMPUTING
+        ex._on_busy(False)  # ended without a result (a cancel): back to the shown line
+        for _ in range(50):
+            if bar.status.object == line:
+                break
+            time.sleep(0.02)
+        assert bar.status.object == line and bar.spinner.styles == idle_style
+        for w, watcher in watchers:
+            w.param.unwatch(watcher)
     finally:
         ex.close()

@@ -108,7 +108,9 @@ class StatusBar:
         self.alert.visible = True
 
     def show_busy(self, busy: bool, has_result: bool) -> None:
-        self.spinner.styles = spinner_style(busy)
+        style = spinner_style(busy)
+        if self.spinner.styles != style:  # (an idle bar stays as it is: nothing sent)
+            self.spinner.styles = style
         if busy and has_result:
             self.status.object = RECOMPUTING
         elif not busy and self.status.object == RECOMPUTING:
