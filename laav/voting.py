@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._interrupt import check as check_interrupt
 from ._random import resolve_seed
 from ._sequence import Sequence, as_points, check_degenerate, warn_missing_motions
 from ._threads import single_threaded
@@ -710,7 +711,6 @@ def _informed_side_by_side(points, params, starts, extra, uses) -> list:
     trial is cancelled, unlike plain RV's), so all of a kind run at once, whatever
     ``rv_batch``: one call per iteration instead of one per ``rv_batch`` trials (voting
     15-17 % faster than 2 at a time on the demo and six Hopkins155 sequences)."""
-    from ._interrupt import check as check_interrupt
     from .rv import _step, _Trial
 
     trials = [_Trial(lab.copy(), vot.copy(), False, "informed", stream)
@@ -762,7 +762,6 @@ def candidate_part(points, C, params, starts, extra, uses, always_cost: bool = F
     when ``always_cost`` or when their polished labellings differ (as the selection needs
     them then). Returns (results, {key: polished (labels, refined, reassigned)},
     {key: cleaned cost}, the memo of motion fits), keys the trial labels' bytes."""
-    from ._interrupt import check as check_interrupt
 
     results = _informed_side_by_side(points, params, starts, extra, uses)
     fits = fit_memo(points)  # candidates share most motions: each motion's fits made once (same numbers)
@@ -786,7 +785,6 @@ def _candidates(points, C, params, starts, extra, uses, helper) -> tuple:
     here) runs in its process meanwhile, costs included: the same numbers, each trial
     drawing from its own stream and ending by its own test, each polish and cost a function
     of the trial's labels alone."""
-    from ._interrupt import check as check_interrupt
 
     theirs = list(range(1, len(starts), 2))
     # (an array sent to the process arrives C-contiguous: sums over a strided one could
@@ -947,6 +945,7 @@ class _Polished:
         incomplete data, where the coding length is not defined) :func:`subspace_cost`
         of the refined labelling."""
         if self._cost is None:
+            check_interrupt()  # a caller's stop request (laav._interrupt), before the score
             if self.kind == "joint":
                 self._cost = joint_score(self.points, self.final()[0], self.C,
                                          self.params) / self.points.shape[1]
@@ -966,6 +965,7 @@ class _Polished:
         if self._final is None:
             labels, moved = self.refined_labels, 0
             if self.params.rv_reassign:
+                check_interrupt()  # a caller's stop request, before the reassignment
                 labels, moved = reassign_labels(self.points, labels, self.C,
                                                 distances=self._distances,
                                                 unit2=unit2(self.params), **self._kw)
@@ -1040,6 +1040,7 @@ def _select(points, C, params, candidates, trials, initialised, polished=None, m
     for name, cand in candidates:
         key = _partition_key(cand[0])
         if key not in done:
+            check_interrupt()  # a caller's stop request, between polishes (plain RV's 11)
             # plain RV's candidates from the memo; LAAV's own is polished afresh, so that a
             # plain one of the same partition takes its label names, as in a fresh run
             if polished is not None and key in polished and name.startswith("plain"):
