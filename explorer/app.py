@@ -282,6 +282,9 @@ class Explorer:
         self.applied_plain_key = None
         #: the views show a preview (LAAV's own fine-tuning; the result is on its way)
         self.previewing = False
+        #: the result shown whose drawn votes are being fitted (ExplorerState.fit_votes;
+        #: card 3 draws them when they arrive), or None
+        self.votes_pending = None
         self._unpinned_note = None  # the compare card's note when a sequence is opened
         self._params_note = None  # (generation, text): about a params.json, with its result
         self._data_notes: list[str] = []  # the note's lines about the data shown (data_notes)
@@ -341,6 +344,7 @@ class Explorer:
         self.state.on_error = self._on_error
         self.state.on_busy = self._on_busy
         self.state.on_plain_rv = self._on_plain_rv
+        self.state.on_votes = self._on_votes
         self.state.on_target = self._on_target
         if start:
             self.start()
@@ -703,6 +707,9 @@ class Explorer:
     def _on_plain_rv(self, voting, key) -> None:
         self.schedule(self._apply_plain_rv, voting, key)
 
+    def _on_votes(self, result) -> None:
+        self.schedule(self._apply_votes, result)
+
     def _on_target(self, settings) -> None:
         self.schedule(self.advanced.show, settings, now_if_on_doc_thread=True)
 
@@ -771,6 +778,9 @@ class Explorer:
             self._seq_shown = seq
             self._sync_url()
         self.apply_seconds = time.perf_counter() - t0
+        # card 3's votes: fitted now that the result is on its way to the page (drawn then)
+        with self._applied:
+            self.votes_pending = result if self.state.fit_votes(result) is not None else None
         if not preview:
             self.files.result_shown(seq)
         if self._rest is not None and self._rest["loaded"]:  # the later cards: after this result
@@ -803,6 +813,18 @@ class Explorer:
         shown = V.COLOR_LABELS.get(self.style.get("mode"))
         self.frame_view.draw(self.sequence, self.result, self.frame, self.style, self.moved,
                              shown or self.controls.w_color.value)
+
+    def _apply_votes(self, result) -> None:
+        """Card 3 draws ``result``'s votes, fitted (:meth:`ExplorerState.fit_votes`), if it
+        is still the result shown."""
+        if result is self.result:
+            with self.hold():
+                self.coarse_view.draw(self.sequence, result)
+                self.coarse_view.epipolar.draw(self.sequence, result)
+        with self._applied:
+            if self.votes_pending is result:
+                self.votes_pending = None
+            self._applied.notify_all()
 
     def _apply_plain_rv(self, voting, key) -> None:
         if self.result is None or key != self.state.plain_rv_key():
@@ -985,12 +1007,14 @@ class Explorer:
 
     # ------------------------------------------------------------------ testing / teardown
     def wait(self, timeout: float = 60.0, plain_rv: bool = False) -> bool:
-        """Block until the newest request's result (or error) is on the views."""
+        """Block until the newest request's result (or error) is on the views, card 3's
+        votes drawn (:meth:`ExplorerState.fit_votes`)."""
         deadline = time.monotonic() + timeout
         if not self.state.wait(timeout):
             return False
         with self._applied:
-            while self.applied_generation < self.state.published_generation:
+            while (self.applied_generation < self.state.published_generation
+                   or (self.votes_pending is not None and self.votes_pending is self.result)):
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False

@@ -517,8 +517,8 @@ def check_settings(seq: Sequence, settings: Settings) -> None:
 
 def _fit_drawn_votes(result: LaavResult) -> None:
     """(Worker.) The cards draw the paper's pairwise votes, which the default merge does not
-    fit unless read (:class:`laav.coarse.PairwiseVotes`): fitted here, counted as the
-    computation's, not on the page's thread."""
+    fit unless read (:class:`laav.coarse.PairwiseVotes`): fitted here (a worker), not on
+    the page's thread."""
     if result.coarse is not None:
         result.coarse.vote_samples  # noqa: B018
 
@@ -590,6 +590,9 @@ class ExplorerState:
         self.on_error: Callable[[str], None] | None = None
         self.on_busy: Callable[[bool], None] | None = None
         self.on_plain_rv: Callable[[laav.Voting, tuple], None] | None = None
+        #: called (a worker) with a result whose pairwise votes :meth:`fit_votes`
+        #: has fitted (the cards that draw them draw again)
+        self.on_votes: Callable[[LaavResult], None] | None = None
         #: called (worker thread) with a *preview* of a result on its way: LAAV's own
         #: fine-tuning alone, while plain RV and the selection still compute (a new seed, C
         #: or RV setting; :meth:`laav.Pipeline.update`'s ``preview``); then, unless the
@@ -625,6 +628,8 @@ class ExplorerState:
         self._thread_tag = f"laav-explore-state{next(_STATE_NUMBERS)}"
         self._worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-pipeline")
         self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-plain-rv")
+        #: the drawn votes' fits (fit_votes): beside plain RV, not queued behind it
+        self._votes_worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-votes")
         # the pipeline's first-use imports (~1 s), ahead of the first job: they overlap the
         # page's loading, and stage timings shown to the user do not include them. With a
         # pipeline computed elsewhere the first job needs none of them: the app asks for
@@ -851,7 +856,7 @@ class ExplorerState:
                             pipe = self._with_helper(self._pipe)
                             result = pipe.update(**target.update_kwargs(),
                                                  preview=self._previewer(gen, seq, target))
-                    _fit_drawn_votes(result)
+                    # (the drawn votes are not fitted here: fit_votes, once it is shown)
             except Superseded:
                 return  # a newer request is queued: it starts now
             except ValueError as exc:  # includes laav.SequenceError
@@ -925,7 +930,6 @@ class ExplorerState:
                 return  # superseded, or the result is out already
             self._remember_change(seq, target, result)
             try:
-                _fit_drawn_votes(result)
                 self.on_preview(result, seq, target, gen)
             except Exception:  # a GUI hook must never kill the worker
                 traceback.print_exc()
@@ -1009,6 +1013,37 @@ class ExplorerState:
             return None
         self._queue_ahead()  # after plain RV in the same worker
         return fut
+
+    # ------------------------------------------------------------------ the drawn votes
+    def fit_votes(self, result: LaavResult) -> Future | None:
+        """Fit ``result``'s pairwise epipolar votes (what card 3 draws; the default merge
+        does not fit them) in a worker of their own (beside plain RV's, not behind it), then
+        call :attr:`on_votes`; None when they are fitted already (or the state is closed).
+
+        The app asks once a result is on the page: fitted before it, in the computation,
+        they were 57 ms of a 445 ms R1 move on the demo that nothing on screen needed (card
+        3 is below the fold; it shows "fitting…" until they arrive). A fit not started when
+        a newer request comes is dropped (a view of this result later asks again)."""
+        if result.coarse is None or result.coarse.pairwise.unfitted() is None or self._closed:
+            return None
+        gen = self._gen
+
+        def job() -> None:
+            try:
+                with interruptible(lambda: gen != self._gen or self._closed):
+                    check_interrupt()  # (superseded while queued)
+                    _fit_drawn_votes(result)
+            except Superseded:
+                return
+            except Exception:  # a drawing's fit must never cost the session (the cards
+                traceback.print_exc()  # are told all the same: they stop waiting for it)
+            if self.on_votes is not None:
+                self.on_votes(result)
+
+        try:
+            return self._votes_worker.submit(job)
+        except RuntimeError:  # closed
+            return None
 
     # ------------------------------------------------------------------ the next seed, ahead
     def computed_ahead(self, result) -> str | None:
@@ -1164,7 +1199,8 @@ class ExplorerState:
         return None
 
     def threads(self) -> list[threading.Thread]:
-        """The worker threads of this state still running (the pipeline's, plain RV's)."""
+        """The worker threads of this state still running (the pipeline's, plain RV's, the
+        drawn votes')."""
         tag = self._thread_tag + "-"
         return [t for t in threading.enumerate() if t.name.startswith(tag)]
 
@@ -1177,7 +1213,7 @@ class ExplorerState:
             self._gen += 1  # anything still queued is now stale
             self._rv_key = None  # plain RV computing now stops at its next check
             self._idle.notify_all()  # a computation ahead waiting for a job stops now
-        workers = (self._worker, self._rv_worker)
+        workers = (self._worker, self._rv_worker, self._votes_worker)
         for w in workers:
             w.shutdown(wait=False, cancel_futures=True)
         if timeout is None:

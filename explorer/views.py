@@ -26,6 +26,7 @@ __all__ = [
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
     "replay_caption", "fine_count", "fine_count_note", "z_sources", "merge_table", "epipolar_sources",
+    "votes_fitted",
     "rv_sources", "rv_error_sources", "trace_errors",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
     "space_time", "cost_limit", "md_text",
@@ -745,12 +746,23 @@ def _model_factors(result: laav.LaavResult) -> list:
 Z_TEXT_MAX = 8
 
 
-def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None) -> tuple[dict, list]:
+def votes_fitted(result: laav.LaavResult) -> bool:
+    """Whether ``result``'s pairwise epipolar votes are fitted (``Coarse.pairwise``): the
+    default merge leaves them to be fitted when first read, which the cards that draw them
+    do not do on the page's thread (the app has them fitted after the result is shown:
+    ``ExplorerState.fit_votes``)."""
+    co = result.coarse
+    return co is None or co.pairwise.unfitted() is None
+
+
+def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None,
+              fit_votes: bool = True) -> tuple[dict, list]:
     """Heat-map cells of the affinity Z (n_fine x n_fine) and the axis factors; ``d`` the
     pair's epipolar distance, ``g`` the coding length merging it adds (nats per point).
 
     Factors read ``f3→M1``: fine model 3 merged into motion 1 (motions numbered like the
-    coarse colours when ``seq`` has ground truth)."""
+    coarse colours when ``seq`` has ground truth). Without ``fit_votes``, ``d`` is NaN while
+    the votes are not fitted (:func:`votes_fitted`)."""
     Z = np.asarray(result.coarse.affinity, dtype=float)
     n = Z.shape[0]
     f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
@@ -766,7 +778,8 @@ def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None) -> tupl
             "z": Z.ravel(), "text": np.array([f"{v:.2f}" if n <= Z_TEXT_MAX else ""
                                               for v in Z.ravel()], dtype=object),
             "text_color": np.where(Z.ravel() > 0.55, "white", "black"),
-            "d": np.asarray(result.coarse.epipolar_distance, float).ravel(),
+            "d": (np.asarray(result.coarse.epipolar_distance, float).ravel()
+                  if fit_votes or votes_fitted(result) else np.full(n * n, np.nan)),
             "g": (np.zeros(n * n) if result.coarse.merge_cost is None
                   else np.asarray(result.coarse.merge_cost, float).ravel()),
             "j": jj + 1, "k": kk + 1}
@@ -779,7 +792,7 @@ def merge_table(seq: laav.Sequence, result: laav.LaavResult) -> str:
     f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
     fine = np.asarray(result.coarse.fine_point_labels)
     atom_lab = np.asarray(result.multicut.atom_labels)
-    factors = z_sources(result, seq)[1]
+    factors = z_sources(result, seq, fit_votes=False)[1]
     gt = seq.labels
     truth = gt is not None
     head = "| fine model | atoms | points | merged into |" + (" true motion |" if truth else "")
@@ -853,7 +866,7 @@ def _clip_lines(lines: np.ndarray, extent) -> tuple[np.ndarray, ...]:
 
 
 def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int,
-                     max_lines: int = 30, rng_seed: int = 0) -> dict:
+                     max_lines: int = 30, rng_seed: int = 0, fit_votes: bool = True) -> dict:
     """Epipolar check of fine models ``j`` and ``k`` with a fundamental matrix the merge
     itself used: the pair's sample of median distance (``Coarse.vote_samples``).
 
@@ -868,7 +881,8 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     ``pairwise`` / ``coassociation`` / ``affinity`` (the terms of Z for the pair),
     ``n_samples``, ``residual`` (mean distance in px of the drawn frame-r points to their
     lines; ``residual_j`` / ``residual_k`` per model), ``ok`` (False for j == k — a model
-    is never voted against itself — or when the pair has no sample).
+    is never voted against itself — or when the pair has no sample), ``pending`` (without
+    ``fit_votes``: the votes are not fitted yet, nothing is drawn; :func:`votes_fitted`).
     """
     co = result.coarse
     n = np.asarray(co.fine_to_coarse).size
@@ -881,7 +895,9 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
              "frames": (0, seq.n_frames - 1), "distance": nan, "sample_distance": nan,
              "sample_vote": nan, "pairwise": nan, "coassociation": nan, "affinity": nan,
              "n_samples": 0, "residual": nan, "residual_j": nan, "residual_k": nan,
-             "ok": False}
+             "ok": False, "pending": False}
+    if not fit_votes and not votes_fitted(result):
+        return dict(blank, pending=True)
     vs = co.vote_samples
     if not (0 <= j < n and 0 <= k < n) or j == k or vs is None:
         return blank

@@ -627,7 +627,11 @@ def test_close_joins_the_workers_even_mid_computation(seq, monkeypatch):
     ex.state.request_plain_rv()
     assert started.wait(30)
     threads = ex.state.threads()
-    assert len(threads) == 2  # the pipeline's worker and plain RV's
+    # the pipeline's worker and plain RV's (and the drawn votes', once the first result's
+    # votes were fitted: ExplorerState.fit_votes)
+    tag = ex.state._thread_tag + "-"
+    kinds = sorted(t.name[len(tag):].rsplit("_", 1)[0] for t in threads)
+    assert kinds in (["pipeline", "plain-rv"], ["pipeline", "plain-rv", "votes"]), kinds
     assert ex.close(timeout=5) is True
     assert not [t.name for t in threads if t.is_alive()]
 
@@ -1319,3 +1323,34 @@ def test_the_voting_helper_by_default_only_with_a_core_for_each(monkeypatch):
         assert helper is not None
     finally:
         helper.close()
+
+
+def test_card_3_votes_are_fitted_after_the_result_is_shown():
+    """The pairwise votes card 3 draws (which the default merge does not fit) are fitted
+    once the result is on the views, not inside its computation: card 3 first draws the
+    result with them pending ("fitting…", no distances), then, when the votes worker has
+    fitted them, draws them; ``wait`` returns once they are drawn."""
+    ex = Explorer(demo_sequence(), viser=False)
+    try:
+        assert ex.wait(120)
+        seen = []  # (result, its votes fitted) at each draw of card 3's epipolar panel
+        real = ex.coarse_view.epipolar.draw
+
+        def draw(seq, res):
+            seen.append((res, V.votes_fitted(res)))
+            real(seq, res)
+
+        ex.coarse_view.epipolar.draw = draw
+        ex.w_params["r1"].value = 23.0  # new atoms: new fine models, new votes
+        assert ex.wait(120) and ex.result.params.r1 == 23.0
+        res = ex.result
+        mine = [fitted for r, fitted in seen if r is res]
+        assert mine[0] is False, "the votes were fitted before the result was shown"
+        assert mine[-1] is True and V.votes_fitted(res)
+        assert ex.votes_pending is None
+        caption = ex.coarse_view.epipolar.caption.object
+        assert "Fitting the pairwise votes" not in caption and "vote for f1" in caption
+        d = ex.coarse_view.src_z.data["d"]
+        assert np.isfinite(np.asarray(d, float)).sum() > 0
+    finally:
+        ex.close()

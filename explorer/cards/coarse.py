@@ -47,7 +47,7 @@ class CoarseView:
 
     def draw(self, seq, res) -> None:
         """Z and the merge table of ``res`` (the epipolar panel draws separately)."""
-        data, factors = V.z_sources(res, seq)
+        data, factors = V.z_sources(res, seq, fit_votes=False)  # (d: once fitted, drawn again)
         self.fig_z.x_range.factors = factors or ["–"]
         self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
         set_data(self.src_z, data)

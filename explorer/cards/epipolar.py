@@ -80,7 +80,7 @@ class EpipolarPanel:
 
     def draw(self, seq, res) -> None:
         j, k = self.pair()
-        d = V.epipolar_sources(seq, res, j, k)
+        d = V.epipolar_sources(seq, res, j, k, fit_votes=False)  # (once fitted, drawn again)
         set_data(self.src_epi_l, d["left"])
         set_data(self.src_epi_r, d["right"])
         set_data(self.src_sample_l, d["sample_left"])
@@ -107,6 +107,8 @@ def epipolar_caption(d: dict, res, j: int, k: int) -> str:
     """What the panel shows and how the merge used it, with its numbers."""
     if j == k:
         return "Pick two different fine models: a model is never voted against itself."
+    if d.get("pending"):
+        return "Fitting the pairwise votes (drawn here, not needed by this merge)…"
     if not d["ok"]:
         return "No vote for this pair (too few atoms)."
     f2c = np.asarray(res.coarse.fine_to_coarse)
