@@ -707,8 +707,8 @@ class Explorer:
     def _on_plain_rv(self, voting, key) -> None:
         self.schedule(self._apply_plain_rv, voting, key)
 
-    def _on_votes(self, result) -> None:
-        self.schedule(self._apply_votes, result)
+    def _on_votes(self, result, dropped: bool = False) -> None:
+        self.schedule(self._apply_votes, result, dropped)
 
     def _on_target(self, settings) -> None:
         self.schedule(self.advanced.show, settings, now_if_on_doc_thread=True)
@@ -814,9 +814,17 @@ class Explorer:
         self.frame_view.draw(self.sequence, self.result, self.frame, self.style, self.moved,
                              shown or self.controls.w_color.value)
 
-    def _apply_votes(self, result) -> None:
+    def _apply_votes(self, result, dropped: bool = False) -> None:
         """Card 3 draws ``result``'s votes, fitted (:meth:`ExplorerState.fit_votes`), if it
-        is still the result shown."""
+        is still the result shown; a fit ``dropped`` for a newer request is asked again
+        while it is (the newer request may never show a result: cancelled, or failed)."""
+        if dropped:
+            with self._applied:
+                if result is self.result and self.votes_pending is result:
+                    self.votes_pending = result if self.state.fit_votes(result) is not None else None
+                    if self.votes_pending is not None:
+                        return
+            dropped = False  # (fitted meanwhile, or nothing to wait for: drawn as it is)
         if result is self.result:
             with self.hold():
                 self.coarse_view.draw(self.sequence, result)

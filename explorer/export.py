@@ -133,7 +133,7 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
 
     ax = axs[1, 0]
     Z = np.asarray(result.coarse.affinity)
-    _, factors = V.z_sources(result, seq)
+    _, factors = V.z_sources(result, seq, fit_votes=False)  # (the factors only)
     im = ax.imshow(Z, cmap="Blues", vmin=0, vmax=1)
     for (i, j), v in np.ndenumerate(Z):
         ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=8,

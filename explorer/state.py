@@ -590,9 +590,10 @@ class ExplorerState:
         self.on_error: Callable[[str], None] | None = None
         self.on_busy: Callable[[bool], None] | None = None
         self.on_plain_rv: Callable[[laav.Voting, tuple], None] | None = None
-        #: called (a worker) with a result whose pairwise votes :meth:`fit_votes`
-        #: has fitted (the cards that draw them draw again)
-        self.on_votes: Callable[[LaavResult], None] | None = None
+        #: called (a worker) with a result whose pairwise votes :meth:`fit_votes` has
+        #: fitted, and False (the cards that draw them draw again); True: the fit was
+        #: dropped before it started (a newer request)
+        self.on_votes: Callable[[LaavResult, bool], None] | None = None
         #: called (worker thread) with a *preview* of a result on its way: LAAV's own
         #: fine-tuning alone, while plain RV and the selection still compute (a new seed, C
         #: or RV setting; :meth:`laav.Pipeline.update`'s ``preview``); then, unless the
@@ -1023,22 +1024,25 @@ class ExplorerState:
         The app asks once a result is on the page: fitted before it, in the computation,
         they were 57 ms of a 445 ms R1 move on the demo that nothing on screen needed (card
         3 is below the fold; it shows "fitting…" until they arrive). A fit not started when
-        a newer request comes is dropped (a view of this result later asks again)."""
-        if result.coarse is None or result.coarse.pairwise.unfitted() is None or self._closed:
+        a newer request comes is dropped and reported so (:attr:`on_votes`' second
+        argument): the app asks again while the result is still the one shown (the newer
+        request may have been cancelled or failed)."""
+        if result.coarse is None or result.coarse.pairwise.fitted or self._closed:
             return None
         gen = self._gen
 
         def job() -> None:
+            dropped = False
             try:
                 with interruptible(lambda: gen != self._gen or self._closed):
                     check_interrupt()  # (superseded while queued)
                     _fit_drawn_votes(result)
             except Superseded:
-                return
+                dropped = True
             except Exception:  # a drawing's fit must never cost the session (the cards
                 traceback.print_exc()  # are told all the same: they stop waiting for it)
-            if self.on_votes is not None:
-                self.on_votes(result)
+            if self.on_votes is not None and not self._closed:
+                self.on_votes(result, dropped)
 
         try:
             return self._votes_worker.submit(job)

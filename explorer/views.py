@@ -752,7 +752,7 @@ def votes_fitted(result: laav.LaavResult) -> bool:
     do not do on the page's thread (the app has them fitted after the result is shown:
     ``ExplorerState.fit_votes``)."""
     co = result.coarse
-    return co is None or co.pairwise.unfitted() is None
+    return co is None or co.pairwise.fitted  # (never waits for a fit in progress)
 
 
 def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None,

@@ -803,6 +803,12 @@ class _PairwiseFits:
         ki, Fmid, pts, dmid = (np.concatenate(parts) for parts in zip(*mids))
         return np.concatenate(depis), _median_samples(ki, Fmid, pts, dmid, pairs, jj, kk, n)
 
+    @property
+    def done(self) -> bool:
+        """Whether the fits are made, without waiting for a fit in progress (whose lock
+        :meth:`pending` takes: a viewer's thread asks this while a worker fits)."""
+        return self._out is not None
+
     def pending(self) -> tuple | None:
         """The arguments of :func:`fit_pairwise` still to run, or None when fitted."""
         with self._lock:
@@ -876,6 +882,13 @@ class PairwiseVotes:
         if self._vote is not None or fits is None or fits.pending() is None:
             return None
         return fits
+
+    @property
+    def fitted(self) -> bool:
+        """Whether reading the votes is immediate (no fit to make or wait for); never
+        waits itself."""
+        fits = self._fits
+        return self._vote is not None or fits is None or fits.done
 
     def _ensure(self) -> None:
         fits = self._fits

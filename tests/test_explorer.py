@@ -1325,11 +1325,13 @@ def test_the_voting_helper_by_default_only_with_a_core_for_each(monkeypatch):
         helper.close()
 
 
-def test_card_3_votes_are_fitted_after_the_result_is_shown():
+def test_card_3_votes_are_fitted_after_the_result_is_shown(monkeypatch):
     """The pairwise votes card 3 draws (which the default merge does not fit) are fitted
     once the result is on the views, not inside its computation: card 3 first draws the
     result with them pending ("fitting…", no distances), then, when the votes worker has
-    fitted them, draws them; ``wait`` returns once they are drawn."""
+    fitted them, draws them; ``wait`` returns once they are drawn. (Without the voting
+    helper, which fits them during the voting: on by default from 4 cores.)"""
+    monkeypatch.setenv("LAAV_VOTING_HELPER", "0")
     ex = Explorer(demo_sequence(), viser=False)
     try:
         assert ex.wait(120)
@@ -1352,5 +1354,36 @@ def test_card_3_votes_are_fitted_after_the_result_is_shown():
         assert "Fitting the pairwise votes" not in caption and "vote for f1" in caption
         d = ex.coarse_view.src_z.data["d"]
         assert np.isfinite(np.asarray(d, float)).sum() > 0
+    finally:
+        ex.close()
+
+
+def test_a_dropped_votes_fit_is_asked_again(monkeypatch):
+    """A votes fit dropped for a newer request (which may never show a result: cancelled,
+    failed) is asked again while its result is still the one shown, so card 3 does not stay
+    on "fitting…" and ``wait`` does not time out."""
+    monkeypatch.setenv("LAAV_VOTING_HELPER", "0")
+    ex = Explorer(demo_sequence(), viser=False)
+    try:
+        assert ex.wait(120)
+        asked = []
+        real = ex.state.fit_votes
+        ex.state.fit_votes = lambda r: (asked.append(r), real(r))[1]
+        block = threading.Event()
+        ex.state._votes_worker.submit(block.wait, 60)  # the result's fit queues behind this
+        ex.w_params["r1"].value = 23.0
+        deadline = time.monotonic() + 120
+        while not (ex.result is not None and ex.result.params.r1 == 23.0
+                   and ex.votes_pending is ex.result):
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        res = ex.result
+        with ex.state._lock:
+            ex.state._gen += 1  # a newer request that shows nothing: the queued fit is dropped
+        block.set()
+        assert ex.wait(60), "card 3 stayed waiting for a dropped fit"
+        assert [r for r in asked if r is res] == [res, res]  # asked again once
+        assert V.votes_fitted(res) and ex.votes_pending is None
+        assert "Fitting the pairwise votes" not in ex.coarse_view.epipolar.caption.object
     finally:
         ex.close()

@@ -128,14 +128,19 @@ def test_a_result_is_one_message_and_a_frame_move_sends_no_view_data():
             events = with_status[0]
             data = [i for i, e in enumerate(events) if e["kind"] == "ColumnDataChanged"
                     or (e["kind"] == "ModelChanged" and e.get("attr") == "data")]
-            others = [ev for ev in patches if ev is not events]
-            # (card 3's votes come after the result, once fitted: ExplorerState.fit_votes)
+            # (card 3's votes come in a message after the result's, once fitted:
+            # ExplorerState.fit_votes; nothing else, and nothing before it)
+            at = next(i for i, ev in enumerate(patches) if ev is events)
             ep = ex.coarse_view.epipolar
             votes = {m.id for m in (ex.coarse_view.src_z, ep.src_epi_l, ep.src_epi_r, ep.src_sample_l,
                                     ep.src_sample_r, ep.src_epi_lines)}
-            assert not any((e["kind"] == "ColumnDataChanged" or e.get("attr") == "data")
-                           and e.get("model", {}).get("id") not in votes
-                           for ev in others for e in ev), "the result's data sources came in another message"
+
+            def is_data(e):
+                return e["kind"] == "ColumnDataChanged" or e.get("attr") == "data"
+
+            assert not any(is_data(e) for ev in patches[:at] for e in ev) and not any(
+                is_data(e) and e.get("model", {}).get("id") not in votes
+                for ev in patches[at + 1:] for e in ev), "the result's data sources came in another message"
             assert data == list(range(len(events) - len(data), len(events))), "data changes are not last"
             ids = [e.get("model", {}).get("id") for e in events]
             if ex.live.meta.data["gen"][0] != gen0:  # the page remakes its frame views: told last
@@ -203,7 +208,7 @@ def test_plots_off_screen_are_painted_when_seen():
         assert any(is_frame_view(p[0]) for p in on_screen)
         assert not [p[0] for p in on_screen if p[3]], "a plot on screen kept its paint"
         waiting = [p for p in plots.values() if p[3]]
-        assert waiting and all(p[1] > 1000 for p in waiting), "no plot off screen kept its paint"
+        assert waiting and all(p[1] > 800 for p in waiting), "no plot off screen kept its paint"
         assert any(p[4] is not None for p in waiting)
         for p in waiting:  # (categorical coordinates: the glyph holds their positions)
             same = p[4] == p[5] if all(isinstance(x, (int, float)) for x in p[5] or []) else \

@@ -58,9 +58,13 @@ def test_a_text_change_sends_the_text_panel_would(kind):
     events = []
     model.on_change("text", lambda attr, old, new: events.append(attr))
     model.on_change("stylesheets", lambda attr, old, new: events.append(attr))
+    full = []  # panel's full path (every property computed): not taken for a text change
+    real = pane._get_properties
+    pane._get_properties = lambda *a, **k: (full.append(1), real(*a, **k))[1]
     with set_curdoc(doc):
         pane.object = "| a | b |\n|---|---|\n| *1* | 2 < 3 |\n\nnext & <i>line</i>"
-    assert events == ["text"]
+    assert events == ["text"] and full == []
+    del pane._get_properties
     assert model.text == pane._get_properties(doc)["text"] != ""
     with set_curdoc(doc):
         pane.css_classes = ["laav-test"]
@@ -221,7 +225,9 @@ def test_the_spinner_shows_only_for_a_computation_that_lasts(monkeypatch):
         time.sleep(0.15)
         ex._on_busy(True)  # (a second request: the period's clock runs on)
         assert changes == []
-        time.sleep(0.35)
+        deadline = time.monotonic() + 10  # (0.15 s after the first: shown once the 0.3 s passed)
+        while bar.status.object != RECOMPUTING and time.monotonic() < deadline:
+            time.sleep(0.02)
         assert bar.spinner.styles["--laav-spin"] == "running" and bar.status.object == RECOMPUTING
         ex._on_busy(False)  # ended without a result (a cancel): back to the shown line
         for _ in range(50):
