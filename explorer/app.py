@@ -824,7 +824,7 @@ class Explorer:
                     self.votes_pending = result if self.state.fit_votes(result) is not None else None
                     if self.votes_pending is not None:
                         return
-            dropped = False  # (fitted meanwhile, or nothing to wait for: drawn as it is)
+            # (else fitted meanwhile, or no longer shown: drawn as it is, or not at all)
         if result is self.result:
             with self.hold():
                 self.coarse_view.draw(self.sequence, result)

@@ -762,7 +762,6 @@ def candidate_part(points, C, params, starts, extra, uses, always_cost: bool = F
     when ``always_cost`` or when their polished labellings differ (as the selection needs
     them then). Returns (results, {key: polished (labels, refined, reassigned)},
     {key: cleaned cost}, the memo of motion fits), keys the trial labels' bytes."""
-
     results = _informed_side_by_side(points, params, starts, extra, uses)
     fits = fit_memo(points)  # candidates share most motions: each motion's fits made once (same numbers)
     finished: dict = {}
@@ -785,7 +784,6 @@ def _candidates(points, C, params, starts, extra, uses, helper) -> tuple:
     here) runs in its process meanwhile, costs included: the same numbers, each trial
     drawing from its own stream and ending by its own test, each polish and cost a function
     of the trial's labels alone."""
-
     theirs = list(range(1, len(starts), 2))
     # (an array sent to the process arrives C-contiguous: sums over a strided one could
     # round otherwise, so such points stay here)
