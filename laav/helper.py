@@ -168,11 +168,18 @@ class VotingHelper:
 
     def _ensure(self) -> ProcessPoolExecutor:
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(1, mp_context=self._ctx, initializer=_init,
-                                             initargs=(self._stopped, os.getpid()))
+            pool = ProcessPoolExecutor(1, mp_context=self._ctx, initializer=_init,
+                                       initargs=(self._stopped, os.getpid()))
             # the process and its imports, now (a second or two of one core): until they
-            # are done no job is taken, the callers compute their parts themselves
-            self._ready = self._pool.submit(_warm)
+            # are done no job is taken, the callers compute their parts themselves. A pool
+            # whose process dies at once (e.g. a script that makes a helper at import,
+            # which spawn runs again in the child) is never kept without its readiness.
+            self._pool, self._ready = pool, None
+            try:
+                self._ready = pool.submit(_warm)
+            except (BrokenProcessPool, RuntimeError, OSError):
+                self._broken(pool)  # (counted: a helper whose process keeps dying closes)
+                raise
         return self._pool
 
     @property

@@ -233,6 +233,38 @@ def test_a_helper_whose_process_keeps_dying_closes_itself():
         _same(laav.Pipeline(seq, 3).result, laav.Pipeline(seq, 3, helper=h).result)
 
 
+def test_a_process_that_dies_at_start_leaves_the_work_here(monkeypatch):
+    """A pool whose process dies before it takes its first job (as when a script makes a
+    helper at import, which spawn runs again in the child): every call computes here, no
+    AttributeError from a pool kept without its readiness, and the helper closes itself
+    after a few tries."""
+    import laav.helper as H
+
+    made = []
+
+    class DeadPool:
+        def __init__(self, *a, **k):
+            made.append(self)
+
+        def submit(self, *a, **k):
+            raise H.BrokenProcessPool("died at start")
+
+        def shutdown(self, *a, **k):
+            pass
+
+    monkeypatch.setattr(H, "ProcessPoolExecutor", DeadPool)
+    seq = _scene(0)
+    with pytest.warns(RuntimeWarning, match="died 3 times"):
+        h = VotingHelper()
+        assert not h.ready
+        for _ in range(4):
+            assert h.submit(_long_job(seq)) is None
+    assert len(made) == 3  # then closed: no new process per call
+    assert not h.wait_ready(timeout=1)
+    _same(laav.Pipeline(seq, 3).result, laav.Pipeline(seq, 3, helper=h).result)
+    h.close()
+
+
 def test_prefetched_votes_are_those_fitted_here(helper):
     """With prefetch_votes, the coarse stage's pairwise votes (which the default merge does
     not fit; what the explorer draws) are fitted in the helper while the voting runs: the
