@@ -131,7 +131,7 @@ def test_stop_ends_a_running_job(helper):
     P = seq.points.shape[1]
     rng = np.random.default_rng(0)
     params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)  # runs ~10,000 iterations
-    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(1), None)
+    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(1))
     handle = helper.submit((seq.points, 3, params, [start], None, [False]))
     time.sleep(0.5)
     assert not handle[1].done()
@@ -180,7 +180,7 @@ def _long_job(seq, seed=1):
     P = seq.points.shape[1]
     rng = np.random.default_rng(seed)
     params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)
-    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(seed + 1), None)
+    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(seed + 1))
     return (seq.points, 3, params, [start], None, [False])
 
 
@@ -191,7 +191,7 @@ def test_stopping_a_queued_job_leaves_the_running_one(helper):
     P = seq.points.shape[1]
     params = laav.LaavParams(rv_max_iter=1500, rv_patience=1500)  # about a second
     rng = np.random.default_rng(3)
-    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(4), None)
+    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(4))
     first = helper.submit((seq.points, 3, params, [start], None, [False]))
     second = helper.submit(_long_job(seq))
     time.sleep(0.2)
@@ -326,7 +326,7 @@ if __name__ == "__main__":
     P = seq.points.shape[1]
     rng = np.random.default_rng(1)
     params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)  # seconds
-    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(2), None)
+    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(2))
     handle = h.submit((seq.points, 3, params, [start], None, [False]))
     time.sleep(0.5)
     assert not handle[1].done()
