@@ -137,13 +137,6 @@ class LaavParams:
         fold; Hopkins155, 5 seeds: 0.25 -> 0.22 %, held out 0.22 %; three-motion median
         time 0.44 -> 0.54 x plain RV's; ``benchmarks/TUNING.md``, "Two trials per
         missing-motion start").
-    rv_missing_max_iter : int or None
-        Ours, with ``rv_select="laav"`` on complete tracks: the iteration cap of the
-        trials from missing-motion starts (None: ``rv_max_iter``, as every other trial).
-        LAAV's informed trial always has ``rv_max_iter``. The trials run side by side
-        until the last has ended, so one missing-motion trial that never settles (a
-        third of them on Hopkins155's three-motion sequences) kept the whole fine-tuning
-        running for ``rv_max_iter`` iterations.
     rv_batch : int
         Voting trials run side by side in one batched numpy call (plain RV's random
         starts, and LAAV's informed trial beside them in ``with_plain_rv()`` and on
@@ -315,7 +308,6 @@ class LaavParams:
     rv_patience: int = 15
     rv_label_weight: float = 5.0
     rv_missing_trials: int = 2
-    rv_missing_max_iter: int | None = None
     rv_batch: int = 2
     rv_refine: bool = True
     rv_reassign: bool = True
@@ -534,7 +526,6 @@ _BOUNDS = (
     ("rv_patience", "int", 1, 10_000),
     ("rv_label_weight", "float", 0, _BIG),
     ("rv_missing_trials", "int", 1, 100),
-    ("rv_missing_max_iter", "int|None", 1, 10_000),
     ("rv_batch", "int", 1, 32),
     ("rv_refine", "bool", None, None),
     ("rv_reassign", "bool", None, None),

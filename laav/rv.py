@@ -212,12 +212,9 @@ class LabelTrace:
 class _Trial:
     """Working state of one voting trial (internal; several run side by side)."""
 
-    def __init__(self, labels, votes, reset, kind, rng, max_iter=None):
+    def __init__(self, labels, votes, reset, kind, rng):
         self.labels, self.votes, self.rng = labels, votes, rng
         self.reset, self.kind = reset, kind
-        #: its own iteration cap (None: ``rv_max_iter``; LAAV's missing-motion trials have
-        #: ``rv_missing_max_iter``)
-        self.max_iter = max_iter
         self.changed: list = []
         self.margins: list = []
         #: the labels at the start and the changes of every iteration (:class:`LabelTrace`:
@@ -320,7 +317,7 @@ def _step(points, trials, params, masks=None, extra=None):
             t.still = t.still + 1 if n_changed[b] == 0 else 0
             if t.still >= params.rv_patience and (not t.reset or t.it > RESET_AT):
                 t.converged = t.done = True
-        if t.it >= (params.rv_max_iter if t.max_iter is None else t.max_iter):
+        if t.it >= params.rv_max_iter:
             t.done = True
 
 

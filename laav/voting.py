@@ -642,8 +642,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) 
     P = points.shape[1]
     pairs = [(g, h) for g in range(C) for h in range(g + 1, C)]
     streams = rng.spawn(1 + len(pairs))  # [coarse start, one per pair]
-    starts = [("informed", labels0, votes0, streams[0], None, init >= 0)]
-    cap = params.rv_missing_max_iter  # ours: missing-motion trials stop sooner (None: rv_max_iter)
+    starts = [("informed", labels0, votes0, streams[0], init >= 0)]
     for (g, h), stream in zip(pairs, streams[1:]):
         start = missing_motion_start(points, init, C, g, h, params,
                                      max(8, params.rv_sample_size))
@@ -658,11 +657,11 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) 
             vot = np.zeros((P, C))
             vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
             name = f"missing motion ({g}+{h})" + (f", trial {k}" if k > 1 else "")
-            starts.append((name, lab, vot, trial_rng, cap, known2))
+            starts.append((name, lab, vot, trial_rng, known2))
     uses = [votes_with_subspace(params, known) for *_, known in starts]
     extra = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
              if any(uses) else None)  # one for every trial that uses it: the same term
-    results, finished, cost, fits = _candidates(points, C, params, [s[1:5] for s in starts], extra,
+    results, finished, cost, fits = _candidates(points, C, params, [s[1:4] for s in starts], extra,
                                                 uses, helper)
     first, first_extra = results[0], extra if uses[0] else None
     trials = list(results)
@@ -703,8 +702,7 @@ def _own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) 
 
 
 def _informed_side_by_side(points, params, starts, extra, uses) -> list:
-    """LAAV's informed trials from several ``starts`` ((labels0, votes0, generator, iteration
-    cap or None for ``rv_max_iter``) each),
+    """LAAV's informed trials from several ``starts`` ((labels0, votes0, generator) each),
     side by side as :func:`laav.rv.run_trials` runs trials: one batched numpy call per
     iteration, each trial on its own generator and convergence test, so the results (in
     :func:`laav.rv.run_trials`' tuple form, in ``starts`` order) are those of running them
@@ -715,8 +713,8 @@ def _informed_side_by_side(points, params, starts, extra, uses) -> list:
     15-17 % faster than 2 at a time on the demo and six Hopkins155 sequences)."""
     from .rv import _step, _Trial
 
-    trials = [_Trial(lab.copy(), vot.copy(), False, "informed", stream, cap)
-              for lab, vot, stream, cap in starts]
+    trials = [_Trial(lab.copy(), vot.copy(), False, "informed", stream)
+              for lab, vot, stream in starts]
     for with_extra in dict.fromkeys(uses):
         active = [t for t, u in zip(trials, uses) if u == with_extra]
         while active:
