@@ -14,6 +14,7 @@ import numpy as np
 
 import laav
 from laav.geometry import epipolar_lines
+from laav.metrics import matched_counts
 from laav.noise import threshold_factor
 
 __all__ = [
@@ -983,8 +984,6 @@ def trace_errors(trace: np.ndarray, truth: np.ndarray | None) -> np.ndarray:
         return np.zeros(trace.shape[0])
     if truth is None:
         return (trace != trace[-1]).mean(axis=1)
-    from scipy.optimize import linear_sum_assignment
-
     truth = np.asarray(truth)
     ok = truth >= 0
     tr, gt = trace[:, ok], truth[ok]
@@ -994,7 +993,7 @@ def trace_errors(trace: np.ndarray, truth: np.ndarray | None) -> np.ndarray:
     idx = np.int32 if tr.shape[0] * C * K < 2**31 else np.int64
     flat = (np.arange(tr.shape[0], dtype=idx)[:, None] * C + tr.astype(idx)) * K + gt.astype(idx)
     counts = np.bincount(flat.ravel(), minlength=tr.shape[0] * C * K).reshape(-1, C, K)
-    right = np.array([counts[t][linear_sum_assignment(-counts[t])].sum() for t in range(len(counts))])
+    right = matched_counts(counts)
     return 1.0 - right / max(gt.size, 1)
 
 
