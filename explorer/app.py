@@ -316,7 +316,7 @@ class Explorer:
         self.frame_view.draw_raw(seq)  # in the first page already: the points before any compute
         if video is not None:  # how the tracks were made, from the first page on
             self.status_bar.show_note(V.md_text(video.summary()))
-        # the 3-D view's server starts with the first computation (``start``)
+        # the 3-D view's server starts at its card's first unfold (``View3D.start``)
         self.view3d = View3D(self, viser, viser_host, page_hosts,
                              iframe_host or (viser_host if viser_host not in ("0.0.0.0", "::") else None),
                              on_frame=self._frame_from_viser)
@@ -350,8 +350,8 @@ class Explorer:
             self.start()
 
     def start(self) -> None:
-        """Start the first computation and, alongside it, the 3-D view's server (idempotent)."""
-        self.view3d.start()
+        """Start the first computation (idempotent); the 3-D view's server starts when its
+        card is first unfolded (:class:`~explorer.cards.view3d.View3D`)."""
         self.state.start()
         self.files.arm()  # the upload box's browser-side checks, the progress line
         if self._rest is None:  # (with lazy cards: once they are on the page)
@@ -1016,7 +1016,7 @@ class Explorer:
     # ------------------------------------------------------------------ testing / teardown
     def wait(self, timeout: float = 60.0, plain_rv: bool = False) -> bool:
         """Block until the newest request's result (or error) is on the views, card 3's
-        votes drawn (:meth:`ExplorerState.fit_votes`)."""
+        votes drawn (:meth:`ExplorerState.fit_votes`) and the 3-D view's server, if starting, up."""
         deadline = time.monotonic() + timeout
         if not self.state.wait(timeout):
             return False
@@ -1033,6 +1033,7 @@ class Explorer:
                     if left <= 0:
                         return False
                     self._applied.wait(left)
+        self.view3d.wait(max(0.0, deadline - time.monotonic()))  # (started by an unfold)
         return True
 
     def close(self, timeout: float | None = 10.0) -> bool:

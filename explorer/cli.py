@@ -264,7 +264,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
                 created: list | None = None, viser: bool = True, prebuild: bool = False,
                 hosts: list[str] | None = None, announce_viser: bool = False,
                 params: laav.LaavParams | None = None, max_upload: int | None = None, video=None,
-                warm=None, seeds_ahead: bool = False, on_first_page=None, origin=None):
+                warm=None, seeds_ahead: bool = False, on_first_page=None, origin=None,
+                on_built=None):
     """The per-session page builder for ``pn.serve``: one :class:`Explorer` per browser tab.
 
     Page first: a session's pipeline starts once its page is on screen (``pn.state.onload``,
@@ -284,7 +285,8 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
     only the first explorer built takes them). ``seeds_ahead``: every tab computes the next
     seed's result while idle (:class:`explorer.state.ExplorerState`; the command turns it on).
     ``on_first_page``: called, on the server's thread, when a tab's page is complete
-    (:attr:`Explorer.on_page_complete`; it must do its work once). ``origin``: how
+    (:attr:`Explorer.on_page_complete`; it must do its work once). ``on_built``: called when
+    a tab's page has been built, before it is sent (it must do its work once). ``origin``: how
     ``seq`` came from its file (:class:`explorer.state.Origin`), for every tab.
     """
     iframe_host = None if host in _ANY else host
@@ -339,7 +341,10 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
             created.append(ex)
         if announce_viser:
             def announce():  # where a remote browser must reach this tab's 3-D view
-                deadline = time.monotonic() + 600  # it starts with the session (ex.start)
+                # (on loopback the server starts at the card's first unfold; here with the
+                # session, so that its address is printed when the tab opens)
+                ex.view3d.start()
+                deadline = time.monotonic() + 600
                 while ex.view3d.thread is None and not ex.view3d.closed and time.monotonic() < deadline:
                     time.sleep(0.2)
                 ex.view3d.wait(120)
@@ -358,7 +363,10 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
             doc.add_timeout_callback(ex.start, 3000)  # no document_ready (e.g. a script client)
         # the header shows the sequence in a pane that follows uploads; the tab's title is set
         # to the shown sequence with every result of a new one
-        return ex.template("LAAV explorer")
+        page = ex.template("LAAV explorer")
+        if on_built is not None:
+            on_built()
+        return page
 
     def close_unclaimed(timeout: float = 30.0) -> None:
         """Stop a prebuilt explorer no session took (at server shutdown)."""
@@ -506,15 +514,17 @@ def main(argv: list[str] | None = None) -> int:
 
     origin = Origin(None if estimate is None else estimate.n_motions,
                     "" if estimate is None else estimate.reason, kept, note or "")
-    first = first_results(seq, C, settings.params, settings.seed)
+    built = threading.Event()  # the first page is built: the first result's state may be read
+    first = first_results(seq, C, settings.params, settings.seed, hold=built)
     startup_gc = _StartupGC()  # (after the fork: the child holds its own off, explorer.warm)
     try:
-        return _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origin)
+        return _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origin, built)
     finally:
         startup_gc.end()  # (at once if nothing did it before: the server has stopped)
 
 
-def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origin=None) -> int:
+def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origin=None,
+           built: threading.Event | None = None) -> int:
     """:func:`main`'s server: serve until stopped (Ctrl-C)."""
     import panel as pn
 
@@ -525,7 +535,8 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origi
         factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
                               announce_viser=not _is_loopback(args.host), params=settings.params,
                               max_upload=args.max_upload, video=video, warm=first, seeds_ahead=True,
-                              on_first_page=startup_gc.end, origin=origin)
+                              on_first_page=startup_gc.end, origin=origin,
+                              on_built=None if built is None else built.set)
         server = pn.serve({"/": factory}, port=port, address=args.host, websocket_origin=origins,
                           show=False, start=False, title=f"LAAV explorer: {laav.safe_name(seq.name)}",
                           verbose=False, **serve_options())

@@ -106,8 +106,12 @@ def _child(conn, other_end, parent: int, seq, n_motions, params, seed) -> None:
         conn.close()
 
 
+#: Longest a held pipeline state waits for its release (:func:`first_results`' ``hold``).
+HOLD_MAX_S = 5.0
+
+
 def first_results(seq: laav.Sequence, n_motions: int, params: laav.LaavParams | None = None,
-                  seed: int = 0) -> Warm:
+                  seed: int = 0, hold: threading.Event | None = None) -> Warm:
     """Start computing ``laav.Pipeline(seq, n_motions, params, seed)`` (its preview sent
     first), then plain Random Voting's run for the same settings
     (:func:`explorer.state.plain_rv_of`), in a forked child.
@@ -115,7 +119,12 @@ def first_results(seq: laav.Sequence, n_motions: int, params: laav.LaavParams | 
     Returns their Futures (:class:`Warm`); a Future's value is None when the child could not
     deliver it (no ``fork`` on this platform, the child failed or died): the explorer then
     computes it itself, as without this. Call before starting threads (a fork copies only
-    the calling thread)."""
+    the calling thread).
+
+    ``hold``: the pipeline's state, once received, is rebuilt (unpickled) only when this
+    event is set, or after :data:`HOLD_MAX_S`: rebuilding it imports what its stages hold
+    (scipy.spatial's KD-tree: ~0.18 s of the interpreter), which fell on the first page's
+    way when it arrived meanwhile; ``laav-explore`` sets it once the first page is built."""
     pipe_fut: Future = Future()
     rv_fut: Future = Future()
     preview_fut: Future = Future()
@@ -142,6 +151,8 @@ def first_results(seq: laav.Sequence, n_motions: int, params: laav.LaavParams | 
         try:
             data = recv.recv_bytes()
             if data:
+                if hold is not None:
+                    hold.wait(HOLD_MAX_S)
                 pipe = pipeline_from_state(data, seq)
         except Exception:  # noqa: BLE001 - EOF (the child died) or an unusable state
             pipe = None

@@ -482,9 +482,12 @@ def test_viser_view_follows_the_frame(seq):
     ex = Explorer(seq)
     try:
         assert ex.wait(60)
-        assert ex.viser is not None and ex.viser.port > 0
-        # the 3-D card starts folded: no iframe, and the scene is not updated meanwhile
+        # the 3-D card starts folded: no server (it starts at the first unfold), no iframe
+        assert ex.viser is None and ex.view3d.thread is None
         assert ex.v_viser.collapsed and "<iframe" not in ex.viser_pane.object
+        ex.v_viser.collapsed = False  # unfolded: the server starts, then the iframe
+        assert ex.wait(60) and ex.viser is not None and ex.viser.port > 0
+        ex.v_viser.collapsed = True  # folded again: the scene is not updated meanwhile
         ex.w_frame.value = 5
         assert ex.viser._frame != 5
         ex.v_viser.collapsed = False  # unfolded: the iframe, and the scene catches up

@@ -202,11 +202,11 @@ def test_explorer_in_chromium(tmp_path):
         page.get_by_text("must be a positive integer, got 2.5").first.wait_for(timeout=20000)
         assert ex.result is res and ex.controls.w_motions.value == 2.5
 
-        # the 3-D view is served by this process on 127.0.0.1 and connects once its card
-        # is unfolded (it starts folded)
-        viser = _wait_for(lambda: ex.viser, 60, "the 3-D view's server")
-        assert "<iframe" not in ex.viser_pane.object
+        # the 3-D view is served by this process on 127.0.0.1, started and connected once
+        # its card is unfolded (it starts folded)
+        assert ex.viser is None and "<iframe" not in ex.viser_pane.object
         page.locator(".card-header", has_text="3-D space-time view").first.click()
+        viser = _wait_for(lambda: ex.viser, 60, "the 3-D view's server")
         # (its origin check lets its own page in: the scene arrives). Its client loads
         # with the first result and renders in software: slow on a loaded machine
         _wait_for(lambda: any(f":{viser.port}" in u for u in received), 90, "viser's scene",
@@ -220,7 +220,9 @@ def test_explorer_in_chromium(tmp_path):
         page2.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
         ex2 = _wait_for(lambda: created[1] if len(created) > 1 else None, 30, "a second session")
         assert ex2.wait(60)
-        # its own 3-D server, started with its first computation
+        # its own 3-D server, started when its card is unfolded
+        assert ex2.viser is None
+        page2.locator(".card-header", has_text="3-D space-time view").first.click()
         viser2 = _wait_for(lambda: ex2.viser, 60, "the second tab's 3-D server")
         assert ex2 is not ex and viser2.port != viser.port
         assert ex2.result.params.lam == laav.LaavParams().lam
@@ -423,9 +425,11 @@ def test_layout_fits_a_projector(tmp_path):
             assert ex.wait(60)
             page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=30000)
             page.wait_for_function(f"({JS_CARD_TITLES})().length >= 6", timeout=30000)
-            viser = _wait_for(lambda ex=ex: ex.viser, 60, "the 3-D view's server")
-            # the 3-D card starts folded; unfolded, its iframe must fit as well
+            # the 3-D card starts folded (its server not started); unfolded, its iframe must
+            # fit as well
+            assert ex.viser is None
             page.locator(".card-header", has_text="3-D space-time view").first.click()
+            viser = _wait_for(lambda ex=ex: ex.viser, 60, "the 3-D view's server")
             page.frame_locator("iframe").locator("body").wait_for(timeout=60000)
             m = _settled(page, JS_OVERFLOW)
             page.screenshot(path=str(shots / f"layout_{w}x{h}.png"))

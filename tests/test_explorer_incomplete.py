@@ -173,6 +173,8 @@ def test_the_3d_view_draws_only_visible_samples(occ, monkeypatch):
     ex = Explorer(occ, params=FAST)
     try:
         assert ex.wait(120)
+        ex.view3d.start()  # (what the card's first unfold does; the scene is sent at the unfold below)
+        ex.view3d.wait(120)
         scene = ex.viser.server.scene
         drawn = {}
         real_pc, real_ls = scene.add_point_cloud, scene.add_line_segments

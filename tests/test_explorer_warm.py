@@ -47,6 +47,30 @@ def test_the_child_computes_the_pipeline_and_plain_rv_of_this_process(seq):
     assert np.array_equal(voting.labels, state_mod.plain_rv_of(seq, Settings(p, 1, 2)).labels)
 
 
+def test_a_held_state_is_rebuilt_only_when_released(seq, monkeypatch):
+    """With ``hold``, the pipeline's state is rebuilt only once the event is set (the child
+    is done with this small sequence well before), or after HOLD_MAX_S."""
+    import time
+
+    calls = []
+    real = warm.pipeline_from_state
+    monkeypatch.setattr(warm, "pipeline_from_state",
+                        lambda *a: calls.append(time.monotonic()) or real(*a))
+    hold = threading.Event()
+    w = warm.first_results(seq, 2, None, 1, hold=hold)
+    time.sleep(3.0)
+    assert not calls and not w.pipeline.done() and not w.plain_rv.done()
+    released = time.monotonic()
+    hold.set()
+    pipe = w.pipeline.result(timeout=120)
+    assert calls and calls[0] >= released
+    assert isinstance(pipe, laav.Pipeline) and _same(pipe.result, laav.Pipeline(seq, 2, seed=1).result)
+    assert w.plain_rv.result(timeout=120) is not None
+    monkeypatch.setattr(warm, "HOLD_MAX_S", 0.2)  # never released: read after HOLD_MAX_S
+    w2 = warm.first_results(seq, 2, None, 1, hold=threading.Event())
+    assert isinstance(w2.pipeline.result(timeout=120), laav.Pipeline)
+
+
 def test_a_failing_child_gives_none(seq):
     bad = warm.first_results(seq, 10 ** 6, None, 0)  # C > P: the child fails
     assert bad.pipeline.result(timeout=120) is None and bad.plain_rv.result(timeout=120) is None

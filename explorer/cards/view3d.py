@@ -1,8 +1,10 @@
 """The 3-D space-time view: a viser server of its own (:mod:`explorer.viser_view`), shown in
 an iframe in a collapsible card.
 
-The server starts with the first computation, in its own thread: importing viser and
-starting its server (~0.4 s) stays off the page's load. The card starts folded, and the
+The server starts in its own thread when the card is first unfolded: importing viser and
+starting its server hold the interpreter ~0.45 s, which had landed on the first result (and,
+started a moment after it, on the first slider move), and a session that never opens the
+3-D view does not pay it. The card starts folded, and the
 iframe is on the page only while the card is unfolded (and a result is shown): a 3-D client
 redraws its WebGL scene at least once a second, and in a software-rendered browser every
 redraw holds the page's main thread for hundreds of milliseconds (the 2-D views then wait;
@@ -23,6 +25,10 @@ from .base import FOLD_ARROW, HTML, Host, Markdown
 PLACEHOLDER = ('<div style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
                'display:flex;align-items:center;justify-content:center;color:#666">'
                "The 3-D view opens with the first result…</div>")
+
+
+#: The card's pane while its server starts (unfolded for the first time).
+STARTING = PLACEHOLDER.replace("opens with the first result", "is starting")
 
 
 class View3D:
@@ -69,6 +75,7 @@ class View3D:
         if not self.want or self.closed:
             return
         if self.unfolded:
+            self.start()  # (the first unfold starts the server; show() waits for it)
             self.show()
         elif self.iframe_shown:
             self.iframe_shown = False
@@ -76,7 +83,7 @@ class View3D:
 
     def start(self) -> None:
         """Start the server in its thread (idempotent; nothing when the view is off)."""
-        if self.want and self.thread is None:
+        if self.want and self.thread is None and not self.closed:
             self.thread = threading.Thread(target=self._start_server, name="laav-explore-viser",
                                            daemon=True)
             self.thread.start()
@@ -104,7 +111,10 @@ class View3D:
         h = self.host
         if not self.want or h.result is None or self.closed or not self.unfolded:
             return
-        if self.viser is None and self.thread is not None and self.thread.is_alive():
+        if self.viser is None and (self.thread is None or self.thread.is_alive()):
+            self.start()  # (unfolded: the server starts now if it has not)
+            if not self.iframe_shown:
+                self.pane.object = STARTING
             return  # still starting: _start_server calls again when done
         if not self.iframe_shown:
             self.iframe_shown = True
@@ -164,7 +174,7 @@ class View3D:
                 'box-sizing:border-box"></iframe>')
 
     def wait(self, timeout: float = 30.0) -> None:
-        """Let the server finish starting (it normally has, before the first result)."""
+        """Let the server finish starting, if it is starting."""
         t = self.thread
         if t is not None and t.is_alive():
             t.join(timeout)
