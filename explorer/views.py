@@ -26,7 +26,8 @@ __all__ = [
     "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
-    "replay_caption", "fine_count", "fine_count_note", "z_sources", "merge_table", "epipolar_sources",
+    "replay_caption", "fine_count", "fine_count_note", "z_sources", "joint_margins", "signed_log",
+    "merge_table", "epipolar_sources",
     "votes_fitted",
     "rv_sources", "rv_error_sources", "trace_errors",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
@@ -756,16 +757,71 @@ def votes_fitted(result: laav.LaavResult) -> bool:
     return co is None or co.pairwise.fitted  # (never waits for a fit in progress)
 
 
+def joint_margins(result: laav.LaavResult) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """What decided each pair of fine models in the joint merge (``coarse_merge="joint"``;
+    None for the other merges): (margin, its coding-length part, its epipolar part), each
+    (n_fine, n_fine), in nats.
+
+    The margin of fine models j and k is the least score (coding length +
+    ``coarse_epipolar_weight`` x epipolar cost) of a compared partition that puts them in two
+    motions minus the least of one that puts them in one: > 0, joining them won (the chosen
+    partition joins them), < 0, splitting them won. Its parts are the two partitions'
+    differences in coding length and in weighted epipolar cost. NaN on the diagonal and where
+    every partition compared agrees on the pair (nothing was decided there)."""
+    sl = getattr(result.coarse, "shortlist", None)
+    if sl is None:
+        return None
+    a = np.asarray(sl.assign)  # (K, n)
+    n = a.shape[1]
+    together = a[:, :, None] == a[:, None, :]  # (K, n, n)
+    score = np.asarray(sl.score, dtype=float)[:, None, None]
+    s_join = np.where(together, score, np.inf)
+    s_split = np.where(together, np.inf, score)
+    k_join, k_split = s_join.argmin(axis=0), s_split.argmin(axis=0)
+    contested = np.isfinite(s_join.min(axis=0)) & np.isfinite(s_split.min(axis=0))
+    contested[np.diag_indices(n)] = False
+    L = np.asarray(sl.coding_length, dtype=float)
+    E = result.params.coarse_epipolar_weight * np.asarray(sl.epipolar_cost, dtype=float)
+    part = lambda v: np.where(contested, v[k_split] - v[k_join], np.nan)  # noqa: E731
+    return part(L + E), part(L), part(E)
+
+
+#: The joint merge's margin map colours ``sign(m) log10(1 + |m|)`` (m in nats): decisions by
+#: a few nats and by thousands both read; its colour bar is labelled in nats.
+MARGIN_TICKS = (-1000, -100, -10, 0, 10, 100, 1000)
+
+
+def signed_log(m: np.ndarray) -> np.ndarray:
+    """``sign(m) log10(1 + |m|)``: the margin map's colour value."""
+    m = np.asarray(m, dtype=float)
+    return np.sign(m) * np.log10(1.0 + np.abs(m))
+
+
 def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None,
               fit_votes: bool = True) -> tuple[dict, list]:
-    """Heat-map cells of the affinity Z (n_fine x n_fine) and the axis factors; ``d`` the
-    pair's epipolar distance, ``g`` the coding length merging it adds (nats per point).
+    """Heat-map cells of card 3 (n_fine x n_fine) and the axis factors. ``z``, the colour:
+    the affinity Z of the paper's epipolar merge and of the coding merge, or for the joint
+    merge (which builds no Z) its decision margins (:func:`joint_margins`, ``m``, with the
+    coding-length part ``ml`` and the epipolar part ``me``; ``z`` is :func:`signed_log` of
+    ``m``, NaN where the partitions compared agree); ``d`` the pair's epipolar distance, ``g``
+    the coding length merging it adds (nats per point).
 
     Factors read ``f3→M1``: fine model 3 merged into motion 1 (motions numbered like the
     coarse colours when ``seq`` has ground truth). Without ``fit_votes``, ``d`` is NaN while
     the votes are not fitted (:func:`votes_fitted`)."""
     Z = np.asarray(result.coarse.affinity, dtype=float)
     n = Z.shape[0]
+    margins = joint_margins(result) if n else None
+    if margins is None:
+        m = ml = me = np.full((n, n), np.nan)
+        shown, text = Z, [f"{v:.2f}" for v in Z.ravel()]
+        dark = Z.ravel() > 0.55
+    else:
+        m, ml, me = margins
+        shown = signed_log(m)
+        text = ["" if not np.isfinite(v) else f"{v:+.0f}" for v in m.ravel()]
+        top = np.nanmax(np.abs(shown)) if np.isfinite(shown).any() else 1.0
+        dark = np.nan_to_num(np.abs(shown.ravel()), nan=0.0) > 0.55 * top
     f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
     if seq is not None and n:
         f2c = fine_motions(seq, result)  # name motions like the aligned coarse labels
@@ -776,9 +832,9 @@ def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None,
     data = {"x": fac[kk] if n else np.zeros(0, object), "y": fac[jj] if n else np.zeros(0, object),
             # the values written in the cells up to Z_TEXT_MAX models (beyond, they overlap:
             # the colour and the hover tell them)
-            "z": Z.ravel(), "text": np.array([f"{v:.2f}" if n <= Z_TEXT_MAX else ""
-                                              for v in Z.ravel()], dtype=object),
-            "text_color": np.where(Z.ravel() > 0.55, "white", "black"),
+            "z": shown.ravel(), "text": np.array([t if n <= Z_TEXT_MAX else "" for t in text], dtype=object),
+            "text_color": np.where(dark, "white", "black"),
+            "m": m.ravel(), "ml": ml.ravel(), "me": me.ravel(),
             "d": (np.asarray(result.coarse.epipolar_distance, float).ravel()
                   if fit_votes or votes_fitted(result) else np.full(n * n, np.nan)),
             "g": (np.zeros(n * n) if result.coarse.merge_cost is None

@@ -144,19 +144,22 @@ def test_lambda_change_alters_z_and_not_the_atoms():
 
 def test_lambda_weighs_the_joint_merges_epipolar_cost():
     """With the joint merge (``LaavParams.own_chain()``) on complete tracks λ sets the unit
-    of the epipolar cost of the shortlisted partitions (``2 / λ``); their coding lengths and
-    Z (the coding affinity) stay."""
+    of the epipolar cost of the shortlisted partitions (``2 / λ``); their coding lengths
+    stay, and card 3's map (the merge's decision margins) follows the new costs."""
     ex = Explorer.demo(viser=False, params=laav.LaavParams.own_chain())
     assert ex.wait(120)
     co0 = ex.result.coarse
-    z0 = _data(ex.src_z, "z")
+    m0 = _data(ex.src_z, "m")
     ex.w_params["lam"].value = 0.3
     assert ex.wait(120)
     co = ex.result.coarse
     assert co0.method == co.method == "joint" and co is not co0
     np.testing.assert_array_equal(co.shortlist.coding_length, co0.shortlist.coding_length)
     assert not np.allclose(co.shortlist.epipolar_cost, co0.shortlist.epipolar_cost)
-    np.testing.assert_allclose(_data(ex.src_z, "z"), z0)
+    m = _data(ex.src_z, "m")
+    np.testing.assert_allclose(m, V.joint_margins(ex.result)[0].ravel())
+    assert not np.allclose(m, m0, equal_nan=True), "the margins did not follow λ"
+    assert "Joint merge" in ex.fig_z.title.text and "λ = 0.3" in ex.fig_z.title.text
     ex.close()
 
 

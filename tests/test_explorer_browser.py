@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 from conftest import two_motion_sequence  # noqa: E402
 
 import laav  # noqa: E402
+from explorer import views as V  # noqa: E402
 from explorer.cards.status import PREVIEW_STATUS  # noqa: E402
 from explorer.cli import app_factory, serve_options  # noqa: E402
 
@@ -45,7 +46,8 @@ JS_SOURCES = """() => {
     if (m.type === 'ColumnDataSource' && m.data.z !== undefined) out.z = Array.from(m.data.z);
     if (m.type === 'ColumnDataSource' && m.data.index !== undefined) out.points = m.data.index.length;
     if (m.type === 'ColumnDataSource' && m.data.r1 !== undefined) out.r1 = Array.from(m.data.r1);
-    if (m.type === 'Title' && (m.text.startsWith('Affinity Z') || m.text.startsWith('Coding affinity')))
+    if (m.type === 'Title' && (m.text.startsWith('Affinity Z') || m.text.startsWith('Coding affinity')
+                               || m.text.startsWith('Joint merge')))
       out.ztitle = m.text;
     // a result's status line (not a preview's, which a result follows)
     if (typeof m.text === 'string' && m.text.includes('Showing') && !m.text.includes(PREVIEW))
@@ -185,8 +187,10 @@ def test_explorer_in_chromium(tmp_path):
         page.get_by_text(f"What changed: λ {lam0:g} → {target:g}").first.wait_for(timeout=20000)
         page.get_by_text(f"λ = {target:g}").first.wait_for(timeout=20000)
         after = page.evaluate(JS_SOURCES)
-        # the browser shows the new result's Z (whether or not λ moved it on this sequence)
-        assert after["z"] == pytest.approx(list(ex.result.coarse.affinity.ravel()))
+        # the browser shows the new result's map (Z, or the joint merge's margins; whether or
+        # not λ moved it on this sequence)
+        want = V.z_sources(ex.result, seq, fit_votes=False)[0]["z"]
+        assert after["z"] == pytest.approx(list(want), nan_ok=True)
         assert after["r1"] == before["r1"], "atoms changed with λ"
 
         # an impossible setting (fewer fine models than motions) shows a message in the

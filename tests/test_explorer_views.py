@@ -412,6 +412,42 @@ def test_z_cells_carry_their_value_only_while_it_fits(demo):
     assert not any(data["text"]) and len(data["z"]) == many.multicut.n_models ** 2  # hover only
 
 
+def test_joint_margins_are_what_decided_each_pair(demo):
+    """Card 3's map under the joint merge: for each pair of fine models, the least score of a
+    compared partition splitting them minus the least joining them (checked by a plain loop
+    over the shortlist); its sign is the chosen partition's decision; its parts add up; NaN
+    on the diagonal and where every partition agrees. Other merges have none."""
+    seq, _ = demo
+    res = laav.segment(seq, seq.n_motions, laav.LaavParams(), seed=1)
+    sl, w = res.coarse.shortlist, res.params.coarse_epipolar_weight
+    assert res.coarse.method == "joint" and sl is not None
+    m, ml, me = V.joint_margins(res)
+    n = sl.assign.shape[1]
+    for j in range(n):
+        for k in range(n):
+            join = [i for i in range(len(sl.score)) if sl.assign[i, j] == sl.assign[i, k]]
+            split = [i for i in range(len(sl.score)) if sl.assign[i, j] != sl.assign[i, k]]
+            if j == k or not join or not split:
+                assert np.isnan(m[j, k]) and np.isnan(ml[j, k]) and np.isnan(me[j, k])
+                continue
+            a = min(split, key=lambda i: sl.score[i])
+            b = min(join, key=lambda i: sl.score[i])
+            assert m[j, k] == pytest.approx(sl.score[a] - sl.score[b])
+            assert ml[j, k] == pytest.approx(sl.coding_length[a] - sl.coding_length[b])
+            assert me[j, k] == pytest.approx(w * (sl.epipolar_cost[a] - sl.epipolar_cost[b]))
+            chosen_joins = sl.assign[sl.chosen, j] == sl.assign[sl.chosen, k]
+            assert (m[j, k] > 0) == chosen_joins
+    assert np.isfinite(m).any(), "nothing contested on the demo: the test would check nothing"
+    data, _ = V.z_sources(res, seq)
+    np.testing.assert_allclose(data["z"], V.signed_log(m.ravel()), equal_nan=True)
+    np.testing.assert_allclose(data["m"], m.ravel(), equal_nan=True)
+    paper = laav.segment(seq, seq.n_motions, laav.LaavParams(coarse_merge="epipolar"), seed=0)
+    assert V.joint_margins(paper) is None
+    data, _ = V.z_sources(paper, seq)
+    np.testing.assert_allclose(data["z"], np.ravel(paper.coarse.affinity))
+    assert np.isnan(data["m"]).all()
+
+
 # ---------------------------------------------------------------------------- pixel noise
 def test_numbers_card_names_the_measured_noise_and_what_it_widened():
     """The noise-adaptive scales are a departure from the paper: the card says what ran."""

@@ -3,29 +3,40 @@ the epipolar check of a pair (:mod:`explorer.cards.epipolar`)."""
 
 from __future__ import annotations
 
+import numpy as np
 import panel as pn
-from bokeh.models import ColorBar, ColumnDataSource, FactorRange, LinearColorMapper
-from bokeh.palettes import Blues256
+from bokeh.models import BasicTicker, ColorBar, ColumnDataSource, FactorRange, FixedTicker, LinearColorMapper
+from bokeh.palettes import Blues256, Oranges256
 from bokeh.plotting import figure
 
 from .. import views as V
 from .base import Host, Markdown, card, flex, set_data
 from .epipolar import EpipolarPanel
 
+#: Z (0-1): white to blue. The joint merge's margins: orange (splitting won) to white to
+#: blue (joining won), both colour-blind safe; grey where nothing was decided.
+Z_PALETTE = list(Blues256[::-1])
+MARGIN_PALETTE = list(Oranges256) + list(Blues256[::-1])
+UNDECIDED = "#d9d9d9"
+Z_TOOLTIPS = [("pair", "f@j, f@k"), ("Z", "@z{0.00}"), ("epipolar distance", "@d"),
+              ("coding length added by merging (nats/point)", "@g")]
+MARGIN_TOOLTIPS = [("pair", "f@j, f@k"), ("score margin (nats; > 0: joined)", "@m{+0.0}"),
+                   ("of which coding length", "@ml{+0.0}"), ("of which epipolar cost", "@me{+0.0}"),
+                   ("epipolar distance", "@d")]
+
 
 class CoarseView:
-    """Z as a heat map, the merge table, and the epipolar panel."""
+    """Z (or the joint merge's decision margins) as a heat map, the merge table, and the
+    epipolar panel."""
 
     def __init__(self, host: Host, extent) -> None:
-        self.z_mapper = LinearColorMapper(palette=list(Blues256[::-1]), low=0, high=1)
+        self.z_mapper = LinearColorMapper(palette=Z_PALETTE, low=0, high=1, nan_color=UNDECIDED)
         self.src_z = ColumnDataSource({"x": [], "y": [], "z": [], "text": [], "text_color": [], "d": [],
-                                       "g": [], "j": [], "k": []})
+                                       "g": [], "j": [], "k": [], "m": [], "ml": [], "me": []})
         z = self.fig_z = figure(title="Affinity Z of fine-model pairs", width=320, height=320,
                                 x_range=FactorRange(factors=["f1"]), y_range=FactorRange(factors=["f1"]),
-                                tools="hover", toolbar_location=None,
-                                tooltips=[("pair", "f@j, f@k"), ("Z", "@z{0.00}"),
-                                          ("epipolar distance", "@d"),
-                                          ("coding length added by merging (nats/point)", "@g")])
+                                tools="hover", toolbar_location=None, tooltips=Z_TOOLTIPS)
+        self.z_hover = z.hover[0] if isinstance(z.hover, list) else z.hover
         z.rect("x", "y", 1, 1, source=self.src_z, fill_color={"field": "z", "transform": self.z_mapper},
                line_color="white")
         z.text("x", "y", text="text", source=self.src_z, text_align="center", text_baseline="middle",
@@ -34,7 +45,10 @@ class CoarseView:
         z.xaxis.axis_label = "fine model → motion it joined"
         z.yaxis.axis_label = "fine model → motion"
         z.grid.visible = False
-        z.add_layout(ColorBar(color_mapper=self.z_mapper, width=8, padding=2), "right")
+        # both tickers made once: a model new to the document makes bokeh walk its whole graph
+        self._z_ticker, self._margin_ticker = BasicTicker(), FixedTicker(ticks=[0])
+        self.z_bar = ColorBar(color_mapper=self.z_mapper, width=8, padding=2, ticker=self._z_ticker)
+        z.add_layout(self.z_bar, "right")
         # the tables take the width the heat map leaves (at least 340 px; below it when narrower)
         self.merge_md = Markdown("", min_width=340, sizing_mode="stretch_width", margin=(0, 6),
                                  styles={"flex": "1 1 340px"})
@@ -52,17 +66,24 @@ class CoarseView:
         self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
         set_data(self.src_z, data)
         method = res.coarse.method
-        if method in ("coding", "joint"):
-            # λ enters the joint merge as its epipolar cost's unit (2/λ px², see the text)
-            lam = f", λ = {res.params.lam:g}" if method == "joint" else ""
+        margins = method == "joint" and res.coarse.shortlist is not None
+        self._scale(margins, data["z"])
+        if margins:
             # (the model count is on the axes: with it the title overran the plot's width)
-            self.fig_z.title.text = f"Coding affinity, ε = {res.params.coding_eps:g} px{lam}"
-            how = ("ours: " + ("the partition of least coding length decided"
-                               if method == "coding" else
-                               "of the partitions of least coding length, the one of least "
-                               "coding length + epipolar cost (in units of 2/λ px²) decided")
-                   + "; the map shows exp(−ΔL), ΔL the nats per point that merging a pair adds;"
-                   " the paper's epipolar vote is the paper preset")
+            self.fig_z.title.text = f"Joint merge margins (nats), λ = {res.params.lam:g}"
+            w = res.params.coarse_epipolar_weight
+            how = (f"ours: of the partitions of least coding length (ε = {res.params.coding_eps:g} px), "
+                   "the one of least coding length "
+                   f"+ {w:g} × epipolar cost (in units of 2/λ px²) decided. The map shows, for each "
+                   "pair, what decided it: the least score of a compared partition that splits the "
+                   "two minus the least of one that joins them, in nats (blue: joining won by that "
+                   "much; orange: splitting won; grey: every partition compared agrees); hover for "
+                   "its coding-length and epipolar parts. The paper's epipolar vote is the paper preset")
+        elif method == "coding":
+            self.fig_z.title.text = f"Coding affinity, ε = {res.params.coding_eps:g} px"
+            how = ("ours: the partition of least coding length decided; the map shows exp(−ΔL), "
+                   "ΔL the nats per point that merging a pair adds; the paper's epipolar vote is "
+                   "the paper preset")
         else:
             self.fig_z.title.text = f"Affinity Z (λ = {res.params.lam:g}): {len(factors)} fine models"
             how = "spectral clustering of Z (the paper's epipolar votes)"
@@ -71,3 +92,22 @@ class CoarseView:
                                 + V.merge_table(seq, res)
                                 + (f"\n\n**Partitions compared** (lower score wins):\n\n{listed}"
                                    if listed else ""))
+
+    def _scale(self, margins: bool, z) -> None:
+        """The colour scale: Z in [0, 1], or the margins' signed log, symmetric, its colour
+        bar labelled in nats (:data:`explorer.views.MARGIN_TICKS`)."""
+        if not margins:
+            self.z_mapper.update(palette=Z_PALETTE, low=0, high=1)
+            self.z_bar.update(ticker=self._z_ticker, major_label_overrides={})
+            self.z_hover.tooltips = Z_TOOLTIPS
+            return
+        z = np.asarray(z, dtype=float)
+        top = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else 1.0
+        top = max(top, float(V.signed_log(10.0)))
+        ticks = [t for t in V.MARGIN_TICKS if abs(V.signed_log(t)) <= top + 1e-9]
+        where = [float(V.signed_log(t)) for t in ticks]
+        self.z_mapper.update(palette=MARGIN_PALETTE, low=-top, high=top)
+        self._margin_ticker.ticks = where
+        self.z_bar.update(ticker=self._margin_ticker,
+                          major_label_overrides={v: f"{t:+d}" if t else "0" for v, t in zip(where, ticks)})
+        self.z_hover.tooltips = MARGIN_TOOLTIPS
