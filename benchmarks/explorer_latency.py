@@ -4,7 +4,8 @@ From setting a widget's value to every view's data being updated from the new re
 the widget callback, the request to the worker thread, ``Pipeline.update`` (only the
 stages downstream of the change), building the view data and writing it into the bokeh
 data sources and the viser scene. The explorer is built without a browser (no websocket
-push; results are applied directly by the worker), with its viser server running.
+push; results are applied directly by the worker), with its viser server running (started
+here as the 3-D card's first unfold starts it; the card stays folded, so its scene waits).
 
 Targets (issue 5): lambda <= 150 ms, R1/R2 <= 500 ms, frame <= 50 ms, on a ~300-point
 Hopkins155 sequence (cars1, 307 points; else 1R2RC_g12; else the bundled demo, noted on
@@ -80,6 +81,7 @@ def main(argv=None) -> int:
     if note:
         print(note, file=sys.stderr)
     ex = Explorer(seq, viser=not args.no_viser)
+    ex.view3d.start()  # (nothing with --no-viser)
     try:
         if not ex.wait(300):
             raise RuntimeError("first result did not arrive")

@@ -351,7 +351,10 @@ class Explorer:
 
     def start(self) -> None:
         """Start the first computation (idempotent); the 3-D view's server starts when its
-        card is first unfolded (:class:`~explorer.cards.view3d.View3D`)."""
+        card is first unfolded (:class:`~explorer.cards.view3d.View3D`), or now when
+        ``view3d.eager``."""
+        if self.view3d.eager:
+            self.view3d.start()
         self.state.start()
         self.files.arm()  # the upload box's browser-side checks, the progress line
         if self._rest is None:  # (with lazy cards: once they are on the page)
@@ -1033,8 +1036,7 @@ class Explorer:
                     if left <= 0:
                         return False
                     self._applied.wait(left)
-        self.view3d.wait(max(0.0, deadline - time.monotonic()))  # (started by an unfold)
-        return True
+        return self.view3d.wait(max(0.0, deadline - time.monotonic()))  # (started by an unfold)
 
     def close(self, timeout: float | None = 10.0) -> bool:
         """Stop the computations and the 3-D view's server. The worker threads are joined

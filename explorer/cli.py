@@ -340,11 +340,12 @@ def app_factory(seq: laav.Sequence, n_motions: int | None, seed: int = 0, host: 
         if created is not None:
             created.append(ex)
         if announce_viser:
+            # (on loopback the 3-D server starts at the card's first unfold; here with the
+            # session's first computation, so that its address is printed when the tab opens)
+            ex.view3d.eager = True
+
             def announce():  # where a remote browser must reach this tab's 3-D view
-                # (on loopback the server starts at the card's first unfold; here with the
-                # session, so that its address is printed when the tab opens)
-                ex.view3d.start()
-                deadline = time.monotonic() + 600
+                deadline = time.monotonic() + 600  # it starts with the session (ex.start)
                 while ex.view3d.thread is None and not ex.view3d.closed and time.monotonic() < deadline:
                     time.sleep(0.2)
                 ex.view3d.wait(120)

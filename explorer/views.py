@@ -27,6 +27,7 @@ __all__ = [
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
     "replay_caption", "fine_count", "fine_count_note", "z_sources", "joint_margins", "signed_log",
+    "margin_top", "MARGIN_TICKS", "MARGIN_PALETTE", "UNDECIDED",
     "merge_table", "epipolar_sources",
     "votes_fitted",
     "rv_sources", "rv_error_sources", "trace_errors",
@@ -789,12 +790,38 @@ def joint_margins(result: laav.LaavResult) -> tuple[np.ndarray, np.ndarray, np.n
 #: The joint merge's margin map colours ``sign(m) log10(1 + |m|)`` (m in nats): decisions by
 #: a few nats and by thousands both read; its colour bar is labelled in nats.
 MARGIN_TICKS = (-1000, -100, -10, 0, 10, 100, 1000)
+#: Its palette, 256 colours: dark orange (splitting won) through white to dark blue (joining
+#: won), told apart under the common colour blindnesses (the ends of ColorBrewer's Oranges
+#: and Blues); :data:`UNDECIDED` where every partition compared agrees.
+MARGIN_ANCHORS = ("#7f2704", "#f16913", "#fdd0a2", "#ffffff", "#c6dbef", "#4292c6", "#08306b")
+UNDECIDED = "#d9d9d9"
+
+
+def _ramp(anchors, n: int) -> tuple:
+    """``n`` colours evenly through ``anchors`` (hex), interpolated in RGB."""
+    rgb = hex_to_rgb(list(anchors)).astype(float)
+    t = np.linspace(0.0, len(anchors) - 1.0, n)
+    k = np.minimum(t.astype(int), len(anchors) - 2)
+    f = (t - k)[:, None]
+    out = np.rint(rgb[k] * (1 - f) + rgb[k + 1] * f).astype(int)
+    return tuple(f"#{r:02x}{g:02x}{b:02x}" for r, g, b in out.tolist())
+
+
+MARGIN_PALETTE = _ramp(MARGIN_ANCHORS, 256)
 
 
 def signed_log(m: np.ndarray) -> np.ndarray:
     """``sign(m) log10(1 + |m|)``: the margin map's colour value."""
     m = np.asarray(m, dtype=float)
     return np.sign(m) * np.log10(1.0 + np.abs(m))
+
+
+def margin_top(z) -> float:
+    """The margin map's colour range ``[-top, top]`` for colour values ``z``
+    (:func:`signed_log`): their largest size, at least that of 10 nats."""
+    z = np.asarray(z, dtype=float)
+    top = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else 0.0
+    return max(top, float(signed_log(10.0)))
 
 
 def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None,
@@ -820,8 +847,7 @@ def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None,
         m, ml, me = margins
         shown = signed_log(m)
         text = ["" if not np.isfinite(v) else f"{v:+.0f}" for v in m.ravel()]
-        top = np.nanmax(np.abs(shown)) if np.isfinite(shown).any() else 1.0
-        dark = np.nan_to_num(np.abs(shown.ravel()), nan=0.0) > 0.55 * top
+        dark = np.nan_to_num(np.abs(shown.ravel()), nan=0.0) > 0.55 * margin_top(shown)
     f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
     if seq is not None and n:
         f2c = fine_motions(seq, result)  # name motions like the aligned coarse labels

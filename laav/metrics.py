@@ -44,8 +44,8 @@ def confusion_matrix(true, pred) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return counts, tv, pv
 
 
-#: Most candidate matchings :func:`_assign` enumerates itself (6! = 720: up to 6 motions
-#: on the smaller side); above, scipy's Hungarian method.
+#: Most candidate matchings :func:`_assign` enumerates itself (6! = 720: e.g. 6 motions
+#: against 6; ``perm(columns, rows)`` counts them); above, scipy's Hungarian method.
 _ENUMERATE_MAX = 720
 
 
@@ -62,10 +62,10 @@ def _assign(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rows and columns of the one-to-one assignment with the largest total count, rows
     increasing (as :func:`scipy.optimize.linear_sum_assignment` returns them).
 
-    Motions are few: up to 6 on the smaller side every matching is scored at once (the
-    first of equal totals kept); above, the Hungarian method. The total is the same either
-    way; scipy.optimize is imported only then: it costs 0.35-0.4 s, which fell on the
-    explorer's first result.
+    Motions are few: while there are at most :data:`_ENUMERATE_MAX` matchings (e.g. 6
+    motions against 6) every one is scored at once (the first of equal totals kept); beyond,
+    the Hungarian method. The total is the same either way; scipy.optimize is imported only
+    then: it costs 0.35-0.4 s, which fell on the explorer's first result.
     """
     r, c = counts.shape
     if min(r, c) == 0:
@@ -80,23 +80,24 @@ def _assign(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.arange(r), choices[best].copy()
     from scipy.optimize import linear_sum_assignment
 
-    return linear_sum_assignment(-counts)
+    return linear_sum_assignment(counts, maximize=True)
 
 
 def matched_counts(counts: np.ndarray) -> np.ndarray:
     """The largest total of a one-to-one matching of rows to columns, for every matrix of a
-    stack: ``counts`` (..., r, c) -> (...), e.g. the points a labelling gets right under
-    the best matching of its labels, for every row of a label trace at once."""
-    counts = np.asarray(counts)
+    stack: ``counts`` (..., r, c) non-negative integers -> (...) int64, e.g. the points a
+    labelling gets right under the best matching of its labels, for every row of a label
+    trace at once."""
+    counts = np.asarray(counts, dtype=np.int64)
     r, c = counts.shape[-2:]
     if min(r, c) == 0:
-        return np.zeros(counts.shape[:-2], dtype=counts.dtype)
+        return np.zeros(counts.shape[:-2], dtype=np.int64)
     if r > c:
         counts, (r, c) = np.swapaxes(counts, -1, -2), (c, r)
     if math.perm(c, r) <= _ENUMERATE_MAX:
         return counts[..., np.arange(r), _matchings(c, r)].sum(axis=-1).max(axis=-1)
     flat = counts.reshape(-1, r, c)
-    out = np.array([m[_assign(m)].sum() for m in flat], dtype=counts.dtype)
+    out = np.array([m[_assign(m)].sum() for m in flat], dtype=np.int64)
     return out.reshape(counts.shape[:-2])
 
 
@@ -130,7 +131,8 @@ def best_label_map(true, pred) -> dict:
 def misclassification_rate(true, pred) -> float:
     """Fraction of points misassigned under the best one-to-one matching of labels.
 
-    The matching (Hungarian assignment on the confusion matrix) pairs each predicted
+    The matching (the best one-to-one assignment on the confusion matrix: every matching
+    scored for a few labels, the Hungarian method beyond) pairs each predicted
     group with at most one true group; points of unmatched groups count as errors. This
     is the Hopkins155 error measure. The label -1 is reserved: it marks a point LAAV left
     unlabelled (``LaavResult.unlabelled_reason``) and is never matched, so such points

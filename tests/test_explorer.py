@@ -509,6 +509,64 @@ def test_viser_view_follows_the_frame(seq):
         ex.close()
 
 
+def test_a_3d_view_that_cannot_start_says_so(seq, monkeypatch):
+    """The first unfold starts the 3-D view's server; one that fails to start shows why (the
+    card never stays on "is starting")."""
+    pytest.importorskip("viser")
+    import explorer.viser_view as VV
+
+    def broken(*a, **k):
+        raise OSError("no port for you")
+
+    monkeypatch.setattr(VV, "ViserView", broken)
+    ex = Explorer(seq)
+    try:
+        assert ex.wait(60) and ex.view3d.thread is None
+        ex.v_viser.collapsed = False
+        assert ex.wait(60)
+        deadline = time.monotonic() + 30
+        while "could not start" not in ex.viser_pane.object and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert "could not start" in ex.viser_pane.object and "no port for you" in ex.viser_pane.object
+        assert ex.viser is None
+    finally:
+        ex.close()
+
+
+def test_card_3_colour_bar_follows_the_map():
+    """Card 3's colour bar keeps one ticker model (BokehJS reads a bar's ticker once) and
+    switches its ticks and labels with the map: margins in nats under the joint merge, Z in
+    [0, 1] under the epipolar one."""
+    from explorer.cards.coarse import Z_TICKS
+    from explorer.demo import demo_sequence
+
+    seq = demo_sequence()
+    joint = laav.segment(seq, 3, seed=1)
+    paper = laav.segment(seq, 3, laav.LaavParams(coarse_merge="epipolar"), seed=1)
+    assert joint.coarse.shortlist is not None
+    ex = Explorer(seq, viser=False, start=False)
+    try:
+        cv = ex.coarse_view
+        ticker = cv.z_bar.ticker
+        for res in (joint, paper, joint):
+            cv.draw(seq, res)
+            assert cv.z_bar.ticker is ticker
+            if res is joint:
+                top = cv.z_mapper.high
+                assert cv.z_mapper.low == -top and top >= V.signed_log(10)
+                labels = cv.z_bar.major_label_overrides
+                assert set(labels) == set(ticker.ticks) and "0" in labels.values()
+                for where, text in labels.items():  # each tick labelled with its margin in nats
+                    assert V.signed_log(float(text)) == pytest.approx(where)
+                assert "Joint merge" in ex.fig_z.title.text
+            else:
+                assert (cv.z_mapper.low, cv.z_mapper.high) == (0, 1)
+                assert list(ticker.ticks) == list(Z_TICKS) and cv.z_bar.major_label_overrides == {}
+                assert "Affinity Z" in ex.fig_z.title.text
+    finally:
+        ex.close()
+
+
 def test_explorer_from_file_and_demo(tmp_path, seq):
     p = laav.save_sequence(seq, tmp_path / "seq.npz")
     ex = Explorer.from_file(p, viser=False)

@@ -56,9 +56,17 @@ def test_a_held_state_is_rebuilt_only_when_released(seq, monkeypatch):
     real = warm.pipeline_from_state
     monkeypatch.setattr(warm, "pipeline_from_state",
                         lambda *a: calls.append(time.monotonic()) or real(*a))
-    hold = threading.Event()
+    class Hold(threading.Event):
+        waited = threading.Event()  # the state arrived and its rebuild is waiting on the hold
+
+        def wait(self, timeout=None):
+            Hold.waited.set()
+            return super().wait(timeout)
+
+    hold = Hold()
     w = warm.first_results(seq, 2, None, 1, hold=hold)
-    time.sleep(3.0)
+    assert Hold.waited.wait(120), "the state never reached the hold"
+    time.sleep(0.5)
     assert not calls and not w.pipeline.done() and not w.plain_rv.done()
     released = time.monotonic()
     hold.set()
@@ -249,3 +257,38 @@ def test_an_in_process_start_leaves_the_test_sessions_heap_unfrozen(monkeypatch)
     assert gc.get_freeze_count() == 0  # the fixture undid every earlier test's freeze
     assert cli.main(["--no-browser", "--port", "5998"]) == 0
     assert gc.get_freeze_count() > 0 and gc.isenabled()  # frozen; the collector back on
+
+
+def test_a_served_page_once_built_releases_the_held_state(seq):
+    """``app_factory(on_built=...)`` (what ``laav-explore`` passes, the hold's ``set``) is
+    called once a tab's page has been built, before it is sent."""
+    import socket
+    import time
+    import urllib.request
+
+    import panel as pn
+
+    from explorer.cli import _free_port, app_factory, serve_options
+
+    built, created = threading.Event(), []
+    port = _free_port("127.0.0.1")
+    server = pn.serve({"/": app_factory(seq, 2, created=created, viser=False, on_built=built.set)},
+                      port=port, address="127.0.0.1", websocket_origin=[f"127.0.0.1:{port}"],
+                      show=False, threaded=True, verbose=False, **serve_options())
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "the server did not listen"
+                time.sleep(0.05)
+        assert not built.is_set()
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=60) as r:
+            assert r.status == 200 and b"bokeh" in r.read().lower()
+        assert built.is_set() and len(created) == 1
+    finally:
+        server.stop()
+        for ex in created:
+            ex.close()

@@ -242,3 +242,19 @@ def test_matching_empty_and_scipy_not_imported_for_few_motions(tmp_path):
             "laav.best_label_map([0, 0, 1], [1, 1, 0]); print('scipy.optimize' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_matched_counts_of_small_or_unsigned_integers_do_not_wrap():
+    """Counts of any integer or bool dtype: summed in int64, on both paths (enumerated and
+    scipy's), never wrapped (uint8 totals above 255) nor negated (unsigned)."""
+    from scipy.optimize import linear_sum_assignment
+
+    from laav.metrics import matched_counts
+
+    rng = np.random.default_rng(5)
+    for n in (3, 7):  # enumerated, scipy
+        m = rng.integers(100, 255, size=(n, n)).astype(np.uint8)
+        want = m.astype(np.int64)[linear_sum_assignment(m.astype(np.int64), maximize=True)].sum()
+        assert matched_counts(m) == want and want > 255
+        b = m > 180
+        assert matched_counts(b) == b[linear_sum_assignment(b.astype(int), maximize=True)].sum()

@@ -3,21 +3,19 @@ the epipolar check of a pair (:mod:`explorer.cards.epipolar`)."""
 
 from __future__ import annotations
 
-import numpy as np
 import panel as pn
-from bokeh.models import BasicTicker, ColorBar, ColumnDataSource, FactorRange, FixedTicker, LinearColorMapper
-from bokeh.palettes import Blues256, Oranges256
+from bokeh.models import ColorBar, ColumnDataSource, FactorRange, FixedTicker, LinearColorMapper
+from bokeh.palettes import Blues256
 from bokeh.plotting import figure
 
 from .. import views as V
 from .base import Host, Markdown, card, flex, set_data
 from .epipolar import EpipolarPanel
 
-#: Z (0-1): white to blue. The joint merge's margins: orange (splitting won) to white to
-#: blue (joining won), both colour-blind safe; grey where nothing was decided.
+#: Z (0-1): white to blue. The joint merge's margins: :data:`explorer.views.MARGIN_PALETTE`.
 Z_PALETTE = list(Blues256[::-1])
-MARGIN_PALETTE = list(Oranges256) + list(Blues256[::-1])
-UNDECIDED = "#d9d9d9"
+MARGIN_PALETTE, UNDECIDED = list(V.MARGIN_PALETTE), V.UNDECIDED
+Z_TICKS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)
 Z_TOOLTIPS = [("pair", "f@j, f@k"), ("Z", "@z{0.00}"), ("epipolar distance", "@d"),
               ("coding length added by merging (nats/point)", "@g")]
 MARGIN_TOOLTIPS = [("pair", "f@j, f@k"), ("score margin (nats; > 0: joined)", "@m{+0.0}"),
@@ -45,9 +43,11 @@ class CoarseView:
         z.xaxis.axis_label = "fine model → motion it joined"
         z.yaxis.axis_label = "fine model → motion"
         z.grid.visible = False
-        # both tickers made once: a model new to the document makes bokeh walk its whole graph
-        self._z_ticker, self._margin_ticker = BasicTicker(), FixedTicker(ticks=[0])
-        self.z_bar = ColorBar(color_mapper=self.z_mapper, width=8, padding=2, ticker=self._z_ticker)
+        # one ticker for both scales, its ticks changed: BokehJS reads a colour bar's ticker
+        # once, when the bar's view is made (a ticker swapped later is ignored), and a model
+        # new to the document makes bokeh walk its whole graph
+        self.z_ticker = FixedTicker(ticks=list(Z_TICKS))
+        self.z_bar = ColorBar(color_mapper=self.z_mapper, width=8, padding=2, ticker=self.z_ticker)
         z.add_layout(self.z_bar, "right")
         # the tables take the width the heat map leaves (at least 340 px; below it when narrower)
         self.merge_md = Markdown("", min_width=340, sizing_mode="stretch_width", margin=(0, 6),
@@ -68,6 +68,7 @@ class CoarseView:
         method = res.coarse.method
         margins = method == "joint" and res.coarse.shortlist is not None
         self._scale(margins, data["z"])
+        single = method == "joint" and not margins  # no partitions compared (see Coarse.shortlist)
         if margins:
             # (the model count is on the axes: with it the title overran the plot's width)
             self.fig_z.title.text = f"Joint merge margins (nats), λ = {res.params.lam:g}"
@@ -79,11 +80,13 @@ class CoarseView:
                    "two minus the least of one that joins them, in nats (blue: joining won by that "
                    "much; orange: splitting won; grey: every partition compared agrees); hover for "
                    "its coding-length and epipolar parts. The paper's epipolar vote is the paper preset")
-        elif method == "coding":
+        elif method == "coding" or single:
             self.fig_z.title.text = f"Coding affinity, ε = {res.params.coding_eps:g} px"
-            how = ("ours: the partition of least coding length decided; the map shows exp(−ΔL), "
-                   "ΔL the nats per point that merging a pair adds; the paper's epipolar vote is "
-                   "the paper preset")
+            decided = ("the joint merge compared no partitions (no more fine models than motions, or "
+                       "none that gives every motion 8 points), so the partition of least coding "
+                       "length decided" if single else "the partition of least coding length decided")
+            how = (f"ours: {decided}; the map shows exp(−ΔL), ΔL the nats per point that merging a "
+                   "pair adds; the paper's epipolar vote is the paper preset")
         else:
             self.fig_z.title.text = f"Affinity Z (λ = {res.params.lam:g}): {len(factors)} fine models"
             how = "spectral clustering of Z (the paper's epipolar votes)"
@@ -98,16 +101,14 @@ class CoarseView:
         bar labelled in nats (:data:`explorer.views.MARGIN_TICKS`)."""
         if not margins:
             self.z_mapper.update(palette=Z_PALETTE, low=0, high=1)
-            self.z_bar.update(ticker=self._z_ticker, major_label_overrides={})
+            self.z_ticker.ticks = list(Z_TICKS)
+            self.z_bar.major_label_overrides = {}
             self.z_hover.tooltips = Z_TOOLTIPS
             return
-        z = np.asarray(z, dtype=float)
-        top = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else 1.0
-        top = max(top, float(V.signed_log(10.0)))
+        top = V.margin_top(z)
         ticks = [t for t in V.MARGIN_TICKS if abs(V.signed_log(t)) <= top + 1e-9]
         where = [float(V.signed_log(t)) for t in ticks]
         self.z_mapper.update(palette=MARGIN_PALETTE, low=-top, high=top)
-        self._margin_ticker.ticks = where
-        self.z_bar.update(ticker=self._margin_ticker,
-                          major_label_overrides={v: f"{t:+d}" if t else "0" for v, t in zip(where, ticks)})
+        self.z_ticker.ticks = where
+        self.z_bar.major_label_overrides = {v: f"{t:+d}" if t else "0" for v, t in zip(where, ticks)}
         self.z_hover.tooltips = MARGIN_TOOLTIPS

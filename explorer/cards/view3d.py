@@ -51,6 +51,10 @@ class View3D:
         self._on_frame = on_frame
         self.iframe_shown = False
         self.stale = False  # folded: the scene has not been given the shown result/colours/frame
+        self._started = False  # the server's start has ended (``viser`` set, or ``error``)
+        #: start the server with the first computation, not at the first unfold (a remote
+        #: page's address is printed then: ``laav-explore --host``)
+        self.eager = False
         if self.want:
             self.pane = HTML(PLACEHOLDER, height=440, margin=0, sizing_mode="stretch_width",
                              max_width=900)
@@ -95,12 +99,15 @@ class View3D:
             view = ViserView(host=self._viser_host, on_frame=self._on_frame, page_hosts=self._page_hosts)
         except Exception as exc:  # the 2-D views still work without it
             self.error = f"the 3-D view could not start: {exc}"
+            self._started = True  # (before show() runs: it may run here, in this thread)
             self.host.schedule(self.show)
             return
         if self.closed:
             view.close()
+            self._started = True
         else:
             self.viser = view
+            self._started = True
             # a result applied while the server was still starting (a slow, loaded machine)
             # did not reach it: show the view and send the shown result now
             self.host.schedule(self.show)
@@ -111,7 +118,7 @@ class View3D:
         h = self.host
         if not self.want or h.result is None or self.closed or not self.unfolded:
             return
-        if self.viser is None and (self.thread is None or self.thread.is_alive()):
+        if self.viser is None and not self._started:
             self.start()  # (unfolded: the server starts now if it has not)
             if not self.iframe_shown:
                 self.pane.object = STARTING
@@ -125,9 +132,9 @@ class View3D:
             self.viser.set_result(h.sequence, h.result, h.style["color"], h.frame)
 
     def show_first(self) -> None:
-        """(Document thread, with the first result.) The iframe, once the server is up."""
+        """(Document thread, with the first result.) The iframe, once the server is up (not
+        waited for: while it starts the card says so, and its start shows it when done)."""
         if self.want and not self.iframe_shown and self.unfolded:
-            self.wait(5.0)  # normally done long before; else show() follows
             self.show(send=False)
 
     def draw(self, seq, res, colors, frame: int, new_seq: bool) -> None:
@@ -173,11 +180,12 @@ class View3D:
                 'style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
                 'box-sizing:border-box"></iframe>')
 
-    def wait(self, timeout: float = 30.0) -> None:
-        """Let the server finish starting, if it is starting."""
+    def wait(self, timeout: float = 30.0) -> bool:
+        """Let the server finish starting, if it is starting; False if it has not by then."""
         t = self.thread
         if t is not None and t.is_alive():
             t.join(timeout)
+        return t is None or not t.is_alive()
 
     def close(self) -> None:
         self.closed = True
