@@ -77,9 +77,10 @@ TOUR: tuple[TourStep, ...] = (
             "The fine models are grouped into C motions by the joint merge: of the groupings whose "
             "trajectories take the fewest bits to describe (up to a distortion ε), with at least 8 "
             "points per motion, the one whose motions' fundamental matrices also explain their points "
-            "best wins. Coding length separates motions that share epipolar geometry (a truck and the "
-            "background it drives across), and the epipolar cost rejects a grouping that mixes "
-            "independent motions of nearly the same length.")),
+            "best wins. The map colours each pair of fine models by how many nats joining (blue) or "
+            "splitting (orange) them won: coding length separates motions that share epipolar geometry "
+            "(a truck and the background it drives across), the epipolar cost groupings that mix "
+            "independent motions.")),
     TourStep(
         "4 · Fine-tuning: Random Voting labels every point",
         "Random Voting starts from the coarse labels: in each iteration every motion fits a "
