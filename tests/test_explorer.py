@@ -654,6 +654,7 @@ def test_notebook_runs_top_to_bottom():
     assert not [o for o in outs if o.output_type == "error"]
     text = "".join(o.get("text", "") for o in outs if o.output_type == "stream")
     assert "atoms reused: True" in text and "alert after fixing it: False" in text
+    assert "card 3's map (joint merge) changed: True" in text  # λ is the epipolar cost's unit
     # the video cell: tracked, its tracks kept, its frames kept for the frame view
     assert "of the track x frame entries visible" in text
     assert "24 frames of 320x240 kept at 320x240 grey" in text
