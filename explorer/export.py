@@ -135,25 +135,24 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
     cells, factors = V.z_sources(result, seq, fit_votes=False)
     n = len(factors)
     shown = np.asarray(cells["z"], dtype=float).reshape(n, n)
-    margins = V.joint_margins(result) is not None  # card 3's map: the joint merge's margins, or Z
+    margins = V.shows_margins(result)  # card 3's map: the joint merge's margins, or Z
+    top = V.margin_top(shown)
     if margins:
         from matplotlib.colors import ListedColormap
 
-        top = V.margin_top(shown)
         cmap = ListedColormap(V.MARGIN_PALETTE).with_extremes(bad=V.UNDECIDED)
         im = ax.imshow(np.ma.masked_invalid(shown), cmap=cmap, vmin=-top, vmax=top)
     else:
         im = ax.imshow(shown, cmap="Blues", vmin=0, vmax=1)
+    colors = np.asarray(cells["text_color"]).reshape(n, n)
     for (i, j), text in np.ndenumerate(np.asarray(cells["text"], dtype=object).reshape(n, n)):
-        ax.text(j, i, text, ha="center", va="center", fontsize=8,
-                color=np.asarray(cells["text_color"]).reshape(n, n)[i, j])
+        ax.text(j, i, text, ha="center", va="center", fontsize=8, color=colors[i, j])
     ax.set_xticks(range(n), factors, rotation=45)
     ax.set_yticks(range(n), factors)
     bar = fig.colorbar(im, ax=ax, shrink=0.8)
     if margins:
-        ticks = [t for t in V.MARGIN_TICKS if abs(V.signed_log(t)) <= V.margin_top(shown) + 1e-9]
-        bar.set_ticks([float(V.signed_log(t)) for t in ticks],
-                      labels=[f"{t:+d}" if t else "0" for t in ticks])
+        where, labels = V.margin_ticks(top)
+        bar.set_ticks(where, labels=labels)
         ax.set_title("Joint merge margins (nats; > 0: joined)\nfN→Mk: fine model N joined motion k",
                      fontsize=10)
     else:

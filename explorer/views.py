@@ -26,8 +26,8 @@ __all__ = [
     "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
-    "replay_caption", "fine_count", "fine_count_note", "z_sources", "joint_margins", "signed_log",
-    "margin_top", "MARGIN_TICKS", "MARGIN_PALETTE", "UNDECIDED",
+    "replay_caption", "fine_count", "fine_count_note", "z_sources", "joint_margins", "shows_margins",
+    "signed_log", "margin_top", "margin_ticks", "MARGIN_TICKS", "MARGIN_PALETTE", "UNDECIDED",
     "merge_table", "epipolar_sources",
     "votes_fitted",
     "rv_sources", "rv_error_sources", "trace_errors",
@@ -769,9 +769,9 @@ def joint_margins(result: laav.LaavResult) -> tuple[np.ndarray, np.ndarray, np.n
     partition joins them), < 0, splitting them won. Its parts are the two partitions'
     differences in coding length and in weighted epipolar cost. NaN on the diagonal and where
     every partition compared agrees on the pair (nothing was decided there)."""
-    sl = getattr(result.coarse, "shortlist", None)
-    if sl is None:
+    if not shows_margins(result):
         return None
+    sl = result.coarse.shortlist
     a = np.asarray(sl.assign)  # (K, n)
     n = a.shape[1]
     together = a[:, :, None] == a[:, None, :]  # (K, n, n)
@@ -814,6 +814,19 @@ def signed_log(m: np.ndarray) -> np.ndarray:
     """``sign(m) log10(1 + |m|)``: the margin map's colour value."""
     m = np.asarray(m, dtype=float)
     return np.sign(m) * np.log10(1.0 + np.abs(m))
+
+
+def shows_margins(result: laav.LaavResult) -> bool:
+    """Whether card 3's map is the joint merge's decision margins (:func:`joint_margins`:
+    the joint merge compared partitions), else the affinity Z."""
+    return getattr(result.coarse, "shortlist", None) is not None
+
+
+def margin_ticks(top: float) -> tuple[list, list]:
+    """The margin map's colour-bar ticks within ``[-top, top]`` (colour values,
+    :func:`signed_log`) and their labels in nats (:data:`MARGIN_TICKS`)."""
+    ticks = [t for t in MARGIN_TICKS if abs(signed_log(t)) <= top + 1e-9]
+    return [float(signed_log(t)) for t in ticks], [f"{t:+d}" if t else "0" for t in ticks]
 
 
 def margin_top(z) -> float:

@@ -66,7 +66,7 @@ class CoarseView:
         self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
         set_data(self.src_z, data)
         method = res.coarse.method
-        margins = method == "joint" and res.coarse.shortlist is not None
+        margins = V.shows_margins(res)
         self._scale(margins, data["z"])
         single = method == "joint" and not margins  # no partitions compared (see Coarse.shortlist)
         if margins:
@@ -104,11 +104,9 @@ class CoarseView:
                          tooltips=Z_TOOLTIPS)
         else:
             top = V.margin_top(z)
-            ticks = [t for t in V.MARGIN_TICKS if abs(V.signed_log(t)) <= top + 1e-9]
-            where = [float(V.signed_log(t)) for t in ticks]
+            where, labels = V.margin_ticks(top)
             scale = dict(palette=MARGIN_PALETTE, low=-top, high=top, ticks=where,
-                         labels={v: f"{t:+d}" if t else "0" for v, t in zip(where, ticks)},
-                         tooltips=MARGIN_TOOLTIPS)
+                         labels=dict(zip(where, labels)), tooltips=MARGIN_TOOLTIPS)
         # only what changed: bokeh validates a value before comparing it (the 256 or 512
         # colours of a palette: ~6 ms a result), and sends every change to the page
         for model, attr, key in ((self.z_mapper, "palette", "palette"), (self.z_mapper, "low", "low"),
