@@ -961,6 +961,24 @@ def _clip_lines(lines: np.ndarray, extent) -> tuple[np.ndarray, ...]:
     return X0, Y0, X1, Y1
 
 
+def _pair_points(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int, fl: int,
+                 fr: int) -> tuple:
+    """Fine models ``j`` and ``k``'s points seen in frames ``fl`` and ``fr``: (fine labels
+    (P,), their indices, seen in both (P,) bool, the two models' colours, the frame-``fl``
+    and frame-``fr`` sources (x, y, color, model))."""
+    fine = np.asarray(result.coarse.fine_point_labels)
+    both = visible_at(seq, fl) & visible_at(seq, fr)  # missing data: only points seen in both frames
+    idx = np.flatnonzero(((fine == j) | (fine == k)) & both)
+    fc = fine_colors(seq, result)
+    cj, ck = fc[j], fc[k]
+    cols = np.where(fine[idx] == j, cj, ck).astype("U7")
+    model = np.where(fine[idx] == j, f"fine model f{j + 1}", f"fine model f{k + 1}").astype(object)
+    pts = seq.points
+    return (fine, idx, both, (cj, ck),
+            {"x": pts[fl, idx, 0], "y": pts[fl, idx, 1], "color": cols, "model": model},
+            {"x": pts[fr, idx, 0], "y": pts[fr, idx, 1], "color": cols, "model": model})
+
+
 def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int,
                      max_lines: int = 30, rng_seed: int = 0, fit_votes: bool = True) -> dict:
     """Epipolar check of fine models ``j`` and ``k`` with a fundamental matrix the merge
@@ -978,7 +996,8 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     ``n_samples``, ``residual`` (mean distance in px of the drawn frame-r points to their
     lines; ``residual_j`` / ``residual_k`` per model), ``ok`` (False for j == k — a model
     is never voted against itself — or when the pair has no sample), ``pending`` (without
-    ``fit_votes``: the votes are not fitted yet, nothing is drawn; :func:`votes_fitted`).
+    ``fit_votes``: the votes are not fitted yet, :func:`votes_fitted`; only ``left`` and
+    ``right`` are drawn then, in the first and last frames).
     """
     co = result.coarse
     n = np.asarray(co.fine_to_coarse).size
@@ -992,21 +1011,21 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
              "sample_vote": nan, "pairwise": nan, "coassociation": nan, "affinity": nan,
              "n_samples": 0, "residual": nan, "residual_j": nan, "residual_k": nan,
              "ok": False, "pending": False}
+    pair = 0 <= j < n and 0 <= k < n and j != k
     if not fit_votes and not votes_fitted(result):
-        return dict(blank, pending=True)
+        # the pair's points already, in the first and last frames: the plots, their legends
+        # and so the page keep their size until the votes arrive (no relayout meanwhile)
+        if not pair:
+            return dict(blank, pending=True)
+        *_, left, right = _pair_points(seq, result, j, k, *blank["frames"])
+        return dict(blank, pending=True, left=left, right=right)
     vs = co.vote_samples
-    if not (0 <= j < n and 0 <= k < n) or j == k or vs is None:
+    if not pair or vs is None:
         return blank
     fl, fr = (int(v) for v in vs.frames[j, k])
     if fl < 0:
         return blank
-    fine = np.asarray(co.fine_point_labels)
-    both = visible_at(seq, fl) & visible_at(seq, fr)  # missing data: only points seen in both frames
-    idx = np.flatnonzero(((fine == j) | (fine == k)) & both)
-    fc = fine_colors(seq, result)
-    cj, ck = fc[j], fc[k]
-    cols = np.where(fine[idx] == j, cj, ck).astype("U7")
-    model = np.where(fine[idx] == j, f"fine model f{j + 1}", f"fine model f{k + 1}").astype(object)
+    fine, idx, both, (cj, ck), left, right = _pair_points(seq, result, j, k, fl, fr)
     pts = seq.points
     F = np.asarray(vs.fundamental[j, k])
     sample = np.asarray(vs.points[j, k])
@@ -1017,9 +1036,7 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     def term(a):
         return nan if a is None else float(np.asarray(a)[j, k])
 
-    out = dict(blank, frames=(fl, fr),
-               left={"x": pts[fl, idx, 0], "y": pts[fl, idx, 1], "color": cols, "model": model},
-               right={"x": pts[fr, idx, 0], "y": pts[fr, idx, 1], "color": cols, "model": model},
+    out = dict(blank, frames=(fl, fr), left=left, right=right,
                sample_left={"x": pts[fl, u, 0], "y": pts[fl, u, 1]},
                sample_right={"x": pts[fr, u, 0], "y": pts[fr, u, 1]},
                distance=term(co.epipolar_distance), sample_distance=float(vs.distance[j, k]),

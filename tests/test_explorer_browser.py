@@ -863,3 +863,65 @@ def test_a_seed_step_shows_the_next_seed_computed_while_idle():
         page.get_by_text("ahead, while idle").first.wait_for(timeout=30000)
         assert ex.result.seed == 1 and st.ahead_used == 1
         np.testing.assert_array_equal(ex.result.labels, laav.segment(seq, ex.result.n_motions, seed=1).labels)
+
+
+JS_WATCH_EPIPOLAR = """() => {
+  // card 3's epipolar caption and its two plots' legends: every size they take from now on
+  // (watched only once all three are on the page; returns how many there are)
+  const found = [];
+  const add = (m, what) => {
+    const v = Bokeh.index.find_one(m);
+    if (v && v.el) found.push([v.el, what]);
+  };
+  for (const m of Bokeh.documents[0].all_models) {
+    const t = typeof m.text === 'string' ? m.text : '';
+    if (t.includes('The vote for f') || t.includes('Fitting the pairwise votes')) add(m, 'caption');
+    if ((m.type === 'Figure' || m.type === 'Plot') && m.title && /^frame [lr] = /.test(m.title.text))
+      for (const r of m.below) if (r.type === 'Legend') add(r, 'legend');
+  }
+  if (found.length !== 3) return found.length;
+  window.__epi = [];
+  const ro = new ResizeObserver((entries) => {
+    for (const e of entries) window.__epi.push([e.target.__what, Math.round(e.contentRect.height)]);
+  });
+  for (const [el, what] of found) { el.__what = what; ro.observe(el); }
+  return 3;
+}"""
+
+
+def test_card_3_keeps_its_size_while_its_votes_are_fitted(monkeypatch):
+    """A result is drawn before card 3's pairwise votes are fitted (the default merge does
+    not need them): meanwhile its epipolar caption keeps the room of a full one and its
+    plots keep their legends, so the page below does not move up and back on every move (a
+    layout of every plot in the browser: ~70 ms of an R1 move on the demo)."""
+    from explorer.cards.epipolar import CAPTION_MIN_HEIGHT
+
+    monkeypatch.setenv("LAAV_VOTING_HELPER", "0")  # (a helper fits them during the voting)
+    seq = _sequence()
+    with _served(seq, viser=False) as (port, browser, created):
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        assert ex.wait(60)
+        page.wait_for_function("(" + JS_SOURCES + ")().status !== undefined", timeout=30000)
+        # the caption and two legends (the later cards arrive after the first result)
+        _wait_for(lambda: page.evaluate(JS_WATCH_EPIPOLAR) == 3, 60, "card 3's epipolar panel",
+                  page=page)
+        pending = []  # card 3's epipolar draws of the new result before its votes were fitted
+        real = ex.coarse_view.epipolar.draw
+        ex.coarse_view.epipolar.draw = lambda s, r: (pending.append(not V.votes_fitted(r)), real(s, r))[1]
+        page.evaluate("() => { window.__epi = []; }")
+        assert page.evaluate(JS_SET_SLIDER, ["R1", 23.0]) is not None
+        _wait_for(lambda: ex.result is not None and ex.result.params.r1 == 23.0
+                  and ex.votes_pending is None, 120, "the result and its votes", page=page)
+        page.wait_for_function("(" + JS_SOURCES + ")().status.includes('R1 = 23')", timeout=30000)
+        page.wait_for_timeout(1000)
+        assert pending[:1] == [True] and pending[-1] is False  # drawn pending, then fitted
+        sizes = page.evaluate("() => window.__epi")
+        caption = [h for what, h in sizes if what == "caption"]
+        legends = [h for what, h in sizes if what == "legend"]
+        assert all(h >= CAPTION_MIN_HEIGHT - 1 for h in caption), sizes
+        assert all(h > 0 for h in legends), sizes
+        text = ex.coarse_view.epipolar.caption.object
+        assert "The vote for f1" in text and "Fitting" not in text

@@ -521,3 +521,69 @@ def test_rv_summary_at_one_motion_says_no_trial_ran():
     assert "converged" not in text
     two = V.rv_summary(laav.segment(seq, 2, seed=0).voting, None)
     assert "nothing to vote on" not in two and "iterations" in two
+
+
+def test_the_epipolar_panel_draws_the_pair_while_its_votes_are_fitted():
+    """Before card 3's votes are fitted (the default merge does not fit them), the panel
+    already draws the pair's points, in the first and last frames, with their colours and
+    legend names, and its caption says what decided the pair: the plots, their legends and
+    the caption keep their size, so the page does not move up and back (a layout of every
+    plot in the browser) while the votes are fitted. No lines nor sample until then."""
+    from explorer.cards.epipolar import epipolar_caption
+
+    seq = demo_sequence()
+    res = laav.Pipeline(seq, 3).result
+    assert not V.votes_fitted(res)
+    j, k = 0, 1
+    d = V.epipolar_sources(seq, res, j, k, fit_votes=False)
+    assert d["pending"] and not d["ok"] and d["frames"] == (0, seq.n_frames - 1)
+    fine = np.asarray(res.coarse.fine_point_labels)
+    idx = np.flatnonzero((fine == j) | (fine == k))
+    assert idx.size > 0
+    for side, f in (("left", 0), ("right", seq.n_frames - 1)):
+        np.testing.assert_array_equal(d[side]["x"], seq.points[f, idx, 0])
+        np.testing.assert_array_equal(d[side]["y"], seq.points[f, idx, 1])
+    fc = V.fine_colors(seq, res)
+    assert d["left"]["color"].tolist() == np.where(fine[idx] == j, fc[j], fc[k]).tolist()
+    assert set(d["left"]["model"].tolist()) == {"fine model f1", "fine model f2"}
+    assert len(d["lines"]["x0"]) == 0 and len(d["sample_left"]["x"]) == 0
+    caption = epipolar_caption(d, res, j, k)
+    assert caption.startswith("Fitting the pairwise votes for f1–f2")
+    assert "The joint merge" in caption  # what decided: the next test
+    # the pending draw fitted nothing; once fitted, the same points in the sample's frames
+    assert not V.votes_fitted(res)
+    full = V.epipolar_sources(seq, res, j, k)
+    assert full["ok"] and not full["pending"] and len(full["lines"]["x0"]) > 0
+    fl, fr = full["frames"]
+    np.testing.assert_array_equal(full["left"]["x"], seq.points[fl, idx, 0])
+    np.testing.assert_array_equal(full["right"]["x"], seq.points[fr, idx, 0])
+    # a model against itself: nothing drawn, pending or not
+    same = V.epipolar_sources(seq, laav.Pipeline(seq, 3).result, 1, 1, fit_votes=False)
+    assert same["pending"] and len(same["left"]["x"]) == 0
+
+
+def test_the_epipolar_caption_says_what_the_joint_merge_decided():
+    """Under the joint merge the caption gives the pair's margin (card 3's map): its sign is
+    the decision the caption states, for every pair of fine models."""
+    from explorer.cards.epipolar import epipolar_caption
+
+    seq = demo_sequence()
+    res = laav.Pipeline(seq, 3).result
+    margin, coding, epi = V.joint_margins(res)
+    f2c = np.asarray(res.coarse.fine_to_coarse)
+    n = f2c.size
+    decided = 0
+    for j, k in itertools.permutations(range(n), 2):
+        d = V.epipolar_sources(seq, res, j, k, fit_votes=False)
+        text = epipolar_caption(d, res, j, k)
+        same = f2c[j] == f2c[k]
+        assert text.endswith("the same motion." if same else "different motions.")
+        if np.isfinite(margin[j, k]):
+            decided += 1
+            assert (margin[j, k] > 0) == same  # splitting scores worse exactly when joined
+            assert f"scores {margin[j, k]:+.1f} nats" in text
+            assert f"coding length {coding[j, k]:+.1f}, epipolar {epi[j, k]:+.1f}" in text
+            assert margin[j, k] == pytest.approx(coding[j, k] + epi[j, k])
+        else:
+            assert "every partition it compared put" in text
+    assert decided > 0

@@ -14,6 +14,9 @@ from bokeh.models import ColumnDataSource, Legend
 from .. import views as V
 from .base import Host, Markdown, fit_image_figure, flex, image_figure, set_data
 
+#: px reserved for the caption (:class:`EpipolarPanel`).
+CAPTION_MIN_HEIGHT = 150
+
 
 class EpipolarPanel:
     """Pick two fine models; see whether one rigid motion explains both."""
@@ -53,7 +56,11 @@ class EpipolarPanel:
             fig.scatter("x", "y", source=src, size=10, fill_alpha=0, line_color="black",
                         line_width=1.5)
 
-        self.caption = Markdown("", sizing_mode="stretch_width", max_width=800, margin=(0, 10))
+        # room for a caption of the usual length (about six lines at 1280 px): the page below
+        # does not move up and back while a result's votes are fitted (the caption is short
+        # then), which cost the browser a layout of every plot per move
+        self.caption = Markdown("", sizing_mode="stretch_width", max_width=800, margin=(0, 10),
+                                min_height=CAPTION_MIN_HEIGHT)
         self.layout = pn.Column(pn.Row(self.w_pair_j, self.w_pair_k),
                                 flex(pn.pane.Bokeh(self.fig_l), pn.pane.Bokeh(self.fig_r)),
                                 self.caption, max_width=580, sizing_mode="stretch_width")
@@ -88,7 +95,8 @@ class EpipolarPanel:
         set_data(self.src_epi_lines, d["lines"])
         fl, fr = d["frames"]
         self.fig_l.title.text = f"frame l = {fl}: f{j + 1} and f{k + 1}"
-        self.fig_r.title.text = f"frame r = {fr}: the vote's F"
+        self.fig_r.title.text = f"frame r = {fr}: " + (
+            "fitting the vote's F…" if d.get("pending") else "the vote's F")
         self.caption.object = epipolar_caption(d, res, j, k)
 
     # ------------------------------------------------------------------ callbacks
@@ -107,13 +115,16 @@ def epipolar_caption(d: dict, res, j: int, k: int) -> str:
     """What the panel shows and how the merge used it, with its numbers."""
     if j == k:
         return "Pick two different fine models: a model is never voted against itself."
-    if d.get("pending"):
-        return "Fitting the pairwise votes (drawn here, not needed by this merge)…"
-    if not d["ok"]:
-        return "No vote for this pair (too few atoms)."
     f2c = np.asarray(res.coarse.fine_to_coarse)
     same = "the same motion" if f2c[j] == f2c[k] else "different motions"
     a, b = f"f{j + 1}", f"f{k + 1}"
+    method = getattr(res.coarse, "method", "epipolar")
+    if d.get("pending"):
+        text = (f"Fitting the pairwise votes for {a}–{b} (drawn here, not needed by this "
+                f"merge)… Until then: their points in the first and last frames")
+        return text + (_decided(res, j, k, same) if method in ("coding", "joint") else ".")
+    if not d["ok"]:
+        return "No vote for this pair (too few atoms)."
     text = (
         f"The vote for {a}–{b} drew {d['n_samples']} samples: two atoms of each model, one F "
         f"per sample fitted on their features between two frames, distance d = the larger "
@@ -123,17 +134,33 @@ def epipolar_caption(d: dict, res, j: int, k: int) -> str:
         f"{a} points lie {d['residual_j']:.1f} px, of {b} points {d['residual_k']:.1f} px from "
         f"their points. Over all samples: mean d = {d['distance']:.2f} px², pairwise vote "
         f"**{d['pairwise']:.2f}**")
-    method = getattr(res.coarse, "method", "epipolar")
     w = res.params.pairwise_weight if res.params.pooled_trials > 0 else 1.0
     if method in ("coding", "joint"):
-        g = float(np.asarray(res.coarse.merge_cost)[j, k])
-        who = ("The coding-length merge" if method == "coding" else
-               "The joint merge (coding length + epipolar cost of whole partitions)")
-        return text + (f". {who} decided, not this vote: joining {a} and "
-                       f"{b} adds {g:+.2f} nats per point; they went to {same}.")
+        return text + _decided(res, j, k, same)
     if w < 1.0:
         text += (f"; co-association of the pooled-voting trials {d['coassociation']:.2f}; "
                  f"Z = {1 - w:.2f} × co-association + {w:.2f} × vote = **{d['affinity']:.2f}**")
     else:
         text += f" = Z {d['affinity']:.2f}"
     return text + f". Spectral clustering of Z put them in {same}."
+
+
+def _decided(res, j: int, k: int, same: str) -> str:
+    """The caption's end under the coding-length or joint merge: what decided the pair (the
+    joint merge: its margin for the pair, :func:`explorer.views.joint_margins`, as card 3's
+    map shows it)."""
+    a, b = f"f{j + 1}", f"f{k + 1}"
+    margins = V.joint_margins(res) if res.coarse.method == "joint" else None
+    if margins is None:
+        who = ("The coding-length merge" if res.coarse.method == "coding" else
+               "The joint merge (coding length + epipolar cost of whole partitions)")
+        g = float(np.asarray(res.coarse.merge_cost)[j, k])
+        return (f". {who} decided, not this vote: joining {a} and {b} adds {g:+.2f} "
+                f"nats per point; they went to {same}.")
+    m, coding, epi = (float(x[j, k]) for x in margins)
+    who = "The joint merge (coding length + epipolar cost of whole partitions) decided, not this vote"
+    if not np.isfinite(m):
+        return f". {who}: every partition it compared put {a} and {b} in {same}."
+    return (f". {who}: of the partitions it compared, the best that splits {a} and {b} scores "
+            f"{m:+.1f} nats against the best that joins them (coding length {coding:+.1f}, "
+            f"epipolar {epi:+.1f}), so they went to {same}.")
