@@ -781,13 +781,9 @@ class Explorer:
             self._seq_shown = seq
             self._sync_url()
         self.apply_seconds = time.perf_counter() - t0
-        # card 3's votes: fitted once this batch is on its way to the page (asked on the
-        # document's next tick, so that the fit's thread does not share the interpreter
-        # with the batch's sending), drawn then
+        # card 3's votes: fitted now that the result is on its way to the page (drawn then)
         with self._applied:
-            self.votes_pending = None if V.votes_fitted(result) else result
-        if self.votes_pending is result:
-            self.schedule(self._fit_votes, result)
+            self.votes_pending = result if self.state.fit_votes(result) is not None else None
         if not preview:
             self.files.result_shown(seq)
         if self._rest is not None and self._rest["loaded"]:  # the later cards: after this result
@@ -820,14 +816,6 @@ class Explorer:
         shown = V.COLOR_LABELS.get(self.style.get("mode"))
         self.frame_view.draw(self.sequence, self.result, self.frame, self.style, self.moved,
                              shown or self.controls.w_color.value)
-
-    def _fit_votes(self, result) -> None:
-        """(The tick after :meth:`_apply_result`.) Ask for ``result``'s votes
-        (:meth:`ExplorerState.fit_votes`) if it still waits for them."""
-        with self._applied:
-            if self.votes_pending is result and self.state.fit_votes(result) is None:
-                self.votes_pending = None  # (fitted meanwhile, or closed)
-                self._applied.notify_all()
 
     def _apply_votes(self, result, dropped: bool = False) -> None:
         """Card 3 draws ``result``'s votes, fitted (:meth:`ExplorerState.fit_votes`), if it
