@@ -5,7 +5,7 @@ background) fails because the default's candidates split the background and the 
 score prefers that. This script measures, for each scene, outside the package:
 
 * every labelling the default's model selection polished (its candidates: LAAV's informed
-  trial and plain RV's), recorded by wrapping ``laav.voting._Polished`` (internal);
+  trial and plain RV's), recorded by wrapping ``laav.selection.Polished`` (internal);
 * **projective missing-motion starts** from the default's result: for each pair of its
   motions (g, h), the two as one, a rank-4 *projective* factorization of every remaining
   motion (8 evenly spaced frames, Sturm-Triggs depths from the fundamental matrices of
@@ -49,6 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import cpu_model, git_commit  # noqa: E402
 
 import laav  # noqa: E402
+import laav.selection as selection_module  # noqa: E402
 import laav.synthetic  # noqa: E402
 import laav.voting as voting_module  # noqa: E402
 from laav.geometry import fit_fundamental  # noqa: E402
@@ -173,17 +174,17 @@ def job_run(job) -> dict:
     seq, lseed = scene(job)
     P, T, C = seq.points, seq.labels, seq.n_motions
     polished = []
-    real = voting_module._Polished.__init__
+    real = selection_module.Polished.__init__
 
     def record(self, *a, **k):
         real(self, *a, **k)
         polished.append(self)
 
-    voting_module._Polished.__init__ = record
+    selection_module.Polished.__init__ = record
     try:
         result = laav.segment(seq, C, seed=lseed)
     finally:
-        voting_module._Polished.__init__ = real
+        selection_module.Polished.__init__ = real
     sigma = estimate_noise(P)
     params = laav.LaavParams()
     run = params.for_noise(sigma)

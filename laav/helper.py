@@ -3,8 +3,8 @@
 LAAV's fine-tuning (``rv_select="laav"``, the default on complete tracks) runs its informed
 trial and ``rv_missing_trials`` trials from every missing-motion start, 3-7 trials that do
 not depend on one another (each draws from its own random stream and keeps its own
-convergence test, :func:`laav.voting._informed_side_by_side`), then polishes each distinct
-result and scores it (:func:`laav.voting.candidate_part`). With a :class:`VotingHelper`
+convergence test, :func:`laav.own_chain.informed_side_by_side`), then polishes each distinct
+result and scores it (:func:`laav.own_chain.candidate_part`). With a :class:`VotingHelper`
 (``laav.Pipeline(..., helper=...)``, ``laav.random_voting(..., helper=...)``) every other
 start's trial, polish and score run in the helper's process while this one does the rest,
 on the machine's second core; the results are those of doing it all here
@@ -82,8 +82,8 @@ def _run(job: int, func, args: tuple):
 
 
 def _candidate_part(*args) -> tuple:
-    """:func:`laav.voting.candidate_part` without its memo of fits (which stays here)."""
-    from .voting import candidate_part
+    """:func:`laav.own_chain.candidate_part` without its memo of fits (which stays here)."""
+    from .own_chain import candidate_part
 
     results, finished, cost, _ = candidate_part(*args)
     return results, finished, cost
@@ -222,7 +222,7 @@ class VotingHelper:
             pool.shutdown(wait=False, cancel_futures=True)
 
     def submit(self, args: tuple) -> tuple | None:
-        """Start :func:`laav.voting.candidate_part` on ``args`` in the helper's process (its
+        """Start :func:`laav.own_chain.candidate_part` on ``args`` in the helper's process (its
         value without the memo of fits): a handle for :meth:`result` and :meth:`stop`, or
         None when the helper is closed or broken."""
         return self.submit_call(_candidate_part, *args)

@@ -280,7 +280,7 @@ def fit_memo(points: np.ndarray) -> dict:
     called with (another raises ``ValueError``): kept by the caller for as long as it
     compares labellings of them. It holds one row of P floats per motion fitted (about 60
     for LAAV's candidates of a three-motion sequence), plus the selection's principal
-    trajectories (``laav.voting._projection``), and is not bounded: make one per
+    trajectories (``laav.own_chain.projection``), and is not bounded: make one per
     comparison, not per session."""
     return _FitMemo(points)
 

@@ -121,9 +121,9 @@ def test_both_methods_refuse_identical_trajectories(run):
 
 
 def test_random_voting_warns_on_a_single_label(monkeypatch):
-    import laav.voting as voting
+    import laav.selection as selection
 
-    real = voting._finish
+    real = selection.finish
 
     def one_label(points, C, params, best, *args, **kw):
         res = real(points, C, params, best, *args, **kw)
@@ -131,8 +131,8 @@ def test_random_voting_warns_on_a_single_label(monkeypatch):
 
         return dataclasses.replace(res, labels=np.zeros_like(res.labels))
 
-    monkeypatch.setattr(voting, "_finish", one_label)
-    monkeypatch.setattr(voting, "_select", lambda points, C, params, cands, *a, **k: one_label(
+    monkeypatch.setattr(selection, "finish", one_label)
+    monkeypatch.setattr(selection, "select", lambda points, C, params, cands, *a, **k: one_label(
         points, C, params, cands[0][1], (), False, "x"))
     with pytest.warns(LaavWarning, match="every point got the same label though 2 motions"):
         laav.random_voting(_scene(), 2, FAST)

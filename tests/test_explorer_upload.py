@@ -193,7 +193,7 @@ def test_an_upload_cancelled_after_its_preview_leaves_the_box(monkeypatch):
     """With plain RV in LAAV (``with_plain_rv()``), a new sequence's first computation shows
     a preview (LAAV's own trial) while plain RV runs; cancelled then, the preview gives way
     to the last result and the file leaves the upload box."""
-    import laav.voting as LV
+    import laav.selection as LS
     from laav._interrupt import check
 
     e = Explorer(_seq(), params=laav.LaavParams.with_plain_rv(), viser=False, max_upload=2_000_000)
@@ -202,7 +202,7 @@ def test_an_upload_cancelled_after_its_preview_leaves_the_box(monkeypatch):
         shown = e.sequence
         cleared = []
         monkeypatch.setattr(e.files, "clear_box", cleared.append)
-        real = LV._plain_run
+        real = LS.plain_run
 
         def slow(*a, **k):  # plain RV inside LAAV: long enough to cancel during the preview
             for _ in range(1200):
@@ -210,7 +210,7 @@ def test_an_upload_cancelled_after_its_preview_leaves_the_box(monkeypatch):
                 time.sleep(0.05)
             return real(*a, **k)
 
-        monkeypatch.setattr(LV, "_plain_run", slow)
+        monkeypatch.setattr(LS, "plain_run", slow)
         from laav.synthetic import make_sequence
 
         up = make_sequence(n_objects=1, n_points=200, n_frames=12, rng=6, name="previewed")

@@ -416,14 +416,15 @@ def test_coarse_labels_are_a_candidate_on_incomplete_tracks_only():
     # its labels: the start's where known, the others placed by the motions' fits (all right
     # on this noise-free scene); polished like every candidate
     from laav._visibility import decidable, filled, pair_pool
-    from laav.voting import _coarse_candidate, _Masks
+    from laav.selection import coarse_candidate
+    from laav.voting import _Masks
 
     pool = pair_pool(occl.visible, 8 * seq.n_motions)
     idx = np.flatnonzero(decidable(occl.visible, pool))
     sub_vis = occl.visible[:, idx]
     mk = _Masks(sub_vis, pool)
     labels0 = np.where(start[idx] >= 0, start[idx], 0)
-    cand = _coarse_candidate(filled(occl.points[:, idx], sub_vis), seq.n_motions, LaavParams(),
+    cand = coarse_candidate(filled(occl.points[:, idx], sub_vis), seq.n_motions, LaavParams(),
                              start[idx], labels0, np.zeros((idx.size, seq.n_motions)), mk)
     np.testing.assert_array_equal(cand[0], truth[idx])
     assert cand[4] == 0 and cand[5] is False  # no voting

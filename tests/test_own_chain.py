@@ -192,15 +192,15 @@ def test_own_candidates_side_by_side_are_their_one_after_another_results(monkeyp
     """LAAV's informed and missing-motion trials run all side by side (speed only): every
     candidate's labels, iterations and score are those of one trial at a time, whatever
     ``rv_batch``; trials that end on the same labels share one polish (counted)."""
+    import laav.own_chain as V
     import laav.rv as rv
-    import laav.voting as V
     from explorer.demo import demo_sequence
     from laav import segment
 
     seq = demo_sequence()  # seed 1: seven trials (the informed one, two per missing-motion
     # start), one ending on the informed trial's very labels
     made, batches = [], []
-    real, real_side, real_step = V._Polished, V._informed_side_by_side, rv._step
+    real, real_side, real_step = V.Polished, V.informed_side_by_side, rv._step
 
     class Counted(real):
         def __init__(self, *a, **k):
@@ -210,7 +210,7 @@ def test_own_candidates_side_by_side_are_their_one_after_another_results(monkeyp
     def one_at_a_time(points, params, starts, extra, uses):  # the reference
         return [real_side(points, params, [s], extra, [u])[0] for s, u in zip(starts, uses)]
 
-    monkeypatch.setattr(V, "_Polished", Counted)
+    monkeypatch.setattr(V, "Polished", Counted)
     monkeypatch.setattr(rv, "_step", lambda p, trials, *a: batches.append(len(trials)) or
                         real_step(p, trials, *a))
     runs = {}
@@ -219,7 +219,7 @@ def test_own_candidates_side_by_side_are_their_one_after_another_results(monkeyp
         r = segment(seq, 3, LaavParams(rv_batch=b), seed=1)
         runs[b] = (r, len(made))
         assert max(batches) == 7  # all seven side by side, whatever rv_batch
-    monkeypatch.setattr(V, "_informed_side_by_side", one_at_a_time)
+    monkeypatch.setattr(V, "informed_side_by_side", one_at_a_time)
     del made[:], batches[:]
     r = segment(seq, 3, LaavParams(), seed=1)
     runs[1] = (r, len(made))
@@ -266,7 +266,7 @@ def test_second_missing_motion_trials_leave_the_first_ones_as_they_were():
 def test_the_selections_fit_memo_changes_no_number(monkeypatch):
     """LAAV's own candidates share one memo of motion fits (speed only): without it, the
     same labels, candidates' costs and descended points."""
-    import laav.voting as V
+    import laav.own_chain as V
     from explorer.demo import demo_sequence
     from laav import segment
 

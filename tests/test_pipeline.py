@@ -372,20 +372,20 @@ def test_selection_fields_outside_rv_reach_the_kept_fine_tuning(change):
 def test_the_coarse_candidate_switch_keeps_plain_rv_runs(monkeypatch):
     """``rv_coarse_candidate`` is read by LAAV's fine-tuning only: toggling it on incomplete
     tracks reruns the selection, not plain RV (its runs are kept), and equals a fresh run."""
-    import laav.voting as V
+    import laav.selection as S
     from laav.synthetic import occlude
 
     seq = occlude(synthetic.make_sequence(n_objects=1, n_frames=20, n_points=200, rng=3), 0.4, 3)
     pipe = Pipeline(seq, 2, seed=0)
     runs = []
-    real = V._plain_run
+    real = S.plain_run
 
     def counted(*args, **kw):
         memo, k = args[5], args[6]
         runs.append(memo is None or ("run", k) not in memo)  # True: plain RV actually runs
         return real(*args, **kw)
 
-    monkeypatch.setattr(V, "_plain_run", counted)
+    monkeypatch.setattr(S, "plain_run", counted)
     res = pipe.update(rv_coarse_candidate=False)
     assert runs and not any(runs)  # every plain RV run came from the memo
     assert "coarse" not in res.voting.costs
@@ -436,11 +436,11 @@ def test_preview_only_when_plain_rv_runs_afresh():
 def test_a_step_back_to_a_seed_reuses_plain_rvs_runs(monkeypatch):
     """Plain RV's runs are kept for the last few seeds: a step back (or an interrupted seed
     change) reruns only LAAV's own stages, and the result is a fresh run's."""
-    import laav.voting as voting_module
+    import laav.selection as selection_module
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
     pipe = Pipeline(seq, 3, PLAIN)
-    real = voting_module.run_trials
+    real = selection_module.run_trials  # (plain RV's runs beside LAAV's: laav.selection)
     plain = []
 
     def counting(points, C, params, rng, start=None, *a, **k):
@@ -448,7 +448,7 @@ def test_a_step_back_to_a_seed_reuses_plain_rvs_runs(monkeypatch):
             plain.append(1)
         return real(points, C, params, rng, start, *a, **k)
 
-    monkeypatch.setattr(voting_module, "run_trials", counting)
+    monkeypatch.setattr(selection_module, "run_trials", counting)
     pipe.update(seed=1)
     assert plain  # a new seed: plain RV runs
     for s in (2, 3, 4, 5):
@@ -463,11 +463,12 @@ def test_a_step_back_to_a_seed_reuses_plain_rvs_runs(monkeypatch):
 
 
 def test_with_a_preview_the_informed_trial_and_its_polish_run_once(monkeypatch):
+    import laav.selection as selection_module
     import laav.voting as voting_module
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
     pipe = Pipeline(seq, 3, PLAIN)
-    real_trials, real_polished = voting_module.run_trials, voting_module._Polished
+    real_trials, real_polished = voting_module.run_trials, selection_module.Polished
     informed, polished = [], []
 
     def trials(points, C, params, rng, start=None, *a, **k):
@@ -481,7 +482,7 @@ def test_with_a_preview_the_informed_trial_and_its_polish_run_once(monkeypatch):
             super().__init__(*a, **k)
 
     monkeypatch.setattr(voting_module, "run_trials", trials)
-    monkeypatch.setattr(voting_module, "_Polished", Polished)
+    monkeypatch.setattr(selection_module, "Polished", Polished)
     got = []
     pipe.update(seed=1, preview=got.append)
     n_with = (len(informed), len(polished))
@@ -553,7 +554,7 @@ def test_a_sweep_over_a_selection_field_keeps_few_polished_sets():
     """Each coding_eps value scores plain RV's candidates anew; the memo keeps the sets of
     the last POLISHED_KEPT values only (it kept all: ~0.25 MB a value at 1,000 points), and
     a value asked again scores to the same result."""
-    from laav.voting import POLISHED_KEPT
+    from laav.selection import POLISHED_KEPT
 
     seq = scene(1, 1)
     pipe = Pipeline(seq, 2, PLAIN, seed=0)

@@ -8,6 +8,7 @@ import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
 import laav
+import laav.own_chain as own_chain_module
 import laav.pipeline as pipeline_module
 import laav.voting as voting_module
 from laav import LaavParams, random_voting, segment
@@ -46,7 +47,7 @@ def test_segment_and_random_voting_run_single_threaded(two_threads, monkeypatch)
     seen: list = []
     _spy(monkeypatch, pipeline_module, "merge_models", seen)  # inside Pipeline._run
     _spy(monkeypatch, voting_module, "run_trials", seen)  # inside random_voting (plain RV)
-    _spy(monkeypatch, voting_module, "_informed_side_by_side", seen)  # LAAV's own trials
+    _spy(monkeypatch, own_chain_module, "informed_side_by_side", seen)  # LAAV's own trials
     segment(seq, 2, FAST)
     pipe = laav.Pipeline(seq, 2, FAST)
     assert _threads() == two_threads

@@ -244,7 +244,7 @@ def test_fine_tuning_from_a_wrong_start_is_outvoted_by_plain_rv():
 def test_selection_prefers_the_labelling_the_other_candidates_agree_with(monkeypatch, mode):
     """With more than two candidates of near-equal cost, agreement decides, whichever cost
     the selection uses."""
-    import laav.voting as V
+    import laav.selection as V
 
     seq = scene(1, 3)
     C = seq.n_motions
@@ -265,7 +265,7 @@ def test_selection_prefers_the_labelling_the_other_candidates_agree_with(monkeyp
                          np.zeros(1), 1, False)
     cands = [("odd", trial(odd)), ("a", trial(good)), ("b", trial(1 - good)), ("c", trial(good))]
     for weight, expected in ((0.0, "odd"), (0.5, "a")):
-        res = V._select(seq.points, C, LaavParams(rv_select=mode, rv_select_agreement=weight,
+        res = V.select(seq.points, C, LaavParams(rv_select=mode, rv_select_agreement=weight,
                                                   rv_reassign=False), cands,
                         [c for _, c in cands], initialised=False)
         assert res.selected == expected
@@ -447,6 +447,7 @@ def test_plain_memo_reuses_plain_rv_and_keeps_the_labels(monkeypatch, max_iter):
     are computed once and the labels equal those of a run without it, for several starts
     (at 40 iterations one of them makes plain RV's arbitration runs happen; at 25 plain RV
     ends with its consensus, whose random draw the memo replays)."""
+    import laav.selection as selection_module
     import laav.voting as voting_module
     from laav import synthetic
 
@@ -465,9 +466,11 @@ def test_plain_memo_reuses_plain_rv_and_keeps_the_labels(monkeypatch, max_iter):
     memo: dict = {}
     for init in starts:
         fresh = random_voting(seq, 3, p, 5, init_labels=init)
-        monkeypatch.setattr(voting_module, "run_trials", spy)
+        for module in (voting_module, selection_module):  # informed trial; plain RV's runs
+            monkeypatch.setattr(module, "run_trials", spy)
         kept = random_voting(seq, 3, p, 5, init_labels=init, plain_memo=memo)
-        monkeypatch.setattr(voting_module, "run_trials", orig)
+        for module in (voting_module, selection_module):
+            monkeypatch.setattr(module, "run_trials", orig)
         np.testing.assert_array_equal(kept.labels, fresh.labels)
         assert kept.selected == fresh.selected
     # every plain run after the first call came from the memo: of the calls made with the
@@ -562,7 +565,7 @@ def test_joint_selection_scores_are_the_joint_score_of_each_polished_candidate()
 def test_joint_selection_falls_back_to_the_subspace_cost_when_no_joint_score_is_finite(monkeypatch):
     """Every candidate with a motion under 8 points (joint score inf): the subspace cost
     and the agreement decide, and the result says so."""
-    import laav.voting as V
+    import laav.selection as V
 
     seq = scene(2, 1)
     C = seq.n_motions
@@ -639,19 +642,19 @@ def test_plain_rv_selection_stops_between_polishes(monkeypatch):
     between two of them, not after all: the explorer's plain-RV run for a result no longer
     shown ran to its end beside the next computation (a seed move's took 1.0 s instead of
     0.55 s on the demo, in-process)."""
-    import laav.voting as voting
+    import laav.selection as selection
     from laav._interrupt import Interrupted, interruptible
 
     pts = scene(2, 1).points  # three motions
     params = LaavParams(rv_max_iter=6, rv_patience=50)  # no trial converges: the selection runs
     polished = []
-    real = voting._Polished.__init__
+    real = selection.Polished.__init__
 
     def counting(self, *args, **kwargs):
         polished.append(1)
         real(self, *args, **kwargs)
 
-    monkeypatch.setattr(voting._Polished, "__init__", counting)
+    monkeypatch.setattr(selection.Polished, "__init__", counting)
     full = random_voting(pts, 3, params, 0)
     assert full.selected != "trial" and len(polished) >= 5
     n_full = len(polished)

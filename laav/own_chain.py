@@ -1,0 +1,240 @@
+"""Ours, beyond both papers: LAAV's own candidates (``rv_select="laav"``, the default on
+complete tracks; no plain Random Voting).
+
+The informed trial (the LAAV paper's fine-tuning, from the coarse labels) and
+``rv_missing_trials`` (2) trials per pair of coarse motions from a *missing-motion start*
+(:func:`missing_motion_start`: two coarse motions joined, the points in no atom that no
+remaining motion explains made a motion of their own), each on its own random stream, run
+side by side (:func:`informed_side_by_side`), each refined and reassigned
+(:class:`laav.selection.Polished`), the one of least :func:`laav.joint.joint_score` kept
+(:func:`own_candidates`; when they differ, each is scored after its best moves of at most
+``rv_select_descent`` of the points, so that a few stray points do not decide), which then
+descends on that score (``rv_descent``, :func:`laav.joint.joint_descent`: single points move
+while the score decreases), from its polished labels and from its trial's own, the lower
+kept (``rv_descent_from_trial``). With a :class:`laav.helper.VotingHelper`, half of the
+trials run in its process (:func:`candidates`; the same labels).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ._interrupt import check as check_interrupt
+from .coding import principal_trajectories
+from .joint import joint_descent, joint_score, unit2
+from .params import LaavParams
+from .refine import _memo, fit_memo
+from .selection import Polished, finish, with_informed
+from .subspace_votes import SubspaceVotes, votes_with_subspace
+from .voting_result import Voting
+
+__all__ = ["own_candidates", "missing_motion_start", "candidate_part", "MISSING_MOTION_QUANTILE"]
+
+
+#: A missing-motion start (``rv_select="laav"``) takes the points in no atom whose best
+#: subspace distance exceeds this quantile of the covered points' own distances.
+MISSING_MOTION_QUANTILE = 0.95
+
+
+def missing_motion_start(points: np.ndarray, init: np.ndarray, n_motions: int, g: int, h: int,
+                         params: LaavParams, min_points: int) -> np.ndarray | None:
+    """A start for the case where one motion has no atom (``rv_select="laav"``).
+
+    Coarse motions ``g`` and ``h`` become one; the points in no atom (``init`` -1) whose
+    squared distance to every remaining motion's robust rank-4 trajectory subspace
+    (:func:`laav.refine.subspace_residuals`) exceeds the :data:`MISSING_MOTION_QUANTILE`
+    of the covered points' own become motion ``n_motions - 1``. Returns labels (P,)
+    with -1 for the other uncovered points, or None when fewer than ``min_points``
+    points qualify (or a motion is too small to fit).
+    """
+    from .refine import subspace_residuals
+
+    C = n_motions
+    L = np.where(init == h, g, init)
+    L = np.where(L > h, L - 1, L)  # C - 1 motions, -1 outside the atoms
+    R = subspace_residuals(points, L, C - 1, unit2=unit2(params))
+    if R is None:
+        return None
+    cov = L >= 0
+    own = R[L[cov], np.flatnonzero(cov)]
+    new = ~cov & (R.min(axis=0) > np.quantile(own, MISSING_MOTION_QUANTILE))
+    if new.sum() < min_points:
+        return None
+    return np.where(new, C - 1, L)
+
+
+def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -> Voting:
+    """``rv_select="laav"``: LAAV's informed trial and its missing-motion starts
+    (``rv_missing_trials`` trials each), each polished, the one of least
+    :func:`joint_score` kept and descended (with ``rv_descent_from_trial`` from its polished
+    and its unpolished labels, the lower kept; see :class:`LaavParams`)."""
+    P = points.shape[1]
+    pairs = [(g, h) for g in range(C) for h in range(g + 1, C)]
+    streams = rng.spawn(1 + len(pairs))  # [coarse start, one per pair]
+    starts = [("informed", labels0, votes0, streams[0], init >= 0)]
+    for (g, h), stream in zip(pairs, streams[1:]):
+        start = missing_motion_start(points, init, C, g, h, params,
+                                     max(8, params.rv_sample_size))
+        if start is None:
+            continue
+        known2 = start >= 0
+        # the first trial on the pair's own stream, as with one trial; the others on
+        # streams spawned from it (spawning draws nothing: the first trial is unchanged)
+        more = stream.spawn(params.rv_missing_trials - 1)
+        for k, trial_rng in enumerate([stream] + more, start=1):
+            lab = np.where(known2, start, trial_rng.integers(0, C, P))
+            vot = np.zeros((P, C))
+            vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
+            name = f"missing motion ({g}+{h})" + (f", trial {k}" if k > 1 else "")
+            starts.append((name, lab, vot, trial_rng, known2))
+    uses = [votes_with_subspace(params, known) for *_, known in starts]
+    extra = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
+             if any(uses) else None)  # one for every trial that uses it: the same term
+    results, finished, cost, fits = candidates(points, C, params, [s[1:4] for s in starts], extra,
+                                                uses, helper)
+    first, first_extra = results[0], extra if uses[0] else None
+    trials = list(results)
+    polished = {key: _Finished(f) for key, f in finished.items()}
+    finals = {key: f[0] for key, f in finished.items()}
+    clean = params.rv_select_descent > 0 and len({f.tobytes() for f in finals.values()}) > 1
+    proj = None
+    if clean:  # ours: each scored after its best moves of a few points (rv_select_descent)
+        proj = projection(points, fits)  # one projection for every descent here
+        missing = {key: f for key, f in finals.items() if key not in cost}
+        cost.update(cleaned_costs(points, C, params, missing, fits, proj))
+    else:
+        proj = projection(points, fits)
+        cost = {key: joint_score(points, f, C, params, fits=fits, projected=proj)
+                for key, f in finals.items()}
+    entries = [(name, res, polished[res[0].tobytes()], cost[res[0].tobytes()])
+               for (name, *_), res in zip(starts, results)]
+    scores = np.array([e[3] for e in entries])
+    k = int(np.argmin(scores))  # the first of equal scores: the coarse start
+    name, res, pol, _ = entries[k]
+    costs = {e[0]: float(e[3]) for e in entries}
+    out = finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
+                  score="joint-cleaned" if clean else "joint-sum")
+    if params.rv_descent:  # ours: the kept labelling descends on the same score
+        trial = np.asarray(res[0], dtype=np.int64)
+        # ours: the trial's own labels descend too, unless the polish left them as they were
+        both = params.rv_descent_from_trial and not np.array_equal(trial, out.labels)
+        labels, moved, score = joint_descent(points, out.labels, C, params, projected=proj,
+                                             fits=fits, return_score=True)
+        if both:
+            raw, raw_moved, raw_score = joint_descent(points, trial, C, params, projected=proj,
+                                                      fits=fits, return_score=True)
+            if raw_score < score:  # the refinement and reassignment are not kept
+                out = dataclasses.replace(out, refined=0, reassigned=0, unpolished=True)
+                labels, moved = raw, raw_moved
+        out = dataclasses.replace(out, labels=labels, descended=moved)
+    return with_informed(out, first, first_extra)
+
+
+def informed_side_by_side(points, params, starts, extra, uses) -> list:
+    """LAAV's informed trials from several ``starts`` ((labels0, votes0, generator) each),
+    side by side as :func:`laav.rv.run_trials` runs trials: one batched numpy call per
+    iteration, each trial on its own generator and convergence test, so the results (in
+    :func:`laav.rv.run_trials`' tuple form, in ``starts`` order) are those of running them
+    one after another. ``extra``: the subspace votes, for the starts whose ``uses`` (bool
+    each) is true; the trials of each kind share a batch. Every trial runs to its end (no
+    trial is cancelled, unlike plain RV's), so all of a kind run at once, whatever
+    ``rv_batch``: one call per iteration instead of one per ``rv_batch`` trials (voting
+    15-17 % faster than 2 at a time on the demo and six Hopkins155 sequences)."""
+    from .rv import _step, _Trial
+
+    trials = [_Trial(lab.copy(), vot.copy(), False, "informed", stream)
+              for lab, vot, stream in starts]
+    for with_extra in dict.fromkeys(uses):
+        active = [t for t, u in zip(trials, uses) if u == with_extra]
+        while active:
+            check_interrupt()  # a caller's stop request, once per iteration
+            _step(points, active, params, None, extra if with_extra else None)
+            active = [t for t in active if not t.done]
+    return [t.result() for t in trials]
+
+
+def projection(points: np.ndarray, fits: dict) -> np.ndarray:
+    """:func:`principal_trajectories` (K, P) of ``points``, made once per ``fits``
+    (:func:`fit_memo` of ``points``): the selection's costs, scores and descents all read
+    the same SVD (computing it again gave the same numbers, at ~2 ms a time)."""
+    key = ("projection",)  # (beside the memo's motion fits: no motion key is a 1-tuple)
+    if fits is None:  # (no memo: made anew each time)
+        return principal_trajectories(points)
+    fits = _memo(fits, points)  # a memo of these very points (else ValueError)
+    if key not in fits:
+        fits[key] = principal_trajectories(points)
+    return fits[key]
+
+
+class _Finished:
+    """A candidate polished elsewhere (:func:`candidate_part`): its :meth:`Polished.final`."""
+
+    def __init__(self, final: tuple):
+        self._final = final
+
+    def final(self) -> tuple:
+        return self._final
+
+
+def cleaned_costs(points, C, params, finals: dict, fits, proj) -> dict:
+    """The selection's cleaned cost (``rv_select_descent``) of every labelling of ``finals``:
+    its joint score after its best moves of at most that share of the points."""
+    most = int(np.ceil(params.rv_select_descent * points.shape[1]))
+    return {key: joint_descent(points, f, C, params, max_moves=most, projected=proj,
+                               return_score=True, fits=fits)[2] for key, f in finals.items()}
+
+
+def candidate_part(points, C, params, starts, extra, uses, always_cost: bool = False) -> tuple:
+    """Some of LAAV's own candidates (:func:`own_candidates`): the trials of ``starts``
+    side by side (:func:`informed_side_by_side`), every distinct trial labelling polished
+    (refinement and reassignment), and, with ``rv_select_descent``, their cleaned costs
+    when ``always_cost`` or when their polished labellings differ (as the selection needs
+    them then). Returns (results, {key: polished (labels, refined, reassigned)},
+    {key: cleaned cost}, the memo of motion fits), keys the trial labels' bytes."""
+    results = informed_side_by_side(points, params, starts, extra, uses)
+    fits = fit_memo(points)  # candidates share most motions: each motion's fits made once (same numbers)
+    finished: dict = {}
+    for res in results:
+        key = res[0].tobytes()  # trials that end on the same labels share their polish
+        if key not in finished:
+            check_interrupt()  # a caller's stop request, between polishes
+            finished[key] = Polished(points, C, params, res[0], fits=fits).final()
+    cost: dict = {}
+    if params.rv_select_descent > 0 and (
+            always_cost or len({f[0].tobytes() for f in finished.values()}) > 1):
+        cost = cleaned_costs(points, C, params, {k: f[0] for k, f in finished.items()}, fits,
+                              projection(points, fits))
+    return results, finished, cost, fits
+
+
+def candidates(points, C, params, starts, extra, uses, helper) -> tuple:
+    """:func:`candidate_part` of every start; with a ``helper``
+    (:class:`laav.helper.VotingHelper`), every other start's part (the informed trial stays
+    here) runs in its process meanwhile, costs included: the same numbers, each trial
+    drawing from its own stream and ending by its own test, each polish and cost a function
+    of the trial's labels alone."""
+    theirs = list(range(1, len(starts), 2))
+    # (an array sent to the process arrives C-contiguous: sums over a strided one could
+    # round otherwise, so such points stay here)
+    if helper is None or not theirs or not points.flags.c_contiguous:
+        return candidate_part(points, C, params, starts, extra, uses)
+    mine = list(range(0, len(starts), 2))
+    part = lambda ks: ([starts[k] for k in ks], extra, [uses[k] for k in ks])  # noqa: E731
+    handle = helper.submit((points, C, params, *part(theirs), True))
+    if handle is None:  # closed or broken: all here
+        return candidate_part(points, C, params, starts, extra, uses)
+    try:
+        here = candidate_part(points, C, params, *part(mine))
+    except BaseException:
+        helper.stop(handle)
+        raise
+    there = helper.result(handle, check_interrupt)
+    if there is None:  # its process died: its part here (their streams were never drawn here)
+        there = candidate_part(points, C, params, *part(theirs), True)
+    results = [None] * len(starts)
+    for ks, res in ((mine, here[0]), (theirs, there[0])):
+        for k, r in zip(ks, res):
+            results[k] = r
+    return results, {**there[1], **here[1]}, {**there[2], **here[2]}, here[3]
