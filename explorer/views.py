@@ -1018,7 +1018,8 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
         if not pair:
             return dict(blank, pending=True)
         *_, left, right = _pair_points(seq, result, j, k, *blank["frames"])
-        return dict(blank, pending=True, left=left, right=right)
+        return dict(blank, pending=True, left=left, right=right,
+                    n_samples=int(len(co.frame_pairs) * result.params.coarse_samples))
     vs = co.vote_samples
     if not pair or vs is None:
         return blank

@@ -21,12 +21,12 @@ import dataclasses
 
 import numpy as np
 
+from . import selection  # (looked up there: one patch of selection.Polished covers every path)
 from ._interrupt import check as check_interrupt
 from .coding import principal_trajectories
 from .joint import joint_descent, joint_score, unit2
 from .params import LaavParams
 from .refine import _memo, fit_memo
-from .selection import Polished, finish, with_informed
 from .subspace_votes import SubspaceVotes, votes_with_subspace
 from .voting_result import Voting
 
@@ -114,7 +114,7 @@ def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -
     k = int(np.argmin(scores))  # the first of equal scores: the coarse start
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
-    out = finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
+    out = selection.finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
                   score="joint-cleaned" if clean else "joint-sum")
     if params.rv_descent:  # ours: the kept labelling descends on the same score
         trial = np.asarray(res[0], dtype=np.int64)
@@ -129,7 +129,7 @@ def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -
                 out = dataclasses.replace(out, refined=0, reassigned=0, unpolished=True)
                 labels, moved = raw, raw_moved
         out = dataclasses.replace(out, labels=labels, descended=moved)
-    return with_informed(out, first, first_extra)
+    return selection.with_informed(out, first, first_extra)
 
 
 def informed_side_by_side(points, params, starts, extra, uses) -> list:
@@ -169,7 +169,7 @@ def projection(points: np.ndarray, fits: dict) -> np.ndarray:
 
 
 class _Finished:
-    """A candidate polished elsewhere (:func:`candidate_part`): its :meth:`Polished.final`."""
+    """A candidate polished elsewhere (:func:`candidate_part`): its :meth:`laav.selection.Polished.final`."""
 
     def __init__(self, final: tuple):
         self._final = final
@@ -200,7 +200,7 @@ def candidate_part(points, C, params, starts, extra, uses, always_cost: bool = F
         key = res[0].tobytes()  # trials that end on the same labels share their polish
         if key not in finished:
             check_interrupt()  # a caller's stop request, between polishes
-            finished[key] = Polished(points, C, params, res[0], fits=fits).final()
+            finished[key] = selection.Polished(points, C, params, res[0], fits=fits).final()
     cost: dict = {}
     if params.rv_select_descent > 0 and (
             always_cost or len({f[0].tobytes() for f in finished.values()}) > 1):

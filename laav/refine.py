@@ -7,7 +7,7 @@ frame at once:
 * :func:`motion_distances` / :func:`refine_labels`: robust fundamental matrices per
   motion over a spread of frame pairs; points their own motion does not explain move.
 * :func:`subspace_cost`: how well rank-5 trajectory subspaces explain a labelling (used
-  to choose between candidate labellings, see :mod:`laav.voting`).
+  to choose between candidate labellings, see :mod:`laav.selection`).
 * :func:`subspace_residuals` / :func:`reassign_labels`: every point goes to the motion
   whose robust trajectory subspace *and* fundamental matrices explain it best together.
 

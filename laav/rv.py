@@ -29,7 +29,8 @@ Choices where the RV paper is vague (measured on Hopkins155, ``benchmarks/TUNING
 One hook for what is ours: an ``extra`` distance term added to the Sampson distances of
 LAAV's informed trial (:func:`run_trials`, :func:`vote`); LAAV passes its subspace votes
 (:mod:`laav.subspace_votes`) there. Everything else beyond the paper (refinement, joint
-reassignment, model selection) is in :mod:`laav.voting` and :mod:`laav.refine`.
+reassignment, model selection, LAAV's own candidates) is in :mod:`laav.voting` (the
+entry point), :mod:`laav.selection`, :mod:`laav.own_chain` and :mod:`laav.refine`.
 """
 
 from __future__ import annotations

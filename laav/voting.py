@@ -40,7 +40,11 @@ from ._sequence import Sequence, as_points, check_degenerate, warn_missing_motio
 from ._threads import single_threaded
 from .joint import joint_score, unit2
 from .metrics import misclassification_rate
-from .own_chain import missing_motion_start
+from .own_chain import (  # noqa: F401 (re-exported, as before the split)
+    MISSING_MOTION_QUANTILE,
+    candidate_part,
+    missing_motion_start,
+)
 from .params import LaavParams, as_params
 from .refine import (
     assign_by_subspace,
@@ -53,7 +57,7 @@ from .refine import (
     subspace_cost,
 )
 from .rv import consensus, run_trials, vote
-from .selection import NOT_PLAIN_FIELDS, SELECTION_FIELDS
+from .selection import NOT_PLAIN_FIELDS, POLISHED_KEPT, SELECTION_FIELDS  # noqa: F401
 from .subspace_votes import (  # noqa: F401 (SUBSPACE_VOTES_MIN_START re-exported)
     SUBSPACE_VOTES_MIN_START,
     for_informed_trial,
@@ -374,7 +378,8 @@ def _own_key(labels: np.ndarray, params: LaavParams) -> tuple:
 def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo,
                  mk=None, helper=None) -> Voting:
     """LAAV's fine-tuning: the informed trial started from ``init_labels`` and, with the
-    selection, plain RV's runs beside it (see the module docstring). ``mk`` (missing
+    selection, plain RV's runs beside it (:mod:`laav.selection`), or with ``rv_select="laav"``
+    on complete tracks LAAV's own candidates (:mod:`laav.own_chain`). ``mk`` (missing
     data): a :class:`_Masks`."""
     masks = None if mk is None else (mk.visible, mk.pool)
     init, labels0, votes0 = _informed_start(points, C, params, rng, init_labels, weights)

@@ -1416,7 +1416,7 @@ def test_card_3_votes_are_fitted_after_the_result_is_shown(monkeypatch):
         assert mine[-1] is True and V.votes_fitted(res)
         assert ex.votes_pending is None
         caption = ex.coarse_view.epipolar.caption.object
-        assert "Fitting the pairwise votes" not in caption and "vote for f1" in caption
+        assert "(being fitted)" not in caption and "vote for f1" in caption
         d = ex.coarse_view.src_z.data["d"]
         assert np.isfinite(np.asarray(d, float)).sum() > 0
     finally:
@@ -1449,6 +1449,6 @@ def test_a_dropped_votes_fit_is_asked_again(monkeypatch):
         assert ex.wait(60), "card 3 stayed waiting for a dropped fit"
         assert [r for r in asked if r is res] == [res, res]  # asked again once
         assert V.votes_fitted(res) and ex.votes_pending is None
-        assert "Fitting the pairwise votes" not in ex.coarse_view.epipolar.caption.object
+        assert "(being fitted)" not in ex.coarse_view.epipolar.caption.object
     finally:
         ex.close()

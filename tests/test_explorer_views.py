@@ -548,12 +548,16 @@ def test_the_epipolar_panel_draws_the_pair_while_its_votes_are_fitted():
     assert set(d["left"]["model"].tolist()) == {"fine model f1", "fine model f2"}
     assert len(d["lines"]["x0"]) == 0 and len(d["sample_left"]["x"]) == 0
     caption = epipolar_caption(d, res, j, k)
-    assert caption.startswith("Fitting the pairwise votes for f1–f2")
+    assert caption.startswith("The vote for f1–f2 (being fitted) drew ")
     assert "The joint merge" in caption  # what decided: the next test
     # the pending draw fitted nothing; once fitted, the same points in the sample's frames
     assert not V.votes_fitted(res)
     full = V.epipolar_sources(seq, res, j, k)
     assert full["ok"] and not full["pending"] and len(full["lines"]["x0"]) > 0
+    # the same sentences as once fitted, "…" for the numbers not known yet: about as long
+    full_caption = epipolar_caption(full, res, j, k)
+    assert "…" in caption and "…" not in full_caption
+    assert abs(len(caption) - len(full_caption)) <= 40, (caption, full_caption)
     fl, fr = full["frames"]
     np.testing.assert_array_equal(full["left"]["x"], seq.points[fl, idx, 0])
     np.testing.assert_array_equal(full["right"]["x"], seq.points[fr, idx, 0])
@@ -582,7 +586,7 @@ def test_the_epipolar_caption_says_what_the_joint_merge_decided():
             decided += 1
             assert (margin[j, k] > 0) == same  # splitting scores worse exactly when joined
             assert f"scores {margin[j, k]:+.1f} nats" in text
-            assert f"coding length {coding[j, k]:+.1f}, epipolar {epi[j, k]:+.1f}" in text
+            assert f"length {coding[j, k]:+.1f}, epipolar {epi[j, k]:+.1f}" in text
             assert margin[j, k] == pytest.approx(coding[j, k] + epi[j, k])
         else:
             assert "every partition it compared put" in text

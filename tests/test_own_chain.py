@@ -1,5 +1,6 @@
 """LAAV's own chain (issue 12): subspace votes in its informed trials, missing-motion
-starts, and the choice among its trials by the joint merge's score (laav.voting)."""
+starts, and the choice among its trials by the joint merge's score (laav.own_chain,
+laav.voting)."""
 
 from __future__ import annotations
 
@@ -194,13 +195,14 @@ def test_own_candidates_side_by_side_are_their_one_after_another_results(monkeyp
     ``rv_batch``; trials that end on the same labels share one polish (counted)."""
     import laav.own_chain as V
     import laav.rv as rv
+    import laav.selection as S
     from explorer.demo import demo_sequence
     from laav import segment
 
     seq = demo_sequence()  # seed 1: seven trials (the informed one, two per missing-motion
     # start), one ending on the informed trial's very labels
     made, batches = [], []
-    real, real_side, real_step = V.Polished, V.informed_side_by_side, rv._step
+    real, real_side, real_step = S.Polished, V.informed_side_by_side, rv._step
 
     class Counted(real):
         def __init__(self, *a, **k):
@@ -210,7 +212,7 @@ def test_own_candidates_side_by_side_are_their_one_after_another_results(monkeyp
     def one_at_a_time(points, params, starts, extra, uses):  # the reference
         return [real_side(points, params, [s], extra, [u])[0] for s, u in zip(starts, uses)]
 
-    monkeypatch.setattr(V, "Polished", Counted)
+    monkeypatch.setattr(S, "Polished", Counted)
     monkeypatch.setattr(rv, "_step", lambda p, trials, *a: batches.append(len(trials)) or
                         real_step(p, trials, *a))
     runs = {}

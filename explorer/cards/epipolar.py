@@ -119,24 +119,28 @@ def epipolar_caption(d: dict, res, j: int, k: int) -> str:
     same = "the same motion" if f2c[j] == f2c[k] else "different motions"
     a, b = f"f{j + 1}", f"f{k + 1}"
     method = getattr(res.coarse, "method", "epipolar")
-    if d.get("pending"):
-        text = (f"Fitting the pairwise votes for {a}–{b} (drawn here, not needed by this "
-                f"merge)… Until then: their points in the first and last frames")
-        return text + (_decided(res, j, k, same) if method in ("coding", "joint") else ".")
-    if not d["ok"]:
+    if not (d["ok"] or d.get("pending")):
         return "No vote for this pair (too few atoms)."
+    # while the votes are fitted, the same sentences with "…" for what is not known yet:
+    # about the same length, so the caption (and the page below it) keeps its height
+    pending = bool(d.get("pending"))
+    n = lambda key, fmt: "…" if pending else format(d[key], fmt)  # noqa: E731
+    fl, fr = ("…", "…") if pending else d["frames"]
     text = (
-        f"The vote for {a}–{b} drew {d['n_samples']} samples: two atoms of each model, one F "
+        f"The vote for {a}–{b}{' (being fitted)' if pending else ''} drew {d['n_samples']} "
+        f"samples: two atoms of each model, one F "
         f"per sample fitted on their features between two frames, distance d = the larger "
         f"of the two models' mean Sampson distances, vote exp(−λ d). **Shown: the sample of "
-        f"median d** (frames {d['frames'][0]} → {d['frames'][1]}, its features ringed): "
-        f"d = **{d['sample_distance']:.2f} px²**, vote **{d['sample_vote']:.2f}**; lines of "
-        f"{a} points lie {d['residual_j']:.1f} px, of {b} points {d['residual_k']:.1f} px from "
-        f"their points. Over all samples: mean d = {d['distance']:.2f} px², pairwise vote "
-        f"**{d['pairwise']:.2f}**")
+        f"median d** (frames {fl} → {fr}, its features ringed): "
+        f"d = **{n('sample_distance', '.2f')} px²**, vote **{n('sample_vote', '.2f')}**; lines of "
+        f"{a} points lie {n('residual_j', '.1f')} px, of {b} points {n('residual_k', '.1f')} px from "
+        f"their points. Over all samples: mean d = {n('distance', '.2f')} px², pairwise vote "
+        f"**{n('pairwise', '.2f')}**")
     w = res.params.pairwise_weight if res.params.pooled_trials > 0 else 1.0
     if method in ("coding", "joint"):
         return text + _decided(res, j, k, same)
+    if pending:  # (the paper's merge fits its votes: not reached there)
+        return text + "."
     if w < 1.0:
         text += (f"; co-association of the pooled-voting trials {d['coassociation']:.2f}; "
                  f"Z = {1 - w:.2f} × co-association + {w:.2f} × vote = **{d['affinity']:.2f}**")
@@ -162,5 +166,5 @@ def _decided(res, j: int, k: int, same: str) -> str:
     if not np.isfinite(m):
         return f". {who}: every partition it compared put {a} and {b} in {same}."
     return (f". {who}: of the partitions it compared, the best that splits {a} and {b} scores "
-            f"{m:+.1f} nats against the best that joins them (coding length {coding:+.1f}, "
-            f"epipolar {epi:+.1f}), so they went to {same}.")
+            f"{m:+.1f} nats against the best that joins them (the lower score wins; coding "
+            f"length {coding:+.1f}, epipolar {epi:+.1f}), so they went to {same}.")
