@@ -401,6 +401,14 @@ JS_CARD_TITLES = """() => {
 }"""
 
 
+def _first_page(port: int, browser, created: list):
+    """The served app's first page at 1280x800, and its session's explorer: (page, ex)."""
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+    page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
+    return page, _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+
+
 def _settled(page, js: str, timeout: float = 30.0):
     """``page.evaluate(js)`` once it gives the same value twice, 300 ms apart (layout done)."""
     last = page.evaluate(js)
@@ -557,10 +565,7 @@ def test_gaec_replay_keys_reach_both_ends():
     changed the number of steps (the old slider's End key went to step 1)."""
     seq = _sequence()
     with _served(seq, viser=False) as (port, browser, created):
-        page = browser.new_page(viewport={"width": 1280, "height": 800})
-        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
-        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
-        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        page, ex = _first_page(port, browser, created)
         assert ex.wait(60)
 
         def replay_input():
@@ -850,10 +855,7 @@ def test_a_seed_step_shows_the_next_seed_computed_while_idle():
     on the status line, with the labels a fresh computation gives."""
     seq = _sequence()
     with _served(seq, viser=False, seeds_ahead=True) as (port, browser, created):
-        page = browser.new_page(viewport={"width": 1280, "height": 800})
-        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
-        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
-        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        page, ex = _first_page(port, browser, created)
         assert ex.wait(60) and ex.result.seed == 0
         st = ex.state
         _wait_for(lambda: any(k[1].seed == 1 for k in st._ahead) and st.plain_rv(
@@ -899,10 +901,7 @@ def test_card_3_keeps_its_size_while_its_votes_are_fitted(monkeypatch):
     monkeypatch.setenv("LAAV_VOTING_HELPER", "0")  # (a helper fits them during the voting)
     seq = _sequence()
     with _served(seq, viser=False) as (port, browser, created):
-        page = browser.new_page(viewport={"width": 1280, "height": 800})
-        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
-        page.wait_for_function("window.Bokeh && Bokeh.documents.length > 0", timeout=30000)
-        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        page, ex = _first_page(port, browser, created)
         assert ex.wait(60)
         page.wait_for_function("(" + JS_SOURCES + ")().status !== undefined", timeout=30000)
         # the caption and two legends (the later cards arrive after the first result)
