@@ -591,3 +591,9 @@ def test_the_epipolar_caption_says_what_the_joint_merge_decided():
         else:
             assert "every partition it compared put" in text
     assert decided > 0
+    # a joint merge that compared no partitions: the caption says the coding length decided
+    import dataclasses
+
+    bare = dataclasses.replace(res, coarse=dataclasses.replace(res.coarse, shortlist=None))
+    text = epipolar_caption(V.epipolar_sources(seq, bare, 0, 1, fit_votes=False), bare, 0, 1)
+    assert "compared no partitions" in text and "least coding length decided" in text

@@ -155,9 +155,10 @@ def _decided(res, j: int, k: int, same: str) -> str:
     map shows it)."""
     a, b = f"f{j + 1}", f"f{k + 1}"
     margins = V.joint_margins(res) if res.coarse.method == "joint" else None
-    if margins is None:
+    if margins is None:  # the coding merge, or a joint merge that compared no partitions
         who = ("The coding-length merge" if res.coarse.method == "coding" else
-               "The joint merge (coding length + epipolar cost of whole partitions)")
+               "The joint merge compared no partitions (no more fine models than motions, or "
+               "none that gives every motion 8 points), so the partition of least coding length")
         g = float(np.asarray(res.coarse.merge_cost)[j, k])
         return (f". {who} decided, not this vote: joining {a} and {b} adds {g:+.2f} "
                 f"nats per point; they went to {same}.")
