@@ -1012,14 +1012,14 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
              "n_samples": 0, "residual": nan, "residual_j": nan, "residual_k": nan,
              "ok": False, "pending": False}
     pair = 0 <= j < n and 0 <= k < n and j != k
+    n_samples = int(len(co.frame_pairs) * result.params.coarse_samples)  # behind every pair's vote
     if not fit_votes and not votes_fitted(result):
         # the pair's points already, in the first and last frames: the plots, their legends
         # and so the page keep their size until the votes arrive (no relayout meanwhile)
         if not pair:
             return dict(blank, pending=True)
         *_, left, right = _pair_points(seq, result, j, k, *blank["frames"])
-        return dict(blank, pending=True, left=left, right=right,
-                    n_samples=int(len(co.frame_pairs) * result.params.coarse_samples))
+        return dict(blank, pending=True, left=left, right=right, n_samples=n_samples)
     vs = co.vote_samples
     if not pair or vs is None:
         return blank
@@ -1044,7 +1044,7 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
                sample_vote=float(np.exp(-result.params.lam * vs.distance[j, k])),
                pairwise=term(co.pairwise_vote), coassociation=term(co.coassociation),
                affinity=term(co.affinity),
-               n_samples=int(len(co.frame_pairs) * result.params.coarse_samples))
+               n_samples=n_samples)
     # lines: the sample's own features, then others of both models, the same number each
     rng = np.random.default_rng(rng_seed)
     own_model = np.concatenate([np.full(half, j), np.full(sample.size - half, k)])

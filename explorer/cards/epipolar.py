@@ -14,7 +14,9 @@ from bokeh.models import ColumnDataSource, Legend
 from .. import views as V
 from .base import Host, Markdown, fit_image_figure, flex, image_figure, set_data
 
-#: px reserved for the caption (:class:`EpipolarPanel`).
+#: px the caption never goes under (:class:`EpipolarPanel`): with the pending caption as
+#: long as the fitted one (:func:`epipolar_caption`), the page keeps its height while a
+#: result's votes are fitted.
 CAPTION_MIN_HEIGHT = 150
 
 
@@ -56,9 +58,8 @@ class EpipolarPanel:
             fig.scatter("x", "y", source=src, size=10, fill_alpha=0, line_color="black",
                         line_width=1.5)
 
-        # room for a caption of the usual length (about six lines at 1280 px): the page below
-        # does not move up and back while a result's votes are fitted (the caption is short
-        # then), which cost the browser a layout of every plot per move
+        # the page below must not move up and back while a result's votes are fitted: that
+        # cost the browser a layout of every plot per move (CAPTION_MIN_HEIGHT)
         self.caption = Markdown("", sizing_mode="stretch_width", max_width=800, margin=(0, 10),
                                 min_height=CAPTION_MIN_HEIGHT)
         self.layout = pn.Column(pn.Row(self.w_pair_j, self.w_pair_k),
