@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["as_seed", "resolve_seed"]
+__all__ = ["as_seed", "resolve_seed", "check_seed"]
 
 _MAX_SEED = 2**31 - 1
 
@@ -28,6 +28,14 @@ def as_seed(random_state) -> int:
         return int(random_state.randint(_MAX_SEED))
     raise ValueError(f"random_state must be None, an int, a numpy Generator or RandomState, "
                      f"got {random_state!r}")
+
+
+def check_seed(seed) -> int:
+    """``seed`` as an int, or a ValueError naming it: an integer in [0, 2**63) (bools,
+    floats, None and negative numbers are refused: every run is seeded)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**63:
+        raise ValueError(f"seed must be an integer in [0, 2**63), got {seed!r}")
+    return int(seed)
 
 
 def resolve_seed(seed, random_state):

@@ -47,9 +47,10 @@ class IncompleteSequenceError(SequenceError):
 def require_complete(seq: Sequence, what: str = "the explorer") -> None:
     """Raise :class:`IncompleteSequenceError` unless every point of ``seq`` is visible in every frame.
 
-    LAAV's stages handle missing data (``docs/ALGORITHM.md``, "Missing data"); what does not
-    yet calls this, naming itself in ``what``: the explorer, and the estimate of the
-    number of motions (:func:`laav.estimate_motions`), which fits whole trajectories.
+    Every part of ``laav`` and the explorer takes incomplete tracks (``docs/ALGORITHM.md``,
+    "Missing data"; :func:`laav.estimate_motions` counts on the tracks seen in every
+    frame), so nothing here calls it any more: it is for a caller's own code that needs
+    whole trajectories, named in ``what``.
     """
     if seq.is_complete:
         return
@@ -311,7 +312,13 @@ class Sequence:
         if vis is None or vis.all():
             if not np.isfinite(pts).all():
                 bad = int((~np.isfinite(pts)).any(axis=(0, 2)).sum())
-                raise SequenceError(f"{src}: {bad} point(s) have NaN or infinite coordinates")
+                f, q = np.argwhere(~np.isfinite(pts).all(axis=2))[0]
+                hint = ""
+                if not np.isinf(pts).any():  # NaN only: perhaps frames where a point is not seen
+                    hint = ("; if NaN marks a frame where a point is not seen, give `visible` "
+                            "(F x P, False there; in an .npz file an array 'visible')")
+                raise SequenceError(f"{src}: {bad} point(s) have NaN or infinite coordinates "
+                                    f"(first: point {q} in frame {f}){hint}")
             vis = np.ones((n_frames, n_points), dtype=bool)
             complete = True
         else:

@@ -48,11 +48,15 @@ def _positive_int(text: str) -> int:
     return v
 
 
-def _int(text: str) -> int:
+def _jobs(text: str) -> int:
     try:
-        return int(text)
+        v = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v == 0:
+        raise argparse.ArgumentTypeError("expected a positive number of processes, or a negative "
+                                         "one as in joblib (-1: all cores), got 0")
+    return v
 
 
 def _motions(text: str):
@@ -100,7 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "ground truth)")
     seg.add_argument("--method", choices=("laav", "rv"), default="laav",
                      help="LAAV (default) or plain Random Voting")
-    seg.add_argument("--seed", type=_int, default=0, metavar="S", help="random seed (default 0)")
+    seg.add_argument("--seed", type=_int_at_least(0), default=0, metavar="S",
+                     help="random seed, an integer >= 0 (default 0)")
     seg.add_argument("--out", "-o", metavar="CSV",
                      help="labels file, or folder to write it in (default: <sequence name>_labels.csv "
                           "in the current folder, the name reduced to letters, digits and _.+-)")
@@ -134,7 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--only", action="append", default=[], metavar="GLOB",
                        help="only sequences whose name matches the glob (repeatable, or "
                             "comma-separated)")
-    bench.add_argument("--jobs", "-j", type=_int, default=None, metavar="N",
+    bench.add_argument("--jobs", "-j", type=_jobs, default=None, metavar="N",
                        help="worker processes (default: all cores; negative as in joblib)")
     bench.add_argument("--scheduler", metavar="ADDRESS",
                        help="run on a Dask distributed cluster, e.g. tcp://10.0.0.5:8786")
@@ -305,10 +310,7 @@ def _cmd_track(args) -> int:
         tracks = track(args.video, **track_options(args), progress=False if args.quiet else None)
     except TrackError as exc:
         raise _UsageError(str(exc)) from None
-    default = f"{safe_name(tracks.name)}_tracks.npz"
-    out = Path(args.out) if args.out else Path(default)
-    if out.is_dir():
-        out = out / default
+    out = _output_path(args.out, f"{safe_name(tracks.name)}_tracks.npz")
     try:
         save_tracks(tracks, out)
     except OSError as exc:
@@ -318,6 +320,29 @@ def _cmd_track(args) -> int:
           f"{100 * vis.mean():.0f} % of entries visible, {len(tracks.complete())} visible in "
           "every frame)")
     return 0
+
+
+def _output_path(given: str | None, default: str) -> Path:
+    """Where a command writes its file: ``default`` (a base name) in the current folder when
+    ``--out`` was not given; inside ``given`` when it is a folder or ends with a path
+    separator (created, with its parents: folders only where the user said so); else
+    ``given`` itself, its parent folders created. An empty ``--out``, or a parent that is a
+    file, is a usage error (exit code 2)."""
+    if given is None:
+        return Path(default)
+    if not given.strip():
+        raise _UsageError("--out is empty: give a file or a folder")
+    out = Path(given)
+    folder = out if given.endswith(("/", os.sep)) or out.is_dir() else out.parent
+    for part in (folder, *folder.parents):
+        if part.exists() and not part.is_dir():
+            raise _UsageError(f"{given}: {part} is a file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _UsageError(f"{given}: cannot create the folder {folder} "
+                          f"({exc.strerror or exc})") from None
+    return folder / default if folder == out else out
 
 
 def _cmd_segment(args) -> int:
@@ -354,13 +379,8 @@ def _cmd_segment(args) -> int:
     except ValueError as exc:
         raise _UsageError(_named(args.file, exc)) from None
     # a name read from the file is only ever a base name in the current or given folder
-    default = f"{safe_name(seq.name)}_labels.csv"
-    out = Path(args.out) if args.out else Path(default)
-    if out.is_dir():
-        out = out / default
+    out = _output_path(args.out, f"{safe_name(seq.name)}_labels.csv")
     try:
-        if args.out:  # folders only where the user said
-            out.parent.mkdir(parents=True, exist_ok=True)
         with open(out, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(("point", "label"))

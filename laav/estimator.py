@@ -10,6 +10,10 @@ tracked point (trajectory), its columns ``x1, y1, x2, y2, ..., xF, yF`` in pixel
 
     X = points.transpose(1, 0, 2).reshape(points.shape[1], -1)
 
+A NaN in ``X`` marks a point not seen in that frame (either coordinate NaN: the frame's
+entry is hidden), as :class:`laav.Sequence` ``visible`` does, and the missing-data variant
+of every stage runs; infinite values are refused.
+
 **Parameters.** ``n_motions``, ``random_state`` and, as keyword-only parameters, every
 field of :class:`laav.LaavParams` (:class:`RandomVoting`: its ``rv_*`` fields) with the
 dataclass's default. The signature of ``__init__`` is generated from the dataclass when
@@ -79,12 +83,15 @@ class _Estimator(ClusterMixin, BaseEstimator):
             raise ValueError("X must have shape (P, 2F), one trajectory x1, y1, ..., xF, yF per "
                              "row; for points of shape (F, P, 2) pass "
                              "points.transpose(1, 0, 2).reshape(P, -1) or a laav.Sequence")
-        # at least 8 points (the 8-point fits of Random Voting) and 2 frames
-        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=8, ensure_min_features=4)
+        # at least 8 points (the 8-point fits of Random Voting) and 2 frames; NaN: not seen
+        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=8, ensure_min_features=4,
+                          ensure_all_finite="allow-nan")
         if X.shape[1] % 2:
             raise ValueError(f"X must have an even number of columns (x, y per frame), got {X.shape[1]}")
         P, F = X.shape[0], X.shape[1] // 2
-        return Sequence(X.reshape(P, F, 2).transpose(1, 0, 2))
+        points = X.reshape(P, F, 2).transpose(1, 0, 2)
+        seen = ~np.isnan(points).any(axis=-1)  # (F, P)
+        return Sequence(points, visible=None if seen.all() else seen)
 
     def _fit(self, X, run):
         seq = self._sequence(X)
@@ -96,7 +103,7 @@ class _Estimator(ClusterMixin, BaseEstimator):
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
-        tags.input_tags.allow_nan = False
+        tags.input_tags.allow_nan = True  # a point not seen in a frame
         return tags
 
 
@@ -105,8 +112,8 @@ class LAAV(_Estimator):
 
     Parameters
     ----------
-    n_motions : int, default 2
-        C, the number of motions.
+    n_motions : int or "auto", default 2
+        C, the number of motions; ``"auto"`` estimates it (:func:`laav.estimate_motions`).
     random_state : None, int, numpy.random.Generator or RandomState, default None
     **stage_params
         Every field of :class:`laav.LaavParams`, keyword-only, with its default.
@@ -142,6 +149,7 @@ class RandomVoting(_Estimator):
     Parameters
     ----------
     n_motions : int, default 2
+        C, the number of motions.
     random_state : None, int, numpy.random.Generator or RandomState, default None
     **stage_params
         Every ``rv_*`` field of :class:`laav.LaavParams`, and the two its selection's joint

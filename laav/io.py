@@ -395,6 +395,11 @@ def _load_csv(p: Path, header: tuple[str, dict], lim: tuple[int, int]) -> Sequen
             by_index = {i + 1: n for n, i in cols.items()}
             col = by_index.get(int(m.group(2)), f"column {m.group(2)}")
             msg = f"{msg[: m.start()].strip()} in column '{col}' of data row {int(m.group(1)) + 1}"
+        elif short := re.match(r"invalid column index (\d+) at row (\d+) with (\d+) columns", msg):
+            # numpy: 0-based line of the file, the header its line 0
+            msg = (f"data row {int(short.group(2))} (line {int(short.group(2)) + 1}) has only "
+                   f"{short.group(3)} fields: every row needs a value for each column the header "
+                   "names (a track not seen in a frame has no row for that frame)")
         else:  # numpy: 0-based line of the file
             msg = re.sub(r"at row (\d+)", lambda g: f"on line {int(g.group(1)) + 1}", msg)
         raise SequenceError(f"{p}: bad tracks CSV: {msg}") from None
@@ -411,8 +416,11 @@ def _load_csv(p: Path, header: tuple[str, dict], lim: tuple[int, int]) -> Sequen
         v = col[name]
         bad = ~np.isfinite(v) | (v != np.round(v)) | (np.abs(v) > 2.0**53)
         if bad.any():
-            raise SequenceError(f"{p}: column '{name}' must hold whole numbers, got "
-                                f"{float(v[bad][0]):g} on data row {_row(bad)}")
+            first = float(v[bad][0])
+            what = ("whole numbers of at most 2**53" if np.isfinite(first) and first == round(first)
+                    else "whole numbers")
+            raise SequenceError(f"{p}: column '{name}' must hold {what}, got "
+                                f"{first:g} on data row {_row(bad)}")
     bad = ~np.isfinite(col["x"]) | ~np.isfinite(col["y"])
     if bad.any():
         raise SequenceError(f"{p}: NaN or infinite coordinate on data row {_row(bad)} (a track not "
@@ -612,6 +620,8 @@ def save_sequence(seq: Sequence, path: str | os.PathLike, format: str | None = N
 
 
 def _save_format(seq: Sequence, p: Path, format: str | None) -> str:
+    if p.is_dir():
+        raise SequenceError(f"{p}: is a folder; give a file name (.npz, .mat or .csv)")
     if format is not None:
         if format not in FORMATS:
             raise SequenceError(f"{p}: unknown format {format!r}; use one of {', '.join(FORMATS)}")

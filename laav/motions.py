@@ -184,8 +184,15 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
         warnings.simplefilter("ignore", LaavWarning)
         # never the descent nor the cleaning (NOT_FITTED): the profile's constants were
         # fitted on labellings without them, whatever the caller's settings
-        pipe = Pipeline(seq, 2, profile_params() if params is None
-                        else params.replace(**NOT_FITTED), seed)
+        try:
+            pipe = Pipeline(seq, 2, profile_params() if params is None
+                            else params.replace(**NOT_FITTED), seed)
+        except ValueError as err:  # (its checks ask for C = 2: the caller asked for "auto")
+            msg = str(err)
+            if msg.endswith(" for 2 motions") and " distinct trajector" in msg:
+                raise ValueError(msg[: -len(" for 2 motions")] + ": too few to estimate the "
+                                 "number of motions (it compares 2 or more)") from None
+            raise
     atoms = pipe.result.atoms
     res = [np.ravel(r) for r in atoms.residuals if np.size(r)]
     noise2 = float(np.median(np.concatenate(res)) ** 2) if res else 0.0

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._interrupt import check as check_interrupt
-from ._random import resolve_seed
+from ._random import check_seed, resolve_seed
 from ._sequence import Sequence, check_degenerate, warn_missing_motions
 from ._threads import single_threaded
 from .atoms import Atoms, MaskedNeighbourhoods, Neighbourhoods, build_atoms
@@ -143,12 +143,6 @@ def _check_frame_pairs(seq: Sequence, C: int, params: LaavParams) -> None:
         raise ValueError(f"{seq.source}: {err}") from None
 
 
-def _check_seed(seed) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**63:
-        raise ValueError(f"seed must be an integer in [0, 2**63), got {seed!r}")
-    return int(seed)
-
-
 class Pipeline:
     """LAAV staged for live recomputation.
 
@@ -203,7 +197,7 @@ class Pipeline:
         self.seq, self.n_motions = _check_inputs(seq, n_motions)
         self.params.n_fine(self.n_motions, self.seq.is_complete)
         _check_frame_pairs(self.seq, self.n_motions, self.params)
-        self.seed = _check_seed(seed)
+        self.seed = check_seed(seed)
         #: speed only (:class:`laav.helper.VotingHelper`): LAAV's own trials half in its process
         self.helper = helper
         #: speed only, with a helper: the paper's pairwise votes of the coarse stage (which
@@ -392,7 +386,7 @@ class Pipeline:
             For invalid values; the pipeline then keeps its previous state and result.
         """
         with self._lock:
-            seed = _check_seed(changed.pop("seed", self.seed))
+            seed = check_seed(changed.pop("seed", self.seed))
             C = changed.pop("n_motions", self.n_motions)
             new_params = self.params.replace(**changed) if changed else self.params
             # the sequence is the one checked at construction: only a new C is checked again
@@ -482,7 +476,7 @@ def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: i
             raise ValueError(f"n_motions must be an integer or 'auto', got {n_motions!r}")
         from .motions import _estimate_motions
 
-        seed = _check_seed(seed)
+        seed = check_seed(seed)
         count, result = _estimate_motions(seq, 5, seed, params)
         n_motions = count.n_motions
     if result is None:  # C given, or the estimate did not segment the whole sequence with it

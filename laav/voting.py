@@ -35,7 +35,7 @@ import dataclasses
 import numpy as np
 
 from . import own_chain, selection
-from ._random import resolve_seed
+from ._random import check_seed, resolve_seed
 from ._sequence import Sequence, as_points, check_degenerate, warn_missing_motions
 from ._threads import single_threaded
 from .joint import joint_score, unit2
@@ -88,7 +88,8 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         (:data:`SELECTION_FIELDS`). Defaults
         to ``LaavParams()``.
     seed : int or numpy.random.Generator
-        Same seed, same labels.
+        An int in [0, 2**63) (anything else is a ValueError) or a generator. Same seed,
+        same labels.
     random_state : None, int, numpy.random.Generator or RandomState, optional
         scikit-learn style alternative to ``seed``, used instead of it when given (an int
         is the seed itself, a generator gives one draw). None (default): ``seed`` is used.
@@ -158,7 +159,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
     if init_labels is None and check_input:  # plain RV, an entry point: segment()'s checks
         check_degenerate(seq, C, visible=None if isinstance(seq, Sequence) else vis)
     seed = resolve_seed(seed, random_state)
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(check_seed(seed))
     if C == 1 or F < 2:
         lab = np.zeros(P, dtype=np.int64)
         return Voting(lab, np.ones((P, 1)), np.zeros(0, np.int64), np.zeros(0), 0, 0, True,

@@ -280,3 +280,38 @@ def test_segment_warning_is_one_line(tmp_path):
     err = [ln for ln in run.stderr.splitlines() if ln.strip()]
     assert len(err) == 1, err
     assert err[0].startswith(f"laav segment: warning: {path}: the coordinates span")
+
+
+def test_segment_out_with_a_trailing_separator_is_a_folder(tmp_path, capsys):
+    # `--out DIR/` names a folder (created), not a file called DIR
+    seq = make_scene(2, seed=0, name="mine")
+    path = laav.save_sequence(seq, tmp_path / "mine.npz")
+    assert main(["segment", str(path), "-o", str(tmp_path / "new") + "/", *SMALL]) == 0
+    assert (tmp_path / "new").is_dir() and (tmp_path / "new" / "mine_labels.csv").is_file()
+    assert main(["segment", str(path), "-o", str(tmp_path / "a" / "b") + "/", *SMALL]) == 0
+    assert (tmp_path / "a" / "b" / "mine_labels.csv").is_file()
+    capsys.readouterr()
+    assert main(["segment", str(path), "-o", "", *SMALL]) == 2
+    assert "--out is empty" in capsys.readouterr().err
+    (tmp_path / "afile").write_text("x")
+    assert main(["segment", str(path), "-o", str(tmp_path / "afile" / "x.csv"), *SMALL]) == 2
+    assert "afile is a file, not a folder" in capsys.readouterr().err
+
+
+def test_seed_and_jobs_are_checked_by_the_parser(tmp_path, capsys):
+    seq = make_scene(2, seed=0)
+    path = laav.save_sequence(seq, tmp_path / "s.npz")
+    for argv, said in ((["segment", str(path), "--seed", "-1"], "--seed: expected an integer >= 0"),
+                       (["bench", "--data", str(tmp_path), "--jobs", "0"], "--jobs/-j: expected a positive")):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert said in err and str(path) not in err  # the option is wrong, not the file
+
+
+def test_convert_to_a_folder_says_so(tmp_path, capsys):
+    path = laav.save_sequence(make_scene(2, seed=0), tmp_path / "s.npz")
+    (tmp_path / "dir").mkdir()
+    assert main(["convert", str(path), str(tmp_path / "dir")]) == 2
+    assert "is a folder; give a file name" in capsys.readouterr().err

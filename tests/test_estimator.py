@@ -93,13 +93,29 @@ def test_single_motion():
 @pytest.mark.parametrize("bad, match", [
     (np.zeros((12, 2, 120)), r"shape \(P, 2F\)"),       # (F, P, 2)-like 3-D input
     (np.zeros((120, 7)), "even number of columns"),
-    (np.full((120, 24), np.nan), "NaN"),
+    (np.full((120, 24), np.nan), "visible in fewer than 2 frames"),  # NaN: not seen
+    (np.full((120, 24), np.inf), "infinity"),
     (np.ones((120, 2)), "minimum of 4"),                 # one frame
     (np.ones((3, 24)), "minimum of 8"),                  # three trajectories
 ])
 def test_bad_input_is_refused(bad, match):
     with pytest.raises(ValueError, match=match):
         LAAV(2).fit(bad)
+
+
+def test_nan_marks_a_point_not_seen_in_a_frame():
+    # laav segments incomplete tracks: a NaN in X hides that frame's entry, as Sequence's
+    # `visible` does (not scikit-learn's "does not accept missing values" refusal)
+    seq = _seq()
+    X = _X(seq).copy()
+    X[3, 4:6] = np.nan  # point 3 unseen in frame 2
+    X[7, 10] = np.nan  # one coordinate: the entry is hidden
+    est = LAAV(2, random_state=0, **FAST).fit(X)
+    vis = np.ones((seq.n_frames, seq.n_points), dtype=bool)
+    vis[2, 3] = vis[5, 7] = False
+    expected = segment(laav.Sequence(seq.points, visible=vis), 2, LaavParams(**FAST), 0).labels
+    np.testing.assert_array_equal(est.labels_, expected)
+    assert est.n_features_in_ == 2 * seq.n_frames
 
 
 def test_random_state_kinds():

@@ -234,3 +234,13 @@ def test_many_tracks_are_estimated_on_a_seeded_subset():
     assert "1000 of the 1100 tracks" in a.reason
     b = estimate_motions(seq, random_state=0)
     np.testing.assert_array_equal(a.subspace_level, b.subspace_level)  # the same subset
+
+
+def test_auto_on_identical_trajectories_does_not_speak_of_two_motions():
+    # the caller asked for "auto", not for 2 motions
+    pts = np.tile(np.random.default_rng(0).normal(size=(10, 1, 2)) * 50, (1, 30, 1))
+    seq = laav.Sequence(pts, name="same", source="same.npz")
+    with pytest.raises(ValueError, match=r"^same.npz: only 1 distinct trajectory: too few to "
+                                         r"estimate the number of motions") as exc:
+        laav.segment(seq, "auto")
+    assert "2 motions" not in str(exc.value)

@@ -91,6 +91,13 @@ def test_deterministic_for_a_seed():
     assert c.labels.shape == (seq.n_points,) and set(np.unique(c.labels)) <= {0, 1, 2}
 
 
+@pytest.mark.parametrize("bad", [1.5, -1, None, "a", True, 2**63])
+def test_a_bad_seed_is_a_clear_error(bad):
+    # as segment(): one message naming the argument, not numpy's SeedSequence error
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 2\*\*63\), got "):
+        random_voting(scene(1, 0), 2, seed=bad)
+
+
 @pytest.mark.parametrize("init", [False, True])
 @pytest.mark.parametrize("n_objects, scene_seed", [(1, 3), (2, 0)])
 def test_traces_consistent(n_objects, scene_seed, init):
