@@ -366,9 +366,11 @@ class Sequence:
             n_mot = int(lab.max()) + 1
             if present.size != n_mot:
                 missing = sorted(set(range(n_mot)) - set(present.tolist()))
+                hint = ("; they look 1-based: subtract 1" if missing == [0]
+                        and present.size == n_mot - 1 else "")
                 raise SequenceError(
                     f"{src}: motion label(s) {missing} have no points (labels must be "
-                    f"0..{n_mot - 1} with every label used)"
+                    f"0..{n_mot - 1} with every label used){hint}"
                 )
             lab.setflags(write=False)
             object.__setattr__(self, "labels", lab)

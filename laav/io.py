@@ -273,6 +273,12 @@ def _load_mat(p: Path, mat: dict, lim: tuple[int, int]) -> Sequence:
         s = s.astype(np.float64).ravel()
         if s.size and np.isfinite(s).all() and s.min() < 1:
             raise SequenceError(f"{p}: variable 's' must hold 1-based labels, found {s.min():g}")
+        if s.size and np.isfinite(s).all() and np.all(s == np.round(s)) and s.max() <= s.size:
+            missing = sorted(set(range(1, int(s.max()) + 1)) - set(np.unique(s).astype(int).tolist()))
+            if missing:  # said in the file's own (1-based) numbers
+                raise SequenceError(f"{p}: variable 's' has no point with motion label(s) "
+                                    f"{missing} (1-based labels must be 1..{int(s.max())}, every "
+                                    "one used)")
         labels = s - 1
     image_size = None
     if "width" in mat and "height" in mat:

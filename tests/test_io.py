@@ -768,3 +768,19 @@ def test_isolated_mat_over_the_byte_limit_is_not_read(tmp_path):
 def test_bad_limits(tmp_path, bad):
     with pytest.raises(ValueError, match="max_points must be a positive integer"):
         load_sequence(tmp_path, max_points=bad)
+
+
+def test_label_gaps_are_named_in_the_files_own_numbers(tmp_path):
+    import scipy.io as sio
+
+    rng = np.random.default_rng(0)
+    P, F = 30, 5
+    y = np.concatenate([rng.uniform(0, 100, (2, P, F)), np.ones((1, P, F))])
+    s = np.r_[np.ones(10), np.full(10, 3.0), np.full(10, 3.0)]  # Hopkins: 1-based, no 2
+    path = tmp_path / "gap_truth.mat"
+    sio.savemat(path, {"x": y, "y": y, "s": s[:, None]})
+    with pytest.raises(laav.SequenceError, match=r"variable 's' has no point with motion label\(s\) "
+                                                 r"\[2\] \(1-based labels must be 1..3"):
+        laav.load_sequence(path)
+    with pytest.raises(laav.SequenceError, match="they look 1-based: subtract 1"):
+        laav.Sequence(y[:2].transpose(2, 1, 0), np.r_[np.ones(15), np.full(15, 2)].astype(int))
