@@ -76,7 +76,10 @@ class SeedRow:
     converged : bool
         Whether the returned Random Voting trial converged.
     iterations : int
-        Random Voting iterations of the run (every trial's).
+        Iterations of the returned Random Voting trial (the one ``converged`` is about; what
+        card 4 counts for it).
+    all_iterations : int
+        Random Voting iterations of the run, every trial's (``Voting.n_iterations``).
     seconds : float
         Time of this seed's :func:`laav.segment`.
     labels : numpy.ndarray
@@ -90,6 +93,7 @@ class SeedRow:
     agreement: float
     converged: bool
     iterations: int
+    all_iterations: int
     seconds: float
     labels: np.ndarray
 
@@ -106,8 +110,8 @@ def seed_row(seq: laav.Sequence, result: laav.LaavResult, reference: np.ndarray 
         return None if v is None else float(v)
 
     return SeedRow(int(result.seed), f(num["error_fine"]), f(num["error_coarse"]), f(num["error_final"]),
-                   agree, bool(result.voting.converged), int(result.voting.n_iterations), float(seconds),
-                   labels)
+                   agree, bool(result.voting.converged), len(result.voting.changed),
+                   int(result.voting.n_iterations), float(seconds), labels)
 
 
 def worst_seed(rows: Sequence[SeedRow]) -> int | None:
@@ -143,7 +147,8 @@ def table_columns(rows: Sequence[SeedRow]) -> dict:
         "final": [_pct(r.error_final) for r in rows],
         "agreement": [_pct(r.agreement) for r in rows],
         "converged": ["yes" if r.converged else "no (cap)" for r in rows],
-        "iterations": [str(r.iterations) for r in rows],
+        "iterations": [str(r.iterations) if r.all_iterations == r.iterations
+                       else f"{r.iterations} (of {r.all_iterations})" for r in rows],
         "time": [f"{1000 * r.seconds:.0f} ms" for r in rows],
         "note": ["◀ worst" if r.seed == worst else "" for r in rows],
     }
@@ -156,8 +161,12 @@ _COLUMNS = {True: (("seed", "seed"), ("fine", "fine models"), ("coarse", "coarse
                     ("iterations", "iterations"), ("time", "time"))}
 
 
+#: Characters of the widest cell a column holds (beyond its title): "150 (of 1050)".
+_CELL_CHARS = {"iterations": 13}
+
+
 def _widths(has_truth: bool) -> list[int]:
-    return [max(len(title), 6) for _, title in _COLUMNS[has_truth]]
+    return [max(len(title), 6, _CELL_CHARS.get(key, 0)) for key, title in _COLUMNS[has_truth]]
 
 
 def header_line(has_truth: bool) -> str:

@@ -45,60 +45,47 @@ class TourStep:
 TOUR: tuple[TourStep, ...] = (
     TourStep(
         "1 · Atoms: small groups that move as one",
-        "Each atom grows around a random seed feature: RANSAC keeps the neighbours within the outer "
-        "radius R2 that one affine motion carries through every frame. Features within R1 of the seed "
-        "belong to that atom alone, the ring out to R2 may be shared with other atoms, and features no "
-        "atom takes (grey crosses) wait for stage 4.",
+        "Each atom grows around a random seed feature: RANSAC keeps the neighbours within R2 that one "
+        "affine motion carries through every frame. Features within R1 belong to that atom alone, the "
+        "ring out to R2 may be shared, and features no atom takes (grey crosses) wait for stage 4.",
         ("frame",), color="atoms", color_no_truth="atoms"),
     TourStep(
         "2 · Multicut: cutting the atom graph into fine models",
-        "Atoms become nodes of a graph whose edges join overlapping and nearby atoms, blue when one "
-        "atom's affine motion carries the other's features forward and back well (join), red when it "
-        "does not (cut). A minimum cost multicut (greedy contraction, replayed by the slider, then "
-        "Kernighan-Lin) cuts the graph, and its segments are merged or split to {fine} fine models, on "
+        "Atoms become the nodes of a graph, an edge blue when one atom's affine motion carries the "
+        "other's features forward and back well (join), red when it does not (cut). A minimum cost "
+        "multicut (greedy contraction, replayed by the slider) cuts it into {fine} fine models, on "
         "purpose more than the C motions.",
-        ("graph",)),
+        ("graph",), color="fine", color_no_truth="fine"),
     TourStep(
         "3 · Fine-to-coarse: merging fine models into C motions",
         "The fine models are grouped into C motions by coding length: the grouping whose trajectories "
-        "take the fewest bits to describe (up to a distortion ε) wins, since two motions coded as one "
-        "need an extra coordinate for every point. The paper instead lets pairs of fine models vote "
-        "with epipolar geometry and splits their affinity Z by spectral clustering: that is the paper "
-        "preset (coarse_merge = epipolar).",
-        ("coarse",),
+        "take the fewest bits to describe wins. The paper instead lets pairs of fine models vote with "
+        "epipolar geometry and splits the votes by spectral clustering (the paper preset).",
+        ("coarse",), color="coarse", color_no_truth="coarse",
         # the text when the epipolar merge decided (coarse_merge = "epipolar", the paper's)
         text_epipolar=(
-            "Pairs of fine models vote with epipolar geometry: one fundamental matrix fitted to atoms of "
-            "both explains both when they move as one rigid body, and the votes form the affinity Z. "
-            "Spectral clustering splits Z into C motions, as the paper does; the option coarse_merge = "
-            "coding instead picks the grouping whose trajectories take the fewest bits to describe."),
+            "Pairs of fine models vote with epipolar geometry: one fundamental matrix fitted to both "
+            "explains both when they move as one rigid body. Spectral clustering splits these votes "
+            "into C motions, as the paper does."),
         # the text when the joint merge decided (coarse_merge = "auto", the default, or "joint")
         text_joint=(
             "The fine models are grouped into C motions by the joint merge: of the groupings whose "
-            "trajectories take the fewest bits to describe (up to a distortion ε), with at least 8 "
-            "points per motion, the one whose motions' fundamental matrices also explain their points "
-            "best wins. The map colours each pair of fine models by how many nats joining (blue) or "
-            "splitting (orange) them won: coding length separates motions that share epipolar geometry "
-            "(a truck and the background it drives across), the epipolar cost groupings that mix "
-            "independent motions.")),
+            "trajectories take the fewest bits to describe, the one whose fundamental matrices best "
+            "explain its points wins. The map shows how many nats joining (blue) or splitting (orange) "
+            "each pair of fine models won.")),
     TourStep(
         "4 · Fine-tuning: Random Voting labels every point",
         "Random Voting starts from the coarse labels: in each iteration every motion fits a "
-        "fundamental matrix to a few of its points on a random pair of frames, and every point votes "
-        "for the motions whose epipolar geometry fits it, older votes fading by α; the first chart "
-        "shows each run's error per iteration: started from the coarse labels it begins near the "
-        "answer, from a random start far from it (the paper's claim: faster convergence). This labels the "
-        "features no atom took and can undo a wrong merge; by default the informed run's votes also "
-        "weigh each point's distance to the motion's trajectory subspace, runs from starts that give "
-        "a motion the atoms missed its own label go beside it, and the labelling of least coding "
-        "length + epipolar cost is kept (the paper: epipolar votes, the informed run alone); on "
-        "complete tracks plain Random Voting runs here only for the comparison.",
-        ("rv",)),
+        "fundamental matrix on a random pair of frames, and every point votes for the motions whose "
+        "epipolar geometry fits it. The chart shows the error per iteration: LAAV's run starts near "
+        "the answer and settles sooner than plain Random Voting from a random start (the paper's "
+        "claim; our default adds subspace votes and runs for a missed motion, named in the card).",
+        ("rv",), color="final", color_no_truth="final"),
     TourStep(
         "5 · Result: one motion per point, and its error",
         "Every point now belongs to one of the C motions; with ground truth, the error is the share "
-        "of points misassigned under the best matching of motions to true labels, shown here for "
-        "every stage. Atoms, the merge and the voting are random, so the seed sweep below the cards "
-        "runs seeds 0-9 to show whether a result is typical or a bad draw.",
+        "of points misassigned under the best matching of motions, shown for every stage. Atoms, the "
+        "merge and the voting are random: after the tour, the Seed sweep card runs seeds 0-9 to show "
+        "whether a result is typical or a bad draw.",
         ("numbers", "frame"), color="errors", color_no_truth="final"),
 )

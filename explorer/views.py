@@ -386,8 +386,9 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
             label = np.where(un, UNSEEN_LABEL, label)
     elif mode.startswith("errors"):
         color = np.where(wrong, ERROR_MARK, np.where(scored, CORRECT, "#EEEEEE")).astype("U7")
-        label = np.where(wrong, f"misclassified ({stage})",
-                         np.where(scored, f"correct ({stage})", "not labelled at this stage"))
+        short = "plain RV" if stage == "plain" else stage
+        label = np.where(wrong, f"misclassified ({short})",
+                         np.where(scored, f"correct ({short})", "not labelled at this stage"))
         un = _unlabelled(result) if stage == "final" else (
             np.asarray(plain.labels) < 0 if stage == "plain" and plain is not None else None)
         if un is not None and un.any():  # an error too (as the metrics count it), own marker
@@ -1380,7 +1381,8 @@ def numbers_markdown(num: dict) -> str:
         f"{_ms(t, 'coarse')} |",
         f"| 5 Random Voting | {labelled} | **{_pct(num['error_final'])}** "
         f"{final_note} | {_ms(t, 'voting')} |",
-        f"| total (this update) | | | {num['total_ms']:.0f} ms |",
+        f"| sum of the stages (the status line's time adds the app's own work) | | | "
+        f"{num['total_ms']:.0f} ms |",
         f"| *plain RV* (random start; same C, seed, RV settings) | {_plain_result(num)} | "
         f"{_pct(num.get('error_plain'))} (all points) | |",
     ]

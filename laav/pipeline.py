@@ -280,6 +280,7 @@ class Pipeline:
                 key = self._voting_key(init)
                 if self._voting_memo is not None and self._same_voting_inputs(key):
                     st["voting"] = self._voting_memo[1]  # same inputs, same result
+                    continue  # reused: its time stays 0 (as for the stages not rerun)
                 else:
                     # plain RV's runs: kept for the last PLAIN_MEMOS (seed, C, rv_*) (its
                     # polished candidates' costs are keyed on the selection's fields inside)

@@ -63,7 +63,9 @@ def test_sweep_rows_equal_direct_segment_runs():
             assert (row.error_fine, row.error_coarse, row.error_final) == pytest.approx(
                 (num["error_fine"], num["error_coarse"], num["error_final"]))
             assert row.converged == direct.voting.converged
-            assert row.iterations == direct.voting.n_iterations
+            # the returned trial's iterations (what card 4 and `converged` are about), and all
+            assert row.iterations == len(direct.voting.changed)
+            assert row.all_iterations == direct.voting.n_iterations >= row.iterations
             ref = direct.labels if ref is None else ref
             assert row.agreement == pytest.approx(1 - laav.misclassification_rate(ref, direct.labels))
         assert sw.matches(seq, 2, params) and not sw.matches(seq, 2, laav.LaavParams())
@@ -110,8 +112,10 @@ def test_sweep_cancel_stops_at_once_and_a_new_sweep_supersedes():
         sw.start(seq, 2, laav.LaavParams())
 
 
-def _row(seed, fine=None, coarse=None, final=None, agreement=1.0, converged=True, iterations=50):
-    return S.SeedRow(seed, fine, coarse, final, agreement, converged, iterations, 0.01, np.zeros(3, int))
+def _row(seed, fine=None, coarse=None, final=None, agreement=1.0, converged=True, iterations=50,
+         all_iterations=None):
+    return S.SeedRow(seed, fine, coarse, final, agreement, converged, iterations,
+                     iterations if all_iterations is None else all_iterations, 0.01, np.zeros(3, int))
 
 
 def test_worst_seed_and_table():
@@ -131,6 +135,9 @@ def test_worst_seed_and_table():
     t = S.table_columns(rows)
     assert t["fine"] == ["–"] * 4 and t["agreement"][1] == "80.0 %" and t["converged"][2] == "no (cap)"
     assert S.worst_seed([]) is None and S.table_columns(rows[:1])["note"] == [""]
+    # the returned trial's iterations, with every trial's when more ran
+    t = S.table_columns([_row(0, iterations=70, all_iterations=764), _row(1, iterations=40)])
+    assert t["iterations"] == ["70 (of 764)", "40"]
     # all equal: no worst row, whatever the iterations
     rows = [_row(0, 0.0, 0.0, 0.0, iterations=60), _row(1, 0.0, 0.0, 0.0, iterations=500)]
     assert S.worst_seed(rows) is None and S.table_columns(rows)["note"] == ["", ""]
@@ -297,6 +304,11 @@ def test_the_address_carries_the_tour_step(explorer):
     assert tour.active and tour.step == 2 and ex.query()["tour"] == "3"
     tour.w_next.clicks += 1
     assert ex.query()["tour"] == "4"
+    # a step is one address, however it was reached (each step sets its own colouring)
+    forward = ex.query()
+    tour.w_next.clicks += 1
+    tour.w_back.clicks += 1
+    assert ex.query() == forward
     tour.w_key.value = "end:99"
     assert not tour.active and "tour" not in ex.query()
     problems = ex.apply_query({"tour": ["99"]})

@@ -66,7 +66,9 @@ class Controls:
             w.param.watch(self._on_param, "value")
             w._debounce = 0  # as the frame player's (above): a newer value supersedes at once
             self.w_params[name] = w
-        self.w_seed = pn.widgets.IntSlider(label="seed (random stages)", start=0, end=99,
+        # (a seed beyond 99, e.g. from the page address, widens the slider: its handle shows it)
+        self.w_seed = pn.widgets.IntSlider(label="seed (random stages)", start=0,
+                                           end=max(99, min(st.seed, 2**53 - 1)),
                                            value=st.seed, width=SIDE_W)
         self.w_seed.param.watch(self._on_param, "value")
         self.w_seed._debounce = 0
