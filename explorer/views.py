@@ -1406,24 +1406,29 @@ def labels_table(seq: laav.Sequence, result: laav.LaavResult,
     point is not seen there), ``ground_truth`` (empty without), ``owner_atom`` (the atom
     whose R1 core holds it, -1 for none: a point only in atoms' R1-R2 rings, or in no
     atom), ``fine_model``, ``coarse_motion`` (-1: the stage left the point out, i.e. it is
-    in no atom), ``atoms`` (how many atoms hold the point; 0: in no atom; last, so that the
-    columns before it keep their places).
+    in no atom), ``atoms`` (how many atoms hold the point; 0: in no atom), ``page_motion``
+    (the motion the page's views name the point's final label by, "motion N", 1-based:
+    matched to the ground truth's numbering when there is one, so that a right label reads
+    as its ``ground_truth`` + 1; empty for a point left unlabelled). New columns come last,
+    so that the columns before them keep their places.
     """
     st = result.stage_labels()
+    shown = _aligned(seq, result)["final"]
     owner = np.asarray(result.atoms.owner)
     n_atoms = result.atoms.membership().sum(axis=0)  # (P,)
     ids = np.arange(seq.n_points) if point_ids is None else np.asarray(point_ids)
     if ids.shape != (seq.n_points,):
         raise ValueError(f"point_ids: {ids.shape[0]} numbers for {seq.n_points} points")
     gt = seq.labels
-    lines = ["point,label,x0,y0,ground_truth,owner_atom,fine_model,coarse_motion,atoms"]
+    lines = ["point,label,x0,y0,ground_truth,owner_atom,fine_model,coarse_motion,atoms,page_motion"]
     p0 = seq.points[0]
     v0 = visible_at(seq, 0)
     for i in range(seq.n_points):
         g = "" if gt is None else str(int(gt[i]))
         xy0 = f"{p0[i, 0]:.3f},{p0[i, 1]:.3f}" if v0[i] else ","
+        page = "" if shown[i] < 0 else str(int(shown[i]) + 1)
         lines.append(f"{int(ids[i])},{int(st['final'][i])},{xy0},{g},{int(owner[i])},"
-                     f"{int(st['fine'][i])},{int(st['coarse'][i])},{int(n_atoms[i])}")
+                     f"{int(st['fine'][i])},{int(st['coarse'][i])},{int(n_atoms[i])},{page}")
     return "\n".join(lines) + "\n"
 
 

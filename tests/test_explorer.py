@@ -335,6 +335,11 @@ def test_exports(ex, seq):
     assert [int(r["atoms"]) for r in rows] == held
     assert [int(r["atoms"]) == 0 for r in rows] == [int(r["coarse_motion"]) == -1 for r in rows]
     assert any(int(r["owner_atom"]) == -1 and int(r["atoms"]) > 0 for r in rows)  # ring points
+    # page_motion: the page's "motion N" of the final label, matched to the ground truth
+    shown = V.shown_labels(seq, ex.result)["final"]
+    assert [int(r["page_motion"]) for r in rows] == (shown + 1).tolist()
+    agree = np.mean([int(r["page_motion"]) == int(r["ground_truth"]) + 1 for r in rows])
+    assert agree == pytest.approx(1 - laav.misclassification_rate(ex.result.labels, seq.labels))
     # the PNG carries the parameters, errors and legends
     fig = export.views_figure(seq, ex.result, 3, "final", plain=None)
     head = fig._suptitle.get_text()
