@@ -236,6 +236,18 @@ def _read_mat_here(p: Path, max_bytes: int) -> dict:
         raise SequenceError(f"{p}: {exc}") from None
 
 
+def _one_based_gaps(p: Path, labels: np.ndarray, what: str) -> None:
+    """A motion label of 1..max(``labels``) (a MAT file's 1-based labels) that no point
+    has, named in the file's own numbers (:class:`laav.Sequence` would name it 0-based)."""
+    s = labels
+    if not (s.size and np.isfinite(s).all() and np.all(s == np.round(s)) and s.max() <= s.size):
+        return  # (other problems: the Sequence's checks say them)
+    missing = sorted(set(range(1, int(s.max()) + 1)) - set(np.unique(s).astype(int).tolist()))
+    if missing:
+        raise SequenceError(f"{p}: {what} has no point with motion label(s) {missing} (1-based "
+                            f"labels must be 1..{int(s.max())}, every one used)")
+
+
 def _load_mat(p: Path, mat: dict, lim: tuple[int, int]) -> Sequence:
     if "y" not in mat and "Data" in mat:
         return _load_kt3d(p, mat, lim)
@@ -273,12 +285,7 @@ def _load_mat(p: Path, mat: dict, lim: tuple[int, int]) -> Sequence:
         s = s.astype(np.float64).ravel()
         if s.size and np.isfinite(s).all() and s.min() < 1:
             raise SequenceError(f"{p}: variable 's' must hold 1-based labels, found {s.min():g}")
-        if s.size and np.isfinite(s).all() and np.all(s == np.round(s)) and s.max() <= s.size:
-            missing = sorted(set(range(1, int(s.max()) + 1)) - set(np.unique(s).astype(int).tolist()))
-            if missing:  # said in the file's own (1-based) numbers
-                raise SequenceError(f"{p}: variable 's' has no point with motion label(s) "
-                                    f"{missing} (1-based labels must be 1..{int(s.max())}, every "
-                                    "one used)")
+        _one_based_gaps(p, s, "variable 's'")
         labels = s - 1
     image_size = None
     if "width" in mat and "height" in mat:
@@ -335,6 +342,7 @@ def _load_kt3d(p: Path, mat: dict, lim: tuple[int, int]) -> Sequence:
         g = _numeric(p, mat["Data.GtLabel"], "Data.GtLabel").astype(np.float64).ravel()
         if g.size and np.isfinite(g).all() and g.min() < 1:
             raise SequenceError(f"{p}: Data.GtLabel must hold labels 1..K, found {g.min():g}")
+        _one_based_gaps(p, g, "Data.GtLabel")
         labels = g - 1
     image_size = None
     if "width" in mat and "height" in mat:

@@ -192,7 +192,8 @@ def test_kt3d_divides_by_the_homogeneous_row_and_needs_no_mask_or_labels(tmp_pat
     ("mask values", {"visibleSparse": np.full((12, 5), 2.0)}, "only 0 and 1"),
     ("labels 0-based", {"GtLabel": np.arange(12.0)}, "labels 1..K"),
     ("labels too few", {"GtLabel": np.ones(5)}, "5 labels for 12 points"),
-    ("labels gap", {"GtLabel": np.r_[np.ones(6), np.full(6, 3.0)]}, "label(s) [1] have no points"),
+    ("labels gap", {"GtLabel": np.r_[np.ones(6), np.full(6, 3.0)]},
+     "Data.GtLabel has no point with motion label(s) [2] (1-based labels must be 1..3"),
 ])
 def test_kt3d_bad_fields(tmp_path, isolated, case, fields, expect):
     path = tmp_path / "bad_Tracks.mat"
