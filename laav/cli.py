@@ -107,8 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
     seg.add_argument("--seed", type=_int_at_least(0), default=0, metavar="S",
                      help="random seed, an integer >= 0 (default 0)")
     seg.add_argument("--out", "-o", metavar="CSV",
-                     help="labels file, or folder to write it in (default: <sequence name>_labels.csv "
-                          "in the current folder, the name reduced to letters, digits and _.+-)")
+                     help="labels file, or folder to write it in (an existing one, or a path ending "
+                          "in /: created) (default: <sequence name>_labels.csv in the current folder, "
+                          "the name reduced to letters, digits and _.+-)")
     seg.add_argument("--preset", choices=tuple(PRESETS), default="default",
                      help="parameters to start from: default (ours), paper (every stage as the "
                           "LAAV paper writes it, LaavParams.paper()) or with-plain-rv (ours with "
@@ -295,7 +296,8 @@ def _add_track(sub) -> None:
                     "name. Needs OpenCV (pip install 'laav[track]').")
     tr.add_argument("video", metavar="VIDEO", help="video file or folder of frames")
     tr.add_argument("--out", "-o", metavar="NPZ",
-                    help="output file (default: <video name>_tracks.npz in the current folder)")
+                    help="output file, or folder to write it in (an existing one, or a path ending "
+                         "in /: created) (default: <video name>_tracks.npz in the current folder)")
     add_track_arguments(tr)
     tr.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
 
