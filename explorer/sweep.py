@@ -74,10 +74,10 @@ class SeedRow:
         Share of points whose final motion is the same as with the sweep's first seed
         (after the best matching of motions, ``1 - misclassification_rate``).
     converged : bool
-        Whether the returned Random Voting trial converged.
+        Whether LAAV's informed trial converged (plain RV, without one: the returned trial),
+        as card 4 says.
     iterations : int
-        Iterations of the returned Random Voting trial (the one ``converged`` is about; what
-        card 4 counts for it).
+        That trial's iterations, as card 4 counts them.
     all_iterations : int
         Random Voting iterations of the run, every trial's (``Voting.n_iterations``).
     seconds : float
@@ -109,9 +109,12 @@ def seed_row(seq: laav.Sequence, result: laav.LaavResult, reference: np.ndarray 
     def f(v):
         return None if v is None else float(v)
 
+    v = result.voting
+    own = v.informed_changed is not None  # LAAV's informed trial, as card 4 describes it
     return SeedRow(int(result.seed), f(num["error_fine"]), f(num["error_coarse"]), f(num["error_final"]),
-                   agree, bool(result.voting.converged), len(result.voting.changed),
-                   int(result.voting.n_iterations), float(seconds), labels)
+                   agree, bool(v.informed_converged if own else v.converged),
+                   len(v.informed_changed if own else v.changed), int(v.n_iterations),
+                   float(seconds), labels)
 
 
 def worst_seed(rows: Sequence[SeedRow]) -> int | None:
@@ -128,7 +131,7 @@ def worst_seed(rows: Sequence[SeedRow]) -> int | None:
             return (-r.agreement, not r.converged)
     if len({key(r) for r in rows}) == 1:
         return None  # every seed scores the same: none is worse
-    return max(rows, key=lambda r: (*key(r), r.iterations)).seed
+    return max(rows, key=lambda r: (*key(r), r.all_iterations)).seed
 
 
 def _pct(v: float | None) -> str:

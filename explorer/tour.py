@@ -53,8 +53,8 @@ TOUR: tuple[TourStep, ...] = (
         "2 · Multicut: cutting the atom graph into fine models",
         "Atoms become the nodes of a graph, an edge blue when one atom's affine motion carries the "
         "other's features forward and back well (join), red when it does not (cut). A minimum cost "
-        "multicut (greedy contraction, replayed by the slider) cuts it into {fine} fine models, on "
-        "purpose more than the C motions.",
+        "multicut (greedy contraction, replayed by the slider) cuts it, and its segments are merged "
+        "or split to {fine} fine models, on purpose more than the C motions.",
         ("graph",), color="fine", color_no_truth="fine"),
     TourStep(
         "3 · Fine-to-coarse: merging fine models into C motions",
@@ -85,7 +85,7 @@ TOUR: tuple[TourStep, ...] = (
         "5 · Result: one motion per point, and its error",
         "Every point now belongs to one of the C motions; with ground truth, the error is the share "
         "of points misassigned under the best matching of motions, shown for every stage. Atoms, the "
-        "merge and the voting are random: after the tour, the Seed sweep card runs seeds 0-9 to show "
-        "whether a result is typical or a bad draw.",
+        "merge and the voting are random: after the tour, the Seed sweep card's button runs seeds 0-9 "
+        "to show whether a result is typical or a bad draw.",
         ("numbers", "frame"), color="errors", color_no_truth="final"),
 )

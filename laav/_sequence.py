@@ -28,7 +28,8 @@ class SequenceError(ValueError):
 
 
 class IncompleteSequenceError(SequenceError):
-    """A sequence with missing entries was given to a stage that needs every point in every frame.
+    """A sequence with missing entries was given to code that needs every point in every
+    frame (:func:`require_complete`; every part of ``laav`` takes incomplete tracks).
 
     Attributes
     ----------
@@ -44,13 +45,13 @@ class IncompleteSequenceError(SequenceError):
         self.n_complete = n_complete
 
 
-def require_complete(seq: Sequence, what: str = "the explorer") -> None:
+def require_complete(seq: Sequence, what: str = "this code") -> None:
     """Raise :class:`IncompleteSequenceError` unless every point of ``seq`` is visible in every frame.
 
     Every part of ``laav`` and the explorer takes incomplete tracks (``docs/ALGORITHM.md``,
-    "Missing data"; :func:`laav.estimate_motions` counts on the tracks seen in every
-    frame), so nothing here calls it any more: it is for a caller's own code that needs
-    whole trajectories, named in ``what``.
+    "Missing data"; :func:`laav.estimate_motions` counts on a stretch of frames and the
+    tracks seen in all of them), so nothing here calls it any more: it is for a caller's own
+    code that needs whole trajectories, named in ``what``.
     """
     if seq.is_complete:
         return
@@ -314,7 +315,7 @@ class Sequence:
                 bad = int((~np.isfinite(pts)).any(axis=(0, 2)).sum())
                 f, q = np.argwhere(~np.isfinite(pts).all(axis=2))[0]
                 hint = ""
-                if not np.isinf(pts).any():  # NaN only: perhaps frames where a point is not seen
+                if self.visible is None and not np.isinf(pts).any():  # NaN only: not seen?
                     hint = ("; if NaN marks a frame where a point is not seen, give `visible` "
                             "(F x P, False there; in an .npz file an array 'visible')")
                 raise SequenceError(f"{src}: {bad} point(s) have NaN or infinite coordinates "

@@ -48,6 +48,16 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer in [0, 2**63), got {text!r}") from None
+    if not 0 <= v < 2**63:
+        raise argparse.ArgumentTypeError(f"expected an integer in [0, 2**63), got {text!r}")
+    return v
+
+
 def _jobs(text: str) -> int:
     try:
         v = int(text)
@@ -104,8 +114,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "ground truth)")
     seg.add_argument("--method", choices=("laav", "rv"), default="laav",
                      help="LAAV (default) or plain Random Voting")
-    seg.add_argument("--seed", type=_int_at_least(0), default=0, metavar="S",
-                     help="random seed, an integer >= 0 (default 0)")
+    seg.add_argument("--seed", type=_seed, default=0, metavar="S",
+                     help="random seed, an integer in [0, 2**63) (default 0)")
     seg.add_argument("--out", "-o", metavar="CSV",
                      help="labels file, or folder to write it in (an existing one, or a path ending "
                           "in /: created) (default: <sequence name>_labels.csv in the current folder, "
@@ -216,8 +226,14 @@ def _load_for_command(args):
 def _cmd_convert(args) -> int:
     from . import SequenceError, save_sequence
 
+    given = str(args.output)
+    if not given.strip():
+        raise _UsageError("OUT is empty: give a file name (.npz, .mat or .csv)")
+    if _names_a_folder(given):
+        raise _UsageError(f"{given}: names a folder; give a file name (.npz, .mat or .csv)")
     seq, _ = _load_for_command(args)
     try:
+        _output_path(given, "")  # its folders, as segment's and track's --out
         out = save_sequence(seq, args.output, args.format)
     except SequenceError as exc:
         raise _UsageError(str(exc)) from None
@@ -308,6 +324,7 @@ def _cmd_track(args) -> int:
 
     # FFmpeg's own log (e.g. "moov atom not found") would add lines to our one-line errors
     os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+    _output_path(args.out, "tracks.npz")  # a bad --out said before the tracking, not after
     try:
         tracks = track(args.video, **track_options(args), progress=False if args.quiet else None)
     except TrackError as exc:
@@ -324,6 +341,13 @@ def _cmd_track(args) -> int:
     return 0
 
 
+def _names_a_folder(given: str) -> bool:
+    """Whether the path ``given`` can only be a folder: it ends with a separator, or its last
+    part is ``.`` or ``..`` (which :class:`pathlib.Path` would drop or keep as a name)."""
+    last = given.replace(os.sep, "/").rsplit("/", 1)[-1]
+    return last in ("", ".", "..")
+
+
 def _output_path(given: str | None, default: str) -> Path:
     """Where a command writes its file: ``default`` (a base name) in the current folder when
     ``--out`` was not given; inside ``given`` when it is a folder or ends with a path
@@ -335,7 +359,7 @@ def _output_path(given: str | None, default: str) -> Path:
     if not given.strip():
         raise _UsageError("--out is empty: give a file or a folder")
     out = Path(given)
-    folder = out if given.endswith(("/", os.sep)) or out.is_dir() else out.parent
+    folder = out if _names_a_folder(given) or out.is_dir() else out.parent
     for part in (folder, *folder.parents):
         if part.exists() and not part.is_dir():
             raise _UsageError(f"{given}: {part} is a file, not a folder")
@@ -359,6 +383,7 @@ def _cmd_segment(args) -> int:
 
     params = params_from_assignments(args.param, args.preset)
     seq, kept = _load_for_command(args)
+    out = _output_path(args.out, f"{safe_name(seq.name)}_labels.csv")  # before the work
     C = args.motions if args.motions is not None else seq.n_motions
     if C is None:
         raise _UsageError(f"{args.file}: no ground-truth labels in the file; give the number "
@@ -381,7 +406,6 @@ def _cmd_segment(args) -> int:
     except ValueError as exc:
         raise _UsageError(_named(args.file, exc)) from None
     # a name read from the file is only ever a base name in the current or given folder
-    out = _output_path(args.out, f"{safe_name(seq.name)}_labels.csv")
     try:
         with open(out, "w", newline="") as fh:
             w = csv.writer(fh)

@@ -91,6 +91,11 @@ class _Estimator(ClusterMixin, BaseEstimator):
         P, F = X.shape[0], X.shape[1] // 2
         points = X.reshape(P, F, 2).transpose(1, 0, 2)
         seen = ~np.isnan(points).any(axis=-1)  # (F, P)
+        few = np.flatnonzero(seen.sum(axis=0) < 2)
+        if few.size:
+            rows = ", ".join(map(str, few[:5].tolist())) + (", ..." if few.size > 5 else "")
+            raise ValueError(f"X: {few.size} row(s) seen in fewer than 2 frames (rows {rows}; a NaN "
+                             "marks a frame where the point is not seen): every trajectory needs 2")
         return Sequence(points, visible=None if seen.all() else seen)
 
     def _fit(self, X, run):
@@ -121,7 +126,8 @@ class LAAV(_Estimator):
     Attributes
     ----------
     labels_ : ndarray of shape (P,), int64
-        Motion of every trajectory.
+        Motion of every trajectory; -1 for one seen (not NaN) in too few frames to decide
+        (missing data: ``result_.unlabelled_reason`` says why), as scikit-learn's noise label.
     result_ : LaavResult
         Every stage's result (``result_.atoms``, ``.graph``, ``.multicut``, ``.coarse``,
         ``.voting``, ``.timings``).
@@ -159,6 +165,7 @@ class RandomVoting(_Estimator):
     Attributes
     ----------
     labels_ : ndarray of shape (P,), int64
+        Motion of every trajectory; -1 as in :class:`LAAV`.
     result_ : Voting
     seed_ : int
     n_features_in_ : int

@@ -241,11 +241,13 @@ def _one_based_gaps(p: Path, labels: np.ndarray, what: str) -> None:
     has, named in the file's own numbers (:class:`laav.Sequence` would name it 0-based)."""
     s = labels
     if not (s.size and np.isfinite(s).all() and np.all(s == np.round(s)) and s.max() <= s.size):
-        return  # (other problems: the Sequence's checks say them)
-    missing = sorted(set(range(1, int(s.max()) + 1)) - set(np.unique(s).astype(int).tolist()))
-    if missing:
-        raise SequenceError(f"{p}: {what} has no point with motion label(s) {missing} (1-based "
-                            f"labels must be 1..{int(s.max())}, every one used)")
+        return  # (other problems, a label above the number of points too: the Sequence says them)
+    top = int(s.max())
+    missing = np.setdiff1d(np.arange(1, top + 1), s.astype(np.int64))
+    if missing.size:
+        shown = ", ".join(map(str, missing[:10].tolist())) + (", ..." if missing.size > 10 else "")
+        raise SequenceError(f"{p}: {what} has no point with motion label(s) [{shown}] (1-based "
+                            f"labels must be 1..{top}, every one used)")
 
 
 def _load_mat(p: Path, mat: dict, lim: tuple[int, int]) -> Sequence:
@@ -410,8 +412,8 @@ def _load_csv(p: Path, header: tuple[str, dict], lim: tuple[int, int]) -> Sequen
             col = by_index.get(int(m.group(2)), f"column {m.group(2)}")
             msg = f"{msg[: m.start()].strip()} in column '{col}' of data row {int(m.group(1)) + 1}"
         elif short := re.match(r"invalid column index (\d+) at row (\d+) with (\d+) columns", msg):
-            # numpy: 0-based line of the file, the header its line 0
-            msg = (f"data row {int(short.group(2))} (line {int(short.group(2)) + 1}) has only "
+            # numpy: the row among the lines it read (blank and # lines not counted)
+            msg = (f"data row {int(short.group(2))} has only "
                    f"{short.group(3)} fields: every row needs a value for each column the header "
                    "names (a track not seen in a frame has no row for that frame)")
         else:  # numpy: 0-based line of the file
@@ -431,8 +433,8 @@ def _load_csv(p: Path, header: tuple[str, dict], lim: tuple[int, int]) -> Sequen
         bad = ~np.isfinite(v) | (v != np.round(v)) | (np.abs(v) > 2.0**53)
         if bad.any():
             first = float(v[bad][0])
-            what = ("whole numbers of at most 2**53" if np.isfinite(first) and first == round(first)
-                    else "whole numbers")
+            what = ("whole numbers of magnitude at most 2**53"
+                    if np.isfinite(first) and first == round(first) else "whole numbers")
             raise SequenceError(f"{p}: column '{name}' must hold {what}, got "
                                 f"{first:g} on data row {_row(bad)}")
     bad = ~np.isfinite(col["x"]) | ~np.isfinite(col["y"])

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._sequence import MIN_POINTS, LaavWarning, Sequence
+from ._sequence import MIN_POINTS, LaavWarning, Sequence, check_degenerate
 from ._threads import single_threaded
 
 __all__ = ["MotionCount", "MotionProfile", "motion_profile", "estimate_motions", "complete_window", "decide",
@@ -184,15 +184,14 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
         warnings.simplefilter("ignore", LaavWarning)
         # never the descent nor the cleaning (NOT_FITTED): the profile's constants were
         # fitted on labellings without them, whatever the caller's settings
-        try:
-            pipe = Pipeline(seq, 2, profile_params() if params is None
-                            else params.replace(**NOT_FITTED), seed)
-        except ValueError as err:  # (its checks ask for C = 2: the caller asked for "auto")
-            msg = str(err)
-            if msg.endswith(" for 2 motions") and " distinct trajector" in msg:
-                raise ValueError(msg[: -len(" for 2 motions")] + ": too few to estimate the "
-                                 "number of motions (it compares 2 or more)") from None
-            raise
+        try:  # (the pipeline below would say "for 2 motions": the caller asked for "auto")
+            check_degenerate(seq, 2)
+        except ValueError:  # its one refusal: fewer than 2 distinct trajectories
+            raise ValueError(f"{seq.source}: fewer than 2 distinct trajectories: nothing to "
+                             "estimate the number of motions from (it compares one motion with "
+                             "a 2-motion labelling)") from None
+        pipe = Pipeline(seq, 2, profile_params() if params is None
+                        else params.replace(**NOT_FITTED), seed)
     atoms = pipe.result.atoms
     res = [np.ravel(r) for r in atoms.residuals if np.size(r)]
     noise2 = float(np.median(np.concatenate(res)) ** 2) if res else 0.0
@@ -377,8 +376,9 @@ def estimate_motions(seq_or_points, max_motions: int = 5, random_state=0, params
     ------
     ValueError
         For a bad ``max_motions`` or too few points (fewer than 8 per motion of C = 2;
-        a smaller sequence has C = 1 only if said so); on a sequence with missing entries,
-        when fewer than 16 tracks are seen in every frame.
+        a smaller sequence has C = 1 only if said so), fewer than 2 distinct trajectories;
+        on a sequence with missing entries, when fewer than 16 tracks are seen in every frame
+        of a stretch of frames.
 
     Notes
     -----

@@ -290,18 +290,22 @@ def test_segment_out_with_a_trailing_separator_is_a_folder(tmp_path, capsys):
     assert (tmp_path / "new").is_dir() and (tmp_path / "new" / "mine_labels.csv").is_file()
     assert main(["segment", str(path), "-o", str(tmp_path / "a" / "b") + "/", *SMALL]) == 0
     assert (tmp_path / "a" / "b" / "mine_labels.csv").is_file()
+    assert main(["segment", str(path), "-o", str(tmp_path / "dot") + "/.", *SMALL]) == 0
+    assert (tmp_path / "dot" / "mine_labels.csv").is_file()  # a folder, not a file "dot"
     capsys.readouterr()
     assert main(["segment", str(path), "-o", "", *SMALL]) == 2
     assert "--out is empty" in capsys.readouterr().err
     (tmp_path / "afile").write_text("x")
     assert main(["segment", str(path), "-o", str(tmp_path / "afile" / "x.csv"), *SMALL]) == 2
-    assert "afile is a file, not a folder" in capsys.readouterr().err
+    out = capsys.readouterr()
+    assert "afile is a file, not a folder" in out.err
+    assert "misclassification" not in out.out  # said before the segmentation, not after
 
 
 def test_seed_and_jobs_are_checked_by_the_parser(tmp_path, capsys):
     seq = make_scene(2, seed=0)
     path = laav.save_sequence(seq, tmp_path / "s.npz")
-    for argv, said in ((["segment", str(path), "--seed", "-1"], "--seed: expected an integer >= 0"),
+    for argv, said in ((["segment", str(path), "--seed", "-1"], "--seed: expected an integer in [0, 2**63)"),
                        (["bench", "--data", str(tmp_path), "--jobs", "0"], "--jobs/-j: expected a positive")):
         with pytest.raises(SystemExit) as exc:
             main(argv)
@@ -315,3 +319,7 @@ def test_convert_to_a_folder_says_so(tmp_path, capsys):
     (tmp_path / "dir").mkdir()
     assert main(["convert", str(path), str(tmp_path / "dir")]) == 2
     assert "is a folder; give a file name" in capsys.readouterr().err
+    assert main(["convert", str(path), str(tmp_path / "new") + "/"]) == 2
+    assert "names a folder; give a file name" in capsys.readouterr().err
+    assert main(["convert", str(path), str(tmp_path / "sub" / "s.csv")]) == 0  # its folder made
+    assert (tmp_path / "sub" / "s.csv").is_file()

@@ -1457,3 +1457,13 @@ def test_a_dropped_votes_fit_is_asked_again(monkeypatch):
         assert "(being fitted)" not in ex.coarse_view.epipolar.caption.object
     finally:
         ex.close()
+
+
+def test_a_seed_beyond_the_slider_widens_it(seq):
+    # a seed from the address or the command line (e.g. 150) is shown by the slider's handle,
+    # not pinned at the slider's usual end (99)
+    ex = Explorer(seq, seed=150, viser=False, start=False)
+    try:
+        assert ex.w_seed.value == 150 and ex.w_seed.end >= 150
+    finally:
+        ex.close()

@@ -13,6 +13,7 @@ from conftest import two_motion_sequence
 
 import laav
 from explorer import sweep as S
+from explorer import views as V
 from explorer.tour import TOUR
 from explorer.views import COLOR_MODES, stage_numbers
 
@@ -62,10 +63,12 @@ def test_sweep_rows_equal_direct_segment_runs():
             num = stage_numbers(seq, direct)
             assert (row.error_fine, row.error_coarse, row.error_final) == pytest.approx(
                 (num["error_fine"], num["error_coarse"], num["error_final"]))
-            assert row.converged == direct.voting.converged
-            # the returned trial's iterations (what card 4 and `converged` are about), and all
-            assert row.iterations == len(direct.voting.changed)
-            assert row.all_iterations == direct.voting.n_iterations >= row.iterations
+            # LAAV's informed trial, as card 4 describes it (its iterations in card 4's line)
+            v = direct.voting
+            assert row.converged == v.informed_converged
+            assert row.iterations == len(v.informed_changed)
+            assert V._rv_line(v, "LAAV").startswith(f"**LAAV:** {row.iterations} iterations, ")
+            assert row.all_iterations == v.n_iterations >= row.iterations
             ref = direct.labels if ref is None else ref
             assert row.agreement == pytest.approx(1 - laav.misclassification_rate(ref, direct.labels))
         assert sw.matches(seq, 2, params) and not sw.matches(seq, 2, laav.LaavParams())
@@ -224,7 +227,7 @@ def test_three_cars_worst_seed_is_one_click_away(hopkins_root):
         rows = ex.sweep_view.sweep.rows
         direct = [stage_numbers(seq, laav.segment(seq, 3, params, seed=s)) for s in S.SEEDS]
         worst = max(S.SEEDS, key=lambda s: (direct[s]["error_final"], direct[s]["error_coarse"],
-                                            direct[s]["error_fine"], rows[s].iterations))
+                                            direct[s]["error_fine"], rows[s].all_iterations))
         assert len({d["error_coarse"] for d in direct}) > 1  # the seeds differ here
         assert S.worst_seed(rows) == worst
         assert [r.error_coarse for r in rows] == pytest.approx([d["error_coarse"] for d in direct])

@@ -296,12 +296,12 @@ def test_csv_gaps_become_missing_entries(tmp_path):
      "in column 'x' of data row 2"),
     ("track text", "track,frame,x,y\ncar,0,1,2\n", "in column 'track' of data row 1"),
     ("empty field", "track,frame,x,y,label\n0,0,1,2,\n", "in column 'label' of data row 1"),
-    ("short row", "track,frame,x,y\n0,0,1,2\n0,1,3\n", "data row 2 (line 3) has only 3 fields: every "
+    ("short row", "track,frame,x,y\n0,0,1,2\n0,1,3\n", "data row 2 has only 3 fields: every "
      "row needs a value for each column the header names"),
     ("fractional frame", "track,frame,x,y\n0,0,1,2\n0,1.5,1,2\n", "column 'frame' must hold whole "
      "numbers, got 1.5 on data row 2"),
     ("huge track id", "track,frame,x,y\n1e300,0,1,2\n", "column 'track' must hold whole numbers of "
-     "at most 2**53, got 1e+300 on data row 1"),
+     "magnitude at most 2**53, got 1e+300 on data row 1"),
     ("nan x", "track,frame,x,y\n0,0,1,2\n0,1,nan,2\n", "NaN or infinite coordinate on data row 2 (a track "
      "not seen in a frame has no row"),
     ("inf y", "track,frame,x,y\n0,0,1,2\n0,1,1,-inf\n", "NaN or infinite coordinate on data row 2"),

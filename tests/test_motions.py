@@ -240,7 +240,7 @@ def test_auto_on_identical_trajectories_does_not_speak_of_two_motions():
     # the caller asked for "auto", not for 2 motions
     pts = np.tile(np.random.default_rng(0).normal(size=(10, 1, 2)) * 50, (1, 30, 1))
     seq = laav.Sequence(pts, name="same", source="same.npz")
-    with pytest.raises(ValueError, match=r"^same.npz: only 1 distinct trajectory: too few to "
-                                         r"estimate the number of motions") as exc:
+    with pytest.raises(ValueError, match=r"^same.npz: fewer than 2 distinct trajectories: nothing "
+                                         r"to estimate the number of motions from") as exc:
         laav.segment(seq, "auto")
     assert "2 motions" not in str(exc.value)
