@@ -361,7 +361,8 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
             sel = m[first[m] < 0]
             first[sel] = i
         color = _palette(first, ATOM_COLORS)
-        label = np.where(first >= 0, "in an atom (colour = atom)", "in no atom (grey)")
+        # one legend entry: the points in no atom have the × mark's own entry ("in no atom: N")
+        label = np.full(P, "point (colour = its atom; grey: in no atom)")
     elif mode == "fine":
         lab = np.asarray(result.coarse.fine_point_labels, dtype=np.int64)
         fc, mot = fine_colors(seq, result, ref), fine_motions(seq, result, ref)

@@ -97,6 +97,16 @@ def test_every_view_gives_a_motion_one_colour_and_shape(demo):
     assert len(fs["points"]["marker"]) == seq.n_points
 
 
+def test_the_atoms_colouring_has_one_legend_entry_for_its_points(demo):
+    # the points in no atom have the × mark's own entry ("in no atom: N"); a second entry
+    # for their grey fill said the same thing twice (tour step 1's legend)
+    seq, res = demo
+    st = V.point_style(seq, res, "atoms")
+    assert len(set(st["label"].tolist())) == 1
+    unassigned = np.asarray(res.atoms.unassigned)
+    assert unassigned.size and set(st["color"][unassigned].tolist()) == {V.UNLABELLED}
+
+
 def test_fine_models_are_shades_of_the_motion_they_joined(demo):
     seq, res = demo
     mot = V.fine_motions(seq, res)
