@@ -571,8 +571,8 @@ def save_sequence(seq: Sequence, path: str | os.PathLike, format: str | None = N
     Raises
     ------
     SequenceError
-        For an unknown extension or format, an incomplete sequence as ``"hopkins"``, or an
-        empty frame as ``"csv"``.
+        For a path that is a folder, an unknown extension or format, an incomplete sequence
+        as ``"hopkins"``, or an empty frame as ``"csv"``.
     """
     p = Path(path)
     fmt = _save_format(seq, p, format)
