@@ -173,6 +173,15 @@ def explorer():
     ex.close()
 
 
+def test_the_summary_counts_bad_seeds_per_stage(explorer):
+    # coarse errors above 1 % on every seed but the final labels right: the caption must not
+    # read as if the final stage failed on them
+    rows = [_row(s, 0.0, 0.058, 0.0) for s in range(9)] + [_row(9, 0.0, 0.058, 0.02)]
+    text = explorer.sweep_view._summary(rows)
+    assert "above 1 %: 1 of 10 seeds at the final stage, 10 at the coarse stage" in text
+    assert "**Worst: seed 9**" in text
+
+
 def test_card_runs_loads_a_seed_and_is_cancelled_by_a_parameter_change(explorer):
     ex = explorer
     card = ex.sweep_view

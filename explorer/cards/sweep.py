@@ -167,12 +167,13 @@ class SweepView:
         r = next(r for r in rows if r.seed == worst)
         if r.error_final is not None:
             finals = [x.error_final for x in rows]
-            bad = sum(x.error_final > 0.01 or (x.error_coarse or 0) > 0.01 for x in rows)
+            bad_final = sum(x.error_final > 0.01 for x in rows)
+            bad_coarse = sum((x.error_coarse or 0) > 0.01 for x in rows)
             return (f"**Worst: seed {worst}** (fine {100 * (r.error_fine or 0):.1f} %, coarse "
                     f"{100 * (r.error_coarse or 0):.1f} %, final {100 * r.error_final:.1f} %). "
-                    f"Final error over the seeds: mean {100 * sum(finals) / len(finals):.1f} %, "
-                    f"{bad} of {len(rows)} seeds above 1 % at the coarse or final stage. "
-                    "Click a row to load that seed.")
+                    f"Final error over the seeds: mean {100 * sum(finals) / len(finals):.1f} %; "
+                    f"above 1 %: {bad_final} of {len(rows)} seeds at the final stage, "
+                    f"{bad_coarse} at the coarse stage. Click a row to load that seed.")
         agree = [x.agreement for x in rows[1:]]
         conv = sum(x.converged for x in rows)
         return (f"No ground truth: the table compares each seed's final labels with seed {rows[0].seed}'s. "
