@@ -185,8 +185,8 @@ class Origin:
 
     def motions_note(self, n_motions: int) -> str:
         """Where C = ``n_motions`` (the one computed) comes from, for a file without ground truth."""
-        if self.motions_estimate is None:
-            return f"C = {n_motions} is taken from the C box."
+        if self.motions_estimate is None:  # (the command's --motions, or the box since)
+            return f"C = {n_motions} as given (--motions or the C box); the C box changes it."
         if n_motions == self.motions_estimate:
             return f"C = {n_motions} was estimated: {self.motions_reason}. The C box changes it."
         return f"C = {n_motions} is taken from the C box (estimated: {self.motions_estimate})."

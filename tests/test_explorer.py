@@ -1102,6 +1102,8 @@ def test_cli_estimates_c_for_a_file_without_ground_truth(monkeypatch, tmp_path, 
     assert "taken from the C box (estimated: " in prov.motions_note(expected + 1)
     assert main([str(f), "--no-browser", "--port", "0", "--motions", "3"]) == 0
     assert seen["n_motions"] == 3 and seen["origin"].motions_estimate is None
+    # C from --motions: not said to come from the C box
+    assert seen["origin"].motions_note(3).startswith("C = 3 as given (--motions or the C box)")
 
 
 def test_complete_only_exports_the_files_point_numbers(monkeypatch, tmp_path, capsys):

@@ -199,3 +199,25 @@ def test_the_3d_view_draws_only_visible_samples(occ, monkeypatch):
         assert np.isfinite(drawn["/atoms"]).all()
     finally:
         ex.close()
+
+
+def test_titles_fit_when_not_every_point_voted_and_without_ground_truth():
+    # card 4's title with the voted count was cut off beside the toolbar; card 5's title
+    # spoke of a ground truth the sequence does not have
+    from explorer.cards.numbers import CARD_TITLES
+    from explorer.cards.rv import ERROR_TITLES, VOTED_AXIS
+
+    assert len(VOTED_AXIS.format(k=12345, p=12345)) <= 32  # the axis's 235 px
+    seq = laav.synthetic.make_sequence(n_objects=1, n_frames=12, n_points=160, rng=0)
+    bare = laav.Sequence(seq.points, name="bare")
+    ex = Explorer(bare, 2, params=laav.LaavParams(rv_max_points=100), viser=False)
+    try:
+        assert ex.wait(120)
+        assert ex.result.voting.voted.size == 100
+        fig = ex.rv_view.fig_error
+        assert fig.title.text == ERROR_TITLES[False]  # as short as with every point voting
+        assert fig.yaxis.axis_label == "% of the 100 voted (of 160)"
+        assert ex.numbers_view.card.title == CARD_TITLES[False]
+        assert "ground truth" not in CARD_TITLES[False].split(":")[1].replace("no ground truth", "")
+    finally:
+        ex.close()

@@ -187,7 +187,11 @@ class FrameView:
         self._caption = (
             f"{res.atoms.n_atoms} atoms (R1 = {res.atoms.r1:g} px solid, R2 = {res.atoms.r2:g} px dashed, "
             f"drawn at their seeds); {np.asarray(res.atoms.unassigned).size} features in no atom (×); "
-            f"{errors}. Click legend entries to hide them.")
+            f"{errors}"
+            # (incomplete tracks: a frame shows only the points seen in it, and so does its legend)
+            + ("" if seq.is_complete else "; these counts are over every frame, the legend's over "
+               "the points seen in this one")
+            + ". Click legend entries to hide them.")
         self.caption.object = self._caption + self._background_text(seq, f)
         live.commit(f)
 

@@ -6,16 +6,22 @@ from __future__ import annotations
 from .. import views as V
 from .base import Markdown, card
 
+#: Card 5's title with and without ground truth (a sequence without one has no error).
+CARD_TITLES = {True: "5 · Final labels and numbers: every stage against the ground truth",
+               False: "5 · Final labels and numbers: every stage (no ground truth: no error)"}
+
 
 class NumbersView:
     def __init__(self) -> None:
         self.numbers = Markdown("", sizing_mode="stretch_width", margin=(0, 10))
-        self.card = card("5 · Final labels and numbers: every stage against the ground truth",
-                         self.numbers)
+        self.card = card(CARD_TITLES[True], self.numbers)
 
     def draw(self, seq, res, plain) -> dict:
         """Show the numbers of ``res`` (and of ``plain``, plain RV's run, when there); returns
         them (:func:`views.stage_numbers`)."""
         num = V.stage_numbers(seq, res, plain)
+        title = CARD_TITLES[seq.labels is not None]
+        if self.card.title != title:
+            self.card.title = title
         self.numbers.object = V.numbers_markdown(num)
         return num

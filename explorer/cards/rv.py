@@ -16,6 +16,9 @@ RV_TOOLS = "pan,wheel_zoom,reset"
 #: The error chart's title with and without ground truth.
 ERROR_TITLES = {True: "Error per iteration (vs ground truth)",
                 False: "Points off the trial's last labels"}
+#: The error plot's y axis when not every point voted: ``{k}`` of ``{p}`` points (in the
+#: title, beside the toolbar, "(the K of P points that voted)" was cut off).
+VOTED_AXIS = "% of the {k} voted (of {p})"
 
 
 class RVView:
@@ -84,8 +87,9 @@ class RVView:
         shown = laav_voting if laav_voting is not None else plain
         some = shown is not None and shown.voted is not None and shown.voted.size < seq.n_points
         self.fig_error.title.text = ERROR_TITLES[seq.labels is not None] + (
-            "" if drawn else ": not recorded (no trial ran)") + (
-            f" (the {shown.voted.size} of {seq.n_points} points that voted)" if some else "")
+            "" if drawn else ": not recorded (no trial ran)")
+        self.fig_error.yaxis.axis_label = (VOTED_AXIS.format(k=shown.voted.size, p=seq.n_points)
+                                           if some else "% of points")
         set_data(self.src_err_laav, own)
         set_data(self.src_err_plain, other)
         self.plain = plain
