@@ -245,6 +245,12 @@ def _aligned(seq: laav.Sequence, result: laav.LaavResult, ref=None) -> dict:
     return {"gt": gt, "coarse": coarse, "final": final}
 
 
+def stage_name(stage: str) -> str:
+    """A stage of :data:`ERROR_STAGE` as the page names it: ``"plain RV"`` for ``"plain"``
+    (plain Random Voting is no stage of LAAV's), the stage itself otherwise."""
+    return "plain RV" if stage == "plain" else stage
+
+
 def shown_labels(seq: laav.Sequence, result: laav.LaavResult, ref=None) -> dict:
     """The coarse and final labels as the views number (and colour) them: matched to the
     ground truth; without one to ``ref`` (another result's shown final labels, so two
@@ -387,9 +393,8 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
             label = np.where(un, UNSEEN_LABEL, label)
     elif mode.startswith("errors"):
         color = np.where(wrong, ERROR_MARK, np.where(scored, CORRECT, "#EEEEEE")).astype("U7")
-        short = "plain RV" if stage == "plain" else stage
-        label = np.where(wrong, f"misclassified ({short})",
-                         np.where(scored, f"correct ({short})", "not labelled at this stage"))
+        label = np.where(wrong, f"misclassified ({stage_name(stage)})",
+                         np.where(scored, f"correct ({stage_name(stage)})", "not labelled at this stage"))
         un = _unlabelled(result) if stage == "final" else (
             np.asarray(plain.labels) < 0 if stage == "plain" and plain is not None else None)
         if un is not None and un.any():  # an error too (as the metrics count it), own marker
@@ -1414,7 +1419,7 @@ def labels_table(seq: laav.Sequence, result: laav.LaavResult,
     so that the columns before them keep their places.
     """
     st = result.stage_labels()
-    shown = _aligned(seq, result)["final"]
+    shown = shown_labels(seq, result)["final"]
     owner = np.asarray(result.atoms.owner)
     n_atoms = result.atoms.membership().sum(axis=0)  # (P,)
     ids = np.arange(seq.n_points) if point_ids is None else np.asarray(point_ids)

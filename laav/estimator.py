@@ -91,12 +91,8 @@ class _Estimator(ClusterMixin, BaseEstimator):
         P, F = X.shape[0], X.shape[1] // 2
         points = X.reshape(P, F, 2).transpose(1, 0, 2)
         seen = ~np.isnan(points).any(axis=-1)  # (F, P)
-        few = np.flatnonzero(seen.sum(axis=0) < 2)
-        if few.size:
-            rows = ", ".join(map(str, few[:5].tolist())) + (", ..." if few.size > 5 else "")
-            raise ValueError(f"X: {few.size} row(s) seen in fewer than 2 frames (rows {rows}; a NaN "
-                             "marks a frame where the point is not seen): every trajectory needs 2")
-        return Sequence(points, visible=None if seen.all() else seen)
+        # (its checks name X's rows as points, e.g. one seen in fewer than 2 frames)
+        return Sequence(points, visible=None if seen.all() else seen, source="X (rows = points)")
 
     def _fit(self, X, run):
         seq = self._sequence(X)

@@ -93,7 +93,7 @@ def test_single_motion():
 @pytest.mark.parametrize("bad, match", [
     (np.zeros((12, 2, 120)), r"shape \(P, 2F\)"),       # (F, P, 2)-like 3-D input
     (np.zeros((120, 7)), "even number of columns"),
-    (np.full((120, 24), np.nan), r"X: 120 row\(s\) seen in fewer than 2 frames \(rows 0, 1, 2, 3, 4, "),
+    (np.full((120, 24), np.nan), r"X \(rows = points\): 120 point\(s\) are visible in fewer than 2 "),
     (np.full((120, 24), np.inf), "infinity"),
     (np.ones((120, 2)), "minimum of 4"),                 # one frame
     (np.ones((3, 24)), "minimum of 8"),                  # three trajectories

@@ -175,12 +175,12 @@ class FrameView:
             self._item_changed.label = value(live.text("frame_changed", "changed motion: {n:frame_changed}",
                                                        f, named))
         stage = style.get("stage", "final")
-        short = "plain RV" if stage == "plain" else stage  # (plain RV is no stage of LAAV's)
         if self._item_errors is not None:
             self._item_errors.label = value(live.text(
-                "frame_errors", f"misclassified ({short}): {{n:frame_errors}}" if seq.labels is not None
+                "frame_errors", f"misclassified ({V.stage_name(stage)}): {{n:frame_errors}}"
+                if seq.labels is not None
                 else "misclassified: (no truth)", f, named))
-        by = "plain RV" if stage == "plain" else f"the {stage} stage"
+        by = V.stage_name(stage) if stage == "plain" else f"the {stage} stage"
         errors = (f"{int(style['misclassified'].sum())} points misclassified by {by} (black "
                   "ring; the colour-by choice picks the stage)" if seq.labels is not None else
                   "no ground truth, so no point is marked misclassified")
