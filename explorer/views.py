@@ -18,7 +18,8 @@ from laav.metrics import matched_counts
 from laav.noise import threshold_factor
 
 __all__ = [
-    "COLOR_MODES", "COLOR_LABELS", "ERROR_STAGE", "stage_errors", "MOTION_COLORS", "MOTION_MARKERS",
+    "COLOR_MODES", "TRUTH_MODES", "COLOR_LABELS", "ERROR_STAGE", "stage_errors", "MOTION_COLORS",
+    "MOTION_MARKERS",
     "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "UNSEEN", "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at",
     "incomplete_note", "result_notes", "counted",
     "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
@@ -48,6 +49,8 @@ COLOR_MODES = {
     "errors: final": "errors",
     "errors: plain RV": "errors_plain",
 }
+#: The colour modes that need ground truth (not offered for a sequence without it).
+TRUTH_MODES = frozenset(mode for mode in COLOR_MODES.values() if mode == "gt" or mode.startswith("errors"))
 #: A colour mode's label in the page (COLOR_MODES inverted).
 COLOR_LABELS = {mode: label for label, mode in COLOR_MODES.items()}
 #: The stage whose errors a colour mode marks (black rings / black points).
@@ -350,7 +353,7 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
     if mode in ("plain", "errors_plain") and plain is None:
         note = "plain RV is still computing: showing the final labels until it is ready"
         mode = "final" if mode == "plain" else "errors"
-    if (mode == "gt" or mode.startswith("errors")) and gt is None:
+    if mode in TRUTH_MODES and gt is None:
         note = "this sequence has no ground truth: showing the final labels"
         mode = "final"
     stage = ERROR_STAGE[mode]

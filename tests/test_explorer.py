@@ -295,9 +295,15 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     # the frame view's caption does not count errors it cannot score
     assert "no ground truth, so no point is marked misclassified" in ex.frame_view.caption.object
     assert ex.w_color.value == "final (after Random Voting)"
-    # asked to colour by a ground truth it does not have: the title names what is drawn
-    ex.w_color.value = "ground truth"
-    assert ex.wait(60) and "colour: final" in ex.frame_view.fig.title.text
+    # no colouring that needs the ground truth it does not have is offered
+    assert "ground truth" not in ex.w_color.options and "atoms" in ex.w_color.options
+    assert not [o for o in ex.w_color.options if o.startswith("errors")]
+    ex.controls.set_color_mode("errors")
+    assert ex.w_color.value == "final (after Random Voting)"
+    # ... nor asked for by a URL: said, and the final labels shown
+    problems = ex.apply_query({"color": ["gt"]})
+    assert len(problems) == 1 and "color=gt needs a ground truth" in problems[0]
+    assert ex.w_color.value == "final (after Random Voting)"
     from explorer import export  # the PNG's frame panel too
 
     fig = export.views_figure(ex.sequence, ex.result, 0, "gt", plain=None)

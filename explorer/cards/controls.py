@@ -90,7 +90,10 @@ class Controls:
         return V.COLOR_MODES[self.w_color.value]
 
     def set_color_mode(self, mode: str) -> None:
-        self.w_color.value = V.COLOR_LABELS[mode]
+        """Colour by ``mode`` (a :data:`views.COLOR_MODES` key); a mode that needs ground truth
+        (:data:`views.TRUTH_MODES`) on a sequence without it is not offered: the final labels."""
+        label = V.COLOR_LABELS[mode]
+        self.w_color.value = label if label in self.w_color.options else V.COLOR_LABELS["final"]
 
     # ------------------------------------------------------------------ widgets -> request
     def _fine_models(self, v: int, C: int):
@@ -225,13 +228,17 @@ class Controls:
             self.w_frame.value = 0
 
     def fit_color(self, seq, shown_seq) -> None:
-        """No truth-based colouring for a sequence without truth; the truth again for one with
-        it after one without (``shown_seq``: the sequence shown until now, None at first)."""
-        mode = self.color_mode
-        if seq.labels is None and (mode == "gt" or mode.startswith("errors")):
-            self.w_color.value = "final (after Random Voting)"
-        elif seq.labels is not None and shown_seq is not None and shown_seq.labels is None:
-            self.w_color.value = "ground truth"
+        """The colourings ``seq`` can show: without ground truth, none that needs it
+        (:data:`views.TRUTH_MODES`; one chosen becomes the final labels), and the truth again
+        for a sequence with it after one without (``shown_seq``: the sequence shown until
+        now, None at first)."""
+        has_truth = seq.labels is not None
+        if not has_truth and self.color_mode in V.TRUTH_MODES:
+            self.w_color.value = V.COLOR_LABELS["final"]
+        elif has_truth and shown_seq is not None and shown_seq.labels is None:
+            self.w_color.value = V.COLOR_LABELS["gt"]
+        self.w_color.options = [label for label, mode in V.COLOR_MODES.items()
+                                if has_truth or mode not in V.TRUTH_MODES]
 
 
 def _whole(v):
