@@ -22,7 +22,8 @@ __all__ = [
     "MOTION_MARKERS",
     "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "UNSEEN", "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at",
     "incomplete_note", "result_notes", "counted",
-    "NO_ATOM", "CHANGED_MARK", "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
+    "NO_ATOM", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line", "motion_color", "motion_marker",
+    "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "raw_style", "points_source", "frame_sources",
     "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
@@ -1289,7 +1290,11 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Votin
     (``coverage`` of them); ``error_final`` on all points; ``error_plain``: plain RV from a
     random start (``plain``, with the same sequence, C, seed and RV settings) on all points.
     Errors are None without ground truth (``error_plain`` also before plain RV is given).
-    ``plain_iterations`` / ``plain_converged`` describe that run. ``timings_ms`` per stage,
+    ``plain_iterations`` / ``plain_converged`` describe that run; ``plain_disagreement``: the
+    share of points LAAV's final labels and plain RV's label differently, motions matched one
+    to one (:func:`laav.misclassification_rate` of one against the other; a point LAAV left
+    unlabelled counts as a difference), with or without ground truth: on tracks without one
+    it is the only check of the result the page can give. ``timings_ms`` per stage,
     ``total_ms``. ``n_unlabelled``: points the final stage left unlabelled (-1, seen too
     briefly; missing data only), counted as errors in ``error_final`` as
     :func:`laav.misclassification_rate` does; ``visible_share`` of the sequence's entries.
@@ -1321,6 +1326,8 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Votin
     out["error_plain"] = None
     out["plain_iterations"] = None if plain is None else len(plain.changed)
     out["plain_converged"] = None if plain is None else bool(plain.converged)
+    out["plain_disagreement"] = None if plain is None else float(
+        laav.misclassification_rate(np.asarray(st["final"]), np.asarray(plain.labels)))
     if gt is not None and plain is not None:
         out["error_plain"] = float(laav.misclassification_rate(gt, np.asarray(plain.labels)))
     return out
@@ -1367,6 +1374,28 @@ def _plain_result(num: dict) -> str:
     return f"{it} iterations, " + ("converged" if num.get("plain_converged") else "hit the iteration cap")
 
 
+#: LAAV and plain RV disagreeing on more than this share of the points: one of them is wrong
+#: on at least half as many (the numbers card says so).
+DISAGREEMENT_WARN = 0.10
+
+
+def disagreement_line(num: dict) -> str | None:
+    """One sentence on how far LAAV's final labels and plain RV's differ (None before plain
+    RV is computed); above :data:`DISAGREEMENT_WARN` of the points, without ground truth, a
+    hint where to look."""
+    d = num.get("plain_disagreement")
+    if d is None:
+        return None
+    n = int(round(d * num["n_points"]))
+    text = (f"they label {n} of the {num['n_points']} points differently ({_pct(d)}; motions "
+            "matched one to one)")
+    if d > DISAGREEMENT_WARN and num.get("error_final") is None:
+        text += (": without a ground truth this is the warning sign; at least one of them is "
+                 f"wrong on {_pct(d / 2)} or more of the points. Compare them: colour points by "
+                 f"*{COLOR_LABELS['plain']}*")
+    return text
+
+
 def numbers_markdown(num: dict) -> str:
     """The numbers view as a Markdown table (one row per stage)."""
     t = num["timings_ms"]
@@ -1395,6 +1424,9 @@ def numbers_markdown(num: dict) -> str:
         f"| *plain RV* (random start; same C, seed, RV settings) | {_plain_result(num)} | "
         f"{_pct(num.get('error_plain'))} (all points) | |",
     ]
+    dis = disagreement_line(num)
+    if dis:
+        rows.append(f"| *LAAV against plain RV* | {dis} | | |")
     noise = noise_line(num)
     if noise:
         rows.append(f"| *pixel noise* | {noise} | | |")

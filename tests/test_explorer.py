@@ -6,6 +6,7 @@ thread; ``Explorer.wait()`` blocks until the newest request's result is on the v
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import re
@@ -106,6 +107,30 @@ def test_views_are_pure_functions_of_the_result(seq):
     num = V.stage_numbers(seq, res)
     assert 0 <= num["error_final"] <= 1 and num["n_atoms"] == res.atoms.n_atoms
     assert "Random Voting" in V.numbers_markdown(num)
+
+
+def test_disagreement_with_plain_rv_warns_only_without_ground_truth(seq):
+    res = laav.Pipeline(seq, int(seq.labels.max()) + 1).result
+    lab = np.asarray(res.labels)
+    C = int(lab.max()) + 1
+    wrong = lab.copy()
+    wrong[: seq.n_points // 4] = (lab[: seq.n_points // 4] + 1) % C  # a quarter moved
+    plain = laav.random_voting(seq, C, seed=0)
+    far = dataclasses.replace(plain, labels=wrong)
+    unlabelled = dataclasses.replace(seq, labels=None)
+    d = laav.misclassification_rate(lab, wrong)
+    assert d > V.DISAGREEMENT_WARN
+    for s_, warned in ((seq, False), (unlabelled, True)):
+        num = V.stage_numbers(s_, res, far)
+        assert num["plain_disagreement"] == pytest.approx(d)
+        line = V.disagreement_line(num)
+        assert line.startswith(f"they label {round(d * seq.n_points)} of the {seq.n_points} points")
+        assert ("warning sign" in line) is warned
+        assert ("LAAV against plain RV" in V.numbers_markdown(num))
+    # the same labels: no difference, no warning; before plain RV: no line
+    same = V.stage_numbers(unlabelled, res, dataclasses.replace(plain, labels=lab.copy()))
+    assert same["plain_disagreement"] == 0 and "warning" not in V.disagreement_line(same)
+    assert V.disagreement_line(V.stage_numbers(unlabelled, res)) is None
 
 
 def test_align_labels_renames_to_the_reference():
@@ -976,6 +1001,11 @@ def test_stage_errors_plain_rv_numbers_and_replay_reset():
         # plain RV's error beside LAAV's in the numbers card
         num = V.stage_numbers(seq, res, plain)
         assert f"{100 * num['error_plain']:.1f} %" in ex.numbers.object and "plain RV" in ex.numbers.object
+        # ... and how far the two labellings are apart (the check left without ground truth)
+        d = laav.misclassification_rate(res.labels, plain.labels)
+        assert num["plain_disagreement"] == pytest.approx(d)
+        assert f"they label {round(d * seq.n_points)} of the {seq.n_points} points differently" \
+            in ex.numbers.object
         # colouring by the coarse stage rings the coarse stage's mistakes (the demo's coarse
         # stage is wrong on some points; the old view said "misclassified: 0" here)
         ex.w_color.value = "coarse (atoms merged)"
