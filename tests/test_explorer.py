@@ -333,6 +333,12 @@ def test_good_upload_replaces_the_sequence(ex, seq):
 
     fig = export.views_figure(ex.sequence, ex.result, 0, "gt", plain=None)
     assert fig.axes[0].get_title().startswith("Frame 0, coloured by final")
+    # back to a sequence with ground truth: every colouring offered again, the truth shown
+    buf = io.BytesIO()
+    np.savez(buf, points=seq.points, labels=seq.labels)
+    assert ex.load_bytes(buf.getvalue(), "labelled.npz") and ex.wait(60)
+    assert ex.sequence.labels is not None
+    assert list(ex.w_color.options) == list(V.COLOR_MODES) and ex.w_color.value == "ground truth"
 
 
 def test_reset_restores_defaults(ex):
