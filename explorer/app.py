@@ -82,7 +82,7 @@ BUSY_SHOW_AFTER_S = 0.25
 SHORTCUTS = {
     **{n: f"controls.{n}" for n in ("w_frame", "w_color", "w_params", "w_seed", "w_motions", "w_reset")},
     **{n: f"files.{n}" for n in ("w_upload", "w_dl_csv", "w_dl_json", "w_dl_png", "seq_info")},
-    **{n: f"status_bar.{n}" for n in ("alert", "note", "url_alert", "status", "change_md")},
+    **{n: f"status_bar.{n}" for n in ("alert", "note", "url_alert", "check_alert", "status", "change_md")},
     **{n: f"frame_view.{n}" for n in ("w_layers", "src_points", "src_atoms", "src_errors", "src_changed",
                                       "r_changed")},
     "fig_frame": "frame_view.fig", "frame_caption": "frame_view.caption",
@@ -441,7 +441,7 @@ class Explorer:
         # cards in the order of the stages; each lays its parts out in a wrapping FlexBox, so
         # they sit side by side on a wide screen and stack on a projector (1024 px)
         self.main = [
-            s.line, s.alert, s.url_alert, s.note, self.tour.panel, self.compare.card,
+            s.line, s.alert, s.check_alert, s.url_alert, s.note, self.tour.panel, self.compare.card,
             self.frame_view.card, self.view3d.card, self.graph_view.card, self.coarse_view.card,
             self.rv_view.card, self.numbers_view.card, self.sweep_view.card,
         ]
@@ -752,6 +752,7 @@ class Explorer:
                 self.coarse_view.epipolar.draw(seq, result)
                 self.rv_view.draw(seq, result.voting, plain, pending=preview)
                 num = self.numbers_view.draw(seq, result, plain)
+                self.status_bar.show_check(num)
                 s = self.status_bar
                 s.alert.visible = self.state.error is not None
                 data_notes = []  # about the data: kept when the colour mode changes
@@ -807,6 +808,7 @@ class Explorer:
         fm.end = max(fm.end, 4 * settings.n_motions)
         self.files.show_sequence(seq)
         self.status_bar.show_sequence(seq)
+        self.sweep_view.show_sequence(seq)
         self.files.name_downloads(seq)
         c.fit_color(seq, self._seq_shown)
         c.sync_to(settings)
@@ -842,7 +844,7 @@ class Explorer:
             return
         with self.hold():
             self.rv_view.draw(self.sequence, self.result.voting, voting)
-            self.numbers_view.draw(self.sequence, self.result, voting)
+            self.status_bar.show_check(self.numbers_view.draw(self.sequence, self.result, voting))
             if self.controls.color_mode in ("plain", "errors_plain"):
                 self._color_now()
             else:

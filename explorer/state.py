@@ -46,7 +46,7 @@ from laav._interrupt import check as check_interrupt
 from laav.params import _BOUNDS
 from laav.voting import NOT_PLAIN_FIELDS, SELECTION_FIELDS
 
-from .views import COLOR_MODES, align_labels, stage_numbers
+from .views import COLOR_MODES, TRUTH_MODES, align_labels, stage_numbers
 
 __all__ = ["ExplorerState", "Superseded", "Cancelled", "Settings", "RV_FIELDS", "Change", "describe_change",
            "non_defaults", "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of",
@@ -375,8 +375,9 @@ def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings
 
                 view["tour"] = _whole("tour", raw, 1, len(TOUR))
             elif key == "color":
-                if str(raw) not in VIEW_COLORS:
-                    raise ValueError(f"color must be one of {', '.join(VIEW_COLORS)}, got {str(raw)[:40]!r}")
+                if str(raw) not in VIEW_COLORS:  # (those this sequence can show)
+                    shown = [c for c in VIEW_COLORS if seq.labels is not None or c not in TRUTH_MODES]
+                    raise ValueError(f"color must be one of {', '.join(shown)}, got {str(raw)[:40]!r}")
                 view["color"] = str(raw)
             else:
                 raise ValueError(f"unknown setting {str(key)[:40]!r}")

@@ -6,8 +6,9 @@ so one result can be a typical one or a bad draw. :class:`SeedSweep` runs
 on its own worker thread, and reports each seed's :class:`SeedRow` as it is done: every
 stage's error against the ground truth (fine models, coarse, final; the same measures as
 the Numbers card, :func:`explorer.views.stage_numbers`) or, without ground truth, the
-share of points on which the seed agrees with the first seed's final labels, and how
-Random Voting converged.
+share of points on which the seed agrees with the first seed's final labels and the
+segmentation it gives (seeds grouped by their final labels, :func:`segmentation_groups`),
+and how Random Voting converged.
 
 Each seed's :class:`laav.Pipeline` (whose result equals :func:`laav.segment`'s) can be
 handed on (``on_pipeline``): the explorer keeps it, so that a click on the seed's row
@@ -37,7 +38,7 @@ from .state import Cancelled
 from .views import stage_numbers
 
 __all__ = ["SEEDS", "SeedRow", "SweepKey", "SeedSweep", "seed_row", "worst_seed", "table_columns",
-           "header_line", "row_line"]
+           "header_line", "row_line", "segmentation_groups", "group_name", "SAME_SEGMENTATION"]
 
 #: The seeds one sweep runs.
 SEEDS = tuple(range(10))
@@ -117,18 +118,44 @@ def seed_row(seq: laav.Sequence, result: laav.LaavResult, reference: np.ndarray 
                    float(seconds), labels)
 
 
+#: Without ground truth, two seeds give the same segmentation when their final labels agree
+#: on at least this share of the points (motions matched one to one).
+SAME_SEGMENTATION = 0.99
+
+
+def segmentation_groups(rows: Sequence[SeedRow]) -> list[list[int]]:
+    """The rows (indices) grouped by the segmentation they give, in seed order: a row joins
+    the first group whose first row's final labels agree with its own on at least
+    :data:`SAME_SEGMENTATION` of the points, else starts a group. Without ground truth the
+    sweep shows these groups, not a "worst" seed: which of two segmentations is right, the
+    seeds cannot say (and agreement with seed 0 would make seed 0's the reference)."""
+    groups: list[list[int]] = []
+    for i, r in enumerate(rows):
+        for g in groups:
+            first = rows[g[0]].labels
+            if 1.0 - float(laav.misclassification_rate(first, r.labels)) >= SAME_SEGMENTATION:
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    return groups
+
+
+def group_name(k: int) -> str:
+    """The name of the k-th segmentation: A, B, …, Z, then 27, 28, …"""
+    return chr(ord("A") + k) if k < 26 else str(k + 1)
+
+
 def worst_seed(rows: Sequence[SeedRow]) -> int | None:
-    """The seed of the worst row: with ground truth the highest final error, then coarse,
-    then fine; without, the least agreement with the first seed, then unconverged; among
-    equals the most iterations. None for no rows, or when every row scores the same."""
-    if not rows:
+    """The seed of the worst row, with ground truth: the highest final error, then coarse,
+    then fine; among equals the most iterations. None for no rows, when every row scores the
+    same, or without ground truth (:func:`segmentation_groups` then)."""
+    if not rows or rows[0].error_final is None:
         return None
-    if rows[0].error_final is not None:
-        def key(r):
-            return (r.error_final, r.error_coarse or 0.0, r.error_fine or 0.0)
-    else:
-        def key(r):
-            return (-r.agreement, not r.converged)
+
+    def key(r):
+        return (r.error_final, r.error_coarse or 0.0, r.error_fine or 0.0)
+
     if len({key(r) for r in rows}) == 1:
         return None  # every seed scores the same: none is worse
     return max(rows, key=lambda r: (*key(r), r.all_iterations)).seed
@@ -140,10 +167,16 @@ def _pct(v: float | None) -> str:
 
 def table_columns(rows: Sequence[SeedRow]) -> dict:
     """The rows as table columns of text (and the worst row's marks): ``seed`` (int),
-    ``fine``, ``coarse``, ``final``, ``agreement``, ``converged``, ``iterations``, ``time``,
-    ``note`` ("◀ worst" on the worst row)."""
+    ``fine``, ``coarse``, ``final``, ``agreement``, ``group`` (the segmentation, e.g. "B (6
+    of 10)", :func:`segmentation_groups`), ``converged``, ``iterations``, ``time``, ``note``
+    ("◀ worst" on the worst row, with ground truth)."""
     worst = worst_seed(rows) if len(rows) > 1 else None
+    group = [""] * len(rows)
+    for k, g in enumerate(segmentation_groups(rows)):
+        for i in g:
+            group[i] = f"{group_name(k)} ({len(g)} of {len(rows)})"
     return {
+        "group": group,
         "seed": [r.seed for r in rows],
         "fine": [_pct(r.error_fine) for r in rows],
         "coarse": [_pct(r.error_coarse) for r in rows],
@@ -160,12 +193,12 @@ def table_columns(rows: Sequence[SeedRow]) -> dict:
 #: The table's columns, with and without ground truth: (key of :func:`table_columns`, title).
 _COLUMNS = {True: (("seed", "seed"), ("fine", "fine models"), ("coarse", "coarse"), ("final", "final"),
                    ("converged", "converged"), ("iterations", "iterations"), ("time", "time")),
-            False: (("seed", "seed"), ("agreement", "same as seed 0"), ("converged", "converged"),
-                    ("iterations", "iterations"), ("time", "time"))}
+            False: (("seed", "seed"), ("group", "segmentation"), ("agreement", "same as seed 0"),
+                    ("converged", "converged"), ("iterations", "iterations"), ("time", "time"))}
 
 
 #: Characters of the widest cell a column holds (beyond its title): "150 (of 1050)".
-_CELL_CHARS = {"iterations": 13}
+_CELL_CHARS = {"iterations": 13, "group": 12}
 
 
 def _widths(has_truth: bool) -> list[int]:

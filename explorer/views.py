@@ -22,8 +22,8 @@ __all__ = [
     "MOTION_MARKERS",
     "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "UNSEEN", "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at",
     "incomplete_note", "result_notes", "counted",
-    "NO_ATOM", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line", "motion_color", "motion_marker",
-    "shade", "fine_motions", "fine_colors",
+    "NO_ATOM", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line", "disagreement_warning",
+    "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "raw_style", "points_source", "frame_sources",
     "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
@@ -1382,18 +1382,32 @@ DISAGREEMENT_WARN = 0.10
 def disagreement_line(num: dict) -> str | None:
     """One sentence on how far LAAV's final labels and plain RV's differ (None before plain
     RV is computed); above :data:`DISAGREEMENT_WARN` of the points, without ground truth, a
-    hint where to look."""
+    hint where to look (:func:`disagreement_warning` is the status line's short form)."""
     d = num.get("plain_disagreement")
     if d is None:
         return None
     n = int(round(d * num["n_points"]))
-    text = (f"they label {n} of the {num['n_points']} points differently ({_pct(d)}; motions "
-            "matched one to one)")
-    if d > DISAGREEMENT_WARN and num.get("error_final") is None:
-        text += (": without a ground truth this is the warning sign; at least one of them is "
-                 f"wrong on {_pct(d / 2)} or more of the points. Compare them: colour points by "
+    text = (f"They label {n} of the {num['n_points']} points differently ({_pct(d)}; motions "
+            f"matched one to one, both with C = {num['n_motions']}, so it says nothing of C itself)")
+    if disagreement_warning(num):
+        text += (". Without a ground truth this is a warning sign: at least one of the two is wrong "
+                 f"on {_pct(d / 2)} or more of the points. Compare them: colour points by "
                  f"*{COLOR_LABELS['plain']}*")
     return text
+
+
+def disagreement_warning(num: dict) -> str | None:
+    """The status line's warning when LAAV and plain RV disagree on more than
+    :data:`DISAGREEMENT_WARN` of the points of a sequence without ground truth (None
+    otherwise, and before plain RV is computed)."""
+    d = num.get("plain_disagreement")
+    if d is None or d <= DISAGREEMENT_WARN or num.get("error_final") is not None:
+        return None
+    n = int(round(d * num["n_points"]))
+    return (f"**LAAV and plain RV disagree on {_pct(d)} of the points** ({n} of {num['n_points']}). "
+            "Without a ground truth this is the sign that at least one of them is wrong here: "
+            f"card 5 says more, and colouring points by *{COLOR_LABELS['plain']}* shows plain RV's "
+            "labels to compare.")
 
 
 def numbers_markdown(num: dict) -> str:
@@ -1407,8 +1421,9 @@ def numbers_markdown(num: dict) -> str:
     else:
         labelled = f"all {num['n_points']} points labelled"
     final_note = "(all points; unlabelled ones count as errors)" if n_un else "(all points)"
+    truth = "error vs ground truth" if num["error_final"] is not None else "error (needs a ground truth)"
     rows = [
-        "| stage | result | error vs ground truth | time |",
+        f"| stage | result | {truth} | time |",
         "|---|---|---|---|",
         f"| 1 atoms | {num['n_atoms']} atoms; {cov} | – | {_ms(t, 'atoms')} |",
         f"| 2 atom graph | {num['n_edges']} edges | – | {_ms(t, 'graph')} |",

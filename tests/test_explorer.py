@@ -120,17 +120,29 @@ def test_disagreement_with_plain_rv_warns_only_without_ground_truth(seq):
     unlabelled = dataclasses.replace(seq, labels=None)
     d = laav.misclassification_rate(lab, wrong)
     assert d > V.DISAGREEMENT_WARN
+    from explorer.cards.status import StatusBar
+
+    bar = StatusBar(seq)
     for s_, warned in ((seq, False), (unlabelled, True)):
         num = V.stage_numbers(s_, res, far)
         assert num["plain_disagreement"] == pytest.approx(d)
         line = V.disagreement_line(num)
-        assert line.startswith(f"they label {round(d * seq.n_points)} of the {seq.n_points} points")
+        assert line.startswith(f"They label {round(d * seq.n_points)} of the {seq.n_points} points")
+        assert f"both with C = {C}" in line
         assert ("warning sign" in line) is warned
         assert ("LAAV against plain RV" in V.numbers_markdown(num))
+        # ... and the status line's warning, above the cards
+        bar.show_check(num)
+        assert bar.check_alert.visible is warned
+        assert (f"disagree on {100 * d:.1f} % of the points" in bar.check_alert.object) is warned
     # the same labels: no difference, no warning; before plain RV: no line
     same = V.stage_numbers(unlabelled, res, dataclasses.replace(plain, labels=lab.copy()))
     assert same["plain_disagreement"] == 0 and "warning" not in V.disagreement_line(same)
+    bar.show_check(same)
+    assert not bar.check_alert.visible and bar.check_alert.object == ""
     assert V.disagreement_line(V.stage_numbers(unlabelled, res)) is None
+    assert "error (needs a ground truth)" in V.numbers_markdown(same)
+    assert "error vs ground truth" in V.numbers_markdown(V.stage_numbers(seq, res))
 
 
 def test_align_labels_renames_to_the_reference():
@@ -322,12 +334,18 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     assert ex.w_color.value == "final (after Random Voting)"
     # no colouring that needs the ground truth it does not have is offered
     assert "ground truth" not in ex.w_color.options and "atoms" in ex.w_color.options
+    from explorer.cards.sweep import TITLES
+
+    assert ex.sweep_view.card.title == TITLES[False]  # the seed sweep lists no error either
     assert not [o for o in ex.w_color.options if o.startswith("errors")]
     ex.controls.set_color_mode("errors")
     assert ex.w_color.value == "final (after Random Voting)"
     # ... nor asked for by a URL: said, and the final labels shown
     problems = ex.apply_query({"color": ["gt"]})
     assert len(problems) == 1 and "color=gt needs a ground truth" in problems[0]
+    problems = ex.apply_query({"color": ["bogus"]})  # the modes it lists are those it can show
+    assert len(problems) == 1 and "color must be one of atoms, fine," in problems[0]
+    assert "gt" not in problems[0].split("got")[0] and "errors" not in problems[0]
     assert ex.w_color.value == "final (after Random Voting)"
     from explorer import export  # the PNG's frame panel too
 
@@ -339,6 +357,7 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     assert ex.load_bytes(buf.getvalue(), "labelled.npz") and ex.wait(60)
     assert ex.sequence.labels is not None
     assert list(ex.w_color.options) == list(V.COLOR_MODES) and ex.w_color.value == "ground truth"
+    assert ex.sweep_view.card.title == TITLES[True]
 
 
 def test_reset_restores_defaults(ex):
@@ -1010,7 +1029,7 @@ def test_stage_errors_plain_rv_numbers_and_replay_reset():
         # ... and how far the two labellings are apart (the check left without ground truth)
         d = laav.misclassification_rate(res.labels, plain.labels)
         assert num["plain_disagreement"] == pytest.approx(d)
-        assert f"they label {round(d * seq.n_points)} of the {seq.n_points} points differently" \
+        assert f"They label {round(d * seq.n_points)} of the {seq.n_points} points differently" \
             in ex.numbers.object
         # colouring by the coarse stage rings the coarse stage's mistakes (the demo's coarse
         # stage is wrong on some points; the old view said "misclassified: 0" here)
@@ -1249,6 +1268,9 @@ def test_hidden_cards_come_later_and_at_once_when_asked_for(ex, monkeypatch):
     assert ex.compare.pin()
     assert [id(c) for c in ex.main_column.objects] == [id(c) for c in ex.main]
     assert ex.compare.inner.visible
+    # the colouring's short name in the plots' titles (its long one was cut off at 1280 px)
+    short = ex.w_color.value.split(" (")[0]
+    assert ex.compare.fig_a.title.text == f"A (pinned) · frame {ex.frame} · {short}"
 
 
 def test_r2_moves_along_when_r1_passes_it_and_values_stay_round(ex):

@@ -116,9 +116,10 @@ def test_sweep_cancel_stops_at_once_and_a_new_sweep_supersedes():
 
 
 def _row(seed, fine=None, coarse=None, final=None, agreement=1.0, converged=True, iterations=50,
-         all_iterations=None):
+         all_iterations=None, labels=None):
     return S.SeedRow(seed, fine, coarse, final, agreement, converged, iterations,
-                     iterations if all_iterations is None else all_iterations, 0.01, np.zeros(3, int))
+                     iterations if all_iterations is None else all_iterations, 0.01,
+                     np.zeros(3, int) if labels is None else np.asarray(labels))
 
 
 def test_worst_seed_and_table():
@@ -132,11 +133,21 @@ def test_worst_seed_and_table():
     assert S.row_line(t, 3, True).split() == ["3", "0.0", "%", "40.0", "%", "0.0", "%", "yes", "50", "10",
                                               "ms", "◀", "worst"]
     assert len(S.row_line(t, 0, True)) == len(S.header_line(True))  # aligned under the header
-    # without ground truth: the least agreement with the first seed, then unconverged
-    rows = [_row(0), _row(1, agreement=0.8), _row(2, agreement=0.8, converged=False), _row(3, agreement=0.95)]
-    assert S.worst_seed(rows) == 2
+    # without ground truth: no worst seed (which segmentation is right, the seeds cannot
+    # say); the seeds grouped by the segmentation they give, in seed order
+    a = np.repeat([0, 1], 100)
+    b = a.copy()
+    b[:40] = 1  # 20 % of the points elsewhere: another segmentation
+    c = 1 - a  # a's, the motions renamed: the same segmentation
+    rows = [_row(0, labels=a), _row(1, agreement=0.8, labels=b),
+            _row(2, agreement=0.8, converged=False, labels=b), _row(3, labels=c)]
+    assert S.worst_seed(rows) is None
+    assert S.segmentation_groups(rows) == [[0, 3], [1, 2]]
     t = S.table_columns(rows)
     assert t["fine"] == ["–"] * 4 and t["agreement"][1] == "80.0 %" and t["converged"][2] == "no (cap)"
+    assert t["group"] == ["A (2 of 4)", "B (2 of 4)", "B (2 of 4)", "A (2 of 4)"] and t["note"] == [""] * 4
+    assert S.row_line(t, 1, False).split()[:4] == ["1", "B", "(2", "of"]
+    assert len(S.row_line(t, 0, False)) == len(S.header_line(False))
     assert S.worst_seed([]) is None and S.table_columns(rows[:1])["note"] == [""]
     # the returned trial's iterations, with every trial's when more ran
     t = S.table_columns([_row(0, iterations=70, all_iterations=764), _row(1, iterations=40)])
@@ -144,6 +155,22 @@ def test_worst_seed_and_table():
     # all equal: no worst row, whatever the iterations
     rows = [_row(0, 0.0, 0.0, 0.0, iterations=60), _row(1, 0.0, 0.0, 0.0, iterations=500)]
     assert S.worst_seed(rows) is None and S.table_columns(rows)["note"] == ["", ""]
+
+
+def test_summary_without_ground_truth_names_the_segmentations():
+    from explorer.cards.sweep import CAPTIONS, TITLES, _summary_without_truth
+
+    a = np.repeat([0, 1], 100)
+    b = a.copy()
+    b[:40] = 1
+    rows = [_row(k, labels=a if k in (0, 3) else b, converged=k != 2) for k in range(5)]
+    text = _summary_without_truth(rows)
+    assert "**2 different segmentations:** A from seeds 0, 3 (2 of 5); B from seeds 1, 2, 4 (3 of 5)" in text
+    assert "the seeds cannot say which" in text and "converged for 4 of 5" in text
+    assert "worst" not in text.lower()
+    assert _summary_without_truth(rows[:1]).startswith("**Every seed gives the same segmentation**")
+    # the card's own words without ground truth speak of segmentations, not errors
+    assert "error" not in TITLES[False] and "no ground truth" in CAPTIONS[False]
 
 
 def test_sweep_without_ground_truth_scores_agreement():

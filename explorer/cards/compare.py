@@ -128,7 +128,7 @@ class CompareView:
         changed = np.asarray(comp.changed, dtype=np.int64)
         changed = changed[V.visible_at(seq, f)[changed]]  # only the points seen in this frame
         ring = {"x": xy[changed, 0], "y": xy[changed, 1]}
-        what = self.controls.w_color.value
+        what = self.controls.w_color.value.split(" (")[0]  # "final", not "final (after …)": it fits
         with self.host.hold():
             for k, style in zip(("A", "B"), self._styles):
                 set_data(self.src[k], V.points_source(seq, f, style))

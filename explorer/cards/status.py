@@ -52,6 +52,9 @@ class StatusBar:
                            margin=(4, 6))
         self.note = Alert("", alert_type="info", visible=False, sizing_mode="stretch_width",
                           margin=(4, 6))
+        # no ground truth, and LAAV and plain RV far apart (views.disagreement_warning)
+        self.check_alert = Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
+                                 margin=(4, 6))
         # problems with the settings a shared URL carried (kept until the next URL)
         self.url_alert = Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
                                margin=(4, 6))
@@ -120,6 +123,15 @@ class StatusBar:
     def show_note(self, note: str) -> None:
         self.note.object = note
         self.note.visible = bool(note)
+
+    def show_check(self, num: dict) -> None:
+        """The warning of :func:`views.disagreement_warning` for the numbers ``num`` shown
+        (hidden when there is none)."""
+        text = V.disagreement_warning(num) or ""
+        if self.check_alert.object != text:
+            self.check_alert.object = text
+        if self.check_alert.visible != bool(text):
+            self.check_alert.visible = bool(text)
 
     def show_url_problems(self, problems: list[str]) -> None:
         self.url_alert.object = ("" if not problems else "**Some settings in the page address were not "

@@ -13,17 +13,28 @@ from functools import partial
 
 import panel as pn
 
+from .. import sweep as S
 from .. import views as V
 from ..sweep import SEEDS, SeedSweep, header_line, row_line, table_columns, worst_seed
 from .base import HTML, Host, Markdown, card
 
-_EMPTY = {k: [] for k in ("seed", "fine", "coarse", "final", "agreement", "converged", "iterations", "time",
-                          "note")}
+_EMPTY = {k: [] for k in ("seed", "fine", "coarse", "final", "agreement", "group", "converged", "iterations",
+                          "time", "note")}
 # a row of the table: one button, its cells aligned in a fixed-width font
 _ROW_CSS = [":host .bk-btn { font-family: ui-monospace, 'DejaVu Sans Mono', monospace; font-size: 13px; "
             "white-space: pre; text-align: left; padding: 2px 8px; }"]
 _HEAD_STYLE = {"font-family": "ui-monospace, 'DejaVu Sans Mono', monospace", "font-size": "13px",
                "white-space": "pre", "font-weight": "bold", "padding-left": "9px"}
+
+
+#: The card's title and its caption before a sweep, with and without ground truth.
+TITLES = {True: f"Seed sweep: every stage's error for seeds {SEEDS[0]}-{SEEDS[-1]}",
+          False: f"Seed sweep: does the segmentation change with the seed? (seeds {SEEDS[0]}-{SEEDS[-1]})"}
+CAPTIONS = {True: ("Runs LAAV with the settings shown for every seed, in the background, and lists each "
+                   "stage's error; click a row to load that seed."),
+            False: ("Runs LAAV with the settings shown for every seed, in the background, and groups the "
+                    "seeds by the segmentation they give (no ground truth: no error to list); click a row "
+                    "to load that seed.")}
 
 
 class SweepView:
@@ -60,14 +71,20 @@ class SweepView:
                                   visible=False)
             b.on_click(partial(self._on_row, i))
             self.row_buttons.append(b)
-        self.caption = Markdown(
-            "Runs LAAV with the settings shown for every seed, in the background, and lists each "
-            "stage's error; click a row to load that seed.", sizing_mode="stretch_width",
-            max_width=820, margin=(0, 10))
-        self.card = card("Seed sweep: every stage's error for seeds 0-9",
+        self.caption = Markdown(CAPTIONS[True], sizing_mode="stretch_width", max_width=820, margin=(0, 10))
+        self.card = card(TITLES[True],
                          pn.Row(self.w_run, self.w_stop, self.progress_bar, self.progress_md,
                                 sizing_mode="stretch_width"),
                          self.header, pn.Column(*self.row_buttons, margin=0), self.caption)
+
+    def show_sequence(self, seq) -> None:
+        """(Inside a hold.) The title and the caption for ``seq`` (with or without ground
+        truth), unless a sweep's rows are shown."""
+        truth = seq.labels is not None
+        if self.card.title != TITLES[truth]:
+            self.card.title = TITLES[truth]
+        if not self.data["seed"] and not self.sweep.running:
+            self.caption.object = CAPTIONS[truth]
 
     # ------------------------------------------------------------------ run / stop
     def run(self) -> int:
@@ -157,29 +174,23 @@ class SweepView:
                                            "Run it again for the settings shown.")
 
     def _summary(self, rows) -> str:
+        if rows[0].error_final is None:
+            return _summary_without_truth(rows)
         worst = worst_seed(rows)
         if worst is None:
             r = rows[0]
             same = (f"fine {100 * (r.error_fine or 0):.1f} %, coarse {100 * (r.error_coarse or 0):.1f} %, "
-                    f"final {100 * r.error_final:.1f} %" if r.error_final is not None
-                    else "the same final segmentation")
+                    f"final {100 * r.error_final:.1f} %")
             return f"**Every seed gives the same result** ({same}). Click a row to load that seed."
         r = next(r for r in rows if r.seed == worst)
-        if r.error_final is not None:
-            finals = [x.error_final for x in rows]
-            bad_final = sum(x.error_final > 0.01 for x in rows)
-            bad_coarse = sum((x.error_coarse or 0) > 0.01 for x in rows)
-            return (f"**Worst: seed {worst}** (fine {100 * (r.error_fine or 0):.1f} %, coarse "
-                    f"{100 * (r.error_coarse or 0):.1f} %, final {100 * r.error_final:.1f} %). "
-                    f"Final error over the seeds: mean {100 * sum(finals) / len(finals):.1f} %; "
-                    f"above 1 %: {bad_final} of {len(rows)} seeds at the final stage, "
-                    f"{bad_coarse} at the coarse stage. Click a row to load that seed.")
-        agree = [x.agreement for x in rows[1:]]
-        conv = sum(x.converged for x in rows)
-        return (f"No ground truth: the table compares each seed's final labels with seed {rows[0].seed}'s. "
-                f"**Least agreement: seed {worst}** ({100 * r.agreement:.1f} % of points the same); "
-                f"{sum(a >= 0.999 for a in agree)} of {len(agree)} seeds give the same segmentation; "
-                f"Random Voting converged for {conv} of {len(rows)}. Click a row to load that seed.")
+        finals = [x.error_final for x in rows]
+        bad_final = sum(x.error_final > 0.01 for x in rows)
+        bad_coarse = sum((x.error_coarse or 0) > 0.01 for x in rows)
+        return (f"**Worst: seed {worst}** (fine {100 * (r.error_fine or 0):.1f} %, coarse "
+                f"{100 * (r.error_coarse or 0):.1f} %, final {100 * r.error_final:.1f} %). "
+                f"Final error over the seeds: mean {100 * sum(finals) / len(finals):.1f} %; "
+                f"above 1 %: {bad_final} of {len(rows)} seeds at the final stage, "
+                f"{bad_coarse} at the coarse stage. Click a row to load that seed.")
 
     # ------------------------------------------------------------------ a click loads a seed
     def _show_table(self, data: dict) -> None:
@@ -215,3 +226,21 @@ class SweepView:
 
     def close(self) -> None:
         self.sweep.close()
+
+
+def _summary_without_truth(rows) -> str:
+    """The caption of a finished sweep on a sequence without ground truth: the segmentations
+    the seeds give (:func:`explorer.sweep.segmentation_groups`), not a worst seed."""
+    groups = S.segmentation_groups(rows)
+    conv = sum(x.converged for x in rows)
+    tail = f" Random Voting converged for {conv} of {len(rows)}. Click a row to load that seed."
+    same = f"final labels the same on at least {100 * S.SAME_SEGMENTATION:.0f} % of the points"
+    if len(groups) == 1:
+        return f"**Every seed gives the same segmentation** ({same}).{tail}"
+    parts = "; ".join(f"{S.group_name(k)} from seed{'s' if len(g) > 1 else ''} "
+                      f"{', '.join(str(rows[i].seed) for i in g)} ({len(g)} of {len(rows)})"
+                      for k, g in enumerate(groups))
+    return (f"No ground truth: the seeds are grouped by the segmentation they give ({same}). "
+            f"**{len(groups)} different segmentations:** {parts}. At most one of them is right, and "
+            "the seeds cannot say which (the most frequent need not be): compare them, e.g. pin one "
+            "as A and load another." + tail)
