@@ -197,8 +197,8 @@ _COLUMNS = {True: (("seed", "seed"), ("fine", "fine models"), ("coarse", "coarse
                     ("converged", "converged"), ("iterations", "iterations"), ("time", "time"))}
 
 
-#: Characters of the widest cell a column holds (beyond its title): "150 (of 1050)".
-_CELL_CHARS = {"iterations": 13, "group": 12}
+#: Characters of the widest cell a column holds (beyond its title): "150 (of 1050)", "1015 ms".
+_CELL_CHARS = {"iterations": 13, "group": 12, "time": 7}
 
 
 def _widths(has_truth: bool) -> list[int]:
