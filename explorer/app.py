@@ -845,7 +845,7 @@ class Explorer:
         with self.hold():
             self.rv_view.draw(self.sequence, self.result.voting, voting)
             self.status_bar.show_check(self.numbers_view.draw(self.sequence, self.result, voting))
-            if self.controls.color_mode in ("plain", "errors_plain"):
+            if self.controls.color_mode in ("plain", "errors_plain", "vs_plain"):
                 self._color_now()
             else:
                 self.compare.redraw()  # plain RV's error in the compare table

@@ -24,7 +24,8 @@ __all__ = [
     "incomplete_note", "result_notes", "counted",
     "NO_ATOM", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line", "disagreement_warning",
     "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
-    "align_labels", "shown_labels", "point_style", "raw_style", "points_source", "frame_sources",
+    "align_labels", "shown_labels", "point_style", "plain_differs", "raw_style", "points_source",
+    "frame_sources",
     "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
@@ -49,6 +50,7 @@ COLOR_MODES = {
     "errors: coarse": "errors_coarse",
     "errors: final": "errors",
     "errors: plain RV": "errors_plain",
+    "differences: final vs plain RV": "vs_plain",
 }
 #: The colour modes that need ground truth (not offered for a sequence without it).
 TRUTH_MODES = frozenset(mode for mode in COLOR_MODES.values() if mode == "gt" or mode.startswith("errors"))
@@ -57,7 +59,7 @@ COLOR_LABELS = {mode: label for label, mode in COLOR_MODES.items()}
 #: The stage whose errors a colour mode marks (black rings / black points).
 ERROR_STAGE = {"gt": "final", "atoms": "final", "fine": "fine", "coarse": "coarse", "final": "final",
                "plain": "plain", "errors_fine": "fine", "errors_coarse": "coarse", "errors": "final",
-               "errors_plain": "plain"}
+               "errors_plain": "plain", "vs_plain": "final"}
 
 #: One colour per motion, everywhere (frame view, 3-D view, fine models as its shades): Okabe-Ito
 #: colours, the subset and order whose pairs stay apart under simulated deuteranopia (CIE Lab
@@ -351,9 +353,9 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
     gt = al["gt"]
     note = ""
     marker = np.full(P, "circle", dtype=object)
-    if mode in ("plain", "errors_plain") and plain is None:
+    if mode in ("plain", "errors_plain", "vs_plain") and plain is None:
         note = "plain RV is still computing: showing the final labels until it is ready"
-        mode = "final" if mode == "plain" else "errors"
+        mode = "errors" if mode == "errors_plain" else "final"
     if mode in TRUTH_MODES and gt is None:
         note = "this sequence has no ground truth: showing the final labels"
         mode = "final"
@@ -395,6 +397,12 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
             color = np.where(un, UNSEEN, color).astype("U7")
             marker = np.where(un, UNSEEN_MARKER, marker).astype(object)
             label = np.where(un, UNSEEN_LABEL, label)
+    elif mode == "vs_plain":  # where the final labels and plain RV's differ (no truth needed)
+        fin = al["final"]
+        differ = plain_differs(fin, plain.labels)
+        color = np.where(differ, ERROR_MARK, CORRECT).astype("U7")
+        _, marker = _motion_palette(fin)  # the final motion's shape
+        label = np.where(differ, "differs from plain RV", "same as plain RV")
     elif mode.startswith("errors"):
         color = np.where(wrong, ERROR_MARK, np.where(scored, CORRECT, "#EEEEEE")).astype("U7")
         label = np.where(wrong, f"misclassified ({stage_name(stage)})",
@@ -409,6 +417,16 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
     return {"color": np.asarray(color, dtype="U7"), "marker": np.asarray(marker, dtype=object),
             "label": np.asarray(label).astype(str), "misclassified": wrong, "stage": stage,
             "note": note, "mode": mode}
+
+
+def plain_differs(final: np.ndarray, plain: np.ndarray) -> np.ndarray:
+    """(P,) bool: the points whose final label and plain RV's differ once plain RV's motions
+    are renamed to match the final ones (:func:`align_labels`); a point either left
+    unlabelled (-1) differs, as :func:`laav.misclassification_rate` counts it (the Numbers
+    card's ``plain_disagreement`` is this share)."""
+    final = np.asarray(final, dtype=np.int64)
+    other = align_labels(plain, final)
+    return (final != other) | (final < 0) | (other < 0)
 
 
 def raw_style(seq: laav.Sequence) -> dict:
@@ -1392,7 +1410,7 @@ def disagreement_line(num: dict) -> str | None:
     if disagreement_warning(num):
         text += (". Without a ground truth this is a warning sign: at least one of the two is wrong "
                  f"on {_pct(d / 2)} or more of the points. Compare them: colour points by "
-                 f"*{COLOR_LABELS['plain']}*")
+                 f"*{COLOR_LABELS['vs_plain']}* (black where they differ) or by *{COLOR_LABELS['plain']}*")
     return text
 
 
@@ -1406,8 +1424,8 @@ def disagreement_warning(num: dict) -> str | None:
     n = int(round(d * num["n_points"]))
     return (f"**LAAV and plain RV disagree on {_pct(d)} of the points** ({n} of {num['n_points']}). "
             "Without a ground truth this is the sign that at least one of them is wrong here: "
-            f"card 5 says more, and colouring points by *{COLOR_LABELS['plain']}* shows plain RV's "
-            "labels to compare.")
+            f"card 5 says more; colouring points by *{COLOR_LABELS['vs_plain']}* shows where they "
+            f"differ, by *{COLOR_LABELS['plain']}* plain RV's labels.")
 
 
 def numbers_markdown(num: dict) -> str:

@@ -135,6 +135,13 @@ def test_disagreement_with_plain_rv_warns_only_without_ground_truth(seq):
         bar.show_check(num)
         assert bar.check_alert.visible is warned
         assert (f"disagree on {100 * d:.1f} % of the points" in bar.check_alert.object) is warned
+    # the colouring of the differences marks exactly the points the share counts
+    for s_ in (seq, unlabelled):
+        st = V.point_style(s_, res, "vs_plain", far)
+        black = st["color"] == V.ERROR_MARK
+        assert black.sum() == round(d * seq.n_points) and st["mode"] == "vs_plain" and not st["note"]
+        assert set(st["label"][black]) == {"differs from plain RV"}
+    assert V.point_style(unlabelled, res, "vs_plain")["mode"] == "final"  # plain RV not there yet
     # the same labels: no difference, no warning; before plain RV: no line
     same = V.stage_numbers(unlabelled, res, dataclasses.replace(plain, labels=lab.copy()))
     assert same["plain_disagreement"] == 0 and "warning" not in V.disagreement_line(same)
