@@ -752,7 +752,8 @@ class Explorer:
                 self.coarse_view.epipolar.draw(seq, result)
                 self.rv_view.draw(seq, result.voting, plain, pending=preview)
                 num = self.numbers_view.draw(seq, result, plain)
-                self.status_bar.show_check(num)
+                if plain is not None or new_seq:  # (else the last check stays until plain RV
+                    self.status_bar.show_check(num)  # is back: the page does not jump twice)
                 s = self.status_bar
                 s.alert.visible = self.state.error is not None
                 data_notes = []  # about the data: kept when the colour mode changes
@@ -845,7 +846,7 @@ class Explorer:
         with self.hold():
             self.rv_view.draw(self.sequence, self.result.voting, voting)
             self.status_bar.show_check(self.numbers_view.draw(self.sequence, self.result, voting))
-            if self.controls.color_mode in ("plain", "errors_plain", "vs_plain"):
+            if self.controls.color_mode in V.PLAIN_MODES:
                 self._color_now()
             else:
                 self.compare.redraw()  # plain RV's error in the compare table

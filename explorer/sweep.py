@@ -35,7 +35,7 @@ from laav import LaavParams
 from laav._interrupt import interruptible
 
 from .state import Cancelled
-from .views import stage_numbers
+from .views import labelling_distance, stage_numbers
 
 __all__ = ["SEEDS", "SeedRow", "SweepKey", "SeedSweep", "seed_row", "worst_seed", "table_columns",
            "header_line", "row_line", "segmentation_groups", "group_name", "SAME_SEGMENTATION"]
@@ -73,7 +73,8 @@ class SeedRow:
         counted as its majority true motion); None without ground truth.
     agreement : float
         Share of points whose final motion is the same as with the sweep's first seed
-        (after the best matching of motions, ``1 - misclassification_rate``).
+        (after the best matching of motions, ``1 - labelling_distance``: a point both leave
+        unlabelled is no difference).
     converged : bool
         Whether LAAV's informed trial converged (plain RV, without one: the returned trial),
         as card 4 says.
@@ -105,7 +106,7 @@ def seed_row(seq: laav.Sequence, result: laav.LaavResult, reference: np.ndarray 
     None when this is the first seed)."""
     num = stage_numbers(seq, result)
     labels = np.asarray(result.labels)
-    agree = 1.0 if reference is None else 1.0 - float(laav.misclassification_rate(reference, labels))
+    agree = 1.0 if reference is None else 1.0 - labelling_distance(reference, labels)
 
     def f(v):
         return None if v is None else float(v)
@@ -118,22 +119,25 @@ def seed_row(seq: laav.Sequence, result: laav.LaavResult, reference: np.ndarray 
                    float(seconds), labels)
 
 
-#: Without ground truth, two seeds give the same segmentation when their final labels agree
-#: on at least this share of the points (motions matched one to one).
+#: Without ground truth, a seed gives a group's segmentation when its final labels agree with
+#: the group's first seed's on at least this share of the points (motions matched one to one,
+#: :func:`explorer.views.labelling_distance`).
 SAME_SEGMENTATION = 0.99
 
 
 def segmentation_groups(rows: Sequence[SeedRow]) -> list[list[int]]:
     """The rows (indices) grouped by the segmentation they give, in seed order: a row joins
     the first group whose first row's final labels agree with its own on at least
-    :data:`SAME_SEGMENTATION` of the points, else starts a group. Without ground truth the
+    :data:`SAME_SEGMENTATION` of the points, else starts a group (so two seeds of one group
+    may differ on up to twice the rest, and another order of the rows could group them
+    otherwise; seeds 0-9 come in order). Without ground truth the
     sweep shows these groups, not a "worst" seed: which of two segmentations is right, the
     seeds cannot say (and agreement with seed 0 would make seed 0's the reference)."""
     groups: list[list[int]] = []
     for i, r in enumerate(rows):
         for g in groups:
             first = rows[g[0]].labels
-            if 1.0 - float(laav.misclassification_rate(first, r.labels)) >= SAME_SEGMENTATION:
+            if 1.0 - labelling_distance(first, r.labels) >= SAME_SEGMENTATION:
                 g.append(i)
                 break
         else:

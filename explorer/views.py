@@ -18,15 +18,14 @@ from laav.metrics import matched_counts
 from laav.noise import threshold_factor
 
 __all__ = [
-    "COLOR_MODES", "TRUTH_MODES", "COLOR_LABELS", "ERROR_STAGE", "stage_errors", "MOTION_COLORS",
-    "MOTION_MARKERS",
-    "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "UNSEEN", "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at",
-    "incomplete_note", "result_notes", "counted",
+    "COLOR_MODES", "TRUTH_MODES", "PLAIN_MODES", "COLOR_LABELS", "ERROR_STAGE", "stage_errors",
+    "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "UNSEEN",
+    "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at", "incomplete_note", "result_notes", "counted",
     "NO_ATOM", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line", "disagreement_warning",
     "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
-    "align_labels", "shown_labels", "point_style", "plain_differs", "raw_style", "points_source",
-    "frame_sources",
-    "graph_sources", "TRAIL", "frame_specs", "frame_templates", "points_template", "graph_specs",
+    "align_labels", "shown_labels", "point_style", "plain_differs", "labelling_distance", "raw_style",
+    "points_source", "frame_sources", "graph_sources", "TRAIL", "frame_specs", "frame_templates",
+    "points_template", "graph_specs",
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
     "replay_caption", "fine_count", "fine_count_note", "z_sources", "joint_margins", "shows_margins",
@@ -52,6 +51,8 @@ COLOR_MODES = {
     "errors: plain RV": "errors_plain",
     "differences: final vs plain RV": "vs_plain",
 }
+#: The colour modes that draw plain RV's labels (the final labels until it is computed).
+PLAIN_MODES = ("plain", "errors_plain", "vs_plain")
 #: The colour modes that need ground truth (not offered for a sequence without it).
 TRUTH_MODES = frozenset(mode for mode in COLOR_MODES.values() if mode == "gt" or mode.startswith("errors"))
 #: A colour mode's label in the page (COLOR_MODES inverted).
@@ -353,7 +354,7 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
     gt = al["gt"]
     note = ""
     marker = np.full(P, "circle", dtype=object)
-    if mode in ("plain", "errors_plain", "vs_plain") and plain is None:
+    if mode in PLAIN_MODES and plain is None:
         note = "plain RV is still computing: showing the final labels until it is ready"
         mode = "errors" if mode == "errors_plain" else "final"
     if mode in TRUTH_MODES and gt is None:
@@ -419,14 +420,28 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
             "note": note, "mode": mode}
 
 
+def labelling_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """The share of the points two labellings (P,) label differently, motions matched one to
+    one: :func:`laav.misclassification_rate` of one against the other over the points at
+    least one of them labels, over all P. A point both leave unlabelled (-1: seen too
+    briefly, which depends on the tracks alone) is no difference; one left unlabelled by
+    one of them only is. A metric (the triangle inequality holds): against the truth T,
+    ``max(d(a, T), d(b, T)) >= d(a, b) / 2``."""
+    a, b = np.asarray(a, dtype=np.int64), np.asarray(b, dtype=np.int64)
+    some = (a >= 0) | (b >= 0)
+    if not some.any():
+        return 0.0
+    return float(laav.misclassification_rate(a[some], b[some])) * float(some.mean())
+
+
 def plain_differs(final: np.ndarray, plain: np.ndarray) -> np.ndarray:
     """(P,) bool: the points whose final label and plain RV's differ once plain RV's motions
-    are renamed to match the final ones (:func:`align_labels`); a point either left
-    unlabelled (-1) differs, as :func:`laav.misclassification_rate` counts it (the Numbers
-    card's ``plain_disagreement`` is this share)."""
+    are renamed to match the final ones (:func:`align_labels`): those
+    :func:`labelling_distance` counts (the Numbers card's ``plain_disagreement`` is their
+    share). A point only one of them leaves unlabelled (-1) differs; one both leave, not."""
     final = np.asarray(final, dtype=np.int64)
     other = align_labels(plain, final)
-    return (final != other) | (final < 0) | (other < 0)
+    return ((final != other) | (final < 0) | (other < 0)) & ((final >= 0) | (other >= 0))
 
 
 def raw_style(seq: laav.Sequence) -> dict:
@@ -1310,9 +1325,8 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Votin
     Errors are None without ground truth (``error_plain`` also before plain RV is given).
     ``plain_iterations`` / ``plain_converged`` describe that run; ``plain_disagreement``: the
     share of points LAAV's final labels and plain RV's label differently, motions matched one
-    to one (:func:`laav.misclassification_rate` of one against the other; a point LAAV left
-    unlabelled counts as a difference), with or without ground truth: on tracks without one
-    it is the only check of the result the page can give. ``timings_ms`` per stage,
+    to one (:func:`labelling_distance`), with or without ground truth: on tracks without one
+    it is the page's main check of the result. ``timings_ms`` per stage,
     ``total_ms``. ``n_unlabelled``: points the final stage left unlabelled (-1, seen too
     briefly; missing data only), counted as errors in ``error_final`` as
     :func:`laav.misclassification_rate` does; ``visible_share`` of the sequence's entries.
@@ -1344,8 +1358,7 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Votin
     out["error_plain"] = None
     out["plain_iterations"] = None if plain is None else len(plain.changed)
     out["plain_converged"] = None if plain is None else bool(plain.converged)
-    out["plain_disagreement"] = None if plain is None else float(
-        laav.misclassification_rate(np.asarray(st["final"]), np.asarray(plain.labels)))
+    out["plain_disagreement"] = None if plain is None else labelling_distance(st["final"], plain.labels)
     if gt is not None and plain is not None:
         out["error_plain"] = float(laav.misclassification_rate(gt, np.asarray(plain.labels)))
     return out
@@ -1397,6 +1410,11 @@ def _plain_result(num: dict) -> str:
 DISAGREEMENT_WARN = 0.10
 
 
+def _share_count(num: dict) -> int:
+    """The points behind ``num``'s ``plain_disagreement`` (a share of ``n_points``)."""
+    return int(round(num["plain_disagreement"] * num["n_points"]))
+
+
 def disagreement_line(num: dict) -> str | None:
     """One sentence on how far LAAV's final labels and plain RV's differ (None before plain
     RV is computed); above :data:`DISAGREEMENT_WARN` of the points, without ground truth, a
@@ -1404,7 +1422,7 @@ def disagreement_line(num: dict) -> str | None:
     d = num.get("plain_disagreement")
     if d is None:
         return None
-    n = int(round(d * num["n_points"]))
+    n = _share_count(num)
     text = (f"They label {n} of the {num['n_points']} points differently ({_pct(d)}; motions "
             f"matched one to one, both with C = {num['n_motions']}, so it says nothing of C itself)")
     if disagreement_warning(num):
@@ -1421,7 +1439,7 @@ def disagreement_warning(num: dict) -> str | None:
     d = num.get("plain_disagreement")
     if d is None or d <= DISAGREEMENT_WARN or num.get("error_final") is not None:
         return None
-    n = int(round(d * num["n_points"]))
+    n = _share_count(num)
     return (f"**LAAV and plain RV disagree on {_pct(d)} of the points** ({n} of {num['n_points']}). "
             "Without a ground truth this is the sign that at least one of them is wrong here: "
             f"card 5 says more; colouring points by *{COLOR_LABELS['vs_plain']}* shows where they "

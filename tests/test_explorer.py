@@ -142,6 +142,15 @@ def test_disagreement_with_plain_rv_warns_only_without_ground_truth(seq):
         assert black.sum() == round(d * seq.n_points) and st["mode"] == "vs_plain" and not st["note"]
         assert set(st["label"][black]) == {"differs from plain RV"}
     assert V.point_style(unlabelled, res, "vs_plain")["mode"] == "final"  # plain RV not there yet
+    # a point both leave unlabelled (-1: seen too briefly) is no difference; one that only
+    # one of them leaves is
+    a = np.array([0, 0, 1, 1, -1, -1, 0, 1])
+    assert V.labelling_distance(a, a) == 0 and not V.plain_differs(a, a).any()
+    b = a.copy()
+    b[0] = -1
+    assert V.labelling_distance(a, b) == pytest.approx(1 / 8) and V.plain_differs(a, b).tolist() == [
+        True] + [False] * 7
+    assert V.labelling_distance(a, 1 - a * (a >= 0) - 2 * (a < 0)) == 0  # renamed motions
     # the same labels: no difference, no warning; before plain RV: no line
     same = V.stage_numbers(unlabelled, res, dataclasses.replace(plain, labels=lab.copy()))
     assert same["plain_disagreement"] == 0 and "warning" not in V.disagreement_line(same)
@@ -358,6 +367,15 @@ def test_good_upload_replaces_the_sequence(ex, seq):
 
     fig = export.views_figure(ex.sequence, ex.result, 0, "gt", plain=None)
     assert fig.axes[0].get_title().startswith("Frame 0, coloured by final")
+    # plain RV far from the final labels: the amber warning above the cards
+    assert ex.wait(60, plain_rv=True) and not ex.check_alert.visible  # (they agree here)
+    plain = ex.state.plain_rv()
+    lab = np.asarray(ex.result.labels)
+    moved = lab.copy()
+    moved[: lab.size // 4] = (lab[: lab.size // 4] + 1) % ex.result.n_motions
+    ex._apply_plain_rv(dataclasses.replace(plain, labels=moved), ex.state.plain_rv_key())
+    assert ex.check_alert.visible and "LAAV and plain RV disagree on" in ex.check_alert.object
+    assert "warning sign" in ex.numbers.object
     # back to a sequence with ground truth: every colouring offered again, the truth shown
     buf = io.BytesIO()
     np.savez(buf, points=seq.points, labels=seq.labels)
@@ -365,6 +383,7 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     assert ex.sequence.labels is not None
     assert list(ex.w_color.options) == list(V.COLOR_MODES) and ex.w_color.value == "ground truth"
     assert ex.sweep_view.card.title == TITLES[True]
+    assert not ex.check_alert.visible  # errors can be scored: no warning
 
 
 def test_reset_restores_defaults(ex):
@@ -1276,8 +1295,8 @@ def test_hidden_cards_come_later_and_at_once_when_asked_for(ex, monkeypatch):
     assert [id(c) for c in ex.main_column.objects] == [id(c) for c in ex.main]
     assert ex.compare.inner.visible
     # the colouring's short name in the plots' titles (its long one was cut off at 1280 px)
-    short = ex.w_color.value.split(" (")[0]
-    assert ex.compare.fig_a.title.text == f"A (pinned) · frame {ex.frame} · {short}"
+    ex.w_color.value = "final (after Random Voting)"
+    assert ex.compare.fig_a.title.text == f"A (pinned) · frame {ex.frame} · final"
 
 
 def test_r2_moves_along_when_r1_passes_it_and_values_stay_round(ex):

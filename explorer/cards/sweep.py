@@ -234,7 +234,8 @@ def _summary_without_truth(rows) -> str:
     groups = S.segmentation_groups(rows)
     conv = sum(x.converged for x in rows)
     tail = f" Random Voting converged for {conv} of {len(rows)}. Click a row to load that seed."
-    same = f"final labels the same on at least {100 * S.SAME_SEGMENTATION:.0f} % of the points"
+    same = (f"a seed joins a segmentation when its final labels are those of the segmentation's "
+            f"first seed on at least {100 * S.SAME_SEGMENTATION:.0f} % of the points")
     if len(groups) == 1:
         return f"**Every seed gives the same segmentation** ({same}).{tail}"
     parts = "; ".join(f"{S.group_name(k)} from seed{'s' if len(g) > 1 else ''} "
