@@ -3,11 +3,17 @@
 of the guided tour, and the A/B compare (the result pinned as A, then R2 moved from 40 to 50
 px and the points coloured by their coarse motion), in headless Debian Chromium; and
 ``docs/explorer_video.png``: ``laav-explore assets/two_objects`` (the synthetic clip tracked,
-its complete tracks segmented, the video's frame 12 behind the points).
+its complete tracks segmented, the video's frame 12 behind the points); and
+``docs/explorer_own_tracks.png``: tracks without ground truth on which LAAV fails, as a
+user's own noisy tracks can be (Hopkins155's 2T3RCRT with 0.5 px of noise,
+``laav.bench.add_pixel_noise`` seed 0, its truth removed; C = 3 given), coloured by the
+differences between LAAV's final labels and plain RV's, the amber warning above (needs
+Hopkins155: ``--hopkins DIR``, default ``../shared/data/hopkins155`` beside the repository;
+skipped when it is not there).
 
 Usage: ``python docs/make_mode_screenshots.py [SEQUENCE_FILE] [--param NAME=VALUE ...]
-[--video FOLDER_OR_VIDEO] [--only modes|video]`` (default: the bundled demo with the default
-parameters, and the clip). Needs ``/usr/bin/chromium``, the playwright package and OpenCV
+[--video FOLDER_OR_VIDEO] [--hopkins DIR] [--only modes|video|own]`` (default: the bundled demo
+with the default parameters, and the clip). Needs ``/usr/bin/chromium``, the playwright package and OpenCV
 (to track the video); no request leaves 127.0.0.1. PNGs quantised to 256 colours.
 """
 
@@ -43,13 +49,17 @@ def main(argv=None) -> int:
     ap.add_argument("--out-dir", default=str(REPO / "docs"))
     ap.add_argument("--video", default=str(REPO / "assets" / "two_objects"),
                     help="video or folder of frames for explorer_video.png (default: the synthetic clip)")
-    ap.add_argument("--only", choices=("modes", "video"), default=None, help="make only these shots")
+    ap.add_argument("--hopkins", default=str(REPO.parent / "shared" / "data" / "hopkins155"),
+                    help="Hopkins155 folder, for explorer_own_tracks.png")
+    ap.add_argument("--only", choices=("modes", "video", "own"), default=None, help="make only these shots")
     args = ap.parse_args(argv)
     outside: list[str] = []
-    if args.only != "video":
+    if args.only in (None, "modes"):
         _modes(args, outside)
-    if args.only != "modes":
+    if args.only in (None, "video"):
         _video(args, outside)
+    if args.only in (None, "own"):
+        _own_tracks(args, outside)
     if outside:
         print(f"requests that left 127.0.0.1 (blocked): {outside}")
         return 1
@@ -121,6 +131,57 @@ def _video(args, outside: list) -> None:
         server.stop()
         for e in created:
             e.close()
+
+
+def _own_tracks(args, outside: list) -> None:
+    """explorer_own_tracks.png: noisy tracks without ground truth on which LAAV and plain RV
+    disagree (see the module docstring): the warning and the differences colouring."""
+    import dataclasses
+    import tempfile
+
+    import laav
+    from laav.bench import add_pixel_noise
+
+    src = Path(args.hopkins) / "2T3RCRT" / "2T3RCRT_truth.mat"
+    if not src.exists():
+        print(f"explorer_own_tracks.png skipped: no {src}")
+        return
+    seq = add_pixel_noise(laav.load_sequence(src), 0.5, 0)
+    seq = dataclasses.replace(seq, labels=None, name="noisy_no_truth")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "noisy_no_truth.npz"
+        laav.save_sequence(seq, path)
+        _serve_and_shoot(path, ["--motions", "3"], "?color=vs_plain", "disagree on",
+                         Path(args.out_dir) / "explorer_own_tracks.png", outside)
+
+
+def _serve_and_shoot(path: Path, options: list, query: str, text: str, out: Path, outside: list) -> None:
+    """``laav-explore PATH OPTIONS`` as a user starts it, the page at ``query``, shot once a
+    model's text holds ``text`` (and the page has settled), scrolled 250 px down."""
+    import subprocess
+
+    from playwright.sync_api import sync_playwright
+
+    port = _free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "explorer.cli", str(path), *options, "--no-browser",
+                             "--port", str(port)], cwd=REPO, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        _wait_listening(port)
+        with sync_playwright() as p:
+            browser, page = _page(p, outside)
+            page.goto(f"http://127.0.0.1:{port}/{query}")
+            page.wait_for_function(
+                "(t) => window.Bokeh && Bokeh.documents.length > 0 && [...Bokeh.documents[0].all_models]"
+                ".some(m => typeof m.text === 'string' && m.text.includes(t))", arg=text, timeout=180000)
+            page.wait_for_timeout(2000)
+            page.mouse.wheel(0, 250)
+            page.wait_for_timeout(1000)
+            _save(page, out)
+            browser.close()
+    finally:
+        proc.terminate()
+        proc.wait(30)
 
 
 def _modes(args, outside: list) -> None:
