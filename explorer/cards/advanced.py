@@ -80,8 +80,9 @@ class AdvancedPanel:
             "Every `LaavParams` field (hover the **?** for its meaning, range and default); a field "
             f"off its default is marked {MARK}. Seed and C stay in the sliders above. The presets "
             "set every field: `LaavParams.paper()` (each stage as the paper writes it) and "
-            "`LaavParams.with_plain_rv()` (ours with plain RV beside LAAV's trial and a selection, "
-            "the default until 2026-12-02); pin a result first (Compare) to see what changes.",
+            "`LaavParams.with_plain_rv()` (ours with plain RV beside LAAV's trial and a selection: "
+            "an earlier default, behind the current one on clean tracks, ahead of it under pixel "
+            "noise, README); pin a result first (Compare) to see what changes.",
             width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
         # folded, the card holds nothing: its ~130 models (a third of the sidebar's) go to the
         # page when it is first opened, not with the page (served and built that much sooner)
