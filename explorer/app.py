@@ -961,10 +961,6 @@ class Explorer:
             self.state.request(params=new.params.to_dict(), seed=new.seed, n_motions=new.n_motions)
         self.controls.show_settings(new)
         if "color" in view:
-            if view["color"] in V.TRUTH_MODES and self.sequence.labels is None:
-                problems.append(f"color={view['color']} needs a ground truth, which this sequence "
-                                "does not have: the final labels are shown")
-                view["color"] = "final"
             self.controls.set_color_mode(view["color"])
         if "frame" in view:
             self.controls.w_frame.value = view["frame"]

@@ -375,8 +375,11 @@ def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings
 
                 view["tour"] = _whole("tour", raw, 1, len(TOUR))
             elif key == "color":
-                if str(raw) not in VIEW_COLORS:  # (those this sequence can show)
-                    shown = [c for c in VIEW_COLORS if seq.labels is not None or c not in TRUTH_MODES]
+                shown = [c for c in VIEW_COLORS if seq.labels is not None or c not in TRUTH_MODES]
+                if str(raw) in TRUTH_MODES and seq.labels is None:  # (the select has none either)
+                    raise ValueError(f"color={raw} needs a ground truth, which this sequence does "
+                                     "not have: the final labels are shown")
+                if str(raw) not in shown:
                     raise ValueError(f"color must be one of {', '.join(shown)}, got {str(raw)[:40]!r}")
                 view["color"] = str(raw)
             else:

@@ -420,28 +420,24 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
             "note": note, "mode": mode}
 
 
-def labelling_distance(a: np.ndarray, b: np.ndarray) -> float:
-    """The share of the points two labellings (P,) label differently, motions matched one to
-    one: :func:`laav.misclassification_rate` of one against the other over the points at
-    least one of them labels, over all P. A point both leave unlabelled (-1: seen too
-    briefly, which depends on the tracks alone) is no difference; one left unlabelled by
-    one of them only is. A metric (the triangle inequality holds): against the truth T,
-    ``max(d(a, T), d(b, T)) >= d(a, b) / 2``."""
-    a, b = np.asarray(a, dtype=np.int64), np.asarray(b, dtype=np.int64)
-    some = (a >= 0) | (b >= 0)
-    if not some.any():
-        return 0.0
-    return float(laav.misclassification_rate(a[some], b[some])) * float(some.mean())
-
-
 def plain_differs(final: np.ndarray, plain: np.ndarray) -> np.ndarray:
-    """(P,) bool: the points whose final label and plain RV's differ once plain RV's motions
-    are renamed to match the final ones (:func:`align_labels`): those
-    :func:`labelling_distance` counts (the Numbers card's ``plain_disagreement`` is their
-    share). A point only one of them leaves unlabelled (-1) differs; one both leave, not."""
+    """(P,) bool: the points whose final label and plain RV's (or any two labellings') differ
+    once the second's motions are renamed to match the first's (:func:`align_labels`, the
+    best one-to-one matching on the points both label). A point only one of them leaves
+    unlabelled (-1) differs; one both leave (seen too briefly, which depends on the tracks
+    alone), not."""
     final = np.asarray(final, dtype=np.int64)
     other = align_labels(plain, final)
     return ((final != other) | (final < 0) | (other < 0)) & ((final >= 0) | (other >= 0))
+
+
+def labelling_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """The share of the points two labellings (P,) label differently: :func:`plain_differs`'
+    share (so card 5's number counts the points the differences colouring marks). It is
+    :func:`laav.misclassification_rate` of one against the other over the points at least
+    one labels, over all P; a metric (the triangle inequality holds): against the truth T,
+    ``max(d(a, T), d(b, T)) >= d(a, b) / 2``."""
+    return float(plain_differs(a, b).mean()) if np.size(a) else 0.0
 
 
 def raw_style(seq: laav.Sequence) -> dict:
@@ -1410,6 +1406,12 @@ def _plain_result(num: dict) -> str:
 DISAGREEMENT_WARN = 0.10
 
 
+def _warns(num: dict) -> bool:
+    """No ground truth, and LAAV and plain RV apart on more than :data:`DISAGREEMENT_WARN`."""
+    d = num.get("plain_disagreement")
+    return d is not None and d > DISAGREEMENT_WARN and num.get("error_final") is None
+
+
 def _share_count(num: dict) -> int:
     """The points behind ``num``'s ``plain_disagreement`` (a share of ``n_points``)."""
     return int(round(num["plain_disagreement"] * num["n_points"]))
@@ -1425,7 +1427,7 @@ def disagreement_line(num: dict) -> str | None:
     n = _share_count(num)
     text = (f"They label {n} of the {num['n_points']} points differently ({_pct(d)}; motions "
             f"matched one to one, both with C = {num['n_motions']}, so it says nothing of C itself)")
-    if disagreement_warning(num):
+    if _warns(num):
         text += (". Without a ground truth this is a warning sign: at least one of the two is wrong "
                  f"on {_pct(d / 2)} or more of the points. Compare them: colour points by "
                  f"*{COLOR_LABELS['vs_plain']}* (black where they differ) or by *{COLOR_LABELS['plain']}*")
@@ -1436,10 +1438,9 @@ def disagreement_warning(num: dict) -> str | None:
     """The status line's warning when LAAV and plain RV disagree on more than
     :data:`DISAGREEMENT_WARN` of the points of a sequence without ground truth (None
     otherwise, and before plain RV is computed)."""
-    d = num.get("plain_disagreement")
-    if d is None or d <= DISAGREEMENT_WARN or num.get("error_final") is not None:
+    if not _warns(num):
         return None
-    n = _share_count(num)
+    d, n = num["plain_disagreement"], _share_count(num)
     return (f"**LAAV and plain RV disagree on {_pct(d)} of the points** ({n} of {num['n_points']}). "
             "Without a ground truth this is the sign that at least one of them is wrong here: "
             f"card 5 says more; colouring points by *{COLOR_LABELS['vs_plain']}* shows where they "
