@@ -19,7 +19,7 @@ from laav.noise import threshold_factor
 
 __all__ = [
     "COLOR_MODES", "TRUTH_MODES", "PLAIN_MODES", "COLOR_LABELS", "ERROR_STAGE", "stage_errors",
-    "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "UNSEEN",
+    "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "DIFFERS_MARK", "UNSEEN",
     "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at", "incomplete_note", "result_notes", "counted",
     "NO_ATOM", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line", "disagreement_warning",
     "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
@@ -90,6 +90,10 @@ NO_ATOM = "#555555"
 #: Points whose final motion changed with the last recompute: a large reddish-purple ring
 #: (Okabe-Ito; no motion uses it).
 CHANGED_MARK = "#CC79A7"
+#: Points LAAV's final labels and plain RV's label differently (colouring ``vs_plain``):
+#: Okabe-Ito orange, no motion's colour and not black, which the misclassified rings drawn
+#: over them mean (ΔE 73 from the grey of the others, 103 from black, deuteranopia simulated).
+DIFFERS_MARK = "#E69F00"
 
 
 _MD_PUNCT = re.compile(r"([!-/:-@\[-`{-~])")  # every ASCII punctuation character
@@ -401,7 +405,7 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
     elif mode == "vs_plain":  # where the final labels and plain RV's differ (no truth needed)
         fin = al["final"]
         differ = plain_differs(fin, plain.labels)
-        color = np.where(differ, ERROR_MARK, CORRECT).astype("U7")
+        color = np.where(differ, DIFFERS_MARK, CORRECT).astype("U7")
         _, marker = _motion_palette(fin)  # the final motion's shape
         label = np.where(differ, "differs from plain RV", "same as plain RV")
     elif mode.startswith("errors"):
@@ -1287,13 +1291,48 @@ PREVIEW_NOTE = ("*LAAV's own trial, shown first: plain RV's runs and the model s
 
 
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
-               pending: bool = False) -> str:
-    """Markdown: LAAV's fine-tuning beside plain RV, with their iteration counts;
-    ``pending``: ``fine_tuning`` is a preview (:data:`PREVIEW_NOTE`)."""
+               pending: bool = False, truth: np.ndarray | None = None) -> str:
+    """Markdown: LAAV's fine-tuning beside plain RV, with their iteration counts, and
+    whether they end at the same segmentation (:func:`rv_verdict`; ``truth``: the
+    sequence's ground truth, or None); ``pending``: ``fine_tuning`` is a preview
+    (:data:`PREVIEW_NOTE`)."""
+    verdict = None if pending else rv_verdict(fine_tuning, plain, truth)
     return (_rv_line(fine_tuning, "LAAV fine-tuning (RV started from the coarse labels)") + "  \n"
             + (PREVIEW_NOTE + "  \n" if pending else "")
             + _rv_line(plain, "Plain RV (random start, same sequence and RV settings)") + "  \n"
+            + (verdict + "  \n" if verdict else "")
             + RV_ERROR_NOTE)
+
+
+#: Final labellings apart on at most this share of the points count as the same segmentation
+#: in the RV card (a few boundary points).
+SAME_SEGMENTATION = 0.01
+
+
+def rv_verdict(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
+               truth: np.ndarray | None = None) -> str | None:
+    """Whether LAAV's final labels and plain RV's are the same segmentation (None until both
+    are there). When they are not, it says that converging is not being right: which run
+    converged tells how it voted, not which labelling is wrong (a trial from a wrong start
+    can settle, one from the right labels can still be moving at the iteration cap); the
+    ground truth's errors when there is one, else where to look."""
+    if fine_tuning is None or plain is None:
+        return None
+    a, b = np.asarray(fine_tuning.labels), np.asarray(plain.labels)
+    if a.shape != b.shape or a.size == 0:
+        return None
+    differ = plain_differs(a, b)
+    n, d = int(differ.sum()), float(differ.mean())
+    if d <= SAME_SEGMENTATION:
+        return (f"**Both end at the same segmentation**: their final labels differ on {n} of the "
+                f"{a.size} points.")
+    text = (f"**The two end apart: their final labels differ on {n} of the {a.size} points "
+            f"({_pct(d)})**. Converging means the labels stopped changing, not that they are right")
+    if truth is not None and np.shape(truth) == a.shape:
+        e_a, e_b = laav.misclassification_rate(truth, a), laav.misclassification_rate(truth, b)
+        return text + f": against the ground truth, LAAV is {_pct(e_a)} wrong, plain RV {_pct(e_b)}."
+    return text + (f"; without a ground truth, colour points by *{COLOR_LABELS['vs_plain']}* to see "
+                   "where they differ, and judge which motion those points follow.")
 
 
 #: What the RV card's error chart draws.
@@ -1430,7 +1469,7 @@ def disagreement_line(num: dict) -> str | None:
     if _warns(num):
         text += (". Without a ground truth this is a warning sign: at least one of the two is wrong "
                  f"on {_pct(d / 2)} or more of the points. Compare them: colour points by "
-                 f"*{COLOR_LABELS['vs_plain']}* (black where they differ) or by *{COLOR_LABELS['plain']}*")
+                 f"*{COLOR_LABELS['vs_plain']}* (orange where they differ) or by *{COLOR_LABELS['plain']}*")
     return text
 
 

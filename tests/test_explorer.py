@@ -138,9 +138,10 @@ def test_disagreement_with_plain_rv_warns_only_without_ground_truth(seq):
     # the colouring of the differences marks exactly the points the share counts
     for s_ in (seq, unlabelled):
         st = V.point_style(s_, res, "vs_plain", far)
-        black = st["color"] == V.ERROR_MARK
+        black = st["color"] == V.DIFFERS_MARK
         assert black.sum() == round(d * seq.n_points) and st["mode"] == "vs_plain" and not st["note"]
         assert set(st["label"][black]) == {"differs from plain RV"}
+        assert not (st["color"] == V.ERROR_MARK).any()  # black is the misclassified rings' colour
     assert V.point_style(unlabelled, res, "vs_plain")["mode"] == "final"  # plain RV not there yet
     # a point both leave unlabelled (-1: seen too briefly) is no difference; one that only
     # one of them leaves is
@@ -347,6 +348,11 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     assert V.md_text(f"C = {C} was estimated: ") in ex.note.object
     # the frame view's caption does not count errors it cannot score
     assert "no ground truth, so no point is marked misclassified" in ex.frame_view.caption.object
+    # ... nor is its misclassified layer offered (it would mark nothing)
+    from explorer.cards.frame import LAYERS, TRUTH_LAYER
+
+    assert TRUTH_LAYER not in ex.w_layers.options and TRUTH_LAYER not in ex.w_layers.value
+    assert len(ex.w_layers.options) == len(LAYERS) - 1 and not ex.frame_view.r_errors.visible
     assert ex.w_color.value == "final (after Random Voting)"
     # no colouring that needs the ground truth it does not have is offered
     assert "ground truth" not in ex.w_color.options and "atoms" in ex.w_color.options
@@ -376,12 +382,18 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     ex._apply_plain_rv(dataclasses.replace(plain, labels=moved), ex.state.plain_rv_key())
     assert ex.check_alert.visible and "LAAV and plain RV disagree on" in ex.check_alert.object
     assert "warning sign" in ex.numbers.object
+    # the RV card: converging is not being right, and where to look without a truth
+    rv_text = ex.rv_view.rv_md.object
+    assert "**The two end apart" in rv_text and "not that they are right" in rv_text
+    assert "differences: final vs plain RV" in rv_text and "against the ground truth" not in rv_text
     # back to a sequence with ground truth: every colouring offered again, the truth shown
     buf = io.BytesIO()
     np.savez(buf, points=seq.points, labels=seq.labels)
     assert ex.load_bytes(buf.getvalue(), "labelled.npz") and ex.wait(60)
     assert ex.sequence.labels is not None
     assert list(ex.w_color.options) == list(V.COLOR_MODES) and ex.w_color.value == "ground truth"
+    assert list(ex.w_layers.options) == LAYERS and TRUTH_LAYER in ex.w_layers.value  # ticked, as before
+    assert ex.frame_view.r_errors.visible
     assert ex.sweep_view.card.title == TITLES[True]
     assert not ex.check_alert.visible  # errors can be scored: no warning
 

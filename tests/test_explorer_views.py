@@ -6,6 +6,7 @@ session state (``explorer.state``).
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -61,6 +62,9 @@ def test_motion_colours_and_error_marks_stay_apart_under_deuteranopia():
     err = _lab_deuteranope([V.ERROR_MARK])[0]
     to_err = {c: float(np.linalg.norm(err - lab[i])) for i, c in enumerate(V.MOTION_COLORS)}
     assert min(to_err.values()) > MIN_DELTA_E, to_err
+    # the differences colouring's orange stays apart from the others' grey and the black rings
+    diff = _lab_deuteranope([V.DIFFERS_MARK, V.CORRECT, V.ERROR_MARK])
+    assert min(np.linalg.norm(diff[0] - diff[1]), np.linalg.norm(diff[0] - diff[2])) > MIN_DELTA_E
     # and with normal vision
     norm = _lab(_linear(list(V.MOTION_COLORS) + [V.ERROR_MARK]))
     for i, j in itertools.combinations(range(len(norm)), 2):
@@ -531,6 +535,33 @@ def test_rv_summary_at_one_motion_says_no_trial_ran():
     assert "converged" not in text
     two = V.rv_summary(laav.segment(seq, 2, seed=0).voting, None)
     assert "nothing to vote on" not in two and "iterations" in two
+
+
+def test_rv_summary_says_whether_the_two_runs_end_at_the_same_segmentation():
+    """Card 4 compares LAAV's final labels with plain RV's: the same segmentation (motions
+    renamed) is said so; apart, it says that converging is not being right, with both
+    errors against the ground truth (computed, not copied) or, without one, where to look.
+    No verdict while LAAV's trial is a preview or plain RV is not there."""
+    seq = laav.synthetic.make_sequence(n_objects=2, n_frames=10, n_points=120, rng=0)
+    res = laav.segment(seq, 2, seed=0)
+    lab = np.asarray(res.labels)
+    renamed = dataclasses.replace(res.voting, labels=1 - lab)  # the same segmentation
+    text = V.rv_summary(res.voting, renamed, truth=seq.labels)
+    assert f"**Both end at the same segmentation**: their final labels differ on 0 of the {lab.size}" in text
+    moved = lab.copy()
+    moved[:30] = 1 - moved[:30]
+    apart = dataclasses.replace(res.voting, labels=moved)
+    text = V.rv_summary(res.voting, apart, truth=seq.labels)
+    assert f"differ on 30 of the {lab.size} points (25.0 %)" in text and "not that they are right" in text
+    e_own = laav.misclassification_rate(seq.labels, lab)
+    e_plain = laav.misclassification_rate(seq.labels, moved)
+    assert e_plain > 0.2
+    assert f"LAAV is {100 * e_own:.1f} % wrong, plain RV {100 * e_plain:.1f} %" in text
+    bare = V.rv_summary(res.voting, apart)
+    assert "against the ground truth" not in bare and "*differences: final vs plain RV*" in bare
+    assert "end apart" not in V.rv_summary(res.voting, apart, pending=True)
+    assert "end apart" not in V.rv_summary(res.voting, None) and "same segmentation" not in V.rv_summary(
+        res.voting, None)
 
 
 def test_the_epipolar_panel_draws_the_pair_while_its_votes_are_fitted():

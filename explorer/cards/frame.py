@@ -22,6 +22,8 @@ EMPTY_POINTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "index
 #: The layers a checkbox shows or hides, in the sidebar's order.
 LAYERS = ["trails (last 5 frames)", "atom circles (R1 solid, R2 dashed)",
           "features in no atom (×)", "misclassified (black ring)", "changed motion (purple ring)"]
+#: The layer only a sequence with ground truth can show (not offered without one).
+TRUTH_LAYER = LAYERS[3]
 EMPTY_IMAGE = {"image": [], "x": [], "y": [], "dw": [], "dh": []}
 #: Opacity of the video frame over the white figure: light enough for the motion colours.
 BACKGROUND_ALPHA = 0.55
@@ -38,6 +40,7 @@ class FrameView:
         self._tpls: dict = {}
         self.w_layers = pn.widgets.CheckBoxGroup(options=list(LAYERS), value=list(LAYERS), inline=False)
         self.w_layers.param.watch(self._on_layers, "value")
+        self._errors_on = True  # the misclassified layer ticked, while a sequence without truth hides it
 
         self.src_points = ColumnDataSource(dict(EMPTY_POINTS))
         self.src_trails = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": [], "alpha": []})
@@ -101,6 +104,7 @@ class FrameView:
     def fit(self, seq) -> None:
         fit_image_figure(self.fig, seq.extent())
         self.w_background.visible = self._frames_of(seq) is not None
+        self.fit_truth(seq)
 
     def set_video(self, video) -> None:
         """Draw ``video``'s frames (an :class:`explorer.video.Video`) behind its sequence's points."""
@@ -205,6 +209,21 @@ class FrameView:
             self.draw_background(seq, self.host.frame)
             if self._caption:
                 self.caption.object = self._caption + self._background_text(seq, self.host.frame)
+
+    def fit_truth(self, seq) -> None:
+        """Offer the misclassified layer only for a sequence with ground truth (without one it
+        marks nothing); whether it is ticked is kept for the next sequence with a truth."""
+        has_truth = seq.labels is not None
+        if (TRUTH_LAYER in self.w_layers.options) == has_truth:
+            return
+        if has_truth:
+            on = set(self.w_layers.value) | ({TRUTH_LAYER} if self._errors_on else set())
+            self.w_layers.options = list(LAYERS)
+            self.w_layers.value = [n for n in LAYERS if n in on]
+        else:
+            self._errors_on = TRUTH_LAYER in self.w_layers.value
+            self.w_layers.value = [n for n in self.w_layers.value if n != TRUTH_LAYER]
+            self.w_layers.options = [n for n in LAYERS if n != TRUTH_LAYER]
 
     def _on_layers(self, event=None) -> None:
         self.host.schedule(self._layers_now, now_if_on_doc_thread=True)

@@ -93,4 +93,4 @@ class RVView:
         set_data(self.src_err_laav, own)
         set_data(self.src_err_plain, other)
         self.plain = plain
-        self.rv_md.object = V.rv_summary(laav_voting, plain, pending=pending)
+        self.rv_md.object = V.rv_summary(laav_voting, plain, pending=pending, truth=seq.labels)
