@@ -1254,6 +1254,11 @@ _SCORES = {"joint": "coding length + epipolar cost per point, + disagreement wit
                              "best moves of a few points (`rv_select_descent`)")}
 
 
+#: The unit of each score (``Voting.score``): LAAV's own candidates are scored as whole
+#: labellings, plain RV's trials per point (the two lines' numbers are not comparable).
+_SCORE_UNITS = {"joint": " nats per point", "joint-sum": " nats", "joint-cleaned": " nats"}
+
+
 def _selection(voting: laav.Voting) -> str:
     """Which candidate labelling the selection kept, and the candidates' scores.
 
@@ -1268,7 +1273,8 @@ def _selection(voting: laav.Voting) -> str:
     if len(costs) < 2:
         return ""
     name = md_text(kept) if kept else "(unnamed)"
-    score = f" (score {float(costs[kept]):.2f})" if kept in costs else ""
+    unit = _SCORE_UNITS.get(voting.score, "")
+    score = f" (score {float(costs[kept]):.2f}{unit})" if kept in costs else ""
     if score and voting.score == "joint-cleaned":  # scored after a few moves of its own
         score = score[:-1] + ", after its cleaning" + (
             "; the labels returned: its trial's own labels after the full descent, unpolished)"
@@ -1280,7 +1286,7 @@ def _selection(voting: laav.Voting) -> str:
     by = f"; scored by {by} (ours)" if by else ""
     others = [(k, v) for k, v in costs.items() if k != kept]
     if len(others) <= 2:
-        listed = ", ".join(f"{md_text(k)} {float(v):.2f}" for k, v in others)
+        listed = ", ".join(f"{md_text(k)} {float(v):.2f}{unit}" for k, v in others)
         return f"; kept the *{name}* labelling{score}; other candidates: {listed}{by}"
     return f"; kept *{name}*{score} of {len(costs)} scored candidates{by}"
 

@@ -838,7 +838,7 @@ def test_rv_card_says_the_candidates_were_scored_after_their_cleaning():
     off = laav.random_voting(seq, 2, laav.LaavParams(rv_select_descent=0.0), seed=0, init_labels=init)
     assert on.score == "joint-cleaned" and len(on.costs) == 1 + laav.LaavParams().rv_missing_trials
     assert "best moves of a few points (`rv_select_descent`)" in rv_summary(on, None)
-    assert f"(score {on.costs[on.selected]:.2f}, after its cleaning" in rv_summary(on, None)
+    assert f"(score {on.costs[on.selected]:.2f} nats, after its cleaning" in rv_summary(on, None)
     assert "rv_select_descent" not in rv_summary(off, None) and "cleaning" not in rv_summary(off, None)
 
 

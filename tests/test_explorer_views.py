@@ -345,6 +345,12 @@ def test_rv_summary_reads_only_public_fields_and_any_selected_name(demo):
     four = {"a": 2.0, "b": 1.0, "c": 3.0}
     assert "coding length + epipolar cost" in V.rv_summary(
         dataclasses.replace(v, selected="b", costs=four, score="joint"), None)
+    # ... with its unit: LAAV's candidates are whole labellings (nats), plain RV's trials per point
+    pair = {"a": 2.0, "b": 1.0}
+    assert "(score 1.00 nats per point); other candidates: a 2.00 nats per point" in V.rv_summary(
+        dataclasses.replace(v, selected="b", costs=pair, score="joint"), None)
+    assert "(score 1.00 nats); other candidates: a 2.00 nats;" in V.rv_summary(
+        dataclasses.replace(v, selected="b", costs=pair, score="joint-sum"), None)
     old = V.rv_summary(dataclasses.replace(v, selected="b", costs=four, score="subspace"), None)
     assert "trajectory-subspace cost" in old and "coding length" not in old
     assert "scored by" not in V.rv_summary(dataclasses.replace(v, selected="b", costs=four, score=""),
