@@ -751,6 +751,7 @@ class Explorer:
                 self.coarse_view.draw(seq, result)
                 self.coarse_view.epipolar.draw(seq, result)
                 self.rv_view.draw(seq, result.voting, plain, pending=preview)
+                self.tour.refresh()
                 num = self.numbers_view.draw(seq, result, plain)
                 if plain is not None or new_seq:  # (else the last check stays until plain RV
                     self.status_bar.show_check(num)  # is back: the page does not jump twice)
@@ -845,6 +846,7 @@ class Explorer:
             return
         with self.hold():
             self.rv_view.draw(self.sequence, self.result.voting, voting)
+            self.tour.refresh()
             self.status_bar.show_check(self.numbers_view.draw(self.sequence, self.result, voting))
             if self.controls.color_mode in V.PLAIN_MODES:
                 self._color_now()

@@ -10,16 +10,20 @@ paper does otherwise it names the ``paper`` preset (``LaavParams.paper()``).
 colour-by (a :data:`explorer.views.COLOR_MODES` key; ``color_no_truth`` instead for a
 sequence without ground truth; None leaves it as it is). A text follows the result shown
 (:meth:`TourStep.text_for`): ``{fine}`` is its number of fine models (``3C``, ``2C``), and
-``text_epipolar`` replaces the text when the paper's epipolar merge decided.
+``text_epipolar`` replaces the text when the paper's epipolar merge decided. A step with
+``facts="rv"`` ends with what the result shown did (:func:`fine_tuning_facts`: how LAAV's trial
+started and ended, plain RV's trials), so the paper's claim is read beside this run.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .views import fine_count
+import numpy as np
 
-__all__ = ["TourStep", "TOUR"]
+from .views import fine_count, rv_error_sources
+
+__all__ = ["TourStep", "TOUR", "fine_tuning_facts"]
 
 
 @dataclass(frozen=True)
@@ -31,6 +35,7 @@ class TourStep:
     color_no_truth: str | None = None
     text_epipolar: str | None = None
     text_joint: str | None = None
+    facts: str | None = None
 
     def text_for(self, params, n_motions: int, complete: bool = True) -> str:
         """The text for a result of ``params`` (a :class:`laav.LaavParams`) with C =
@@ -46,15 +51,16 @@ TOUR: tuple[TourStep, ...] = (
     TourStep(
         "1 · Atoms: small groups that move as one",
         "Each atom grows around a random seed feature: RANSAC keeps the neighbours within R2 that one "
-        "affine motion carries through every frame. Features within R1 belong to that atom alone, the "
-        "ring out to R2 may be shared, and features no atom takes (grey crosses) wait for stage 4.",
+        "affine motion carries through every frame (the paper checks one random frame pair). Features "
+        "within R1 belong to that atom alone, the ring out to R2 may be shared, and features no atom "
+        "takes (grey crosses) wait for stage 4.",
         ("frame",), color="atoms", color_no_truth="atoms"),
     TourStep(
         "2 · Multicut: cutting the atom graph into fine models",
         "Atoms become the nodes of a graph, an edge blue when one atom's affine motion carries the "
         "other's features forward and back well (join), red when it does not (cut). A minimum cost "
         "multicut (greedy contraction, replayed by the slider) cuts it, and its segments are merged "
-        "or split to {fine} fine models, on purpose more than the C motions.",
+        "or split to {fine} fine models, on purpose more than the C motions (the paper: 2C).",
         ("graph",), color="fine", color_no_truth="fine"),
     TourStep(
         "3 · Fine-to-coarse: merging fine models into C motions",
@@ -75,12 +81,11 @@ TOUR: tuple[TourStep, ...] = (
             "each pair of fine models won.")),
     TourStep(
         "4 · Fine-tuning: Random Voting labels every point",
-        "Random Voting starts from the coarse labels: in each iteration every motion fits a "
-        "fundamental matrix on a random pair of frames, and every point votes for the motions whose "
-        "epipolar geometry fits it. The chart shows the error per iteration: LAAV's run starts near "
-        "the answer and settles sooner than plain Random Voting from a random start (the paper's "
-        "claim; our default adds subspace votes and runs for a missed motion, named in the card).",
-        ("rv",), color="final", color_no_truth="final"),
+        "Random Voting starts from the coarse labels, the labelled points with extra votes: in each "
+        "iteration every motion fits a fundamental matrix on a random pair of frames, and every point "
+        "votes for the motions whose epipolar geometry fits it. The paper's claim: started near the "
+        "answer, LAAV's run settles sooner than plain Random Voting from random starts.",
+        ("rv",), color="final", color_no_truth="final", facts="rv"),
     TourStep(
         "5 · Result: one motion per point, and its error",
         "Every point now belongs to one of the C motions; with ground truth, the error is the share "
@@ -89,3 +94,41 @@ TOUR: tuple[TourStep, ...] = (
         "to show whether a result is typical or a bad draw.",
         ("numbers", "frame"), color="errors", color_no_truth="final"),
 )
+
+
+def fine_tuning_facts(seq, voting, plain) -> str:
+    """What this result's fine-tuning did, in a sentence or two for tour step 4: how far
+    from the answer LAAV's informed trial started (against the ground truth, else against
+    its own last labels) and whether it settled or ran to the iteration cap; plain RV's
+    trials the same way (``plain`` None: still computing); the departures of ours the
+    trial used (subspace votes, missing-motion trials), named. ``voting``: the result's
+    :class:`laav.Voting` (None: nothing yet)."""
+    if voting is None or voting.informed_changed is None:
+        return ""
+    n = len(voting.informed_changed)
+    err = rv_error_sources(seq, voting)["error"]
+    what = "wrong" if seq.labels is not None else "off its own last labels"
+    start = f"started {err[0]:.0f} % {what} and " if err.size else ""
+    ended = (f"settled after {n} iterations" if voting.informed_converged
+             else f"was still changing at the cap of {n} iterations")
+    text = f"Here LAAV's trial {start}{ended}"
+    if plain is None:
+        text += "; plain RV: computing."
+    else:
+        per = [int(t) for t in plain.trial_iterations] or [int(plain.n_iterations)]
+        if plain.converged:
+            text += (f"; plain RV ran {len(per)} trials until one settled" if len(per) > 1
+                     else f"; plain RV's trial settled after {per[0]} iterations")
+        else:
+            text += (f"; plain RV's {len(per)} trials all reached the cap of {max(per)} iterations"
+                     if len(per) > 1 else f"; plain RV reached the cap of {per[0]} iterations")
+        text += f" ({int(plain.n_iterations)} in all)."
+    ours = []
+    if (voting.informed_subspace_weight or 0) > 0:
+        ours.append("subspace votes in LAAV's trial")
+    extra = max(0, int(voting.n_trials) - 1)
+    if extra:
+        ours.append(f"{extra} more trials that look for a missed motion")
+    if ours:
+        text += " Ours, not the paper's: " + " and ".join(ours) + " (named in the card)."
+    return text

@@ -826,6 +826,22 @@ def test_rv_summary_names_the_points_each_polishing_step_moved():
     assert f"the descent on the joint score (ours, `rv_descent`) {own.descended}" in rv_summary(own, None)
 
 
+def test_rv_card_legend_names_the_subspace_votes_of_ours():
+    """Card 4's curves differ in their votes too when LAAV's trial used our subspace term
+    (the default): its legend says so; with the paper's votes (the paper preset) it does not."""
+    from explorer.cards.rv import OWN_LEGEND, RVView
+
+    seq = _two_motion_sequence()
+    view = RVView()
+    for params, ours in ((laav.LaavParams(), True), (laav.LaavParams.paper(), False)):
+        res = laav.segment(seq, 2, params, seed=0)
+        assert ((res.voting.informed_subspace_weight or 0) > 0) is ours
+        view.draw(seq, res.voting, None)
+        for fig in (view.fig_error, view.fig_changed, view.fig_margin):
+            assert fig.legend.items[0].label.value == OWN_LEGEND[ours]
+    assert "subspace votes (ours)" in OWN_LEGEND[True]
+
+
 def test_rv_card_says_the_candidates_were_scored_after_their_cleaning():
     """When LAAV's candidates differ, the selection scores each after a short descent
     (``rv_select_descent``, ours): the RV card says so, and not when it is off."""

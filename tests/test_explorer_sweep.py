@@ -300,6 +300,36 @@ def test_tour_texts_are_two_sentences_each():
             assert len(re.findall(r"[.!?](?=\s+[A-Z]|\s*$)", t)) == 2 and "{" not in t
 
 
+def test_tour_step_4_says_what_this_run_did():
+    """Step 4 reads the paper's claim beside this run: how LAAV's trial started (its error
+    at iteration 0, as card 4's chart draws it) and whether it settled, plain RV's trials,
+    and the departures of ours the trial used; never a claim the run contradicts."""
+    import dataclasses
+
+    from explorer.tour import fine_tuning_facts
+
+    seq = _sequence(0)
+    res = laav.segment(seq, 2, seed=0)
+    v = res.voting
+    plain = laav.random_voting(seq, 2, res.params, seed=0)
+    start = V.rv_error_sources(seq, v)["error"][0]
+    text = fine_tuning_facts(seq, v, plain)
+    n = len(v.informed_changed)
+    ended = f"settled after {n} iterations" if v.informed_converged else f"still changing at the cap of {n}"
+    assert f"Here LAAV's trial started {start:.0f} % wrong and {ended}" in text
+    assert f"({plain.n_iterations} in all)" in text and "Ours, not the paper's: subspace votes" in text
+    capped = dataclasses.replace(v, informed_converged=False)
+    assert f"was still changing at the cap of {n} iterations" in fine_tuning_facts(seq, capped, plain)
+    stuck = dataclasses.replace(plain, converged=False, trial_iterations=(150,) * 10, n_iterations=1500)
+    assert "plain RV's 10 trials all reached the cap of 150 iterations (1500 in all)" in fine_tuning_facts(
+        seq, v, stuck)
+    assert "; plain RV: computing." in fine_tuning_facts(seq, v, None)
+    bare = laav.Sequence(seq.points, None, name="bare")
+    assert "off its own last labels" in fine_tuning_facts(bare, v, plain)
+    paper = laav.segment(seq, 2, laav.LaavParams.paper(), seed=0)
+    assert "Ours" not in fine_tuning_facts(seq, paper.voting, plain)
+
+
 def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     ex = explorer
     tour = ex.tour
@@ -322,6 +352,9 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     assert tour.step == 2 and tour.texts[1] == TOUR[2].text_for(ex.result.params, 2)
     tour.w_key.value = "back:3"
     assert tour.step == 1
+    tour.go(3)  # step 4 ends with what this run did
+    assert tour.texts[1].startswith(TOUR[3].text_for(ex.result.params, 2) + " Here LAAV's trial started ")
+    tour.go(1)
     for _ in range(5):
         tour.w_key.value = f"next:{10 + _}"
     assert tour.step == 4 and tour.active  # → stops at the last step

@@ -4,6 +4,7 @@ Random Voting from a random start."""
 from __future__ import annotations
 
 import panel as pn
+from bokeh.core.properties import value
 from bokeh.models import ColumnDataSource, LogAxis
 from bokeh.plotting import figure
 
@@ -11,6 +12,10 @@ from .. import views as V
 from .base import Markdown, card, flex, set_data
 
 RV_TOOLS = "pan,wheel_zoom,reset"
+#: The legend's name of LAAV's informed trial, by whether it voted with our subspace term
+#: (the default) or with the RV paper's votes alone (the paper preset): the two curves then
+#: differ in their votes too, not only in their start.
+OWN_LEGEND = {False: "LAAV's informed trial", True: "LAAV's informed trial + subspace votes (ours)"}
 
 
 #: The error chart's title with and without ground truth.
@@ -94,3 +99,8 @@ class RVView:
         set_data(self.src_err_plain, other)
         self.plain = plain
         self.rv_md.object = V.rv_summary(laav_voting, plain, pending=pending, truth=seq.labels)
+        ours = laav_voting is not None and (laav_voting.informed_subspace_weight or 0) > 0
+        for fig in (self.fig_error, self.fig_changed, self.fig_margin):
+            item = fig.legend.items[0]
+            if getattr(item.label, "value", None) != OWN_LEGEND[ours]:
+                item.label = value(OWN_LEGEND[ours])

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import panel as pn
 
-from ..tour import TOUR
+from ..tour import TOUR, fine_tuning_facts
 from .base import Host, Markdown, page_box
 
 #: Outline of the card a step is about (the header's navy: a page colour, not a motion's).
@@ -159,15 +159,35 @@ class TourView:
             self.title_md.object = s.title
             res = self.host.result
             complete = self.controls.state.sequence.is_complete
-            self.text_md.object = (s.text_for(res.params, res.n_motions, complete) if res is not None
-                                   else s.text_for(self.controls.state.target.params,
-                                                   self.controls.state.target.n_motions, complete))
+            self.text_md.object = self._text(s)
             self.w_back.disabled = self.step == 0
             self.w_next.label = "Next ▶" if self.step < len(TOUR) - 1 else "Finish"
         if color is not None and self.controls.color_mode != color:
             self.controls.set_color_mode(color)
         self._js("scroll")
         self._sync_url()
+
+    def _text(self, s) -> str:
+        """Step ``s``'s text for the result shown (with the facts of this run, if it has any)."""
+        res = self.host.result
+        complete = self.controls.state.sequence.is_complete
+        if res is None:
+            target = self.controls.state.target
+            return s.text_for(target.params, target.n_motions, complete)
+        text = s.text_for(res.params, res.n_motions, complete)
+        if s.facts == "rv":
+            rv_view = getattr(self.host, "rv_view", None)
+            facts = fine_tuning_facts(self.host.sequence, res.voting,
+                                      None if rv_view is None else rv_view.plain)
+            text += (" " + facts) if facts else ""
+        return text
+
+    def refresh(self) -> None:
+        """(Document thread.) The step's text again, for a new result or plain RV's run."""
+        if self.active:
+            text = self._text(TOUR[self.step])
+            if self.text_md.object != text:
+                self.text_md.object = text
 
     def end(self) -> None:
         """Leave the tour: every card and the colour-by as before it."""
