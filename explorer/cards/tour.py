@@ -157,8 +157,6 @@ class TourView:
                             **(HIGHLIGHT if name == s.cards[0] else NO_HIGHLIGHT)}
             self.step_md.object = f"Guided tour · step {self.step + 1} of {len(TOUR)}"
             self.title_md.object = s.title
-            res = self.host.result
-            complete = self.controls.state.sequence.is_complete
             self.text_md.object = self._text(s)
             self.w_back.disabled = self.step == 0
             self.w_next.label = "Next ▶" if self.step < len(TOUR) - 1 else "Finish"
