@@ -19,8 +19,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from .views import fine_count, rv_error_sources
 
 __all__ = ["TourStep", "TOUR", "fine_tuning_facts"]
