@@ -107,8 +107,8 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
     step = K + 1 if step is None else step
     g = V.graph_sources(result, frame, step, V.fine_colors(seq, result))
     lim = V.cost_limit(result)
-    from matplotlib import colormaps
-    cmap = colormaps["RdBu"]
+    from matplotlib.colors import ListedColormap
+    cmap = ListedColormap(V.EDGE_PALETTE)  # the page's colours
     for key, ls, lw in (("joined", "-", 1.6), ("cut", "--", 1.0)):
         d = g[key]
         if len(d["x0"]):
@@ -121,8 +121,8 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
     ax.set(xlim=(x0, x1), ylim=(y1, y0), aspect="equal", xlabel="x (px)", ylabel="y (px, down)",
            title=f"Multicut graph of {result.atoms.n_atoms} atoms (colour = fine model)")
     from matplotlib.lines import Line2D
-    handles = [Line2D([], [], color="0.3", lw=1.6, label="kept edge (solid)"),
-               Line2D([], [], color="0.3", lw=1.0, ls="--", label="cut edge (dashed)"),
+    handles = [Line2D([], [], color="0.3", lw=1.6, label="kept by the multicut (solid)"),
+               Line2D([], [], color="0.3", lw=1.0, ls="--", label="cut by the multicut (dashed)"),
                Line2D([], [], color=cmap(0.95), lw=2, label="edge cost > 0 (join)"),
                Line2D([], [], color=cmap(0.05), lw=2, label="edge cost < 0 (cut)")]
     fc = V.fine_colors(seq, result)

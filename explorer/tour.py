@@ -56,9 +56,10 @@ TOUR: tuple[TourStep, ...] = (
     TourStep(
         "2 · Multicut: cutting the atom graph into fine models",
         "Atoms become the nodes of a graph, an edge blue when one atom's affine motion carries the "
-        "other's features forward and back well (join), red when it does not (cut). A minimum cost "
-        "multicut (greedy contraction, replayed by the slider) cuts it, and its segments are merged "
-        "or split to {fine} fine models, on purpose more than the C motions (the paper: 2C).",
+        "other's features forward and back well (its cost favours joining them), red when it does "
+        "not. A minimum cost multicut (greedy contraction, replayed by the slider) cuts edges "
+        "(dashed), and its segments are merged or split to {fine} fine models, on purpose more than "
+        "the C motions (the paper: 2C).",
         ("graph",), color="fine", color_no_truth="fine"),
     TourStep(
         "3 · Fine-to-coarse: merging fine models into C motions",
@@ -86,11 +87,12 @@ TOUR: tuple[TourStep, ...] = (
         ("rv",), color="final", color_no_truth="final", facts="rv"),
     TourStep(
         "5 · Result: one motion per point, and its error",
-        "Every point now belongs to one of the C motions; with ground truth, the error is the share "
-        "of points misassigned under the best matching of motions, shown for every stage. Atoms, the "
-        "merge and the voting are random: after the tour, the Seed sweep card's button runs seeds 0-9 "
-        "to show whether a result is typical or a bad draw.",
-        ("numbers", "frame"), color="errors", color_no_truth="final"),
+        "Every point now belongs to one of the C motions; with ground truth the frame view draws the "
+        "misassigned ones black, and the Numbers card below gives every stage's error (the share of "
+        "points misassigned under the best matching of motions). Atoms, the merge and the voting are "
+        "random: after the tour, the Seed sweep card's button runs seeds 0-9 to show whether a result "
+        "is typical or a bad draw.",
+        ("frame", "numbers"), color="errors", color_no_truth="final"),
 )
 
 

@@ -69,13 +69,16 @@ ERROR_STAGE = {"gt": "final", "atoms": "final", "fine": "fine", "coarse": "coars
 MOTION_COLORS = ("#0072B2", "#D55E00", "#009E73", "#F0E442", "#56B4E9")
 #: One marker shape per motion (bokeh marker names), so motions differ by more than colour.
 MOTION_MARKERS = ("circle", "square", "triangle", "diamond", "inverted_triangle", "hex")
-#: Atoms (the "atoms" colour mode only: an atom is no motion) cycle through these greys and
-#: muted tones, never a motion colour.
-ATOM_COLORS = ("#4D4D4D", "#8C8C8C", "#B07AA1", "#9C755F", "#76B7B2", "#BAB0AC", "#D4A6C8",
-               "#86BCB6", "#A0CBE8", "#6F6F6F")
+#: Atoms (the "atoms" colour mode only: an atom is no motion) cycle through these muted
+#: tones, never a motion colour and never a grey (grey is the points in no atom).
+ATOM_COLORS = ("#332288", "#882255", "#B07AA1", "#9C755F", "#76B7B2", "#999933", "#D4A6C8",
+               "#DDCC77", "#A0CBE8", "#CC6677")
 #: Shades of a motion colour for the fine models that joined it: >0 mixes in white, <0 black.
 FINE_SHADES = (0.0, 0.5, -0.45, 0.72, -0.65, 0.28, -0.25, 0.85)
 UNLABELLED = "#C7C7C7"
+#: The atom graph's edge costs, red (< 0: cut) to blue (> 0: join): ColorBrewer's RdBu
+#: without its three palest shades, which drew a small cost nearly white on white.
+EDGE_PALETTE = ("#67001f", "#b2182b", "#d6604d", "#f4a582", "#92c5de", "#4393c3", "#2166ac", "#053061")
 #: Points the final stage leaves unlabelled (-1: seen too briefly to decide, missing data
 #: only; ``LaavResult.unlabelled_code``): a neutral grey, their own marker and legend entry.
 UNSEEN = "#9A9A9A"

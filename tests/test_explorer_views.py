@@ -73,6 +73,9 @@ def test_motion_colours_and_error_marks_stay_apart_under_deuteranopia():
     okabe_ito = {"#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "#CC79A7", "#000000"}
     assert set(V.MOTION_COLORS) <= okabe_ito
     assert not set(V.ATOM_COLORS) & set(V.MOTION_COLORS)
+    # ... nor a grey, the colour of the points in no atom in the same view
+    rgb = V.hex_to_rgb(list(V.ATOM_COLORS)).astype(float)
+    assert (rgb.max(axis=1) - rgb.min(axis=1)).min() > 40, V.ATOM_COLORS
     # one marker shape per motion, and (colour, shape) unique for many more motions than C ever is
     assert len(set(V.MOTION_MARKERS)) == len(V.MOTION_MARKERS)
     combos = {(V.motion_color(m), V.motion_marker(m)) for m in range(30)}

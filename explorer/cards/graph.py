@@ -8,7 +8,6 @@ from __future__ import annotations
 import numpy as np
 import panel as pn
 from bokeh.models import ColorBar, ColumnDataSource, HoverTool, LinearColorMapper
-from bokeh.palettes import RdBu11
 
 from .. import views as V
 from .base import Host, Markdown, card, fit_image_figure, image_figure, move_legend, set_data
@@ -21,6 +20,10 @@ from .live import LiveFrames
 #: spread; a JavaScript profile had put the ids' measuring at about 20 ms a move.)
 MAX_ATOM_IDS = 200
 
+
+
+#: The legend samples of the kept and cut edges.
+LEGEND_EDGE = "#555555"
 
 class GraphView:
     """Atoms as nodes at their seeds' positions in the shown frame, kept / cut edges by cost,
@@ -41,11 +44,12 @@ class GraphView:
                                         width=420)
         self.w_step.param.watch(self._on_step, "value")
 
-        # RdBu11 runs blue -> red; cost > 0 (join) is blue
-        self.cost_mapper = LinearColorMapper(palette=list(RdBu11)[::-1], low=-1, high=1)
+        # cost > 0 (join) blue, < 0 (cut) red; without RdBu's three palest shades, which a
+        # small cost drew nearly white on the white figure (a teacher's review)
+        self.cost_mapper = LinearColorMapper(palette=list(V.EDGE_PALETTE), low=-1, high=1)
         # the colour bar reads a mapper of its own: bokeh's colour bar lays the whole figure
         # out again whenever its mapper colours anything, i.e. at every frame move's edges
-        self.bar_mapper = LinearColorMapper(palette=list(RdBu11)[::-1], low=-1, high=1)
+        self.bar_mapper = LinearColorMapper(palette=list(V.EDGE_PALETTE), low=-1, high=1)
         g = self.fig = image_figure("Atom graph at frame 0", 410, extent)
         empty_e = {"x0": [], "y0": [], "x1": [], "y1": [], "cost": [], "error": [], "a": [], "b": []}
         self.src_joined = ColumnDataSource(dict(empty_e))
@@ -57,10 +61,10 @@ class GraphView:
         g.segment("x0", "y0", "x1", "y1", source=self.src_step, line_color="#222222", line_alpha=0.35,
                   line_width=10, legend_label="contracted at this step")
         by_cost = {"field": "cost", "transform": self.cost_mapper}
-        g.segment("x0", "y0", "x1", "y1", source=self.src_joined, line_width=2.5, line_color=by_cost,
-                  legend_label="kept edge (solid)")
-        g.segment("x0", "y0", "x1", "y1", source=self.src_cut, line_width=1.8, line_dash="dashed",
-                  line_color=by_cost, legend_label="cut edge (dashed)")
+        r_kept = g.segment("x0", "y0", "x1", "y1", source=self.src_joined, line_width=2.5,
+                           line_color=by_cost, legend_label="kept by the multicut (solid)")
+        r_cut = g.segment("x0", "y0", "x1", "y1", source=self.src_cut, line_width=1.8, line_dash="dashed",
+                          line_color=by_cost, legend_label="cut by the multicut (dashed)")
         r_nodes = g.scatter("x", "y", source=self.src_nodes, size="size", fill_color="color",
                             line_color="black", line_width=0.8, legend_label="atom (colour = cluster)")
         # atom ids beside the nodes; the pair joined at this step on top of everything, ringed
@@ -82,6 +86,10 @@ class GraphView:
                           ("step_edge", self.src_step), ("pair", self.src_pair)):
             self.live.add("graph_" + name, src, self.specs[name])
         self.live.detach_legend(g)
+        # the solid / dashed entries say what the multicut decided, not the cost's sign (the
+        # colour bar's): their samples in a neutral grey, whatever the first edge's cost
+        for r in (r_kept, r_cut):
+            self.live.stand_in(r).glyph.line_color = LEGEND_EDGE
         self.live.add_text("graph_title", g.title, "text")
 
         self.caption = Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
