@@ -453,6 +453,13 @@ def main(argv: list[str] | None = None) -> int:
         elif not seq.is_complete and video is None:  # (a video's own line says it)
             _say(f"{seq.n_points} tracks, {100 * seq.visible_share:.1f} % of the entries visible "
                  "(incomplete tracks: drawn only where seen; --complete-only keeps the full ones)")
+        if video is None and args.file is not None:  # a tracks CSV's own track ids, for the exports
+            import numpy as np
+
+            from laav.io import point_numbers
+
+            ids = point_numbers(seq, kept)
+            kept = None if np.array_equal(ids, np.arange(seq.n_points)) else ids
     except (laav.SequenceError, FileNotFoundError) as exc:
         return _fail(parser, str(exc))
     if video is not None:

@@ -118,8 +118,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="random seed, an integer in [0, 2**63) (default 0)")
     seg.add_argument("--out", "-o", metavar="CSV",
                      help="labels file, or folder to write it in (an existing one, or a path ending "
-                          "in /: created) (default: <sequence name>_labels.csv in the current folder, "
-                          "the name reduced to letters, digits and _.+-)")
+                          "in /: created) (default: <input file's name>_labels.csv in the current "
+                          "folder, without a Hopkins155 _truth suffix, reduced to letters, digits "
+                          "and _.+-; two track files from one video get two labels files)")
     seg.add_argument("--preset", choices=tuple(PRESETS), default="default",
                      help="parameters to start from: default (ours), paper (every stage as the "
                           "LAAV paper writes it, LaavParams.paper()) or with-plain-rv (ours with "
@@ -182,7 +183,8 @@ def _add_complete_only(parser: argparse.ArgumentParser, segment: bool = True) ->
     parser.add_argument("--complete-only", action="store_true",
                         help=("keep only the tracks visible in every frame (without it, tracks with "
                               "missing entries are segmented too, those seen too briefly labelled "
-                              "-1); output rows keep the file's point numbers") if segment else
+                              "-1); output rows keep the file's point numbers (a tracks CSV's "
+                              "track ids)") if segment else
                         "keep only the tracks visible in every frame (without it every track is "
                         "written, missing entries included)")
 
@@ -371,19 +373,32 @@ def _output_path(given: str | None, default: str) -> Path:
     return folder / default if folder == out else out
 
 
+def _input_name(seq) -> str:
+    """The default output's base name: the input file's name (``Sequence.source``; without
+    Hopkins155's ``_truth``), not the name stored in the file, which every track file of one
+    video shares (``laav track`` stores the video's name), so that two runs do not overwrite
+    one labels file; a safe base name either way (:func:`laav.safe_name`)."""
+    from . import safe_name
+    from .io import _name_from_path
+
+    src = getattr(seq, "source", None)
+    name = _name_from_path(Path(src)) if src and not str(src).startswith("<") else seq.name
+    return safe_name(name)
+
+
 def _cmd_segment(args) -> int:
     from . import (
         misclassification_rate,
         random_voting,
-        safe_name,
         segment,
     )
     from ._sequence import MIN_POINTS
     from .bench import params_from_assignments
+    from .io import point_numbers
 
     params = params_from_assignments(args.param, args.preset)
     seq, kept = _load_for_command(args)
-    out = _output_path(args.out, f"{safe_name(seq.name)}_labels.csv")  # before the work
+    out = _output_path(args.out, f"{_input_name(seq)}_labels.csv")  # before the work
     C = args.motions if args.motions is not None else seq.n_motions
     if C is None:
         raise _UsageError(f"{args.file}: no ground-truth labels in the file; give the number "
@@ -410,7 +425,7 @@ def _cmd_segment(args) -> int:
         with open(out, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(("point", "label"))
-            index = range(len(labels)) if kept is None else kept.tolist()  # the file's numbers
+            index = point_numbers(seq, kept).tolist()  # the file's numbers
             w.writerows((i, int(v)) for i, v in zip(index, labels))
     except OSError as exc:
         raise _UsageError(f"{out}: cannot write labels ({exc.strerror or exc})") from None

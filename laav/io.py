@@ -389,6 +389,47 @@ def _csv_header(p: Path) -> tuple[str, dict] | None:
     return None
 
 
+def csv_track_ids(path: str | os.PathLike) -> np.ndarray | None:
+    """The track ids of a tracks CSV, in the order :func:`load_sequence` makes its points
+    (increasing id): int64 (P,); None when ``path`` is not a tracks CSV. For a file that
+    :func:`load_sequence` has read (the ids of its other formats are ``0 .. P-1``), so
+    that outputs can name the points as the file does. Raises :class:`SequenceError` for an
+    unreadable file."""
+    p = Path(path)
+    try:
+        header = _csv_header(p)
+    except SequenceError:
+        if not p.is_file():
+            raise
+        header = None  # a CSV without the tracks header
+    if header is None:
+        return None
+    delim, cols = header
+    try:
+        ids = np.loadtxt(p, delimiter=delim, skiprows=1, usecols=[cols["track"]], dtype=np.float64,
+                         ndmin=1, encoding="utf-8", quotechar='"')
+    except Exception as exc:  # changed since it was read
+        raise SequenceError(f"{p}: bad tracks CSV ({type(exc).__name__}: {exc})") from None
+    return np.unique(ids).astype(np.int64)
+
+
+def point_numbers(seq: Sequence, kept: np.ndarray | None = None) -> np.ndarray:
+    """The number its file gives each point of ``seq`` (int64 (P,)): a tracks CSV's track
+    ids (:func:`csv_track_ids`), else the point's index in the file. ``kept``: ``seq`` is
+    these points of the file's (``Sequence.complete()``'s indices); their numbers then.
+    A sequence not read from a file (``source`` ``"<array>"``), or a file that can no longer
+    be read, numbers its points by index."""
+    index = np.arange(seq.n_points) if kept is None else np.asarray(kept, dtype=np.int64)
+    src = str(getattr(seq, "source", "") or "")
+    try:
+        ids = csv_track_ids(src) if src and not src.startswith("<") else None
+    except (SequenceError, OSError):  # changed or gone since it was read: the indices
+        ids = None
+    if ids is not None and index.size and ids.size > index.max():
+        index = ids[index]
+    return index
+
+
 def _load_csv(p: Path, header: tuple[str, dict], lim: tuple[int, int]) -> Sequence:
     """A tracks CSV: one row per observation of a track in a frame."""
     import warnings
