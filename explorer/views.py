@@ -8,6 +8,7 @@ function returns plain dicts of numpy arrays, ready for ``ColumnDataSource.data 
 
 from __future__ import annotations
 
+import itertools
 import re
 
 import numpy as np
@@ -225,7 +226,10 @@ def align_labels(pred: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
     """Rename ``pred``'s labels to agree with ``ref`` as far as possible (for stable colours).
 
     The best one-to-one matching (on the points labelled in both) maps predicted labels to
-    reference labels; unmatched predicted labels get fresh numbers. ``-1`` stays ``-1``.
+    reference labels; unmatched predicted labels get the smallest numbers no matched one
+    took (so C motions stay named 1..C when the reference has fewer: a coarse stage that
+    put every covered point in one motion named the other final motion "motion 3" at C = 2).
+    ``-1`` stays ``-1``.
     """
     pred = np.asarray(pred, dtype=np.int64)
     if ref is None:
@@ -236,11 +240,10 @@ def align_labels(pred: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
     if not both.any():
         return pred.copy()
     mapping = laav.best_label_map(ref[both], pred[both])
-    nxt = int(max(ref.max(), pred.max())) + 1
+    free = (k for k in itertools.count() if k not in set(mapping.values()))
     for p in np.unique(pred[pred >= 0]).tolist():
         if p not in mapping:
-            mapping[p] = nxt
-            nxt += 1
+            mapping[p] = next(free)
     lab = pred >= 0
     lut = np.full(int(pred.max()) + 1, -1, dtype=np.int64)
     for p, t in mapping.items():

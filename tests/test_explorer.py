@@ -166,6 +166,11 @@ def test_align_labels_renames_to_the_reference():
     ref = np.array([0, 0, 1, 1, 2, 2])
     pred = np.array([2, 2, 0, 0, 1, -1])
     np.testing.assert_array_equal(V.align_labels(pred, ref), [0, 0, 1, 1, 2, -1])
+    # a reference with fewer labels (a coarse stage that put every covered point in one
+    # motion, C = 2): the unmatched motion takes the smallest free number, 1, not 2 ("motion 3")
+    np.testing.assert_array_equal(V.align_labels([1, 1, 0, 0], [0, 0, 0, -1]), [0, 0, 1, 1])
+    # ... and a number the reference left unused in between: 1, not 3
+    np.testing.assert_array_equal(V.align_labels([0, 1, 2, 2], [0, 2, 2, 2]), [0, 1, 2, 2])
 
 
 # ---------------------------------------------------------------------------- live updates
