@@ -397,6 +397,14 @@ def _say(text: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``laav-explore``: LAAV's warnings as one line each (``laav-explore: warning: ...``)."""
+    from laav.cli import _warnings_as_lines
+
+    with _warnings_as_lines("laav-explore"):
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -461,7 +469,7 @@ def main(argv: list[str] | None = None) -> int:
             ids = point_numbers(seq, kept)
             kept = None if np.array_equal(ids, np.arange(seq.n_points)) else ids
     except (laav.SequenceError, FileNotFoundError) as exc:
-        return _fail(parser, str(exc))
+        return _fail(None, str(exc))  # a file's problem, not the arguments': no usage block
     if video is not None:
         C = video.n_motions
     elif args.motions == "auto" or (args.motions is None and seq.labels is None):

@@ -34,8 +34,19 @@ def params_json(seq: laav.Sequence, result: laav.LaavResult) -> str:
 def views_png(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: str,
               step: int | None = None, plain: laav.Voting | None = None, dpi: int = 100) -> bytes:
     """The views as a PNG (see :func:`views_figure`)."""
+    import logging
+
     buf = io.BytesIO()
-    views_figure(seq, result, frame, mode, step, plain, dpi).savefig(buf, format="png")
+    # matplotlib's mathtext looks for TeX fonts that a Debian install lacks and logs a
+    # "findfont: ... not found" line for each (nine on the first export) while it falls back to
+    # DejaVu Sans, which it draws with: noise in the terminal of laav-explore, not an error
+    fonts = logging.getLogger("matplotlib.font_manager")
+    level = fonts.level
+    fonts.setLevel(logging.ERROR)
+    try:
+        views_figure(seq, result, frame, mode, step, plain, dpi).savefig(buf, format="png")
+    finally:
+        fonts.setLevel(level)
     return buf.getvalue()
 
 
@@ -96,8 +107,9 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
     # smaller than the points, as on the page: their colour and shape stay readable under it
     ax.scatter(u["x"], u["y"], marker="x", c=V.NO_ATOM, s=9, lw=0.8, label="in no atom")
     e = fs["errors"]
-    ax.scatter(e["x"], e["y"], facecolors="none", edgecolors=V.ERROR_MARK, s=80, lw=1.8,
-               label="misclassified")
+    if seq.labels is not None:  # (without ground truth nothing is marked, as on the page)
+        ax.scatter(e["x"], e["y"], facecolors="none", edgecolors=V.ERROR_MARK, s=80, lw=1.8,
+                   label="misclassified")
     ax.set(xlim=(x0, x1), ylim=(y1, y0), aspect="equal", xlabel="x (px)", ylabel="y (px, down)",
            title=f"Frame {frame}, coloured by {mode_name}")
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0)

@@ -181,7 +181,8 @@ def incomplete_note(seq: laav.Sequence, result: laav.LaavResult | None = None,
         if n_un:
             text += (f"{' ' if text else ''}{n_un} point{'s' if n_un != 1 else ''} "
                      f"{'are' if n_un != 1 else 'is'} "
-                     f"*{UNSEEN_LABEL}* (label -1, grey ⊗; counted as errors).")
+                     f"*{UNSEEN_LABEL}* (label -1, grey ⊗"
+                     + ("; counted as errors)." if seq.labels is not None else ")."))
     return text
 
 
@@ -1518,8 +1519,9 @@ def numbers_markdown(num: dict) -> str:
     cov = f"{num['n_covered']} of {num['n_points']} points in atoms ({100 * num['coverage']:.0f} %)"
     n_un = int(num.get("n_unlabelled", 0))
     if n_un:
+        scored = num["error_final"] is not None
         labelled = (f"{num['n_points'] - n_un} of {num['n_points']} points labelled; **{n_un} "
-                    f"{UNSEEN_LABEL}** (label -1, counted as errors)")
+                    f"{UNSEEN_LABEL}** (label -1{', counted as errors' if scored else ''})")
     else:
         labelled = f"all {num['n_points']} points labelled"
     final_note = "(all points; unlabelled ones count as errors)" if n_un else "(all points)"

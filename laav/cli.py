@@ -433,7 +433,7 @@ def _cmd_segment(args) -> int:
     unlabelled = int((labels < 0).sum())
     if unlabelled:
         print(f"unlabelled: {unlabelled} of {len(labels)} points (label -1: seen too briefly to "
-              "decide; they count as errors below)")
+              "decide" + ("; they count as errors below)" if seq.labels is not None else ")"))
     if seq.labels is not None:
         err = 100.0 * misclassification_rate(seq.labels, labels)
         print(f"misclassification: {err:.2f} % ({seq.name}, {seq.n_points} points, "
