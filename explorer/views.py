@@ -443,12 +443,10 @@ def plain_differs(final: np.ndarray, plain: np.ndarray) -> np.ndarray:
 
 
 def labelling_distance(a: np.ndarray, b: np.ndarray) -> float:
-    """The share of the points two labellings (P,) label differently: :func:`plain_differs`'
-    share (so card 5's number counts the points the differences colouring marks). It is
-    :func:`laav.misclassification_rate` of one against the other over the points at least
-    one labels, over all P; a metric (the triangle inequality holds): against the truth T,
-    ``max(d(a, T), d(b, T)) >= d(a, b) / 2``."""
-    return float(plain_differs(a, b).mean()) if np.size(a) else 0.0
+    """The share of the points two labellings (P,) label differently:
+    :func:`laav.labelling_distance` (card 5's number; it counts the points the differences
+    colouring, :func:`plain_differs`, marks)."""
+    return laav.labelling_distance(a, b) if np.size(a) else 0.0
 
 
 def raw_style(seq: laav.Sequence) -> dict:

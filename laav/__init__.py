@@ -13,7 +13,7 @@ uses only the public API exported here.
 from ._sequence import IncompleteSequenceError, LaavWarning, Sequence, SequenceError, require_complete
 from ._visibility import UNLABELLED_REASONS
 from .io import find_truth_files, load_sequence, load_sequence_isolated, safe_name, save_sequence
-from .metrics import best_label_map, confusion_matrix, misclassification_rate
+from .metrics import best_label_map, confusion_matrix, labelling_distance, misclassification_rate
 
 __version__ = "0.1.0"
 
@@ -30,6 +30,7 @@ __all__ = [
     "find_truth_files",
     "safe_name",
     "misclassification_rate",
+    "labelling_distance",
     "best_label_map",
     "confusion_matrix",
 ]

@@ -128,6 +128,11 @@ def build_parser() -> argparse.ArgumentParser:
                           "is the default's chain, LaavParams.own_chain(); --param changes them")
     seg.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help=_param_help())
+    seg.add_argument("--check", action="store_true",
+                     help="also run plain Random Voting (random starts, the same parameters, C and "
+                          "seed) and print on how many points the two labellings differ; above 10 %% "
+                          "a warning says at least one of them is wrong on half that share or more "
+                          "(the explorer's check on tracks without ground truth; about twice the time)")
     _add_max_points(seg)
     _add_complete_only(seg)
 
@@ -418,6 +423,9 @@ def _cmd_segment(args) -> int:
             labels = segment(seq, C, params, args.seed).labels
         else:
             labels = random_voting(seq, C, params, args.seed).labels
+        other = None
+        if args.check and args.method == "laav":
+            other = random_voting(seq, C, params, args.seed).labels
     except ValueError as exc:
         raise _UsageError(_named(args.file, exc)) from None
     # a name read from the file is only ever a base name in the current or given folder
@@ -438,7 +446,35 @@ def _cmd_segment(args) -> int:
         err = 100.0 * misclassification_rate(seq.labels, labels)
         print(f"misclassification: {err:.2f} % ({seq.name}, {seq.n_points} points, "
               f"{C} motions, {args.method}, seed {args.seed})")
+    if args.check and args.method == "rv":
+        print("check: --method rv is plain Random Voting itself; nothing to compare with",
+              file=sys.stderr)
+    elif other is not None:
+        _print_check(labels, other, seq.labels)
     return 0
+
+
+#: LAAV and plain RV apart on more than this share of the points: ``laav segment --check``
+#: warns (as the explorer does, ``explorer.views.DISAGREEMENT_WARN``).
+CHECK_WARN = 0.10
+
+
+def _print_check(labels, plain, truth) -> None:
+    """``--check``'s lines: how far LAAV's labels and plain RV's are apart, and plain RV's
+    error when there is a ground truth; above :data:`CHECK_WARN` a warning (stderr)."""
+    from . import labelling_distance, misclassification_rate
+
+    d = labelling_distance(labels, plain)
+    n = int(round(d * len(labels)))
+    line = (f"check: LAAV and plain Random Voting label {n} of {len(labels)} points differently "
+            f"({100 * d:.1f} %)")
+    if truth is not None:
+        line += f"; plain RV misclassification {100 * misclassification_rate(truth, plain):.2f} %"
+    print(line)
+    if d > CHECK_WARN:
+        print(f"laav segment: warning: LAAV and plain RV disagree on {100 * d:.1f} % of the points: "
+              f"at least one of them is wrong on {50 * d:.1f} % or more; look at the result (e.g. "
+              "laav-explore FILE) before using it", file=sys.stderr)
 
 
 def _named(path, exc) -> str:

@@ -8,7 +8,8 @@ import math
 
 import numpy as np
 
-__all__ = ["confusion_matrix", "misclassification_rate", "best_label_map", "matched_counts"]
+__all__ = ["confusion_matrix", "misclassification_rate", "best_label_map", "matched_counts",
+           "labelling_distance"]
 
 
 def _as_labels(a, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -157,3 +158,31 @@ def misclassification_rate(true, pred) -> float:
     counts = _matchable(counts, tv, pv)
     rows, cols = _assign(counts)
     return float(1.0 - counts[rows, cols].sum() / total)
+
+
+def labelling_distance(a, b) -> float:
+    """The share of the points two labellings of the same points label differently, their
+    motions matched one to one (the best matching): :func:`misclassification_rate` of one
+    against the other over the points at least one of them labels, counted over all P. A
+    point both leave unlabelled (-1) is no difference; one only one of them leaves is. A
+    metric (symmetric, 0 for the same partition, the triangle inequality holds), so against
+    a ground truth T, ``max(d(a, T), d(b, T)) >= d(a, b) / 2``: two runs far apart mean at
+    least one of them is wrong, which is the check when there is no ground truth (LAAV
+    against plain Random Voting: ``laav segment --check``, the explorer's card 5).
+
+    Parameters
+    ----------
+    a, b : array-like of shape (P,)
+        Integer labels; -1 means unlabelled.
+
+    Returns
+    -------
+    float in [0, 1]
+    """
+    a, b = np.asarray(a), np.asarray(b)
+    if a.shape != b.shape or a.ndim != 1:
+        raise ValueError(f"labellings of different shapes: {a.shape} and {b.shape}")
+    some = (a >= 0) | (b >= 0)
+    if not some.any():
+        return 0.0
+    return misclassification_rate(a[some], b[some]) * float(some.sum()) / a.size

@@ -487,5 +487,21 @@ def segment(seq, n_motions: int | str, params: LaavParams | None = None, seed: i
 
         result = replace(result, motion_count=count)
     warn_missing_motions(seq, result.labels, result.n_motions)  # names segment's caller
+    _warn_no_atoms(seq, result)
     return result
+
+
+def _warn_no_atoms(seq, result: LaavResult) -> None:
+    """Warn (:class:`LaavWarning`) when no atom formed at C > 1: the fine-tuning then started
+    from random labels, which is plain Random Voting, not LAAV (the explorer says the same)."""
+    if result.n_motions > 1 and result.atoms.n_atoms == 0:
+        import warnings
+
+        from ._sequence import LaavWarning, user_stacklevel
+
+        p = result.params
+        warnings.warn(f"{getattr(seq, 'source', '<array>')}: no atom formed with R1 = {p.r1:g}, "
+                      f"R2 = {p.r2:g} px: the fine-tuning started from random labels (plain Random "
+                      "Voting, not LAAV); larger radii or a larger affine_threshold let atoms form",
+                      LaavWarning, stacklevel=user_stacklevel())
 

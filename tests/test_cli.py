@@ -289,8 +289,11 @@ def test_segment_warning_is_one_line(tmp_path):
                          timeout=120)
     assert run.returncode == 0, run.stderr
     err = [ln for ln in run.stderr.splitlines() if ln.strip()]
-    assert len(err) == 1, err
+    # one line per warning: the scale, and (at that scale the radii hold no neighbours) the
+    # atoms that did not form
+    assert len(err) == 2, err
     assert err[0].startswith(f"laav segment: warning: {path}: the coordinates span")
+    assert err[1].startswith(f"laav segment: warning: {path}: no atom formed with R1 = ")
 
 
 def test_segment_out_with_a_trailing_separator_is_a_folder(tmp_path, capsys):
@@ -334,3 +337,42 @@ def test_convert_to_a_folder_says_so(tmp_path, capsys):
     assert "names a folder; give a file name" in capsys.readouterr().err
     assert main(["convert", str(path), str(tmp_path / "sub" / "s.csv")]) == 0  # its folder made
     assert (tmp_path / "sub" / "s.csv").is_file()
+
+
+def test_segment_check_compares_with_plain_rv(tmp_path, capsys, monkeypatch):
+    """--check runs plain RV with the same parameters and seed and says how far the two
+    labellings are apart (laav.labelling_distance), plain RV's error with a ground truth;
+    above 10 % a warning on stderr."""
+    seq = make_scene(2, seed=0, name="mine")
+    path = laav.save_sequence(seq, tmp_path / "mine.npz")
+    out = tmp_path / "l.csv"
+    assert main(["segment", str(path), "-o", str(out), "--check", *SMALL]) == 0
+    cap = capsys.readouterr()
+    lab = _labels_csv(out)[:, 1]
+    params = laav.LaavParams(rv_max_iter=30, rv_trials=2)
+    plain = laav.random_voting(seq, 2, params, seed=0).labels
+    d = laav.labelling_distance(lab, plain)
+    assert (f"check: LAAV and plain Random Voting label {round(d * seq.n_points)} of {seq.n_points} "
+            f"points differently ({100 * d:.1f} %); plain RV misclassification "
+            f"{100 * laav.misclassification_rate(seq.labels, plain):.2f} %") in cap.out
+    assert "warning" not in cap.err and d <= 0.10
+    # plain RV far off: the warning
+    real = laav.random_voting
+
+    def far(seq_, C, params_, seed_):
+        v = real(seq_, C, params_, seed_)
+        moved = v.labels.copy()
+        moved[: moved.size // 3] = 1 - moved[: moved.size // 3]
+        import dataclasses
+
+        return dataclasses.replace(v, labels=moved)
+
+    monkeypatch.setattr(laav, "random_voting", far)
+    assert main(["segment", str(path), "-o", str(out), "--check", *SMALL]) == 0
+    cap = capsys.readouterr()
+    assert "laav segment: warning: LAAV and plain RV disagree on" in cap.err
+    assert "at least one of them is wrong" in cap.err
+    # without --check plain RV is not run
+    calls = []
+    monkeypatch.setattr(laav, "random_voting", lambda *a, **k: calls.append(a) or real(*a, **k))
+    assert main(["segment", str(path), "-o", str(out), *SMALL]) == 0 and not calls

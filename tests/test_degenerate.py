@@ -251,3 +251,18 @@ def test_plain_voting_names_the_file_when_too_much_is_missing(max_points):
     seq = Sequence(seq.points, seq.labels, visible=seq.visible, source="clip.mat")
     with pytest.raises(ValueError, match=r"^clip\.mat: no two frames share"):
         laav.random_voting(seq, 3, LaavParams(rv_max_points=max_points), seed=0)
+
+
+def test_segment_warns_when_no_atom_formed():
+    """No atom at C > 1: the fine-tuning started from random labels (plain RV, not LAAV);
+    laav.segment says so (the explorer's note), an ordinary run does not."""
+    from laav.synthetic import make_sequence
+
+    seq = make_sequence(1, n_frames=10, n_points=60, rng=0)
+    with pytest.warns(LaavWarning, match=r"no atom formed with R1 = 0.5, R2 = 1 px: the fine-tuning "
+                                         r"started from random labels \(plain Random Voting"):
+        res = laav.segment(seq, 2, laav.LaavParams(r1=0.5, r2=1.0), seed=0)
+    assert res.atoms.n_atoms == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LaavWarning)
+        assert laav.segment(seq, 2, seed=0).atoms.n_atoms > 0

@@ -258,3 +258,43 @@ def test_matched_counts_of_small_or_unsigned_integers_do_not_wrap():
         assert matched_counts(m) == want and want > 255
         b = m > 180
         assert matched_counts(b) == b[linear_sum_assignment(b.astype(int), maximize=True)].sum()
+
+
+# ---------------------------------------------------------------------- labelling_distance
+def _distance_by_brute_force(a, b) -> float:
+    """Every one-to-one renaming of ``b``'s motions tried: the fewest points that then
+    differ, -1 in both not counted, over all P."""
+    a, b = np.asarray(a), np.asarray(b)
+    la = sorted(set(a[a >= 0].tolist()) | set(b[b >= 0].tolist()))
+    lb = sorted(set(b[b >= 0].tolist()))
+    names = la + [100 + k for k in range(len(lb))]  # fresh names: a motion matched to none
+    best = a.size
+    for perm in itertools.permutations(names, len(lb)):
+        ren = {-1: -1, **dict(zip(lb, perm))}
+        r = np.array([ren[v] for v in b.tolist()])
+        best = min(best, int(((a != r) & ((a >= 0) | (r >= 0))).sum()))
+    return best / a.size
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(st.integers(-1, 2), st.integers(-1, 2)), min_size=1, max_size=12))
+def test_labelling_distance_is_the_fewest_points_apart_under_any_renaming(pairs):
+    from laav import labelling_distance
+
+    a = np.array([p[0] for p in pairs])
+    b = np.array([p[1] for p in pairs])
+    d = labelling_distance(a, b)
+    assert d == pytest.approx(_distance_by_brute_force(a, b))
+    assert d == pytest.approx(labelling_distance(b, a))  # symmetric
+    assert labelling_distance(a, a) == 0 and 0 <= d <= 1
+
+
+def test_labelling_distance_of_renamed_or_unlabelled_points():
+    from laav import labelling_distance
+
+    assert labelling_distance([0, 0, 1, 1], [1, 1, 0, 0]) == 0
+    assert labelling_distance([0, 0, 1, -1], [1, 1, 0, -1]) == 0  # -1 in both: no difference
+    assert labelling_distance([0, 0, 1, 1], [1, 1, 0, -1]) == pytest.approx(0.25)
+    assert labelling_distance([-1, -1], [-1, -1]) == 0
+    with pytest.raises(ValueError, match="different shapes"):
+        labelling_distance([0, 1], [0, 1, 1])
