@@ -169,6 +169,13 @@ def test_summary_without_ground_truth_names_the_segmentations():
     assert "the seeds cannot say which" in text and "converged for 4 of 5" in text
     assert "worst" not in text.lower()
     assert _summary_without_truth(rows[:1]).startswith("**Every seed gives the same segmentation**")
+    assert "C ± 1" not in text  # a segmentation for 3 of 5 seeds
+    # no segmentation for half the seeds: the hint that C may be wrong
+    c = a.copy()
+    c[100:140] = 0
+    scattered = [_row(k, labels=(a, b, c)[k % 3], converged=False) for k in range(5)]
+    text = _summary_without_truth(scattered)
+    assert "**3 different segmentations:**" in text and "try C ± 1 in the C box" in text
     # the card's own words without ground truth speak of segmentations, not errors
     assert "error" not in TITLES[False] and "no ground truth" in CAPTIONS[False]
 

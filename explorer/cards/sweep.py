@@ -241,7 +241,12 @@ def _summary_without_truth(rows) -> str:
     parts = "; ".join(f"{S.group_name(k)} from seed{'s' if len(g) > 1 else ''} "
                       f"{', '.join(str(rows[i].seed) for i in g)} ({len(g)} of {len(rows)})"
                       for k, g in enumerate(groups))
+    scatter = ""
+    if 2 * max(len(g) for g in groups) < len(rows):  # no segmentation for half the seeds
+        scatter = (" Seeds that scatter over this many segmentations are also what a wrong C gives "
+                   "(tracks of C + 1 motions forced into C, or the reverse): try C ± 1 in the C box "
+                   "and sweep again.")
     return (f"No ground truth: the seeds are grouped by the segmentation they give ({same}). "
             f"**{len(groups)} different segmentations:** {parts}. At most one of them is right, and "
             "the seeds cannot say which (the most frequent need not be): compare them, e.g. pin one "
-            "as A and load another." + tail)
+            "as A and load another." + scatter + tail)
