@@ -457,19 +457,7 @@ def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
         raise ValueError(f"not a JSON file ({exc})") from None
     except RecursionError:  # thousands of nested brackets: no params file
         raise ValueError("not a params file (nested too deeply)") from None
-    if not isinstance(d, dict):
-        raise ValueError("a params file holds one JSON object")
-    params = d.get("params", d if "params" not in d else None)
-    if not isinstance(params, dict):
-        raise ValueError('"params" must be an object of LAAV parameters')
-    params = {k: v for k, v in params.items() if k not in ("sequence", "seed", "n_motions")}
-    unknown = sorted(set(params) - set(_FIELDS))
-    if unknown:
-        raise ValueError(f"unknown LAAV parameter(s): {', '.join(map(str, unknown))[:200]}")
-    try:
-        new_params = LaavParams(**{**(_DEFAULTS if defaults is None else defaults).to_dict(), **params})
-    except TypeError as exc:
-        raise ValueError(f"invalid LAAV parameters: {exc}") from None
+    new_params = LaavParams.from_json(d, _DEFAULTS if defaults is None else defaults)
     seed = d.get("seed", base.seed)
     # C is a property of the sequence: a file exported for another one does not set it
     C = base.n_motions if _exported_for_another(d, seq) else d.get("n_motions", base.n_motions)

@@ -157,21 +157,36 @@ def parse_param(text: str) -> tuple[str, object]:
     return key, value
 
 
-def params_from_assignments(assignments: Iterable[str] | None, preset: str = "default") -> LaavParams:
+def params_from_assignments(assignments: Iterable[str] | None, preset: str = "default",
+                            params_file: str | None = None) -> LaavParams:
     """A :class:`~laav.LaavParams` with the ``key=value`` assignments applied to a preset:
     ``"default"`` (``LaavParams()``, ours), ``"paper"`` (:meth:`LaavParams.paper`) or
-    ``"with-plain-rv"`` (:meth:`LaavParams.with_plain_rv`).
+    ``"with-plain-rv"`` (:meth:`LaavParams.with_plain_rv`); with ``params_file`` (a params
+    file the explorer exported, :meth:`LaavParams.from_json`) its fields first, then the
+    assignments.
 
     Raises
     ------
     BenchError
-        For a malformed assignment, an unknown field or an invalid value.
+        For a malformed assignment, an unknown field or an invalid value, or a params file
+        that cannot be read or is not one (naming the file).
     """
     changes = dict(parse_param(a) for a in (assignments or ()))
     if preset not in PRESETS:
         raise BenchError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
+    base = PRESETS[preset]()
+    if params_file is not None:
+        try:
+            with open(params_file, "rb") as fh:
+                text = fh.read(1 << 20)
+        except OSError as exc:
+            raise BenchError(f"{params_file}: cannot be read ({exc.strerror or exc})") from None
+        try:
+            base = LaavParams.from_json(text, base)
+        except ValueError as exc:
+            raise BenchError(f"{params_file}: {exc}") from None
     try:
-        return PRESETS[preset]().replace(**changes)
+        return base.replace(**changes)
     except (ValueError, TypeError) as exc:
         raise BenchError(str(exc)) from None
 

@@ -128,6 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "is the default's chain, LaavParams.own_chain(); --param changes them")
     seg.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help=_param_help())
+    seg.add_argument("--params", metavar="JSON",
+                     help="parameters from a params file (the explorer's Parameters (JSON) export, "
+                          "or a {field: value} object; its seed and C are not used), applied to "
+                          "the preset; --param changes them further")
     seg.add_argument("--check", action="store_true",
                      help="also run plain Random Voting (random starts, the same parameters, C and "
                           "seed) and print on how many points the two labellings differ; above 10 %% "
@@ -401,7 +405,7 @@ def _cmd_segment(args) -> int:
     from .bench import params_from_assignments
     from .io import point_numbers
 
-    params = params_from_assignments(args.param, args.preset)
+    params = params_from_assignments(args.param, args.preset, args.params)
     seq, kept = _load_for_command(args)
     out = _output_path(args.out, f"{_input_name(seq)}_labels.csv")  # before the work
     C = args.motions if args.motions is not None else seq.n_motions

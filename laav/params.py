@@ -469,6 +469,45 @@ class LaavParams:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
+    @classmethod
+    def from_json(cls, text, base: LaavParams | None = None) -> LaavParams:
+        """The parameters of a params file: the explorer's export (``{"params": {...},
+        "seed": ..., ...}``; its ``sequence``, ``seed`` and ``n_motions`` are not parameters
+        and are ignored here) or a bare ``{field: value}`` object, as JSON text (str or
+        bytes) or already parsed. A field it does not name keeps ``base``'s
+        (default: ``LaavParams()``; e.g. ``LaavParams.paper()`` to start from the paper's).
+        Raises ValueError (readable) for a file that is not one, an unknown field or an
+        invalid value; ``laav segment --params FILE`` and ``laav-explore --params FILE``
+        read it so.
+
+        >>> LaavParams.from_json('{"params": {"r1": 25}, "seed": 3}').r1
+        25
+        """
+        import json
+
+        if not isinstance(text, (str, bytes, bytearray)):
+            d = text  # parsed already (anything but an object is refused below)
+        else:
+            try:
+                d = json.loads(text)
+            except (ValueError, UnicodeDecodeError) as exc:
+                raise ValueError(f"not a JSON file ({exc})") from None
+            except RecursionError:  # thousands of nested brackets: no params file
+                raise ValueError("not a params file (nested too deeply)") from None
+        if not isinstance(d, dict):
+            raise ValueError("a params file holds one JSON object")
+        fields = d.get("params", d if "params" not in d else None)
+        if not isinstance(fields, dict):
+            raise ValueError('"params" must be an object of LAAV parameters')
+        fields = {k: v for k, v in fields.items() if k not in ("sequence", "seed", "n_motions")}
+        unknown = sorted(map(str, set(fields) - {f.name for f in dataclasses.fields(cls)}))
+        if unknown:
+            raise ValueError(f"unknown LAAV parameter(s): {', '.join(unknown)[:200]}")
+        try:
+            return (cls() if base is None else base).replace(**fields)
+        except TypeError as exc:
+            raise ValueError(f"invalid LAAV parameters: {exc}") from None
+
 
 def as_params(params) -> LaavParams:
     """``params``, or the defaults for None; a clear TypeError for anything else (a dict

@@ -376,3 +376,36 @@ def test_segment_check_compares_with_plain_rv(tmp_path, capsys, monkeypatch):
     calls = []
     monkeypatch.setattr(laav, "random_voting", lambda *a, **k: calls.append(a) or real(*a, **k))
     assert main(["segment", str(path), "-o", str(out), *SMALL]) == 0 and not calls
+
+
+def test_segment_reads_a_params_file_as_the_explorer_exports_it(tmp_path, capsys):
+    """--params takes the explorer's Parameters (JSON) export (its seed and C not used),
+    on the preset, --param after it; a bad file is one line naming it."""
+    import json
+
+    seq = make_scene(2, seed=0, name="mine")
+    path = laav.save_sequence(seq, tmp_path / "mine.npz")
+    exported = {"sequence": "other", "n_motions": 3, "seed": 7,
+                "params": {**laav.LaavParams().to_dict(), "r1": 25.0, "rv_max_iter": 30, "rv_trials": 2}}
+    pj = tmp_path / "p.json"
+    pj.write_text(json.dumps(exported))
+    out = tmp_path / "l.csv"
+    assert main(["segment", str(path), "--params", str(pj), "-o", str(out)]) == 0
+    want = laav.segment(seq, 2, laav.LaavParams(r1=25.0, rv_max_iter=30, rv_trials=2), seed=0).labels
+    assert np.array_equal(_labels_csv(out)[:, 1], want)
+    assert laav.LaavParams.from_json(pj.read_text()).r1 == 25.0
+    assert laav.LaavParams.from_json('{"r1": 9}', laav.LaavParams.paper()) == laav.LaavParams.paper(r1=9)
+    # --param after the file
+    assert main(["segment", str(path), "--params", str(pj), "--param", "r1=20", "-o", str(out)]) == 0
+    capsys.readouterr()
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"params": {"r1": 25, "nonsense": 1}}')
+    assert main(["segment", str(path), "--params", str(bad), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{bad}: unknown LAAV parameter(s): nonsense" in err and "Traceback" not in err
+    assert main(["segment", str(path), "--params", str(tmp_path / "none.json"), "-o", str(out)]) == 2
+    assert "none.json: cannot be read" in capsys.readouterr().err
+    for text, msg in (("[1, 2]", "one JSON object"), ("{", "not a JSON file"),
+                      ('{"params": {"r1": -5}}', "r1")):
+        with pytest.raises(ValueError, match=msg):
+            laav.LaavParams.from_json(text)
