@@ -81,8 +81,11 @@ def _resolve(path: str | os.PathLike) -> Path:
         if len(found) != 1:
             what = "no" if not found else f"{len(found)}"
             raise SequenceError(
-                f"{p}: folder holds {what} sequence files; expected exactly one *_truth.mat"
-            )
+                f"{p}: folder holds {what} sequence files; expected exactly one (a *_truth.mat, "
+                "or one .mat, .npz or tracks .csv file)"
+                + ("; a folder of video frames is tracked first: laav track FOLDER" if not found
+                   and any(q.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+                           for q in p.iterdir()) else ""))
         p = found[0]
     return p
 
@@ -162,8 +165,11 @@ def load_sequence(path: str | os.PathLike, *, isolated: bool = False,
     csv_head = _csv_header(p)
     if csv_head is not None:
         return _load_csv(p, csv_head, lim)
+    video = b"\0" in head  # binary, and none of the binary formats above: a video, perhaps
     raise SequenceError(
         f"{p}: not a MATLAB v5 .mat, NumPy .npz or tracks CSV file (unrecognised content)"
+        + ("; a video is tracked first: laav track VIDEO (laav-explore opens one directly)"
+           if video else "")
     )
 
 

@@ -338,7 +338,25 @@ def test_csv_limits_checked_before_allocating(tmp_path):
 
 
 def test_text_that_is_no_csv_still_says_unrecognised(tmp_path):
-    _error(_write(tmp_path / "notes.csv", "hello world\nno separators here\n"), "unrecognised content")
+    msg = _error(_write(tmp_path / "notes.csv", "hello world\nno separators here\n"), "unrecognised content")
+    assert "laav track" not in msg
+
+
+def test_a_video_or_a_folder_of_frames_points_to_laav_track(tmp_path):
+    """Given to the sequence loader (laav segment), a video or a folder of frames is refused
+    with the command that reads it."""
+    clip = tmp_path / "clip.mp4"
+    clip.write_bytes(b"\x00\x00\x00\x20ftypisom\x00\x00\x02\x00isomiso2avc1mp41" + bytes(200))
+    _error(clip, "a video is tracked first: laav track VIDEO")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for k in range(3):
+        (frames / f"{k}.png").write_bytes(b"\x89PNG")
+    _error(frames, "a folder of video frames is tracked first: laav track FOLDER")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    msg = _error(empty, "holds no sequence files; expected exactly one (a *_truth.mat, or one .mat")
+    assert "laav track" not in msg
 
 
 # --------------------------------------------------------------------------- npz with visible
