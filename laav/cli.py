@@ -435,7 +435,7 @@ def _cmd_segment(args) -> int:
     # a name read from the file is only ever a base name in the current or given folder
     try:
         with open(out, "w", newline="") as fh:
-            w = csv.writer(fh)
+            w = csv.writer(fh, lineterminator="\n")  # as the explorer's labels CSV
             w.writerow(("point", "label"))
             index = point_numbers(seq, kept).tolist()  # the file's numbers
             w.writerows((i, int(v)) for i, v in zip(index, labels))

@@ -100,6 +100,7 @@ class _Estimator(ClusterMixin, BaseEstimator):
         self.seed_ = as_seed(self.random_state)
         self.result_ = run(seq, self.n_motions, params, self.seed_)
         self.labels_ = self.result_.labels
+        self.n_motions_ = int(getattr(self.result_, "n_motions", self.n_motions))
         return self
 
     def __sklearn_tags__(self):
@@ -124,6 +125,9 @@ class LAAV(_Estimator):
     labels_ : ndarray of shape (P,), int64
         Motion of every trajectory; -1 for one seen (not NaN) in too few frames to decide
         (missing data: ``result_.unlabelled_reason`` says why), as scikit-learn's noise label.
+        A row seen in fewer than 2 frames is refused (ValueError naming it): drop it first.
+    n_motions_ : int
+        C as run: ``n_motions``, or the estimate for ``"auto"`` (``result_.motion_count``).
     result_ : LaavResult
         Every stage's result (``result_.atoms``, ``.graph``, ``.multicut``, ``.coarse``,
         ``.voting``, ``.timings``).
@@ -162,6 +166,8 @@ class RandomVoting(_Estimator):
     ----------
     labels_ : ndarray of shape (P,), int64
         Motion of every trajectory; -1 as in :class:`LAAV`.
+    n_motions_ : int
+        C as run (``n_motions``).
     result_ : Voting
     seed_ : int
     n_features_in_ : int

@@ -73,6 +73,11 @@ def test_fit_matches_segment_and_sets_the_stage_results():
     np.testing.assert_array_equal(LAAV(2, random_state=0, lam=3.0, **FAST).fit(seq).labels_, ref.labels)
     assert misclassification_rate(seq.labels, est.labels_) < 0.01
     assert est.get_params()["lam"] == 3.0  # fit changed no parameter
+    assert est.n_motions_ == 2
+    # "auto": C as estimated, beside the parameter it leaves as it was
+    auto = LAAV("auto", random_state=0, **FAST).fit(seq)
+    assert auto.n_motions_ == auto.result_.n_motions == auto.result_.motion_count.n_motions
+    assert auto.get_params()["n_motions"] == "auto"
 
 
 def test_random_voting_estimator_matches_the_function():
@@ -81,7 +86,7 @@ def test_random_voting_estimator_matches_the_function():
     lab = rv.fit_predict(_X(seq))
     ref = random_voting(seq, 2, LaavParams(rv_alpha=0.95, **FAST), 0)
     np.testing.assert_array_equal(lab, ref.labels)
-    assert rv.result_.labels is rv.labels_
+    assert rv.result_.labels is rv.labels_ and rv.n_motions_ == 2
     assert misclassification_rate(seq.labels, lab) < 0.01
 
 
