@@ -359,6 +359,16 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     assert tour.step == 2 and tour.texts[1] == TOUR[2].text_for(ex.result.params, 2)
     tour.w_key.value = "back:3"
     assert tour.step == 1
+    # the page's count of presses with the last ones: two presses that reached the server as
+    # one change are both applied, a repeated value none
+    tour.w_key.value = "2:next,next"
+    assert tour.step == 3
+    tour.w_key.value = "3:next,next,back"
+    assert tour.step == 2
+    tour.w_key.value = "3:next,next,back "  # (the same count again: nothing new)
+    assert tour.step == 2
+    tour.w_key.value = "4:next,next,back,back"
+    assert tour.step == 1
     tour.go(3)  # step 4 ends with what this run did
     assert tour.texts[1].startswith(TOUR[3].text_for(ex.result.params, 2) + " Here LAAV's trial started ")
     tour.go(1)

@@ -30,8 +30,10 @@ _TIGHT = [":host p, :host h1, :host h2 { margin: 0.15em 0; }"]
 # Runs in the browser when the server writes a command into the hidden ``w_js`` box:
 # ``on:N`` / ``off:N`` (arrow keys step the tour or not; the sidebar folded away for it and
 # back), ``scroll:N`` (the panel to the top).
-# Keys go back through the hidden ``w_key`` box as ``next:T`` / ``back:T`` / ``end:T``; keys
-# typed into a box or on a slider stay there.
+# Keys go back through the hidden ``w_key`` box as ``N:k1,k2,...``: the count of presses and
+# the last 32 of them (``next``, ``back``, ``end``), so that none is lost when two arrive as
+# one change (``KEY:T``, one press, is read too); keys typed into a box or on a slider stay
+# there.
 _TOUR_JS = """
 const cmd = String(cb_obj.value);
 if (!window._laavTour) {
@@ -47,7 +49,11 @@ if (!window._laavTour) {
                Escape: 'end'}[e.key];
     if (!k) return;
     e.preventDefault();
-    t.out.value = k + ':' + Date.now();
+    // every press so far (the last 32) in one value: two presses faster than the server
+    // answers reach it as one change of the box, and the second one was lost
+    t.n = (t.n || 0) + 1;
+    t.keys = (t.keys || []).concat([k]).slice(-32);
+    t.out.value = t.n + ':' + t.keys.join(',');
   });
 }
 const t = window._laavTour;
@@ -88,6 +94,7 @@ class TourView:
         self.active = False
         self._saved: dict = {}  # card name -> (visible, styles), colour mode, before the tour
         self._n_js = 0
+        self._keys_done = 0  # the page's key presses applied (the w_key box's count)
         self.w_start = pn.widgets.Button(label="▶ Guided tour (for a class)", color="success",
                                          width=265, margin=(8, 10))
         self.w_start.on_click(lambda e: self.start())
@@ -220,13 +227,20 @@ class TourView:
         self.w_js.value = f"{cmd}:{self._n_js}"
 
     def _on_key(self, event) -> None:
-        key = str(event.new).split(":")[0]
-        if not self.active:
-            return
-        if key == "next":
-            if self.step < len(TOUR) - 1:  # the last step ends by its button only
-                self.go(self.step + 1)
-        elif key == "back":
-            self.go(self.step - 1)
-        elif key == "end":
-            self.end()
+        head, _, tail = str(event.new).partition(":")
+        if head.isdigit():  # "N:k1,k2,...": the presses after the last one applied
+            n, keys = int(head), tail.split(",")
+            new = keys[max(0, len(keys) - (n - self._keys_done)):] if n > self._keys_done else []
+            self._keys_done = max(self._keys_done, n)
+        else:  # "KEY:T": one press
+            new = [head]
+        for key in new:
+            if not self.active:
+                return
+            if key == "next":
+                if self.step < len(TOUR) - 1:  # the last step ends by its button only
+                    self.go(self.step + 1)
+            elif key == "back":
+                self.go(self.step - 1)
+            elif key == "end":
+                self.end()
