@@ -80,10 +80,10 @@ TOUR: tuple[TourStep, ...] = (
             "each pair of fine models won.")),
     TourStep(
         "4 · Fine-tuning: Random Voting labels every point",
-        "Random Voting starts from the coarse labels, the labelled points with extra votes: in each "
-        "iteration every motion fits a fundamental matrix on a random pair of frames, and every point "
-        "votes for the motions whose epipolar geometry fits it. The paper's claim: started near the "
-        "answer, LAAV's run settles sooner than plain Random Voting from random starts.",
+        "Random Voting starts from the coarse labels (labelled points with extra votes): each "
+        "iteration, every motion fits a fundamental matrix on a random frame pair and every point "
+        "votes for the motions that fit it. The paper's claim: started near the answer, it settles "
+        "sooner than plain Random Voting from random starts.",
         ("rv",), color="final", color_no_truth="final", facts="rv"),
     TourStep(
         "5 · Result: one motion per point, and its error",
@@ -107,11 +107,11 @@ def fine_tuning_facts(seq, voting, plain) -> str:
         return ""
     n = len(voting.informed_changed)
     err = rv_error_sources(seq, voting)["error"]
-    what = "wrong" if seq.labels is not None else "off its own last labels"
+    what = "wrong" if seq.labels is not None else "off its last labels"
     start = f"started {err[0]:.0f} % {what} and " if err.size else ""
     ended = (f"settled after {n} iterations" if voting.informed_converged
-             else f"was still changing at the cap of {n} iterations")
-    text = f"Here LAAV's trial {start}{ended}"
+             else f"was still changing at the {n}-iteration cap")
+    text = f"This run: LAAV's trial {start}{ended}"
     if plain is None:
         text += "; plain RV: computing."
     else:
@@ -120,15 +120,15 @@ def fine_tuning_facts(seq, voting, plain) -> str:
             text += (f"; plain RV ran {len(per)} trials until one settled" if len(per) > 1
                      else f"; plain RV's trial settled after {per[0]} iterations")
         else:
-            text += (f"; plain RV's {len(per)} trials all reached the cap of {max(per)} iterations"
-                     if len(per) > 1 else f"; plain RV reached the cap of {per[0]} iterations")
+            text += (f"; plain RV's {len(per)} trials all hit the {max(per)}-iteration cap"
+                     if len(per) > 1 else f"; plain RV hit the {per[0]}-iteration cap")
         text += f" ({int(plain.n_iterations)} in all)."
     ours = []
     if (voting.informed_subspace_weight or 0) > 0:
-        ours.append("subspace votes in LAAV's trial")
+        ours.append("subspace votes")
     extra = max(0, int(voting.n_trials) - 1)
     if extra:
-        ours.append(f"{extra} more trials that look for a missed motion")
+        ours.append(f"{extra} trials for a missed motion")
     if ours:
-        text += " Ours, not the paper's: " + " and ".join(ours) + " (named in the card)."
+        text += " Ours, not the paper's: " + ", ".join(ours) + "."
     return text

@@ -1361,8 +1361,8 @@ def rv_verdict(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
 RV_ERROR_NOTE = ("*Error per iteration:* each trial's own voting labels, iteration 0 its start "
                  "(LAAV's informed trial: the coarse labels, each labelled point starting with extra "
                  "votes for its label, the paper's additional weight, `rv_label_weight`; the points "
-                 "in no atom at random. Plain RV: the trial it returned, every point at random at "
-                 "the start; its votes are reset once, at iteration 15, as the RV paper does, hence "
+                 "in no atom at random. Plain RV: the trial it returned, or the last of its trials when "
+                 "it returned their consensus; every point at random at the start; its votes are reset once, at iteration 15, as the RV paper does, hence "
                  "its jump there), before the refinement, reassignment and descent that give the "
                  "final labels. Without ground truth: the share of points not yet at the trial's "
                  "last labels.")

@@ -322,17 +322,17 @@ def test_tour_step_4_says_what_this_run_did():
     start = V.rv_error_sources(seq, v)["error"][0]
     text = fine_tuning_facts(seq, v, plain)
     n = len(v.informed_changed)
-    ended = f"settled after {n} iterations" if v.informed_converged else f"still changing at the cap of {n}"
-    assert f"Here LAAV's trial started {start:.0f} % wrong and {ended}" in text
+    ended = f"settled after {n} iterations" if v.informed_converged else f"still changing at the {n}-iteration"
+    assert f"This run: LAAV's trial started {start:.0f} % wrong and {ended}" in text
     assert f"({plain.n_iterations} in all)" in text and "Ours, not the paper's: subspace votes" in text
     capped = dataclasses.replace(v, informed_converged=False)
-    assert f"was still changing at the cap of {n} iterations" in fine_tuning_facts(seq, capped, plain)
+    assert f"was still changing at the {n}-iteration cap" in fine_tuning_facts(seq, capped, plain)
     stuck = dataclasses.replace(plain, converged=False, trial_iterations=(150,) * 10, n_iterations=1500)
-    assert "plain RV's 10 trials all reached the cap of 150 iterations (1500 in all)" in fine_tuning_facts(
+    assert "plain RV's 10 trials all hit the 150-iteration cap (1500 in all)" in fine_tuning_facts(
         seq, v, stuck)
     assert "; plain RV: computing." in fine_tuning_facts(seq, v, None)
     bare = laav.Sequence(seq.points, None, name="bare")
-    assert "off its own last labels" in fine_tuning_facts(bare, v, plain)
+    assert "off its last labels" in fine_tuning_facts(bare, v, plain)
     paper = laav.segment(seq, 2, laav.LaavParams.paper(), seed=0)
     assert "Ours" not in fine_tuning_facts(seq, paper.voting, plain)
 
@@ -370,7 +370,7 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     tour.w_key.value = "4:next,next,back,back"
     assert tour.step == 1
     tour.go(3)  # step 4 ends with what this run did
-    assert tour.texts[1].startswith(TOUR[3].text_for(ex.result.params, 2) + " Here LAAV's trial started ")
+    assert tour.texts[1].startswith(TOUR[3].text_for(ex.result.params, 2) + " This run: LAAV's trial started ")
     tour.go(1)
     for _ in range(5):
         tour.w_key.value = f"next:{10 + _}"

@@ -15,7 +15,7 @@ RV_TOOLS = "pan,wheel_zoom,reset"
 #: The legend's name of LAAV's informed trial, by whether it voted with our subspace term
 #: (the default) or with the RV paper's votes alone (the paper preset): the two curves then
 #: differ in their votes too, not only in their start.
-OWN_LEGEND = {False: "LAAV's informed trial", True: "LAAV's informed trial + subspace votes (ours)"}
+OWN_LEGEND = {False: "LAAV's informed trial", True: "LAAV's trial + subspace votes (ours)"}
 
 
 #: The error chart's title with and without ground truth.
@@ -48,6 +48,8 @@ class RVView:
         self.fig_error.xaxis.axis_label = "Random Voting iteration (0 = the start)"
         self.fig_error.yaxis.axis_label = "% of points"
         self.fig_error.legend.location = "top_right"
+        self.fig_error.legend.label_text_font_size = "8pt"  # (small: it covers the curves less)
+        self.fig_error.legend.padding = self.fig_error.legend.spacing = 2
         self.fig_error.legend.background_fill_alpha = 0.7
         self.fig_error.title.text_font_size = "11pt"
         self.fig_changed = figure(title="Labels changed per iteration", width=440, height=235,
@@ -66,6 +68,8 @@ class RVView:
             # top right in both: the counts fall and the margins settle low after the start
             # (bottom right, the margins' legend covered plain RV's curve)
             fig.legend.location = "top_right"
+            fig.legend.label_text_font_size = "8pt"
+            fig.legend.padding = fig.legend.spacing = 2
             fig.legend.background_fill_alpha = 0.7
             fig.title.text_font_size = "11pt"
         assert isinstance(self.fig_changed.yaxis[0], LogAxis)
