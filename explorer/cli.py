@@ -398,9 +398,9 @@ def _say(text: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """``laav-explore``: LAAV's warnings as one line each (``laav-explore: warning: ...``)."""
-    from laav.cli import _warnings_as_lines
+    from laav.cli import warnings_as_lines
 
-    with _warnings_as_lines("laav-explore"):
+    with warnings_as_lines("laav-explore"):
         return _main(argv)
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .views import fine_count, rv_error_sources
+from .views import fine_count, other_trial_counts, rv_error_sources
 
 __all__ = ["TourStep", "TOUR", "fine_tuning_facts"]
 
@@ -126,9 +126,11 @@ def fine_tuning_facts(seq, voting, plain) -> str:
     ours = []
     if (voting.informed_subspace_weight or 0) > 0:
         ours.append("subspace votes")
-    extra = max(0, int(voting.n_trials) - 1)
-    if extra:
-        ours.append(f"{extra} trials for a missed motion")
+    missing, plain_trials = other_trial_counts(voting)
+    if missing:
+        ours.append(f"{missing} trials for a missed motion")
+    if plain_trials:
+        ours.append(f"{plain_trials} plain RV trials it was compared with")
     if ours:
         text += " Ours, not the paper's: " + ", ".join(ours) + "."
     return text

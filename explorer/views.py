@@ -1197,9 +1197,8 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
         else:
             shown = ", ".join(map(str, per[:6])) + (", …" if len(per) > 6 else "")
             trials = f"; {voting.n_trials} trials ({shown} iterations)"
-        if own:  # LAAV's: its informed trial, then the missing-motion starts' (ours)
-            trials += (f": the informed one first, then {voting.n_trials - 1} from starts that "
-                       "look for a missed motion (ours)")
+        if own:  # LAAV's: its informed trial, then the others it was compared with (ours)
+            trials += ": the informed one first, then " + other_trials(voting)
     moved = [f"refinement {voting.refined}"] if voting.refined else []
     if voting.unpolished:  # ours: the trial's own labels descended lower than the polished
         moved.append(f"the descent on the joint score from the trial's own labels "
@@ -1242,6 +1241,23 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
             f"{_selection(voting)}.")
 
 
+def other_trial_counts(voting: laav.Voting) -> tuple[int, int]:
+    """What LAAV's fine-tuning ran beside its informed trial (ours, not the paper's), from
+    the candidates' names (``Voting.costs``): (trials from missing-motion starts, the default
+    on complete tracks; plain RV's trials, ``with_plain_rv()`` and the default on incomplete
+    tracks)."""
+    missing = sum(str(n).startswith("missing motion") for n in (voting.costs or {}))
+    return missing, max(0, int(voting.n_trials) - 1 - missing)
+
+
+def other_trials(voting: laav.Voting) -> str:
+    """:func:`other_trial_counts` in words ("" when nothing else ran)."""
+    missing, plain = other_trial_counts(voting)
+    parts = ([f"{missing} from starts that look for a missed motion"] if missing else []) + (
+        [f"{plain} of plain RV from random starts, compared with it"] if plain else [])
+    return " and ".join(parts) + " (ours)" if parts else ""
+
+
 def _votes(voting: laav.Voting) -> str:
     """How LAAV's informed trial voted: the RV paper's epipolar votes, or ours with the
     subspace term (a departure from the paper, named as such)."""
@@ -1262,9 +1278,10 @@ _SCORES = {"joint": "coding length + epipolar cost per point, + disagreement wit
                              "best moves of a few points (`rv_select_descent`)")}
 
 
-#: The unit of each score (``Voting.score``): LAAV's own candidates are scored as whole
-#: labellings, plain RV's trials per point (the two lines' numbers are not comparable).
-_SCORE_UNITS = {"joint": " nats per point", "joint-sum": " nats", "joint-cleaned": " nats"}
+#: The unit of each score (``Voting.score``): whole labellings in nats (the default's own
+#: candidates), or nats per point plus the agreement term (plain RV's trials, and LAAV's
+#: with ``with_plain_rv()``): the numbers of two lines need not be on one scale.
+_SCORE_UNITS = {"joint": " per point", "joint-sum": " nats", "joint-cleaned": " nats"}
 
 
 def _selection(voting: laav.Voting) -> str:
@@ -1346,8 +1363,7 @@ def rv_verdict(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
     lesson = ". Converging means the labels stopped changing, not that they are right"
     if truth is not None and np.shape(truth) == a.shape:
         e_a, e_b = laav.misclassification_rate(truth, a), laav.misclassification_rate(truth, b)
-        own_conv = (fine_tuning.informed_converged if fine_tuning.informed_changed is not None
-                    else fine_tuning.converged)
+        own_conv = fine_tuning.converged  # (the kept candidate's trial: its labels are scored)
         # the lesson only where this run teaches it: the run that settled is the worse one
         misleads = (own_conv and not plain.converged and e_a > e_b) or (
             plain.converged and not own_conv and e_b > e_a)
@@ -1361,11 +1377,11 @@ def rv_verdict(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
 RV_ERROR_NOTE = ("*Error per iteration:* each trial's own voting labels, iteration 0 its start "
                  "(LAAV's informed trial: the coarse labels, each labelled point starting with extra "
                  "votes for its label, the paper's additional weight, `rv_label_weight`; the points "
-                 "in no atom at random. Plain RV: the trial it returned, or the last of its trials when "
-                 "it returned their consensus; every point at random at the start; its votes are reset once, at iteration 15, as the RV paper does, hence "
-                 "its jump there), before the refinement, reassignment and descent that give the "
-                 "final labels. Without ground truth: the share of points not yet at the trial's "
-                 "last labels.")
+                 "in no atom at random. Plain RV: the trial it returned, or the last of its trials "
+                 "when it returned their consensus; every point at random at the start; its votes "
+                 "are reset once, at iteration 15, as the RV paper does, hence its jump there), "
+                 "before the refinement, reassignment and descent that give the final labels. "
+                 "Without ground truth: the share of points not yet at the trial's last labels.")
 
 
 # ---------------------------------------------------------------------- numbers
@@ -1522,7 +1538,8 @@ def numbers_markdown(num: dict) -> str:
                     f"{UNSEEN_LABEL}** (label -1{', counted as errors' if scored else ''})")
     else:
         labelled = f"all {num['n_points']} points labelled"
-    final_note = "(all points; unlabelled ones count as errors)" if n_un else "(all points)"
+    final_note = ("(all points; unlabelled ones count as errors)" if n_un and num["error_final"] is not None
+                  else "(all points)")
     truth = "error vs ground truth" if num["error_final"] is not None else "error (needs a ground truth)"
     rows = [
         f"| stage | result | {truth} | time |",

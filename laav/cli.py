@@ -114,8 +114,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "ground truth)")
     seg.add_argument("--method", choices=("laav", "rv"), default="laav",
                      help="LAAV (default) or plain Random Voting")
-    seg.add_argument("--seed", type=_seed, default=0, metavar="S",
-                     help="random seed, an integer in [0, 2**63) (default 0)")
+    seg.add_argument("--seed", type=_seed, default=None, metavar="S",
+                     help="random seed, an integer in [0, 2**63) (default: the --params file's "
+                          "seed, else 0)")
     seg.add_argument("--out", "-o", metavar="CSV",
                      help="labels file, or folder to write it in (an existing one, or a path ending "
                           "in /: created) (default: <input file's name>_labels.csv in the current "
@@ -382,6 +383,24 @@ def _output_path(given: str | None, default: str) -> Path:
     return folder / default if folder == out else out
 
 
+def _params_file_seed(path) -> int:
+    """The seed of a params file the explorer exported (``--params``), else 0 (read once
+    more: :func:`laav.bench.params_from_assignments` has checked the file)."""
+    import json
+
+    if path is None:
+        return 0
+    try:
+        with open(path, "rb") as fh:
+            seed = json.loads(fh.read(1 << 20)).get("seed", 0)
+    except (OSError, ValueError, AttributeError):
+        return 0
+    try:
+        return _seed(str(seed)) if isinstance(seed, int) and not isinstance(seed, bool) else 0
+    except argparse.ArgumentTypeError:
+        raise _UsageError(f"{path}: seed must be a whole number in [0, 2**63), got {seed}") from None
+
+
 def _input_name(seq) -> str:
     """The default output's base name: the input file's name (``Sequence.source``; without
     Hopkins155's ``_truth``), not the name stored in the file, which every track file of one
@@ -406,6 +425,8 @@ def _cmd_segment(args) -> int:
     from .io import point_numbers
 
     params = params_from_assignments(args.param, args.preset, args.params)
+    if args.seed is None:  # the params file's, as laav-explore --params takes it
+        args.seed = _params_file_seed(args.params)
     seq, kept = _load_for_command(args)
     out = _output_path(args.out, f"{_input_name(seq)}_labels.csv")  # before the work
     C = args.motions if args.motions is not None else seq.n_motions
@@ -429,7 +450,8 @@ def _cmd_segment(args) -> int:
             labels = random_voting(seq, C, params, args.seed).labels
         other = None
         if args.check and args.method == "laav":
-            other = random_voting(seq, C, params, args.seed).labels
+            # (its input checks are segment's, said once already)
+            other = random_voting(seq, C, params, args.seed, check_input=False).labels
     except ValueError as exc:
         raise _UsageError(_named(args.file, exc)) from None
     # a name read from the file is only ever a base name in the current or given folder
@@ -567,7 +589,7 @@ def _cmd_report(args) -> int:
 
 
 @contextlib.contextmanager
-def _warnings_as_lines(prog: str):
+def warnings_as_lines(prog: str):
     """LAAV's warnings (:class:`laav.LaavWarning`) shown as one line each,
     ``PROG: warning: MESSAGE``, instead of Python's file, line number and source line
     (the format only: a caller recording warnings still records them)."""
@@ -598,7 +620,7 @@ def main(argv=None) -> int:
     commands = {"segment": _cmd_segment, "bench": _cmd_bench, "report": _cmd_report,
                 "convert": _cmd_convert, "track": _cmd_track}
     try:
-        with _warnings_as_lines(f"laav {args.command}"):
+        with warnings_as_lines(f"laav {args.command}"):
             return commands[args.command](args)
     except (_UsageError, BenchError) as exc:
         print(f"laav {args.command}: error: {exc}", file=sys.stderr)

@@ -359,8 +359,9 @@ def test_segment_check_compares_with_plain_rv(tmp_path, capsys, monkeypatch):
     # plain RV far off: the warning
     real = laav.random_voting
 
-    def far(seq_, C, params_, seed_):
-        v = real(seq_, C, params_, seed_)
+    def far(seq_, C, params_, seed_, **kw):
+        assert kw == {"check_input": False}  # segment's input warnings are not said twice
+        v = real(seq_, C, params_, seed_, **kw)
         moved = v.labels.copy()
         moved[: moved.size // 3] = 1 - moved[: moved.size // 3]
         import dataclasses
@@ -379,8 +380,9 @@ def test_segment_check_compares_with_plain_rv(tmp_path, capsys, monkeypatch):
 
 
 def test_segment_reads_a_params_file_as_the_explorer_exports_it(tmp_path, capsys):
-    """--params takes the explorer's Parameters (JSON) export (its seed and C not used),
-    on the preset, --param after it; a bad file is one line naming it."""
+    """--params takes the explorer's Parameters (JSON) export (its seed too, unless --seed
+    is given, as laav-explore --params does; not its C), on the preset, --param after it; a
+    bad file is one line naming it."""
     import json
 
     seq = make_scene(2, seed=0, name="mine")
@@ -391,8 +393,12 @@ def test_segment_reads_a_params_file_as_the_explorer_exports_it(tmp_path, capsys
     pj.write_text(json.dumps(exported))
     out = tmp_path / "l.csv"
     assert main(["segment", str(path), "--params", str(pj), "-o", str(out)]) == 0
-    want = laav.segment(seq, 2, laav.LaavParams(r1=25.0, rv_max_iter=30, rv_trials=2), seed=0).labels
-    assert np.array_equal(_labels_csv(out)[:, 1], want)
+    fast = laav.LaavParams(r1=25.0, rv_max_iter=30, rv_trials=2)
+    assert "seed 7)" in capsys.readouterr().out  # the file's seed
+    assert np.array_equal(_labels_csv(out)[:, 1], laav.segment(seq, 2, fast, seed=7).labels)
+    assert main(["segment", str(path), "--params", str(pj), "--seed", "0", "-o", str(out)]) == 0
+    assert "seed 0)" in capsys.readouterr().out  # --seed wins
+    assert np.array_equal(_labels_csv(out)[:, 1], laav.segment(seq, 2, fast, seed=0).labels)
     assert laav.LaavParams.from_json(pj.read_text()).r1 == 25.0
     assert laav.LaavParams.from_json('{"r1": 9}', laav.LaavParams.paper()) == laav.LaavParams.paper(r1=9)
     # --param after the file

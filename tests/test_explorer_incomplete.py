@@ -125,6 +125,10 @@ def test_unlabelled_points_have_their_own_style_and_count_as_errors(occ, res):
     md = V.numbers_markdown(num)
     assert f"{occ.n_points - BRIEF.size} of {occ.n_points} points labelled" in md
     assert f"{BRIEF.size} {V.UNSEEN_LABEL}" in md and "counted as errors" in md
+    assert "unlabelled ones count as errors" in md
+    # without a ground truth nothing is counted as an error (no error is scored)
+    bare = V.numbers_markdown({**num, "error_final": None, "error_fine": None, "error_coarse": None})
+    assert f"{BRIEF.size} {V.UNSEEN_LABEL}" in bare and "as errors" not in bare
     assert f"{100 * occ.visible_share:.1f} % of the entries visible" in md
     # colour-by modes stay consistent: every mode styles every point, the same points
     for mode in V.COLOR_MODES.values():

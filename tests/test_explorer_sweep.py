@@ -322,7 +322,8 @@ def test_tour_step_4_says_what_this_run_did():
     start = V.rv_error_sources(seq, v)["error"][0]
     text = fine_tuning_facts(seq, v, plain)
     n = len(v.informed_changed)
-    ended = f"settled after {n} iterations" if v.informed_converged else f"still changing at the {n}-iteration"
+    ended = (f"settled after {n} iterations" if v.informed_converged
+             else f"still changing at the {n}-iteration")
     assert f"This run: LAAV's trial started {start:.0f} % wrong and {ended}" in text
     assert f"({plain.n_iterations} in all)" in text and "Ours, not the paper's: subspace votes" in text
     capped = dataclasses.replace(v, informed_converged=False)
@@ -361,16 +362,21 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     assert tour.step == 1
     # the page's count of presses with the last ones: two presses that reached the server as
     # one change are both applied, a repeated value none
-    tour.w_key.value = "2:next,next"
+    run = tour._run
+    assert len(run) == 8  # a token per tour, sent to the page with "on:RUN"
+    tour.w_key.value = f"{run}.2:next,next"
     assert tour.step == 3
-    tour.w_key.value = "3:next,next,back"
+    tour.w_key.value = f"{run}.3:next,next,back"
     assert tour.step == 2
-    tour.w_key.value = "3:next,next,back "  # (the same count again: nothing new)
+    tour.w_key.value = f"{run}.3:next,next,back "  # (the same count again: nothing new)
     assert tour.step == 2
-    tour.w_key.value = "4:next,next,back,back"
+    tour.w_key.value = "other.9:end,end"  # another tour's presses: not replayed
+    assert tour.step == 2 and tour.active
+    tour.w_key.value = f"{run}.4:next,next,back,back"
     assert tour.step == 1
     tour.go(3)  # step 4 ends with what this run did
-    assert tour.texts[1].startswith(TOUR[3].text_for(ex.result.params, 2) + " This run: LAAV's trial started ")
+    step4 = TOUR[3].text_for(ex.result.params, 2)
+    assert tour.texts[1].startswith(step4 + " This run: LAAV's trial started ")
     tour.go(1)
     for _ in range(5):
         tour.w_key.value = f"next:{10 + _}"

@@ -348,9 +348,9 @@ def test_rv_summary_reads_only_public_fields_and_any_selected_name(demo):
     four = {"a": 2.0, "b": 1.0, "c": 3.0}
     assert "coding length + epipolar cost" in V.rv_summary(
         dataclasses.replace(v, selected="b", costs=four, score="joint"), None)
-    # ... with its unit: LAAV's candidates are whole labellings (nats), plain RV's trials per point
+    # ... with its unit: whole labellings in nats (the default's own candidates), else per point
     pair = {"a": 2.0, "b": 1.0}
-    assert "(score 1.00 nats per point); other candidates: a 2.00 nats per point" in V.rv_summary(
+    assert "(score 1.00 per point); other candidates: a 2.00 per point" in V.rv_summary(
         dataclasses.replace(v, selected="b", costs=pair, score="joint"), None)
     assert "(score 1.00 nats); other candidates: a 2.00 nats;" in V.rv_summary(
         dataclasses.replace(v, selected="b", costs=pair, score="joint-sum"), None)
@@ -564,14 +564,20 @@ def test_rv_summary_says_whether_the_two_runs_end_at_the_same_segmentation():
     e_plain = laav.misclassification_rate(seq.labels, moved)
     assert e_plain > 0.2 > e_own
     errors = f"against the ground truth, LAAV is {100 * e_own:.1f} % wrong, plain RV {100 * e_plain:.1f} %"
-    # the run that settled is the worse one: the lesson, with both errors
-    own_settled = dataclasses.replace(res.voting, informed_converged=False, converged=False)
-    text = V.rv_summary(own_settled, dataclasses.replace(apart, converged=True), truth=seq.labels)
+    # the run that settled is the worse one: the lesson, with both errors (plain RV settled
+    # on its wrong labels, LAAV's kept trial did not)
+    plain_settled = dataclasses.replace(apart, converged=True)
+    text = V.rv_summary(dataclasses.replace(res.voting, converged=False), plain_settled, truth=seq.labels)
     assert f"differ on 30 of the {lab.size} points (25.0 %)" in text and "not that they are right" in text
     assert errors in text
+    # ... and LAAV's kept trial settled on the wrong labels (its final labels are scored)
+    wrong = dataclasses.replace(res.voting, labels=moved, converged=True)
+    text = V.rv_summary(wrong, dataclasses.replace(res.voting, converged=False), truth=seq.labels)
+    assert "not that they are right" in text
+    assert f"LAAV is {100 * e_plain:.1f} % wrong, plain RV {100 * e_own:.1f} %" in text
     # the better run settled (or both did): the errors alone, no lesson it would contradict
     for conv in (False, True):
-        text = V.rv_summary(dataclasses.replace(res.voting, informed_converged=True),
+        text = V.rv_summary(dataclasses.replace(res.voting, converged=True),
                             dataclasses.replace(apart, converged=conv), truth=seq.labels)
         assert errors in text and "not that they are right" not in text
     bare = V.rv_summary(res.voting, apart)
@@ -579,6 +585,27 @@ def test_rv_summary_says_whether_the_two_runs_end_at_the_same_segmentation():
     assert "end apart" not in V.rv_summary(res.voting, apart, pending=True)
     assert "end apart" not in V.rv_summary(res.voting, None) and "same segmentation" not in V.rv_summary(
         res.voting, None)
+
+
+def test_rv_card_and_tour_name_the_trials_beside_laavs_by_kind():
+    """Beside LAAV's informed trial the default runs missing-motion starts; with_plain_rv()
+    (and the default on incomplete tracks) runs plain RV's trials: card 4 and the tour name
+    them so (they called plain RV's trials missing-motion ones)."""
+    from explorer.tour import fine_tuning_facts
+
+    seq = laav.synthetic.make_sequence(n_objects=1, n_frames=10, n_points=120, rng=0)
+    own = laav.segment(seq, 2, seed=0).voting
+    missing, plain = V.other_trial_counts(own)
+    assert missing == own.n_trials - 1 > 0 and plain == 0
+    assert f"then {missing} from starts that look for a missed motion (ours)" in V.rv_summary(own, None)
+    assert f"{missing} trials for a missed motion" in fine_tuning_facts(seq, own, None)
+    mixed = laav.segment(seq, 2, laav.LaavParams.with_plain_rv(), seed=0).voting
+    missing, plain = V.other_trial_counts(mixed)
+    assert missing == 0 and plain == mixed.n_trials - 1 > 0
+    text = V.rv_summary(mixed, None)
+    assert f"then {plain} of plain RV from random starts, compared with it (ours)" in text
+    assert "missed motion" not in text and "missed motion" not in fine_tuning_facts(seq, mixed, None)
+    assert f"{plain} plain RV trials it was compared with" in fine_tuning_facts(seq, mixed, None)
 
 
 def test_the_epipolar_panel_draws_the_pair_while_its_votes_are_fitted():

@@ -353,6 +353,14 @@ def test_a_video_or_a_folder_of_frames_points_to_laav_track(tmp_path):
     for k in range(3):
         (frames / f"{k}.png").write_bytes(b"\x89PNG")
     _error(frames, "a folder of video frames is tracked first: laav track FOLDER")
+    # other binary content (an image, a pickle) gets no such hint
+    png = tmp_path / "frame.png"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100))
+    assert "laav track" not in _error(png, "unrecognised content")
+    for head in (b"RIFF\x00\x00\x00\x00AVI LIST", b"\x1a\x45\xdf\xa3\x01\x00", b"OggS\x00\x02"):
+        other = tmp_path / "clip.bin"
+        other.write_bytes(head + bytes(100))
+        _error(other, "a video is tracked first")
     empty = tmp_path / "empty"
     empty.mkdir()
     msg = _error(empty, "holds no sequence files; expected exactly one (a *_truth.mat, or one .mat")

@@ -259,5 +259,18 @@ def test_explorer_upload_of_an_incomplete_file_replaces_the_sequence(tmp_path):
         assert ex.load_bytes((tmp_path / "ok.csv").read_bytes(), "ok.csv")
         assert ex.wait(120)
         assert ex.sequence.n_points == 50 and ex.sequence.name == "ok"
+        assert ex.origin_of(ex.sequence).point_ids is None  # tracks 0..49: numbered by index
+        # a tracker's CSV with its own track ids: the labels CSV names the points by them
+        ids = 500 + 3 * np.arange(occl.n_points)
+        xy = occl.points.tolist()
+        rows = ["track,frame,x,y"] + [f"{ids[q]},{f},{xy[f][q][0]!r},{xy[f][q][1]!r}"
+                                      for f in range(occl.n_frames) for q in range(occl.n_points)
+                                      if occl.visible[f, q]]
+        assert ex.load_bytes(("\n".join(rows) + "\n").encode(), "ids.csv") and ex.wait(120)
+        assert np.array_equal(ex.origin_of(ex.sequence).point_ids, ids)
+        from explorer import export
+
+        table = export.labels_csv(ex.sequence, ex.result, ex.origin_of(ex.sequence).point_ids)
+        assert [int(r.split(",")[0]) for r in table.splitlines()[1:]] == ids.tolist()
     finally:
         ex.close()

@@ -23,6 +23,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import panel as pn
 
 import laav
@@ -351,6 +352,9 @@ class Files:
                     # is parsed in a child process (scipy's reader can crash the interpreter
                     # on some damaged files, and an upload must never do that)
                     seq = laav.load_sequence(p, isolated=True)  # incomplete tracks too
+                    # a tracks CSV's own track ids, for the labels CSV (read while the file is here)
+                    ids = laav.io.point_numbers(seq)
+                    ids = None if np.array_equal(ids, np.arange(seq.n_points)) else ids
                     # named by the file the user gave, not this temporary copy (later
                     # messages, e.g. of the computation, name the sequence's source)
                     seq = dataclasses.replace(seq, source=base)
@@ -363,7 +367,7 @@ class Files:
             return False
         self._estimating = token
         try:  # without ground truth C is estimated, as by the command (a second or a few)
-            origin = _estimated_motions(seq)
+            origin = dataclasses.replace(_estimated_motions(seq), point_ids=ids)
         finally:
             self._estimating = None
         if origin.motions_estimate is not None:

@@ -20,10 +20,9 @@ from .live import LiveFrames
 #: spread; a JavaScript profile had put the ids' measuring at about 20 ms a move.)
 MAX_ATOM_IDS = 200
 
-
-
 #: The legend samples of the kept and cut edges.
 LEGEND_EDGE = "#555555"
+
 
 class GraphView:
     """Atoms as nodes at their seeds' positions in the shown frame, kept / cut edges by cost,

@@ -10,6 +10,8 @@ choice back as they were.
 
 from __future__ import annotations
 
+import secrets
+
 import panel as pn
 
 from ..tour import TOUR, fine_tuning_facts
@@ -30,10 +32,11 @@ _TIGHT = [":host p, :host h1, :host h2 { margin: 0.15em 0; }"]
 # Runs in the browser when the server writes a command into the hidden ``w_js`` box:
 # ``on:N`` / ``off:N`` (arrow keys step the tour or not; the sidebar folded away for it and
 # back), ``scroll:N`` (the panel to the top).
-# Keys go back through the hidden ``w_key`` box as ``N:k1,k2,...``: the count of presses and
-# the last 32 of them (``next``, ``back``, ``end``), so that none is lost when two arrive as
-# one change (``KEY:T``, one press, is read too); keys typed into a box or on a slider stay
-# there.
+# Keys go back through the hidden ``w_key`` box as ``RUN.N:k1,k2,...``: the tour's token
+# (sent with ``on:RUN``, new for every tour, so that another tour's or another explorer's
+# presses in the same window are not replayed), the count of presses and the last 32 of them
+# (``next``, ``back``, ``end``), so that none is lost when two arrive as one change
+# (``KEY:T``, one press, is read too); keys typed into a box or on a slider stay there.
 _TOUR_JS = """
 const cmd = String(cb_obj.value);
 if (!window._laavTour) {
@@ -49,11 +52,11 @@ if (!window._laavTour) {
                Escape: 'end'}[e.key];
     if (!k) return;
     e.preventDefault();
-    // every press so far (the last 32) in one value: two presses faster than the server
+    // every press of this tour (the last 32) in one value: two presses faster than the server
     // answers reach it as one change of the box, and the second one was lost
     t.n = (t.n || 0) + 1;
     t.keys = (t.keys || []).concat([k]).slice(-32);
-    t.out.value = t.n + ':' + t.keys.join(',');
+    t.out.value = t.run + '.' + t.n + ':' + t.keys.join(',');
   });
 }
 const t = window._laavTour;
@@ -63,6 +66,8 @@ const toggle = document.getElementById('sidebar-toggle');
 const shown = () => side != null && side.offsetWidth > 0;
 if (cmd.startsWith('on:')) {
   t.on = true;
+  // a new tour (its token from the server): its presses are counted from 1
+  t.run = cmd.split(':')[1]; t.n = 0; t.keys = [];
   // the whole width for the tour (a projector): the sidebar folds away, and back afterwards
   if (toggle && shown()) { toggle.click(); t.folded = true; }
 }
@@ -95,6 +100,7 @@ class TourView:
         self._saved: dict = {}  # card name -> (visible, styles), colour mode, before the tour
         self._n_js = 0
         self._keys_done = 0  # the page's key presses applied (the w_key box's count)
+        self._run = ""  # the running tour's token (the page names its presses by it)
         self.w_start = pn.widgets.Button(label="▶ Guided tour (for a class)", color="success",
                                          width=265, margin=(8, 10))
         self.w_start.on_click(lambda e: self.start())
@@ -140,7 +146,8 @@ class TourView:
             self._saved["__color"] = self.controls.color_mode
             self.active = True
             self.panel.visible = True
-            self._js("on")
+            self._run, self._keys_done = secrets.token_hex(4), 0  # the page counts from 1 again
+            self._js("on:" + self._run)
         self.go(step)
 
     def next(self) -> None:
@@ -228,8 +235,11 @@ class TourView:
 
     def _on_key(self, event) -> None:
         head, _, tail = str(event.new).partition(":")
-        if head.isdigit():  # "N:k1,k2,...": the presses after the last one applied
-            n, keys = int(head), tail.split(",")
+        run, dot, count = head.partition(".")
+        if dot:  # "RUN.N:k1,k2,...": this tour's presses after the last one applied
+            if run != self._run or not count.isdigit():
+                return  # another tour's (or explorer's) presses
+            n, keys = int(count), tail.split(",")
             new = keys[max(0, len(keys) - (n - self._keys_done)):] if n > self._keys_done else []
             self._keys_done = max(self._keys_done, n)
         else:  # "KEY:T": one press
