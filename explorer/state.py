@@ -451,13 +451,9 @@ def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
     it names none): another sequence's C stays ``base``'s.
     Raises ValueError (readable) when it is not such a file or a value is invalid; nothing
     is half-applied."""
-    try:
-        d = json.loads(text)
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise ValueError(f"not a JSON file ({exc})") from None
-    except RecursionError:  # thousands of nested brackets: no params file
-        raise ValueError("not a params file (nested too deeply)") from None
-    new_params = LaavParams.from_json(d, _DEFAULTS if defaults is None else defaults)
+    # (the file checked by laav's reader first: JSON, one object, valid parameters)
+    new_params = LaavParams.from_json(text, _DEFAULTS if defaults is None else defaults)
+    d = json.loads(text)
     seed = d.get("seed", base.seed)
     # C is a property of the sequence: a file exported for another one does not set it
     C = base.n_motions if _exported_for_another(d, seq) else d.get("n_motions", base.n_motions)
