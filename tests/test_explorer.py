@@ -272,11 +272,18 @@ def test_colour_by_and_gaec_step(ex):
     ex.w_color.value = "errors: final"
     assert set(ex.src_points.data["label"]) <= {"correct (final)", "misclassified (final)"}
     assert list(ex.src_points.data["color"]) != c_atoms
+    from explorer.cards.graph import STEP_ENTRIES
+
+    items = ex.graph_view._step_items
+    assert sorted(it.label.value for it in items) == sorted(STEP_ENTRIES)
+    assert not any(it.visible for it in items)  # the final step: nothing to mark
     ex.w_step.value = 0
     assert len(ex.src_cut.data["x0"]) == ex.result.graph.n_edges  # nothing contracted yet
     assert "step 0" in ex.graph_caption.object
+    assert all(it.visible for it in items)  # a replay step: its entries shown
     ex.w_step.value = ex.w_step.end
     assert "Final fine models" in ex.graph_caption.object
+    assert not any(it.visible for it in items)
 
 
 def test_invalid_slider_combination_shows_a_message_and_keeps_the_result(ex):

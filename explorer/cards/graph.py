@@ -22,6 +22,8 @@ MAX_ATOM_IDS = 200
 
 #: The legend samples of the kept and cut edges.
 LEGEND_EDGE = "#555555"
+#: The legend entries of a replay step (hidden at the final step, where they mark nothing).
+STEP_ENTRIES = ("contracted at this step", "joined at this step (ringed)")
 
 
 class GraphView:
@@ -89,6 +91,10 @@ class GraphView:
         # colour bar's): their samples in a neutral grey, whatever the first edge's cost
         for r in (r_kept, r_cut):
             self.live.stand_in(r).glyph.line_color = LEGEND_EDGE
+        # the entries of a replay step, shown only while the slider is before the final step
+        # (at it nothing is contracted or joined: they had a label and no sample)
+        self._step_items = [it for it in g.legend[0].items
+                            if str(getattr(it.label, "value", "")).endswith(STEP_ENTRIES)]
         self.live.add_text("graph_title", g.title, "text")
 
         self.caption = Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
@@ -120,6 +126,10 @@ class GraphView:
         live = self.live
         live.set_atoms(res)
         self.r_ids.visible = res.graph.n_nodes <= MAX_ATOM_IDS
+        replaying = step <= len(res.multicut.contractions)
+        for item in self._step_items:
+            if item.visible != replaying:
+                item.visible = replaying
         for k, t in self._tpls.items():
             live.template("graph_" + k, t)
         lim = V.cost_limit(res)
