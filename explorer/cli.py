@@ -450,6 +450,9 @@ def _main(argv: list[str] | None) -> int:
             seq = demo_sequence()
         else:
             seq = laav.load_sequence(args.file, isolated=True, max_points=args.max_points)
+            hint = laav.io.layout_warning(seq)
+            if hint:
+                print(f"laav-explore: warning: {hint}", file=sys.stderr)
         if args.complete_only and not seq.is_complete:
             missing = 100 * (1 - seq.visible_share)
             n_file = seq.n_points

@@ -161,6 +161,14 @@ RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams)
                   if f.name.startswith("rv_") and f.name not in NOT_PLAIN_FIELDS) + SELECTION_FIELDS
 
 
+#: How far an estimated C can be trusted: laav.estimate_motions on Hopkins155, held out by
+#: cross-validation grouped by video (docs/bench/motions.md, 2026-12-01: 143 of 155 right;
+#: 8 of its 9 misses on three motions said 2).
+ESTIMATE_NOTE = ("The estimate is right on 92 % of Hopkins155's sequences but 74 % of its "
+                 "three-motion ones, where it mostly says 2: if the seed sweep finds several "
+                 "segmentations, try C + 1.")
+
+
 @dataclasses.dataclass(frozen=True)
 class Origin:
     """How a sequence the explorer shows came from its file: what the page says about it
@@ -188,7 +196,8 @@ class Origin:
         if self.motions_estimate is None:  # (the command's --motions, or the box since)
             return f"C = {n_motions} as given (--motions or the C box); the C box changes it."
         if n_motions == self.motions_estimate:
-            return f"C = {n_motions} was estimated: {self.motions_reason}. The C box changes it."
+            return (f"C = {n_motions} was estimated: {self.motions_reason}. {ESTIMATE_NOTE} "
+                    "The C box changes it.")
         return f"C = {n_motions} is taken from the C box (estimated: {self.motions_estimate})."
 
 

@@ -221,10 +221,14 @@ def _load_for_command(args):
     Returns ``(seq, kept)``: ``kept`` the file's indices of ``seq``'s points (None: all).
     """
     from . import SequenceError, load_sequence
+    from .io import layout_warning
 
     path = getattr(args, "file", None) or args.input
     try:
         seq = load_sequence(path, isolated=True, max_points=args.max_points)
+        hint = layout_warning(seq)
+        if hint:
+            print(f"laav {args.command}: warning: {hint}", file=sys.stderr)
         if not args.complete_only or seq.is_complete:
             return seq, None
         full, kept = seq.complete()

@@ -30,7 +30,7 @@ import numpy as np
 from ._sequence import Sequence, SequenceError
 
 __all__ = ["load_sequence", "load_sequence_isolated", "save_sequence", "find_truth_files",
-           "safe_name", "FORMATS", "point_numbers", "csv_track_ids"]
+           "safe_name", "FORMATS", "point_numbers", "csv_track_ids", "layout_warning"]
 
 #: The formats :func:`save_sequence` writes (``format=``); :func:`load_sequence` reads them all.
 FORMATS = ("hopkins", "kt3d", "npz", "csv")
@@ -402,6 +402,24 @@ def _looks_like_video(head: bytes) -> bool:
             or (head[:4] == b"RIFF" and head[8:12] == b"AVI ")
             or head[:4] in (b"\x1a\x45\xdf\xa3", b"OggS", b"\x00\x00\x01\xba")
             or head[:3] == b"FLV")
+
+
+def layout_warning(seq: Sequence) -> str | None:
+    """A warning for an ``.npz`` sequence with more frames than points, which is how a
+    ``points`` array written as (P, F, 2) instead of (F, P, 2) reads (nothing else tells:
+    its stages then find no atom); None otherwise. The loader cannot warn itself: it runs
+    in a child process for the command line and the explorer."""
+    src = str(getattr(seq, "source", "") or "")
+    if seq.n_frames <= seq.n_points or not src or src.startswith("<"):
+        return None
+    try:
+        with open(src, "rb") as fh:
+            if not fh.read(4).startswith(_ZIP_MAGIC[:4]):
+                return None
+    except OSError:
+        return None
+    return (f"{src}: {seq.n_frames} frames of {seq.n_points} points: if its 'points' array is "
+            "(points, frames, 2), transpose it to (frames, points, 2)")
 
 
 def csv_track_ids(path: str | os.PathLike) -> np.ndarray | None:

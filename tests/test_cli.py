@@ -415,3 +415,19 @@ def test_segment_reads_a_params_file_as_the_explorer_exports_it(tmp_path, capsys
                       ('{"params": {"r1": -5}}', "r1")):
         with pytest.raises(ValueError, match=msg):
             laav.LaavParams.from_json(text)
+
+
+def test_an_npz_with_more_frames_than_points_warns_of_a_transposed_array(tmp_path, capsys):
+    """points written as (P, F, 2) read as P frames of F points and segment into nothing
+    useful without a word; laav segment and laav-explore say what it looks like."""
+    seq = make_scene(2, seed=0)
+    swapped = tmp_path / "swapped.npz"
+    np.savez(swapped, points=seq.points.transpose(1, 0, 2)[:, :9])  # 9 of the points, transposed
+    assert laav.io.layout_warning(laav.load_sequence(swapped)).startswith(
+        f"{swapped}: {seq.n_points} frames of 9 points: if its 'points' array is (points, frames, 2)")
+    main(["segment", str(swapped), "--motions", "1", "-o", str(tmp_path / "l.csv")])
+    assert "laav segment: warning: " in capsys.readouterr().err
+    # the right layout, and other formats, say nothing
+    assert laav.io.layout_warning(laav.load_sequence(laav.save_sequence(seq, tmp_path / "ok.npz"))) is None
+    wide = laav.save_sequence(laav.Sequence(seq.points.transpose(1, 0, 2)[:, :9]), tmp_path / "w.csv")
+    assert laav.io.layout_warning(laav.load_sequence(wide)) is None  # a CSV names its columns

@@ -1226,6 +1226,10 @@ def test_cli_estimates_c_for_a_file_without_ground_truth(monkeypatch, tmp_path, 
     prov = seen["origin"]
     assert prov.motions_estimate == expected and prov.point_ids is None
     assert prov.motions_note(expected).startswith(f"C = {expected} was estimated: ")
+    from explorer.state import ESTIMATE_NOTE
+
+    assert ESTIMATE_NOTE in prov.motions_note(expected)  # how far an estimate can be trusted
+    assert ESTIMATE_NOTE not in prov.motions_note(expected + 1)
     assert "taken from the C box (estimated: " in prov.motions_note(expected + 1)
     assert main([str(f), "--no-browser", "--port", "0", "--motions", "3"]) == 0
     assert seen["n_motions"] == 3 and seen["origin"].motions_estimate is None
