@@ -608,6 +608,25 @@ def test_rv_card_and_tour_name_the_trials_beside_laavs_by_kind():
     assert f"{plain} plain RV trials it was compared with" in fine_tuning_facts(seq, mixed, None)
 
 
+def test_numbers_card_gives_the_rv_papers_own_result_beside_plain_rv_polished():
+    """Plain RV's row is its labels after our polish; when a trial settled, the row adds that
+    trial's own labels' error (the RV paper's result), computed from its label trace."""
+    seq = laav.synthetic.make_sequence(n_objects=1, n_frames=10, n_points=120, rng=0)
+    res = laav.segment(seq, 2, seed=0)
+    plain = laav.random_voting(seq, 2, seed=0)
+    assert plain.converged  # (a trial settles on this easy scene)
+    num = V.stage_numbers(seq, res, plain)
+    raw = laav.misclassification_rate(seq.labels, np.asarray(plain.label_trace)[-1])
+    assert num["error_plain_trial"] == pytest.approx(raw)
+    note = f"its settled trial's own labels, the RV paper's result: {100 * raw:.1f} %"
+    assert note in V.numbers_markdown(num)
+    unsettled = V.stage_numbers(seq, res, dataclasses.replace(plain, converged=False))
+    assert unsettled["error_plain_trial"] is None
+    assert "RV paper's result" not in V.numbers_markdown(unsettled)
+    bare = laav.Sequence(seq.points, None)
+    assert V.stage_numbers(bare, res, plain)["error_plain_trial"] is None
+
+
 def test_the_epipolar_panel_draws_the_pair_while_its_votes_are_fitted():
     """Before card 3's votes are fitted (the default merge does not fit them), the panel
     already draws the pair's points, in the first and last frames, with their colours and
