@@ -15,7 +15,7 @@ import numpy as np
 
 import laav
 from laav.geometry import epipolar_lines
-from laav.metrics import matched_counts
+from laav.metrics import DISAGREEMENT_WARN, matched_counts
 from laav.noise import threshold_factor
 
 __all__ = [
@@ -442,11 +442,9 @@ def plain_differs(final: np.ndarray, plain: np.ndarray) -> np.ndarray:
     return ((final != other) | (final < 0) | (other < 0)) & ((final >= 0) | (other >= 0))
 
 
-def labelling_distance(a: np.ndarray, b: np.ndarray) -> float:
-    """The share of the points two labellings (P,) label differently:
-    :func:`laav.labelling_distance` (card 5's number; it counts the points the differences
-    colouring, :func:`plain_differs`, marks)."""
-    return laav.labelling_distance(a, b) if np.size(a) else 0.0
+#: The share of the points two labellings label differently (card 5's number; it counts the
+#: points the differences colouring, :func:`plain_differs`, marks).
+labelling_distance = laav.labelling_distance
 
 
 def raw_style(seq: laav.Sequence) -> dict:
@@ -1493,11 +1491,6 @@ def _plain_result(num: dict) -> str:
     if it is None:
         return "computing…"
     return f"{it} iterations, " + ("converged" if num.get("plain_converged") else "hit the iteration cap")
-
-
-#: LAAV and plain RV disagreeing on more than this share of the points: one of them is wrong
-#: on at least half as many (the numbers card says so).
-DISAGREEMENT_WARN = 0.10
 
 
 def _warns(num: dict) -> bool:

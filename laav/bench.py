@@ -157,13 +157,33 @@ def parse_param(text: str) -> tuple[str, object]:
     return key, value
 
 
+def read_params_file(path, base: LaavParams) -> tuple[LaavParams, int | None]:
+    """A params file the explorer exported (or a bare ``{field: value}`` object): its
+    parameters on ``base`` (:meth:`LaavParams.from_json`) and its seed (None when it names
+    none). Raises :class:`BenchError` naming the file when it cannot be read, is not one, or
+    holds an invalid parameter or seed."""
+    try:
+        with open(path, "rb") as fh:
+            text = fh.read(1 << 20)
+    except OSError as exc:
+        raise BenchError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    try:
+        params = LaavParams.from_json(text, base)
+    except ValueError as exc:
+        raise BenchError(f"{path}: {exc}") from None
+    seed = json.loads(text).get("seed")  # (an object: from_json checked it)
+    if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < 2**63):
+        raise BenchError(f"{path}: seed must be a whole number in [0, 2**63), got {str(seed)[:40]}")
+    return params, seed
+
+
 def params_from_assignments(assignments: Iterable[str] | None, preset: str = "default",
                             params_file: str | None = None) -> LaavParams:
     """A :class:`~laav.LaavParams` with the ``key=value`` assignments applied to a preset:
     ``"default"`` (``LaavParams()``, ours), ``"paper"`` (:meth:`LaavParams.paper`) or
     ``"with-plain-rv"`` (:meth:`LaavParams.with_plain_rv`); with ``params_file`` (a params
-    file the explorer exported, :meth:`LaavParams.from_json`) its fields first, then the
-    assignments.
+    file the explorer exported, :func:`read_params_file`) its fields first, then the
+    assignments (:func:`params_and_seed`, without the file's seed).
 
     Raises
     ------
@@ -171,22 +191,21 @@ def params_from_assignments(assignments: Iterable[str] | None, preset: str = "de
         For a malformed assignment, an unknown field or an invalid value, or a params file
         that cannot be read or is not one (naming the file).
     """
+    return params_and_seed(assignments, preset, params_file)[0]
+
+
+def params_and_seed(assignments: Iterable[str] | None, preset: str = "default",
+                    params_file: str | None = None) -> tuple[LaavParams, int | None]:
+    """:func:`params_from_assignments`, and the params file's seed (None without a file or
+    when it names none): the file is read once."""
     changes = dict(parse_param(a) for a in (assignments or ()))
     if preset not in PRESETS:
         raise BenchError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
-    base = PRESETS[preset]()
+    base, seed = PRESETS[preset](), None
     if params_file is not None:
-        try:
-            with open(params_file, "rb") as fh:
-                text = fh.read(1 << 20)
-        except OSError as exc:
-            raise BenchError(f"{params_file}: cannot be read ({exc.strerror or exc})") from None
-        try:
-            base = LaavParams.from_json(text, base)
-        except ValueError as exc:
-            raise BenchError(f"{params_file}: {exc}") from None
+        base, seed = read_params_file(params_file, base)
     try:
-        return base.replace(**changes)
+        return base.replace(**changes), seed
     except (ValueError, TypeError) as exc:
         raise BenchError(str(exc)) from None
 

@@ -387,24 +387,6 @@ def _output_path(given: str | None, default: str) -> Path:
     return folder / default if folder == out else out
 
 
-def _params_file_seed(path) -> int:
-    """The seed of a params file the explorer exported (``--params``), else 0 (read once
-    more: :func:`laav.bench.params_from_assignments` has checked the file)."""
-    import json
-
-    if path is None:
-        return 0
-    try:
-        with open(path, "rb") as fh:
-            seed = json.loads(fh.read(1 << 20)).get("seed", 0)
-    except (OSError, ValueError, AttributeError):
-        return 0
-    try:
-        return _seed(str(seed)) if isinstance(seed, int) and not isinstance(seed, bool) else 0
-    except argparse.ArgumentTypeError:
-        raise _UsageError(f"{path}: seed must be a whole number in [0, 2**63), got {seed}") from None
-
-
 def _input_name(seq) -> str:
     """The default output's base name: the input file's name (``Sequence.source``; without
     Hopkins155's ``_truth``), not the name stored in the file, which every track file of one
@@ -425,12 +407,12 @@ def _cmd_segment(args) -> int:
         segment,
     )
     from ._sequence import MIN_POINTS
-    from .bench import params_from_assignments
+    from .bench import params_and_seed
     from .io import point_numbers
 
-    params = params_from_assignments(args.param, args.preset, args.params)
-    if args.seed is None:  # the params file's, as laav-explore --params takes it
-        args.seed = _params_file_seed(args.params)
+    params, file_seed = params_and_seed(args.param, args.preset, args.params)
+    if args.seed is None:  # the params file's, as laav-explore --params takes it, else 0
+        args.seed = 0 if file_seed is None else file_seed
     seq, kept = _load_for_command(args)
     out = _output_path(args.out, f"{_input_name(seq)}_labels.csv")  # before the work
     C = args.motions if args.motions is not None else seq.n_motions
@@ -484,15 +466,11 @@ def _cmd_segment(args) -> int:
     return 0
 
 
-#: LAAV and plain RV apart on more than this share of the points: ``laav segment --check``
-#: warns (as the explorer does, ``explorer.views.DISAGREEMENT_WARN``).
-CHECK_WARN = 0.10
-
-
 def _print_check(labels, plain, truth) -> None:
     """``--check``'s lines: how far LAAV's labels and plain RV's are apart, and plain RV's
-    error when there is a ground truth; above :data:`CHECK_WARN` a warning (stderr)."""
-    from . import labelling_distance, misclassification_rate
+    error when there is a ground truth; above :data:`laav.metrics.DISAGREEMENT_WARN` a
+    warning (stderr)."""
+    from .metrics import DISAGREEMENT_WARN, labelling_distance, misclassification_rate
 
     d = labelling_distance(labels, plain)
     n = int(round(d * len(labels)))
@@ -501,7 +479,7 @@ def _print_check(labels, plain, truth) -> None:
     if truth is not None:
         line += f"; plain RV misclassification {100 * misclassification_rate(truth, plain):.2f} %"
     print(line)
-    if d > CHECK_WARN:
+    if d > DISAGREEMENT_WARN:
         print(f"laav segment: warning: LAAV and plain RV disagree on {100 * d:.1f} % of the points: "
               f"at least one of them is wrong on {50 * d:.1f} % or more; look at the result (e.g. "
               "laav-explore FILE) before using it", file=sys.stderr)

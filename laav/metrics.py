@@ -9,7 +9,13 @@ import math
 import numpy as np
 
 __all__ = ["confusion_matrix", "misclassification_rate", "best_label_map", "matched_counts",
-           "labelling_distance"]
+           "labelling_distance", "DISAGREEMENT_WARN"]
+
+#: Two runs without ground truth (LAAV and plain Random Voting) whose labellings are more
+#: than this share of the points apart (:func:`labelling_distance`) are a warning sign: at
+#: least one of them is wrong on half that share or more (``laav segment --check``, the
+#: explorer's amber warning).
+DISAGREEMENT_WARN = 0.10
 
 
 def _as_labels(a, name: str) -> tuple[np.ndarray, np.ndarray]:

@@ -411,6 +411,10 @@ def test_segment_reads_a_params_file_as_the_explorer_exports_it(tmp_path, capsys
     assert f"{bad}: unknown LAAV parameter(s): nonsense" in err and "Traceback" not in err
     assert main(["segment", str(path), "--params", str(tmp_path / "none.json"), "-o", str(out)]) == 2
     assert "none.json: cannot be read" in capsys.readouterr().err
+    badseed = tmp_path / "badseed.json"
+    badseed.write_text('{"params": {"r1": 25}, "seed": -3}')
+    assert main(["segment", str(path), "--params", str(badseed), "-o", str(out)]) == 2
+    assert f"{badseed}: seed must be a whole number in [0, 2**63), got -3" in capsys.readouterr().err
     for text, msg in (("[1, 2]", "one JSON object"), ("{", "not a JSON file"),
                       ('{"params": {"r1": -5}}', "r1")):
         with pytest.raises(ValueError, match=msg):

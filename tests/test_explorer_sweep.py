@@ -338,6 +338,14 @@ def test_tour_step_4_says_what_this_run_did():
     assert "Ours" not in fine_tuning_facts(seq, paper.voting, plain)
 
 
+def _press(tour, *keys) -> None:
+    """Arrow / Esc presses one at a time as the page sends them: this tour's token, its
+    count of presses and the last of them (the browser's key handler in
+    explorer/cards/tour.py; the count continues from the presses the tour applied)."""
+    for k in keys:
+        tour.w_key.value = f"{tour._run}.{tour._keys_done + 1}:{k}"
+
+
 def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     ex = explorer
     tour = ex.tour
@@ -355,31 +363,32 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     tour.w_back.clicks += 1
     assert tour.step == 0 and tour.w_back.disabled
     # the page's keys: → and ← (sent by the browser through the hidden box)
-    tour.w_key.value = "next:1"
-    tour.w_key.value = "next:2"
+    _press(tour, "next")
+    _press(tour, "next")
     assert tour.step == 2 and tour.texts[1] == TOUR[2].text_for(ex.result.params, 2)
-    tour.w_key.value = "back:3"
+    _press(tour, "back")
     assert tour.step == 1
     # the page's count of presses with the last ones: two presses that reached the server as
     # one change are both applied, a repeated value none
     run = tour._run
     assert len(run) == 8  # a token per tour, sent to the page with "on:RUN"
-    tour.w_key.value = f"{run}.2:next,next"
+    tour.w_key.value = f"{run}.5:next,next,back,next,next"  # presses 4 and 5 in one change
     assert tour.step == 3
-    tour.w_key.value = f"{run}.3:next,next,back"
+    tour.w_key.value = f"{run}.6:next,next,back,next,next,back"
     assert tour.step == 2
-    tour.w_key.value = f"{run}.3:next,next,back "  # (the same count again: nothing new)
+    tour.w_key.value = f"{run}.6:next,next,back,next,next,back "  # (the same count: nothing new)
     assert tour.step == 2
     tour.w_key.value = "other.9:end,end"  # another tour's presses: not replayed
     assert tour.step == 2 and tour.active
-    tour.w_key.value = f"{run}.4:next,next,back,back"
+    tour.w_key.value = "next:12"  # nor anything not from this tour's page
+    assert tour.step == 2
+    tour.w_key.value = f"{run}.7:next,next,back,next,next,back,back"
     assert tour.step == 1
     tour.go(3)  # step 4 ends with what this run did
     step4 = TOUR[3].text_for(ex.result.params, 2)
     assert tour.texts[1].startswith(step4 + " This run: LAAV's trial started ")
     tour.go(1)
-    for _ in range(5):
-        tour.w_key.value = f"next:{10 + _}"
+    _press(tour, *["next"] * 5)
     assert tour.step == 4 and tour.active  # → stops at the last step
     assert tour.w_next.label == "Finish" and ex.controls.color_mode == "errors"
     assert {n for n, c in cards.items() if c.visible} == {"numbers", "frame"}
@@ -388,7 +397,7 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     assert all(c.visible for c in cards.values()) and not any(outlined(c) for c in cards.values())
     assert ex.controls.color_mode == before
     tour.start(3)
-    tour.w_key.value = "end:20"  # Esc
+    _press(tour, "end")  # Esc (a new tour: its presses counted from 1)
     assert not tour.active and all(c.visible for c in cards.values())
 
 
@@ -404,7 +413,7 @@ def test_the_address_carries_the_tour_step(explorer):
     tour.w_next.clicks += 1
     tour.w_back.clicks += 1
     assert ex.query() == forward
-    tour.w_key.value = "end:99"
+    _press(tour, "end")
     assert not tour.active and "tour" not in ex.query()
     problems = ex.apply_query({"tour": ["99"]})
     assert not tour.active and len(problems) == 1 and "tour must be between 1 and" in problems[0]

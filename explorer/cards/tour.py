@@ -35,8 +35,8 @@ _TIGHT = [":host p, :host h1, :host h2 { margin: 0.15em 0; }"]
 # Keys go back through the hidden ``w_key`` box as ``RUN.N:k1,k2,...``: the tour's token
 # (sent with ``on:RUN``, new for every tour, so that another tour's or another explorer's
 # presses in the same window are not replayed), the count of presses and the last 32 of them
-# (``next``, ``back``, ``end``), so that none is lost when two arrive as one change
-# (``KEY:T``, one press, is read too); keys typed into a box or on a slider stay there.
+# (``next``, ``back``, ``end``), so that none is lost when two arrive as one change; keys
+# typed into a box or on a slider stay there.
 _TOUR_JS = """
 const cmd = String(cb_obj.value);
 if (!window._laavTour) {
@@ -235,15 +235,13 @@ class TourView:
 
     def _on_key(self, event) -> None:
         head, _, tail = str(event.new).partition(":")
-        run, dot, count = head.partition(".")
-        if dot:  # "RUN.N:k1,k2,...": this tour's presses after the last one applied
-            if run != self._run or not count.isdigit():
-                return  # another tour's (or explorer's) presses
-            n, keys = int(count), tail.split(",")
-            new = keys[max(0, len(keys) - (n - self._keys_done)):] if n > self._keys_done else []
-            self._keys_done = max(self._keys_done, n)
-        else:  # "KEY:T": one press
-            new = [head]
+        run, _, count = head.partition(".")
+        if run != self._run or not count.isdigit():
+            return  # another tour's (or explorer's) presses
+        # "RUN.N:k1,k2,...": this tour's presses after the last one applied
+        n, keys = int(count), tail.split(",")
+        new = keys[max(0, len(keys) - (n - self._keys_done)):] if n > self._keys_done else []
+        self._keys_done = max(self._keys_done, n)
         for key in new:
             if not self.active:
                 return
