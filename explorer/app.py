@@ -302,7 +302,7 @@ class Explorer:
         #: called once (document thread) when the served page is complete: its later cards
         #: added (``laav-explore`` then lets Python's garbage collector run again)
         self.on_page_complete = None
-        self.main_column = None
+        self.main_column = self.sidebar_column = None
 
         ext = seq.extent()
         self.controls = Controls(self, self.state, seq, self._defaults)
@@ -424,8 +424,10 @@ class Explorer:
         def heading(text):
             return Markdown(f"### {text}", margin=(0, 10))
 
+        # the tour's panel heads the sidebar (hidden until a tour starts): beside the step's
+        # card, as slides put text beside a figure (see explorer/cards/tour.py)
         self.sidebar = [
-            heading("Sequence"), f.seq_info,
+            self.tour.panel, heading("Sequence"), f.seq_info,
             Markdown("Open another sequence (`.mat`, `.npz` or tracks `.csv`), or a `params.json` "
                      "exported here (a video is tracked on the command line only: "
                      "`laav-explore VIDEO`):", margin=(0, 10)),
@@ -441,7 +443,7 @@ class Explorer:
         # cards in the order of the stages; each lays its parts out in a wrapping FlexBox, so
         # they sit side by side on a wide screen and stack on a projector (1024 px)
         self.main = [
-            s.line, s.alert, s.check_alert, s.url_alert, s.note, self.tour.panel, self.compare.card,
+            s.line, s.alert, s.check_alert, s.url_alert, s.note, self.compare.card,
             self.frame_view.card, self.view3d.card, self.graph_view.card, self.coarse_view.card,
             self.rv_view.card, self.numbers_view.card, self.sweep_view.card,
         ]
@@ -457,7 +459,7 @@ class Explorer:
         their data, after the status line and the points. The tour's panel and the compare
         card, hidden until asked for, come with them (:meth:`complete_page`).
         """
-        n_first = self.main.index(self.view3d.card) + 1  # status, alerts, note, tour, atoms, 3-D
+        n_first = self.main.index(self.view3d.card) + 1  # status, alerts, note, atoms, 3-D
         if lazy is None:
             lazy = self._session_doc is not None
         # the tour's panel and the compare card are hidden until asked for: they come with
@@ -466,6 +468,8 @@ class Explorer:
         first = [c for c in self.main[:n_first] if not (lazy and id(c) in hidden)]
         main = pn.Column(*(first if lazy else self.main), sizing_mode="stretch_width")
         self.main_column = main
+        side = [c for c in self.sidebar if not (lazy and id(c) in hidden)]
+        self.sidebar_column = pn.Column(*side, sizing_mode="stretch_width")
         self._rest = None
         self._rest_timer = None  # the pending _add_rest_after
         if lazy:
@@ -479,7 +483,7 @@ class Explorer:
         # the browser lay the whole page out again; the frame player had been exempted);
         # the status line's own spinner shows a computation.
         page = _Template(
-            title=title, sidebar=[pn.Column(*self.sidebar, sizing_mode="stretch_width")],
+            title=title, sidebar=[self.sidebar_column],
             header=[self.status_bar.header_name], main=[main], sidebar_width=SIDE_W + 35,
             header_background="#2c4a66", busy_indicator=None)
         page.ready_scripts = (
@@ -521,6 +525,8 @@ class Explorer:
             return
         self._rest = None
         self.main_column.objects = list(self.main)  # (in stage order; those shown are kept)
+        if len(self.sidebar_column.objects) != len(self.sidebar):
+            self.sidebar_column.objects = list(self.sidebar)  # the tour's panel
         done, self.on_page_complete = self.on_page_complete, None
         if done is not None:
             done()

@@ -386,7 +386,7 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
             first[sel] = i
         color = _palette(first, ATOM_COLORS)
         # one legend entry: the points in no atom have the × mark's own entry ("in no atom: N")
-        label = np.full(P, "point (colour = its atom; grey: in no atom)")
+        label = np.full(P, "point (colour = its atom)")
     elif mode == "fine":
         lab = np.asarray(result.coarse.fine_point_labels, dtype=np.int64)
         fc, mot = fine_colors(seq, result, ref), fine_motions(seq, result, ref)

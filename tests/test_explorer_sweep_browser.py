@@ -48,6 +48,39 @@ JS_OUTLINED = """() => { let n = 0; const walk = root => { for (const el of root
   if (cs.outlineStyle !== 'none' && cs.outlineWidth === '4px') n++;
   if (el.shadowRoot) walk(el.shadowRoot); } }; walk(document); return n; }"""
 
+#: The sidebar as the tour widens it (explorer.cards.tour.TOUR_SIDEBAR_WIDTH: 35 % of the
+#: window less 60 px, 300-440 px) / as usual (300 px).
+JS_SIDEBAR_WIDE = """() => { const w = document.getElementById('sidebar').offsetWidth;
+  const want = Math.min(Math.max(0.35 * window.innerWidth - 60, 300), 440);
+  return Math.abs(w - want) <= 1; }"""
+JS_SIDEBAR_USUAL = "() => Math.abs(document.getElementById('sidebar').offsetWidth - 300) <= 1"
+
+#: Where the tour's panel, the outlined card's first plot and the page's parts end: the
+#: boxes (left, top, right, bottom; px in the window) of the panel and of the first canvas
+#: inside the outlined card, the sidebar's and main area's scroll offsets, and the widest
+#: content against the window.
+JS_TOUR_BOXES = """() => {
+  const box = el => { const r = el.getBoundingClientRect();
+    return [Math.round(r.left), Math.round(r.top), Math.round(r.right), Math.round(r.bottom)]; };
+  let panel = null, card = null;
+  const walk = root => { for (const el of root.querySelectorAll('*')) {
+    if (!panel && el.classList && el.classList.contains('laav-tour-panel')) panel = el;
+    if (!card && getComputedStyle(el).outlineWidth === '4px' && getComputedStyle(el).outlineStyle !== 'none')
+      card = el;
+    if (el.shadowRoot) walk(el.shadowRoot); } };
+  walk(document);
+  let canvas = null;
+  const inCard = root => { for (const el of root.querySelectorAll('*')) {
+    if (!canvas && el.tagName === 'CANVAS' && el.getBoundingClientRect().width > 50) canvas = el;
+    if (el.shadowRoot) inCard(el.shadowRoot); } };
+  if (card) { inCard(card); if (card.shadowRoot) inCard(card.shadowRoot); }
+  const side = document.getElementById('sidebar'), main = document.getElementById('main');
+  return {panel: panel && box(panel), canvas: canvas && box(canvas), card: card && box(card),
+          sideScroll: side.scrollTop, mainScroll: main.scrollTop,
+          mainWide: main.scrollWidth - main.clientWidth, pageWide: document.scrollingElement.scrollWidth};
+}"""
+
+
 def _shots(tmp_path) -> Path:
     d = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
     d.mkdir(parents=True, exist_ok=True)
@@ -135,13 +168,14 @@ def test_guided_tour_in_the_page(tmp_path):
         title = page.get_by_text(TOUR[0].title)
         title.first.wait_for(timeout=20000)
         page.get_by_text("step 1 of 5").first.wait_for(timeout=10000)
-        # large type for a projector
+        # large type for a projector (the page's other text is 14 px)
         size = title.first.evaluate("el => parseFloat(getComputedStyle(el).fontSize)")
-        assert size >= 30, size
+        assert size >= 26, size
         # only this stage's card: the multicut card is hidden at step 1
         graph = page.locator(".card-header", has_text="2 · Multicut graph")
         graph.first.wait_for(state="hidden", timeout=10000)
-        page.locator("#sidebar").wait_for(state="hidden", timeout=10000)  # the whole width
+        # the panel is in the sidebar, widened beside the card
+        page.wait_for_function(JS_SIDEBAR_WIDE, timeout=10000)
         page.wait_for_function(f"({JS_OUTLINED})() >= 1", timeout=10000)  # the stage's card
         page.screenshot(path=str(_shots(tmp_path) / "tour_step1.png"))
 
@@ -174,6 +208,7 @@ def test_guided_tour_in_the_page(tmp_path):
         graph.first.wait_for(state="visible", timeout=10000)
         page.get_by_text(TOUR[0].title).first.wait_for(state="hidden", timeout=10000)
         page.locator("#sidebar").wait_for(state="visible", timeout=10000)
+        page.wait_for_function(JS_SIDEBAR_USUAL, timeout=10000)  # its usual width
         # and no outline is left on any card in the page (the server's styles are not enough)
         page.wait_for_function(f"({JS_OUTLINED})() === 0", timeout=10000)
     assert not errors, errors[:5]
@@ -195,7 +230,7 @@ def test_a_link_opens_the_tour_at_its_step(tmp_path):
         assert ex.wait(60)
         page.get_by_text(TOUR[2].title).first.wait_for(timeout=30000)
         page.get_by_text("step 3 of 5").first.wait_for(timeout=10000)
-        page.locator("#sidebar").wait_for(state="hidden", timeout=10000)
+        page.wait_for_function(JS_SIDEBAR_WIDE, timeout=10000)
         page.locator(".card-header", has_text="2 · Multicut graph").first.wait_for(
             state="hidden", timeout=10000)
         page.keyboard.press("ArrowRight")
@@ -206,4 +241,45 @@ def test_a_link_opens_the_tour_at_its_step(tmp_path):
         _wait_for(lambda: not ex.tour.active, 10, "the tour to end", page=page)
         page.wait_for_function("!new URLSearchParams(location.search).has('tour')", timeout=20000)
         page.locator("#sidebar").wait_for(state="visible", timeout=10000)
+        page.wait_for_function(JS_SIDEBAR_USUAL, timeout=10000)
     assert not errors, errors[:5]
+
+
+def test_the_tour_fits_a_projector(tmp_path):
+    """On the bundled demo (three motions: the longest texts and tables), at 1280x800 and
+    1024x768, every step shows its whole panel (title, text, Back / Next) beside its card,
+    and the card's first plot whole, without scrolling either way (before, the panel sat
+    above the card and took half the screen: the plots began at y = 440-490 px)."""
+    from explorer.demo import demo_sequence
+    from explorer.tour import TOUR
+
+    seq = demo_sequence()
+    with _served(seq, viser=False) as (port, browser, created):
+        for i, (w, h) in enumerate(((1280, 800), (1024, 768))):
+            page = browser.new_page(viewport={"width": w, "height": h})
+            errors: list[str] = []
+            page.on("pageerror", lambda e, errors=errors: errors.append(str(e)))
+            page.goto(f"http://127.0.0.1:{port}/?tour=1", wait_until="domcontentloaded")
+            ex = _wait_for(lambda i=i: created[i] if len(created) > i else None, 30, "the explorer")
+            assert ex.wait(90)
+            page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=60000)
+            for k, step in enumerate(TOUR):
+                if k:
+                    page.keyboard.press("ArrowRight")
+                page.get_by_text(step.title).first.wait_for(timeout=20000)
+                _wait_for(lambda k=k, ex=ex: ex.tour.step == k, 10, f"step {k + 1}", page=page)
+                page.wait_for_function(JS_SIDEBAR_WIDE, timeout=10000)
+                page.wait_for_timeout(400)  # (the page scrolls its areas to their tops at 150 ms)
+                m = page.evaluate(JS_TOUR_BOXES)
+                page.screenshot(path=str(_shots(tmp_path) / f"tour_{w}x{h}_step{k + 1}.png"))
+                where = f"{w}x{h}, step {k + 1}: {m}"
+                assert m["panel"] and m["card"] and m["canvas"], where
+                assert m["sideScroll"] == 0 and m["mainScroll"] == 0, where
+                assert m["mainWide"] <= 0 and m["pageWide"] <= w, where  # nothing sideways
+                assert m["panel"][3] <= h, where  # the whole text and its buttons on screen
+                x0, y0, x1, y1 = m["canvas"]
+                assert x0 >= m["panel"][2] and x1 <= w and y1 <= h, where  # the plot beside it, whole
+            page.keyboard.press("Escape")
+            _wait_for(lambda ex=ex: not ex.tour.active, 10, "the tour to end", page=page)
+            page.close()
+            assert not errors, errors[:5]

@@ -12,6 +12,8 @@ from .. import views as V
 from .base import Markdown, card, flex, set_data
 
 RV_TOOLS = "pan,wheel_zoom,reset"
+#: The charts' width (px): two fit side by side beside the guided tour's panel at 1280 px.
+RV_FIG_WIDTH = 400
 #: The legend's name of LAAV's informed trial, by whether it voted with our subspace term
 #: (the default) or with the RV paper's votes alone (the paper preset): the two curves then
 #: differ in their votes too, not only in their start.
@@ -39,7 +41,7 @@ class RVView:
         # random (row 0 of each trial's label trace, laav.Voting.label_trace)
         self.src_err_laav = ColumnDataSource({"iteration": [], "error": []})
         self.src_err_plain = ColumnDataSource({"iteration": [], "error": []})
-        self.fig_error = figure(title=ERROR_TITLES[True], width=440, height=235, tools=RV_TOOLS,
+        self.fig_error = figure(title=ERROR_TITLES[True], width=RV_FIG_WIDTH, height=235, tools=RV_TOOLS,
                                 toolbar_location="above")
         self.fig_error.line("iteration", "error", source=self.src_err_laav, line_width=2.5,
                             color="#222222", legend_label="LAAV's informed trial")
@@ -52,9 +54,9 @@ class RVView:
         self.fig_error.legend.padding = self.fig_error.legend.spacing = 2
         self.fig_error.legend.background_fill_alpha = 0.7
         self.fig_error.title.text_font_size = "11pt"
-        self.fig_changed = figure(title="Labels changed per iteration", width=440, height=235,
+        self.fig_changed = figure(title="Labels changed per iteration", width=RV_FIG_WIDTH, height=235,
                                   y_axis_type="log", tools=RV_TOOLS, toolbar_location="above")
-        self.fig_margin = figure(title="Mean vote margin per iteration", width=440, height=235,
+        self.fig_margin = figure(title="Mean vote margin per iteration", width=RV_FIG_WIDTH, height=235,
                                  tools=RV_TOOLS, toolbar_location="above")
         for fig, col, ylab in ((self.fig_changed, "changed_plot", "labels changed (0 drawn as ½)"),
                                (self.fig_margin, "margin", "(best − 2nd best) / sum of votes")):

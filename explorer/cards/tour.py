@@ -1,11 +1,12 @@
 """The guided tour: stages 1-5 one at a time, for a class (the texts: :mod:`explorer.tour`).
 
-A button in the sidebar starts it. The tour panel at the top of the page shows the step's
-title and two sentences in large type, Back / Next (and the keyboard: ← → or a presenter's
-Page Up / Page Down; Esc ends the tour); the cards of other stages are hidden, the step's
-card is outlined, the sidebar folds away (the whole width for a projector) and the page
-scrolls to the panel. Ending the tour brings every card, the sidebar and the colour-by
-choice back as they were.
+A button in the sidebar starts it. The tour's panel heads the sidebar, which widens for it
+(about a third of the screen) while the main area shows only the step's card, outlined, at
+its top: the step's title and text in large type beside the figures they explain, as a
+slide puts them, so that a projector's 1280x800 or 1024x768 shows both without scrolling.
+Back / Next (and the keyboard: ← → or a presenter's Page Up / Page Down; Esc ends the
+tour); the controls stay in the sidebar below the panel. Ending the tour brings every card,
+the sidebar's width (and its fold) and the colour-by choice back as they were.
 """
 
 from __future__ import annotations
@@ -23,15 +24,22 @@ HIGHLIGHT = {"outline": "4px solid #2c4a66", "outline-offset": "2px"}
 #: place (the browser keeps a CSS property that is no longer sent).
 NO_HIGHLIGHT = {"outline": "none", "outline-offset": "0px"}
 
-_BIG_BUTTON = [":host .bk-btn { font-size: 22px; padding: 6px 22px; }"]
+_BIG_BUTTON = [":host .bk-btn { font-size: 20px; padding: 4px 12px; }"]
 #: The panel's text without the paragraphs' own margins (about a line of its type each,
-#: above and below): the step's card keeps the screen's height below the panel, a projector's
-#: 768-800 px.
+#: above and below): the step's text keeps to the screen's height, a projector's 768-800 px.
 _TIGHT = [":host p, :host h1, :host h2 { margin: 0.15em 0; }"]
+#: The sidebar's width during the tour (the page's ``--sidebar-width``; 300 px otherwise):
+#: about a third of a wide screen, 388 px at 1280, and the usual 300 px at 1024 and below,
+#: where the cards are fitted to the main area beside it.
+TOUR_SIDEBAR_WIDTH = "clamp(300px, 35vw - 60px, 440px)"
+#: Type sizes that follow the screen's width (27 / 19 px at 1280, 22 / 16 px at 1024; the
+#: page's other text is 14 px).
+TITLE_SIZE = "clamp(22px, 2.1vw, 30px)"
+TEXT_SIZE = "clamp(16px, 1.5vw, 22px)"
 
 # Runs in the browser when the server writes a command into the hidden ``w_js`` box:
-# ``on:N`` / ``off:N`` (arrow keys step the tour or not; the sidebar folded away for it and
-# back), ``scroll:N`` (the panel to the top).
+# ``on:RUN:N`` / ``off:N`` (arrow keys step the tour or not; the sidebar shown and widened for
+# it, and back as it was), ``scroll:N`` (the sidebar and the main area to their tops).
 # Keys go back through the hidden ``w_key`` box as ``RUN.N:k1,k2,...``: the tour's token
 # (sent with ``on:RUN``, new for every tour, so that another tour's or another explorer's
 # presses in the same window are not replayed), the count of presses and the last 32 of them
@@ -64,29 +72,35 @@ t.out = out;
 const side = document.getElementById('sidebar');
 const toggle = document.getElementById('sidebar-toggle');
 const shown = () => side != null && side.offsetWidth > 0;
+const root = document.documentElement.style;
 if (cmd.startsWith('on:')) {
-  t.on = true;
   // a new tour (its token from the server): its presses are counted from 1
   t.run = cmd.split(':')[1]; t.n = 0; t.keys = [];
-  // the whole width for the tour (a projector): the sidebar folds away, and back afterwards
-  if (toggle && shown()) { toggle.click(); t.folded = true; }
+  if (!t.on) {
+    t.on = true;
+    // the panel is in the sidebar: shown (unfolded if folded) and widened, back afterwards
+    if (toggle && !shown()) { toggle.click(); t.unfolded = true; }
+    t.width = root.getPropertyValue('--sidebar-width');
+    root.setProperty('--sidebar-width', '__WIDTH__');
+  }
 }
 if (cmd.startsWith('off:')) {
   t.on = false;
-  if (toggle && t.folded && !shown()) toggle.click();
-  t.folded = false;
+  if (t.width) root.setProperty('--sidebar-width', t.width); else root.removeProperty('--sidebar-width');
+  t.width = '';
+  if (toggle && t.unfolded && shown()) toggle.click();
+  t.unfolded = false;
 }
 if (cmd.startsWith('scroll:')) {
-  const find = (root) => {
-    for (const el of root.querySelectorAll('*')) {
-      if (el.classList && el.classList.contains('laav-tour-panel')) return el;
-      if (el.shadowRoot) { const f = find(el.shadowRoot); if (f) return f; }
+  // the step's text and card from their tops (after the server's layout changes are in)
+  setTimeout(() => {
+    for (const id of ['sidebar', 'main']) {
+      const el = document.getElementById(id);
+      if (el) el.scrollTop = 0;
     }
-    return null;
-  };
-  setTimeout(() => { const el = find(document); if (el) el.scrollIntoView({block: 'start'}); }, 150);
+  }, 150);
 }
-"""
+""".replace("__WIDTH__", TOUR_SIDEBAR_WIDTH)
 
 
 class TourView:
@@ -104,34 +118,35 @@ class TourView:
         self.w_start = pn.widgets.Button(label="▶ Guided tour (for a class)", color="success",
                                          width=265, margin=(8, 10))
         self.w_start.on_click(lambda e: self.start())
-        self.w_back = pn.widgets.Button(label="◀ Back", width=150, height=50, margin=(2, 10),
+        self.w_back = pn.widgets.Button(label="◀ Back", width=120, height=44, margin=(2, 4, 2, 10),
                                         stylesheets=_BIG_BUTTON)
-        self.w_next = pn.widgets.Button(label="Next ▶", color="primary", width=150, height=50,
-                                        margin=(2, 10), stylesheets=_BIG_BUTTON)
-        self.w_end = pn.widgets.Button(label="End tour", width=110, margin=(2, 10))
+        self.w_next = pn.widgets.Button(label="Next ▶", color="primary", width=120, height=44,
+                                        margin=(2, 4), stylesheets=_BIG_BUTTON)
+        self.w_end = pn.widgets.Button(label="End tour", width=80, margin=(2, 10, 2, 4))
         self.w_back.on_click(lambda e: self.go(self.step - 1))
         self.w_next.on_click(lambda e: self.next())
         self.w_end.on_click(lambda e: self.end())
-        self.step_md = Markdown("", margin=(2, 10), styles={"font-size": "18px", "color": "#444"},
+        self.step_md = Markdown("", margin=(2, 10), styles={"font-size": "15px", "color": "#444"},
                                 stylesheets=_TIGHT)
-        self.title_md = Markdown("", margin=(0, 10), sizing_mode="stretch_width", stylesheets=_TIGHT,
-                                 styles={"font-size": "32px", "font-weight": "bold",
-                                                 "line-height": "1.2", "color": "#2c4a66"})
+        self.title_md = Markdown("", margin=(6, 10, 0, 10), sizing_mode="stretch_width", stylesheets=_TIGHT,
+                                 styles={"font-size": TITLE_SIZE, "font-weight": "bold",
+                                         "line-height": "1.2", "color": "#2c4a66"})
         self.text_md = Markdown("", margin=(4, 10), sizing_mode="stretch_width", stylesheets=_TIGHT,
-                                styles={"font-size": "25px", "line-height": "1.35"})
-        self.hint_md = Markdown("Keyboard: ← →  (Esc ends the tour)", margin=(18, 10),
-                                styles={"font-size": "16px", "color": "#555"}, stylesheets=_TIGHT)
+                                styles={"font-size": TEXT_SIZE, "line-height": "1.35"})
+        self.hint_md = Markdown("Keyboard: ← →  (Esc ends the tour)", margin=(6, 10),
+                                styles={"font-size": "14px", "color": "#555"}, stylesheets=_TIGHT)
         # commands to the page (scroll, keys on/off) and the keys it sends back
         self.w_key = pn.widgets.TextInput(value="", visible=False, margin=0, width=0)
         self.w_js = page_box(_TOUR_JS, args={"out": self.w_key})
         self.w_key.param.watch(self._on_key, "value")
+        # Back / Next first, where they stay in place from step to step whatever the text's length
         self.panel = pn.Column(
             pn.Row(self.step_md, pn.layout.HSpacer(), self.w_end, sizing_mode="stretch_width"),
-            self.title_md, self.text_md,
-            pn.Row(self.w_back, self.w_next, self.hint_md),
+            pn.Row(self.w_back, self.w_next),
+            self.title_md, self.text_md, self.hint_md,
             self.w_js, self.w_key,
-            visible=False, sizing_mode="stretch_width", margin=(6, 6), css_classes=["laav-tour-panel"],
-            styles={"background": "#f3f5f8", "border-left": "8px solid #2c4a66", "padding": "6px 8px"})
+            visible=False, sizing_mode="stretch_width", margin=(0, 4, 10, 0), css_classes=["laav-tour-panel"],
+            styles={"background": "#f3f5f8", "border-left": "6px solid #2c4a66", "padding": "4px 2px"})
 
     # ------------------------------------------------------------------ navigation
     def start(self, step: int = 0) -> None:
@@ -169,7 +184,7 @@ class TourView:
                 c.visible = name in s.cards
                 c.styles = {**self._saved[name][1],
                             **(HIGHLIGHT if name == s.cards[0] else NO_HIGHLIGHT)}
-            self.step_md.object = f"Guided tour · step {self.step + 1} of {len(TOUR)}"
+            self.step_md.object = f"Tour · step {self.step + 1} of {len(TOUR)}"
             self.title_md.object = s.title
             self.text_md.object = self._text(s)
             self.w_back.disabled = self.step == 0
