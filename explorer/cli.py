@@ -483,7 +483,7 @@ def _main(argv: list[str] | None) -> int:
             return _fail(None, f"--motions auto: {exc}")
         C = count.n_motions
         estimate = count
-        _say(f"C = {C} estimated ({count.reason})")
+        _say(f"C = {C} estimated ({count.explain()})")
     else:
         C = args.motions if args.motions is not None else seq.n_motions
     if C > seq.n_points:
@@ -532,7 +532,7 @@ def _main(argv: list[str] | None) -> int:
     from .warm import first_results
 
     origin = Origin(None if estimate is None else estimate.n_motions,
-                    "" if estimate is None else estimate.reason, kept, note or "")
+                    "" if estimate is None else estimate.explain(), kept, note or "")
     built = threading.Event()  # the first page is built: the first result's state may be read
     first = first_results(seq, C, settings.params, settings.seed, hold=built)
     startup_gc = _StartupGC()  # (after the fork: the child holds its own off, explorer.warm)

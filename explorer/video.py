@@ -211,7 +211,7 @@ class Video:
         """What was done, in plain text (the page shows it as text)."""
         seq = self.sequence
         if self.motion_count is not None:
-            why = f"C = {self.n_motions} estimated by laav.estimate_motions ({self.motion_count.reason})"
+            why = f"C = {self.n_motions} estimated by laav.estimate_motions ({self.motion_count.explain()})"
         else:
             why = f"C = {self.n_motions} as given"
         src = Path(self.source)
@@ -311,7 +311,7 @@ def open_video(path, n_motions: int | None = None, *, track_options: dict | None
         except ValueError as exc:
             raise VideoError(str(exc)) from None
         C = int(count.n_motions)
-        say(f"C = {C} ({count.reason}; {count.seconds:.1f} s)")
+        say(f"C = {C} ({count.explain()}; {count.seconds:.1f} s)")
     else:
         C = int(n_motions)
     return Video(sequence=seq, n_motions=C, frames=frames, source=src, n_tracks=n, kept=kept,

@@ -429,7 +429,7 @@ def _cmd_segment(args) -> int:
 
             count = estimate_motions(seq, params=params, random_state=args.seed)
             C = count.n_motions
-            print(f"motions: {C} (estimated: {count.reason})")
+            print(f"motions: {C} (estimated: {count.explain()})")
         if args.method == "laav":
             labels = segment(seq, C, params, args.seed).labels
         else:

@@ -1231,6 +1231,14 @@ def test_cli_estimates_c_for_a_file_without_ground_truth(monkeypatch, tmp_path, 
     assert ESTIMATE_NOTE in prov.motions_note(expected)  # how far an estimate can be trusted
     assert ESTIMATE_NOTE not in prov.motions_note(expected + 1)
     assert "taken from the C box (estimated: " in prov.motions_note(expected + 1)
+    # a close call is said, on the terminal and on the page (laav.MotionCount.close_call)
+    close = laav.MotionCount(2, (1, 2, 3), (0,) * 3, (0,) * 3, (0,) * 3, (5.0, -0.4), 0.01, "why")
+    monkeypatch.setattr(laav, "estimate_motions", lambda *a, **k: close)
+    assert main([str(f), "--no-browser", "--port", "0"]) == 0
+    said = capsys.readouterr().out
+    assert "C = 2 estimated (why; a close call: the test gave motion 3 a 40 % chance" in said
+    assert "why; a close call: " in seen["origin"].motions_note(2)
+    assert "compare C = 3" in seen["origin"].motions_note(2)
     assert main([str(f), "--no-browser", "--port", "0", "--motions", "3"]) == 0
     assert seen["n_motions"] == 3 and seen["origin"].motions_estimate is None
     # C from --motions: not said to come from the C box

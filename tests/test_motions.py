@@ -157,6 +157,54 @@ def test_decide_sequential_test():
     assert decide(lv, noise2=1e-3, max_motions=5)[0] == 3
 
 
+def _count(C: int, steps) -> MotionCount:
+    nan = (float("nan"),) * 6
+    return MotionCount(C, tuple(range(1, 7)), nan, nan, nan, tuple(steps), 0.01, "why")
+
+
+def test_close_call_names_the_step_nearest_zero_and_the_c_to_compare():
+    """The two steps that decided (the last motion added, the step the test stopped at): the
+    one nearer 0 is the deciding step; within CLOSE_CALL_LOGIT of 0 it is a close call, with
+    the logistic criterion's chance and the other C to compare."""
+    from laav.motions import CLOSE_CALL_LOGIT
+
+    assert CLOSE_CALL_LOGIT == 1.0  # (a logit of 1: set a priori; the docs quote its counts)
+    nan = float("nan")
+    # stopped at 2 -> 3 with a score of -0.0005: a coin flip for motion 3
+    c = _count(2, (5.3, -0.0005, nan, nan))
+    assert c.deciding_step == (2, -0.0005)
+    assert c.close_call == ("a close call: the test gave motion 3 a 50 % chance (step score -0.00); "
+                            "compare C = 3")
+    assert c.explain() == "why; " + c.close_call
+    # added motion 4 at +0.69 (67 %), then no candidate with 5 motions: compare C = 3
+    c = _count(4, (9.0, 8.8, 0.69, nan))
+    assert c.deciding_step == (3, 0.69)
+    assert c.close_call.endswith("a 67 % chance (step score +0.69); compare C = 3")
+    # the nearer of the two: stopped far below 0 (-4.1) but added motion 3 at +0.8
+    c = _count(3, (6.0, 0.8, -4.1, nan))
+    assert c.deciding_step == (2, 0.8) and "motion 3 a 69 % chance" in c.close_call
+    assert c.close_call.endswith("compare C = 2")
+    # no close call: both decisive, or only the first (ratio) step scored, or C = 1
+    for c in (_count(3, (6.0, 4.6, -4.1, nan)), _count(2, (2.5, nan, nan, nan)),
+              _count(1, (-0.5, nan, nan, nan)), _count(2, (6.0, -1.0, nan, nan))):
+        assert c.close_call == "" and c.explain() == "why"
+    assert _count(2, (6.0, -1.0, nan, nan)).deciding_step == (2, -1.0)
+    assert _count(2, (2.5, nan, nan, nan)).deciding_step is None
+
+
+def test_cli_says_when_the_estimate_was_a_close_call(tmp_path, capsys, monkeypatch):
+    seq = _scene(2, 0)
+    path = laav.save_sequence(laav.Sequence(seq.points, name="tracks"), tmp_path / "tracks.npz")
+    import laav.motions as motions
+
+    monkeypatch.setattr(motions, "estimate_motions",
+                        lambda *a, **k: _count(2, (5.3, -0.4, float("nan"), float("nan"))))
+    assert main(["segment", str(path), "--motions", "auto", "-o", str(tmp_path / "l.csv"), *SMALL]) == 0
+    printed = capsys.readouterr().out
+    assert "motions: 2 (estimated: why; a close call: the test gave motion 3 a 40 % chance" in printed
+    assert "compare C = 3)" in printed
+
+
 def test_profile_levels_nan_for_missing_candidates():
     R = np.array([[1.0, 1.0], [np.inf, np.inf]])
     lv = profile_levels(R, R, coding=np.array([2.0, np.nan]))

@@ -511,4 +511,4 @@ def _estimated_motions(seq: laav.Sequence) -> Origin:
         count = laav.estimate_motions(seq)
     except Exception:  # noqa: BLE001 - never let an upload hang on "Reading": the C box's value
         return Origin()
-    return Origin(count.n_motions, count.reason)
+    return Origin(count.n_motions, count.explain())
