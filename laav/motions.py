@@ -51,9 +51,10 @@ STEP_BIAS = -4.3065
 ONE_MOTION_RATIO = 0.05
 #: A step C -> C + 1 (C >= 2) whose score is within this of 0 is a *close call*
 #: (:attr:`MotionCount.close_call`): the logistic criterion puts the added motion's chance
-#: between 27 and 73 %. Set a priori (a logit of 1), not tuned. On Hopkins155 (all-data
-#: constants, so not held out; 2026-12-04, git 98ec060) 17 of 155 estimates were close calls
-#: and 5 of them wrong, against 6 wrong among the other 138.
+#: between 27 and 73 %. A logit of 1, the score's natural unit, not fitted; but the counts
+#: below were seen at several margins before it was fixed, so they do not test it held out. On
+#: Hopkins155 (the all-data constants; docs/bench/motions_close_calls.md) 17 of 155 estimates
+#: were close calls and 5 of them wrong, against 6 wrong among the other 138.
 CLOSE_CALL_LOGIT = 1.0
 TRIM = 0.95  # share of points (best explained) in a level
 #: The estimate runs LAAV on at most this many tracks (a seeded random subset; Hopkins155's
