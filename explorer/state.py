@@ -242,12 +242,26 @@ def non_defaults(settings: Settings, default_motions: int | None,
                  complete: bool = True) -> list[str]:
     """``name = value`` for every setting that differs from the defaults (the LaavParams
     defaults, seed 0, C of the ground truth, the default number of fine models for the C in
-    use, on complete or incomplete tracks)."""
-    default = _values(Settings(LaavParams(), 0, settings.n_motions if default_motions is None
-                               else default_motions), complete)
-    default["fine_models"] = LaavParams().n_fine(settings.n_motions, complete)  # follows C
+    use, on complete or incomplete tracks). Parameters nearer a preset
+    (:data:`laav.params.PRESETS`, as ``--preset`` spells them) than the defaults are said as
+    ``preset = NAME`` and the settings that differ from it (the paper preset's twelve fields
+    were twelve code names in a class's status line)."""
     now = _values(settings, complete)
-    return [f"{PARAM_NAMES.get(k, k)} = {_fmt(v)}" for k, v in now.items() if v != default[k]]
+    motions = settings.n_motions if default_motions is None else default_motions
+
+    def differing(base: LaavParams) -> list[str]:
+        default = _values(Settings(base, 0, motions), complete)
+        default["fine_models"] = base.n_fine(settings.n_motions, complete)  # follows C
+        return [f"{PARAM_NAMES.get(k, k)} = {_fmt(v)}" for k, v in now.items() if v != default[k]]
+
+    best = differing(LaavParams())
+    from laav.params import PRESETS
+
+    for name, make in PRESETS.items():
+        got = [f"preset = {name}"] + differing(make())
+        if len(got) < len(best):
+            best = got
+    return best
 
 
 @dataclasses.dataclass(frozen=True)

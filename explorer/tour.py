@@ -8,9 +8,12 @@ paper does otherwise it names the ``paper`` preset (``LaavParams.paper()``).
 ``cards`` names the cards a step shows (``frame``, ``view3d``, ``graph``, ``coarse``,
 ``rv``, ``numbers``; the first is the one highlighted), ``color`` the frame view's
 colour-by (a :data:`explorer.views.COLOR_MODES` key; ``color_no_truth`` instead for a
-sequence without ground truth; None leaves it as it is). A text follows the result shown
-(:meth:`TourStep.text_for`): ``{fine}`` is its number of fine models (``3C``, ``2C``), and
-``text_epipolar`` replaces the text when the paper's epipolar merge decided. A step with
+sequence without ground truth; None leaves it as it is); ``hide_errors`` hides the frame view's
+misclassified rings at that step (the final stage's errors, beside the atoms). A text follows
+the result shown (:meth:`TourStep.text_for`): ``{fine}`` is its number of fine models (``3C``,
+``2C``) and ``{paper_fine}`` says whether that is the paper's 2C; ``text_epipolar`` /
+``text_joint`` replace the text for the merge that decided, ``text_pair`` for atoms checked on
+one frame pair (the paper's). A step with
 ``facts="rv"`` ends with what the result shown did (:func:`fine_tuning_facts`: how LAAV's trial
 started and ended, plain RV's trials), so the paper's claim is read beside this run.
 """
@@ -33,7 +36,9 @@ class TourStep:
     color_no_truth: str | None = None
     text_epipolar: str | None = None
     text_joint: str | None = None
+    text_pair: str | None = None
     facts: str | None = None
+    hide_errors: bool = False
 
     def text_for(self, params, n_motions: int, complete: bool = True) -> str:
         """The text for a result of ``params`` (a :class:`laav.LaavParams`) with C =
@@ -41,8 +46,12 @@ class TourStep:
         fine models."""
         merge = params.merge_for(complete)
         text = {"epipolar": self.text_epipolar, "joint": self.text_joint}.get(merge)
+        if params.atom_frames == "pair" and self.text_pair:
+            text = self.text_pair
         text = text or self.text
-        return text.replace("{fine}", fine_count(params, n_motions, complete))
+        fine = fine_count(params, n_motions, complete)
+        return (text.replace("{fine}", fine)
+                .replace("{paper_fine}", ", as the paper does" if fine == "2C" else " (the paper: 2C)"))
 
 
 TOUR: tuple[TourStep, ...] = (
@@ -52,20 +61,27 @@ TOUR: tuple[TourStep, ...] = (
         "affine motion carries through every frame (the paper checks one random frame pair). Features "
         "within R1 belong to that atom alone, the ring out to R2 may be shared, and features no atom "
         "takes (grey crosses) wait for stage 4.",
-        ("frame",), color="atoms", color_no_truth="atoms"),
+        ("frame",), color="atoms", color_no_truth="atoms", hide_errors=True,
+        # the text when atoms are checked on one frame pair (atom_frames = "pair", the paper's)
+        text_pair=(
+            "Each atom grows around a random seed feature: RANSAC keeps the neighbours within R2 that "
+            "one affine motion carries between one random frame pair, as the paper does. Features "
+            "within R1 belong to that atom alone, the ring out to R2 may be shared, and features no "
+            "atom takes (grey crosses) wait for stage 4.")),
     TourStep(
         "2 · Multicut: cutting the atom graph into fine models",
         "Atoms become the nodes of a graph, an edge blue when one atom's affine motion carries the "
         "other's features forward and back well (its cost favours joining them), red when it does "
         "not. A minimum cost multicut (greedy contraction, replayed by the slider) cuts edges "
         "(dashed), and its segments are merged or split to {fine} fine models, on purpose more than "
-        "the C motions (the paper: 2C).",
+        "the C motions{paper_fine}.",
         ("graph",), color="fine", color_no_truth="fine"),
     TourStep(
         "3 · Fine-to-coarse: merging fine models into C motions",
-        "The fine models are grouped into C motions by coding length: the grouping whose trajectories "
-        "take the fewest bits to describe wins. The paper instead lets pairs of fine models vote with "
-        "epipolar geometry and splits the votes by spectral clustering (the paper preset).",
+        "The fine models are grouped into C motions by coding length: the grouping whose "
+        "trajectories take the fewest nats (a unit of information, like bits) to describe wins. The "
+        "paper instead lets pairs of fine models vote with epipolar geometry and splits the votes by "
+        "spectral clustering (the paper preset).",
         ("coarse",), color="coarse", color_no_truth="coarse",
         # the text when the epipolar merge decided (coarse_merge = "epipolar", the paper's)
         text_epipolar=(
@@ -75,24 +91,25 @@ TOUR: tuple[TourStep, ...] = (
         # the text when the joint merge decided (coarse_merge = "auto", the default, or "joint")
         text_joint=(
             "The fine models are grouped into C motions by the joint merge: of the groupings whose "
-            "trajectories take the fewest bits to describe, the one whose fundamental matrices best "
-            "explain its points wins. The map shows how many nats joining (blue) or splitting (orange) "
+            "trajectories take the fewest nats (a unit of information, like bits) to describe, the one "
+            "whose fundamental matrices best explain its points wins. The map shows how many nats "
+            "joining (blue) or splitting (orange) "
             "each pair of fine models won.")),
     TourStep(
         "4 · Fine-tuning: Random Voting labels every point",
-        "Random Voting starts from the coarse labels (labelled points with extra votes): each "
-        "iteration, every motion fits a fundamental matrix on a random frame pair and every point "
-        "votes for the motions that fit it. The paper's claim: started near the answer, it settles "
-        "sooner than plain Random Voting from random starts.",
+        "Random Voting starts from the coarse labels (a labelled point starts with extra votes for "
+        "its motion): each iteration, every motion fits a fundamental matrix on "
+        "a random frame pair and every point votes for the motions that fit it. The paper's claim: "
+        "started near the answer, it settles sooner than plain Random Voting from random starts.",
         ("rv",), color="final", color_no_truth="final", facts="rv"),
     TourStep(
         "5 · Result: one motion per point, and its error",
-        "Every point now belongs to one of the C motions; with ground truth the frame view draws the "
-        "misassigned ones black, and the Numbers card below gives every stage's error (the share of "
-        "points misassigned under the best matching of motions). Atoms, the merge and the voting are "
-        "random: after the tour, the Seed sweep card's button runs seeds 0-9 to show whether a result "
-        "is typical or a bad draw.",
-        ("frame", "numbers"), color="errors", color_no_truth="final"),
+        "Every point now belongs to one of the C motions, one colour each; with ground truth the "
+        "frame view rings the misassigned ones in black, and the Numbers card below gives every "
+        "stage's error (the share of points misassigned under the best matching of motions). Atoms, "
+        "the merge and the voting are random: after the tour, the Seed sweep card's button runs "
+        "seeds 0-9 to show whether a result is typical or a bad draw.",
+        ("frame", "numbers"), color="final", color_no_truth="final"),
 )
 
 
@@ -107,10 +124,13 @@ def fine_tuning_facts(seq, voting, plain) -> str:
         return ""
     n = len(voting.informed_changed)
     err = rv_error_sources(seq, voting)["error"]
-    what = "wrong" if seq.labels is not None else "off its last labels"
+    truth = seq.labels is not None
+    what = "wrong" if truth else "off its last labels"
     start = f"started {err[0]:.0f} % {what} and " if err.size else ""
     ended = (f"settled after {n} iterations" if voting.informed_converged
              else f"was still changing at the {n}-iteration cap")
+    if truth and err.size:  # settling is not being right: where it ended
+        ended += f", {err[-1]:.0f} % wrong"
     text = f"This run: LAAV's trial {start}{ended}"
     if plain is None:
         text += "; plain RV: computing."
@@ -123,12 +143,18 @@ def fine_tuning_facts(seq, voting, plain) -> str:
             text += (f"; plain RV's {len(per)} trials all hit the {max(per)}-iteration cap"
                      if len(per) > 1 else f"; plain RV hit the {per[0]}-iteration cap")
         text += f" ({int(plain.n_iterations)} in all)."
+    returned = voting.selected if voting.initialised else "informed"
+    if returned not in ("informed", "trial") and not returned.startswith("missing motion"):
+        whose = "LAAV's coarse labels" if returned == "coarse" else f"those of {returned}"
+        text += f" The labels returned are {whose} (ours), not this trial's: they scored better."
     ours = []
     if (voting.informed_subspace_weight or 0) > 0:
         ours.append("subspace votes")
     missing, plain_trials = other_trial_counts(voting)
     if missing:
-        ours.append(f"{missing} trials for a missed motion")
+        ours.append(f"{missing} trials for a missed motion"
+                    + ("; one of them, not this trial, gave the labels returned (it scored better)"
+                       if returned.startswith("missing motion") else ""))
     if plain_trials:
         ours.append(f"{plain_trials} plain RV trials it was compared with")
     if ours:

@@ -14,6 +14,7 @@ from conftest import two_motion_sequence
 import laav
 from explorer import sweep as S
 from explorer import views as V
+from explorer.cards.frame import TRUTH_LAYER
 from explorer.tour import TOUR
 from explorer.views import COLOR_MODES, stage_numbers
 
@@ -298,7 +299,12 @@ def test_tour_texts_are_two_sentences_each():
     assert "coding length" in TOUR[2].text_for(coding, 3)
     assert TOUR[2].text_for(paper, 3).startswith("Pairs of fine models vote with epipolar geometry")
     assert "to 3C fine models" in TOUR[1].text_for(coding.replace(fine_per_motion=3), 3)
-    assert "to 2C fine models" in TOUR[1].text_for(paper, 2)
+    assert "to 2C fine models, on purpose more than the C motions, as the paper does." in TOUR[1].text_for(
+        paper, 2)
+    assert "(the paper: 2C)" in TOUR[1].text_for(coding.replace(fine_per_motion=3), 3)
+    # step 1 with the paper's frame pair says so, not "the paper checks one frame pair" beside it
+    assert "between one random frame pair, as the paper does" in TOUR[0].text_for(paper, 3)
+    assert "(the paper checks one random frame pair)" in TOUR[0].text_for(coding, 3)
     assert "to 7 fine models" in TOUR[1].text_for(coding.replace(fine_models=7), 3)
     joint = laav.LaavParams(coarse_merge="joint", fine_per_motion=4)
     assert "joint merge" in TOUR[2].text_for(joint, 3) and "to 4C fine models" in TOUR[1].text_for(joint, 3)
@@ -324,7 +330,17 @@ def test_tour_step_4_says_what_this_run_did():
     n = len(v.informed_changed)
     ended = (f"settled after {n} iterations" if v.informed_converged
              else f"still changing at the {n}-iteration")
-    assert f"This run: LAAV's trial started {start:.0f} % wrong and {ended}" in text
+    end = V.rv_error_sources(seq, v)["error"][-1]
+    # where it ended too: settling is not being right
+    assert f"This run: LAAV's trial started {start:.0f} % wrong and {ended}, {end:.0f} % wrong" in text
+    assert "labels returned are not" not in text  # (LAAV's own trial was returned here)
+    assert v.selected == "informed"
+    other = dataclasses.replace(v, selected="missing motion (0+1), trial 2")
+    assert ("trials for a missed motion; one of them, not this trial, gave the labels returned (it "
+            "scored better).") in fine_tuning_facts(seq, other, plain)
+    coarse = dataclasses.replace(v, selected="coarse")
+    assert ("The labels returned are LAAV's coarse labels (ours), not this trial's: they scored "
+            "better.") in fine_tuning_facts(seq, coarse, plain)
     assert f"({plain.n_iterations} in all)" in text and "Ours, not the paper's: subspace votes" in text
     capped = dataclasses.replace(v, informed_converged=False)
     assert f"was still changing at the {n}-iteration cap" in fine_tuning_facts(seq, capped, plain)
@@ -351,9 +367,13 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     tour = ex.tour
     cards = tour.cards
     before = ex.controls.color_mode
+    layers = list(ex.frame_view.w_layers.value)
+    assert TRUTH_LAYER in layers
     tour.w_start.clicks += 1
     assert tour.active and tour.panel.visible and tour.step == 0
     assert tour.texts == (TOUR[0].title, TOUR[0].text_for(ex.result.params, ex.result.n_motions))
+    # step 1 is about atoms: the final stage's error rings are hidden there
+    assert ex.frame_view.w_layers.value == [v for v in layers if v != TRUTH_LAYER]
     assert [n for n, c in cards.items() if c.visible] == ["frame"]
     assert outlined(cards["frame"]) and ex.controls.color_mode == "atoms"
     tour.w_next.clicks += 1
@@ -390,10 +410,14 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     tour.go(1)
     _press(tour, *["next"] * 5)
     assert tour.step == 4 and tour.active  # → stops at the last step
-    assert tour.w_next.label == "Finish" and ex.controls.color_mode == "errors"
+    # the motions in colour (an all-grey "errors" view showed nothing on a perfect result),
+    # their errors ringed: the misclassified layer is back after step 1 hid it
+    assert tour.w_next.label == "Finish" and ex.controls.color_mode == "final"
+    assert TRUTH_LAYER in ex.frame_view.w_layers.value
     assert {n for n, c in cards.items() if c.visible} == {"numbers", "frame"}
     tour.w_next.clicks += 1  # Finish
     assert not tour.active and not tour.panel.visible
+    assert ex.frame_view.w_layers.value == layers  # as before the tour
     assert all(c.visible for c in cards.values()) and not any(outlined(c) for c in cards.values())
     assert ex.controls.color_mode == before
     tour.start(3)

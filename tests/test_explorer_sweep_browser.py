@@ -248,8 +248,8 @@ def test_a_link_opens_the_tour_at_its_step(tmp_path):
 def test_the_tour_fits_a_projector(tmp_path):
     """On the bundled demo (three motions: the longest texts and tables), at 1280x800 and
     1024x768, every step shows its whole panel (title, text, Back / Next) beside its card,
-    and the card's first plot whole, without scrolling either way (before, the panel sat
-    above the card and took half the screen: the plots began at y = 440-490 px)."""
+    and the card's first plot whole and inside its card, without scrolling either way (before,
+    the panel sat above the card and took half the screen: the plots began at y = 440-490 px)."""
     from explorer.demo import demo_sequence
     from explorer.tour import TOUR
 
@@ -279,6 +279,7 @@ def test_the_tour_fits_a_projector(tmp_path):
                 assert m["panel"][3] <= h, where  # the whole text and its buttons on screen
                 x0, y0, x1, y1 = m["canvas"]
                 assert x0 >= m["panel"][2] and x1 <= w and y1 <= h, where  # the plot beside it, whole
+                assert x1 <= m["card"][2], where  # inside its card (its legend spilled out at 1024)
             page.keyboard.press("Escape")
             _wait_for(lambda ex=ex: not ex.tour.active, 10, "the tour to end", page=page)
             page.close()

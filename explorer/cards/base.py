@@ -179,6 +179,7 @@ def image_figure(title: str, frame_width: int, extent, **kw):
     kw.setdefault("tools", TOOLS)
     fig = figure(title=title, frame_width=frame_width, frame_height=max(fh, 80),
                  x_range=Range1d(x0, x1), y_range=Range1d(y1, y0), match_aspect=True, **kw)
+    fig.toolbar.logo = None  # (bokeh's coloured logo: beside the motion colours, noise)
     fig.xaxis.axis_label = "x (px)"
     fig.yaxis.axis_label = "y (px, pointing down)"
     fig.title.text_font_size = "11pt"

@@ -17,6 +17,7 @@ import panel as pn
 
 from ..tour import TOUR, fine_tuning_facts
 from .base import Host, Markdown, page_box
+from .frame import TRUTH_LAYER
 
 #: Outline of the card a step is about (the header's navy: a page colour, not a motion's).
 HIGHLIGHT = {"outline": "4px solid #2c4a66", "outline-offset": "2px"}
@@ -159,6 +160,7 @@ class TourView:
             self.host.complete_page()  # the panel, if the later cards are still to come
             self._saved = {name: (c.visible, dict(c.styles or {})) for name, c in self.cards.items()}
             self._saved["__color"] = self.controls.color_mode
+            self._saved["__layers"] = list(self._layers.value) if self._layers is not None else None
             self.active = True
             self.panel.visible = True
             self._run, self._keys_done = secrets.token_hex(4), 0  # the page counts from 1 again
@@ -189,10 +191,28 @@ class TourView:
             self.text_md.object = self._text(s)
             self.w_back.disabled = self.step == 0
             self.w_next.label = "Next ▶" if self.step < len(TOUR) - 1 else "Finish"
+            self.hint_md.visible = self.step == 0  # (learnt at step 1: the others keep the height)
         if color is not None and self.controls.color_mode != color:
             self.controls.set_color_mode(color)
+        self._show_layers(s.hide_errors)
         self._js("scroll")
         self._sync_url()
+
+    @property
+    def _layers(self):
+        """The frame view's layer boxes (None without a frame view)."""
+        view = getattr(self.host, "frame_view", None)
+        return None if view is None else view.w_layers
+
+    def _show_layers(self, hide_errors: bool) -> None:
+        """The frame view's layers as before the tour, without the misclassified rings when
+        ``hide_errors`` (a step about another stage than the final one)."""
+        box, before = self._layers, self._saved.get("__layers")
+        if box is None or before is None:
+            return
+        want = [v for v in before if v in box.options and not (hide_errors and v == TRUTH_LAYER)]
+        if list(box.value) != want:
+            box.value = want
 
     def _text(self, s) -> str:
         """Step ``s``'s text for the result shown (with the facts of this run, if it has any)."""
@@ -229,6 +249,7 @@ class TourView:
         color = self._saved.get("__color")
         if color is not None and self.controls.color_mode != color:
             self.controls.set_color_mode(color)
+        self._show_layers(False)
         self._js("off")
         self._sync_url()
 
