@@ -72,9 +72,9 @@ TOUR: tuple[TourStep, ...] = (
         "2 · Multicut: cutting the atom graph into fine models",
         "Atoms become the nodes of a graph, an edge blue when one atom's affine motion carries the "
         "other's features forward and back well (its cost favours joining them), red when it does "
-        "not. A minimum cost multicut (greedy contraction, replayed by the slider) cuts edges "
-        "(dashed), and its segments are merged or split to {fine} fine models, on purpose more than "
-        "the C motions{paper_fine}.",
+        "not. A minimum cost multicut (greedy contraction, replayed by the step slider under the "
+        "graph) cuts edges (dashed), and its segments are merged or split to {fine} fine models, "
+        "on purpose more than the C motions{paper_fine}.",
         ("graph",), color="fine", color_no_truth="fine"),
     TourStep(
         "3 · Fine-to-coarse: merging fine models into C motions",

@@ -53,8 +53,9 @@ class FrameView:
         self.w_background = pn.widgets.Checkbox(label="video frame behind the points", value=True,
                                                 visible=False)
         self.w_background.param.watch(self._on_background, "value")
-        # (toolbar above: at 1024 px the figure with its legend fits the card only so)
-        f = self.fig = image_figure("Points at frame 0", 410, extent, toolbar_location="above")
+        # (toolbar below: at 1024 px the figure with its legend fits the card only so; above,
+        # beside the title, it folded its tools into a menu)
+        f = self.fig = image_figure("Points at frame 0", 410, extent, toolbar_location="below")
         # row 0 of the image at y = -0.5 (the top: the y axis points down), under everything
         self.r_background = f.image("image", x="x", y="y", dw="dw", dh="dh", source=self.src_background,
                                     color_mapper=LinearColorMapper(Greys256, low=0, high=255),

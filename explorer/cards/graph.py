@@ -51,8 +51,8 @@ class GraphView:
         # the colour bar reads a mapper of its own: bokeh's colour bar lays the whole figure
         # out again whenever its mapper colours anything, i.e. at every frame move's edges
         self.bar_mapper = LinearColorMapper(palette=list(V.EDGE_PALETTE), low=-1, high=1)
-        # (toolbar above, 390 px: at 1024 px the figure with its legend fits the card only so)
-        g = self.fig = image_figure("Atom graph at frame 0", 390, extent, toolbar_location="above")
+        # (toolbar below, 390 px: at 1024 px the figure with its legend fits the card only so)
+        g = self.fig = image_figure("Atom graph at frame 0", 390, extent, toolbar_location="below")
         empty_e = {"x0": [], "y0": [], "x1": [], "y1": [], "cost": [], "error": [], "a": [], "b": []}
         self.src_joined = ColumnDataSource(dict(empty_e))
         self.src_cut = ColumnDataSource(dict(empty_e))
