@@ -456,20 +456,22 @@ class Explorer:
         the first result is shown (:data:`REST_GAP_S` after it is applied; or
         :data:`REST_AFTER_S` after the page loaded, whichever comes first), so that the page
         and then the first result appear sooner: the browser draws those cards once, with
-        their data, after the status line and the points. The tour's panel and the compare
-        card, hidden until asked for, come with them (:meth:`complete_page`).
+        their data, after the status line and the points. The compare card, hidden until
+        asked for, comes with them (:meth:`complete_page`); the tour's panel, hidden in the
+        sidebar, comes with the first page.
         """
         n_first = self.main.index(self.view3d.card) + 1  # status, alerts, note, atoms, 3-D
         if lazy is None:
             lazy = self._session_doc is not None
-        # the tour's panel and the compare card are hidden until asked for: they come with
-        # the later cards (or at once when asked for first: :meth:`complete_page`)
-        hidden = (id(self.tour.panel), id(self.compare.card))
+        # the compare card is hidden until asked for: it comes with the later cards (or at
+        # once when asked for first: :meth:`complete_page`)
+        hidden = (id(self.compare.card),)
         first = [c for c in self.main[:n_first] if not (lazy and id(c) in hidden)]
         main = pn.Column(*(first if lazy else self.main), sizing_mode="stretch_width")
         self.main_column = main
-        side = [c for c in self.sidebar if not (lazy and id(c) in hidden)]
-        self.sidebar_column = pn.Column(*side, sizing_mode="stretch_width")
+        # (the tour's panel, hidden, is sent with the first sidebar: put in front of it later,
+        # it made bokeh lay the whole sidebar out again, which blurs a box being typed in)
+        self.sidebar_column = pn.Column(*self.sidebar, sizing_mode="stretch_width")
         self._rest = None
         self._rest_timer = None  # the pending _add_rest_after
         if lazy:
@@ -525,8 +527,6 @@ class Explorer:
             return
         self._rest = None
         self.main_column.objects = list(self.main)  # (in stage order; those shown are kept)
-        if len(self.sidebar_column.objects) != len(self.sidebar):
-            self.sidebar_column.objects = list(self.sidebar)  # the tour's panel
         done, self.on_page_complete = self.on_page_complete, None
         if done is not None:
             done()

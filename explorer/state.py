@@ -244,8 +244,8 @@ def non_defaults(settings: Settings, default_motions: int | None,
     defaults, seed 0, C of the ground truth, the default number of fine models for the C in
     use, on complete or incomplete tracks). Parameters nearer a preset
     (:data:`laav.params.PRESETS`, as ``--preset`` spells them) than the defaults are said as
-    ``preset = NAME`` and the settings that differ from it (the paper preset's twelve fields
-    were twelve code names in a class's status line)."""
+    ``preset = NAME`` and the settings that differ from it (the paper preset's 13 fields and
+    its fine models were 14 code names in a class's status line)."""
     now = _values(settings, complete)
     motions = settings.n_motions if default_motions is None else default_motions
 

@@ -8,8 +8,9 @@ paper does otherwise it names the ``paper`` preset (``LaavParams.paper()``).
 ``cards`` names the cards a step shows (``frame``, ``view3d``, ``graph``, ``coarse``,
 ``rv``, ``numbers``; the first is the one highlighted), ``color`` the frame view's
 colour-by (a :data:`explorer.views.COLOR_MODES` key; ``color_no_truth`` instead for a
-sequence without ground truth; None leaves it as it is); ``hide_errors`` hides the frame view's
-misclassified rings at that step (the final stage's errors, beside the atoms). A text follows
+sequence without ground truth; None leaves it as it is); ``error_rings`` shows (True) or hides
+(False) the frame view's misclassified rings at that step (None: as before the tour): hidden on
+the atoms, shown on the result. A text follows
 the result shown (:meth:`TourStep.text_for`): ``{fine}`` is its number of fine models (``3C``,
 ``2C``) and ``{paper_fine}`` says whether that is the paper's 2C; ``text_epipolar`` /
 ``text_joint`` replace the text for the merge that decided, ``text_pair`` for atoms checked on
@@ -38,7 +39,7 @@ class TourStep:
     text_joint: str | None = None
     text_pair: str | None = None
     facts: str | None = None
-    hide_errors: bool = False
+    error_rings: bool | None = None
 
     def text_for(self, params, n_motions: int, complete: bool = True) -> str:
         """The text for a result of ``params`` (a :class:`laav.LaavParams`) with C =
@@ -61,7 +62,7 @@ TOUR: tuple[TourStep, ...] = (
         "affine motion carries through every frame (the paper checks one random frame pair). Features "
         "within R1 belong to that atom alone, the ring out to R2 may be shared, and features no atom "
         "takes (grey crosses) wait for stage 4.",
-        ("frame",), color="atoms", color_no_truth="atoms", hide_errors=True,
+        ("frame",), color="atoms", color_no_truth="atoms", error_rings=False,
         # the text when atoms are checked on one frame pair (atom_frames = "pair", the paper's)
         text_pair=(
             "Each atom grows around a random seed feature: RANSAC keeps the neighbours within R2 that "
@@ -109,7 +110,7 @@ TOUR: tuple[TourStep, ...] = (
         "stage's error (the share of points misassigned under the best matching of motions). Atoms, "
         "the merge and the voting are random: after the tour, the Seed sweep card's button runs "
         "seeds 0-9 to show whether a result is typical or a bad draw.",
-        ("frame", "numbers"), color="final", color_no_truth="final"),
+        ("frame", "numbers"), color="final", color_no_truth="final", error_rings=True),
 )
 
 
@@ -130,7 +131,7 @@ def fine_tuning_facts(seq, voting, plain) -> str:
     ended = (f"settled after {n} iterations" if voting.informed_converged
              else f"was still changing at the {n}-iteration cap")
     if truth and err.size:  # settling is not being right: where it ended
-        ended += f", {err[-1]:.0f} % wrong"
+        ended += f", its own labels {err[-1]:.0f} % wrong"
     text = f"This run: LAAV's trial {start}{ended}"
     if plain is None:
         text += "; plain RV: computing."
@@ -143,10 +144,13 @@ def fine_tuning_facts(seq, voting, plain) -> str:
             text += (f"; plain RV's {len(per)} trials all hit the {max(per)}-iteration cap"
                      if len(per) > 1 else f"; plain RV hit the {per[0]}-iteration cap")
         text += f" ({int(plain.n_iterations)} in all)."
-    returned = voting.selected if voting.initialised else "informed"
-    if returned not in ("informed", "trial") and not returned.startswith("missing motion"):
-        whose = "LAAV's coarse labels" if returned == "coarse" else f"those of {returned}"
-        text += f" The labels returned are {whose} (ours), not this trial's: they scored better."
+    returned = voting.selected
+    if returned != "informed" and not returned.startswith("missing motion"):
+        whose = ("LAAV's coarse labels" if returned == "coarse" else
+                 "those of " + (returned.replace("plain", "plain RV's", 1)
+                                if returned.startswith("plain") else returned))
+        text += (f" The labels returned are {whose}, not this trial's: our selection (not in the "
+                 "paper) scored them better.")
     ours = []
     if (voting.informed_subspace_weight or 0) > 0:
         ours.append("subspace votes")

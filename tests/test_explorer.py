@@ -1330,17 +1330,21 @@ def test_the_page_is_built_with_one_walk_of_its_models(seq, monkeypatch):
 
 
 def test_hidden_cards_come_later_and_at_once_when_asked_for(ex, monkeypatch):
-    """The served page's first document leaves out the tour's panel and the compare card
-    (hidden until asked for) with the later cards; starting the tour (or pinning) before
-    those came puts every card on the page at once, in stage order."""
+    """The served page's first document leaves out the compare card (hidden until asked
+    for) with the later cards; starting the tour (or pinning) before those came puts every
+    card on the page at once, in stage order. The tour's panel, hidden at the top of the
+    sidebar, is in the first document: the sidebar is never laid out again for it."""
     monkeypatch.setattr(pn.state, "onload", lambda *a, **k: None)  # the page never loads here
     ex.template("LAAV explorer", lazy=True)
     first = ex.main_column.objects
-    assert all(c is not ex.tour.panel and c is not ex.compare.card for c in first)
+    assert all(c is not ex.compare.card for c in first)
+    assert ex.sidebar_column.objects[0] is ex.tour.panel and not ex.tour.panel.visible
+    sidebar = list(ex.sidebar_column.objects)
     assert any(c is ex.frame_view.card for c in first) and len(first) < len(ex.main)
     ex.tour.start()
     assert ex.tour.panel.visible
     assert [id(c) for c in ex.main_column.objects] == [id(c) for c in ex.main]
+    assert ex.sidebar_column.objects == sidebar  # the same sidebar, untouched
     ex.tour.end()
     ex.template("LAAV explorer", lazy=True)
     assert ex.compare.pin()

@@ -332,15 +332,21 @@ def test_tour_step_4_says_what_this_run_did():
              else f"still changing at the {n}-iteration")
     end = V.rv_error_sources(seq, v)["error"][-1]
     # where it ended too: settling is not being right
-    assert f"This run: LAAV's trial started {start:.0f} % wrong and {ended}, {end:.0f} % wrong" in text
-    assert "labels returned are not" not in text  # (LAAV's own trial was returned here)
+    assert (f"This run: LAAV's trial started {start:.0f} % wrong and {ended}, its own labels "
+            f"{end:.0f} % wrong") in text
+    # (LAAV's own trial was returned here)
+    assert "The labels returned are" not in text and "gave the labels returned" not in text
     assert v.selected == "informed"
     other = dataclasses.replace(v, selected="missing motion (0+1), trial 2")
     assert ("trials for a missed motion; one of them, not this trial, gave the labels returned (it "
             "scored better).") in fine_tuning_facts(seq, other, plain)
     coarse = dataclasses.replace(v, selected="coarse")
-    assert ("The labels returned are LAAV's coarse labels (ours), not this trial's: they scored "
-            "better.") in fine_tuning_facts(seq, coarse, plain)
+    assert ("The labels returned are LAAV's coarse labels, not this trial's: our selection (not in "
+            "the paper) scored them better.") in fine_tuning_facts(seq, coarse, plain)
+    # a plain RV trial's labels (with_plain_rv()): plain RV's, not "ours"
+    plain_won = dataclasses.replace(v, selected="plain trial 3")
+    assert ("The labels returned are those of plain RV's trial 3, not this trial's: our selection"
+            in fine_tuning_facts(seq, plain_won, plain))
     assert f"({plain.n_iterations} in all)" in text and "Ours, not the paper's: subspace votes" in text
     capped = dataclasses.replace(v, informed_converged=False)
     assert f"was still changing at the {n}-iteration cap" in fine_tuning_facts(seq, capped, plain)
@@ -423,6 +429,41 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     tour.start(3)
     _press(tour, "end")  # Esc (a new tour: its presses counted from 1)
     assert not tour.active and all(c.visible for c in cards.values())
+
+
+def test_the_tour_sets_only_the_error_rings_and_gives_them_back(explorer):
+    """The tour hides the misclassified rings at step 1 and shows them at step 5, touching no
+    other layer, and gives back the user's choice when it ends, also through a sequence
+    without ground truth loaded meanwhile (where the layer is not offered)."""
+    import io
+
+    from explorer.cards.frame import LAYERS
+
+    ex, tour, box = explorer, explorer.tour, explorer.frame_view.w_layers
+    trails = LAYERS[0]
+    box.value = [v for v in box.value if v != TRUTH_LAYER]  # unticked by the user
+    tour.start()
+    assert TRUTH_LAYER not in box.value
+    box.value = [v for v in box.value if v != trails]  # the user hides the trails in the tour
+    tour.go(4)  # the result: its errors ringed, the trails as the user left them
+    assert TRUTH_LAYER in box.value and trails not in box.value
+    tour.end()
+    assert TRUTH_LAYER not in box.value and trails not in box.value
+    # ticked before; a sequence without ground truth loaded at step 1 (rings hidden by the
+    # tour), then one with truth after the tour: the rings are on again, as the user had them
+    box.value = list(box.options)
+    tour.start()
+    assert TRUTH_LAYER not in box.value
+    seq = ex.sequence
+    buf = io.BytesIO()
+    np.savez(buf, points=seq.points)
+    assert ex.load_bytes(buf.getvalue(), "bare.npz") and ex.wait(60)
+    assert TRUTH_LAYER not in box.options
+    tour.end()
+    buf = io.BytesIO()
+    np.savez(buf, points=seq.points, labels=seq.labels)
+    assert ex.load_bytes(buf.getvalue(), "labelled.npz") and ex.wait(60)
+    assert TRUTH_LAYER in box.options and TRUTH_LAYER in box.value
 
 
 def test_the_address_carries_the_tour_step(explorer):

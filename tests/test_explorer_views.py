@@ -191,7 +191,7 @@ def test_non_defaults_names_every_changed_setting():
     # the fine models follow C: C = 2 with fine_models unset is 2C = 4, not a change of its own
     assert non_defaults(Settings(P(), 0, 2), 3) == ["C = 2"]
     assert non_defaults(Settings(P(), 0, 2), None) == []  # no ground truth: C is the user's
-    # a preset by its name, then what differs from it (not its twelve fields)
+    # a preset by its name, then what differs from it (not its 13 fields and the fine models)
     assert non_defaults(Settings(P.paper(), 0, 3), 3) == ["preset = paper"]
     assert non_defaults(Settings(P.paper(r1=25.0), 2, 3), 3) == ["preset = paper", "R1 = 25", "seed = 2"]
     assert non_defaults(Settings(P.with_plain_rv(), 0, 3), 3) == ["preset = with-plain-rv"]

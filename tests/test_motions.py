@@ -168,7 +168,7 @@ def test_close_call_names_the_step_nearest_zero_and_the_c_to_compare():
     the logistic criterion's chance and the other C to compare."""
     from laav.motions import CLOSE_CALL_LOGIT
 
-    assert CLOSE_CALL_LOGIT == 1.0  # (a logit of 1: set a priori; the docs quote its counts)
+    assert CLOSE_CALL_LOGIT == 1.0  # (a logit of 1; the docs quote its counts at that margin)
     nan = float("nan")
     # stopped at 2 -> 3 with a score of -0.0005: a coin flip for motion 3
     c = _count(2, (5.3, -0.0005, nan, nan))

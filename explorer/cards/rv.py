@@ -58,6 +58,8 @@ class RVView:
                                   y_axis_type="log", tools=RV_TOOLS, toolbar_location="above")
         self.fig_margin = figure(title="Mean vote margin per iteration", width=RV_FIG_WIDTH, height=235,
                                  tools=RV_TOOLS, toolbar_location="above")
+        for fig in (self.fig_error, self.fig_changed, self.fig_margin):
+            fig.toolbar.logo = None  # (bokeh's coloured logo: colours mean motions on this page)
         for fig, col, ylab in ((self.fig_changed, "changed_plot", "labels changed (0 drawn as ½)"),
                                (self.fig_margin, "margin", "(best − 2nd best) / sum of votes")):
             # neutral greys: colours mean motions on this page

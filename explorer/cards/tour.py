@@ -80,14 +80,19 @@ if (cmd.startsWith('on:')) {
   if (!t.on) {
     t.on = true;
     // the panel is in the sidebar: shown (unfolded if folded) and widened, back afterwards
+    // (a notebook has no such sidebar: nothing to widen there)
     if (toggle && !shown()) { toggle.click(); t.unfolded = true; }
-    t.width = root.getPropertyValue('--sidebar-width');
-    root.setProperty('--sidebar-width', '__WIDTH__');
+    if (side) {
+      t.width = root.getPropertyValue('--sidebar-width');
+      root.setProperty('--sidebar-width', '__WIDTH__');
+    }
   }
 }
 if (cmd.startsWith('off:')) {
   t.on = false;
-  if (t.width) root.setProperty('--sidebar-width', t.width); else root.removeProperty('--sidebar-width');
+  if (side) {
+    if (t.width) root.setProperty('--sidebar-width', t.width); else root.removeProperty('--sidebar-width');
+  }
   t.width = '';
   if (toggle && t.unfolded && shown()) toggle.click();
   t.unfolded = false;
@@ -98,6 +103,17 @@ if (cmd.startsWith('scroll:')) {
     for (const id of ['sidebar', 'main']) {
       const el = document.getElementById(id);
       if (el) el.scrollTop = 0;
+    }
+    if (!side) {  // a notebook: the panel into view
+      const find = (root) => {
+        for (const el of root.querySelectorAll('*')) {
+          if (el.classList && el.classList.contains('laav-tour-panel')) return el;
+          if (el.shadowRoot) { const f = find(el.shadowRoot); if (f) return f; }
+        }
+        return null;
+      };
+      const el = find(document);
+      if (el) el.scrollIntoView({block: 'start'});
     }
   }, 150);
 }
@@ -116,6 +132,8 @@ class TourView:
         self._n_js = 0
         self._keys_done = 0  # the page's key presses applied (the w_key box's count)
         self._run = ""  # the running tour's token (the page names its presses by it)
+        self._errors_before = None  # the misclassified rings before the tour (None: no frame view)
+        self._hint_step = 0
         self.w_start = pn.widgets.Button(label="▶ Guided tour (for a class)", color="success",
                                          width=265, margin=(8, 10))
         self.w_start.on_click(lambda e: self.start())
@@ -160,7 +178,10 @@ class TourView:
             self.host.complete_page()  # the panel, if the later cards are still to come
             self._saved = {name: (c.visible, dict(c.styles or {})) for name, c in self.cards.items()}
             self._saved["__color"] = self.controls.color_mode
-            self._saved["__layers"] = list(self._layers.value) if self._layers is not None else None
+            box = self._layers  # the misclassified rings: on or off before the tour
+            self._errors_before = None if box is None else (
+                TRUTH_LAYER in box.value if TRUTH_LAYER in box.options else self.host.frame_view._errors_on)
+            self._hint_step = step  # the keys are said at the step a tour (or a link) opens on
             self.active = True
             self.panel.visible = True
             self._run, self._keys_done = secrets.token_hex(4), 0  # the page counts from 1 again
@@ -191,10 +212,10 @@ class TourView:
             self.text_md.object = self._text(s)
             self.w_back.disabled = self.step == 0
             self.w_next.label = "Next ▶" if self.step < len(TOUR) - 1 else "Finish"
-            self.hint_md.visible = self.step == 0  # (learnt at step 1: the others keep the height)
+            self.hint_md.visible = self.step == self._hint_step  # (once: the others keep the height)
         if color is not None and self.controls.color_mode != color:
             self.controls.set_color_mode(color)
-        self._show_layers(s.hide_errors)
+        self._error_rings(s.error_rings)
         self._js("scroll")
         self._sync_url()
 
@@ -204,15 +225,19 @@ class TourView:
         view = getattr(self.host, "frame_view", None)
         return None if view is None else view.w_layers
 
-    def _show_layers(self, hide_errors: bool) -> None:
-        """The frame view's layers as before the tour, without the misclassified rings when
-        ``hide_errors`` (a step about another stage than the final one)."""
-        box, before = self._layers, self._saved.get("__layers")
+    def _error_rings(self, on: bool | None) -> None:
+        """The frame view's misclassified rings on or off (None: as before the tour); the
+        tour touches no other layer. For a sequence without ground truth (the layer not
+        offered) the choice is kept for the next one with a truth, as the frame view keeps it."""
+        box, before = self._layers, self._errors_before
         if box is None or before is None:
             return
-        want = [v for v in before if v in box.options and not (hide_errors and v == TRUTH_LAYER)]
-        if list(box.value) != want:
-            box.value = want
+        want = before if on is None else on
+        if TRUTH_LAYER not in box.options:
+            self.host.frame_view._errors_on = want
+        elif (TRUTH_LAYER in box.value) != want:
+            on = (set(box.value) - {TRUTH_LAYER}) | ({TRUTH_LAYER} if want else set())
+            box.value = [v for v in box.options if v in on]
 
     def _text(self, s) -> str:
         """Step ``s``'s text for the result shown (with the facts of this run, if it has any)."""
@@ -249,7 +274,7 @@ class TourView:
         color = self._saved.get("__color")
         if color is not None and self.controls.color_mode != color:
             self.controls.set_color_mode(color)
-        self._show_layers(False)
+        self._error_rings(None)
         self._js("off")
         self._sync_url()
 
