@@ -548,9 +548,10 @@ def test_url_carries_the_state(tmp_path):
         ex3 = _wait_for(lambda: created[2] if len(created) > 2 else None, 30, "the third explorer")
         assert ex3.wait(60)
         page.wait_for_function("location.search === ''", timeout=20000)
-        # C = 0 typed in the page's C box (its first text box): a message, the result kept
+        # C = 0 typed in the page's C box (its first visible text box: the tour's hidden key
+        # box comes before it): a message, the result kept
         res3 = ex3.result
-        box = page.locator("input.bk-input[type=text]").first
+        box = page.locator("input.bk-input[type=text]:visible").first
         assert box.input_value() == str(res3.n_motions)
         box.fill("0")
         box.press("Enter")

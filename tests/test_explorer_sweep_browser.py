@@ -174,8 +174,10 @@ def test_guided_tour_in_the_page(tmp_path):
         # only this stage's card: the multicut card is hidden at step 1
         graph = page.locator(".card-header", has_text="2 · Multicut graph")
         graph.first.wait_for(state="hidden", timeout=10000)
-        # the panel is in the sidebar, widened beside the card
+        # the panel is in the sidebar, widened beside the card; the sidebar cannot be folded
+        # away meanwhile (its text would go while the keys still step)
         page.wait_for_function(JS_SIDEBAR_WIDE, timeout=10000)
+        page.locator("#sidebar-toggle").wait_for(state="hidden", timeout=10000)
         page.wait_for_function(f"({JS_OUTLINED})() >= 1", timeout=10000)  # the stage's card
         page.screenshot(path=str(_shots(tmp_path) / "tour_step1.png"))
 
@@ -209,6 +211,7 @@ def test_guided_tour_in_the_page(tmp_path):
         page.get_by_text(TOUR[0].title).first.wait_for(state="hidden", timeout=10000)
         page.locator("#sidebar").wait_for(state="visible", timeout=10000)
         page.wait_for_function(JS_SIDEBAR_USUAL, timeout=10000)  # its usual width
+        page.locator("#sidebar-toggle").wait_for(state="visible", timeout=10000)
         # and no outline is left on any card in the page (the server's styles are not enough)
         page.wait_for_function(f"({JS_OUTLINED})() === 0", timeout=10000)
     assert not errors, errors[:5]

@@ -82,6 +82,9 @@ if (cmd.startsWith('on:')) {
     // the panel is in the sidebar: shown (unfolded if folded) and widened, back afterwards
     // (a notebook has no such sidebar: nothing to widen there)
     if (toggle && !shown()) { toggle.click(); t.unfolded = true; }
+    // folded during the tour, the sidebar hid the step's text while the keys still stepped:
+    // its button is hidden until the tour ends (End tour, Esc)
+    if (toggle) toggle.style.visibility = 'hidden';
     if (side) {
       t.width = root.getPropertyValue('--sidebar-width');
       root.setProperty('--sidebar-width', '__WIDTH__');
@@ -94,6 +97,7 @@ if (cmd.startsWith('off:')) {
     if (t.width) root.setProperty('--sidebar-width', t.width); else root.removeProperty('--sidebar-width');
   }
   t.width = '';
+  if (toggle) toggle.style.visibility = '';
   if (toggle && t.unfolded && shown()) toggle.click();
   t.unfolded = false;
 }
