@@ -238,6 +238,27 @@ def _values(settings: Settings, complete: bool = True) -> dict:
     return d
 
 
+def _nearest_base(settings: Settings, default_motions: int, complete: bool) -> tuple:
+    """The defaults or the preset (:data:`laav.params.PRESETS`, as ``--preset`` spells them)
+    nearest ``settings``: ``(name, its values, the names that differ, the settings' values)``;
+    a preset costs one entry more than its differing settings (``preset = NAME``), so on a
+    tie the defaults win. Values as :func:`_values` (C against ``default_motions``; the fine
+    models follow C)."""
+    from laav.params import PRESETS
+
+    now = _values(settings, complete)
+    best = None
+    for name, make in PRESETS.items():  # "default" first
+        base = make()
+        values = _values(Settings(base, 0, default_motions), complete)
+        values["fine_models"] = base.n_fine(settings.n_motions, complete)
+        diff = [k for k in now if now[k] != values[k]]
+        cost = len(diff) + (name != "default")
+        if best is None or cost < best[0]:
+            best = (cost, name, values, diff)
+    return best[1], best[2], best[3], now
+
+
 def non_defaults(settings: Settings, default_motions: int | None,
                  complete: bool = True) -> list[str]:
     """``name = value`` for every setting that differs from the defaults (the LaavParams
@@ -246,22 +267,10 @@ def non_defaults(settings: Settings, default_motions: int | None,
     (:data:`laav.params.PRESETS`, as ``--preset`` spells them) than the defaults are said as
     ``preset = NAME`` and the settings that differ from it (the paper preset's 13 fields and
     its fine models were 14 code names in a class's status line)."""
-    now = _values(settings, complete)
     motions = settings.n_motions if default_motions is None else default_motions
-
-    def differing(base: LaavParams) -> list[str]:
-        default = _values(Settings(base, 0, motions), complete)
-        default["fine_models"] = base.n_fine(settings.n_motions, complete)  # follows C
-        return [f"{PARAM_NAMES.get(k, k)} = {_fmt(v)}" for k, v in now.items() if v != default[k]]
-
-    best = differing(LaavParams())
-    from laav.params import PRESETS
-
-    for name, make in PRESETS.items():
-        got = [f"preset = {name}"] + differing(make())
-        if len(got) < len(best):
-            best = got
-    return best
+    name, _, diff, now = _nearest_base(settings, motions, complete)
+    head = [] if name == "default" else [f"preset = {name}"]
+    return head + [f"{PARAM_NAMES.get(k, k)} = {_fmt(now[k])}" for k in diff]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -296,8 +305,15 @@ class Change:
 def describe_change(seq: Sequence, before: LaavResult, before_settings: Settings, after: LaavResult,
                     after_settings: Settings) -> Change:
     """The :class:`Change` from ``before`` to ``after`` (two results on ``seq``)."""
-    old, new = _values(before_settings, seq.is_complete), _values(after_settings, seq.is_complete)
-    changed = tuple((PARAM_NAMES.get(k, k), old[k], new[k]) for k in new if new[k] != old[k])
+    complete = seq.is_complete
+    was, was_base, _, old = _nearest_base(before_settings, before_settings.n_motions, complete)
+    now, now_base, _, new = _nearest_base(after_settings, after_settings.n_motions, complete)
+    # a preset chosen (or left): said as "preset default → paper", with the settings that moved
+    # otherwise, not every field the preset sets
+    switched = was != now
+    changed = tuple([("preset", was, now)] * switched + [
+        (PARAM_NAMES.get(k, k), old[k], new[k]) for k in new
+        if new[k] != old[k] and not (switched and old[k] == was_base[k] and new[k] == now_base[k])])
     errors = ()
     if seq.labels is not None:
         a, b = stage_numbers(seq, before), stage_numbers(seq, after)

@@ -176,6 +176,16 @@ def test_describe_change_counts_points_that_changed_motion(demo):
     bare = laav.Sequence(seq.points, None, name="bare")
     ch = describe_change(bare, res, s0, after, Settings(laav.LaavParams(), 4, 3))
     assert ch.errors == () and ch.text() == "seed 0 → 4: 3 points changed motion"
+    # a preset chosen: said by its name, with what else moved, not its 14 settings
+    ch = describe_change(bare, res, s0, after, Settings(laav.LaavParams.paper(r1=25.0), 0, 3))
+    assert ch.settings == (("preset", "default", "paper"), ("R1", 20.0, 25.0))
+    assert ch.text() == "preset default → paper, R1 20 → 25: 3 points changed motion"
+    back = describe_change(bare, res, Settings(laav.LaavParams.paper(), 0, 3), after, s0)
+    assert back.settings == (("preset", "paper", "default"),)
+    # within a preset, its fields as usual
+    ch = describe_change(bare, res, Settings(laav.LaavParams.paper(), 0, 3), after,
+                         Settings(laav.LaavParams.paper(lam=3.0), 0, 3))
+    assert ch.settings == (("λ", laav.LaavParams.paper().lam, 3.0),)
 
 
 def test_non_defaults_names_every_changed_setting():
