@@ -21,6 +21,7 @@ started and ended, plain RV's trials), so the paper's claim is read beside this 
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from .views import fine_count, other_trial_counts, rv_error_sources
@@ -114,6 +115,18 @@ TOUR: tuple[TourStep, ...] = (
 )
 
 
+def _in_words(candidate: str) -> str:
+    """A plain RV candidate's name (:func:`laav.selection`'s ``plain [k ]trial[ i]`` /
+    ``plain [k ]consensus``) in words; any other name as it is."""
+    m = re.fullmatch(r"plain(?: (\d+))? (trial|consensus)(?: (\d+))?", candidate)
+    if m is None:
+        return candidate
+    run, what, i = m.groups()
+    words = ("plain RV's consensus of its trials" if what == "consensus"
+             else f"plain RV's trial {i}" if i else "plain RV's settled trial")
+    return words + (f" (its run {run})" if run else "")
+
+
 def fine_tuning_facts(seq, voting, plain) -> str:
     """What this result's fine-tuning did, in a sentence or two for tour step 4: how far
     from the answer LAAV's informed trial started (against the ground truth, else against
@@ -146,9 +159,7 @@ def fine_tuning_facts(seq, voting, plain) -> str:
         text += f" ({int(plain.n_iterations)} in all)."
     returned = voting.selected
     if returned != "informed" and not returned.startswith("missing motion"):
-        whose = ("LAAV's coarse labels" if returned == "coarse" else
-                 "those of " + (returned.replace("plain", "plain RV's", 1)
-                                if returned.startswith("plain") else returned))
+        whose = "LAAV's coarse labels" if returned == "coarse" else "those of " + _in_words(returned)
         text += (f" The labels returned are {whose}, not this trial's: our selection (not in the "
                  "paper) scored them better.")
     ours = []

@@ -344,9 +344,11 @@ def test_tour_step_4_says_what_this_run_did():
     assert ("The labels returned are LAAV's coarse labels, not this trial's: our selection (not in "
             "the paper) scored them better.") in fine_tuning_facts(seq, coarse, plain)
     # a plain RV trial's labels (with_plain_rv()): plain RV's, not "ours"
-    plain_won = dataclasses.replace(v, selected="plain trial 3")
-    assert ("The labels returned are those of plain RV's trial 3, not this trial's: our selection"
-            in fine_tuning_facts(seq, plain_won, plain))
+    for name, words in (("plain trial 3", "plain RV's trial 3"), ("plain trial", "plain RV's settled trial"),
+                        ("plain 2 consensus", "plain RV's consensus of its trials (its run 2)")):
+        plain_won = dataclasses.replace(v, selected=name)
+        assert (f"The labels returned are those of {words}, not this trial's: our selection"
+                in fine_tuning_facts(seq, plain_won, plain))
     assert f"({plain.n_iterations} in all)" in text and "Ours, not the paper's: subspace votes" in text
     capped = dataclasses.replace(v, informed_converged=False)
     assert f"was still changing at the {n}-iteration cap" in fine_tuning_facts(seq, capped, plain)

@@ -227,6 +227,23 @@ class FrameView:
             self.w_layers.value = [n for n in self.w_layers.value if n != TRUTH_LAYER]
             self.w_layers.options = [n for n in LAYERS if n != TRUTH_LAYER]
 
+    @property
+    def error_rings(self) -> bool:
+        """Whether the misclassified rings are on: their layer ticked, or for a sequence
+        without ground truth (the layer not offered) the choice kept for the next one."""
+        if TRUTH_LAYER in self.w_layers.options:
+            return TRUTH_LAYER in self.w_layers.value
+        return self._errors_on
+
+    @error_rings.setter
+    def error_rings(self, on: bool) -> None:
+        """Tick or untick the misclassified layer alone (kept for later without a truth)."""
+        if TRUTH_LAYER not in self.w_layers.options:
+            self._errors_on = bool(on)
+        elif self.error_rings != bool(on):
+            keep = (set(self.w_layers.value) - {TRUTH_LAYER}) | ({TRUTH_LAYER} if on else set())
+            self.w_layers.value = [v for v in self.w_layers.options if v in keep]
+
     def _on_layers(self, event=None) -> None:
         self.host.schedule(self._layers_now, now_if_on_doc_thread=True)
 

@@ -17,7 +17,6 @@ import panel as pn
 
 from ..tour import TOUR, fine_tuning_facts
 from .base import Host, Markdown, page_box
-from .frame import TRUTH_LAYER
 
 #: Outline of the card a step is about (the header's navy: a page colour, not a motion's).
 HIGHLIGHT = {"outline": "4px solid #2c4a66", "outline-offset": "2px"}
@@ -173,18 +172,17 @@ class TourView:
 
     # ------------------------------------------------------------------ navigation
     def start(self, step: int = 0) -> None:
-        """Enter the tour at ``step`` (0-based), on the document's thread: its panel comes
-        with the later cards and must be on the page before the page's script is told."""
+        """Enter the tour at ``step`` (0-based), on the document's thread: the steps' cards
+        come with the later cards and must be on the page first."""
         self.host.schedule(self._start, step, now_if_on_doc_thread=True)
 
     def _start(self, step: int) -> None:
         if not self.active:
-            self.host.complete_page()  # the panel, if the later cards are still to come
+            self.host.complete_page()  # the steps' cards, if the later cards are still to come
             self._saved = {name: (c.visible, dict(c.styles or {})) for name, c in self.cards.items()}
             self._saved["__color"] = self.controls.color_mode
-            box = self._layers  # the misclassified rings: on or off before the tour
-            self._errors_before = None if box is None else (
-                TRUTH_LAYER in box.value if TRUTH_LAYER in box.options else self.host.frame_view._errors_on)
+            view = getattr(self.host, "frame_view", None)  # its misclassified rings before the tour
+            self._errors_before = None if view is None else view.error_rings
             self._hint_step = step  # the keys are said at the step a tour (or a link) opens on
             self.active = True
             self.panel.visible = True
@@ -223,25 +221,12 @@ class TourView:
         self._js("scroll")
         self._sync_url()
 
-    @property
-    def _layers(self):
-        """The frame view's layer boxes (None without a frame view)."""
-        view = getattr(self.host, "frame_view", None)
-        return None if view is None else view.w_layers
-
     def _error_rings(self, on: bool | None) -> None:
         """The frame view's misclassified rings on or off (None: as before the tour); the
-        tour touches no other layer. For a sequence without ground truth (the layer not
-        offered) the choice is kept for the next one with a truth, as the frame view keeps it."""
-        box, before = self._layers, self._errors_before
-        if box is None or before is None:
-            return
-        want = before if on is None else on
-        if TRUTH_LAYER not in box.options:
-            self.host.frame_view._errors_on = want
-        elif (TRUTH_LAYER in box.value) != want:
-            on = (set(box.value) - {TRUTH_LAYER}) | ({TRUTH_LAYER} if want else set())
-            box.value = [v for v in box.options if v in on]
+        tour touches no other layer (:attr:`explorer.cards.frame.FrameView.error_rings`)."""
+        view = getattr(self.host, "frame_view", None)
+        if view is not None and self._errors_before is not None:
+            view.error_rings = self._errors_before if on is None else on
 
     def _text(self, s) -> str:
         """Step ``s``'s text for the result shown (with the facts of this run, if it has any)."""
