@@ -172,6 +172,9 @@ def fine_tuning_facts(seq, voting, plain) -> str:
                        if returned.startswith("missing motion") else ""))
     if plain_trials:
         ours.append(f"{plain_trials} plain RV trials it was compared with")
+    if voting.skipped_starts:
+        ours.append(f"{len(voting.skipped_starts)} searches for a missed motion skipped, "
+                    "this trial's labels explaining their points")
     if ours:
         text += " Ours, not the paper's: " + ", ".join(ours) + "."
     return text

@@ -1197,6 +1197,11 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
             trials = f"; {voting.n_trials} trials ({shown} iterations)"
         if own:  # LAAV's: its informed trial, then the others it was compared with (ours)
             trials += ": the informed one first, then " + other_trials(voting)
+    if own and voting.skipped_starts:  # ours: starts whose trials did not run, and why
+        n = len(voting.skipped_starts)
+        trials += (f"; {n} missing-motion start{'s' if n > 1 else ''} skipped: the informed "
+                   "trial's labels already explain most of the points "
+                   f"{'each' if n > 1 else 'it'} would make a motion (ours, `rv_missing_gate`)")
     moved = [f"refinement {voting.refined}"] if voting.refined else []
     if voting.unpolished:  # ours: the trial's own labels descended lower than the polished
         moved.append(f"the descent on the joint score from the trial's own labels "

@@ -69,11 +69,19 @@ def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -
     """``rv_select="laav"``: LAAV's informed trial and its missing-motion starts
     (``rv_missing_trials`` trials each), each polished, the one of least
     :func:`joint_score` kept and descended (with ``rv_descent_from_trial`` from its polished
-    and its unpolished labels, the lower kept; see :class:`LaavParams`)."""
+    and its unpolished labels, the lower kept; see :class:`LaavParams`).
+
+    With ``rv_missing_gate`` > 0 the informed trial runs first and is selected alone; a
+    missing-motion start's trials then run only when that result leaves at least that share
+    of the start's new motion unexplained (:func:`unexplained`); the starts not run are named
+    in ``Voting.skipped_starts``. A start that runs gives the candidates it gives without the
+    gate (each trial on its own stream), so when every start runs the labels are the gate's
+    off labels."""
     P = points.shape[1]
     pairs = [(g, h) for g in range(C) for h in range(g + 1, C)]
     streams = rng.spawn(1 + len(pairs))  # [coarse start, one per pair]
-    starts = [("informed", labels0, votes0, streams[0], init >= 0)]
+    informed = ("informed", labels0, votes0, streams[0], init >= 0)
+    groups = []  # per missing-motion start: (name, its new motion (P,) bool, its trials' starts)
     for (g, h), stream in zip(pairs, streams[1:]):
         start = missing_motion_start(points, init, C, g, h, params,
                                      max(8, params.rv_sample_size))
@@ -83,17 +91,61 @@ def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -
         # the first trial on the pair's own stream, as with one trial; the others on
         # streams spawned from it (spawning draws nothing: the first trial is unchanged)
         more = stream.spawn(params.rv_missing_trials - 1)
+        group = []
         for k, trial_rng in enumerate([stream] + more, start=1):
             lab = np.where(known2, start, trial_rng.integers(0, C, P))
             vot = np.zeros((P, C))
             vot[np.arange(P), lab] = np.where(known2, params.rv_label_weight, 0.0)
             name = f"missing motion ({g}+{h})" + (f", trial {k}" if k > 1 else "")
-            starts.append((name, lab, vot, trial_rng, known2))
+            group.append((name, lab, vot, trial_rng, known2))
+        groups.append((f"missing motion ({g}+{h})", start == C - 1, group))
+    starts = [informed] + [s for *_, group in groups for s in group]
     uses = [votes_with_subspace(params, known) for *_, known in starts]
     extra = (SubspaceVotes(points, params.rv_subspace_weight, params.rv_subspace_sample)
              if any(uses) else None)  # one for every trial that uses it: the same term
-    results, finished, cost, fits = candidates(points, C, params, [s[1:4] for s in starts], extra,
-                                                uses, helper)
+    if params.rv_missing_gate <= 0 or not groups:
+        part = candidates(points, C, params, [s[1:4] for s in starts], extra, uses, helper)
+        return _select(points, C, params, starts, part, extra, uses)
+    # ours (rv_missing_gate): the informed trial alone first, the starts it leaves unexplained then
+    first = candidates(points, C, params, [informed[1:4]], extra, uses[:1], helper)
+    alone = _select(points, C, params, [informed], first, extra, uses[:1])
+    run = [unexplained(points, alone.labels, C, new, params) >= params.rv_missing_gate * new.sum()
+           for _, new, _ in groups]
+    skipped = tuple(name for (name, *_), r in zip(groups, run) if not r)
+    if not any(run):
+        return dataclasses.replace(alone, skipped_starts=skipped)
+    more = [s for (*_, group), r in zip(groups, run) if r for s in group]
+    more_uses = [votes_with_subspace(params, known) for *_, known in more]
+    rest = candidates(points, C, params, [s[1:4] for s in more], extra, more_uses, helper)
+    both = ([*first[0], *rest[0]], {**rest[1], **first[1]}, {**rest[2], **first[2]}, first[3])
+    out = _select(points, C, params, [informed, *more], both, extra, uses[:1] + more_uses)
+    return dataclasses.replace(out, skipped_starts=skipped)
+
+
+#: ``rv_missing_gate``: a point is unexplained when its squared distance (mean over frames) to
+#: its own motion's robust rank-4 trajectory subspace exceeds this many squared pixels.
+UNEXPLAINED_PX2 = 1.0
+
+
+def unexplained(points, labels, n_motions, new, params) -> int:
+    """How many of the points ``new`` ((P,) bool: a missing-motion start's new motion)
+    ``labels`` (P,) leave unexplained: farther than :data:`UNEXPLAINED_PX2` (in
+    squared pixels, ``unit2``) from their motion's robust rank-4 trajectory subspace
+    (:func:`laav.refine.subspace_residuals`); all of them when a motion is too small to fit."""
+    from .refine import subspace_residuals
+
+    R = subspace_residuals(points, labels, n_motions, unit2=unit2(params))
+    if R is None:
+        return int(new.sum())
+    own = R[labels, np.arange(labels.size)]
+    return int(np.sum(own[new] > UNEXPLAINED_PX2 * unit2(params)))
+
+
+def _select(points, C, params, starts, part, extra, uses) -> Voting:
+    """The selection among ``starts``' candidates (:func:`own_candidates`), from their
+    :func:`candidates` ``part`` (results, polished, cleaned costs, memo of fits)."""
+    results, finished, cost, fits = part
+    cost = dict(cost)
     first, first_extra = results[0], extra if uses[0] else None
     trials = list(results)
     polished = {key: _Finished(f) for key, f in finished.items()}

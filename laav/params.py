@@ -137,6 +137,14 @@ class LaavParams:
         fold; Hopkins155, 5 seeds: 0.25 -> 0.22 %, held out 0.22 %; three-motion median
         time 0.44 -> 0.54 x plain RV's; ``benchmarks/TUNING.md``, "Two trials per
         missing-motion start").
+    rv_missing_gate : float
+        Ours, with ``rv_select="laav"``: 0 runs every missing-motion start's trials beside
+        the informed trial. Above 0 the informed trial runs and is selected alone first,
+        and a start's trials run only when that result leaves at least this share of the
+        start's new motion unexplained (farther than 1 px RMS from its motion's rank-4
+        trajectory subspace, :func:`laav.own_chain.unexplained`); the starts skipped are
+        named in ``Voting.skipped_starts``. Speed: a result that already explains the
+        points a start would make a motion has nothing for the start to find.
     rv_batch : int
         Voting trials run side by side in one batched numpy call (plain RV's random
         starts, and LAAV's informed trial beside them in ``with_plain_rv()`` and on
@@ -308,6 +316,7 @@ class LaavParams:
     rv_patience: int = 15
     rv_label_weight: float = 5.0
     rv_missing_trials: int = 2
+    rv_missing_gate: float = 0.0
     rv_batch: int = 2
     rv_refine: bool = True
     rv_reassign: bool = True
@@ -565,6 +574,7 @@ _BOUNDS = (
     ("rv_patience", "int", 1, 10_000),
     ("rv_label_weight", "float", 0, _BIG),
     ("rv_missing_trials", "int", 1, 100),
+    ("rv_missing_gate", "float", 0, 1),
     ("rv_batch", "int", 1, 32),
     ("rv_refine", "bool", None, None),
     ("rv_reassign", "bool", None, None),

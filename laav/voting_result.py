@@ -107,6 +107,10 @@ class Voting:
         labelling's :func:`joint_score`, no agreement term), ``"joint-cleaned"`` (the same,
         each candidate scored after its best moves of at most ``rv_select_descent`` of the
         points), or ``""`` when nothing was compared.
+    skipped_starts : tuple of str
+        Ours, ``rv_missing_gate`` > 0: the missing-motion starts whose trials did not run,
+        the informed trial's result explaining their new motion (names as in
+        :attr:`costs`, without a trial number).
     """
 
     labels: np.ndarray
@@ -133,3 +137,4 @@ class Voting:
     label_trace: np.ndarray | None = field(default=None, repr=False)
     informed_label_trace: np.ndarray | None = field(default=None, repr=False)
     voted: np.ndarray | None = field(default=None, repr=False)
+    skipped_starts: tuple = ()

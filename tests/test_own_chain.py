@@ -279,3 +279,77 @@ def test_the_selections_fit_memo_changes_no_number(monkeypatch):
     np.testing.assert_array_equal(shared.labels, alone.labels)
     assert shared.voting.costs == alone.voting.costs
     assert shared.voting.descended == alone.voting.descended
+
+
+def _demo_runs(monkeypatch, seed=1):
+    """The demo at ``seed`` with the missing-motion gate off, on (every start explained:
+    skipped), with no missing-motion start at all, and on with every start judged unexplained."""
+    import laav.own_chain as V
+    from explorer.demo import demo_sequence
+    from laav import segment
+
+    seq = demo_sequence()
+    runs = {"off": segment(seq, 3, LaavParams(rv_missing_gate=0.0), seed=seed),
+            "gated": segment(seq, 3, LaavParams(rv_missing_gate=0.5), seed=seed)}
+    with monkeypatch.context() as m:
+        m.setattr(V, "missing_motion_start", lambda *a, **k: None)
+        runs["none"] = segment(seq, 3, LaavParams(rv_missing_gate=0.0), seed=seed)
+    with monkeypatch.context() as m:
+        m.setattr(V, "unexplained", lambda points, labels, C, new, params: int(new.sum()))
+        runs["opened"] = segment(seq, 3, LaavParams(rv_missing_gate=0.5), seed=seed)
+    with monkeypatch.context() as m:  # only the first start left unexplained
+        m.setattr(V, "unexplained", lambda points, labels, C, new, params:
+                  int(new.sum()) if V.unexplained.calls.append(1) or len(V.unexplained.calls) == 1
+                  else 0)
+        V.unexplained.calls = []
+        runs["one"] = segment(seq, 3, LaavParams(rv_missing_gate=0.5), seed=seed)
+    return runs
+
+
+def test_the_missing_motion_gate_runs_only_the_starts_the_informed_result_leaves(monkeypatch):
+    """``rv_missing_gate`` (ours, speed): LAAV's informed trial runs and is selected alone
+    first. Every start explained (the demo): the labels and iterations of no missing-motion
+    start at all, the starts named as skipped. Every start unexplained: the gate's off labels,
+    candidates, costs and iterations (each trial on its own stream). One start: its two trials
+    beside the informed one, the other starts skipped."""
+    runs = _demo_runs(monkeypatch)
+    off, gated, none, opened, one = (runs[k].voting for k in ("off", "gated", "none", "opened", "one"))
+    names = tuple(f"missing motion ({g}+{h})" for g, h in ((0, 1), (0, 2), (1, 2)))
+    assert off.skipped_starts == () and len(off.costs) == 7
+    assert gated.skipped_starts == names and none.skipped_starts == ()
+    np.testing.assert_array_equal(gated.labels, none.labels)
+    assert gated.trial_iterations == none.trial_iterations and len(gated.trial_iterations) == 1
+    assert gated.n_iterations < off.n_iterations / 3
+    assert opened.skipped_starts == ()
+    np.testing.assert_array_equal(opened.labels, off.labels)
+    assert opened.costs == off.costs and opened.trial_iterations == off.trial_iterations
+    assert one.skipped_starts == names[1:] and list(one.costs) == ["informed", names[0],
+                                                                    names[0] + ", trial 2"]
+    assert one.trial_iterations == off.trial_iterations[:3]
+
+
+def test_unexplained_counts_the_points_far_from_their_motions_subspace():
+    """:func:`laav.own_chain.unexplained` against a direct count: ten points of motion 1
+    labelled 0 lie far (> 1 px RMS) from motion 0's rank-4 trajectory subspace, fitted by
+    a plain SVD to motion 0's true points, and ten of motion 1 labelled 1 near their own;
+    the same count in coordinates ten times larger with ``LaavParams.scaled(10)``."""
+    from laav.own_chain import unexplained
+
+    seq = synthetic.make_sequence(n_objects=1, n_frames=20, n_points=300, noise=0.0, rng=4)
+    ones = np.flatnonzero(seq.labels == 1)
+    labels = seq.labels.copy()
+    labels[ones[:10]] = 0
+    new = np.zeros(seq.n_points, dtype=bool)
+    new[ones[:20]] = True
+
+    def direct(g, idx):  # mean over frames of the squared distance, px^2
+        X = seq.points[:, seq.labels == g].transpose(0, 2, 1).reshape(-1, (seq.labels == g).sum())
+        o = X.min(axis=1, keepdims=True)  # any fixed origin: the subspace is fitted through it
+        U = np.linalg.svd(X - o, full_matrices=False)[0][:, :4]
+        Y = seq.points[:, idx].transpose(0, 2, 1).reshape(-1, len(idx)) - o
+        return ((Y - U @ (U.T @ Y)) ** 2).sum(axis=0) / seq.n_frames
+
+    assert (direct(0, ones[:10]) > 1.0).all() and (direct(1, ones[10:20]) < 1.0).all()
+    p = LaavParams()
+    assert unexplained(seq.points, labels, 2, new, p) == 10
+    assert unexplained(seq.points * 10, labels, 2, new, p.scaled(10)) == 10
