@@ -173,7 +173,8 @@ def fine_tuning_facts(seq, voting, plain) -> str:
     if plain_trials:
         ours.append(f"{plain_trials} plain RV trials it was compared with")
     if voting.skipped_starts:
-        ours.append(f"{len(voting.skipped_starts)} searches for a missed motion skipped, "
+        n = len(voting.skipped_starts)
+        ours.append(f"{n} search{'es' if n > 1 else ''} for a missed motion skipped, "
                     "this trial's labels explaining their points")
     if ours:
         text += " Ours, not the paper's: " + ", ".join(ours) + "."

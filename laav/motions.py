@@ -69,7 +69,7 @@ MAX_ESTIMATE_POINTS = 1000
 #: unpolished descent (``rv_missing_trials``, ``rv_descent_from_trial``, 2026-12-03), added
 #: after its constants were fitted.
 NOT_FITTED = {"rv_descent": False, "rv_select_descent": 0.0, "rv_missing_trials": 1,
-              "rv_descent_from_trial": False}
+              "rv_descent_from_trial": False, "rv_missing_gate": 0.0}
 
 
 def profile_params():
@@ -80,8 +80,8 @@ def profile_params():
     (``docs/bench/motions.md``, 2026-12-01: 92.3 % of Hopkins155 held out with the coding
     length feature, 90.3 % without it, against 87.7 % with the settings used before, the
     epipolar merge on 2C fine models with plain RV beside LAAV's trial). Without the
-    descent on the joint score, the candidates' cleaning and the second missing-motion
-    trials (:data:`NOT_FITTED`, added after the fit): the profile's labellings stay those
+    descent on the joint score, the candidates' cleaning, the second missing-motion
+    trials and their gate (:data:`NOT_FITTED`, added after the fit): the profile's labellings stay those
     its constants were fitted on."""
     from .params import LaavParams
 

@@ -109,7 +109,8 @@ def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -
     # ours (rv_missing_gate): the informed trial alone first, the starts it leaves unexplained then
     first = candidates(points, C, params, [informed[1:4]], extra, uses[:1], helper)
     alone = _select(points, C, params, [informed], first, extra, uses[:1])
-    run = [unexplained(points, alone.labels, C, new, params) >= params.rv_missing_gate * new.sum()
+    far = unexplained(points, alone.labels, C, params)
+    run = [far is None or far[new].sum() >= params.rv_missing_gate * new.sum()
            for _, new, _ in groups]
     skipped = tuple(name for (name, *_), r in zip(groups, run) if not r)
     if not any(run):
@@ -125,20 +126,28 @@ def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -
 #: ``rv_missing_gate``: a point is unexplained when its squared distance (mean over frames) to
 #: its own motion's robust rank-4 trajectory subspace exceeds this many squared pixels.
 UNEXPLAINED_PX2 = 1.0
+#: ... and the test is used only when the median point lies within this share of that
+#: threshold: under pixel noise (σ = 1 px) the points of a missed motion lie as close to the
+#: found motions as every other point does, and the test cannot tell them apart.
+UNEXPLAINED_FLOOR = 0.5
 
 
-def unexplained(points, labels, n_motions, new, params) -> int:
-    """How many of the points ``new`` ((P,) bool: a missing-motion start's new motion)
-    ``labels`` (P,) leave unexplained: farther than :data:`UNEXPLAINED_PX2` (in
-    squared pixels, ``unit2``) from their motion's robust rank-4 trajectory subspace
-    (:func:`laav.refine.subspace_residuals`); all of them when a motion is too small to fit."""
+def unexplained(points, labels, n_motions, params) -> np.ndarray | None:
+    """(P,) bool: the points ``labels`` (P,) leave unexplained, farther than
+    :data:`UNEXPLAINED_PX2` (squared pixels, ``unit2``) from their motion's robust rank-4
+    trajectory subspace (:func:`laav.refine.subspace_residuals`); all of them when a motion
+    is too small to fit. None when the test cannot tell: the median point's distance is
+    above :data:`UNEXPLAINED_FLOOR` of the threshold (pixel noise)."""
     from .refine import subspace_residuals
 
     R = subspace_residuals(points, labels, n_motions, unit2=unit2(params))
     if R is None:
-        return int(new.sum())
+        return np.ones(labels.size, dtype=bool)
     own = R[labels, np.arange(labels.size)]
-    return int(np.sum(own[new] > UNEXPLAINED_PX2 * unit2(params)))
+    limit = UNEXPLAINED_PX2 * unit2(params)
+    if np.median(own) > UNEXPLAINED_FLOOR * limit:
+        return None
+    return own > limit
 
 
 def _select(points, C, params, starts, part, extra, uses) -> Voting:

@@ -144,7 +144,11 @@ class LaavParams:
         start's new motion unexplained (farther than 1 px RMS from its motion's rank-4
         trajectory subspace, :func:`laav.own_chain.unexplained`); the starts skipped are
         named in ``Voting.skipped_starts``. Speed: a result that already explains the
-        points a start would make a motion has nothing for the start to find.
+        points a start would make a motion has nothing for the start to find. The default
+        0.5 (since 2026-12-05) was chosen by 5-fold cross-validation grouped by video among
+        0 / 0.25 / 0.5 / 0.75, ties to the faster (Hopkins155, 5 seeds: 0.19 -> 0.18 %,
+        held out 0.19-0.24 % over three fold shuffles; three-motion median time 0.59 ->
+        0.46 x plain RV's; ``benchmarks/TUNING.md``, "A gate for the missing-motion starts").
     rv_batch : int
         Voting trials run side by side in one batched numpy call (plain RV's random
         starts, and LAAV's informed trial beside them in ``with_plain_rv()`` and on
@@ -316,7 +320,7 @@ class LaavParams:
     rv_patience: int = 15
     rv_label_weight: float = 5.0
     rv_missing_trials: int = 2
-    rv_missing_gate: float = 0.0
+    rv_missing_gate: float = 0.5
     rv_batch: int = 2
     rv_refine: bool = True
     rv_reassign: bool = True
@@ -389,13 +393,15 @@ class LaavParams:
         before they are compared (``rv_select_descent``, since 2026-12-02, late evening), two
         trials from each missing-motion start (``rv_missing_trials``, since 2026-12-03), the
         kept one's unpolished labels descending too (``rv_descent_from_trial``, since
-        2026-12-03). Spelled out, so
+        2026-12-03), the missing-motion starts only where the informed trial's result leaves
+        their points unexplained (``rv_missing_gate``, since 2026-12-05). Spelled out, so
         that it stays this chain (and :func:`laav.motions.profile_params`, fitted on it,
         with it) if the default changes.
         ``changes`` override fields as in :meth:`replace`."""
         return cls(coarse_merge="auto", rv_subspace_weight=1.0,
                    rv_select="laav", rv_descent=True, rv_select_descent=0.03,
-                   rv_missing_trials=2, rv_descent_from_trial=True).replace(**changes)
+                   rv_missing_trials=2, rv_descent_from_trial=True,
+                   rv_missing_gate=0.5).replace(**changes)
 
     def scaled(self, s: float) -> LaavParams:
         """The parameters for coordinates ``s`` times larger: lengths (:data:`PIXEL_PARAMS`)

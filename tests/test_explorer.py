@@ -862,8 +862,9 @@ def test_rv_card_says_the_candidates_were_scored_after_their_cleaning():
     from explorer.views import rv_summary
 
     seq, init, _ = small_motion_uncovered(0)
-    on = laav.random_voting(seq, 2, laav.LaavParams(), seed=0, init_labels=init)
-    off = laav.random_voting(seq, 2, laav.LaavParams(rv_select_descent=0.0), seed=0, init_labels=init)
+    every = laav.LaavParams(rv_missing_gate=0.0)  # every start's trials run: candidates to score
+    on = laav.random_voting(seq, 2, every, seed=0, init_labels=init)
+    off = laav.random_voting(seq, 2, every.replace(rv_select_descent=0.0), seed=0, init_labels=init)
     assert on.score == "joint-cleaned" and len(on.costs) == 1 + laav.LaavParams().rv_missing_trials
     assert "best moves of a few points (`rv_select_descent`)" in rv_summary(on, None)
     assert f"(score {on.costs[on.selected]:.2f} nats, after its cleaning" in rv_summary(on, None)
@@ -1436,7 +1437,8 @@ def test_rv_card_names_the_missing_motion_start_and_trial_returned():
     from explorer.views import md_text, rv_summary
 
     seq, init, _ = small_motion_uncovered(0)
-    res = laav.random_voting(seq, 2, laav.LaavParams(), seed=0, init_labels=init)
+    every = laav.LaavParams(rv_missing_gate=0.0)  # (the default's gate skips the start here)
+    res = laav.random_voting(seq, 2, every, seed=0, init_labels=init)
     assert res.selected == "missing motion (0+1)"
     start = md_text("missing motion (0+1)")  # as Markdown shows it
     assert f"returned the trial 1 (of `rv_missing_trials`) from the {start} start" in rv_summary(res, None)
@@ -1459,7 +1461,8 @@ def test_rv_card_says_when_the_refinement_and_reassignment_were_dropped():
     from explorer.views import rv_summary
 
     seq, init, _ = small_motion_uncovered(0)
-    res = laav.random_voting(seq, 2, laav.LaavParams(), seed=0, init_labels=init)
+    every = laav.LaavParams(rv_missing_gate=0.0)  # candidates compared: the selection's line
+    res = laav.random_voting(seq, 2, every, seed=0, init_labels=init)
     assert not res.unpolished and "dropped" not in rv_summary(res, None)
     un = dataclasses.replace(res, unpolished=True, refined=0, reassigned=0, descended=3)
     text = rv_summary(un, None)

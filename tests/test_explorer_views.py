@@ -610,7 +610,7 @@ def test_rv_card_and_tour_name_the_trials_beside_laavs_by_kind():
     from explorer.tour import fine_tuning_facts
 
     seq = laav.synthetic.make_sequence(n_objects=1, n_frames=10, n_points=120, rng=0)
-    own = laav.segment(seq, 2, seed=0).voting
+    own = laav.segment(seq, 2, laav.LaavParams(rv_missing_gate=0.0), seed=0).voting
     missing, plain = V.other_trial_counts(own)
     assert missing == own.n_trials - 1 > 0 and plain == 0
     assert f"then {missing} from starts that look for a missed motion (ours)" in V.rv_summary(own, None)
@@ -618,6 +618,14 @@ def test_rv_card_and_tour_name_the_trials_beside_laavs_by_kind():
     mixed = laav.segment(seq, 2, laav.LaavParams.with_plain_rv(), seed=0).voting
     missing, plain = V.other_trial_counts(mixed)
     assert missing == 0 and plain == mixed.n_trials - 1 > 0
+    # the default's gate (rv_missing_gate): here LAAV's trial explains the start's points
+    gated = laav.segment(seq, 2, seed=0).voting
+    assert gated.skipped_starts == ("missing motion (0+1)",) and gated.n_trials == 1
+    assert V.other_trial_counts(gated) == (0, 0)
+    assert ("1 missing-motion start skipped: the informed trial's labels already explain most of "
+            "the points it would make a motion (ours, `rv_missing_gate`)") in V.rv_summary(gated, None)
+    assert "1 search for a missed motion skipped" in fine_tuning_facts(seq, gated, None)
+    assert "skipped" not in V.rv_summary(own, None) + fine_tuning_facts(seq, own, None)
     text = V.rv_summary(mixed, None)
     assert f"then {plain} of plain RV from random starts, compared with it (ours)" in text
     assert "missed motion" not in text and "missed motion" not in fine_tuning_facts(seq, mixed, None)

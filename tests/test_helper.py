@@ -21,6 +21,11 @@ def helper():
     h.close()
 
 
+#: Every missing-motion start's trials run (the gate, ``rv_missing_gate``, off): the parts the
+#: helper takes. The gate itself with the helper: :func:`test_the_gate_with_the_helper`.
+ALL = laav.LaavParams(rv_missing_gate=0.0)
+
+
 def _scene(seed):
     return synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=seed)
 
@@ -37,18 +42,33 @@ def _same(a, b):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_same_result_with_the_helper(helper, seed):
     seq = _scene(seed)
-    alone = laav.Pipeline(seq, 3, seed=seed).result
+    alone = laav.Pipeline(seq, 3, ALL, seed=seed).result
     jobs, delivered = helper.jobs, helper.delivered
-    helped = laav.Pipeline(seq, 3, seed=seed, helper=helper).result
+    helped = laav.Pipeline(seq, 3, ALL, seed=seed, helper=helper).result
     # several trials (informed and missing-motion starts), some of them in the helper
     assert len(helped.voting.trial_iterations) >= 3
     assert (helper.jobs, helper.delivered) == (jobs + 1, delivered + 1)
     _same(alone, helped)
 
 
+def test_the_gate_with_the_helper(helper, monkeypatch):
+    """With ``rv_missing_gate`` (the default) the informed trial runs here alone, then the
+    starts it leaves unexplained, split with the helper: the labels of computing it all
+    here, and with every start left unexplained those of the gate off."""
+    import laav.own_chain as V
+
+    seq = _scene(1)
+    _same(laav.Pipeline(seq, 3, seed=1).result, laav.Pipeline(seq, 3, seed=1, helper=helper).result)
+    monkeypatch.setattr(V, "unexplained", lambda points, labels, C, params: np.ones(labels.size, bool))
+    jobs = helper.jobs
+    helped = laav.Pipeline(seq, 3, seed=1, helper=helper).result
+    assert helper.jobs == jobs + 1 and helped.voting.skipped_starts == ()
+    _same(laav.Pipeline(seq, 3, ALL, seed=1).result, helped)
+
+
 def test_updates_with_the_helper_match(helper):
     seq = _scene(3)
-    alone, helped = laav.Pipeline(seq, 3), laav.Pipeline(seq, 3, helper=helper)
+    alone, helped = laav.Pipeline(seq, 3, ALL), laav.Pipeline(seq, 3, ALL, helper=helper)
     for r1 in (8.0, 12.0):
         _same(alone.update(r1=r1), helped.update(r1=r1))
     _same(alone.update(seed=5), helped.update(seed=5))
@@ -56,9 +76,9 @@ def test_updates_with_the_helper_match(helper):
 
 def test_random_voting_takes_a_helper(helper):
     seq = _scene(4)
-    init = laav.Pipeline(seq, 3, seed=1).result.stage_labels()["coarse"]
-    a = laav.random_voting(seq, 3, seed=7, init_labels=init)
-    b = laav.random_voting(seq, 3, seed=7, init_labels=init, helper=helper)
+    init = laav.Pipeline(seq, 3, ALL, seed=1).result.stage_labels()["coarse"]
+    a = laav.random_voting(seq, 3, ALL, seed=7, init_labels=init)
+    b = laav.random_voting(seq, 3, ALL, seed=7, init_labels=init, helper=helper)
     assert np.array_equal(a.labels, b.labels)
     assert a.trial_iterations == b.trial_iterations
 
@@ -68,9 +88,9 @@ def test_a_closed_helper_leaves_the_work_here():
     h = VotingHelper(start=False)
     h.close()
     assert h.submit(()) is None
-    res = laav.Pipeline(seq, 3, helper=h).result
+    res = laav.Pipeline(seq, 3, ALL, helper=h).result
     assert h.jobs == 0
-    _same(laav.Pipeline(seq, 3).result, res)
+    _same(laav.Pipeline(seq, 3, ALL).result, res)
 
 
 def test_a_helper_not_ready_leaves_the_work_here():
@@ -78,11 +98,11 @@ def test_a_helper_not_ready_leaves_the_work_here():
     computes everything itself."""
     seq = _scene(2)
     with VotingHelper(start=False) as h:
-        res = laav.Pipeline(seq, 3, helper=h).result  # starts the process, does not wait
+        res = laav.Pipeline(seq, 3, ALL, helper=h).result  # starts the process, does not wait
         assert h.jobs == 0 and not h.ready
-        _same(laav.Pipeline(seq, 3).result, res)
+        _same(laav.Pipeline(seq, 3, ALL).result, res)
         assert h.wait_ready() and h.ready
-        laav.Pipeline(seq, 3, helper=h)
+        laav.Pipeline(seq, 3, ALL, helper=h)
         assert h.jobs == h.delivered == 1
 
 
@@ -91,18 +111,18 @@ def test_a_dead_helper_process_leaves_the_work_here():
     h = VotingHelper()
     try:
         assert h.wait_ready()
-        laav.Pipeline(seq, 3, helper=h)  # the process is up and has served a job
+        laav.Pipeline(seq, 3, ALL, helper=h)  # the process is up and has served a job
         for pid in list(h._pool._processes):
             os.kill(pid, signal.SIGKILL)
         time.sleep(0.5)
-        res = laav.Pipeline(seq, 3, seed=2, helper=h).result
-        _same(laav.Pipeline(seq, 3, seed=2).result, res)
+        res = laav.Pipeline(seq, 3, ALL, seed=2, helper=h).result
+        _same(laav.Pipeline(seq, 3, ALL, seed=2).result, res)
         # and a new process serves the next call, once up
         assert h.wait_ready()
         jobs = h.jobs
-        res = laav.Pipeline(seq, 3, seed=3, helper=h).result
+        res = laav.Pipeline(seq, 3, ALL, seed=3, helper=h).result
         assert h.jobs == jobs + 1
-        _same(laav.Pipeline(seq, 3, seed=3).result, res)
+        _same(laav.Pipeline(seq, 3, ALL, seed=3).result, res)
     finally:
         h.close()
 
@@ -111,7 +131,7 @@ def test_a_stopped_computation_stops_the_helpers_half(helper):
     """Stopped while the trials run, the call raises and the helper's job ends at its next
     iteration: the next call is served at once and gives the labels of a run alone."""
     seq = _scene(2)
-    pipe = laav.Pipeline(seq, 3, helper=helper)
+    pipe = laav.Pipeline(seq, 3, ALL, helper=helper)
     calls = []
 
     def stop():  # once the voting has begun (a few iterations in)
@@ -121,9 +141,9 @@ def test_a_stopped_computation_stops_the_helpers_half(helper):
     with pytest.raises(Interrupted), interruptible(stop):
         pipe.update(seed=9)
     t = time.perf_counter()
-    res = laav.Pipeline(seq, 3, seed=9, helper=helper).result
+    res = laav.Pipeline(seq, 3, ALL, seed=9, helper=helper).result
     assert time.perf_counter() - t < 30
-    _same(laav.Pipeline(seq, 3, seed=9).result, res)
+    _same(laav.Pipeline(seq, 3, ALL, seed=9).result, res)
 
 
 def test_stop_ends_a_running_job(helper):
@@ -212,9 +232,9 @@ def test_a_helper_that_dies_mid_job_leaves_the_job_to_the_caller():
         assert h.result(handle, lambda: None) is None
         # a new process serves the next job, once up
         assert h.wait_ready()
-        res = laav.Pipeline(seq, 3, seed=2, helper=h).result
+        res = laav.Pipeline(seq, 3, ALL, seed=2, helper=h).result
         assert h.delivered == 1
-        _same(laav.Pipeline(seq, 3, seed=2).result, res)
+        _same(laav.Pipeline(seq, 3, ALL, seed=2).result, res)
 
 
 def test_a_helper_whose_process_keeps_dying_closes_itself():
@@ -230,7 +250,7 @@ def test_a_helper_whose_process_keeps_dying_closes_itself():
                     os.kill(pid, signal.SIGKILL)
                 assert h.result(handle, lambda: None) is None
         assert h.submit(_long_job(seq)) is None
-        _same(laav.Pipeline(seq, 3).result, laav.Pipeline(seq, 3, helper=h).result)
+        _same(laav.Pipeline(seq, 3, ALL).result, laav.Pipeline(seq, 3, ALL, helper=h).result)
 
 
 def test_a_process_that_dies_at_start_leaves_the_work_here(monkeypatch):
@@ -261,7 +281,7 @@ def test_a_process_that_dies_at_start_leaves_the_work_here(monkeypatch):
             assert h.submit(_long_job(seq)) is None
     assert len(made) == 3  # then closed: no new process per call
     assert not h.wait_ready(timeout=1)
-    _same(laav.Pipeline(seq, 3).result, laav.Pipeline(seq, 3, helper=h).result)
+    _same(laav.Pipeline(seq, 3, ALL).result, laav.Pipeline(seq, 3, ALL, helper=h).result)
     h.close()
 
 
@@ -270,8 +290,8 @@ def test_prefetched_votes_are_those_fitted_here(helper):
     not fit; what the explorer draws) are fitted in the helper while the voting runs: the
     same numbers as fitted here when read."""
     seq = _scene(5)
-    alone = laav.Pipeline(seq, 3)
-    helped = laav.Pipeline(seq, 3, helper=helper)
+    alone = laav.Pipeline(seq, 3, ALL)
+    helped = laav.Pipeline(seq, 3, ALL, helper=helper)
     helped.prefetch_votes = True
     for r1 in (8.0, 12.0):
         a = alone.update(r1=r1)

@@ -190,7 +190,7 @@ def test_the_selection_scores_each_candidate_after_a_short_descent(seed):
     from test_own_chain import small_motion_uncovered
 
     seq, init, _ = small_motion_uncovered(seed)
-    p = LaavParams(rv_descent=False)
+    p = LaavParams(rv_descent=False, rv_missing_gate=0.0)  # every candidate scored
     on = random_voting(seq, 2, p, seed=0, init_labels=init)
     off = random_voting(seq, 2, p.replace(rv_select_descent=0.0), seed=0, init_labels=init)
     assert on.score == "joint-cleaned" and off.score == "joint-sum"
