@@ -892,6 +892,40 @@ JS_WATCH_EPIPOLAR = """() => {
 }"""
 
 
+#: Tops (px in the window) of the status line, the "What changed" line (when it has text)
+#: and card 1's title.
+JS_STATUS_TOPS = """() => { const out = {};
+  const top = el => el.getBoundingClientRect().top;
+  const walk = root => { for (const el of root.querySelectorAll('*')) {
+    const text = (el.shadowRoot || el).textContent;
+    if (el.classList && el.classList.contains('card-title') && text.includes('1 · Atoms')) out.card = top(el);
+    if (el.tagName === 'P' && text.startsWith('Showing')) out.status = top(el);
+    if (el.tagName === 'P' && text.startsWith('What changed')) out.change = top(el);
+    if (el.shadowRoot) walk(el.shadowRoot); } };
+  walk(document); return out; }"""
+
+
+def test_what_changed_line_moves_no_card(tmp_path):
+    """The "What changed" line keeps its place before the first change: when a change fills
+    it, card 1 below stays where it was (it came in with ``display``, and every card below
+    moved down by 41 px)."""
+    seq = _sequence()
+    with _served(seq, viser=False) as (port, browser, created):
+        page = browser.new_page(viewport={"width": 1024, "height": 768})
+        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        assert ex.wait(60)
+        page.wait_for_function("(" + JS_SOURCES + ")().status !== undefined", timeout=30000)
+        before = _settled(page, JS_STATUS_TOPS)
+        assert "card" in before and "change" not in before, before
+        assert page.evaluate(JS_SET_SLIDER, ["λ", 4.5]) is not None
+        page.get_by_text("What changed: λ").first.wait_for(timeout=30000)
+        after = _settled(page, JS_STATUS_TOPS)
+        page.screenshot(path=str(Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path)) / "what_changed.png"))
+        assert after["status"] < after["change"] < after["card"], after
+        assert after["card"] == pytest.approx(before["card"], abs=0.5), (before, after)
+
+
 def test_card_3_keeps_its_size_while_its_votes_are_fitted(monkeypatch):
     """A result is drawn before card 3's pairwise votes are fitted (the default merge does
     not need them): meanwhile its epipolar caption keeps the room of a full one and its
