@@ -193,6 +193,7 @@ def _modes(args, outside: list) -> None:
     from explorer.cli import app_factory
     from explorer.demo import demo_sequence
     from explorer.state import parse_value
+    from explorer.tour import TOUR
 
     seq = laav.load_sequence(args.file) if args.file else demo_sequence()
     params = laav.LaavParams(**{k: parse_value(k, v) for k, v in (p.split("=", 1) for p in args.param)})
@@ -224,9 +225,9 @@ def _modes(args, outside: list) -> None:
 
             page.locator("button", has_text="Guided tour").first.click()
             for n in (2, 3):
-                page.get_by_text(f"step {n - 1} of 5").first.wait_for(timeout=20000)
+                page.get_by_text(f"step {n - 1} of {len(TOUR)}").first.wait_for(timeout=20000)
                 page.keyboard.press("ArrowRight")
-            page.get_by_text("step 3 of 5").first.wait_for(timeout=20000)
+            page.get_by_text(f"step 3 of {len(TOUR)}").first.wait_for(timeout=20000)
             page.wait_for_timeout(1500)
             _save(page, out / "explorer_tour.png")
 

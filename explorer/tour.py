@@ -1,6 +1,7 @@
 """The guided tour's steps and texts, in one place for review (no GUI imports).
 
-The tour (:mod:`explorer.cards.tour`) shows one stage at a time: its card, highlighted,
+The tour (:mod:`explorer.cards.tour`) shows one stage at a time (the result, stage 5, in two
+steps: its labels in the frame view, then its numbers): its card, highlighted,
 under a panel with the step's title and two sentences in large type, for a class. Each
 text says what the code does with the default parameters (``LaavParams()``); where the
 paper does otherwise it names the ``paper`` preset (``LaavParams.paper()``).
@@ -104,14 +105,21 @@ TOUR: tuple[TourStep, ...] = (
         "a random frame pair and every point votes for the motions that fit it. The paper's claim: "
         "started near the answer, it settles sooner than plain Random Voting from random starts.",
         ("rv",), color="final", color_no_truth="final", facts="rv"),
+    # the result's two cards are two steps: each is 520-540 px high, and the main area beside the
+    # tour's panel has about 600 of a projector's 768-800 (one card at a time fits, not both)
     TourStep(
-        "5 · Result: one motion per point, and its error",
-        "Every point now belongs to one of the C motions, one colour each; with ground truth the "
-        "frame view rings the misassigned ones in black, and the Numbers card below gives every "
-        "stage's error (the share of points misassigned under the best matching of motions). Atoms, "
-        "the merge and the voting are random: after the tour, the Seed sweep card's button runs "
-        "seeds 0-9 to show whether a result is typical or a bad draw.",
-        ("frame", "numbers"), color="final", color_no_truth="final", error_rings=True),
+        "5 · Result: one motion per point",
+        "Every point now belongs to one of the C motions, one colour each, in every frame (the frame "
+        "slider in the sidebar plays them). With ground truth the frame view rings the misassigned ones "
+        "in black, and the next step gives every stage's error.",
+        ("frame",), color="final", color_no_truth="final", error_rings=True),
+    TourStep(
+        "5 · Numbers: every stage's error",
+        "With ground truth the Numbers card gives every stage's error (the share of points misassigned "
+        "under the best matching of motions), plain Random Voting's beside them. Atoms, the merge "
+        "and the voting are random: after the tour, the Seed sweep card's button runs seeds 0-9 to "
+        "show whether a result is typical or a bad draw.",
+        ("numbers",), color="final", color_no_truth="final", error_rings=True),
 )
 
 

@@ -9,6 +9,7 @@ function returns plain dicts of numpy arrays, ready for ``ColumnDataSource.data 
 from __future__ import annotations
 
 import itertools
+import math
 import re
 
 import numpy as np
@@ -30,7 +31,8 @@ __all__ = [
     "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
     "replay_caption", "fine_count", "fine_count_note", "z_sources", "joint_margins", "shows_margins",
-    "signed_log", "margin_top", "margin_ticks", "MARGIN_TICKS", "MARGIN_PALETTE", "UNDECIDED",
+    "signed_log", "margin_top", "margin_ticks", "margin_text", "cell_font_px", "MARGIN_PALETTE",
+    "UNDECIDED",
     "merge_table", "epipolar_sources",
     "votes_fitted",
     "rv_sources", "rv_error_sources", "trace_errors",
@@ -794,6 +796,21 @@ def _model_factors(result: laav.LaavResult) -> list:
 
 #: Most fine models whose Z values are written in the heat map's cells (9 models overlap).
 Z_TEXT_MAX = 8
+#: Widths in em of the characters a cell's number is written with, in bokeh's text font
+#: (``helvetica``: Helvetica, Arial or Liberation Sans, which share these widths); any other
+#: character as wide as a digit.
+_CHAR_EM = {"-": 0.333, ".": 0.278, "+": 0.584, "k": 0.5}
+
+
+def cell_font_px(texts, cell_px: float, largest: int = 12, smallest: int = 8) -> int:
+    """The font size (px) at which the widest of ``texts`` fits a heat-map cell ``cell_px``
+    wide with a margin on either side, at most ``largest``; 0 when that is below
+    ``smallest`` (then no number is written: the colour and the hover tell it)."""
+    widest = max((sum(_CHAR_EM.get(c, 0.556) for c in str(t)) for t in texts if t), default=0.0)
+    if widest == 0:
+        return largest
+    px = int(min(largest, 0.85 * cell_px / widest, 0.7 * cell_px))
+    return px if px >= smallest else 0
 
 
 def votes_fitted(result: laav.LaavResult) -> bool:
@@ -835,8 +852,8 @@ def joint_margins(result: laav.LaavResult) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 #: The joint merge's margin map colours ``sign(m) log10(1 + |m|)`` (m in nats): decisions by
-#: a few nats and by thousands both read; its colour bar is labelled in nats.
-MARGIN_TICKS = (-1000, -100, -10, 0, 10, 100, 1000)
+#: a few nats and by thousands both read; its colour bar is labelled in nats, at 0 and ±10,
+#: ±100, ... up to its ends (:func:`margin_top`, :func:`margin_ticks`).
 #: Its palette, 256 colours: dark orange (splitting won) through white to dark blue (joining
 #: won), told apart under the common colour blindnesses (the ends of ColorBrewer's Oranges
 #: and Blues); :data:`UNDECIDED` where every partition compared agrees.
@@ -871,17 +888,36 @@ def shows_margins(result: laav.LaavResult) -> bool:
 
 def margin_ticks(top: float) -> tuple[list, list]:
     """The margin map's colour-bar ticks within ``[-top, top]`` (colour values,
-    :func:`signed_log`) and their labels in nats (:data:`MARGIN_TICKS`)."""
-    ticks = [t for t in MARGIN_TICKS if abs(signed_log(t)) <= top + 1e-9]
+    :func:`signed_log`), 0 and ±10, ±100, ... nats, and their labels in nats."""
+    decades = [10 ** k for k in range(1, 16) if signed_log(10 ** k) <= top + 1e-9]
+    ticks = [-t for t in reversed(decades)] + [0] + decades
     return [float(signed_log(t)) for t in ticks], [f"{t:+d}" if t else "0" for t in ticks]
 
 
 def margin_top(z) -> float:
     """The margin map's colour range ``[-top, top]`` for colour values ``z``
-    (:func:`signed_log`): their largest size, at least that of 10 nats."""
+    (:func:`signed_log`): that of the first of 10, 100, 1000, ... nats that no value
+    passes, so the colour bar ends at a labelled tick and no value lies beyond it (ending
+    at the largest value, it ended past its last label: ±100 on a map of ±991)."""
     z = np.asarray(z, dtype=float)
-    top = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else 0.0
-    return max(top, float(signed_log(10.0)))
+    big = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else 0.0
+    nats = 10.0 ** big - 1.0  # (signed_log undone)
+    decade = 10.0 ** max(1, math.ceil(math.log10(nats) - 1e-9)) if nats > 10 else 10.0
+    return float(signed_log(decade))
+
+
+def margin_text(m: float) -> str:
+    """A margin (nats) as written in its cell, in at most four characters: ``991``,
+    ``-38``, ``1.2k``, ``-12k`` (the sign of a negative one only: the colour tells it too,
+    and the hover gives it exactly); "" for NaN."""
+    if not np.isfinite(m):
+        return ""
+    a, sign = abs(m), "-" if round(m) < 0 else ""
+    if round(a) < 1000:
+        return f"{sign}{a:.0f}"
+    if a < 9950:
+        return f"{sign}{a / 1000:.1f}k"
+    return f"{sign}{a / 1000:.0f}k"
 
 
 def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None,
@@ -906,7 +942,7 @@ def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None,
     else:
         m, ml, me = margins
         shown = signed_log(m)
-        text = ["" if not np.isfinite(v) else f"{v:+.0f}" for v in m.ravel()]
+        text = [margin_text(v) for v in m.ravel()]
         dark = np.nan_to_num(np.abs(shown.ravel()), nan=0.0) > 0.55 * margin_top(shown)
     f2c = np.asarray(result.coarse.fine_to_coarse, dtype=np.int64)
     if seq is not None and n:

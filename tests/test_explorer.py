@@ -25,6 +25,7 @@ from conftest import fake_serving  # noqa: E402
 
 from explorer import Explorer, ExplorerState  # noqa: E402
 from explorer import views as V  # noqa: E402
+from explorer.cards.status import NO_CHANGE  # noqa: E402
 from explorer.cli import build_parser, main  # noqa: E402
 from explorer.demo import demo_path, demo_sequence  # noqa: E402
 
@@ -954,14 +955,17 @@ def test_what_changed_is_shown_and_ringed():
     ex = Explorer(demo_sequence(), viser=False)
     try:
         assert ex.wait(120)
-        assert ex.change_md.styles.get("display") == "none" and ex.change is None  # nothing to compare yet
+        # nothing to compare yet: an empty line, in its place (the cards below do not move
+        # when it is filled)
+        assert ex.change_md.object == NO_CHANGE and ex.change is None
+        assert ex.change_md.styles.get("display") is None
         assert "All settings at their defaults" in ex.status.object
         before = ex.result
         ex.w_params["r1"].value = 21.0
         assert ex.wait(120)
         ch = ex.change
         assert ch is not None and ex.state.change_of(ex.result) is ch
-        assert ex.change_md.styles.get("display", "shown") is None  # shown (its inline style removed)
+        assert ex.change_md.styles.get("display") is None
         assert _shown(ex.change_md).startswith("**What changed:** R1 20 → 21: coarse ")
         assert f"{ch.moved.size} point" in _shown(ex.change_md)
         # the rings sit on exactly the points whose final motion changed

@@ -212,12 +212,28 @@ def test_presets_in_one_click(ex):
     assert ex.query()["rv_subspace_weight"] == "0" and ex.query()["rv_select"] == "none"
     assert ex.result.voting.informed_subspace_weight == 0.0
     assert "Sampson distance alone (the RV paper's)" in ex.rv_view.rv_md.object
+    _names_its_preset(ex, "paper")
     adv.w_presets["with_plain_rv"].clicks += 1
     assert ex.wait(120) and ex.result.params == laav.LaavParams.with_plain_rv()
     assert adv.widgets["coarse_merge"].value == "epipolar" and adv.widgets["rv_select"].value == "joint"
     assert ex.query()["rv_select"] == "joint" and ex.result.voting.costs  # plain RV's candidates
+    _names_its_preset(ex, "with_plain_rv")
     adv.w_reset.clicks += 1
     assert ex.wait(120) and ex.result.params == laav.LaavParams()
+
+
+def _names_its_preset(ex, constructor: str) -> None:
+    """The preset button just clicked names the preset as the status line (and the What
+    changed line) then says it, ``preset = with-plain-rv`` (the button said "Preset: ours +
+    plain RV"), and its tooltip names the constructor."""
+    button = ex.advanced.w_presets[constructor]
+    said = re.search(r"preset = ([\w-]+)", _shown(ex.status))
+    assert said, ex.status.object
+    name = said.group(1)
+    assert laav.params.PRESETS[name] == getattr(laav.LaavParams, constructor)
+    assert f"preset = {name}" in button.label, button.label
+    assert re.search(rf"preset \S+ → {re.escape(name)}\b", _shown(ex.change_md))
+    assert f"LaavParams.{constructor}()" in button.description
 
 
 def _ring(ex, k):

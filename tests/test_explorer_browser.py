@@ -892,6 +892,86 @@ JS_WATCH_EPIPOLAR = """() => {
 }"""
 
 
+#: Tops (px in the window) of the status line, the "What changed" line (when it has text)
+#: and card 1's title.
+JS_STATUS_TOPS = """() => { const out = {};
+  const top = el => el.getBoundingClientRect().top;
+  const walk = root => { for (const el of root.querySelectorAll('*')) {
+    const text = (el.shadowRoot || el).textContent;
+    if (el.classList && el.classList.contains('card-title') && text.includes('1 · Atoms')) out.card = top(el);
+    if (el.tagName === 'P' && text.startsWith('Showing')) out.status = top(el);
+    if (el.tagName === 'P' && text.startsWith('What changed')) out.change = top(el);
+    if (el.shadowRoot) walk(el.shadowRoot); } };
+  walk(document); return out; }"""
+
+
+def test_what_changed_line_moves_no_card(tmp_path):
+    """The "What changed" line keeps its place before the first change: when a change fills
+    it, card 1 below stays where it was (it came in with ``display``, and every card below
+    moved down by 41 px)."""
+    seq = _sequence()
+    with _served(seq, viser=False) as (port, browser, created):
+        page = browser.new_page(viewport={"width": 1024, "height": 768})
+        page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+        ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
+        assert ex.wait(60)
+        page.wait_for_function("(" + JS_SOURCES + ")().status !== undefined", timeout=30000)
+        before = _settled(page, JS_STATUS_TOPS)
+        assert "card" in before and "change" not in before, before
+        assert page.evaluate(JS_SET_SLIDER, ["λ", 4.5]) is not None
+        page.get_by_text("What changed: λ").first.wait_for(timeout=30000)
+        after = _settled(page, JS_STATUS_TOPS)
+        page.screenshot(path=str(Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path)) / "what_changed.png"))
+        assert after["status"] < after["change"] < after["card"], after
+        assert after["card"] == pytest.approx(before["card"], abs=0.5), (before, after)
+
+
+#: Card 3's heat map as the page draws it: the widest number written in a cell (measured on a
+#: canvas in the glyph's font) against a cell's width, and the colour bar's range, ticks and
+#: the largest colour value.
+JS_HEAT_MAP = """() => {
+  let fig = null, text = null, bar = null;
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.type === 'GlyphRenderer' && m.glyph.type === 'Text' && m.data_source.data.m !== undefined)
+      text = m;
+    if (m.type === 'ColorBar' && m.ticker.type === 'FixedTicker') bar = m;
+  }
+  for (const m of Bokeh.documents[0].all_models)
+    if (m.type === 'Figure' && m.renderers.includes(text)) fig = m;
+  const val = p => (p !== null && typeof p === 'object' && 'value' in p) ? p.value : p;
+  const g = text.glyph, ctx = document.createElement('canvas').getContext('2d');
+  ctx.font = `${val(g.text_font_style)} ${val(g.text_font_size)} ${val(g.text_font)}`;
+  const texts = Array.from(text.data_source.data.text).filter(t => t);
+  const z = Array.from(text.data_source.data.z).filter(v => Number.isFinite(v));
+  return {font: ctx.font, visible: text.visible, n: texts.length,
+          widest: Math.max(0, ...texts.map(t => ctx.measureText(t).width)),
+          cell: fig.inner_width / fig.x_range.factors.length,
+          low: bar.color_mapper.low, high: bar.color_mapper.high, ticks: Array.from(bar.ticker.ticks),
+          zmax: Math.max(...z.map(Math.abs))};
+}"""
+
+
+@pytest.mark.hopkins
+def test_card_3_numbers_fit_their_cells(hopkins_root, tmp_path):
+    """On cars1 (8 fine models, margins up to 991 nats) card 3's numbers fit their cells (at
+    9 pt, "+991" was 27 px in a 25.5 px cell: the numbers ran into each other), and its colour
+    bar ends at a labelled tick past every value (it ended at 991 nats, its last label +100)."""
+    seq = laav.load_sequence(hopkins_root / "cars1" / "cars1_truth.mat")
+    with _served(seq, viser=False) as (port, browser, created):
+        page, ex = _first_page(port, browser, created)
+        assert ex.wait(120)
+        header = page.locator(".card-header", has_text="3 · Fine-to-coarse")
+        header.first.wait_for(timeout=60000)
+        page.wait_for_function("(" + JS_SOURCES + ")().ztitle.startsWith('Joint merge')", timeout=30000)
+        m = page.evaluate(JS_HEAT_MAP)
+        header.first.scroll_into_view_if_needed()
+        page.screenshot(path=str(Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path)) / "cars1_card3.png"))
+        assert m["visible"] and m["n"] > 0, m  # (8 models: the values are written)
+        assert m["widest"] <= m["cell"] - 2, m
+        assert m["zmax"] <= m["high"] == -m["low"] and m["ticks"][-1] == pytest.approx(m["high"]), m
+        assert m["ticks"][0] == pytest.approx(m["low"]), m
+
+
 def test_card_3_keeps_its_size_while_its_votes_are_fitted(monkeypatch):
     """A result is drawn before card 3's pairwise votes are fitted (the default merge does
     not need them): meanwhile its epipolar caption keeps the room of a full one and its

@@ -286,7 +286,8 @@ def test_three_cars_worst_seed_is_one_click_away(hopkins_root):
 
 # ---------------------------------------------------------------------- the tour
 def test_tour_texts_are_two_sentences_each():
-    assert [s.title.split(" ·")[0] for s in TOUR] == ["1", "2", "3", "4", "5"]
+    # the stages in order; the result (stage 5) in two steps: its labels, then its numbers
+    assert [s.title.split(" ·")[0] for s in TOUR] == ["1", "2", "3", "4", "5", "5"]
     for s in TOUR:
         # sentence ends: a full stop, ! or ? followed by a space and a capital (or the end)
         ends = re.findall(r"[.!?](?=\s+[A-Z]|\s*$)", s.text)
@@ -416,13 +417,18 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     step4 = TOUR[3].text_for(ex.result.params, 2)
     assert tour.texts[1].startswith(step4 + " This run: LAAV's trial started ")
     tour.go(1)
-    _press(tour, *["next"] * 5)
-    assert tour.step == 4 and tour.active  # → stops at the last step
-    # the motions in colour (an all-grey "errors" view showed nothing on a perfect result),
-    # their errors ringed: the misclassified layer is back after step 1 hid it
+    _press(tour, *["next"] * len(TOUR))
+    assert tour.step == len(TOUR) - 1 and tour.active  # → stops at the last step
+    # the result in two steps (one card each fits a projector's screen): the numbers last, and
+    # before them the motions in colour (an all-grey "errors" view showed nothing on a perfect
+    # result), their errors ringed: the misclassified layer is back after step 1 hid it
     assert tour.w_next.label == "Finish" and ex.controls.color_mode == "final"
+    assert [n for n, c in cards.items() if c.visible] == ["numbers"] and outlined(cards["numbers"])
+    tour.w_back.clicks += 1
+    assert [n for n, c in cards.items() if c.visible] == ["frame"] and outlined(cards["frame"])
+    assert TRUTH_LAYER in ex.frame_view.w_layers.value and ex.controls.color_mode == "final"
+    tour.w_next.clicks += 1
     assert TRUTH_LAYER in ex.frame_view.w_layers.value
-    assert {n for n, c in cards.items() if c.visible} == {"numbers", "frame"}
     tour.w_next.clicks += 1  # Finish
     assert not tour.active and not tour.panel.visible
     assert ex.frame_view.w_layers.value == layers  # as before the tour

@@ -55,10 +55,9 @@ JS_SIDEBAR_WIDE = """() => { const w = document.getElementById('sidebar').offset
   return Math.abs(w - want) <= 1; }"""
 JS_SIDEBAR_USUAL = "() => Math.abs(document.getElementById('sidebar').offsetWidth - 300) <= 1"
 
-#: Where the tour's panel, the outlined card's first plot and the page's parts end: the
-#: boxes (left, top, right, bottom; px in the window) of the panel and of the first canvas
-#: inside the outlined card, the sidebar's and main area's scroll offsets, and the widest
-#: content against the window.
+#: Where the tour's panel, the outlined card and the page's parts end: the boxes (left, top,
+#: right, bottom; px in the window) of the panel and of the outlined card, the sidebar's and
+#: main area's scroll offsets, and the widest content against the window.
 JS_TOUR_BOXES = """() => {
   const box = el => { const r = el.getBoundingClientRect();
     return [Math.round(r.left), Math.round(r.top), Math.round(r.right), Math.round(r.bottom)]; };
@@ -69,15 +68,50 @@ JS_TOUR_BOXES = """() => {
       card = el;
     if (el.shadowRoot) walk(el.shadowRoot); } };
   walk(document);
-  let canvas = null;
-  const inCard = root => { for (const el of root.querySelectorAll('*')) {
-    if (!canvas && el.tagName === 'CANVAS' && el.getBoundingClientRect().width > 50) canvas = el;
-    if (el.shadowRoot) inCard(el.shadowRoot); } };
-  if (card) { inCard(card); if (card.shadowRoot) inCard(card.shadowRoot); }
   const side = document.getElementById('sidebar'), main = document.getElementById('main');
-  return {panel: panel && box(panel), canvas: canvas && box(canvas), card: card && box(card),
+  return {panel: panel && box(panel), card: card && box(card),
           sideScroll: side.scrollTop, mainScroll: main.scrollTop,
           mainWide: main.scrollWidth - main.clientWidth, pageWide: document.scrollingElement.scrollWidth};
+}"""
+
+
+#: The cards a tour step names (explorer.tour.TourStep.cards) by the start of their titles.
+CARD_TITLES = {"frame": "1 · Atoms", "view3d": "3-D", "graph": "2 · Multicut", "coarse": "3 · Fine-to-coarse",
+               "rv": "4 · Fine-tuning", "numbers": "5 · Final labels and numbers"}
+#: What a step's text is about in each card, to be on screen whole at a projector's size:
+#: its first n plots (the RV card's error and label-change charts: "it settles sooner"), or
+#: the whole card (the numbers: a table).
+SUBJECTS = {"frame": 1, "view3d": 0, "graph": 1, "coarse": 1, "rv": 2, "numbers": "card"}
+
+#: The box (left, top, right, bottom; px in the window) of the shown card whose title starts
+#: with the given text, and of its plots in page order (one box per plot: bokeh draws a plot
+#: on several canvases of one size); null when no such card is shown.
+JS_CARD_BOXES = """(title) => {
+  const box = el => { const r = el.getBoundingClientRect();
+    return [Math.round(r.left), Math.round(r.top), Math.round(r.right), Math.round(r.bottom)]; };
+  let card = null;
+  const walk = root => { for (const el of root.querySelectorAll('*')) {
+    if (!card && el.classList && el.classList.contains('card-title')) {
+      const h = (el.shadowRoot || el).querySelector('h3');
+      if ((h ? h.textContent : el.textContent).trim().startsWith(title)) {
+        let c = el;  // up to the card (through the shadow roots it sits in)
+        while (c && !(c.classList && c.classList.contains('card')))
+          c = c.parentNode instanceof ShadowRoot ? c.parentNode.host : c.parentNode;
+        if (c && c.getBoundingClientRect().height > 0) card = c;
+      }
+    }
+    if (el.shadowRoot) walk(el.shadowRoot); } };
+  walk(document);
+  if (!card) return null;
+  const plots = [];
+  const inCard = root => { for (const el of root.querySelectorAll('*')) {
+    if (el.tagName === 'CANVAS' && el.getBoundingClientRect().width > 50) {
+      const b = box(el);
+      if (!plots.some(p => p.join() === b.join())) plots.push(b);
+    }
+    if (el.shadowRoot) inCard(el.shadowRoot); } };
+  inCard(card); if (card.shadowRoot) inCard(card.shadowRoot);
+  return {card: box(card), plots: plots};
 }"""
 
 
@@ -167,7 +201,7 @@ def test_guided_tour_in_the_page(tmp_path):
         page.locator("button", has_text="Guided tour").first.click()
         title = page.get_by_text(TOUR[0].title)
         title.first.wait_for(timeout=20000)
-        page.get_by_text("step 1 of 5").first.wait_for(timeout=10000)
+        page.get_by_text(f"step 1 of {len(TOUR)}").first.wait_for(timeout=10000)
         # large type for a projector (the page's other text is 14 px)
         size = title.first.evaluate("el => parseFloat(getComputedStyle(el).fontSize)")
         assert size >= 26, size
@@ -189,7 +223,7 @@ def test_guided_tour_in_the_page(tmp_path):
         page.get_by_text(TOUR[1].text_for(ex.result.params, 2)[:60]).first.wait_for(timeout=10000)
         page.locator("button", has_text="Next ▶").first.click()
         page.get_by_text(TOUR[2].title).first.wait_for(timeout=20000)
-        page.get_by_text("step 3 of 5").first.wait_for(timeout=10000)
+        page.get_by_text(f"step 3 of {len(TOUR)}").first.wait_for(timeout=10000)
         page.locator(".card-header", has_text="3 · Fine-to-coarse").first.wait_for(timeout=10000)
         page.screenshot(path=str(_shots(tmp_path) / "tour_step3.png"))
         page.keyboard.press("ArrowLeft")
@@ -232,7 +266,7 @@ def test_a_link_opens_the_tour_at_its_step(tmp_path):
         ex = _wait_for(lambda: created[0] if created else None, 30, "the explorer")
         assert ex.wait(60)
         page.get_by_text(TOUR[2].title).first.wait_for(timeout=30000)
-        page.get_by_text("step 3 of 5").first.wait_for(timeout=10000)
+        page.get_by_text(f"step 3 of {len(TOUR)}").first.wait_for(timeout=10000)
         page.wait_for_function(JS_SIDEBAR_WIDE, timeout=10000)
         page.locator(".card-header", has_text="2 · Multicut graph").first.wait_for(
             state="hidden", timeout=10000)
@@ -251,8 +285,11 @@ def test_a_link_opens_the_tour_at_its_step(tmp_path):
 def test_the_tour_fits_a_projector(tmp_path):
     """On the bundled demo (three motions: the longest texts and tables), at 1280x800 and
     1024x768, every step shows its whole panel (title, text, Back / Next) beside its card,
-    and the card's first plot whole and inside its card, without scrolling either way (before,
-    the panel sat above the card and took half the screen: the plots began at y = 440-490 px)."""
+    and what the step is about in each card it shows whole and inside its card (:data:`SUBJECTS`:
+    the plots its text talks about, or the whole Numbers table), without scrolling either way
+    (before, the panel sat above the card and took half the screen: the plots began at
+    y = 440-490 px; and the result's step showed the Numbers card below the frame view, off
+    screen)."""
     from explorer.demo import demo_sequence
     from explorer.tour import TOUR
 
@@ -276,13 +313,23 @@ def test_the_tour_fits_a_projector(tmp_path):
                 m = page.evaluate(JS_TOUR_BOXES)
                 page.screenshot(path=str(_shots(tmp_path) / f"tour_{w}x{h}_step{k + 1}.png"))
                 where = f"{w}x{h}, step {k + 1}: {m}"
-                assert m["panel"] and m["card"] and m["canvas"], where
+                assert m["panel"] and m["card"], where
                 assert m["sideScroll"] == 0 and m["mainScroll"] == 0, where
                 assert m["mainWide"] <= 0 and m["pageWide"] <= w, where  # nothing sideways
                 assert m["panel"][3] <= h, where  # the whole text and its buttons on screen
-                x0, y0, x1, y1 = m["canvas"]
-                assert x0 >= m["panel"][2] and x1 <= w and y1 <= h, where  # the plot beside it, whole
-                assert x1 <= m["card"][2], where  # inside its card (its legend spilled out at 1024)
+                # what the step is about, in each card it shows, on screen whole beside the
+                # panel: the plots the text talks about, or the whole table (at 1024x768 the
+                # result's Numbers card was below its frame view, off screen)
+                for name in step.cards:
+                    c = page.evaluate(JS_CARD_BOXES, CARD_TITLES[name])
+                    where = f"{w}x{h}, step {k + 1}, {name}: {c}"
+                    assert c is not None, where
+                    subject = SUBJECTS[name]
+                    boxes = [c["card"]] if subject == "card" else c["plots"][:subject]
+                    assert subject == "card" or len(boxes) == subject, where
+                    for x0, y0, x1, y1 in boxes:
+                        assert x0 >= m["panel"][2] and x1 <= w and y0 >= 0 and y1 <= h, where
+                        assert x1 <= c["card"][2], where  # inside its card (a legend spilled out at 1024)
             page.keyboard.press("Escape")
             _wait_for(lambda ex=ex: not ex.tour.active, 10, "the tour to end", page=page)
             page.close()

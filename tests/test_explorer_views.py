@@ -451,6 +451,31 @@ def test_z_cells_carry_their_value_only_while_it_fits(demo):
     assert not any(data["text"]) and len(data["z"]) == many.multicut.n_models ** 2  # hover only
 
 
+def test_margin_bar_ends_at_a_labelled_tick_past_every_value():
+    """The margin map's colour range ends at 10, 100, 1000, ... nats, the first that no value
+    passes, with a label there (it ended at the largest value: ±991 nats on cars1, its last
+    label ±100)."""
+    for big in (0.0, 3.0, 10.0, 11.0, 991.0, 1000.0, 1001.0, 5e4):
+        z = V.signed_log(np.array([big, -2.0, np.nan]))
+        top = V.margin_top(z)
+        where, labels = V.margin_ticks(top)
+        assert np.nanmax(np.abs(z)) <= top + 1e-12
+        assert where[-1] == pytest.approx(top) and where[0] == pytest.approx(-top)
+        assert labels[-1] == f"+{max(10, 10 ** int(np.ceil(np.log10(max(big, 1.0)))))}", (big, labels)
+        assert labels[len(labels) // 2] == "0" and len(labels) % 2 == 1
+
+
+def test_margin_numbers_are_short_and_sized_to_their_cells():
+    """A margin in a cell takes at most four characters, and the font is as large as the widest
+    fits a cell (at most 12 px), or 0 (no numbers) below 8 px."""
+    texts = [V.margin_text(m) for m in (991.0, -991.0, 0.4, -0.6, 1234.0, -9960.0, 12345.0, np.nan)]
+    assert texts == ["991", "-991", "0", "-1", "1.2k", "-10k", "12k", ""]
+    assert V.cell_font_px(["-991", "874", ""], 28) == 11  # cars1's 8 models in 224 px
+    assert V.cell_font_px(["3"], 112) == 12  # at most 12 px
+    assert V.cell_font_px(["-991"], 16) == 0  # too small to read: the hover tells it
+    assert V.cell_font_px(["", ""], 10) == 12  # nothing written
+
+
 def test_joint_margins_are_what_decided_each_pair(demo):
     """Card 3's map under the joint merge: for each pair of fine models, the least score of a
     compared partition splitting them minus the least joining them (checked by a plain loop

@@ -1,5 +1,6 @@
 """The sidebar's Advanced card: every :class:`laav.LaavParams` field, grouped by stage,
-and two presets (:data:`PRESETS`: the paper's stages, LAAV's own chain) in one click.
+and two presets in one click (:data:`PRESETS`: ``paper`` and ``with-plain-rv``, named as the
+status line names them).
 
 Folded at first. One widget per field (:data:`explorer.fields.FIELDS`): a number box (its
 bounds in its tooltip; the state checks them), a select for a choice (``coarse_merge``, ``atom_frames``,
@@ -26,12 +27,25 @@ from .. import views as V
 from ..fields import AUTO, FIELDS, STAGE_TITLES, changed_fields, fmt_value, widget_value
 from .base import FOLD_ARROW, SIDE_W, Alert, Host, Markdown
 
-#: The presets the card sets in one click: LaavParams constructor -> button label.
-PRESETS = {"paper": "Preset: the paper's stages", "with_plain_rv": "Preset: ours + plain RV"}
+#: The presets the card sets in one click: LaavParams constructor -> (the preset's name, as
+#: the status line and the What changed line say it, ``preset = with-plain-rv``, and as
+#: ``laav-explore --preset`` takes it: :data:`laav.params.PRESETS`; what it is, the button's
+#: tooltip, one short line: a tooltip does not wrap, and the card's text says more). The
+#: button says the name: it said "Preset: ours + plain RV", the status line "with-plain-rv",
+#: not to be told for the same thing.
+PRESETS = {
+    "paper": ("paper", "LaavParams.paper(): the paper's stages, nothing of ours"),
+    "with_plain_rv": ("with-plain-rv", "LaavParams.with_plain_rv(): ours + plain RV"),
+}
 #: Width of a field's widget inside the card (the card's padding and border fit the sidebar).
 FIELD_W = SIDE_W - 30
 #: Marks a field off its default, in its label.
 MARK = "●"
+
+
+def preset_label(name: str) -> str:
+    """A preset button's label: the preset as the status line names it."""
+    return f"Set preset = {name}"
 
 
 def _step(default) -> float:
@@ -72,15 +86,17 @@ class AdvancedPanel:
         self.w_reset.on_click(self._on_reset)
         # the presets (laav.LaavParams): compare ours with the paper's stages by pinning one
         self.w_presets = {}
-        for name, label in PRESETS.items():
-            b = pn.widgets.Button(label=label, color="light", width=FIELD_W, margin=(2, 5))
+        for name, (preset, tip) in PRESETS.items():
+            b = pn.widgets.Button(label=preset_label(preset), description=tip, color="light",
+                                  width=FIELD_W, margin=(2, 5))
             b.on_click(partial(self._on_preset, name))
             self.w_presets[name] = b
         intro = Markdown(
             "Every `LaavParams` field (hover the **?** for its meaning, range and default); a field "
             f"off its default is marked {MARK}. Seed and C stay in the sliders above. The presets "
-            "set every field: `LaavParams.paper()` (each stage as the paper writes it) and "
-            "`LaavParams.with_plain_rv()` (ours with plain RV beside LAAV's trial and a selection: "
+            "set every field, and the status line then says `preset = NAME`: `paper` "
+            "(`LaavParams.paper()`, each stage as the paper writes it) and `with-plain-rv` "
+            "(`LaavParams.with_plain_rv()`, ours with plain RV beside LAAV's trial and a selection: "
             "an earlier default, behind the current one on clean tracks, ahead of it under pixel "
             "noise, README); pin a result first (Compare) to see what changes.",
             width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})

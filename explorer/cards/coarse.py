@@ -16,6 +16,9 @@ from .epipolar import EpipolarPanel
 Z_PALETTE = list(Blues256[::-1])
 MARGIN_PALETTE, UNDECIDED = list(V.MARGIN_PALETTE), V.UNDECIDED
 Z_TICKS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)
+#: The heat map's plot area (px, square): its cells are this divided by the number of fine
+#: models, and the numbers written in them sized to fit (:func:`explorer.views.cell_font_px`).
+Z_FRAME = 224
 Z_TOOLTIPS = [("pair", "f@j, f@k"), ("Z", "@z{0.00}"), ("epipolar distance", "@d"),
               ("coding length added by merging (nats/point)", "@g")]
 MARGIN_TOOLTIPS = [("pair", "f@j, f@k"), ("score margin (nats; > 0: joined)", "@m{+0.0}"),
@@ -31,14 +34,15 @@ class CoarseView:
         self.z_mapper = LinearColorMapper(palette=Z_PALETTE, low=0, high=1, nan_color=UNDECIDED)
         self.src_z = ColumnDataSource({"x": [], "y": [], "z": [], "text": [], "text_color": [], "d": [],
                                        "g": [], "j": [], "k": [], "m": [], "ml": [], "me": []})
-        z = self.fig_z = figure(title="Affinity Z of fine-model pairs", width=320, height=320,
+        z = self.fig_z = figure(title="Affinity Z of fine-model pairs", frame_width=Z_FRAME,
+                                frame_height=Z_FRAME,
                                 x_range=FactorRange(factors=["f1"]), y_range=FactorRange(factors=["f1"]),
                                 tools="hover", toolbar_location=None, tooltips=Z_TOOLTIPS)
         self.z_hover = z.hover[0] if isinstance(z.hover, list) else z.hover
         z.rect("x", "y", 1, 1, source=self.src_z, fill_color={"field": "z", "transform": self.z_mapper},
                line_color="white")
-        z.text("x", "y", text="text", source=self.src_z, text_align="center", text_baseline="middle",
-               text_font_size="9pt", text_color="text_color")
+        self.z_text = z.text("x", "y", text="text", source=self.src_z, text_align="center",
+                             text_baseline="middle", text_font_size="12px", text_color="text_color")
         z.xaxis.major_label_orientation = 0.8
         z.xaxis.axis_label = "fine model → motion it joined"
         z.yaxis.axis_label = "fine model → motion"
@@ -65,6 +69,7 @@ class CoarseView:
         self.fig_z.x_range.factors = factors or ["–"]
         self.fig_z.y_range.factors = list(reversed(factors)) or ["–"]
         set_data(self.src_z, data)
+        self._numbers(data["text"], len(factors))
         method = res.coarse.method
         margins = V.shows_margins(res)
         self._scale(margins, data["z"])
@@ -96,9 +101,20 @@ class CoarseView:
                                 + (f"\n\n**Partitions compared** (lower score wins):\n\n{listed}"
                                    if listed else ""))
 
+    def _numbers(self, texts, n: int) -> None:
+        """The numbers in the cells at a size that fits them (overlapping digits of the next
+        cells at 9 pt before: ``-991`` on a map of 8 models), or none where they cannot be read
+        (the colour and the hover tell the value)."""
+        px = V.cell_font_px(texts, Z_FRAME / max(n, 1))
+        size = f"{px or 12}px"
+        if self.z_text.glyph.text_font_size != size:
+            self.z_text.glyph.text_font_size = size
+        if self.z_text.visible != bool(px):
+            self.z_text.visible = bool(px)
+
     def _scale(self, margins: bool, z) -> None:
         """The colour scale: Z in [0, 1], or the margins' signed log, symmetric, its colour
-        bar labelled in nats (:data:`explorer.views.MARGIN_TICKS`)."""
+        bar labelled in nats up to its ends (:func:`explorer.views.margin_ticks`)."""
         if not margins:
             scale = dict(palette=Z_PALETTE, low=0, high=1, ticks=list(Z_TICKS), labels={},
                          tooltips=Z_TOOLTIPS)

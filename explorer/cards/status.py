@@ -18,6 +18,14 @@ PREVIEW_STATUS = "plain RV and the model selection still computing…"
 
 RECOMPUTING = "Recomputing… (the views keep the last result until the new one is ready)"
 
+#: The "What changed" line before there is a change to tell (the first result, a new
+#: sequence): an empty line of the same height. Hidden by ``display: none`` instead, its
+#: 41 px came and went, and every card below moved by as much when a change first showed.
+NO_CHANGE = "&nbsp;"
+#: That line's paragraph without its own margins (a line of type each, above and below): the
+#: room it keeps is one line high.
+TIGHT_LINE = ":host p { margin: 0.2em 0; }"
+
 
 def header_text(seq: laav.Sequence) -> str:
     return f"{V.md_text(seq.name)} · {seq.n_points} points, {seq.n_frames} frames"
@@ -68,9 +76,10 @@ class StatusBar:
         self._status_text = "Computing the first result…"
         self.status = Markdown(self._status_text, margin=(4, 6),
                                sizing_mode="stretch_width")
-        # hidden by an inline style until the first change (see shown_style)
-        self.change_md = Markdown("", margin=(0, 10), sizing_mode="stretch_width",
-                                  styles=shown_style(False))
+        # an empty line until the first change (NO_CHANGE): its place is kept, so the
+        # cards below stay where they are when it is filled
+        self.change_md = Markdown(NO_CHANGE, margin=(0, 10), sizing_mode="stretch_width",
+                                  stylesheets=[TIGHT_LINE])
         # the sequence shown, in the page header (the template's own title is fixed at load)
         # the browser tab's title follows the sequence shown (bokeh's document title is sent
         # once, with the page): a hidden box whose value the page copies into document.title
@@ -154,6 +163,5 @@ class StatusBar:
             f"Showing {V.md_text(seq.name)}{err} ({how}). "
             + (f"Not at the defaults: {V.md_text(', '.join(changed))}." if changed
                else "All settings at their defaults."))
-        self.change_md.object = ("" if change is None else
+        self.change_md.object = (NO_CHANGE if change is None else
                                  f"**What changed:** {V.md_text(change.text())}")
-        self.change_md.styles = shown_style(change is not None)

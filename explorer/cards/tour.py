@@ -1,4 +1,5 @@
-"""The guided tour: stages 1-5 one at a time, for a class (the texts: :mod:`explorer.tour`).
+"""The guided tour: stages 1-5 one at a time (stage 5 in two steps), for a class (the texts:
+:mod:`explorer.tour`).
 
 A button in the sidebar starts it. The tour's panel heads the sidebar, which widens for it
 (about a third of the screen) while the main area shows only the step's card, outlined, at
