@@ -106,10 +106,11 @@ def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -
     if params.rv_missing_gate <= 0 or not groups:
         part = candidates(points, C, params, [s[1:4] for s in starts], extra, uses, helper)
         return _select(points, C, params, starts, part, extra, uses)
-    # ours (rv_missing_gate): the informed trial alone first, the starts it leaves unexplained then
+    # ours (rv_missing_gate): the informed trial alone first, the starts it leaves unexplained
+    # then (all of them when it did not settle: a trial still changing explains nothing)
     first = candidates(points, C, params, [informed[1:4]], extra, uses[:1], helper)
     alone = _select(points, C, params, [informed], first, extra, uses[:1])
-    far = unexplained(points, alone.labels, C, params)
+    far = unexplained(points, alone.labels, C, params, first[3]) if alone.informed_converged else None
     run = [far is None or far[new].sum() >= params.rv_missing_gate * new.sum()
            for _, new, _ in groups]
     skipped = tuple(name for (name, *_), r in zip(groups, run) if not r)
@@ -132,22 +133,39 @@ UNEXPLAINED_PX2 = 1.0
 UNEXPLAINED_FLOOR = 0.5
 
 
-def unexplained(points, labels, n_motions, params) -> np.ndarray | None:
-    """(P,) bool: the points ``labels`` (P,) leave unexplained, farther than
-    :data:`UNEXPLAINED_PX2` (squared pixels, ``unit2``) from their motion's robust rank-4
-    trajectory subspace (:func:`laav.refine.subspace_residuals`); all of them when a motion
-    is too small to fit. None when the test cannot tell: the median point's distance is
-    above :data:`UNEXPLAINED_FLOOR` of the threshold (pixel noise)."""
+def _own_distances(points, labels, n_motions, params, fits=None) -> np.ndarray | None:
+    """(P,) each point's squared distance (mean over frames, in ``unit2``) to its own motion's
+    robust rank-4 trajectory subspace (:func:`laav.refine.subspace_residuals`; NaN for a point
+    labelled -1), or None when a motion is too small to fit."""
     from .refine import subspace_residuals
 
-    R = subspace_residuals(points, labels, n_motions, unit2=unit2(params))
+    R = subspace_residuals(points, labels, n_motions, unit2=unit2(params), fits=fits)
     if R is None:
-        return np.ones(labels.size, dtype=bool)
-    own = R[labels, np.arange(labels.size)]
-    limit = UNEXPLAINED_PX2 * unit2(params)
-    if np.median(own) > UNEXPLAINED_FLOOR * limit:
         return None
-    return own > limit
+    own = np.full(labels.size, np.nan)
+    on = labels >= 0
+    own[on] = R[labels[on], np.flatnonzero(on)]
+    return own
+
+
+def _has_power(own: np.ndarray, params) -> bool:
+    """Whether the unexplained test can tell: the median point within
+    :data:`UNEXPLAINED_FLOOR` of the threshold."""
+    return bool(np.nanmedian(own) <= UNEXPLAINED_FLOOR * UNEXPLAINED_PX2 * unit2(params))
+
+
+def unexplained(points, labels, n_motions, params, fits=None) -> np.ndarray | None:
+    """(P,) bool: the points ``labels`` (P,) leave unexplained, farther than
+    :data:`UNEXPLAINED_PX2` (squared pixels, ``unit2``) from their motion's robust rank-4
+    trajectory subspace (:func:`laav.refine.subspace_residuals`, with the memo ``fits``); all
+    of them when a motion is too small to fit. None when the test cannot tell: the median
+    point's distance is above :data:`UNEXPLAINED_FLOOR` of the threshold (pixel noise)."""
+    own = _own_distances(points, labels, n_motions, params, fits)
+    if own is None:
+        return np.ones(labels.size, dtype=bool)
+    if not _has_power(own, params):
+        return None
+    return own > UNEXPLAINED_PX2 * unit2(params)
 
 
 def _select(points, C, params, starts, part, extra, uses) -> Voting:

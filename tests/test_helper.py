@@ -58,8 +58,12 @@ def test_the_gate_with_the_helper(helper, monkeypatch):
     import laav.own_chain as V
 
     seq = _scene(1)
-    _same(laav.Pipeline(seq, 3, seed=1).result, laav.Pipeline(seq, 3, seed=1, helper=helper).result)
-    monkeypatch.setattr(V, "unexplained", lambda points, labels, C, params: np.ones(labels.size, bool))
+    jobs = helper.jobs
+    gated = laav.Pipeline(seq, 3, seed=1, helper=helper).result
+    assert gated.voting.skipped_starts and helper.jobs == jobs  # the informed trial alone: here
+    _same(laav.Pipeline(seq, 3, seed=1).result, gated)
+    monkeypatch.setattr(V, "unexplained", lambda points, labels, C, params, fits=None:
+                        np.ones(labels.size, bool))
     jobs = helper.jobs
     helped = laav.Pipeline(seq, 3, seed=1, helper=helper).result
     assert helper.jobs == jobs + 1 and helped.voting.skipped_starts == ()

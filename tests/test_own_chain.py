@@ -303,13 +303,14 @@ def _demo_runs(monkeypatch, seed=1):
         m.setattr(V, "missing_motion_start", lambda *a, **k: None)
         runs["none"] = segment(seq, 3, LaavParams(rv_missing_gate=0.0), seed=seed)
     with monkeypatch.context() as m:
-        m.setattr(V, "unexplained", lambda points, labels, C, params: np.ones(labels.size, bool))
+        m.setattr(V, "unexplained", lambda points, labels, C, params, fits=None:
+                  np.ones(labels.size, bool))
         runs["opened"] = segment(seq, 3, LaavParams(rv_missing_gate=0.5), seed=seed)
     with monkeypatch.context() as m:  # only the first start's new motion left unexplained
         starts = []
         real = V.missing_motion_start
         m.setattr(V, "missing_motion_start", lambda *a, **k: starts.append(real(*a, **k)) or starts[-1])
-        m.setattr(V, "unexplained", lambda points, labels, C, params: starts[0] == C - 1)
+        m.setattr(V, "unexplained", lambda points, labels, C, params, fits=None: starts[0] == C - 1)
         # (the starts' new motions overlap, a share near 1 leaves only the first one to run)
         runs["one"] = segment(seq, 3, LaavParams(rv_missing_gate=0.95), seed=seed)
     return runs
@@ -365,3 +366,36 @@ def test_unexplained_counts_the_points_far_from_their_motions_subspace():
     # pixel noise of 1 px: the median point is as far as the threshold, the test cannot tell
     noisy = seq.points + np.random.default_rng(0).normal(0, 1, seq.points.shape)
     assert unexplained(noisy, labels, 2, p) is None
+
+
+def test_the_gate_runs_every_start_when_its_test_cannot_tell_or_the_trial_did_not_settle(monkeypatch):
+    """The gate skips nothing, giving the gate-off labels, costs and iterations, when its
+    test has no power (``unexplained`` None: the median point near the threshold, pixel
+    noise; the informed trial has run alone, the others then side by side) and when LAAV's
+    informed trial did not settle (here: an iteration cap of 20)."""
+    import laav.own_chain as V
+    from explorer.demo import demo_sequence
+    from laav import segment
+
+    seq = demo_sequence()
+    off = segment(seq, 3, LaavParams(rv_missing_gate=0.0), seed=1).voting
+    batches = []
+    real_side = V.informed_side_by_side
+
+    def spy(points, params, starts, extra, uses):
+        batches.append(len(starts))
+        return real_side(points, params, starts, extra, uses)
+
+    monkeypatch.setattr(V, "informed_side_by_side", spy)
+    with monkeypatch.context() as m:
+        m.setattr(V, "unexplained", lambda *a, **k: None)
+        on = segment(seq, 3, LaavParams(), seed=1).voting
+    assert on.skipped_starts == () and np.array_equal(on.labels, off.labels)
+    assert on.costs == off.costs and on.trial_iterations == off.trial_iterations
+    assert batches == [1, 6]
+    capped = LaavParams(rv_max_iter=20)
+    short = segment(seq, 3, capped, seed=1).voting
+    assert short.informed_converged is False and short.skipped_starts == ()
+    short_off = segment(seq, 3, capped.replace(rv_missing_gate=0.0), seed=1).voting
+    np.testing.assert_array_equal(short.labels, short_off.labels)
+    assert short.costs == short_off.costs and len(short.costs) == 7
