@@ -180,10 +180,11 @@ def fine_tuning_facts(seq, voting, plain) -> str:
                        if returned.startswith("missing motion") else ""))
     if plain_trials:
         ours.append(f"{plain_trials} plain RV trials it was compared with")
-    if voting.skipped_starts:
-        n = len(voting.skipped_starts)
-        ours.append(f"{n} search{'es' if n > 1 else ''} for a missed motion skipped, "
-                    "this trial's labels explaining their points")
     if ours:
-        text += " Ours, not the paper's: " + ", ".join(ours) + "."
+        text += " Ours, not the paper's: " + ", ".join(ours)
+        # (what did not run is not in that list; the RV card says which starts and why)
+        text += ("; no search for a missed motion needed." if voting.skipped_starts and not missing
+                 else ".")
+    elif voting.skipped_starts:
+        text += " No search for a missed motion needed (ours)."
     return text

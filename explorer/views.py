@@ -1236,7 +1236,7 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
     if own and voting.skipped_starts:  # ours: starts whose trials did not run, and why
         n = len(voting.skipped_starts)
         trials += (f"; {n} missing-motion start{'s' if n > 1 else ''} skipped: the informed "
-                   "trial's labels already explain most of the points "
+                   "trial's labels already explain the points "
                    f"{'each' if n > 1 else 'it'} would make a motion (ours, `rv_missing_gate`)")
     moved = [f"refinement {voting.refined}"] if voting.refined else []
     if voting.unpolished:  # ours: the trial's own labels descended lower than the polished

@@ -11,8 +11,10 @@ side by side (:func:`informed_side_by_side`), each refined and reassigned
 ``rv_select_descent`` of the points, so that a few stray points do not decide), which then
 descends on that score (``rv_descent``, :func:`laav.joint.joint_descent`: single points move
 while the score decreases), from its polished labels and from its trial's own, the lower
-kept (``rv_descent_from_trial``). With a :class:`laav.helper.VotingHelper`, half of the
-trials run in its process (:func:`candidates`; the same labels).
+kept (``rv_descent_from_trial``). With ``rv_missing_gate`` (the default) the informed trial
+runs and is selected alone first, and a start's trials run only where that result leaves its
+new motion unexplained (:func:`unexplained`). With a :class:`laav.helper.VotingHelper`, half
+of the trials run in its process (:func:`candidates`; the same labels).
 """
 
 from __future__ import annotations

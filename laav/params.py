@@ -138,23 +138,28 @@ class LaavParams:
         time 0.44 -> 0.54 x plain RV's; ``benchmarks/TUNING.md``, "Two trials per
         missing-motion start").
     rv_missing_gate : float
-        Ours, with ``rv_select="laav"``: 0 runs every missing-motion start's trials beside
-        the informed trial. Above 0 the informed trial runs and is selected alone first,
-        and a start's trials run only when that result leaves at least this share of the
-        start's new motion unexplained (farther than 1 px RMS from its motion's rank-4
-        trajectory subspace, :func:`laav.own_chain.unexplained`); the starts skipped are
-        named in ``Voting.skipped_starts``. Speed: a result that already explains the
-        points a start would make a motion has nothing for the start to find. The default
-        0.5 (since 2026-12-05) was chosen by 5-fold cross-validation grouped by video among
-        0 / 0.25 / 0.5 / 0.75, ties to the faster (Hopkins155, 5 seeds: 0.19 -> 0.18 %,
-        held out 0.19-0.24 % over three fold shuffles; three-motion median time 0.59 ->
-        0.46 x plain RV's; ``benchmarks/TUNING.md``, "A gate for the missing-motion starts").
+        Ours, with ``rv_select="laav"``, a speed setting: 0 runs every missing-motion
+        start's trials beside the informed trial. Above 0 the informed trial runs and is
+        selected alone first, and a start's trials run only when that result leaves at
+        least this share of the start's new motion unexplained (farther than 1 px RMS, in
+        ``noise_adaptive``'s scaled unit, from its motion's rank-4 trajectory subspace,
+        :func:`laav.own_chain.unexplained`). Every start runs when the informed trial did
+        not settle, and when the test cannot tell (the median point within less than
+        twice the threshold of its subspace: pixel noise of about 0.5 px and more); the
+        starts skipped are named in ``Voting.skipped_starts``. The default 0.5 (since
+        2026-12-05) was chosen by 5-fold cross-validation grouped by video among 0 / 0.25
+        / 0.5 / 0.75, ties to the faster; the accuracy is that of 0 within the run-to-run
+        noise (Hopkins155, 5 seeds: 0.18 % against 0.19 %, 2 runs better and 1 worse; held
+        out 0.19-0.24 % over three fold shuffles; σ = 1 px the same errors), the
+        three-motion median time 0.59 -> 0.46 x plain RV's
+        (``benchmarks/TUNING.md``, "A gate for the missing-motion starts").
     rv_batch : int
         Voting trials run side by side in one batched numpy call (plain RV's random
         starts, and LAAV's informed trial beside them in ``with_plain_rv()`` and on
         incomplete tracks; LAAV's own informed and missing-motion trials, at most
         1 + C(C-1)/2 x ``rv_missing_trials``, which all run to their end, run all side by
-        side whatever its value). Speed only: each trial draws from its own random stream and keeps its own
+        side whatever its value, except that with ``rv_missing_gate`` the informed one runs
+        alone first). Speed only: each trial draws from its own random stream and keeps its own
         convergence test, and the trial kept is the same as if they ran one after another,
         so a seed's labels do not depend on it.
     rv_refine : bool
@@ -376,7 +381,8 @@ class LaavParams:
         a plain-RV trial), and slower; on Hopkins155 (5 seeds, σ = 0: 0.25 / 0.81 / 0.38 %,
         grouped-CV 0.38 %) the default, with its descent on the joint score, its
         candidates cleaned before the selection, two trials per missing-motion start and
-        the unpolished descent, measures 0.19 % on all data and held out; under noise
+        the unpolished descent, measures 0.19 % on all data and held out (0.19-0.24 %
+        held out with its gate for the missing-motion starts); under noise
         (σ = 1 px, seeds 0-1: 0.74 % against 1.23 %) and on ``small_motion``
         this preset is the more accurate (``docs/ALGORITHM.md``, the presets table).
         ``changes`` override fields as in :meth:`replace`."""

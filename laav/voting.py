@@ -121,7 +121,8 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         each warning is given once.
     helper : laav.helper.VotingHelper, optional
         Speed only: LAAV's own trials (``rv_select="laav"`` on complete tracks) run half
-        in the helper's process, half here; the labels are those without it.
+        in the helper's process, half here (with ``rv_missing_gate`` the informed trial
+        alone here first); the labels are those without it.
 
     Returns
     -------

@@ -647,10 +647,10 @@ def test_rv_card_and_tour_name_the_trials_beside_laavs_by_kind():
     gated = laav.segment(seq, 2, seed=0).voting
     assert gated.skipped_starts == ("missing motion (0+1)",) and gated.n_trials == 1
     assert V.other_trial_counts(gated) == (0, 0)
-    assert ("1 missing-motion start skipped: the informed trial's labels already explain most of "
-            "the points it would make a motion (ours, `rv_missing_gate`)") in V.rv_summary(gated, None)
-    assert "1 search for a missed motion skipped" in fine_tuning_facts(seq, gated, None)
-    assert "skipped" not in V.rv_summary(own, None) + fine_tuning_facts(seq, own, None)
+    assert ("1 missing-motion start skipped: the informed trial's labels already explain the "
+            "points it would make a motion (ours, `rv_missing_gate`)") in V.rv_summary(gated, None)
+    assert "subspace votes; no search for a missed motion needed." in fine_tuning_facts(seq, gated, None)
+    assert "skipped" not in V.rv_summary(own, None) and "needed" not in fine_tuning_facts(seq, own, None)
     text = V.rv_summary(mixed, None)
     assert f"then {plain} of plain RV from random starts, compared with it (ours)" in text
     assert "missed motion" not in text and "missed motion" not in fine_tuning_facts(seq, mixed, None)
