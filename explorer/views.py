@@ -900,16 +900,17 @@ def margin_top(z) -> float:
     passes, so the colour bar ends at a labelled tick and no value lies beyond it (ending
     at the largest value, it ended past its last label: ±100 on a map of ±991)."""
     z = np.asarray(z, dtype=float)
-    big = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else 0.0
+    z = z[np.isfinite(z)]  # (an infinite margin has no decade: the bar ends at the finite ones')
+    big = min(float(np.max(np.abs(z))), 300.0) if z.size else 0.0
     nats = 10.0 ** big - 1.0  # (signed_log undone)
     decade = 10.0 ** max(1, math.ceil(math.log10(nats) - 1e-9)) if nats > 10 else 10.0
     return float(signed_log(decade))
 
 
 def margin_text(m: float) -> str:
-    """A margin (nats) as written in its cell, in at most four characters: ``991``,
-    ``-38``, ``1.2k``, ``-12k`` (the sign of a negative one only: the colour tells it too,
-    and the hover gives it exactly); "" for NaN."""
+    """A margin (nats) as written in its cell, in four characters below 100,000 nats:
+    ``991``, ``-38``, ``1.2k``, ``-12k`` (``-100k`` beyond; the sign of a negative one only:
+    the colour tells it too, and the hover gives it exactly); "" for NaN."""
     if not np.isfinite(m):
         return ""
     a, sign = abs(m), "-" if round(m) < 0 else ""

@@ -463,6 +463,9 @@ def test_margin_bar_ends_at_a_labelled_tick_past_every_value():
         assert where[-1] == pytest.approx(top) and where[0] == pytest.approx(-top)
         assert labels[-1] == f"+{max(10, 10 ** int(np.ceil(np.log10(max(big, 1.0)))))}", (big, labels)
         assert labels[len(labels) // 2] == "0" and len(labels) % 2 == 1
+    # an infinite margin (a partition no other explains) leaves the bar at the finite ones'
+    assert V.margin_top(V.signed_log(np.array([np.inf, 991.0, -np.inf]))) == pytest.approx(
+        V.margin_top(V.signed_log(np.array([991.0]))))
 
 
 def test_margin_numbers_are_short_and_sized_to_their_cells():
