@@ -5,7 +5,8 @@ trial and ``rv_missing_trials`` trials from every missing-motion start it runs (
 ``rv_missing_gate``, the default, the informed trial first and alone, here, then the starts
 its result leaves unexplained), up to 7 trials that do not depend on one another (each
 draws from its own random stream and keeps its own convergence test,
-:func:`laav.own_chain.informed_side_by_side`), then polishes each distinct result and scores it (:func:`laav.own_chain.candidate_part`). With a :class:`VotingHelper`
+:func:`laav.own_chain.informed_side_by_side`), then polishes each distinct result and scores
+it (:func:`laav.own_chain.candidate_part`). With a :class:`VotingHelper`
 (``laav.Pipeline(..., helper=...)``, ``laav.random_voting(..., helper=...)``) every other
 start's trial, polish and score run in the helper's process while this one does the rest,
 on the machine's second core; the results are those of doing it all here
