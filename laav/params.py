@@ -151,7 +151,7 @@ class LaavParams:
         / 0.5 / 0.75, ties to the faster; the accuracy is that of 0 within the run-to-run
         noise (Hopkins155, 5 seeds: 0.18 % against 0.19 %, 2 runs better and 1 worse; held
         out 0.19-0.24 % over three fold shuffles; σ = 1 px the same errors), the
-        three-motion median time 0.59 -> 0.46 x plain RV's
+        three-motion median time 0.51 -> 0.33 x plain RV's
         (``benchmarks/TUNING.md``, "A gate for the missing-motion starts").
     rv_batch : int
         Voting trials run side by side in one batched numpy call (plain RV's random
