@@ -108,15 +108,16 @@ TOUR: tuple[TourStep, ...] = (
     # the result's two cards are two steps: each is 520-540 px high, and the main area beside the
     # tour's panel has about 600 of a projector's 768-800 (one card at a time fits, not both)
     TourStep(
-        "5 · Result: one motion per point",
+        "5a · Result: one motion per point",
         "Every point now belongs to one of the C motions, one colour each, in every frame (the frame "
         "slider in the sidebar plays them). With ground truth the frame view rings the misassigned ones "
         "in black, and the next step gives every stage's error.",
         ("frame",), color="final", color_no_truth="final", error_rings=True),
     TourStep(
-        "5 · Numbers: every stage's error",
+        "5b · Numbers: every stage's error",
         "With ground truth the Numbers card gives every stage's error (the share of points misassigned "
-        "under the best matching of motions), plain Random Voting's beside them. Atoms, the merge "
+        "under the best matching of motions), plain Random Voting's beside them; without, each "
+        "stage's result and time. Atoms, the merge "
         "and the voting are random: after the tour, the Seed sweep card's button runs seeds 0-9 to "
         "show whether a result is typical or a bad draw.",
         ("numbers",), color="final", color_no_truth="final", error_rings=True),

@@ -287,7 +287,7 @@ def test_three_cars_worst_seed_is_one_click_away(hopkins_root):
 # ---------------------------------------------------------------------- the tour
 def test_tour_texts_are_two_sentences_each():
     # the stages in order; the result (stage 5) in two steps: its labels, then its numbers
-    assert [s.title.split(" ·")[0] for s in TOUR] == ["1", "2", "3", "4", "5", "5"]
+    assert [s.title.split(" ·")[0] for s in TOUR] == ["1", "2", "3", "4", "5a", "5b"]
     for s in TOUR:
         # sentence ends: a full stop, ! or ? followed by a space and a capital (or the end)
         ends = re.findall(r"[.!?](?=\s+[A-Z]|\s*$)", s.text)
