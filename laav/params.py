@@ -144,9 +144,9 @@ class LaavParams:
         least this share of the start's new motion unexplained (farther than 1 px RMS, in
         ``noise_adaptive``'s scaled unit, from its motion's rank-4 trajectory subspace,
         :func:`laav.own_chain.unexplained`). Every start runs when the informed trial did
-        not settle, and when the test cannot tell (the median point within less than
-        twice the threshold of its subspace: pixel noise of about 0.5 px and more); the
-        starts skipped are named in ``Voting.skipped_starts``. The default 0.5 (since
+        not settle, and when the test cannot tell (the median point farther than half the
+        threshold from its subspace: pixel noise of about 0.5 px and more); the starts
+        skipped are named in ``Voting.skipped_starts``. The default 0.5 (since
         2026-12-05) was chosen by 5-fold cross-validation grouped by video among 0 / 0.25
         / 0.5 / 0.75, ties to the faster; the accuracy is that of 0 within the run-to-run
         noise (Hopkins155, 5 seeds: 0.18 % against 0.19 %, 2 runs better and 1 worse; held
