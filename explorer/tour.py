@@ -11,7 +11,8 @@ paper does otherwise it names the ``paper`` preset (``LaavParams.paper()``).
 colour-by (a :data:`explorer.views.COLOR_MODES` key; ``color_no_truth`` instead for a
 sequence without ground truth; None leaves it as it is); ``error_rings`` shows (True) or hides
 (False) the frame view's misclassified rings at that step (None: as before the tour): hidden on
-the atoms, shown on the result. A text follows
+the atoms, shown on the result; ``card_title`` replaces the highlighted card's title while the
+step is shown (the frame view is card 1, the atoms', and also the result's view). A text follows
 the result shown (:meth:`TourStep.text_for`): ``{fine}`` is its number of fine models (``3C``,
 ``2C``) and ``{paper_fine}`` says whether that is the paper's 2C; ``text_epipolar`` /
 ``text_joint`` replace the text for the merge that decided, ``text_pair`` for atoms checked on
@@ -42,6 +43,7 @@ class TourStep:
     text_pair: str | None = None
     facts: str | None = None
     error_rings: bool | None = None
+    card_title: str | None = None
 
     def text_for(self, params, n_motions: int, complete: bool = True) -> str:
         """The text for a result of ``params`` (a :class:`laav.LaavParams`) with C =
@@ -112,7 +114,8 @@ TOUR: tuple[TourStep, ...] = (
         "Every point now belongs to one of the C motions, one colour each, in every frame (the frame "
         "slider in the sidebar plays them). With ground truth the frame view rings the misassigned ones "
         "in black, and the next step gives every stage's error.",
-        ("frame",), color="final", color_no_truth="final", error_rings=True),
+        ("frame",), color="final", color_no_truth="final", error_rings=True,
+        card_title="5a · Result: every point's motion in one frame"),
     TourStep(
         "5b · Numbers: every stage's error",
         "With ground truth the Numbers card gives every stage's error (the share of points misassigned "

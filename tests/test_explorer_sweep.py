@@ -424,11 +424,25 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     # result), their errors ringed: the misclassified layer is back after step 1 hid it
     assert tour.w_next.label == "Finish" and ex.controls.color_mode == "final"
     assert [n for n, c in cards.items() if c.visible] == ["numbers"] and outlined(cards["numbers"])
+    frame_title = cards["frame"].title
     tour.w_back.clicks += 1
     assert [n for n, c in cards.items() if c.visible] == ["frame"] and outlined(cards["frame"])
     assert TRUTH_LAYER in ex.frame_view.w_layers.value and ex.controls.color_mode == "final"
+    # the frame view is card 1 (the atoms'); on the result's step its header says so
+    assert cards["frame"].title == TOUR[-2].card_title and cards["frame"].title.startswith("5a · ")
+    tour.w_back.clicks += 1
+    assert cards["frame"].title == frame_title  # step 4 shows no frame view; then step 1's
+    tour.go(0)
+    assert cards["frame"].title == frame_title
+    tour.go(len(TOUR) - 2)
+    assert cards["frame"].title.startswith("5a · ")
     tour.w_next.clicks += 1
+    assert cards["frame"].title == frame_title
     assert TRUTH_LAYER in ex.frame_view.w_layers.value
+    tour.go(len(TOUR) - 2)
+    tour.end()  # ended on the result's step: card 1's own title is back
+    assert cards["frame"].title == frame_title
+    tour.start(len(TOUR) - 1)
     tour.w_next.clicks += 1  # Finish
     assert not tour.active and not tour.panel.visible
     assert ex.frame_view.w_layers.value == layers  # as before the tour

@@ -133,6 +133,7 @@ class TourView:
         self.step = 0
         self.active = False
         self._saved: dict = {}  # card name -> (visible, styles), colour mode, before the tour
+        self._titles: dict = {}  # card name -> its title before the tour (a step may rename it)
         self._n_js = 0
         self._keys_done = 0  # the page's key presses applied (the w_key box's count)
         self._run = ""  # the running tour's token (the page names its presses by it)
@@ -181,6 +182,7 @@ class TourView:
         if not self.active:
             self.host.complete_page()  # the steps' cards, if the later cards are still to come
             self._saved = {name: (c.visible, dict(c.styles or {})) for name, c in self.cards.items()}
+            self._titles = {name: c.title for name, c in self.cards.items() if isinstance(c, pn.Card)}
             self._saved["__color"] = self.controls.color_mode
             view = getattr(self.host, "frame_view", None)  # its misclassified rings before the tour
             self._errors_before = None if view is None else view.error_rings
@@ -210,6 +212,10 @@ class TourView:
                 c.visible = name in s.cards
                 c.styles = {**self._saved[name][1],
                             **(HIGHLIGHT if name == s.cards[0] else NO_HIGHLIGHT)}
+                if name in self._titles:
+                    title = s.card_title if name == s.cards[0] and s.card_title else self._titles[name]
+                    if c.title != title:
+                        c.title = title
             self.step_md.object = f"Tour · step {self.step + 1} of {len(TOUR)}"
             self.title_md.object = s.title
             self.text_md.object = self._text(s)
@@ -260,6 +266,8 @@ class TourView:
             for name, c in self.cards.items():
                 visible, styles = self._saved[name]
                 c.visible, c.styles = visible, {**styles, **NO_HIGHLIGHT}
+                if name in self._titles and c.title != self._titles[name]:
+                    c.title = self._titles[name]
             self.panel.visible = False
         color = self._saved.get("__color")
         if color is not None and self.controls.color_mode != color:
