@@ -756,7 +756,8 @@ class Explorer:
                 self.graph_view.draw(result, self.frame, self.fine_colors)
                 self.coarse_view.draw(seq, result)
                 self.coarse_view.epipolar.draw(seq, result)
-                self.rv_view.draw(seq, result.voting, plain, pending=preview)
+                own = preview and result.params.rv_select == "laav"  # (its missing-motion starts)
+                self.rv_view.draw(seq, result.voting, plain, pending=preview, own_chain=own)
                 self.tour.refresh()
                 num = self.numbers_view.draw(seq, result, plain)
                 if plain is not None or new_seq:  # (else the last check stays until plain RV
@@ -783,7 +784,8 @@ class Explorer:
                 s.show_result(seq, num["error_final"], sum(result.timings.values()) if preview
                               else self.state.compute_seconds,
                               non_defaults(settings, self.state.default_motions(seq), seq.is_complete),
-                              self.change, ahead=self.state.computed_ahead(result), preview=preview)
+                              self.change, ahead=self.state.computed_ahead(result), preview=preview,
+                              own=own)
                 self.view3d.show_first()
                 self.compare.redraw()
             self.view3d.draw(seq, result, self.style["color"], self.controls.w_frame.value, new_seq)

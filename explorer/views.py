@@ -1359,17 +1359,23 @@ def _selection(voting: laav.Voting) -> str:
 #: The Random Voting card's line under a preview (:attr:`ExplorerState.on_preview`).
 PREVIEW_NOTE = ("*LAAV's own trial, shown first: plain RV's runs and the model selection (ours) "
                 "are still computing, and may replace these labels.*")
+#: ... under a preview of LAAV's own chain (``rv_select="laav"``): the informed trial alone,
+#: while the missing-motion starts its result leaves unexplained run (``rv_missing_gate``).
+PREVIEW_NOTE_OWN = ("*LAAV's informed trial, shown first: it leaves points unexplained, so the "
+                    "trials for a missed motion (ours) are still computing, and may replace "
+                    "these labels.*")
 
 
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
-               pending: bool = False, truth: np.ndarray | None = None) -> str:
+               pending: bool = False, truth: np.ndarray | None = None, own: bool = False) -> str:
     """Markdown: LAAV's fine-tuning beside plain RV, with their iteration counts, and
     whether they end at the same segmentation (:func:`rv_verdict`; ``truth``: the
     sequence's ground truth, or None); ``pending``: ``fine_tuning`` is a preview
-    (:data:`PREVIEW_NOTE`)."""
+    (:data:`PREVIEW_NOTE`; with ``own``, LAAV's own chain's: :data:`PREVIEW_NOTE_OWN`)."""
     verdict = None if pending else rv_verdict(fine_tuning, plain, truth)
+    note = PREVIEW_NOTE_OWN if own else PREVIEW_NOTE
     return (_rv_line(fine_tuning, "LAAV fine-tuning (RV started from the coarse labels)") + "  \n"
-            + (PREVIEW_NOTE + "  \n" if pending else "")
+            + (note + "  \n" if pending else "")
             + _rv_line(plain, "Plain RV (random starts; the same sequence, RV settings and polish, "
                               "ours)") + "  \n"
             + (verdict + "  \n" if verdict else "")

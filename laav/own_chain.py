@@ -67,7 +67,8 @@ def missing_motion_start(points: np.ndarray, init: np.ndarray, n_motions: int, g
     return np.where(new, C - 1, L)
 
 
-def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -> Voting:
+def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None,
+                   preview=None) -> Voting:
     """``rv_select="laav"``: LAAV's informed trial and its missing-motion starts
     (``rv_missing_trials`` trials each), each polished, the one of least
     :func:`joint_score` kept and descended (with ``rv_descent_from_trial`` from its polished
@@ -78,7 +79,9 @@ def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -
     of the start's new motion unexplained (:func:`unexplained`); the starts not run are named
     in ``Voting.skipped_starts``. A start that runs gives the candidates it gives without the
     gate (each trial on its own stream), so when every start runs the labels are the gate's
-    off labels."""
+    off labels. ``preview`` (a callable, for a live view) is given the informed trial's
+    result alone when some start runs, before its trials do (see
+    :func:`laav.voting.random_voting`)."""
     P = points.shape[1]
     pairs = [(g, h) for g in range(C) for h in range(g + 1, C)]
     streams = rng.spawn(1 + len(pairs))  # [coarse start, one per pair]
@@ -118,6 +121,8 @@ def own_candidates(points, C, params, rng, init, labels0, votes0, helper=None) -
     skipped = tuple(name for (name, *_), r in zip(groups, run) if not r)
     if not any(run):
         return dataclasses.replace(alone, skipped_starts=skipped)
+    if preview is not None:  # (a live view draws LAAV's own trial while the starts run)
+        preview(dataclasses.replace(alone, skipped_starts=skipped))
     more = [s for (*_, group), r in zip(groups, run) if r for s in group]
     more_uses = [votes_with_subspace(params, known) for *_, known in more]
     rest = candidates(points, C, params, [s[1:4] for s in more], extra, more_uses, helper)

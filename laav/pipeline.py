@@ -156,8 +156,9 @@ class Pipeline:
     params : LaavParams, optional
     seed : int
     preview : callable, optional
-        Given the result with LAAV's own fine-tuning alone before plain Random Voting runs
-        (as :meth:`update`'s ``preview``).
+        Given the result with LAAV's own fine-tuning alone before plain Random Voting, or
+        the missing-motion starts of LAAV's own chain, run (as :meth:`update`'s
+        ``preview``).
     helper : laav.helper.VotingHelper, optional
         Speed only: LAAV's own voting trials run half in the helper's process (the machine's
         second core); the labels are those without it. May be set or changed later
@@ -296,15 +297,19 @@ class Pipeline:
                             and seq.is_complete):  # plain RV will run: LAAV's own trial first
                         t += self._preview(preview, p, init, memo, timings, t)
                     votes = self._fit_votes_elsewhere(st["coarse"])
+                    own = self._own_preview(preview, timings, t, p, init)
                     try:  # no atom: plain RV, whose input checks segment() made already
                         st["voting"] = random_voting(seq, C, p, self._rng("voting"), init_labels=init,
                                                      plain_memo=memo,
-                                                     check_input=False, helper=self.helper)
+                                                     check_input=False, helper=self.helper,
+                                                     preview=own)
                     except BaseException:
                         if votes is not None:
                             self.helper.stop(votes[1])
                         raise
                     self._voting_memo = (key, st["voting"])
+                    if own is not None:
+                        t += own.spent  # (the preview's own time is not the stage's)
                     waited = time.perf_counter()
                     self._take_votes(votes)
                     waited = time.perf_counter() - waited
@@ -361,6 +366,27 @@ class Pipeline:
         preview(self._result(voting, now))
         return time.perf_counter() - t_call
 
+    def _own_preview(self, preview, timings: dict, t: float, p: LaavParams, init):
+        """``preview`` as :func:`random_voting`'s hook for LAAV's own chain (``rv_select=
+        "laav"``, complete tracks): called with the informed trial's result alone when the
+        missing-motion gate lets some start through, it hands ``preview`` that result, its
+        voting time counted from ``t``; the seconds ``preview`` took are added up in its
+        ``spent``. None when there is no ``preview`` or another chain runs."""
+        if preview is None or p.rv_select != "laav" or init is None or not self.seq.is_complete:
+            return None
+
+        def hook(voting: Voting) -> None:
+            now = dict(timings)
+            now["voting"] += time.perf_counter() - t
+            t_call = time.perf_counter()
+            try:
+                preview(self._result(voting, now))
+            finally:
+                hook.spent += time.perf_counter() - t_call
+
+        hook.spent = 0.0
+        return hook
+
     def update(self, *, preview=None, **changed) -> LaavResult:
         """Change parameters (any :class:`LaavParams` field, ``seed`` or ``n_motions``)
         and recompute only the stages downstream of the change.
@@ -374,7 +400,11 @@ class Pipeline:
         before plain RV and the selection run (for a live view: most of a seed change's
         time is theirs). The trial is not run again after it, the returned result is the
         same with or without ``preview``, and the time ``preview`` takes is not in the
-        result's ``timings``.
+        result's ``timings``. With LAAV's own chain (``rv_select="laav"``, the default;
+        complete tracks) it is given the result with the informed trial alone (polished,
+        selected and descended; ``voting.skipped_starts`` names the missing-motion starts not
+        run) whenever the gate (``rv_missing_gate``) lets some start through, before their
+        trials run; the same holds.
 
         Returns
         -------

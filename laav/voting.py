@@ -74,7 +74,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
                   seed: int | np.random.Generator | None = 0, init_labels: np.ndarray | None = None,
                   weights: np.ndarray | None = None, *, random_state=None,
                   plain_memo: dict | None = None, visible: np.ndarray | None = None,
-                  check_input: bool = True, helper=None) -> Voting:
+                  check_input: bool = True, helper=None, preview=None) -> Voting:
     """Segment trajectories into ``n_motions`` rigid motions by Random Voting.
 
     Parameters
@@ -123,6 +123,13 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         Speed only: LAAV's own trials (``rv_select="laav"`` on complete tracks) run half
         in the helper's process, half here (with ``rv_missing_gate`` the informed trial
         alone here first); the labels are those without it.
+    preview : callable, optional
+        For a live view: with ``rv_select="laav"`` on complete tracks, when the missing-motion
+        gate (``rv_missing_gate``) lets some start through, called (in this thread) with the
+        :class:`Voting` of LAAV's informed trial alone, polished, selected and descended
+        (what is returned when the gate lets none through; ``skipped_starts`` names the
+        starts not run), before those starts' trials run. Not called otherwise; the labels
+        returned are the same with or without it.
 
     Returns
     -------
@@ -179,7 +186,7 @@ def random_voting(seq: Sequence | np.ndarray, n_motions: int, params: LaavParams
         return _plain_result(seq, points, C, params, rng, best, trials, ended, select,
                              warn=check_input)
     return _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo,
-                        helper=helper)
+                        helper=helper, preview=preview)
 
 
 def _start_arrays(init_labels, weights, P: int):
@@ -378,7 +385,7 @@ def _own_key(labels: np.ndarray, params: LaavParams) -> tuple:
 
 
 def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_memo,
-                 mk=None, helper=None) -> Voting:
+                 mk=None, helper=None, preview=None) -> Voting:
     """LAAV's fine-tuning: the informed trial started from ``init_labels`` and, with the
     selection, plain RV's runs beside it (:mod:`laav.selection`), or with ``rv_select="laav"``
     on complete tracks LAAV's own candidates (:mod:`laav.own_chain`). ``mk`` (missing
@@ -387,7 +394,8 @@ def _fine_tuning(points, C, params, rng, init_labels, weights, select, plain_mem
     init, labels0, votes0 = _informed_start(points, C, params, rng, init_labels, weights)
     known = init >= 0
     if params.rv_select == "laav" and mk is None:
-        return own_chain.own_candidates(points, C, params, rng, init, labels0, votes0, helper)
+        return own_chain.own_candidates(points, C, params, rng, init, labels0, votes0, helper,
+                                        preview)
     if not select:  # the LAAV paper's fine-tuning: the informed trial alone
         extra = for_informed_trial(points, params, known, masks)  # ours: subspace votes
         first, _, trials, _ = run_trials(points, C, params, rng, (labels0, votes0), n_plain=0,

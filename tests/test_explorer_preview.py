@@ -1,9 +1,10 @@
-"""A seed (or C, or RV setting) change shows LAAV's own fine-tuning first: the result with
-the informed trial alone, while plain RV and the selection (most of the time) still
-compute; then the result. ``laav.Pipeline.update(preview=...)`` makes it; the state hands
-it on as ``on_preview``; the app draws it with a status line that says so. Only with plain
-RV beside LAAV's trial (``LaavParams.with_plain_rv()``, the default until 2026-12-02): the
-default runs no plain RV, so there is nothing to wait for and no preview."""
+"""A change shows LAAV's own fine-tuning first when more is still to compute: the result
+with the informed trial alone, then the result. ``laav.Pipeline.update(preview=...)`` makes it;
+the state hands it on as ``on_preview``; the app draws it with a status line that says what is
+still computing. With plain RV beside LAAV's trial (``LaavParams.with_plain_rv()``, the default
+until 2026-12-02): plain RV and the selection. In the default, LAAV's own chain: the
+missing-motion starts its gate (``rv_missing_gate``) lets through; when it lets none through
+there is nothing to wait for and no preview."""
 
 from __future__ import annotations
 
@@ -12,9 +13,9 @@ import pytest
 
 import laav
 from explorer import Explorer
-from explorer.cards.status import PREVIEW_STATUS
+from explorer.cards.status import PREVIEW_OWN, PREVIEW_PLAIN, PREVIEW_STATUS
 from explorer.state import ExplorerState
-from explorer.views import PREVIEW_NOTE
+from explorer.views import PREVIEW_NOTE, PREVIEW_NOTE_OWN
 from laav.synthetic import make_sequence
 
 SEQ = make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
@@ -69,6 +70,7 @@ def test_the_app_draws_the_preview_then_the_result(ex):
     assert [p for p, *_ in seen] == [True, False]
     (_, text1, rv1, applied1, gen1, shown1), (_, text2, rv2, applied2, gen2, shown2) = seen
     assert PREVIEW_STATUS in text1 and "seed \\= 2" in text1 and PREVIEW_NOTE in rv1
+    assert PREVIEW_PLAIN.split("{ms}")[1] in text1  # plain RV and the selection to come
     assert applied1 < gen1 and shown1  # drawn, but not yet the applied result (wait())
     assert PREVIEW_STATUS not in text2 and "seed \\= 2" in text2 and PREVIEW_NOTE not in rv2
     assert applied2 == gen2 == gen1 and shown2
@@ -89,15 +91,52 @@ def test_a_preview_gives_way_to_the_last_result_when_its_result_will_not_come(ex
     assert PREVIEW_STATUS not in ex.status_bar._status_text
 
 
-def test_the_default_has_no_preview():
-    """The default (LAAV's own chain) runs no plain RV: a seed change draws the result once."""
-    st = ExplorerState(SEQ, 3, seed=0)
+def test_the_default_has_no_preview_when_its_gate_runs_no_start():
+    """The default (LAAV's own chain) runs no plain RV: a seed change whose informed trial
+    explains the points (the gate lets no missing-motion start through; the demo at seed 3)
+    draws the result once."""
+    from explorer.demo import demo_sequence
+
+    st = ExplorerState(demo_sequence(), 3, seed=0)
     events = []
     try:
         assert st.wait(120)
         st.on_preview = lambda r, seq, s, gen: events.append("preview")
         st.on_result = lambda r, seq, s, gen: events.append("result")
-        st.request(seed=2)
+        st.request(seed=3)
         assert st.wait(120) and events == ["result"]
+        assert len(st.result.voting.skipped_starts) == 3
     finally:
         st.close()
+
+
+def test_the_default_previews_its_informed_trial_while_the_gate_runs_starts(monkeypatch):
+    """When the gate lets missing-motion starts through (here: every point judged
+    unexplained), a seed change draws LAAV's informed trial first, its status line and RV
+    card saying that the trials for a missed motion are still computing, then the result."""
+    import laav.own_chain as V
+
+    monkeypatch.setattr(V, "unexplained", lambda points, labels, C, params, fits=None:
+                        np.ones(labels.size, bool))
+    e = Explorer(SEQ, 3, viser=False)
+    try:
+        assert e.wait(120)
+        seen = []
+        draw = e._apply_result
+
+        def spy(result, seq, settings, gen, preview=False):
+            draw(result, seq, settings, gen, preview)
+            seen.append((preview, e.status_bar._status_text, e.rv_md.object, result))
+
+        e._apply_result = spy
+        e.controls.w_seed.value = 2
+        assert e.wait(120)
+        assert [p for p, *_ in seen] == [True, False]
+        (_, text1, rv1, pre), (_, text2, rv2, res) = seen
+        assert PREVIEW_OWN.split("{ms}")[1] in text1 and "seed \\= 2" in text1
+        assert PREVIEW_NOTE_OWN in rv1 and PREVIEW_NOTE not in rv1
+        assert PREVIEW_STATUS not in text2 and PREVIEW_NOTE_OWN not in rv2
+        assert pre.voting.selected == "informed" and len(res.voting.trial_iterations) > 1
+        np.testing.assert_array_equal(res.labels, laav.segment(SEQ, 3, seed=2).labels)
+    finally:
+        e.close()

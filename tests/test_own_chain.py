@@ -399,3 +399,39 @@ def test_the_gate_runs_every_start_when_its_test_cannot_tell_or_the_trial_did_no
     short_off = segment(seq, 3, capped.replace(rv_missing_gate=0.0), seed=1).voting
     np.testing.assert_array_equal(short.labels, short_off.labels)
     assert short.costs == short_off.costs and len(short.costs) == 7
+
+
+def test_the_pipeline_previews_the_informed_trial_while_the_starts_run(monkeypatch):
+    """A live view's preview (``Pipeline``'s ``preview``) in LAAV's own chain: when the gate
+    lets a start through, the result with the informed trial alone comes first -- the labels
+    and trial the gate returns when it lets none through -- then the result, the same as
+    without a preview (an update's too); when the gate lets none through, no preview."""
+    import laav.own_chain as V
+    from explorer.demo import demo_sequence
+    from laav import Pipeline
+
+    seq = demo_sequence()
+    got = []
+    closed = {s: Pipeline(seq, 3, seed=s, preview=got.append).result for s in (1, 3)}
+    assert all(r.voting.skipped_starts for r in closed.values()) and got == []
+    with monkeypatch.context() as m:
+        m.setattr(V, "unexplained", lambda points, labels, C, params, fits=None:
+                  np.ones(labels.size, bool))
+        pipe = Pipeline(seq, 3, seed=1, preview=got.append)
+        opened = {1: pipe.result}
+        previews = {1: got[:]}
+        got.clear()
+        opened[3] = pipe.update(seed=3, preview=got.append)
+        previews[3] = got[:]
+        without = {s: Pipeline(seq, 3, seed=s).result for s in (1, 3)}
+    for s in (1, 3):
+        assert len(previews[s]) == 1, s
+        pre, res, ref = previews[s][0], opened[s], without[s]
+        assert pre.voting.selected == "informed" and pre.voting.skipped_starts == ()
+        np.testing.assert_array_equal(pre.labels, closed[s].labels)
+        assert pre.voting.trial_iterations == closed[s].voting.trial_iterations
+        assert pre.atoms is res.atoms and pre.coarse is res.coarse and pre.seed == s
+        assert len(res.voting.trial_iterations) == 7  # the informed trial and six for missed motions
+        np.testing.assert_array_equal(res.labels, ref.labels)
+        assert res.voting.costs == ref.voting.costs
+        assert res.voting.trial_iterations == ref.voting.trial_iterations

@@ -420,7 +420,9 @@ def test_preview_is_laavs_own_fine_tuning_before_plain_rv():
 
 def test_preview_only_when_plain_rv_runs_afresh():
     """No preview where nothing waits on plain RV: a λ change (its runs are kept), the
-    paper's fine-tuning (no plain RV), incomplete tracks (another path)."""
+    paper's fine-tuning (no plain RV), incomplete tracks (another path). The default runs no
+    plain RV: its preview comes when its gate lets a missing-motion start through
+    (tests/test_own_chain.py)."""
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=0)
     calls = []
     pipe = Pipeline(seq, 3, PLAIN)
@@ -431,10 +433,12 @@ def test_preview_only_when_plain_rv_runs_afresh():
     pipe.update(n_motions=2, preview=calls.append)
     assert len(calls) == 1
     Pipeline(seq, 3, LaavParams.paper()).update(seed=1, preview=calls.append)
-    Pipeline(seq, 3).update(seed=1, preview=calls.append)  # the default: no plain RV
     hidden = synthetic.occlude(seq, 0.2, 0)
     Pipeline(hidden, 3, PLAIN).update(seed=1, preview=calls.append)
     assert len(calls) == 1
+    own = Pipeline(seq, 3).update(seed=1, preview=calls.append)  # the default: no plain RV
+    opened = len(own.voting.trial_iterations) > 1  # (a start ran: here one of three)
+    assert opened and len(calls) == 2 and calls[1].voting.selected == "informed"
 
 
 def test_a_step_back_to_a_seed_reuses_plain_rvs_runs(monkeypatch):

@@ -83,12 +83,13 @@ class RVView:
                               pn.pane.Bokeh(self.fig_margin)),
                          self.rv_md)
 
-    def draw(self, seq, laav_voting, plain, pending: bool = False) -> None:
+    def draw(self, seq, laav_voting, plain, pending: bool = False, own_chain: bool = False) -> None:
         """``seq``: the sequence (its ground truth scores the error chart); ``pending``:
         ``laav_voting`` is a preview, LAAV's own trial before plain RV and the selection
-        (:attr:`explorer.state.ExplorerState.on_preview`). The same runs again (a λ or
+        (:attr:`explorer.state.ExplorerState.on_preview`), with ``own_chain`` before the
+        missing-motion starts of LAAV's own chain. The same runs again (a λ or
         colour change that left the fine-tuning as it was) are not drawn again."""
-        drawn = (seq, laav_voting, plain, bool(pending))
+        drawn = (seq, laav_voting, plain, (bool(pending), bool(own_chain)))
         if self._drawn is not None and all(a is b for a, b in zip(drawn[:3], self._drawn[:3])) \
                 and drawn[3] == self._drawn[3]:
             return
@@ -106,7 +107,8 @@ class RVView:
         set_data(self.src_err_laav, own)
         set_data(self.src_err_plain, other)
         self.plain = plain
-        self.rv_md.object = V.rv_summary(laav_voting, plain, pending=pending, truth=seq.labels)
+        self.rv_md.object = V.rv_summary(laav_voting, plain, pending=pending, truth=seq.labels,
+                                         own=own_chain)
         ours = laav_voting is not None and (laav_voting.informed_subspace_weight or 0) > 0
         for fig in (self.fig_error, self.fig_changed, self.fig_margin):
             item = fig.legend.items[0]

@@ -12,8 +12,13 @@ from .. import views as V
 from .base import Alert, Markdown, page_box, shown_style
 
 #: What the status line says while a preview is shown (``ExplorerState.on_preview``);
-#: a browser benchmark waits for the result by its absence.
-PREVIEW_STATUS = "plain RV and the model selection still computing…"
+#: a browser benchmark waits for the result by its absence. The line says what is still
+#: computing: plain RV and the selection (:data:`PREVIEW_PLAIN`) or, in LAAV's own chain, the
+#: missing-motion starts (:data:`PREVIEW_OWN`).
+PREVIEW_STATUS = "still computing…"
+PREVIEW_PLAIN = "LAAV's own fine-tuning in {ms} ms; plain RV and the model selection " + PREVIEW_STATUS
+PREVIEW_OWN = ("LAAV's informed trial in {ms} ms; the trials for a missed motion (ours) "
+               + PREVIEW_STATUS)
 
 
 RECOMPUTING = "Recomputing… (the views keep the last result until the new one is ready)"
@@ -148,15 +153,16 @@ class StatusBar:
         self.url_alert.visible = bool(problems)
 
     def show_result(self, seq, error_final, compute_seconds: float, changed: list[str], change,
-                    ahead: str | None = None, preview: bool = False) -> None:
+                    ahead: str | None = None, preview: bool = False, own: bool = False) -> None:
         """The status line for a shown result (``changed``: the settings off their defaults)
         and what moved since the last (``change``: :class:`state.Change` or None); ``ahead``:
         how it was computed before it was asked for (``"ahead, while idle"``, ``"by the seed
-        sweep"``: :meth:`ExplorerState.computed_ahead`), or None."""
+        sweep"``: :meth:`ExplorerState.computed_ahead`), or None; ``preview``: a preview's
+        line, with ``own`` of LAAV's own chain (:data:`PREVIEW_OWN`)."""
         err = "" if error_final is None else f" — final error **{100 * error_final:.1f} %**"
         if preview:  # LAAV's own trial first (ExplorerState.on_preview)
             err = "" if error_final is None else f" — error **{100 * error_final:.1f} %**"
-            how = f"LAAV's own fine-tuning in {1000 * compute_seconds:.0f} ms; {PREVIEW_STATUS}"
+            how = (PREVIEW_OWN if own else PREVIEW_PLAIN).format(ms=f"{1000 * compute_seconds:.0f}")
         else:
             how = f"computed in {1000 * compute_seconds:.0f} ms{', ' + ahead if ahead else ''}"
         self.status.object = self._status_text = (
