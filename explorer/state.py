@@ -292,11 +292,13 @@ class Change:
     errors: tuple
     moved: np.ndarray
 
-    def text(self) -> str:
+    def text(self, final: str = "final") -> str:
         """One line, e.g. ``R1 20 → 21: coarse 3.6 → 14.2 %, final 0.0 → 1.1 %, 17 points
-        changed motion``."""
+        changed motion``; ``final`` names the new labels' stage (a preview's: LAAV's trial,
+        the final labels still to come)."""
         what = ", ".join(f"{n} {_fmt(a)} → {_fmt(b)}" for n, a, b in self.settings) or "recomputed"
-        parts = [f"{st} {100 * a:.1f} → {100 * b:.1f} %" for st, a, b in self.errors]
+        parts = [f"{final if st == 'final' else st} {100 * a:.1f} → {100 * b:.1f} %"
+                 for st, a, b in self.errors]
         n = int(self.moved.size)
         parts.append(f"{n} point{'s' if n != 1 else ''} changed motion")
         return f"{what}: {', '.join(parts)}"

@@ -17,6 +17,8 @@ from .base import Alert, Markdown, page_box, shown_style
 #: missing-motion starts (:data:`PREVIEW_OWN`).
 PREVIEW_STATUS = "still computing…"
 PREVIEW_PLAIN = "LAAV's own fine-tuning in {ms} ms; plain RV and the model selection " + PREVIEW_STATUS
+#: The "What changed" line's name for a preview's labels (the final ones still to come).
+PREVIEW_FINAL = "LAAV's trial (so far)"
 PREVIEW_OWN = ("LAAV's informed trial in {ms} ms; the trials for a missed motion (ours) "
                + PREVIEW_STATUS)
 
@@ -169,5 +171,7 @@ class StatusBar:
             f"Showing {V.md_text(seq.name)}{err} ({how}). "
             + (f"Not at the defaults: {V.md_text(', '.join(changed))}." if changed
                else "All settings at their defaults."))
+        # (a preview's labels are LAAV's trial's so far, not the final labels)
+        named = PREVIEW_FINAL if preview else "final"
         self.change_md.object = (NO_CHANGE if change is None else
-                                 f"**What changed:** {V.md_text(change.text())}")
+                                 f"**What changed:** {V.md_text(change.text(named))}")
