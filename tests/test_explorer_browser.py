@@ -908,7 +908,8 @@ JS_STATUS_TOPS = """() => { const out = {};
 def test_what_changed_line_moves_no_card(tmp_path):
     """The "What changed" line keeps its place before the first change: when a change fills
     it, card 1 below stays where it was (it came in with ``display``, and every card below
-    moved down by 41 px)."""
+    moved down by 41 px). At 1024 px the status line wraps once a setting is off its
+    default: it kept the room for its second line, and card 1 stays where it was too."""
     seq = _sequence()
     with _served(seq, viser=False) as (port, browser, created):
         page = browser.new_page(viewport={"width": 1024, "height": 768})
@@ -924,6 +925,23 @@ def test_what_changed_line_moves_no_card(tmp_path):
         page.screenshot(path=str(Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path)) / "what_changed.png"))
         assert after["status"] < after["change"] < after["card"], after
         assert after["card"] == pytest.approx(before["card"], abs=0.5), (before, after)
+        # settings off their defaults make the status line wrap at 1024 px: it had a second
+        # line's room from the start (STATUS_ROOM), so the cards stay where they are
+        for name, value in (("R1", 23.0), ("R2", 41.0), ("seed", 3)):
+            assert page.evaluate(JS_SET_SLIDER, [name, value]) is not None
+            page.get_by_text(f"What changed: {name}").first.wait_for(timeout=30000)
+        later = _settled(page, JS_STATUS_TOPS)
+        # the status text's own height (its lines, not the room kept for them)
+        lines = page.evaluate("""() => { let out = null;
+          const walk = root => { for (const el of root.querySelectorAll('*')) {
+            const text = (el.shadowRoot || el).textContent;
+            if (el.tagName === 'P' && text.startsWith('Showing')) {
+              const r = document.createRange(); r.selectNodeContents(el);
+              out = [r.getBoundingClientRect().height, parseFloat(getComputedStyle(el).lineHeight)]; }
+            if (el.shadowRoot) walk(el.shadowRoot); } };
+          walk(document); return out; }""")
+        assert lines[0] > 1.5 * lines[1], lines  # it wraps now (what the test is about)
+        assert later["card"] == pytest.approx(before["card"], abs=0.5), (before, later)
 
 
 #: Card 3's heat map as the page draws it: the widest number written in a cell (measured on a

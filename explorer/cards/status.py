@@ -34,6 +34,14 @@ NO_CHANGE = "&nbsp;"
 TIGHT_LINE = ":host p { margin: 0.2em 0; }"
 
 
+#: The status line's paragraph keeps two lines of room where the page is narrow (a projector's
+#: 1024 px): there the line wraps once settings are off their defaults ("Not at the defaults:
+#: R1 = 22, ..."), and every card below moved down by a line (17 px) when it first did. At
+#: 1280 px and wider it keeps its one line (the cards stay where they are, nothing to make
+#: room for). A preview's line with many settings can still take three lines at 1024 px.
+STATUS_ROOM = "@media (max-width: 1199px) { :host p { min-height: 2lh; } }"
+
+
 def header_text(seq: laav.Sequence) -> str:
     return f"{V.md_text(seq.name)} · {seq.n_points} points, {seq.n_frames} frames"
 
@@ -82,7 +90,7 @@ class StatusBar:
                                                     stylesheets=[SPIN_PAUSABLE])
         self._status_text = "Computing the first result…"
         self.status = Markdown(self._status_text, margin=(4, 6),
-                               sizing_mode="stretch_width")
+                               sizing_mode="stretch_width", stylesheets=[STATUS_ROOM])
         # an empty line until the first change (NO_CHANGE): its place is kept, so the
         # cards below stay where they are when it is filled
         self.change_md = Markdown(NO_CHANGE, margin=(0, 10), sizing_mode="stretch_width",
