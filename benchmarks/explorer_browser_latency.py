@@ -20,9 +20,10 @@ in the page's own clock:
   bokeh draws, compared with the sequence's x of each point shown; a video falls back to
   "the glyph holds its source's new x"), then two animation frames so that the browser has
   drawn them. The frame move is thus timed to the redraw, whichever side computes it;
-- a move whose result needs plain RV afresh (a seed) first shows a *preview* (LAAV's own
-  fine-tuning, the status line saying plain RV and the selection are still computing;
-  ``ExplorerState.on_preview``): the ``<control>_ms`` wait for the result itself, and
+- a move whose result needs more than LAAV's own trial (plain RV afresh with
+  ``with_plain_rv()``; in the default chain the missed-motion trials its gate lets through)
+  first shows a *preview* (LAAV's own fine-tuning, the status line saying what is still
+  computing; ``ExplorerState.on_preview``): the ``<control>_ms`` wait for the result itself, and
   ``<control>_preview_ms_median`` is the time to the preview on screen (``<control>_previews``:
   how many moves had one);
 - ``scroll_paint_ms``: a plot off screen is painted when it comes into view

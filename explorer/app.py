@@ -727,10 +727,14 @@ class Explorer:
 
     # ------------------------------------------------------------------ results -> cards
     def _apply_result(self, result, seq, settings, gen, preview: bool = False) -> None:
-        """Every card to ``result``. A ``preview`` (LAAV's own fine-tuning while plain RV and
-        the selection compute; :attr:`ExplorerState.on_preview`) is drawn as a result, its
-        status line saying so, and is not yet the applied generation (:meth:`wait`)."""
+        """Every card to ``result``. A ``preview`` (LAAV's own fine-tuning while the rest of
+        the fine-tuning computes; :attr:`ExplorerState.on_preview`) is drawn as a result, its
+        status line saying so, and is not yet the applied generation (:meth:`wait`); a
+        preview for a request a newer one (or a cancel) has replaced is not drawn (its
+        result will not come, and a cancel's :meth:`restore_result` may have run already)."""
         if gen < self.applied_generation or (preview and gen == self.applied_generation):
+            return
+        if preview and gen < self.state.generation:
             return
         was_preview, self.previewing = self.previewing, preview
         t0 = time.perf_counter()

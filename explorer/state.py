@@ -624,8 +624,10 @@ class ExplorerState:
         #: dropped before it started (a newer request)
         self.on_votes: Callable[[LaavResult, bool], None] | None = None
         #: called (worker thread) with a *preview* of a result on its way: LAAV's own
-        #: fine-tuning alone, while plain RV and the selection still compute (a new seed, C
-        #: or RV setting; :meth:`laav.Pipeline.update`'s ``preview``); then, unless the
+        #: fine-tuning alone, while the rest of the fine-tuning still computes (plain RV and
+        #: the selection: a new seed, C or RV setting with ``with_plain_rv()``; in the
+        #: default chain the missed-motion trials its gate lets through;
+        #: :meth:`laav.Pipeline.update`'s ``preview``); then, unless the
         #: computation is cancelled, fails or is superseded, ``on_result`` with the result,
         #: same generation. Not :attr:`result`: the state moves on only with the result
         self.on_preview: Callable[[LaavResult, Sequence, Settings, int], None] | None = None

@@ -1361,9 +1361,9 @@ PREVIEW_NOTE = ("*LAAV's own trial, shown first: plain RV's runs and the model s
                 "are still computing, and may replace these labels.*")
 #: ... under a preview of LAAV's own chain (``rv_select="laav"``): the informed trial alone,
 #: while the missing-motion starts its result leaves unexplained run (``rv_missing_gate``).
-PREVIEW_NOTE_OWN = ("*LAAV's informed trial, shown first: it leaves points unexplained, so the "
-                    "trials for a missed motion (ours) are still computing, and may replace "
-                    "these labels.*")
+PREVIEW_NOTE_OWN = ("*LAAV's informed trial, shown first: the trials for a missed motion (ours) "
+                    "are still computing (its result leaves some motion's points unexplained, or "
+                    "the trial did not settle), and may replace these labels.*")
 
 
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None,

@@ -55,7 +55,7 @@ class Warm(NamedTuple):
     """The first results computed in the child: Futures of the pipeline and of plain RV's
     run for the same settings (each None when the child could not deliver it), and of the
     pipeline's preview (:meth:`laav.Pipeline.update`'s ``preview``: the result with LAAV's
-    own fine-tuning, before plain RV and the selection; its value None when there was none;
+    own fine-tuning, before the rest of the fine-tuning; its value None when there was none;
     the Future itself None: not computed there)."""
 
     pipeline: Future

@@ -145,3 +145,24 @@ def test_the_default_previews_its_informed_trial_while_the_gate_runs_starts(monk
         np.testing.assert_array_equal(res.labels, laav.segment(SEQ, 3, seed=2).labels)
     finally:
         e.close()
+
+
+def test_a_preview_of_a_replaced_request_is_not_drawn(ex):
+    """A cancel (or a newer request) after a preview was made but before it is drawn: the
+    preview is dropped (the cancel's restore found nothing to restore, and its result will
+    not come: drawn, it stayed on screen for good)."""
+    shown = ex.result
+    got = []
+    laav.Pipeline(SEQ, 3, PLAIN).update(seed=4, preview=got.append)
+    gen = ex.state.generation + 1  # the request the preview answers
+    with ex.state._lock:
+        ex.state._gen = gen + 1  # ... then cancelled (ExplorerState.cancel)
+    ex._apply_result(got[0], SEQ, ex.settings.__class__(ex.settings.params, 4, 3), gen, True)
+    assert not ex.previewing and ex.result is shown
+    assert PREVIEW_STATUS not in ex.status_bar._status_text
+    with ex.state._lock:
+        ex.state._gen = gen  # not replaced: drawn
+    ex._apply_result(got[0], SEQ, ex.settings.__class__(ex.settings.params, 4, 3), gen, True)
+    assert ex.previewing and ex.result is got[0]
+    ex.restore_result()
+    assert ex.result is shown

@@ -436,8 +436,18 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     assert cards["frame"].title == frame_title
     tour.go(len(TOUR) - 2)
     assert cards["frame"].title.startswith("5a · ")
+    # a card that retitles itself meanwhile (the numbers card does, for a sequence without
+    # ground truth) keeps its title: the tour gives back only the header it set
+    own_title = cards["numbers"].title
+    cards["numbers"].title = "5 · retitled by its card"
     tour.w_next.clicks += 1
     assert cards["frame"].title == frame_title
+    assert cards["numbers"].title == "5 · retitled by its card"
+    tour.w_back.clicks += 1
+    tour.end()
+    assert cards["numbers"].title == "5 · retitled by its card"
+    cards["numbers"].title = own_title
+    tour.start(len(TOUR) - 2)
     assert TRUTH_LAYER in ex.frame_view.w_layers.value
     tour.go(len(TOUR) - 2)
     tour.end()  # ended on the result's step: card 1's own title is back

@@ -86,7 +86,8 @@ def test_a_failing_child_gives_none(seq):
 
 
 def test_the_child_sends_its_preview_first_and_the_state_shows_it_before_the_result(seq):
-    """The child's pipeline hands its preview (LAAV's own fine-tuning, before plain RV) back
+    """The child's pipeline hands its preview (LAAV's own fine-tuning, before plain RV, with
+    ``with_plain_rv()``) back
     first; the state shows it (``on_preview``) while it waits for the pipeline, then the
     result; a preview for other settings than the ones asked for is not shown."""
     plain = laav.LaavParams.with_plain_rv()  # the preview exists where plain RV runs

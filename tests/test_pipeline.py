@@ -418,7 +418,7 @@ def test_preview_is_laavs_own_fine_tuning_before_plain_rv():
     assert_same_result(res, segment(seq, 3, PLAIN, seed=2))
 
 
-def test_preview_only_when_plain_rv_runs_afresh():
+def test_preview_only_when_more_of_the_fine_tuning_is_to_come():
     """No preview where nothing waits on plain RV: a λ change (its runs are kept), the
     paper's fine-tuning (no plain RV), incomplete tracks (another path). The default runs no
     plain RV: its preview comes when its gate lets a missing-motion start through

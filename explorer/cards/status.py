@@ -19,7 +19,7 @@ PREVIEW_STATUS = "still computing…"
 PREVIEW_PLAIN = "LAAV's own fine-tuning in {ms} ms; plain RV and the model selection " + PREVIEW_STATUS
 #: The "What changed" line's name for a preview's labels (the final ones still to come).
 PREVIEW_FINAL = "LAAV's trial (so far)"
-PREVIEW_OWN = ("LAAV's informed trial in {ms} ms; the trials for a missed motion (ours) "
+PREVIEW_OWN = ("LAAV's informed trial after {ms} ms; the trials for a missed motion (ours) "
                + PREVIEW_STATUS)
 
 
@@ -37,8 +37,8 @@ TIGHT_LINE = ":host p { margin: 0.2em 0; }"
 #: The status line's paragraph keeps two lines of room where the page is narrow (a projector's
 #: 1024 px): there the line wraps once settings are off their defaults ("Not at the defaults:
 #: R1 = 22, ..."), and every card below moved down by a line (17 px) when it first did. At
-#: 1280 px and wider it keeps its one line (the cards stay where they are, nothing to make
-#: room for). A preview's line with many settings can still take three lines at 1024 px.
+#: 1280 px and wider no room is kept: a few settings off their defaults fit one line there
+#: (a long list, or a preview's line, still wraps and moves the cards, at any width).
 STATUS_ROOM = "@media (max-width: 1199px) { :host p { min-height: 2lh; } }"
 
 

@@ -133,7 +133,7 @@ class TourView:
         self.step = 0
         self.active = False
         self._saved: dict = {}  # card name -> (visible, styles), colour mode, before the tour
-        self._titles: dict = {}  # card name -> its title before the tour (a step may rename it)
+        self._renamed = None  # (card name, its own title, the step's) while a step renames it
         self._n_js = 0
         self._keys_done = 0  # the page's key presses applied (the w_key box's count)
         self._run = ""  # the running tour's token (the page names its presses by it)
@@ -182,7 +182,6 @@ class TourView:
         if not self.active:
             self.host.complete_page()  # the steps' cards, if the later cards are still to come
             self._saved = {name: (c.visible, dict(c.styles or {})) for name, c in self.cards.items()}
-            self._titles = {name: c.title for name, c in self.cards.items() if isinstance(c, pn.Card)}
             self._saved["__color"] = self.controls.color_mode
             view = getattr(self.host, "frame_view", None)  # its misclassified rings before the tour
             self._errors_before = None if view is None else view.error_rings
@@ -212,21 +211,35 @@ class TourView:
                 c.visible = name in s.cards
                 c.styles = {**self._saved[name][1],
                             **(HIGHLIGHT if name == s.cards[0] else NO_HIGHLIGHT)}
-                if name in self._titles:
-                    title = s.card_title if name == s.cards[0] and s.card_title else self._titles[name]
-                    if c.title != title:
-                        c.title = title
             self.step_md.object = f"Tour · step {self.step + 1} of {len(TOUR)}"
             self.title_md.object = s.title
             self.text_md.object = self._text(s)
             self.w_back.disabled = self.step == 0
             self.w_next.label = "Next ▶" if self.step < len(TOUR) - 1 else "Finish"
             self.hint_md.visible = self.step == self._hint_step  # (once: the others keep the height)
+            self._rename(s)
         if color is not None and self.controls.color_mode != color:
             self.controls.set_color_mode(color)
         self._error_rings(s.error_rings)
         self._js("scroll")
         self._sync_url()
+
+    def _rename(self, s) -> None:
+        """(Inside a batch.) Step ``s``'s header on its card (``TourStep.card_title``; None:
+        no step, the tour ends). The card an earlier step renamed gets its own title back,
+        unless its title changed meanwhile (the cards that retitle themselves, e.g. for a
+        sequence without ground truth, keep theirs): no other card's title is touched."""
+        back, self._renamed = self._renamed, None
+        if back is not None:
+            name, own, shown = back
+            card = self.cards[name]
+            if card.title == shown:
+                card.title = own
+        name = None if s is None or not s.card_title else s.cards[0]
+        card = self.cards.get(name)
+        if isinstance(card, pn.Card):
+            self._renamed = (name, card.title, s.card_title)
+            card.title = s.card_title
 
     def _error_rings(self, on: bool | None) -> None:
         """The frame view's misclassified rings on or off (None: as before the tour); the
@@ -266,9 +279,8 @@ class TourView:
             for name, c in self.cards.items():
                 visible, styles = self._saved[name]
                 c.visible, c.styles = visible, {**styles, **NO_HIGHLIGHT}
-                if name in self._titles and c.title != self._titles[name]:
-                    c.title = self._titles[name]
             self.panel.visible = False
+            self._rename(None)
         color = self._saved.get("__color")
         if color is not None and self.controls.color_mode != color:
             self.controls.set_color_mode(color)
