@@ -926,7 +926,7 @@ def test_what_changed_line_moves_no_card(tmp_path):
         assert after["status"] < after["change"] < after["card"], after
         assert after["card"] == pytest.approx(before["card"], abs=0.5), (before, after)
         # settings off their defaults make the status line wrap at 1024 px: it had a second
-        # line's room from the start (STATUS_ROOM), so the cards stay where they are
+        # line's room from the start (STATUS_ROOM, at any width), so the cards stay where they are
         for name, value in (("R1", 23.0), ("R2", 41.0), ("seed", 3)):
             assert page.evaluate(JS_SET_SLIDER, [name, value]) is not None
             page.get_by_text(f"What changed: {name}").first.wait_for(timeout=30000)
