@@ -139,13 +139,15 @@ def _in_words(candidate: str) -> str:
     return words + (f" (its run {run})" if run else "")
 
 
-def fine_tuning_facts(seq, voting, plain) -> str:
+def fine_tuning_facts(seq, voting, plain, searching: bool = False) -> str:
     """What this result's fine-tuning did, in a sentence or two for tour step 4: how far
     from the answer LAAV's informed trial started (against the ground truth, else against
     its own last labels) and whether it settled or ran to the iteration cap; plain RV's
     trials the same way (``plain`` None: still computing); the departures of ours the
     trial used (subspace votes, missing-motion trials), named. ``voting``: the result's
-    :class:`laav.Voting` (None: nothing yet)."""
+    :class:`laav.Voting` (None: nothing yet). ``searching``: ``voting`` is the preview of
+    LAAV's own chain, its trials for a missed motion still computing (said so, and not
+    that no search was needed)."""
     if voting is None or voting.informed_changed is None:
         return ""
     n = len(voting.informed_changed)
@@ -187,8 +189,11 @@ def fine_tuning_facts(seq, voting, plain) -> str:
     if ours:
         text += " Ours, not the paper's: " + ", ".join(ours)
         # (what did not run is not in that list; the RV card says which starts and why)
-        text += ("; no search for a missed motion needed." if voting.skipped_starts and not missing
-                 else ".")
-    elif voting.skipped_starts:
+        text += ("; no search for a missed motion needed."
+                 if voting.skipped_starts and not missing and not searching else ".")
+    elif voting.skipped_starts and not searching:
         text += " No search for a missed motion needed (ours)."
+    if searching:
+        text += (" The trials for a missed motion (ours) are still computing: their labels may "
+                 "replace these.")
     return text

@@ -166,3 +166,47 @@ def test_a_preview_of_a_replaced_request_is_not_drawn(ex):
     assert ex.previewing and ex.result is got[0]
     ex.restore_result()
     assert ex.result is shown
+
+
+def test_the_tour_says_the_missed_motion_trials_are_still_computing(monkeypatch):
+    """Tour step 4 on a preview of LAAV's own chain where the gate let one start through and
+    skipped the others: it says the trials for a missed motion are still computing, not
+    that no search was needed (what it says of the same labels once they are the result)."""
+    import laav.own_chain as V
+    from explorer.demo import demo_sequence
+    from explorer.tour import fine_tuning_facts
+
+    starts = []
+    real = V.missing_motion_start
+    monkeypatch.setattr(V, "missing_motion_start",
+                        lambda *a, **k: starts.append(real(*a, **k)) or starts[-1])
+    # only the first start's new motion unexplained (its share near 1 leaves the others out)
+    monkeypatch.setattr(V, "unexplained", lambda points, labels, C, params, fits=None:
+                        starts[-3] == C - 1)
+    seq = demo_sequence()
+    params = laav.LaavParams(rv_missing_gate=0.95)
+    got = []
+    res = laav.Pipeline(seq, 3, params, seed=1, preview=got.append).result
+    assert len(got) == 1 and got[0].voting.skipped_starts and len(res.voting.trial_iterations) == 3
+    pre = got[0].voting
+    said = fine_tuning_facts(seq, pre, None, searching=True)
+    assert "still computing" in said and "no search" not in said.lower(), said
+    assert "no search for a missed motion needed" in fine_tuning_facts(seq, pre, None)
+    e = Explorer(seq, 3, params, viser=False)
+    try:
+        assert e.wait(120)
+        e.tour.start(3)  # step 4: the fine-tuning
+        seen = []
+        draw = e._apply_result
+
+        def spy(result, seq_, settings, gen, preview=False):
+            draw(result, seq_, settings, gen, preview)
+            seen.append((preview, e.tour.texts[1]))
+
+        e._apply_result = spy
+        e.controls.w_seed.value = 1
+        assert e.wait(120)
+        assert [p for p, _ in seen] == [True, False], seen
+        assert "are still computing" in seen[0][1] and "are still computing" not in seen[1][1]
+    finally:
+        e.close()

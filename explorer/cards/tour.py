@@ -258,8 +258,10 @@ class TourView:
         text = s.text_for(res.params, res.n_motions, complete)
         if s.facts == "rv":
             rv_view = getattr(self.host, "rv_view", None)
+            # (a preview of LAAV's own chain: its trials for a missed motion still computing)
+            searching = bool(getattr(self.host, "previewing", False)) and res.params.rv_select == "laav"
             facts = fine_tuning_facts(self.host.sequence, res.voting,
-                                      None if rv_view is None else rv_view.plain)
+                                      None if rv_view is None else rv_view.plain, searching)
             text += (" " + facts) if facts else ""
         return text
 
