@@ -763,7 +763,8 @@ class Explorer:
                 own = preview and result.params.rv_select == "laav"  # (its missing-motion starts)
                 self.rv_view.draw(seq, result.voting, plain, pending=preview, own_chain=own)
                 self.tour.refresh()
-                num = self.numbers_view.draw(seq, result, plain)
+                num = self.numbers_view.draw(seq, result, plain, pending=(
+                    None if not preview else V.PREVIEW_NOTE_OWN if own else V.PREVIEW_NOTE))
                 if plain is not None or new_seq:  # (else the last check stays until plain RV
                     self.status_bar.show_check(num)  # is back: the page does not jump twice)
                 s = self.status_bar

@@ -121,13 +121,14 @@ def test_the_default_previews_its_informed_trial_while_the_gate_runs_starts(monk
     e = Explorer(SEQ, 3, viser=False)
     try:
         assert e.wait(120)
-        seen, seen_changes = [], []
+        seen, seen_changes, seen_numbers = [], [], []
         draw = e._apply_result
 
         def spy(result, seq, settings, gen, preview=False):
             draw(result, seq, settings, gen, preview)
             seen.append((preview, e.status_bar._status_text, e.rv_md.object, result))
             seen_changes.append(e.status_bar.change_md.object)
+            seen_numbers.append(e.numbers_view.numbers.object)
 
         e._apply_result = spy
         e.controls.w_seed.value = 2
@@ -136,6 +137,9 @@ def test_the_default_previews_its_informed_trial_while_the_gate_runs_starts(monk
         (_, text1, rv1, pre), (_, text2, rv2, res) = seen
         assert PREVIEW_OWN.split("{ms}")[1] in text1 and "seed \\= 2" in text1
         assert PREVIEW_NOTE_OWN in rv1 and PREVIEW_NOTE not in rv1
+        # the numbers card's "final" row is the trial's so far: said above the table
+        numbers1, numbers2 = seen_numbers
+        assert numbers1.startswith(PREVIEW_NOTE_OWN) and PREVIEW_NOTE_OWN not in numbers2
         # what changed, so far: the preview's labels are not called final
         change1, change2 = seen_changes
         assert "trial \\(so far\\)" in change1 and "final" not in change1, change1

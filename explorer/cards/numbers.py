@@ -16,12 +16,14 @@ class NumbersView:
         self.numbers = Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.card = card(CARD_TITLES[True], self.numbers)
 
-    def draw(self, seq, res, plain) -> dict:
+    def draw(self, seq, res, plain, pending: str | None = None) -> dict:
         """Show the numbers of ``res`` (and of ``plain``, plain RV's run, when there); returns
-        them (:func:`views.stage_numbers`)."""
+        them (:func:`views.stage_numbers`). ``pending``: ``res`` is a preview, this note
+        (e.g. :data:`views.PREVIEW_NOTE_OWN`) said first: its "final" row is LAAV's trial so
+        far."""
         num = V.stage_numbers(seq, res, plain)
         title = CARD_TITLES[seq.labels is not None]
         if self.card.title != title:
             self.card.title = title
-        self.numbers.object = V.numbers_markdown(num)
+        self.numbers.object = (pending + "\n\n" if pending else "") + V.numbers_markdown(num)
         return num
