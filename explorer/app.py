@@ -760,11 +760,11 @@ class Explorer:
                 self.graph_view.draw(result, self.frame, self.fine_colors)
                 self.coarse_view.draw(seq, result)
                 self.coarse_view.epipolar.draw(seq, result)
-                own = preview and result.params.rv_select == "laav"  # (its missing-motion starts)
+                own = preview and V.own_chain_preview(result)  # (its missed-motion trials to come)
                 self.rv_view.draw(seq, result.voting, plain, pending=preview, own_chain=own)
                 self.tour.refresh()
-                num = self.numbers_view.draw(seq, result, plain, pending=(
-                    None if not preview else V.PREVIEW_NOTE_OWN if own else V.PREVIEW_NOTE))
+                num = self.numbers_view.draw(seq, result, plain,
+                                             pending=V.preview_note(own) if preview else None)
                 if plain is not None or new_seq:  # (else the last check stays until plain RV
                     self.status_bar.show_check(num)  # is back: the page does not jump twice)
                 s = self.status_bar

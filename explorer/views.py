@@ -32,6 +32,7 @@ __all__ = [
     "replay_labels",
     "replay_caption", "fine_count", "fine_count_note", "z_sources", "joint_margins", "shows_margins",
     "signed_log", "margin_top", "margin_ticks", "margin_text", "cell_font_px", "MARGIN_PALETTE",
+    "own_chain_preview", "preview_note",
     "UNDECIDED",
     "merge_table", "epipolar_sources",
     "votes_fitted",
@@ -1366,6 +1367,19 @@ PREVIEW_NOTE_OWN = ("*LAAV's informed trial, shown first: the trials for a misse
                     "the trial did not settle), and may replace these labels.*")
 
 
+def own_chain_preview(result: laav.LaavResult) -> bool:
+    """Whether a preview of ``result`` is LAAV's own chain's (``rv_select="laav"``: its trials
+    for a missed motion still to come) rather than the informed trial before plain RV's runs
+    (:meth:`laav.Pipeline.update`'s ``preview``)."""
+    return result.params.rv_select == "laav"
+
+
+def preview_note(own: bool) -> str:
+    """The line a card shows above a preview: :data:`PREVIEW_NOTE_OWN` for LAAV's own chain
+    (``own``, :func:`own_chain_preview`), else :data:`PREVIEW_NOTE`."""
+    return PREVIEW_NOTE_OWN if own else PREVIEW_NOTE
+
+
 def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
                pending: bool = False, truth: np.ndarray | None = None, own: bool = False) -> str:
     """Markdown: LAAV's fine-tuning beside plain RV, with their iteration counts, and
@@ -1373,9 +1387,8 @@ def rv_summary(fine_tuning: laav.Voting | None, plain: laav.Voting | None,
     sequence's ground truth, or None); ``pending``: ``fine_tuning`` is a preview
     (:data:`PREVIEW_NOTE`; with ``own``, LAAV's own chain's: :data:`PREVIEW_NOTE_OWN`)."""
     verdict = None if pending else rv_verdict(fine_tuning, plain, truth)
-    note = PREVIEW_NOTE_OWN if own else PREVIEW_NOTE
     return (_rv_line(fine_tuning, "LAAV fine-tuning (RV started from the coarse labels)") + "  \n"
-            + (note + "  \n" if pending else "")
+            + (preview_note(own) + "  \n" if pending else "")
             + _rv_line(plain, "Plain RV (random starts; the same sequence, RV settings and polish, "
                               "ours)") + "  \n"
             + (verdict + "  \n" if verdict else "")

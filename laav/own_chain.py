@@ -155,12 +155,6 @@ def _own_distances(points, labels, n_motions, params, fits=None) -> np.ndarray |
     return own
 
 
-def _has_power(own: np.ndarray, params) -> bool:
-    """Whether the unexplained test can tell: the median point within
-    :data:`UNEXPLAINED_FLOOR` of the threshold."""
-    return bool(np.nanmedian(own) <= UNEXPLAINED_FLOOR * UNEXPLAINED_PX2 * unit2(params))
-
-
 def unexplained(points, labels, n_motions, params, fits=None) -> np.ndarray | None:
     """(P,) bool: the points ``labels`` (P,) leave unexplained, farther than
     :data:`UNEXPLAINED_PX2` (squared pixels, ``unit2``) from their motion's robust rank-4
@@ -170,9 +164,10 @@ def unexplained(points, labels, n_motions, params, fits=None) -> np.ndarray | No
     own = _own_distances(points, labels, n_motions, params, fits)
     if own is None:
         return np.ones(labels.size, dtype=bool)
-    if not _has_power(own, params):
+    threshold = UNEXPLAINED_PX2 * unit2(params)
+    if np.nanmedian(own) > UNEXPLAINED_FLOOR * threshold:  # the test has no power here
         return None
-    return own > UNEXPLAINED_PX2 * unit2(params)
+    return own > threshold
 
 
 def _select(points, C, params, starts, part, extra, uses) -> Voting:

@@ -358,8 +358,11 @@ class Pipeline:
         took (not the stage's)."""
         voting = informed_preview(self.seq.points, self.n_motions, p, self._rng("voting"), init,
                                   plain_memo=memo)
-        if voting is None:
-            return 0.0
+        return 0.0 if voting is None else self._hand_over(preview, voting, timings, t)
+
+    def _hand_over(self, preview, voting: Voting, timings: dict, t: float) -> float:
+        """``preview`` given the result with ``voting``, its voting time counted from ``t``
+        (the stage's start); the seconds ``preview`` itself took (not the stage's)."""
         now = dict(timings)
         now["voting"] += time.perf_counter() - t
         t_call = time.perf_counter()
@@ -376,13 +379,7 @@ class Pipeline:
             return None
 
         def hook(voting: Voting) -> None:
-            now = dict(timings)
-            now["voting"] += time.perf_counter() - t
-            t_call = time.perf_counter()
-            try:
-                preview(self._result(voting, now))
-            finally:
-                hook.spent += time.perf_counter() - t_call
+            hook.spent += self._hand_over(preview, voting, timings, t)
 
         hook.spent = 0.0
         return hook

@@ -435,3 +435,24 @@ def test_the_pipeline_previews_the_informed_trial_while_the_starts_run(monkeypat
         np.testing.assert_array_equal(res.labels, ref.labels)
         assert res.voting.costs == ref.voting.costs
         assert res.voting.trial_iterations == ref.voting.trial_iterations
+
+
+def test_the_previews_own_time_is_not_the_voting_stages(monkeypatch):
+    """A slow live view (its preview takes 1 s) does not count in the result's timings."""
+    import time
+
+    import laav.own_chain as V
+    from explorer.demo import demo_sequence
+    from laav import Pipeline
+
+    monkeypatch.setattr(V, "unexplained", lambda points, labels, C, params, fits=None:
+                        np.ones(labels.size, bool))
+    slept = []
+    t0 = time.perf_counter()
+    res = Pipeline(demo_sequence(), 3, seed=1, preview=lambda r: (slept.append(r),
+                                                                   time.sleep(1.0))).result
+    wall = time.perf_counter() - t0
+    assert len(slept) == 1
+    assert sum(res.timings.values()) < wall - 0.9, (res.timings, wall)
+    # the preview's own timings stop where it was handed over
+    assert slept[0].timings["voting"] < res.timings["voting"]

@@ -16,6 +16,7 @@ import secrets
 
 import panel as pn
 
+from .. import views as V
 from ..tour import TOUR, fine_tuning_facts
 from .base import Host, Markdown, page_box
 
@@ -259,7 +260,7 @@ class TourView:
         if s.facts == "rv":
             rv_view = getattr(self.host, "rv_view", None)
             # (a preview of LAAV's own chain: its trials for a missed motion still computing)
-            searching = bool(getattr(self.host, "previewing", False)) and res.params.rv_select == "laav"
+            searching = bool(getattr(self.host, "previewing", False)) and V.own_chain_preview(res)
             facts = fine_tuning_facts(self.host.sequence, res.voting,
                                       None if rv_view is None else rv_view.plain, searching)
             text += (" " + facts) if facts else ""
