@@ -164,30 +164,66 @@ def test_a_result_is_one_message_and_a_frame_move_sends_no_view_data():
 
 #: Every figure of the page: [title, element's top in the viewport (px), height, a paint
 #: waiting for the plot to be seen (explorer/cards/onscreen.py), the x of the glyph view of
-#: its first line or scatter (what bokeh draws) and of that renderer's source].
+#: its first renderer with an x (or x0) column (what bokeh draws) and that column of its
+#: source, new data waiting for the plot to be seen, and whether every visible renderer's
+#: last paint drew its glyph's data (its screen x is the plot's x scale of the glyph's x)].
 JS_PLOTS = """() => {
   const out = [];
+  const column = (rv) => {
+    const spec = rv.model.glyph.x !== undefined ? rv.model.glyph.x : rv.model.glyph.x0;
+    return spec && typeof spec === 'object' && spec.field !== undefined ? spec.field : null;
+  };
   for (const m of Bokeh.documents[0].all_models) {
     if (m.type !== 'Figure') continue;
     const v = Bokeh.index.find_one(m);
     if (!v || !v.el) continue;
     const r = v.el.getBoundingClientRect();
-    let glyph = null, source = null;
+    let glyph = null, source = null, painted = true;
     for (const rv of v.renderer_views.values()) {
-      if (!rv.glyph || !rv.model.data_source || rv.model.data_source.data.x === undefined) continue;
-      glyph = Array.from(rv.glyph.x || []); source = Array.from(rv.model.data_source.data.x); break;
+      const f = rv.glyph && rv.model.data_source ? column(rv) : null;
+      if (f === null || rv.model.data_source.data[f] === undefined) continue;
+      const gx = rv.glyph.x !== undefined ? rv.glyph.x : rv.glyph.x0;
+      const sx = rv.glyph.sx !== undefined ? rv.glyph.sx : rv.glyph.sx0;
+      if (glyph === null) { glyph = Array.from(gx || []); source = Array.from(rv.model.data_source.data[f]); }
+      if (!rv.model.visible || !gx || !sx) continue;
+      const want = rv.coordinates.x_scale.v_compute(gx);
+      if (want.length !== sx.length) painted = false;
+      for (let i = 0; painted && i < want.length; i++)
+        if (!(Math.abs(want[i] - sx[i]) <= 1e-6 || (want[i] !== want[i] && sx[i] !== sx[i]))) painted = false;
     }
-    out.push([String(m.title.text), r.top, r.height, !!v._laav_deferred, glyph, source]);
+    out.push([String(m.title.text), r.top, r.height, !!v._laav_deferred, glyph, source,
+              !!(v._laav_stale && v._laav_stale.size), painted]);
   }
   return out;
 }"""
 
 
+#: The rows of the first renderer with an x column of the figure titled ``title`` reversed in
+#: the page (its picture and its plot's ranges unchanged, its screen coordinates reordered);
+#: whether there was one with 3 or more rows.
+JS_REVERSE_ROWS = """(title) => {
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.type !== 'Figure' || String(m.title.text) !== title) continue;
+    for (const r of m.renderers) {
+      const spec = r.glyph && (r.glyph.x !== undefined ? r.glyph.x : r.glyph.x0);
+      if (!r.data_source || !spec || typeof spec !== 'object' || spec.field === undefined) continue;
+      const d = r.data_source.data, n = r.data_source.get_length();
+      if (!(n >= 3)) continue;
+      const out = {};
+      for (const k of Object.keys(d)) out[k] = Array.from(d[k]).reverse();
+      r.data_source.data = out;
+      return true;
+    }
+  }
+  return false;
+}"""
+
+
 def test_plots_off_screen_are_painted_when_seen():
-    """A result's plots below the fold keep their paint for when they are scrolled into view
-    (explorer/cards/onscreen.py): after R1 moves no plot on screen has a paint waiting and
-    some plot far below has one, its data applied already (its glyph view holds its
-    source's new data); scrolled into view, it is painted and nothing on screen waits.
+    """A result's plots below the fold keep their paint, and their glyphs' new data, for when
+    they are scrolled into view (explorer/cards/onscreen.py): after R1 moves no plot on
+    screen has a paint or data waiting and some plot far below has both; scrolled into view,
+    it is painted, its glyph view holding its source's new data, and nothing on screen waits.
     Scrolled away, the frame view is deferred in its turn on the next move."""
     seq = _sequence()
     with _served(seq, viser=False) as (port, browser, created):
@@ -202,27 +238,55 @@ def test_plots_off_screen_are_painted_when_seen():
         def is_frame_view(title):
             return title.startswith("frame ") and " of " in title
 
+        def holds_its_data(p):  # (categorical coordinates: the glyph holds their positions)
+            if all(isinstance(x, (int, float)) for x in p[5] or []):
+                return p[4] == p[5]
+            return p[4] is not None and len(p[4]) == len(p[5])
+
         move(16.0)  # the first move observes every plot; the next defers those off screen
         plots = move(18.0)
         on_screen = [p for p in plots.values() if p[2] > 0 and p[1] < 800]
         assert any(is_frame_view(p[0]) for p in on_screen)
-        assert not [p[0] for p in on_screen if p[3]], "a plot on screen kept its paint"
+        assert not [p[0] for p in on_screen if p[3] or p[6]], "a plot on screen kept its paint or data"
+        assert all(holds_its_data(p) for p in on_screen if p[4] is not None)
         waiting = [p for p in plots.values() if p[3]]
         assert waiting and all(p[1] > 800 for p in waiting), "no plot off screen kept its paint"
-        assert any(p[4] is not None for p in waiting)
-        for p in waiting:  # (categorical coordinates: the glyph holds their positions)
-            same = p[4] == p[5] if all(isinstance(x, (int, float)) for x in p[5] or []) else \
-                p[4] is not None and len(p[4]) == len(p[5])
-            assert same, f"the data of {p[0]!r}, off screen, were not applied"
-        title = waiting[-1][0]
+        stale = [p for p in waiting if p[6] and p[4] is not None]
+        assert stale, "no plot off screen kept its glyphs' new data"
+        changed = [p for p in stale if not holds_its_data(p)]  # (its glyph still holds the old)
+        assert changed, "data kept back yet already applied"
+        title = changed[-1][0]
+
         page.evaluate("""(t) => { for (const m of Bokeh.documents[0].all_models)
             if (m.type === 'Figure' && m.title.text === t)
               Bokeh.index.find_one(m).el.scrollIntoView({block: 'start'}); }""", title)
         page.wait_for_timeout(500)
         plots = {p[0]: p for p in page.evaluate(JS_PLOTS)}
         assert 0 <= plots[title][1] < 800, "not scrolled into view"
-        assert not [p[0] for p in plots.values() if p[2] > 0 and 0 <= p[1] < 800 and p[3]], \
-            "scrolled into view, a plot was not painted"
+        seen = [p for p in plots.values() if p[2] > 0 and 0 <= p[1] < 800]
+        assert not [p[0] for p in seen if p[3] or p[6]], "scrolled into view, a plot was not painted"
+        assert holds_its_data(plots[title]), f"scrolled into view, {title!r} drew old data"
+        assert all(holds_its_data(p) for p in seen if p[4] is not None)
+        # what was painted is the new data (a renderer given it but not repainted shows the old)
+        assert not [p[0] for p in seen if not p[7]], "a plot on screen shows other data than it holds"
+
+        def scroll_to(t):
+            page.evaluate("""(t) => { for (const m of Bokeh.documents[0].all_models)
+                if (m.type === 'Figure'
+                    && (t === null ? /^frame \\d+ of/.test(m.title.text) : m.title.text === t))
+                  Bokeh.index.find_one(m).el.scrollIntoView({block: 'start'}); }""", t)
+            page.wait_for_timeout(500)
+            return {p[0]: p for p in page.evaluate(JS_PLOTS)}
+
+        # painted and seen, then off screen again: a change its ranges do not see (its rows
+        # reversed: the same picture) leaves only that renderer to repaint when seen again
+        assert scroll_to(None)[title][1] > 800
+        assert page.evaluate(JS_REVERSE_ROWS, title)
+        plots = {p[0]: p for p in page.evaluate(JS_PLOTS)}
+        assert plots[title][6] and not holds_its_data(plots[title]), "the new rows were applied off screen"
+        plots = scroll_to(title)
+        assert not plots[title][3] and not plots[title][6] and holds_its_data(plots[title])
+        assert plots[title][7], "seen again, its renderer was not repainted with its new rows"
         plots = move(17.0)
         frame = next(p for t, p in plots.items() if is_frame_view(t))
         assert frame[1] < -300 and frame[3], "the frame view, scrolled away, was painted"
