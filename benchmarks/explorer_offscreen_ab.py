@@ -64,6 +64,8 @@ def measure(file: str | None, control: str, pairs: int, settle: float) -> dict:
                         raise RuntimeError("the command did not listen") from None
                     time.sleep(0.05)
             page = browser.new_page(viewport={"width": 1280, "height": 800})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
             page.add_init_script(B.JS_RECORD_PATCHES)
             page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded", timeout=120000)
             page.wait_for_function("() => (" + B.JS_STATE + ")().status.length > 0", timeout=120000,
@@ -78,8 +80,14 @@ def measure(file: str | None, control: str, pairs: int, settle: float) -> dict:
                             raise RuntimeError(f"{control} = {v}: no result on screen ({r!r})")
                         out[off].append((r[0], r[0] - r[2]))
                         page.wait_for_timeout(int(settle * 1000))
+            if errors:  # a figure that failed to draw would time nothing worth comparing
+                raise RuntimeError(f"errors in the page: {errors[:3]}")
         finally:
             proc.terminate()
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
             browser.close()
 
     def med(xs):

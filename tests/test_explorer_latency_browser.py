@@ -199,8 +199,8 @@ JS_PLOTS = """() => {
 
 
 #: The rows of the first renderer with an x column of the figure titled ``title`` reversed in
-#: the page (its picture and its plot's ranges unchanged, its screen coordinates reordered);
-#: whether there was one with 3 or more rows.
+#: the page only (its picture and its plot's ranges unchanged, its screen coordinates
+#: reordered); whether there was one with 3 or more rows.
 JS_REVERSE_ROWS = """(title) => {
   for (const m of Bokeh.documents[0].all_models) {
     if (m.type !== 'Figure' || String(m.title.text) !== title) continue;
@@ -211,11 +211,51 @@ JS_REVERSE_ROWS = """(title) => {
       if (!(n >= 3)) continue;
       const out = {};
       for (const k of Object.keys(d)) out[k] = Array.from(d[k]).reverse();
-      r.data_source.data = out;
+      r.data_source.setv({data: out}, {sync: false});
       return true;
     }
   }
   return false;
+}"""
+
+#: A figure below the fold (its top more than ``margin`` px under the viewport) whose legend
+#: lists a column's values: its legend's renderer given twice its rows in the page only, the
+#: copies under a new value of that column (one more legend entry, and rows past the colours
+#: its glyph computed before); the figure's title, or null.
+JS_GROW_LEGEND = """(margin) => {
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.type !== 'Figure') continue;
+    const v = Bokeh.index.find_one(m);
+    if (!v || !v.el || !(v.el.getBoundingClientRect().top > window.innerHeight + margin)) continue;
+    for (const leg of [...m.center, ...m.below, ...m.above, ...m.left, ...m.right]) {
+      if (leg.type !== 'Legend') continue;
+      for (const it of leg.items) {
+        const field = it.label && it.label.field, r = it.renderers[0];
+        if (field === undefined || !r || !r.data_source || !(r.data_source.get_length() >= 1)) continue;
+        const d = r.data_source.data, out = {};
+        for (const k of Object.keys(d)) {
+          const a = Array.from(d[k]);
+          out[k] = a.concat(k === field ? a.map(() => 'zz') : a);
+        }
+        r.data_source.setv({data: out}, {sync: false});
+        return String(m.title.text);
+      }
+    }
+  }
+  return null;
+}"""
+
+#: No figure on screen has a paint, data or a reveal waiting (explorer/cards/onscreen.py).
+JS_SETTLED = """() => {
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.type !== 'Figure') continue;
+    const v = Bokeh.index.find_one(m);
+    if (!v || !v.el) continue;
+    const r = v.el.getBoundingClientRect();
+    if (r.height > 0 && r.bottom > 0 && r.top < window.innerHeight
+        && (v._laav_deferred || (v._laav_stale && v._laav_stale.size) || v._laav_revealing)) return false;
+  }
+  return true;
 }"""
 
 
@@ -223,17 +263,35 @@ def test_plots_off_screen_are_painted_when_seen():
     """A result's plots below the fold keep their paint, and their glyphs' new data, for when
     they are scrolled into view (explorer/cards/onscreen.py): after R1 moves no plot on
     screen has a paint or data waiting and some plot far below has both; scrolled into view,
-    it is painted, its glyph view holding its source's new data, and nothing on screen waits.
+    it is painted from its new data. Scrolled away again, a change its ranges do not see
+    waits, then is painted when seen (the renderer repainted, not only the plot); a plot
+    whose data wait is not painted by bokeh's direct paint after a layout (its legend would
+    read new rows past its glyph's old colours and throw), and is drawn right when seen.
     Scrolled away, the frame view is deferred in its turn on the next move."""
+    from explorer.cards.onscreen import MARGIN_BELOW_PX
+
     seq = _sequence()
     with _served(seq, viser=False) as (port, browser, created):
         page, errors, frames = _open_with_result(browser, port)
 
+        def plots():
+            return {p[0]: p for p in page.evaluate(JS_PLOTS)}
+
         def move(value):
             assert page.evaluate(JS_SET, ["R1", value])
             page.wait_for_function(f"() => ({JS_PAGE})().status.includes('R1 = {value:g}')", timeout=60000)
-            page.wait_for_timeout(500)
-            return {p[0]: p for p in page.evaluate(JS_PLOTS)}
+            page.wait_for_timeout(300)  # (the server's later messages: plain RV, votes)
+            page.wait_for_function(JS_SETTLED, timeout=10000)
+            return plots()
+
+        def scroll_to(t):  # a figure by title, or the frame view (None), to the top
+            page.evaluate("""(t) => { for (const m of Bokeh.documents[0].all_models)
+                if (m.type === 'Figure'
+                    && (t === null ? /^frame \\d+ of/.test(m.title.text) : m.title.text === t))
+                  Bokeh.index.find_one(m).el.scrollIntoView({block: 'start'}); }""", t)
+            page.wait_for_timeout(100)  # (the observer's report)
+            page.wait_for_function(JS_SETTLED, timeout=10000)
+            return plots()
 
         def is_frame_view(title):
             return title.startswith("frame ") and " of " in title
@@ -243,51 +301,52 @@ def test_plots_off_screen_are_painted_when_seen():
                 return p[4] == p[5]
             return p[4] is not None and len(p[4]) == len(p[5])
 
+        below = 800 + MARGIN_BELOW_PX  # off screen for the page's observer
         move(16.0)  # the first move observes every plot; the next defers those off screen
-        plots = move(18.0)
-        on_screen = [p for p in plots.values() if p[2] > 0 and p[1] < 800]
+        got = move(18.0)
+        on_screen = [p for p in got.values() if p[2] > 0 and p[1] < 800]
         assert any(is_frame_view(p[0]) for p in on_screen)
         assert not [p[0] for p in on_screen if p[3] or p[6]], "a plot on screen kept its paint or data"
-        assert all(holds_its_data(p) for p in on_screen if p[4] is not None)
-        waiting = [p for p in plots.values() if p[3]]
+        assert all(p[7] for p in on_screen) and all(holds_its_data(p) for p in on_screen if p[4] is not None)
+        waiting = [p for p in got.values() if p[3]]
         assert waiting and all(p[1] > 800 for p in waiting), "no plot off screen kept its paint"
         stale = [p for p in waiting if p[6] and p[4] is not None]
-        assert stale, "no plot off screen kept its glyphs' new data"
-        changed = [p for p in stale if not holds_its_data(p)]  # (its glyph still holds the old)
-        assert changed, "data kept back yet already applied"
-        title = changed[-1][0]
-
-        page.evaluate("""(t) => { for (const m of Bokeh.documents[0].all_models)
-            if (m.type === 'Figure' && m.title.text === t)
-              Bokeh.index.find_one(m).el.scrollIntoView({block: 'start'}); }""", title)
-        page.wait_for_timeout(500)
-        plots = {p[0]: p for p in page.evaluate(JS_PLOTS)}
-        assert 0 <= plots[title][1] < 800, "not scrolled into view"
-        seen = [p for p in plots.values() if p[2] > 0 and 0 <= p[1] < 800]
+        assert stale, "no plot off screen kept its glyphs' new data (the server's)"
+        title = stale[-1][0]
+        got = scroll_to(title)
+        assert 0 <= got[title][1] < 800, "not scrolled into view"
+        seen = [p for p in got.values() if p[2] > 0 and 0 <= p[1] < 800]
         assert not [p[0] for p in seen if p[3] or p[6]], "scrolled into view, a plot was not painted"
-        assert holds_its_data(plots[title]), f"scrolled into view, {title!r} drew old data"
-        assert all(holds_its_data(p) for p in seen if p[4] is not None)
+        assert holds_its_data(got[title]), f"scrolled into view, {title!r} holds old data"
         # what was painted is the new data (a renderer given it but not repainted shows the old)
         assert not [p[0] for p in seen if not p[7]], "a plot on screen shows other data than it holds"
 
-        def scroll_to(t):
-            page.evaluate("""(t) => { for (const m of Bokeh.documents[0].all_models)
-                if (m.type === 'Figure'
-                    && (t === null ? /^frame \\d+ of/.test(m.title.text) : m.title.text === t))
-                  Bokeh.index.find_one(m).el.scrollIntoView({block: 'start'}); }""", t)
-            page.wait_for_timeout(500)
-            return {p[0]: p for p in page.evaluate(JS_PLOTS)}
-
-        # painted and seen, then off screen again: a change its ranges do not see (its rows
-        # reversed: the same picture) leaves only that renderer to repaint when seen again
-        assert scroll_to(None)[title][1] > 800
+        # seen, then off screen again: a change its ranges do not see (its rows reversed: the
+        # same picture) leaves only that renderer to repaint when seen again
+        assert scroll_to(None)[title][1] > below
         assert page.evaluate(JS_REVERSE_ROWS, title)
-        plots = {p[0]: p for p in page.evaluate(JS_PLOTS)}
-        assert plots[title][6] and not holds_its_data(plots[title]), "the new rows were applied off screen"
-        plots = scroll_to(title)
-        assert not plots[title][3] and not plots[title][6] and holds_its_data(plots[title])
-        assert plots[title][7], "seen again, its renderer was not repainted with its new rows"
-        plots = move(17.0)
-        frame = next(p for t, p in plots.items() if is_frame_view(t))
+        got = plots()
+        assert got[title][6] and not holds_its_data(got[title]), "the new rows were applied off screen"
+        got = scroll_to(title)
+        assert not got[title][3] and not got[title][6] and holds_its_data(got[title])
+        assert got[title][7], "seen again, its renderer was not repainted with its new rows"
+
+        # a plot whose data wait, laid out again off screen (shown anew, as a tour step or a
+        # pin does): bokeh paints it directly, which must wait too
+        scroll_to(None)
+        grown = page.evaluate(JS_GROW_LEGEND, MARGIN_BELOW_PX)
+        assert grown is not None, "no figure with a legend of a column below the fold"
+        assert plots()[grown][6]
+        page.evaluate("""(t) => { for (const m of Bokeh.documents[0].all_models)
+            if (m.type === 'Figure' && m.title.text === t) {
+              m.setv({visible: false}, {sync: false}); m.setv({visible: true}, {sync: false}); } }""", grown)
+        page.wait_for_timeout(300)
+        assert not errors, errors
+        assert plots()[grown][6], "laid out off screen, the plot was given its data (or drawn without)"
+        got = scroll_to(grown)
+        assert not got[grown][3] and not got[grown][6] and got[grown][7] and holds_its_data(got[grown])
+        assert not errors, errors
+        got = move(17.0)
+        frame = next(p for t, p in got.items() if is_frame_view(t))
         assert frame[1] < -300 and frame[3], "the frame view, scrolled away, was painted"
         assert not errors, errors

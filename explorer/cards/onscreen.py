@@ -8,8 +8,9 @@ page's computed styles, legends, glyphs) takes 15-30 ms: about 165 ms of the pag
 thread per R1 move on the demo, of which the frame view's was ~40 ms (CPU profile of
 headless Chromium, docs/bench/explorer_browser_latency.md). Before painting, bokeh computes
 every changed renderer's glyph data five times (the glyph and its selection, nonselection,
-muted and decimated variants: positions, colours, spatial index): about 37 ms of an R1 move's
-page time for the plots below the fold (docs/bench/explorer_browser_latency_2026-12-05c.md).
+muted and decimated variants: positions, colours, spatial index), about 31 renderers below
+the fold per R1 move on the demo: keeping that for when they are seen took 23-41 ms off the
+page's work after an R1 result (docs/bench/explorer_browser_latency_2026-12-05c.md).
 
 :data:`JS_PAINT_ON_SCREEN`, run once when the page's document is ready, has bokeh's figure
 views defer a paint while their element is off screen (an ``IntersectionObserver`` on each
@@ -18,16 +19,23 @@ downwards, where the browser supports ``scrollMargin`` (Chromium 120+), so that 
 down is ready when scrolled to) and make it when the element comes into view. Bokeh's
 own bookkeeping is untouched: what a deferred paint must redraw accumulates as it does
 between two animation frames (``invalidate_painters``), and the deferred call is bokeh's
-``schedule_paint`` itself. A glyph renderer's new data on such a plot (its source, glyph or
-view changed: bokeh's ``update_data``) waits too: the plot keeps the renderers concerned
-(``_laav_stale``) and, when it comes into view, has bokeh compute each one's data in full
-(``update_data``: ``set_data``, which also marks the plot's data ranges for an update,
-then the renderer marked for repainting) before the paint. The
-models themselves (sources, ranges, legends' items, texts) are updated at once, as the
-server sends them; only what the page computes from them to draw waits. A plot whose
-visibility is not yet known (a new one, before the observer's first report) is drawn as
-before. ``window.__laavNoDefer = true`` in the page makes renderers compute their data at
-once again (a measurement switch: ``benchmarks/explorer_offscreen_ab.py``).
+``schedule_paint`` itself.
+
+A glyph renderer's new data on such a plot (its source, glyph or view changed: bokeh's
+``update_data``) waits too: the plot keeps the renderers concerned (``_laav_stale``) and,
+when it comes into view, has bokeh apply each one's data in full (its own ``update_data``:
+``set_data``, which also marks the plot's data ranges for an update, then the renderer
+marked for repainting), the plot paused meanwhile, before the paint. While data wait, the
+plot is not painted at all, also not by bokeh's direct paints after a layout (a card shown,
+a size changed): old glyphs against new sources would be wrong, and a legend reading its new
+rows' colours past the old ones throws. Such renderers are not hit-tested either. The models
+themselves (sources, ranges, legends' items, texts) are updated at once, as the server sends
+them; only what the page computes from them to draw waits. A plot whose visibility is not
+yet known (a new one, before the observer's first report) is drawn as before. A data range
+shared with a plot whose data wait would be computed from that plot's old bounds; no range
+of the explorer is shared so (each figure's auto ranges are its own). ``window.__laavNoDefer
+= true`` in the page makes renderers compute their data at once again (a measurement switch:
+``benchmarks/explorer_offscreen_ab.py``).
 """
 
 from __future__ import annotations
@@ -43,38 +51,55 @@ MARGIN_BELOW_PX = 200
 #: ``Plot``). Idempotent: a second run changes nothing.
 JS_PAINT_ON_SCREEN = r"""
 const PV = plot.default_view;
-let GV = null;  // bokeh's GlyphRendererView (every glyph renderer's view class)
-for (const m of plot.document.all_models)
+// bokeh's GlyphRendererView (every glyph renderer's view class), from any glyph renderer
+// (the frame view has some): without one, only the paints wait
+let GV = null;
+for (const m of plot.document ? plot.document.all_models : [])
   if (m.type === 'GlyphRenderer' && m.default_view) { GV = m.default_view; break; }
-if (PV && GV && typeof IntersectionObserver === 'function'
+if (PV && typeof IntersectionObserver === 'function'
     && !Object.prototype.hasOwnProperty.call(PV.prototype, '_laav_on_screen')) {
-  const paint = PV.prototype.schedule_paint, remove = PV.prototype.remove;
-  const actual = PV.prototype._actual_paint, update = GV.prototype.update_data;
+  const orig_schedule_paint = PV.prototype.schedule_paint, orig_paint = PV.prototype.paint;
+  const orig_remove = PV.prototype.remove, orig_actual_paint = PV.prototype._actual_paint;
+  const orig_update_data = GV ? GV.prototype.update_data : null;
+  const orig_hit_test = GV ? GV.prototype.hit_test : null;
   const shown = new WeakMap();  // plot view -> its element intersects the (extended) viewport
-  // a plot come into view: its renderers' data that waited applied (bokeh's own
-  // update_data, in full: set_data, then the renderer marked to be repainted, which the
-  // plot's next paint otherwise skips), then painted; _laav_deferred stays set until then
-  const reveal = async (v) => {
-    const stale = v._laav_stale;
-    v._laav_stale = null;
-    if (stale) {
-      for (const rv of stale) {
-        if (rv.plot_view === v) {
-          try { await update.call(rv); } catch (err) { console.error(err); }
+  const waiting = (v) => !!(v._laav_stale && v._laav_stale.size);
+  // A plot come into view: its renderers' data that waited applied, one renderer after
+  // another, with bokeh's own update_data (set_data in full, then the renderer marked for
+  // repainting, which the plot's next paint otherwise skips), the plot paused meanwhile (no
+  // paint with some renderers still waiting); then painted. One reveal at a time per plot
+  // (a second call gets the first's promise); data arriving meanwhile is applied by it too.
+  // _laav_deferred (a paint or data waiting) stays set until that paint.
+  const reveal = (v) => {
+    if (v._laav_revealing) return v._laav_revealing;
+    const run = async () => {
+      v.pause();
+      try {
+        while (waiting(v) && !v.is_destroyed) {
+          const rv = v._laav_stale.values().next().value;
+          v._laav_stale.delete(rv);  // (new data during the reveal are applied at once)
+          if (rv.is_destroyed) continue;
+          try { await orig_update_data.call(rv); } catch (err) { console.error(err); }
         }
+      } finally {
+        v.unpause(true);
+        v._laav_revealing = null;
       }
-    }
-    if (v._laav_stale && v._laav_stale.size) return reveal(v);  // more came meanwhile
-    paint.call(v);
+      if (!v.is_destroyed) orig_schedule_paint.call(v);
+    };
+    v._laav_revealing = run();
+    return v._laav_revealing;
   };
   const obs = new IntersectionObserver((entries) => {
     for (const e of entries) {
       const v = e.target._laav_plot_view;
       if (!v) continue;
       shown.set(v, e.isIntersecting);
-      if (e.isIntersecting && (v._laav_deferred || (v._laav_stale && v._laav_stale.size))) {
-        v._laav_deferred = true;
-        reveal(v);
+      if (!e.isIntersecting || v.is_destroyed) continue;
+      if (waiting(v)) reveal(v);
+      else if (v._laav_deferred) {
+        v._laav_deferred = false;
+        orig_schedule_paint.call(v);
       }
     }
   }, {rootMargin: '0px 0px ' + margin + 'px 0px',
@@ -92,33 +117,51 @@ if (PV && GV && typeof IntersectionObserver === 'function'
       this._laav_deferred = true;  // painted when it comes into view
       return;
     }
-    return paint.call(this);  // (paused: bokeh paints nothing now; a deferral stays)
+    return orig_schedule_paint.call(this);  // (paused: bokeh paints nothing now; a deferral stays)
   };
-  // a renderer's new data (its source, glyph or view changed) on a plot off screen: kept
-  // for when the plot is seen (bokeh computes them for the glyph and its four variants);
-  // window.__laavNoDefer: computed at once (a measurement switch)
-  GV.prototype.update_data = function (...args) {
-    const v = this.plot_view;
-    if (!window.__laavNoDefer && v && shown.get(v) === false && !v.is_paused) {
-      (v._laav_stale = v._laav_stale || new Set()).add(this);
-      v._laav_deferred = true;
-      return Promise.resolve();
+  // Bokeh also paints without scheduling (after a layout: a card shown, a size changed). With
+  // a renderer's data still waiting that paint would draw old glyphs against new sources (a
+  // legend reads its new rows' colours past the old ones and throws): it waits for the
+  // reveal (at once when the plot is seen).
+  PV.prototype.paint = function (...args) {
+    if (waiting(this)) {
+      this._laav_deferred = true;
+      if (shown.get(this) !== false) reveal(this);
+      return;
     }
-    return update.apply(this, args);
+    return orig_paint.apply(this, args);
   };
-  if (typeof actual === 'function') {
+  if (typeof orig_actual_paint === 'function') {
     PV.prototype._actual_paint = function (...args) {
-      // painted, whoever asked (bokeh also paints directly); with data still waiting the
-      // plot stays to be painted when seen
-      this._laav_deferred = !!(this._laav_stale && this._laav_stale.size);
-      return actual.apply(this, args);
+      this._laav_deferred = false;  // painted, whoever asked
+      return orig_actual_paint.apply(this, args);
     };
   }
   PV.prototype.remove = function () {
     if (this.el) obs.unobserve(this.el);
     this._laav_stale = null;
-    return remove.call(this);
+    return orig_remove.call(this);
   };
+  if (GV) {
+    // A renderer's new data (its source, glyph or view changed) on a plot off screen: kept
+    // for when the plot is seen (bokeh computes them for the glyph and its four variants).
+    // window.__laavNoDefer: computed at once (a measurement switch).
+    GV.prototype.update_data = function (...args) {
+      const v = this.plot_view;
+      if (!window.__laavNoDefer && v && shown.get(v) === false && !v._laav_revealing) {
+        (v._laav_stale = v._laav_stale || new Set()).add(this);
+        v._laav_deferred = true;
+        return Promise.resolve();
+      }
+      return orig_update_data.apply(this, args);
+    };
+    // (a renderer whose data wait has nothing to hit: its glyph holds the old rows)
+    GV.prototype.hit_test = function (...args) {
+      const v = this.plot_view;
+      if (v && v._laav_stale && v._laav_stale.has(this)) return null;
+      return orig_hit_test.apply(this, args);
+    };
+  }
 }
 """
 
