@@ -9,8 +9,9 @@ thread per R1 move on the demo, of which the frame view's was ~40 ms (CPU profil
 headless Chromium, docs/bench/explorer_browser_latency.md). Before painting, bokeh computes
 every changed renderer's glyph data five times (the glyph and its selection, nonselection,
 muted and decimated variants: positions, colours, spatial index), about 31 renderers below
-the fold per R1 move on the demo: keeping that for when they are seen took 23-41 ms off the
-page's work after an R1 result (docs/bench/explorer_browser_latency_2026-12-05c.md).
+the fold per R1 move on the demo: keeping that for when they are seen took 19-21 ms off the
+page's work after an R1 result, and adds about 35 ms to a card's paint when it is scrolled to
+(docs/bench/explorer_browser_latency_2026-12-05c.md).
 
 :data:`JS_PAINT_ON_SCREEN`, run once when the page's document is ready, has bokeh's figure
 views defer a paint while their element is off screen (an ``IntersectionObserver`` on each
