@@ -284,14 +284,28 @@ def test_plots_off_screen_are_painted_when_seen():
             page.wait_for_function(JS_SETTLED, timeout=10000)
             return plots()
 
-        def scroll_to(t):  # a figure by title, or the frame view (None), to the top
+        def scroll_to(t, away=None):
+            """A figure by title, or the frame view (None), to the top; until the page's
+            observer has reported it (and ``away``, a title, off screen) and no plot on screen
+            waits."""
             page.evaluate("""(t) => { for (const m of Bokeh.documents[0].all_models)
                 if (m.type === 'Figure'
                     && (t === null ? /^frame \\d+ of/.test(m.title.text) : m.title.text === t))
                   Bokeh.index.find_one(m).el.scrollIntoView({block: 'start'}); }""", t)
-            page.wait_for_timeout(100)  # (the observer's report)
+            page.wait_for_function("""([t, away]) => { for (const m of Bokeh.documents[0].all_models) {
+                if (m.type !== 'Figure') continue;
+                const v = Bokeh.index.find_one(m), title = String(m.title.text);
+                const target = t === null ? /^frame \\d+ of/.test(title) : title === t;
+                if (target && v._laav_shown !== true) return false;
+                if (away !== null && title === away && v._laav_shown !== false) return false;
+              } return true; }""", arg=[t, away], timeout=10000)
             page.wait_for_function(JS_SETTLED, timeout=10000)
             return plots()
+
+        def renders(t):  # how many times bokeh has painted the figure titled t
+            return page.evaluate("""(t) => { for (const m of Bokeh.documents[0].all_models)
+                if (m.type === 'Figure' && m.title.text === t) return Bokeh.index.find_one(m)._render_count;
+              return null; }""", t)
 
         def is_frame_view(title):
             return title.startswith("frame ") and " of " in title
@@ -323,7 +337,7 @@ def test_plots_off_screen_are_painted_when_seen():
 
         # seen, then off screen again: a change its ranges do not see (its rows reversed: the
         # same picture) leaves only that renderer to repaint when seen again
-        assert scroll_to(None)[title][1] > below
+        assert scroll_to(None, away=title)[title][1] > below
         assert page.evaluate(JS_REVERSE_ROWS, title)
         got = plots()
         assert got[title][6] and not holds_its_data(got[title]), "the new rows were applied off screen"
@@ -336,13 +350,16 @@ def test_plots_off_screen_are_painted_when_seen():
         scroll_to(None)
         grown = page.evaluate(JS_GROW_LEGEND, MARGIN_BELOW_PX)
         assert grown is not None, "no figure with a legend of a column below the fold"
+        scroll_to(None, away=grown)
         assert plots()[grown][6]
+        before = renders(grown)
         page.evaluate("""(t) => { for (const m of Bokeh.documents[0].all_models)
             if (m.type === 'Figure' && m.title.text === t) {
               m.setv({visible: false}, {sync: false}); m.setv({visible: true}, {sync: false}); } }""", grown)
         page.wait_for_timeout(300)
         assert not errors, errors
-        assert plots()[grown][6], "laid out off screen, the plot was given its data (or drawn without)"
+        assert renders(grown) == before, "laid out off screen with its data waiting, the plot was painted"
+        assert plots()[grown][6], "laid out off screen, the plot was given its data"
         got = scroll_to(grown)
         assert not got[grown][3] and not got[grown][6] and got[grown][7] and holds_its_data(got[grown])
         assert not errors, errors

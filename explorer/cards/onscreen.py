@@ -67,41 +67,42 @@ if (PV && typeof IntersectionObserver === 'function'
   const waiting = (v) => !!(v._laav_stale && v._laav_stale.size);
   // A plot come into view: its renderers' data that waited applied, one renderer after
   // another, with bokeh's own update_data (set_data in full, then the renderer marked for
-  // repainting, which the plot's next paint otherwise skips), the plot paused meanwhile (no
-  // paint with some renderers still waiting); then painted. One reveal at a time per plot
-  // (a second call gets the first's promise); data arriving meanwhile is applied by it too.
-  // _laav_deferred (a paint or data waiting) stays set until that paint.
+  // repainting, which the plot's next paint otherwise skips), then painted. Until then the
+  // plot is not painted (see paint below; a renderer in flight still counts as waiting) and
+  // is paused as well. One reveal at a time per plot (a second call gets the first's
+  // promise; _laav_revealing is cleared when it ends, however it ends); data arriving
+  // meanwhile is applied at once (update_data below). _laav_deferred (a paint or data
+  // waiting) stays set until the plot's paint (_actual_paint).
   const reveal = (v) => {
     if (v._laav_revealing) return v._laav_revealing;
-    const run = async () => {
+    const p = (async () => {
       v.pause();
       try {
         while (waiting(v) && !v.is_destroyed) {
           const rv = v._laav_stale.values().next().value;
-          v._laav_stale.delete(rv);  // (new data during the reveal are applied at once)
-          if (rv.is_destroyed) continue;
-          try { await orig_update_data.call(rv); } catch (err) { console.error(err); }
+          if (!rv.is_destroyed) {
+            try { await orig_update_data.call(rv); } catch (err) { console.error(err); }
+          }
+          if (v._laav_stale) v._laav_stale.delete(rv);
         }
       } finally {
         v.unpause(true);
-        v._laav_revealing = null;
       }
       if (!v.is_destroyed) orig_schedule_paint.call(v);
-    };
-    v._laav_revealing = run();
-    return v._laav_revealing;
+    })();
+    v._laav_revealing = p;
+    p.finally(() => { if (v._laav_revealing === p) v._laav_revealing = null; });
+    return p;
   };
   const obs = new IntersectionObserver((entries) => {
     for (const e of entries) {
       const v = e.target._laav_plot_view;
       if (!v) continue;
       shown.set(v, e.isIntersecting);
+      v._laav_shown = e.isIntersecting;  // (what the observer last said: for tests)
       if (!e.isIntersecting || v.is_destroyed) continue;
       if (waiting(v)) reveal(v);
-      else if (v._laav_deferred) {
-        v._laav_deferred = false;
-        orig_schedule_paint.call(v);
-      }
+      else if (v._laav_deferred) orig_schedule_paint.call(v);
     }
   }, {rootMargin: '0px 0px ' + margin + 'px 0px',
       // the page's main area is a scrolling box inside a fixed viewport: the margin must
@@ -125,7 +126,7 @@ if (PV && typeof IntersectionObserver === 'function'
   // legend reads its new rows' colours past the old ones and throws): it waits for the
   // reveal (at once when the plot is seen).
   PV.prototype.paint = function (...args) {
-    if (waiting(this)) {
+    if (waiting(this) || this._laav_revealing) {
       this._laav_deferred = true;
       if (shown.get(this) !== false) reveal(this);
       return;
@@ -156,7 +157,9 @@ if (PV && typeof IntersectionObserver === 'function'
       }
       return orig_update_data.apply(this, args);
     };
-    // (a renderer whose data wait has nothing to hit: its glyph holds the old rows)
+    // (a renderer whose data wait has nothing to hit: its glyph holds the old rows; bokeh's
+    // PlotView.export, which paints without paint(), is reached by the save tool of a plot
+    // on screen only, whose data no longer wait)
     GV.prototype.hit_test = function (...args) {
       const v = this.plot_view;
       if (v && v._laav_stale && v._laav_stale.has(this)) return null;
