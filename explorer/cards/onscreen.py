@@ -15,9 +15,9 @@ page's work after an R1 result, and adds about 35 ms to a card's paint when it i
 
 :data:`JS_PAINT_ON_SCREEN`, run once when the page's document is ready, has bokeh's figure
 views defer a paint while their element is off screen (an ``IntersectionObserver`` on each
-figure's element; the viewport and the scrolling main area extended :data:`MARGIN_BELOW_PX`
-downwards, where the browser supports ``scrollMargin`` (Chromium 120+), so that the next card
-down is ready when scrolled to) and make it when the element comes into view. Bokeh's
+figure's element; the viewport and the scrolling main area can be extended
+:data:`MARGIN_BELOW_PX` downwards, where the browser supports ``scrollMargin`` (Chromium 120+);
+0: what can be seen) and make it when the element comes into view. Bokeh's
 own bookkeeping is untouched: what a deferred paint must redraw accumulates as it does
 between two animation frames (``invalidate_painters``), and the deferred call is bokeh's
 ``schedule_paint`` itself.
@@ -43,9 +43,13 @@ from __future__ import annotations
 
 from bokeh.models import CustomJS
 
-#: How far below the viewport a plot counts as on screen (px): scrolling down shows a
-#: painted card rather than one painted a frame later.
-MARGIN_BELOW_PX = 200
+#: How far below the viewport a plot counts as on screen (px). 0: only what can be seen. At
+#: 200 px (until 2026-12-05) a card just below the fold was kept drawn, so that scrolling
+#: down showed it painted rather than a frame later; but at 1280x800 card 2's graph begins 17
+#: px below the fold, and every frame move made and painted its nodes and edges for nobody:
+#: frame moves 40.6-41.6 ms at 0 against 49.8-53.8 ms at 200 (medians of 10, three
+#: interleaved pairs, docs/bench/explorer_browser_latency_2026-12-05c.md).
+MARGIN_BELOW_PX = 0
 
 #: The page's side, once per page (``plot``: any figure of the page; its view class,
 #: bokeh's ``FigureView`` (a ``PlotView``), is every figure's: the explorer makes no plain
