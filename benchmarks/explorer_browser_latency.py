@@ -257,6 +257,23 @@ def frame_x(seq, frame: int) -> list | None:
     return [None if x_ != x_ else x_ for x_ in x.tolist()]
 
 
+def wait_listening(port: int, proc, deadline: float) -> None:
+    """Until the command ``proc`` (a ``subprocess.Popen``) listens on ``port`` of 127.0.0.1;
+    RuntimeError when it ends first or ``deadline`` (``time.monotonic()``) passes. The page is
+    opened once the server listens, as laav-explore opens the browser; until then a plain
+    connect is tried (not a navigation: Chromium's failed loads every 50 ms, each drawing an
+    error page, took a core from the starting command: panel's import took 2.0-2.9 s instead
+    of 0.8-1.2 s)."""
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return
+        except OSError:
+            if time.monotonic() > deadline or proc.poll() is not None:
+                raise RuntimeError(f"the command did not listen on port {port}") from None
+            time.sleep(0.02)
+
+
 def measure(file: str | None, repeats: int, only: list[str] | None = None,
             extra: list[str] | None = None, settle: float = 0.3) -> dict:
     from playwright import sync_api
@@ -280,18 +297,7 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
             page.on("websocket", lambda ws: ws.on("framereceived", lambda f: received.__setitem__(
                 0, received[0] + len(f if isinstance(f, (bytes, bytearray)) else f.encode()))))
             deadline = t_cmd + 300  # a video is tracked before the server starts
-            # the page is opened once the server listens, as laav-explore opens the browser;
-            # until then a plain connect is tried (not a navigation: Chromium's failed loads
-            # every 50 ms, each drawing an error page, took a core from the starting command:
-            # panel's import took 2.0-2.9 s instead of 0.8-1.2 s)
-            while True:
-                try:
-                    socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                    break
-                except OSError:
-                    if time.monotonic() > deadline or proc.poll() is not None:
-                        raise RuntimeError(f"the command did not listen on port {port}") from None
-                    time.sleep(0.02)
+            wait_listening(port, proc, deadline)
             # (the first request may wait for the prebuilt explorer: up to the deadline)
             page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded",
                       timeout=max(1000.0, 1000 * (deadline - time.monotonic())))

@@ -67,7 +67,6 @@ if (PV && typeof IntersectionObserver === 'function'
   const orig_remove = PV.prototype.remove, orig_actual_paint = PV.prototype._actual_paint;
   const orig_update_data = GV ? GV.prototype.update_data : null;
   const orig_hit_test = GV ? GV.prototype.hit_test : null;
-  const shown = new WeakMap();  // plot view -> its element intersects the (extended) viewport
   const waiting = (v) => !!(v._laav_stale && v._laav_stale.size);
   // A plot come into view: its renderers' data that waited applied, one renderer after
   // another, with bokeh's own update_data (set_data in full, then the renderer marked for
@@ -102,8 +101,9 @@ if (PV && typeof IntersectionObserver === 'function'
     for (const e of entries) {
       const v = e.target._laav_plot_view;
       if (!v) continue;
-      shown.set(v, e.isIntersecting);
-      v._laav_shown = e.isIntersecting;  // (what the observer last said: for tests)
+      // whether the element intersects the (extended) viewport, as the observer last said
+      // (undefined before its first report: drawn as before)
+      v._laav_shown = e.isIntersecting;
       if (!e.isIntersecting || v.is_destroyed) continue;
       if (waiting(v)) reveal(v);
       else if (v._laav_deferred) orig_schedule_paint.call(v);
@@ -119,7 +119,7 @@ if (PV && typeof IntersectionObserver === 'function'
       el._laav_plot_view = this;
       obs.observe(el);
     }
-    if (shown.get(this) === false && !this.is_paused) {
+    if (this._laav_shown === false && !this.is_paused) {
       this._laav_deferred = true;  // painted when it comes into view
       return;
     }
@@ -132,7 +132,7 @@ if (PV && typeof IntersectionObserver === 'function'
   PV.prototype.paint = function (...args) {
     if (waiting(this) || this._laav_revealing) {
       this._laav_deferred = true;
-      if (shown.get(this) !== false) reveal(this);
+      if (this._laav_shown !== false) reveal(this);
       return;
     }
     return orig_paint.apply(this, args);
@@ -154,7 +154,7 @@ if (PV && typeof IntersectionObserver === 'function'
     // window.__laavNoDefer: computed at once (a measurement switch).
     GV.prototype.update_data = function (...args) {
       const v = this.plot_view;
-      if (!window.__laavNoDefer && v && shown.get(v) === false && !v._laav_revealing) {
+      if (!window.__laavNoDefer && v && v._laav_shown === false && !v._laav_revealing) {
         (v._laav_stale = v._laav_stale || new Set()).add(this);
         v._laav_deferred = true;
         return Promise.resolve();
