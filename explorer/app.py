@@ -793,6 +793,7 @@ class Explorer:
                               own=own)
                 self.view3d.show_first()
                 self.compare.redraw()
+                self.files.exports_ready(not preview)
             self.view3d.draw(seq, result, self.style["color"], self.controls.w_frame.value, new_seq)
             self._seq_shown = seq
             self._sync_url()

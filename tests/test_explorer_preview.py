@@ -13,6 +13,7 @@ import pytest
 
 import laav
 from explorer import Explorer
+from explorer.cards.files import EXPORT_WAIT_TIP
 from explorer.cards.status import PREVIEW_OWN, PREVIEW_PLAIN, PREVIEW_STATUS
 from explorer.state import ExplorerState
 from explorer.views import PREVIEW_NOTE, PREVIEW_NOTE_OWN
@@ -56,18 +57,20 @@ def ex():
 
 
 def test_the_app_draws_the_preview_then_the_result(ex):
-    seen = []
+    seen, exports = [], []
     draw = ex._apply_result
 
     def spy(result, seq, settings, gen, preview=False):
         draw(result, seq, settings, gen, preview)
         seen.append((preview, ex.status_bar._status_text, ex.rv_md.object, ex.applied_generation,
                      gen, ex.result is result))
+        exports.append([w.disabled for w in ex.files.downloads])
 
     ex._apply_result = spy
     ex.controls.w_seed.value = 2
     assert ex.wait(120)
     assert [p for p, *_ in seen] == [True, False]
+    assert exports == [[True] * 3, [False] * 3]  # no export of a preview
     (_, text1, rv1, applied1, gen1, shown1), (_, text2, rv2, applied2, gen2, shown2) = seen
     assert PREVIEW_STATUS in text1 and "seed \\= 2" in text1 and PREVIEW_NOTE in rv1
     assert PREVIEW_PLAIN.split("{ms}")[1] in text1  # plain RV and the selection to come
@@ -86,9 +89,12 @@ def test_a_preview_gives_way_to_the_last_result_when_its_result_will_not_come(ex
                      ex.applied_generation + 1, True)
     assert ex.previewing and ex.result is got[0]
     assert PREVIEW_STATUS in ex.status_bar._status_text
+    # the exports wait: a preview's labels are not the result's (nor would the files say so)
+    assert all(w.disabled and w.description == EXPORT_WAIT_TIP for w in ex.files.downloads)
     ex.restore_result()
     assert not ex.previewing and ex.result is shown and ex.state.result is shown
     assert PREVIEW_STATUS not in ex.status_bar._status_text
+    assert not any(w.disabled or w.description for w in ex.files.downloads)
 
 
 def test_the_default_has_no_preview_when_its_gate_runs_no_start():
