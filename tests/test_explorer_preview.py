@@ -13,7 +13,6 @@ import pytest
 
 import laav
 from explorer import Explorer
-from explorer.cards.files import EXPORT_WAIT_TIP
 from explorer.cards.status import PREVIEW_OWN, PREVIEW_PLAIN, PREVIEW_STATUS
 from explorer.state import ExplorerState
 from explorer.views import PREVIEW_NOTE, PREVIEW_NOTE_OWN
@@ -90,11 +89,11 @@ def test_a_preview_gives_way_to_the_last_result_when_its_result_will_not_come(ex
     assert ex.previewing and ex.result is got[0]
     assert PREVIEW_STATUS in ex.status_bar._status_text
     # the exports wait: a preview's labels are not the result's (nor would the files say so)
-    assert all(w.disabled and w.description == EXPORT_WAIT_TIP for w in ex.files.downloads)
+    assert all(w.disabled for w in ex.files.downloads)
     ex.restore_result()
     assert not ex.previewing and ex.result is shown and ex.state.result is shown
     assert PREVIEW_STATUS not in ex.status_bar._status_text
-    assert not any(w.disabled or w.description for w in ex.files.downloads)
+    assert not any(w.disabled for w in ex.files.downloads)
 
 
 def test_the_default_has_no_preview_when_its_gate_runs_no_start():

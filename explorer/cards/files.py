@@ -36,8 +36,6 @@ from .base import SIDE_W, Markdown, page_box, shown_style
 
 #: Work shorter than this shows no progress line (a slider move on a small sequence).
 PROGRESS_AFTER = 1.0
-#: The downloads' tooltip while a preview is shown (:meth:`Files.exports_ready`).
-EXPORT_WAIT_TIP = "Waiting for the result: a preview is shown while the fine-tuning finishes"
 
 
 class UploadBox(pn.widgets.FileDropper):
@@ -220,13 +218,13 @@ class Files:
     def exports_ready(self, ready: bool) -> None:
         """(Document thread.) The downloads export the result shown, so they wait while a
         preview is shown (``ready`` False): its labels are LAAV's own trial's, which the
-        result on its way may change, and neither the CSV nor the JSON could say so."""
-        tip = None if ready else EXPORT_WAIT_TIP
+        result on its way may change, and neither the CSV nor the JSON could say so. Only
+        ``disabled`` changes (the status line says what is computing): a tooltip set here
+        (``description``) adds a model to the document, and the preview and the result then
+        reached the page about 200 ms later (measured in Chromium, demo, two pairs)."""
         for w in self.downloads:
             if w.disabled == ready:
                 w.disabled = not ready
-            if w.description != tip:
-                w.description = tip
 
     def name_downloads(self, seq: laav.Sequence) -> None:
         for w, ext in ((self.w_dl_csv, "labels.csv"), (self.w_dl_json, "params.json"),
