@@ -314,3 +314,20 @@ def test_nothing_to_pin_before_the_first_result(seq):
         assert "Nothing to pin yet" in e.compare.pin_md.object
     finally:
         e.close()
+
+
+def test_the_folded_card_makes_its_fields_when_first_opened_with_the_settings_then(ex):
+    """The ~30 fields are made at the first opening (a sixth of building the explorer), and
+    then hold what the sliders and the URL changed while folded, marked."""
+    adv = ex.advanced
+    assert adv._widgets is None and adv.card.objects == []
+    ex.controls.w_params["r1"].value = 25.0
+    assert ex.wait(120) and ex.result.params.r1 == 25.0
+    assert adv._widgets is None  # still folded: nothing made
+    assert "r1" in adv.summary.object  # the count of fields off their defaults is kept
+    adv.card.collapsed = False
+    assert adv._widgets is not None and adv.card.objects == adv.body
+    assert adv.widgets["r1"].value == 25.0 and adv.marked == ["r1"]
+    assert adv.widgets["r1"].label == f"{MARK} r1 · default {laav.LaavParams.r1:g}"
+    adv.widgets["lam"].value = 3.5  # and the made fields ask for changes as before
+    assert ex.wait(120) and ex.result.params.lam == 3.5

@@ -68,17 +68,8 @@ class AdvancedPanel:
     def __init__(self, host: Host, state, controls) -> None:
         self.host, self.state, self.controls = host, state, controls
         p = state.target.params
-        self.widgets: dict = {}
-        rows = []
-        stage = None
-        for f in FIELDS:
-            if f.stage != stage:
-                stage = f.stage
-                rows.append(Markdown(f"**{STAGE_TITLES[stage]}**", margin=(8, 5, 0, 5)))
-            w, row = self._widget(f, getattr(p, f.name))
-            w.param.watch(partial(self._on_field, f), "value")
-            self.widgets[f.name] = w
-            rows.append(row)
+        self._params = p  # the parameters shown (what the fields hold when they are built)
+        self._widgets: dict | None = None  # built when first opened or read (:attr:`widgets`)
         self.message = Alert("", alert_type="danger", visible=False, width=FIELD_W, margin=(4, 5))
         self.summary = Markdown("", width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
         self.w_reset = pn.widgets.Button(label="Reset every field to its default", color="warning",
@@ -91,7 +82,7 @@ class AdvancedPanel:
                                   width=FIELD_W, margin=(2, 5))
             b.on_click(partial(self._on_preset, name))
             self.w_presets[name] = b
-        intro = Markdown(
+        self.intro = Markdown(
             "Every `LaavParams` field (hover the **?** for its meaning, range and default); a field "
             f"off its default is marked {MARK}. Seed and C stay in the sliders above. The presets "
             "set every field, and the status line then says `preset = NAME`: `paper` "
@@ -101,18 +92,42 @@ class AdvancedPanel:
             "noise, README); pin a result first (Compare) to see what changes.",
             width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
         # folded, the card holds nothing: its ~130 models (a third of the sidebar's) go to the
-        # page when it is first opened, not with the page (served and built that much sooner)
-        self.body = [intro, self.summary, self.message, *self.w_presets.values(), *rows,
-                     self.w_reset]
+        # page when it is first opened, not with the page (served and built that much sooner);
+        # its ~30 fields are not even made until then (about a sixth of building the explorer)
         self.card = pn.Card(title="Advanced: every parameter", collapsed=True, collapsible=True,
                             sizing_mode="stretch_width", margin=(6, 10), stylesheets=[FOLD_ARROW])
         self.card.param.watch(self._on_unfold, "collapsed")
         self._mark(p)
 
+    @property
+    def widgets(self) -> dict:
+        """``{field name: widget}`` of every LaavParams field, made when first asked for (the
+        card's first opening): holding the parameters shown last."""
+        if self._widgets is None:
+            widgets, rows, stage = {}, [], None
+            for f in FIELDS:
+                if f.stage != stage:
+                    stage = f.stage
+                    rows.append(Markdown(f"**{STAGE_TITLES[stage]}**", margin=(8, 5, 0, 5)))
+                w, row = self._widget(f, getattr(self._params, f.name))
+                w.param.watch(partial(self._on_field, f), "value")
+                widgets[f.name] = w
+                rows.append(row)
+            self._rows = rows
+            self._widgets = widgets
+        return self._widgets
+
+    @property
+    def body(self) -> list:
+        """What the card holds once opened."""
+        self.widgets  # noqa: B018 - made now
+        return [self.intro, self.summary, self.message, *self.w_presets.values(), *self._rows,
+                self.w_reset]
+
     def _on_unfold(self, event) -> None:
         """The card's fields go to the page the first time it is opened."""
         if not event.new and not self.card.objects:
-            self.card.objects = list(self.body)
+            self.card.objects = self.body
 
     @staticmethod
     def _widget(f, value):
@@ -166,20 +181,21 @@ class AdvancedPanel:
     # ------------------------------------------------------------------ settings -> widgets
     def show(self, settings) -> None:
         """(Document thread.) Put ``settings``' parameters on the widgets without requesting."""
-        p = settings.params
-        with self.host.quiet():
-            for f in FIELDS:
-                w, v = self.widgets[f.name], getattr(p, f.name)
-                if w.value != v:
-                    w.value = v
+        p = self._params = settings.params
+        if self._widgets is not None:  # (else they are made holding p)
+            with self.host.quiet():
+                for f in FIELDS:
+                    w, v = self._widgets[f.name], getattr(p, f.name)
+                    if w.value != v:
+                        w.value = v
         self.message.visible = False  # what is shown was accepted
         self._mark(p)
 
     def _mark(self, params) -> None:
         """Mark the fields off their defaults (their labels) and count them."""
-        for f in FIELDS:
+        for f in ([] if self._widgets is None else FIELDS):  # (made with their labels)
             name = label_of(f, getattr(params, f.name))
-            w = self.widgets[f.name]
+            w = self._widgets[f.name]
             if w.label != name:
                 w.label = name
         off = changed_fields(params)
