@@ -741,6 +741,7 @@ class Explorer:
         new_seq = seq is not self._seq_shown
         with self.quiet():
             with self.hold(freeze=new_seq, live="draw"):
+                self.files.exports_ready(not preview)  # (with previewing, before any drawing)
                 unpinned = None
                 if new_seq:
                     self._set_sequence(seq, settings)
@@ -793,7 +794,6 @@ class Explorer:
                               own=own)
                 self.view3d.show_first()
                 self.compare.redraw()
-                self.files.exports_ready(not preview)
             self.view3d.draw(seq, result, self.style["color"], self.controls.w_frame.value, new_seq)
             self._seq_shown = seq
             self._sync_url()
@@ -915,9 +915,13 @@ class Explorer:
     def restore_result(self) -> None:
         """(Document thread.) After a cancel or a failure: a preview shown (whose result will
         not come) gives way to the last result again."""
-        if self.previewing and self.state.result is not None:
+        if not self.previewing:
+            return
+        if self.state.result is not None:
             self._apply_result(self.state.result, self.state.sequence, self.state.settings,
                                self.applied_generation)
+        else:  # a first computation's preview: nothing else to show; it stays, said to be one
+            self.status_bar.preview_abandoned()  # (the exports and the pin still refuse it)
 
     # ------------------------------------------------------------------ view controls
     def _on_frame(self, event=None) -> None:

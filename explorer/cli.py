@@ -95,17 +95,17 @@ def serve_options() -> dict:
 
     assert 2 * UPLOAD_CHUNK < WEBSOCKET_MAX_MESSAGE  # a chunk and its message's framing fit
     no_mathjax()
-    no_session_validation()
     return {"websocket_max_message_size": WEBSOCKET_MAX_MESSAGE}
 
 
 def no_session_validation() -> None:
-    """Serve each tab's document without bokeh's integrity checks of its models (0.10-0.13 s
-    of the first page's 0.6-0.7 s on the server, measured on the demo, 2026-12-05: every
-    model's references walked and checked, before the page's HTML is sent), unless
-    ``BOKEH_VALIDATE_DOC`` is set. The checks only log warnings (bokeh's validation level
+    """``laav-explore``'s server (:func:`main`, for the whole process): each tab's document is
+    served without bokeh's integrity checks of its models (0.10-0.13 s of the first page's
+    0.6-0.7 s on the server, measured on the demo, 2026-12-05: every model's references
+    walked and checked, before the page's HTML is sent), unless ``BOKEH_VALIDATE_DOC`` is
+    set. The checks only log warnings (bokeh's validation level
     is "none"); the tests run them on the explorer's whole document instead
-    (``tests/test_explorer_layout.py``, ``test_the_page_passes_bokehs_integrity_checks``)."""
+    (``tests/test_explorer.py``, ``test_the_page_passes_bokehs_integrity_checks``)."""
     import os
 
     from bokeh.settings import settings
@@ -564,6 +564,7 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origi
     import panel as pn
 
     startup_gc.imported()
+    no_session_validation()
     hosts = page_hosts(args.host)
     origins = [f"{h}:{port}" for h in hosts]  # the page's websocket: its own origin only
     try:

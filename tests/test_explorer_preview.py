@@ -13,7 +13,7 @@ import pytest
 
 import laav
 from explorer import Explorer
-from explorer.cards.status import PREVIEW_OWN, PREVIEW_PLAIN, PREVIEW_STATUS
+from explorer.cards.status import PREVIEW_ABANDONED, PREVIEW_OWN, PREVIEW_PLAIN, PREVIEW_STATUS
 from explorer.state import ExplorerState
 from explorer.views import PREVIEW_NOTE, PREVIEW_NOTE_OWN
 from laav.synthetic import make_sequence
@@ -94,6 +94,27 @@ def test_a_preview_gives_way_to_the_last_result_when_its_result_will_not_come(ex
     assert not ex.previewing and ex.result is shown and ex.state.result is shown
     assert PREVIEW_STATUS not in ex.status_bar._status_text
     assert not any(w.disabled for w in ex.files.downloads)
+
+
+def test_a_first_computations_preview_stays_a_preview_when_its_result_will_not_come(ex):
+    """Cancelled or failed after its preview with no result before it (a sequence's first
+    computation): the preview stays, the status line says it is one and that its computation
+    did not finish, and the exports and the pin refuse it (its labels are not a result's)."""
+    got = []
+    laav.Pipeline(SEQ, 3, PLAIN).update(seed=4, preview=got.append)
+    ex.state.result = None  # (as before a sequence's first result)
+    ex._apply_result(got[0], SEQ, ex.settings.__class__(ex.settings.params, 4, 3),
+                     ex.applied_generation + 1, True)
+    assert ex.previewing and all(w.disabled for w in ex.files.downloads)
+    ex.restore_result()
+    assert ex.previewing and ex.result is got[0]
+    text = ex.status_bar.status.object
+    assert PREVIEW_ABANDONED in text and PREVIEW_STATUS not in text
+    assert all(w.disabled for w in ex.files.downloads)
+    with pytest.raises(RuntimeError, match="preview"):
+        ex.files.export_csv()  # (a click sent before the buttons were disabled)
+    assert not ex.compare.pin() and "preview" in ex.compare.pin_md.object
+    assert ex.compare.pinned is None
 
 
 def test_the_default_has_no_preview_when_its_gate_runs_no_start():
@@ -217,5 +238,18 @@ def test_the_tour_says_the_missed_motion_trials_are_still_computing(monkeypatch)
         assert e.wait(120)
         assert [p for p, _ in seen] == [True, False], seen
         assert "are still computing" in seen[0][1] and "are still computing" not in seen[1][1]
+    finally:
+        e.close()
+
+
+def test_the_exports_wait_for_the_first_result():
+    """Before any result the downloads are greyed (a click used to raise "no result yet"
+    on the server); the first result shown enables them."""
+    e = Explorer(SEQ, 3, PLAIN, viser=False, start=False)
+    try:
+        assert all(w.disabled for w in e.files.downloads)
+        e.start()
+        assert e.wait(120) and not e.previewing
+        assert not any(w.disabled for w in e.files.downloads)
     finally:
         e.close()

@@ -104,12 +104,12 @@ class AdvancedPanel:
         """``{field name: widget}`` of every LaavParams field, made when first asked for (the
         card's first opening): holding the parameters shown last."""
         if self._widgets is None:
-            widgets, rows, stage = {}, [], None
+            widgets, rows, stage, p = {}, [], None, self._params  # (one snapshot of the settings)
             for f in FIELDS:
                 if f.stage != stage:
                     stage = f.stage
                     rows.append(Markdown(f"**{STAGE_TITLES[stage]}**", margin=(8, 5, 0, 5)))
-                w, row = self._widget(f, getattr(self._params, f.name))
+                w, row = self._widget(f, getattr(p, f.name))
                 w.param.watch(partial(self._on_field, f), "value")
                 widgets[f.name] = w
                 rows.append(row)

@@ -74,6 +74,10 @@ class CompareView:
         if res is None:
             self.pin_md.object = "Nothing to pin yet: the first result is still being computed."
             return False
+        if self.host.previewing:  # LAAV's trial so far: its labels may still change
+            self.pin_md.object = ("A preview is shown (LAAV's own trial while the rest of the "
+                                  "fine-tuning computes): pin once its result is shown.")
+            return False
         self.pinned = C.pin(seq, res, settings, self.state.plain_rv(seq, settings))
         # (a button callback may run outside the document lock: the figures change in a tick)
         self.host.schedule(self.redraw)

@@ -186,6 +186,7 @@ class Files:
                                                 label="Views (PNG)", color="primary",
                                                 embed=False, width=SIDE_W)
         self.downloads = [self.w_dl_csv, self.w_dl_json, self.w_dl_png]
+        self.exports_ready(False)  # until the first result is shown (exports_ready)
 
     def show_sequence(self, seq: laav.Sequence) -> None:
         self.seq_info.object = seq_text(seq)
@@ -496,6 +497,8 @@ class Files:
     def _need_result(self):
         if self.host.result is None:
             raise RuntimeError("no result yet")
+        if self.host.previewing:  # (a click sent just before the buttons were disabled)
+            raise RuntimeError("a preview is shown: the exports wait for the result")
         return self.host.sequence, self.host.result
 
     def export_csv(self):

@@ -21,6 +21,10 @@ PREVIEW_PLAIN = "LAAV's own fine-tuning in {ms} ms; plain RV and the model selec
 PREVIEW_FINAL = "LAAV's trial (so far)"
 PREVIEW_OWN = ("LAAV's informed trial after {ms} ms; the trials for a missed motion (ours) "
                + PREVIEW_STATUS)
+#: What replaces :data:`PREVIEW_STATUS` when the computation a preview came from was cancelled
+#: or failed before any result (:meth:`StatusBar.preview_abandoned`).
+PREVIEW_ABANDONED = ("its computation did not finish: a preview, not a result (change a setting "
+                     "to compute one)")
 
 
 RECOMPUTING = "Recomputing… (the views keep the last result until the new one is ready)"
@@ -129,6 +133,13 @@ class StatusBar:
     def show_last(self) -> None:
         """Back to the shown result's status line (after a cancelled read or computation)."""
         self.status.object = self._status_text
+
+    def preview_abandoned(self) -> None:
+        """The preview shown stays, with no result behind it (the first computation of a
+        sequence cancelled or failed after its preview): the line says so instead of
+        "still computing"."""
+        self.status.object = self._status_text = self._status_text.replace(PREVIEW_STATUS,
+                                                                           PREVIEW_ABANDONED)
 
     def show_error(self, message: str) -> None:
         # settings and files alike ("empty.mat is empty (0 bytes)" is no setting)
