@@ -880,7 +880,9 @@ class Explorer:
     def _show_busy(self, busy: bool) -> None:
         if busy and self._busy_period is None:
             return  # (scheduled by the timer just as the period ended)
-        self.status_bar.show_busy(busy, self.result is not None)
+        # a preview's line stays: it says what is still computing, where "Recomputing… (the
+        # views keep the last result …)" would be wrong (the timer often fires just after it)
+        self.status_bar.show_busy(busy, self.result is not None and not self.previewing)
 
     def _show_error(self, message: str) -> None:
         if self._rest is not None and self._rest["loaded"]:

@@ -96,6 +96,26 @@ def test_a_preview_gives_way_to_the_last_result_when_its_result_will_not_come(ex
     assert not any(w.disabled for w in ex.files.downloads)
 
 
+def test_the_busy_line_does_not_replace_a_previews_line(ex):
+    """The spinner's timer often fires just after the preview is drawn: its "Recomputing…
+    (the views keep the last result …)" replaced the preview's line, which says what is
+    still computing, while the views showed the preview, not the last result."""
+    from explorer.cards.status import RECOMPUTING, spinner_style
+
+    got = []
+    laav.Pipeline(SEQ, 3, PLAIN).update(seed=4, preview=got.append)
+    ex._apply_result(got[0], SEQ, ex.settings.__class__(ex.settings.params, 4, 3),
+                     ex.applied_generation + 1, True)
+    ex._busy_period = object()  # (a computation running for longer than the spinner waits)
+    ex._show_busy(True)
+    text = ex.status_bar.status.object
+    assert PREVIEW_STATUS in text and RECOMPUTING not in text
+    assert ex.status_bar.spinner.styles == spinner_style(True)  # the spinner still turns
+    ex.restore_result()  # (no result of that request will come)
+    ex._show_busy(True)  # a result shown: the line says it is being recomputed
+    assert ex.status_bar.status.object == RECOMPUTING
+
+
 def test_a_first_computations_preview_stays_a_preview_when_its_result_will_not_come(ex):
     """Cancelled or failed after its preview with no result before it (a sequence's first
     computation): the preview stays, the status line says it is one and that its computation
