@@ -103,9 +103,9 @@ def no_session_validation() -> None:
     served without bokeh's integrity checks of its models (0.10-0.13 s of the first page's
     0.6-0.7 s on the server, measured on the demo, 2026-12-05: every model's references
     walked and checked, before the page's HTML is sent), unless ``BOKEH_VALIDATE_DOC`` is
-    set. The checks only log warnings (bokeh's validation level
-    is "none"); the tests run them on the explorer's whole document instead
-    (``tests/test_explorer.py``, ``test_the_page_passes_bokehs_integrity_checks``)."""
+    set. The checks only log warnings (bokeh's validation level is "none"); the tests run
+    them on the explorer's whole document instead (``tests/test_explorer.py``,
+    ``test_the_page_passes_bokehs_integrity_checks``)."""
     import os
 
     from bokeh.settings import settings

@@ -217,9 +217,10 @@ class Files:
         self.clear_box(opened[1])
 
     def exports_ready(self, ready: bool) -> None:
-        """(Document thread.) The downloads export the result shown, so they wait while a
-        preview is shown (``ready`` False): its labels are LAAV's own trial's, which the
-        result on its way may change, and neither the CSV nor the JSON could say so. Only
+        """(Document thread.) The downloads export the result shown, so they wait (``ready``
+        False) before the first result and while a preview is shown: a preview's labels are
+        LAAV's own trial's, which the result on its way may change, and neither the CSV nor
+        the JSON could say so. Only
         ``disabled`` changes (the status line says what is computing): a tooltip set here
         (``description``) adds a model to the document, and the preview and the result then
         reached the page about 200 ms later (measured in Chromium, demo, two pairs)."""
