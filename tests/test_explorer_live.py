@@ -9,7 +9,7 @@ import pytest
 
 from explorer import views as V
 from explorer.app import Explorer
-from explorer.cards.live import LIVE_MAX_ENTRIES, LiveFrames, legend_rows
+from explorer.cards.live import LIVE_MAX_ENTRIES, LiveFrames, legend_rows, packed_colors, unpacked_colors
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,10 @@ def test_the_page_gets_the_tracks_once_and_the_templates_per_result(seq):
         assert meta["t_frame_title"][0].startswith(f"frame {{f}} of {F - 1}")
         # a template, made at the frame shown, is what the server shows there
         _, tsrc, spec = live.views["frame_trails"]
-        tpl = {("_" + k[1:]) if k[0] == "@" else k[1:]: np.asarray(v) for k, v in tsrc.data.items()}
+        # (its colours go packed, 0xRRGGBBAA: the page's bokeh maps them without a CSS parse)
+        assert np.asarray(tsrc.data["=color"]).dtype == np.uint32
+        tpl = {("_" + k[1:]) if k[0] == "@" else k[1:]: unpacked_colors(np.asarray(v))
+               for k, v in tsrc.data.items()}
         ex.w_frame.value = 7
         got = V.instantiate(tpl, spec, seq.points, seq.visible, 7)
         for k, v in got.items():
@@ -159,3 +162,16 @@ def test_atom_ids_are_written_up_to_a_limit(seq, monkeypatch):
         assert gv.r_ids.visible and "Atom ids are written" not in gv.caption.object
     finally:
         ex.close()
+
+
+def test_packed_colours_round_trip_and_leave_other_columns():
+    """The page's templates carry hex colours as bokeh's packed RGBA (uint32 0xRRGGBBAA);
+    anything that is not a column of hex colours goes as it is."""
+    hexes = np.array(["#0072B2", "#D55E00", "#FFFFFF80"])
+    packed = packed_colors(hexes)
+    assert packed.dtype == np.uint32 and int(packed[0]) == 0x0072B2FF and int(packed[2]) == 0xFFFFFF80
+    np.testing.assert_array_equal(unpacked_colors(packed), hexes)
+    for other in (np.array([1.0, 2.0]), np.array(["red", "#000000"]), np.array(["#12345G"]),
+                  np.zeros(0, "U7"), np.array([3, 4], dtype=np.int32)):
+        assert packed_colors(other) is other or np.array_equal(packed_colors(other), other)
+        assert packed_colors(other).dtype == other.dtype

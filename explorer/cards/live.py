@@ -172,6 +172,42 @@ for (const name of Object.keys(out)) out[name][0].setv({data: out[name][1]}, {sy
 """
 
 
+def packed_colors(col: np.ndarray) -> np.ndarray:
+    """``col`` with CSS hex colours (``#rrggbb`` or ``#rrggbbaa``, every entry) as bokeh's
+    packed RGBA, uint32 ``0xRRGGBBAA``; any other column unchanged.
+
+    The page's copy of a view is made again at every frame move and result
+    (:data:`JS_DERIVE`), and bokeh then maps its colour columns again: from strings, a CSS
+    parse per point and glyph (about 6 ms of a frame move's ~30 ms of script on the demo,
+    measured with a CPU profile); a uint32 column is taken as it is. Only the templates the
+    page reads are packed; the server's own views keep the strings (exports, tests, the
+    server-drawn frames above :data:`LIVE_MAX_ENTRIES`). :func:`unpacked_colors` undoes it."""
+    col = np.asarray(col)
+    if col.dtype.kind not in "UO" or col.size == 0:
+        return col
+    text = col.astype("U9")
+    lengths = np.char.str_len(text)
+    if not (np.char.startswith(text, "#") & ((lengths == 7) | (lengths == 9))).all():
+        return col
+    try:
+        rgb = np.array([int(c[1:7], 16) for c in text.tolist()], dtype=np.uint32)
+        alpha = np.array([int(c[7:9], 16) if len(c) == 9 else 255 for c in text.tolist()],
+                         dtype=np.uint32)
+    except ValueError:  # not hex after all
+        return col
+    return (rgb << np.uint32(8)) | alpha
+
+
+def unpacked_colors(col: np.ndarray) -> np.ndarray:
+    """:func:`packed_colors` undone: ``#RRGGBB`` (``#RRGGBBAA`` where not opaque) strings
+    for a uint32 column, anything else unchanged."""
+    col = np.asarray(col)
+    if col.dtype != np.uint32:
+        return col
+    return np.array([f"#{int(v) >> 8:06X}" + ("" if int(v) & 255 == 255 else f"{int(v) & 255:02X}")
+                     for v in col.tolist()], dtype="U9")
+
+
 def legend_rows(tpl: dict, spec: dict, by: str | None = None) -> dict:
     """The rows a legend's stand-in renderer holds for view template ``tpl`` (see
     :meth:`LiveFrames.detach_legend`): its first row (one per distinct value of column ``by``,
@@ -369,7 +405,7 @@ class LiveFrames:
             set_data(proxy.data_source, {c: rows[c] for c in proxy.data_source.data if c in rows})
         if not self.enabled:
             return
-        if set_data(tsrc, {("@" + k[1:]) if k in ("_a", "_b") else "=" + k: np.asarray(v)
+        if set_data(tsrc, {("@" + k[1:]) if k in ("_a", "_b") else "=" + k: packed_colors(v)
                            for k, v in tpl.items()}):
             self._changed = True
 
