@@ -18,6 +18,7 @@ from test_explorer_browser import _sequence, _served, _wait_for
 from test_explorer_latency_browser import JS_PAGE, JS_SET, _open_with_result, _patches
 
 from explorer import views as V
+from explorer.cards.live import unpacked_colors
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -58,6 +59,11 @@ def _columns_differ(page_cols: dict, want: dict) -> list:
             bad.append((k, a.shape, b.shape))
         elif b.dtype.kind == "f":
             if not np.allclose(a.astype(float), b, atol=1e-3, rtol=1e-6, equal_nan=True):
+                bad.append((k, "values"))
+        elif b.dtype.kind in "UO" and a.dtype.kind in "iuf" and a.size:
+            # colours, which the page holds packed (explorer.cards.live.packed_colors)
+            page_hex = np.char.upper(unpacked_colors(a.astype(np.uint32)).astype(str))
+            if not (page_hex == np.char.upper(b.astype(str))).all():
                 bad.append((k, "values"))
         elif not (a.astype(str) == b.astype(str)).all():
             bad.append((k, "values"))
