@@ -167,11 +167,11 @@ def test_atom_ids_are_written_up_to_a_limit(seq, monkeypatch):
 def test_packed_colours_round_trip_and_leave_other_columns():
     """The page's templates carry hex colours as bokeh's packed RGBA (uint32 0xRRGGBBAA);
     anything that is not a column of hex colours goes as it is."""
-    hexes = np.array(["#0072B2", "#D55E00", "#FFFFFF80"])
+    hexes = np.array(["#0072B2", "#D55E00", "#FFFFFF"])
     packed = packed_colors(hexes)
-    assert packed.dtype == np.uint32 and int(packed[0]) == 0x0072B2FF and int(packed[2]) == 0xFFFFFF80
+    assert packed.dtype == np.uint32 and int(packed[0]) == 0x0072B2FF and int(packed[2]) == 0xFFFFFFFF
     np.testing.assert_array_equal(unpacked_colors(packed), hexes)
     for other in (np.array([1.0, 2.0]), np.array(["red", "#000000"]), np.array(["#12345G"]),
-                  np.zeros(0, "U7"), np.array([3, 4], dtype=np.int32)):
+                  np.array(["#FFFFFF80"]), np.zeros(0, "U7"), np.array([3, 4], dtype=np.int32)):
         assert packed_colors(other) is other or np.array_equal(packed_colors(other), other)
         assert packed_colors(other).dtype == other.dtype

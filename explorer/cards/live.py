@@ -173,8 +173,8 @@ for (const name of Object.keys(out)) out[name][0].setv({data: out[name][1]}, {sy
 
 
 def packed_colors(col: np.ndarray) -> np.ndarray:
-    """``col`` with CSS hex colours (``#rrggbb`` or ``#rrggbbaa``, every entry) as bokeh's
-    packed RGBA, uint32 ``0xRRGGBBAA``; any other column unchanged.
+    """``col`` with CSS hex colours (``#rrggbb``, every entry: the explorer's palettes) as
+    bokeh's packed RGBA, uint32 ``0xRRGGBBFF``; any other column unchanged.
 
     The page's copy of a view is made again at every frame move and result
     (:data:`JS_DERIVE`), and bokeh then maps its colour columns again: from strings, a CSS
@@ -185,27 +185,23 @@ def packed_colors(col: np.ndarray) -> np.ndarray:
     col = np.asarray(col)
     if col.dtype.kind not in "UO" or col.size == 0:
         return col
-    text = col.astype("U9")
-    lengths = np.char.str_len(text)
-    if not (np.char.startswith(text, "#") & ((lengths == 7) | (lengths == 9))).all():
+    text = col.astype(str)
+    if not (np.char.startswith(text, "#") & (np.char.str_len(text) == 7)).all():
         return col
     try:
-        rgb = np.array([int(c[1:7], 16) for c in text.tolist()], dtype=np.uint32)
-        alpha = np.array([int(c[7:9], 16) if len(c) == 9 else 255 for c in text.tolist()],
-                         dtype=np.uint32)
+        rgb = V.hex_to_rgb(text).astype(np.uint32)
     except ValueError:  # not hex after all
         return col
-    return (rgb << np.uint32(8)) | alpha
+    return (rgb[:, 0] << 24) | (rgb[:, 1] << 16) | (rgb[:, 2] << 8) | np.uint32(255)
 
 
 def unpacked_colors(col: np.ndarray) -> np.ndarray:
-    """:func:`packed_colors` undone: ``#RRGGBB`` (``#RRGGBBAA`` where not opaque) strings
-    for a uint32 column, anything else unchanged."""
+    """:func:`packed_colors` undone: ``#RRGGBB`` strings for a uint32 column, anything else
+    unchanged."""
     col = np.asarray(col)
     if col.dtype != np.uint32:
         return col
-    return np.array([f"#{int(v) >> 8:06X}" + ("" if int(v) & 255 == 255 else f"{int(v) & 255:02X}")
-                     for v in col.tolist()], dtype="U9")
+    return np.char.mod("#%06X", (col >> np.uint32(8)).astype(np.int64))
 
 
 def legend_rows(tpl: dict, spec: dict, by: str | None = None) -> dict:
