@@ -64,7 +64,7 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
 
     style = V.point_style(seq, result, mode, plain)
     fs = V.frame_sources(seq, result, frame, style)
-    x0, x1, y0, y1 = seq.extent()
+    x0, x1, y0, y1 = V.view_extent(seq.extent())
     fig = Figure(figsize=(13, 10.8), dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
     num = V.stage_numbers(seq, result, plain)
@@ -78,7 +78,8 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
     fig.suptitle(
         f"LAAV on {seq.name}: {seq.n_points} points, {seq.n_frames} frames, C = {result.n_motions}, "
         f"seed {result.seed}\n"
-        f"R1 = {p.r1:g}, R2 = {p.r2:g}, λ = {p.lam:g}, 2C = {result.multicut.n_models}, α = {p.rv_alpha:g}, "
+        f"R1 = {p.r1:g}, R2 = {p.r2:g}, λ = {p.lam:g}, fine models = {result.multicut.n_models}, "
+        f"α = {p.rv_alpha:g}, "
         f"iteration cap {p.rv_max_iter}; not at the defaults: {', '.join(off) if off else 'none'}\n"
         + (f"errors vs ground truth: {errs} (fine and coarse on the points in atoms)"
            if seq.labels is not None else "no ground truth: errors cannot be scored"),
@@ -105,7 +106,7 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
                    marker=mk, s=16, edgecolors="#333333", linewidths=0.3, label=lab)
     u = fs["unassigned"]
     # smaller than the points, as on the page: their colour and shape stay readable under it
-    ax.scatter(u["x"], u["y"], marker="x", c=V.NO_ATOM, s=9, lw=0.8, label="in no atom")
+    ax.scatter(u["x"], u["y"], marker="x", c=V.NO_ATOM, s=20, lw=0.9, label="in no atom")
     e = fs["errors"]
     if seq.labels is not None:  # (without ground truth nothing is marked, as on the page)
         ax.scatter(e["x"], e["y"], facecolors="none", edgecolors=V.ERROR_MARK, s=80, lw=1.8,

@@ -37,8 +37,9 @@ from laav._interrupt import interruptible
 from .state import Cancelled
 from .views import labelling_distance, stage_numbers
 
-__all__ = ["SEEDS", "SeedRow", "SweepKey", "SeedSweep", "seed_row", "worst_seed", "table_columns",
-           "header_line", "row_line", "segmentation_groups", "group_name", "SAME_SEGMENTATION"]
+__all__ = ["SEEDS", "SeedRow", "SweepKey", "SeedSweep", "seed_row", "worst_seed", "worst_stage",
+           "worst_note", "table_columns", "header_line", "row_line", "segmentation_groups", "group_name",
+           "SAME_SEGMENTATION"]
 
 #: The seeds one sweep runs.
 SEEDS = tuple(range(10))
@@ -165,6 +166,25 @@ def worst_seed(rows: Sequence[SeedRow]) -> int | None:
     return max(rows, key=lambda r: (*key(r), r.all_iterations)).seed
 
 
+def worst_stage(rows: Sequence[SeedRow]) -> str | None:
+    """The stage whose error decides :func:`worst_seed`: ``"final"`` when the seeds' final
+    errors differ, else ``"coarse"``, else ``"fine"`` (every seed ends equally right or
+    wrong: the worst is only the worst start); None when there is no worst seed."""
+    if worst_seed(rows) is None:
+        return None
+    for stage, get in (("final", lambda r: r.error_final), ("coarse", lambda r: r.error_coarse or 0.0)):
+        if len({get(r) for r in rows}) > 1:
+            return stage
+    return "fine"
+
+
+def worst_note(rows: Sequence[SeedRow]) -> str:
+    """The worst row's note: "◀ worst", or "◀ worst coarse" / "◀ worst fine" when every
+    seed's final error is the same (:func:`worst_stage`)."""
+    stage = worst_stage(rows)
+    return "◀ worst" if stage in (None, "final") else f"◀ worst {stage}"
+
+
 def _pct(v: float | None) -> str:
     return "–" if v is None else f"{100 * v:.1f} %"
 
@@ -173,8 +193,9 @@ def table_columns(rows: Sequence[SeedRow]) -> dict:
     """The rows as table columns of text (and the worst row's marks): ``seed`` (int),
     ``fine``, ``coarse``, ``final``, ``agreement``, ``group`` (the segmentation, e.g. "B (6
     of 10)", :func:`segmentation_groups`), ``converged``, ``iterations``, ``time``, ``note``
-    ("◀ worst" on the worst row, with ground truth)."""
+    (:func:`worst_note` on the worst row, with ground truth)."""
     worst = worst_seed(rows) if len(rows) > 1 else None
+    note = worst_note(rows)
     group = [""] * len(rows)
     for k, g in enumerate(segmentation_groups(rows)):
         for i in g:
@@ -190,7 +211,7 @@ def table_columns(rows: Sequence[SeedRow]) -> dict:
         "iterations": [str(r.iterations) if r.all_iterations == r.iterations
                        else f"{r.iterations} (of {r.all_iterations})" for r in rows],
         "time": [f"{1000 * r.seconds:.0f} ms" for r in rows],
-        "note": ["◀ worst" if r.seed == worst else "" for r in rows],
+        "note": [note if r.seed == worst else "" for r in rows],
     }
 
 

@@ -26,6 +26,10 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+import numpy as np
+
+import laav
+
 from .views import fine_count, other_trial_counts, rv_error_sources
 
 __all__ = ["TourStep", "TOUR", "fine_tuning_facts"]
@@ -102,8 +106,8 @@ TOUR: tuple[TourStep, ...] = (
             "each pair of fine models won.")),
     TourStep(
         "4 · Fine-tuning: Random Voting labels every point",
-        "Random Voting starts from the coarse labels (a labelled point starts with extra votes for "
-        "its motion): each iteration, every motion fits a fundamental matrix on "
+        "Random Voting starts from the coarse labels (labelled points start with extra votes): "
+        "each iteration, every motion fits a fundamental matrix on "
         "a random frame pair and every point votes for the motions that fit it. The paper's claim: "
         "started near the answer, it settles sooner than plain Random Voting from random starts.",
         ("rv",), color="final", color_no_truth="final", facts="rv"),
@@ -158,7 +162,7 @@ def fine_tuning_facts(seq, voting, plain, searching: bool = False) -> str:
     ended = (f"settled after {n} iterations" if voting.informed_converged
              else f"was still changing at the {n}-iteration cap")
     if truth and err.size:  # settling is not being right: where it ended
-        ended += f", its own labels {err[-1]:.0f} % wrong"
+        ended += f", ending {_pct(err[-1])} wrong"
     text = f"This run: LAAV's trial {start}{ended}"
     if plain is None:
         text += "; plain RV: computing."
@@ -170,7 +174,9 @@ def fine_tuning_facts(seq, voting, plain, searching: bool = False) -> str:
         else:
             text += (f"; plain RV's {len(per)} trials all hit the {max(per)}-iteration cap"
                      if len(per) > 1 else f"; plain RV hit the {per[0]}-iteration cap")
-        text += f" ({int(plain.n_iterations)} in all)."
+        text += f" ({int(plain.n_iterations)} in all)"
+        text += (f", {_pct(100 * laav.misclassification_rate(seq.labels, plain.labels))} wrong."
+                 if truth else ".")
     returned = voting.selected
     if returned != "informed" and not returned.startswith("missing motion"):
         whose = "LAAV's coarse labels" if returned == "coarse" else "those of " + _in_words(returned)
@@ -196,4 +202,18 @@ def fine_tuning_facts(seq, voting, plain, searching: bool = False) -> str:
     if searching:
         text += (" The trials for a missed motion (ours) are still computing: their labels may "
                  "replace these.")
+    elif truth:  # the labels returned, when our last steps moved points (the status line's error)
+        final = 100 * laav.misclassification_rate(seq.labels, voting.labels)
+        if _pct(final) != _pct(err[-1] if err.size else np.nan):
+            text += f" Returned after our last steps: {_pct(final)} wrong."
+        if plain is not None:  # never a win the run contradicts: say when plain RV did better
+            theirs = 100 * laav.misclassification_rate(seq.labels, plain.labels)
+            if final > theirs + 0.5:
+                text += (f" Here plain RV did better ({_pct(theirs)} against {_pct(final)}): a "
+                         "start near a wrong answer settles there (step 3's coarse labels).")
     return text
+
+
+def _pct(v: float) -> str:
+    """An error in % as the status line writes it (one decimal)."""
+    return f"{v:.1f} %"

@@ -23,7 +23,8 @@ __all__ = [
     "COLOR_MODES", "TRUTH_MODES", "PLAIN_MODES", "COLOR_LABELS", "ERROR_STAGE", "stage_errors",
     "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "DIFFERS_MARK", "UNSEEN",
     "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at", "incomplete_note", "result_notes", "counted",
-    "NO_ATOM", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line", "disagreement_warning",
+    "NO_ATOM", "NO_ATOM_SIZE", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line",
+    "disagreement_warning",
     "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "plain_differs", "labelling_distance", "raw_style",
     "points_source", "frame_sources", "graph_sources", "TRAIL", "frame_specs", "frame_templates",
@@ -38,7 +39,7 @@ __all__ = [
     "votes_fitted",
     "rv_sources", "rv_error_sources", "trace_errors",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
-    "space_time", "cost_limit", "md_text",
+    "space_time", "cost_limit", "md_text", "CLOSE_CALL_NATS",
 ]
 
 #: Colour-by choices (label shown in the widget -> key).
@@ -92,8 +93,11 @@ UNSEEN_LABEL = "unlabelled: seen too briefly"
 #: for deuteranopes; black stays apart from every motion colour, ΔE >= 56 simulated).
 ERROR_MARK = "#000000"
 CORRECT = "#BBBBBB"
-#: Features in no atom: a dark grey cross.
-NO_ATOM = "#555555"
+#: Features in no atom: a dark grey cross, drawn wider than the point it marks
+#: (:data:`NO_ATOM_SIZE` against the points' 7 px) so that its arms show on any motion's colour
+#: (inside a navy point alone it was hard to see on a projector).
+NO_ATOM = "#333333"
+NO_ATOM_SIZE = 12
 #: Points whose final motion changed with the last recompute: a large reddish-purple ring
 #: (Okabe-Ito; no motion uses it).
 CHANGED_MARK = "#CC79A7"
@@ -126,6 +130,20 @@ def hex_to_rgb(colors) -> np.ndarray:
     raw = np.char.lstrip(arr, "#")
     ints = np.array([int(h, 16) for h in raw.tolist()], dtype=np.int64)
     return np.stack([(ints >> 16) & 255, (ints >> 8) & 255, ints & 255], axis=1).astype(np.uint8)
+
+
+#: Margin around a sequence's pixel extent in its 2-D views, as a share of its larger side:
+#: a point on the image border (tracks reach it) is drawn whole, with its rings, not cut in
+#: half by the plot's edge.
+VIEW_MARGIN = 0.025
+
+
+def view_extent(extent) -> tuple[float, float, float, float]:
+    """``extent`` (x0, x1, y0, y1), a sequence's :meth:`laav.Sequence.extent`, widened by
+    :data:`VIEW_MARGIN` on every side: what the 2-D views show."""
+    x0, x1, y0, y1 = extent
+    m = VIEW_MARGIN * max(x1 - x0, y1 - y0, 1e-9)
+    return x0 - m, x1 + m, y0 - m, y1 + m
 
 
 def visible_at(seq: laav.Sequence, frame: int) -> np.ndarray:
@@ -852,6 +870,9 @@ def joint_margins(result: laav.LaavResult) -> tuple[np.ndarray, np.ndarray, np.n
     return part(L + E), part(L), part(E)
 
 
+#: A joint-merge margin below this many nats is a close call: card 3 outlines its cell (on the
+#: map's log scale it is nearly white, like the pairs nothing decided).
+CLOSE_CALL_NATS = 10.0
 #: The joint merge's margin map colours ``sign(m) log10(1 + |m|)`` (m in nats): decisions by
 #: a few nats and by thousands both read; its colour bar is labelled in nats, at 0 and ±10,
 #: ±100, ... up to its ends (:func:`margin_top`, :func:`margin_ticks`).

@@ -223,6 +223,36 @@ def test_lambda_weighs_the_joint_merges_epipolar_cost():
     ex.close()
 
 
+@pytest.mark.hopkins
+def test_the_joint_merges_close_calls_are_outlined(hopkins_root):
+    """Card 3 outlines the pairs the joint merge decided by less than CLOSE_CALL_NATS (on the
+    margins' log scale they read as nearly white, like undecided pairs): exactly those cells.
+    cars2B at seed 5 fails (38.5 %) on such a call; none with the paper's epipolar merge (its
+    map is Z, no margins)."""
+    f = hopkins_root / "cars2B" / "cars2B_truth.mat"
+    if not f.is_file():
+        pytest.skip("cars2B is not in the Hopkins155 folder")
+    seq = laav.load_sequence(f)
+    for params, outlined in ((laav.LaavParams(), True), (laav.LaavParams.paper(), False)):
+        ex = Explorer(seq, params=params, seed=5, viser=False)
+        try:
+            assert ex.wait(120)
+            close = ex.coarse_view.src_close.data
+            if not outlined:
+                assert len(close["x"]) == 0
+                continue
+            m = V.joint_margins(ex.result)[0]
+            n = m.shape[0]
+            want = {(j, k) for j in range(n) for k in range(n)
+                    if j != k and np.isfinite(m[j, k]) and abs(m[j, k]) < V.CLOSE_CALL_NATS}
+            fac = list(ex.fig_z.x_range.factors)
+            got = {(fac.index(y), fac.index(x)) for x, y in zip(close["x"], close["y"])}
+            assert want and got == want
+            assert "outlined in black: decided by less than 10 nats" in ex.coarse_view.merge_md.object
+        finally:
+            ex.close()
+
+
 def test_lambda_does_not_move_the_coding_merge():
     """With the coding-length merge λ is not used: stage 4 reruns, its decision and the Z
     drawn (the coding affinity) stay."""
@@ -1358,11 +1388,21 @@ def test_hidden_cards_come_later_and_at_once_when_asked_for(ex, monkeypatch):
     # the colouring's short name in the plots' titles (its long one was cut off at 1280 px)
     ex.w_color.value = "final (after Random Voting)"
     assert ex.compare.fig_a.title.text == f"A (pinned) · frame {ex.frame} · final"
+    # ground truth is the same picture on both sides: the compare views colour each side's
+    # final motions instead (and say so)
+    final_colors = list(ex.compare.src["A"].data["color"])
+    ex.w_color.value = "ground truth"
+    assert ex.compare.fig_a.title.text == f"A (pinned) · frame {ex.frame} · final"
+    assert ex.compare.fig_b.title.text == f"B (live) · frame {ex.frame} · final"
+    assert list(ex.compare.src["A"].data["color"]) == final_colors
+    ex.w_color.value = "errors: coarse"  # any other colouring is the sidebar's
+    assert ex.compare.fig_a.title.text == f"A (pinned) · frame {ex.frame} · errors: coarse"
 
 
 def test_r2_moves_along_when_r1_passes_it_and_values_stay_round(ex):
     """R1 dragged past R2 takes R2 along (a refusal held every later change back, with the
-    status line no longer matching the controls); slider values carry no floating-point
+    status line no longer matching the controls), and takes it back to its own value when R1
+    goes back (it stayed pushed up, with other atoms, before); slider values carry no floating-point
     residue into the run and the URL (0.1 + 67 x 0.1 = 6.800000000000001)."""
     assert ex.wait(120)
     r2 = ex.w_params["r2"].value
@@ -1372,6 +1412,19 @@ def test_r2_moves_along_when_r1_passes_it_and_values_stay_round(ex):
     assert (ex.result.params.r1, ex.result.params.r2) == (r2 + 5.0, r2 + 6.0)
     ex.w_params["r2"].value = 10.0  # below R1: R1 goes down along
     assert ex.wait(120) and ex.w_params["r1"].value == 9.0 and ex.result.params.r1 == 9.0
+    # a pushed radius goes back to its own value when the one that pushed it goes back
+    # (R2 set by hand to 10 above: R1 pushes it, and leaves it at 10 again)
+    ex.w_params["r1"].value = 30.0
+    assert ex.wait(120) and ex.w_params["r2"].value == 31.0
+    ex.w_params["r1"].value = 20.0  # still above 10: R2 follows it down, just above it
+    assert ex.wait(120) and ex.w_params["r2"].value == 21.0
+    ex.w_params["r1"].value = 5.0
+    assert ex.wait(120) and ex.w_params["r2"].value == 10.0
+    assert (ex.result.params.r1, ex.result.params.r2) == (5.0, 10.0)
+    ex.w_params["r1"].value = 12.0  # pushed again, then set by hand: its own value now
+    ex.w_params["r2"].value = 14.0
+    ex.w_params["r1"].value = 6.0
+    assert ex.wait(120) and ex.w_params["r2"].value == 14.0
     ex.w_params["lam"].value = 0.1 + 67 * 0.1
     assert ex.wait(120) and ex.result.params.lam == 6.8 and ex.query()["lam"] == "6.8"
     ex.w_reset.clicks += 1
@@ -1657,3 +1710,18 @@ def test_the_page_passes_bokehs_integrity_checks(ex, monkeypatch):
         assert setting() is True
     finally:
         setting._user_value = before  # as this process had it
+
+
+def test_card_titles_stay_bold_when_they_change():
+    """A card's title drawn again in a live page (the Numbers and Seed sweep cards retitle
+    themselves for a sequence without ground truth) got the template's Bootstrap ``h3``
+    weight (500) and turned light: the cards draw their title in a header pane of their own,
+    with a bold sheet, rewritten (escaped) at every change of ``title``."""
+    from explorer.cards.base import TITLE_CSS, card
+
+    c = card("5 · Final labels")
+    assert c.header.object == "<h3>5 · Final labels</h3>" and TITLE_CSS in c.header.stylesheets
+    c.title = "Seed sweep: <does it change?>"
+    assert c.title == "Seed sweep: <does it change?>"
+    assert c.header.object == "<h3>Seed sweep: &lt;does it change?&gt;</h3>"
+    assert TITLE_CSS in c.header.stylesheets

@@ -130,9 +130,14 @@ def test_worst_seed_and_table():
     assert S.worst_seed(rows) == 3  # then the coarse one
     t = S.table_columns(rows)
     assert t["seed"] == [0, 1, 2, 3] and t["coarse"][1] == "39.0 %" and t["final"][0] == "0.0 %"
-    assert t["note"] == ["", "", "", "◀ worst"]
+    # every final error the same: the worst is only the worst coarse stage, and says so
+    assert S.worst_stage(rows) == "coarse" and t["note"] == ["", "", "", "◀ worst coarse"]
     assert S.row_line(t, 3, True).split() == ["3", "0.0", "%", "40.0", "%", "0.0", "%", "yes", "50", "10",
-                                              "ms", "◀", "worst"]
+                                              "ms", "◀", "worst", "coarse"]
+    rows[1] = _row(1, 0.0, 0.39, 0.01)
+    assert S.worst_stage(rows) == "final" and S.table_columns(rows)["note"] == ["", "◀ worst", "", ""]
+    rows = [_row(0, 0.02, 0.0, 0.0), _row(1, 0.0, 0.0, 0.0)]
+    assert S.worst_stage(rows) == "fine" and S.worst_note(rows) == "◀ worst fine"
     assert len(S.row_line(t, 0, True)) == len(S.header_line(True))  # aligned under the header
     # without ground truth: no worst seed (which segmentation is right, the seeds cannot
     # say); the seeds grouped by the segmentation they give, in seed order
@@ -215,6 +220,14 @@ def test_the_summary_counts_bad_seeds_per_stage(explorer):
     text = explorer.sweep_view._summary(rows)
     assert "above 1 %: 1 of 10 seeds at the final stage, 10 at the coarse stage" in text
     assert "**Worst: seed 9**" in text
+    # every seed ends the same: no seed is called the worst outright
+    rows[9] = _row(9, 0.0, 0.06, 0.0)
+    text = explorer.sweep_view._summary(rows)
+    assert "**Every seed ends at final 0.0 %; the worst coarse stage: seed 9**" in text
+    assert "Iterations:" not in text
+    rows[0] = _row(0, 0.0, 0.058, 0.0, iterations=22, all_iterations=136)
+    text = explorer.sweep_view._summary(rows)
+    assert "Iterations: the returned trial's, and in brackets every trial's" in text
 
 
 def test_card_runs_loads_a_seed_and_is_cancelled_by_a_parameter_change(explorer):
@@ -333,8 +346,8 @@ def test_tour_step_4_says_what_this_run_did():
              else f"still changing at the {n}-iteration")
     end = V.rv_error_sources(seq, v)["error"][-1]
     # where it ended too: settling is not being right
-    assert (f"This run: LAAV's trial started {start:.0f} % wrong and {ended}, its own labels "
-            f"{end:.0f} % wrong") in text
+    assert (f"This run: LAAV's trial started {start:.0f} % wrong and {ended}, ending "
+            f"{end:.1f} % wrong") in text
     # (LAAV's own trial was returned here)
     assert "The labels returned are" not in text and "gave the labels returned" not in text
     assert v.selected == "informed"
@@ -357,6 +370,19 @@ def test_tour_step_4_says_what_this_run_did():
     assert "plain RV's 10 trials all hit the 150-iteration cap (1500 in all)" in fine_tuning_facts(
         seq, v, stuck)
     assert "; plain RV: computing." in fine_tuning_facts(seq, v, None)
+    # plain RV's own error, and a run where it did better is said to be one (a teacher must
+    # not present a failing run as LAAV's win)
+    gt = np.asarray(seq.labels)
+    right = dataclasses.replace(plain, labels=gt.copy())
+    assert f"({plain.n_iterations} in all), 0.0 % wrong." in fine_tuning_facts(seq, v, right)
+    wrong = gt.copy()
+    wrong[: gt.size // 4] = 1 - wrong[: gt.size // 4]  # a quarter of the points in the other motion
+    bad = dataclasses.replace(v, labels=wrong)
+    err = 100 * laav.misclassification_rate(gt, wrong)
+    said = fine_tuning_facts(seq, bad, right)
+    assert f"Returned after our last steps: {err:.1f} % wrong." in said
+    assert f"Here plain RV did better (0.0 % against {err:.1f} %)" in said
+    assert "did better" not in fine_tuning_facts(seq, v, right)  # v is right too
     bare = laav.Sequence(seq.points, None, name="bare")
     assert "off its last labels" in fine_tuning_facts(bare, v, plain)
     paper = laav.segment(seq, 2, laav.LaavParams.paper(), seed=0)

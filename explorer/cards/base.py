@@ -14,6 +14,8 @@ import panel as pn
 from bokeh.models import Legend, Range1d
 from bokeh.plotting import figure
 
+from .. import views as V
+
 TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
 #: Width of the sidebar's widgets (the sidebar is SIDE_W + 35 px wide). With it, every card
 #: fits the main area at 1024 px (checked at 1024x768 and 1280x800 in the browser tests).
@@ -160,9 +162,38 @@ def shown_style(shown: bool, keep_space: bool = False) -> dict:
 FOLD_ARROW = ":host { --background-text-color: var(--bs-body-color, #212529); }"
 
 
+#: The card titles' own stylesheet: bold, as the first page draws them. panel's Card writes
+#: its title as an ``<h3>`` in a pane of its own, which inherits the card header's bold; when
+#: the title changes in a live page (the Numbers and Seed sweep cards retitle themselves for a
+#: sequence without ground truth, the tour renames a card) the pane is drawn again with the
+#: template's Bootstrap sheet inside it, whose ``h3`` is 500, and the title turned light.
+TITLE_CSS = "h3 { font-weight: 700; }"
+
+
+class TitledCard(pn.Card):
+    """A :class:`panel.Card` whose title stays bold when it changes (:data:`TITLE_CSS`): the
+    title is drawn by a header pane of its own, with that sheet, rewritten at every change of
+    ``title`` (read and set as for any card)."""
+
+    def __init__(self, *objs, title: str = "", **kw):
+        self._title_pane = pn.pane.HTML(_title_html(title), css_classes=["card-title"], margin=(5, 0),
+                                        stylesheets=[TITLE_CSS])
+        super().__init__(*objs, title=title, header=self._title_pane, **kw)
+        self.param.watch(self._retitle, "title")
+
+    def _retitle(self, event) -> None:
+        self._title_pane.object = _title_html(event.new)
+
+
+def _title_html(title: str) -> str:
+    import html
+
+    return f"<h3>{html.escape(title, quote=False)}</h3>" if title else "&#8203;"
+
+
 def card(title: str, *objs, **kw) -> pn.Card:
     kw.setdefault("sizing_mode", "stretch_width")
-    return pn.Card(*objs, title=title, collapsible=False, margin=(6, 6), **kw)
+    return TitledCard(*objs, title=title, collapsible=False, margin=(6, 6), **kw)
 
 
 def flex(*objs, **kw) -> pn.FlexBox:
@@ -172,8 +203,9 @@ def flex(*objs, **kw) -> pn.FlexBox:
 
 
 def image_figure(title: str, frame_width: int, extent, **kw):
-    """A bokeh figure in pixel coordinates with the y axis pointing down."""
-    x0, x1, y0, y1 = extent
+    """A bokeh figure in pixel coordinates with the y axis pointing down, showing
+    ``extent`` (x0, x1, y0, y1) with a margin (:func:`explorer.views.view_extent`)."""
+    x0, x1, y0, y1 = V.view_extent(extent)
     fh = int(round(frame_width * (y1 - y0) / max(x1 - x0, 1e-9)))
     kw.setdefault("toolbar_location", "right")
     kw.setdefault("tools", TOOLS)
@@ -188,7 +220,7 @@ def image_figure(title: str, frame_width: int, extent, **kw):
 
 def fit_image_figure(fig, extent) -> None:
     """Point an :func:`image_figure` at another sequence's pixel extent (same frame width)."""
-    x0, x1, y0, y1 = extent
+    x0, x1, y0, y1 = V.view_extent(extent)
     fig.x_range.start, fig.x_range.end = x0, x1
     fig.y_range.start, fig.y_range.end = y1, y0
     fw = fig.frame_width

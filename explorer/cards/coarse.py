@@ -3,6 +3,7 @@ the epipolar check of a pair (:mod:`explorer.cards.epipolar`)."""
 
 from __future__ import annotations
 
+import numpy as np
 import panel as pn
 from bokeh.models import ColorBar, ColumnDataSource, FactorRange, FixedTicker, LinearColorMapper
 from bokeh.palettes import Blues256
@@ -41,6 +42,12 @@ class CoarseView:
         self.z_hover = z.hover[0] if isinstance(z.hover, list) else z.hover
         z.rect("x", "y", 1, 1, source=self.src_z, fill_color={"field": "z", "transform": self.z_mapper},
                line_color="white")
+        # the joint merge's close calls outlined: a pair decided by a few nats reads as nearly
+        # white on the margins' log scale, beside the strong blues of the easy pairs, though a
+        # close call is where a merge fails (cars2B seed 5: f1 and f2 split by 1.1 nats)
+        self.src_close = ColumnDataSource({"x": [], "y": []})
+        z.rect("x", "y", 0.86, 0.86, source=self.src_close, fill_alpha=0, line_color="#000000",
+               line_width=2)
         self.z_text = z.text("x", "y", text="text", source=self.src_z, text_align="center",
                              text_baseline="middle", text_font_size="12px", text_color="text_color")
         z.xaxis.major_label_orientation = 0.8
@@ -72,6 +79,9 @@ class CoarseView:
         self._numbers(data["text"], len(factors))
         method = res.coarse.method
         margins = V.shows_margins(res)
+        m = np.asarray(data["m"], dtype=float)
+        close = margins & np.isfinite(m) & (np.abs(m) < V.CLOSE_CALL_NATS) & (data["x"] != data["y"])
+        set_data(self.src_close, {"x": data["x"][close], "y": data["y"][close]})
         self._scale(margins, data["z"])
         single = method == "joint" and not margins  # no partitions compared (see Coarse.shortlist)
         if margins:
@@ -83,8 +93,10 @@ class CoarseView:
                    f"+ {w:g} × epipolar cost (in units of 2/λ px²) decided. The map shows, for each "
                    "pair, what decided it: the least score of a compared partition that splits the "
                    "two minus the least of one that joins them, in nats (blue: joining won by that "
-                   "much; orange: splitting won; grey: every partition compared agrees); hover for "
-                   "its coding-length and epipolar parts. The paper's epipolar vote is the paper preset")
+                   "much; orange: splitting won; grey: every partition compared agrees; outlined in "
+                   f"black: decided by less than {V.CLOSE_CALL_NATS:g} nats, the close calls); hover "
+                   "for its coding-length and epipolar parts. The paper's epipolar vote is the paper "
+                   "preset")
         elif method == "coding" or single:
             self.fig_z.title.text = f"Coding affinity, ε = {res.params.coding_eps:g} px"
             decided = ("the joint merge compared no partitions (no more fine models than motions, or "

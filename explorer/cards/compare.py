@@ -2,8 +2,9 @@
 
 The sidebar's **Pin as A** keeps the result shown (:func:`explorer.compare.pin`); from then
 on the card, above card 1, shows A's and B's points in the same frame with the same
-colouring (the sidebar's frame and colour-by; without ground truth B's motions take A's
-colours), the points whose final motion differs ringed in both, a table of every stage's
+colouring (the sidebar's frame and colour-by, except that ground truth, the same on both
+sides, becomes each side's final motions; without ground truth B's motions take A's
+colours), the points whose final motion differs ringed thinly in both, a table of every stage's
 error in A and B with the difference, and the settings that differ as ``name: A → B``.
 A stays pinned while parameters change; **Unpin** clears it, and so does opening another
 sequence (with a message). The card is hidden while nothing is pinned.
@@ -23,6 +24,13 @@ from .frame import EMPTY_POINTS
 
 #: Frame width of each of the two views: side by side from about 1150 px, stacked below.
 FRAME_W = 300
+
+
+def compare_mode(mode: str) -> str:
+    """The colouring of the compare views for the sidebar's colour-by ``mode`` (a
+    :data:`explorer.views.COLOR_MODES` key): the same, except that ground truth, which is the
+    same on both sides whatever changed, becomes each side's final motions."""
+    return "final" if mode == "gt" else mode
 
 
 class CompareView:
@@ -55,8 +63,10 @@ class CompareView:
                 f.x_range, f.y_range = self.figs["A"].x_range, self.figs["A"].y_range
             f.scatter("x", "y", source=self.src[k], size=6, fill_color="color", marker="marker",
                       line_color="#333333", line_width=0.4)
-            f.scatter("x", "y", source=self.src_changed[k], marker="circle", size=17, fill_alpha=0,
-                      line_color=V.CHANGED_MARK, line_width=2.2)
+            # thin rings a little wider than a point: where hundreds changed, the points
+            # inside stay visible (thick ones merged into one pink blob)
+            f.scatter("x", "y", source=self.src_changed[k], marker="circle", size=12, fill_alpha=0,
+                      line_color=V.CHANGED_MARK, line_width=1.3)
         self.fig_a, self.fig_b = self.figs["A"], self.figs["B"]
         self.table = Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.w_unpin_card = pn.widgets.Button(label="Unpin A", width=100, margin=(6, 10))
@@ -117,7 +127,7 @@ class CompareView:
             return
         a = self.pinned = C.with_plain(a, self.state.plain_rv(a.sequence, a.settings))
         plain_b = self.state.plain_rv(seq, settings)
-        mode = self.controls.color_mode
+        mode = compare_mode(self.controls.color_mode)
         key = (a.result, a.plain, res, plain_b, mode)
         if self._key is None or not all(x is y for x, y in zip(key, self._key)):
             b = C.pin(seq, res, settings, plain_b)
@@ -132,7 +142,7 @@ class CompareView:
         changed = np.asarray(comp.changed, dtype=np.int64)
         changed = changed[V.visible_at(seq, f)[changed]]  # only the points seen in this frame
         ring = {"x": xy[changed, 0], "y": xy[changed, 1]}
-        what = self.controls.w_color.value.split(" (")[0]  # "final", not "final (after …)": it fits
+        what = V.COLOR_LABELS[mode].split(" (")[0]  # "final", not "final (after …)": it fits
         with self.host.hold():
             for k, style in zip(("A", "B"), self._styles):
                 set_data(self.src[k], V.points_source(seq, f, style))

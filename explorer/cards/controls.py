@@ -32,6 +32,9 @@ class Controls:
     def __init__(self, host: Host, state, seq, defaults) -> None:
         self.host, self.state, self.defaults = host, state, defaults
         self.switching = False  # a new sequence is being read or computed (see lock_motions)
+        #: (radius slider, the value it had) when the other radius pushed it along (R1 < R2):
+        #: it returns towards that value when the pushing one goes back (:meth:`_order_radii`)
+        self._pushed = None
         st = state.target
         p = st.params
         self.w_frame = pn.widgets.Player(label="frame", start=0, end=max(seq.n_frames - 1, 1), value=0,
@@ -146,15 +149,8 @@ class Controls:
         if self.host.quieted:
             return
         r1, r2 = self.w_params["r1"], self.w_params["r2"]
-        if event is not None and event.obj in (r1, r2) and r1.value >= r2.value:
-            # R1 < R2 always (atoms need a ring): the other radius moves along, within its
-            # slider, instead of a refusal that held every later change back
-            with self.host.quiet():
-                if event.obj is r1:
-                    r2.end = max(r2.end, r1.value + r2.step)
-                    r2.value = r1.value + r2.step
-                else:
-                    r1.value = max(r1.start, r2.value - r1.step)
+        if event is not None and event.obj in (r1, r2):
+            self._order_radii(event.obj)
         if event is not None and event.obj is self.w_motions:
             fm = self.w_params["fine_models"]
             old, new = _whole(event.old), _whole(event.new)
@@ -174,6 +170,33 @@ class Controls:
         self.state.request(params=self.widget_params(), seed=int(self.w_seed.value),
                            n_motions=self._motions())
 
+    def _order_radii(self, moved) -> None:
+        """R1 < R2 always (atoms need a ring): when ``moved`` (the R1 or R2 slider) passes
+        the other radius, that one moves along, within its slider, instead of a refusal that
+        held every later change back. The value it had is remembered: when ``moved`` goes
+        back, the pushed radius follows it back to that value and stops there (R1 20 -> 60
+        -> 20 leaves R2 at 40, not at 61). Setting the pushed radius by hand forgets it."""
+        r1, r2 = self.w_params["r1"], self.w_params["r2"]
+        other = r2 if moved is r1 else r1
+        if self._pushed is not None and self._pushed[0] is moved:
+            self._pushed = None  # set by hand: its own value now
+        with self.host.quiet():
+            if r1.value >= r2.value:
+                if self._pushed is None:
+                    self._pushed = (other, other.value)
+                if moved is r1:
+                    r2.end = max(r2.end, r1.value + r2.step)
+                    r2.value = r1.value + r2.step
+                else:
+                    r1.value = max(r1.start, r2.value - r1.step)
+            elif self._pushed is not None and self._pushed[0] is other:
+                own = self._pushed[1]  # back towards it, as near as R1 < R2 allows
+                near = (max(own, r1.value + r2.step) if other is r2
+                        else min(own, r2.value - r1.step))
+                other.value = near
+                if near == own:
+                    self._pushed = None
+
     def _on_reset(self, event=None) -> None:
         """Every parameter (with or without a control here), and the seed, to its default."""
         d = self.defaults
@@ -187,6 +210,7 @@ class Controls:
     # ------------------------------------------------------------------ settings -> widgets
     def show_settings(self, settings) -> None:
         """Put ``settings`` on the controls without triggering a computation."""
+        self._pushed = None  # (radii set from elsewhere: nothing to go back to)
         with self.host.quiet():
             C = settings.n_motions
             fm = self.w_params["fine_models"]

@@ -71,7 +71,7 @@ class FrameView:
         self.r_points = f.scatter("x", "y", source=self.src_points, size=7, fill_color="color",
                                   marker="marker", line_color="#333333", line_width=0.4,
                                   legend_field="label")
-        self.r_unassigned = f.scatter("x", "y", source=self.src_unassigned, marker="x", size=7,
+        self.r_unassigned = f.scatter("x", "y", source=self.src_unassigned, marker="x", size=V.NO_ATOM_SIZE,
                                       line_color=V.NO_ATOM, line_width=1.5, legend_label="in no atom")
         self.r_changed = f.scatter("x", "y", source=self.src_changed, marker="circle", size=21,
                                    fill_alpha=0, line_color=V.CHANGED_MARK, line_width=2.5,
@@ -187,12 +187,13 @@ class FrameView:
                 if seq.labels is not None
                 else "misclassified: (no truth)", f, named))
         by = V.stage_name(stage) if stage == "plain" else f"the {stage} stage"
-        errors = (f"{int(style['misclassified'].sum())} points misclassified by {by} (black "
+        errors = (f"{V.counted(int(style['misclassified'].sum()), 'point')} misclassified by {by} (black "
                   "ring; the colour-by choice picks the stage)" if seq.labels is not None else
                   "no ground truth, so no point is marked misclassified")
         self._caption = (
             f"{res.atoms.n_atoms} atoms (R1 = {res.atoms.r1:g} px solid, R2 = {res.atoms.r2:g} px dashed, "
-            f"drawn at their seeds); {np.asarray(res.atoms.unassigned).size} features in no atom (×); "
+            f"drawn at their seeds); {V.counted(np.asarray(res.atoms.unassigned).size, 'feature')} in no "
+            "atom (×); "
             f"{errors}"
             # (incomplete tracks: a frame shows only the points seen in it, and so does its legend)
             + ("" if seq.is_complete else "; these counts are over every frame, the legend's over "

@@ -15,7 +15,7 @@ import panel as pn
 
 from .. import sweep as S
 from .. import views as V
-from ..sweep import SEEDS, SeedSweep, header_line, row_line, table_columns, worst_seed
+from ..sweep import SEEDS, SeedSweep, header_line, row_line, table_columns, worst_seed, worst_stage
 from .base import HTML, Host, Markdown, card
 
 _EMPTY = {k: [] for k in ("seed", "fine", "coarse", "final", "agreement", "group", "converged", "iterations",
@@ -186,11 +186,17 @@ class SweepView:
         finals = [x.error_final for x in rows]
         bad_final = sum(x.error_final > 0.01 for x in rows)
         bad_coarse = sum((x.error_coarse or 0) > 0.01 for x in rows)
-        return (f"**Worst: seed {worst}** (fine {100 * (r.error_fine or 0):.1f} %, coarse "
+        stage = worst_stage(rows)
+        head = (f"**Worst: seed {worst}**" if stage == "final" else
+                f"**Every seed ends at final {100 * r.error_final:.1f} %; the worst {stage} stage: "
+                f"seed {worst}**")
+        more = ("" if all(x.all_iterations == x.iterations for x in rows) else
+                " Iterations: the returned trial's, and in brackets every trial's of that run.")
+        return (f"{head} (fine {100 * (r.error_fine or 0):.1f} %, coarse "
                 f"{100 * (r.error_coarse or 0):.1f} %, final {100 * r.error_final:.1f} %). "
                 f"Final error over the seeds: mean {100 * sum(finals) / len(finals):.1f} %; "
                 f"above 1 %: {bad_final} of {len(rows)} seeds at the final stage, "
-                f"{bad_coarse} at the coarse stage. Click a row to load that seed.")
+                f"{bad_coarse} at the coarse stage. Click a row to load that seed.{more}")
 
     # ------------------------------------------------------------------ a click loads a seed
     def _show_table(self, data: dict) -> None:
