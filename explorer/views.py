@@ -23,7 +23,7 @@ __all__ = [
     "COLOR_MODES", "TRUTH_MODES", "PLAIN_MODES", "COLOR_LABELS", "ERROR_STAGE", "stage_errors",
     "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "DIFFERS_MARK", "UNSEEN",
     "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at", "incomplete_note", "result_notes", "counted",
-    "NO_ATOM", "NO_ATOM_SIZE", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line",
+    "NO_ATOM", "NO_ATOM_EDGE", "NO_ATOM_SIZE", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line",
     "disagreement_warning",
     "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "plain_differs", "labelling_distance", "raw_style",
@@ -93,11 +93,14 @@ UNSEEN_LABEL = "unlabelled: seen too briefly"
 #: for deuteranopes; black stays apart from every motion colour, ΔE >= 56 simulated).
 ERROR_MARK = "#000000"
 CORRECT = "#BBBBBB"
-#: Features in no atom: a dark grey cross, drawn wider than the point it marks
-#: (:data:`NO_ATOM_SIZE` against the points' 7 px) so that its arms show on any motion's colour
-#: (inside a navy point alone it was hard to see on a projector).
-NO_ATOM = "#333333"
-NO_ATOM_SIZE = 12
+#: Features in no atom: a white cross inside the point it marks (:data:`NO_ATOM_SIZE` against
+#: the points' 7 px), so that the point's colour shows round it and the cross shows on every
+#: motion's colour but the light ones (a dark grey cross vanished inside navy points; one
+#: wide enough to show round them hid the colours of the demo's 127 points in no atom). The
+#: legend draws it on a dark cross (:data:`NO_ATOM_EDGE`): white alone is not seen there.
+NO_ATOM = "#FFFFFF"
+NO_ATOM_EDGE = "#222222"
+NO_ATOM_SIZE = 5
 #: Points whose final motion changed with the last recompute: a large reddish-purple ring
 #: (Okabe-Ito; no motion uses it).
 CHANGED_MARK = "#CC79A7"

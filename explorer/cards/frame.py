@@ -71,8 +71,9 @@ class FrameView:
         self.r_points = f.scatter("x", "y", source=self.src_points, size=7, fill_color="color",
                                   marker="marker", line_color="#333333", line_width=0.4,
                                   legend_field="label")
+        # a white cross inside each point (views.NO_ATOM; its legend entry dark, below)
         self.r_unassigned = f.scatter("x", "y", source=self.src_unassigned, marker="x", size=V.NO_ATOM_SIZE,
-                                      line_color=V.NO_ATOM, line_width=1.5, legend_label="in no atom")
+                                      line_color=V.NO_ATOM, line_width=1.3, legend_label="in no atom")
         self.r_changed = f.scatter("x", "y", source=self.src_changed, marker="circle", size=21,
                                    fill_alpha=0, line_color=V.CHANGED_MARK, line_width=2.5,
                                    legend_label="changed motion")
@@ -92,6 +93,9 @@ class FrameView:
         for name in self.specs:
             self.live.add("frame_" + name, getattr(self, "src_" + name), self.specs[name])
         self.live.detach_legend(f)
+        # the legend's cross dark (its stand-in, drawn only there): white is not seen on it
+        key = self.live.stand_in(self.r_unassigned).glyph
+        key.line_color, key.size, key.line_width = V.NO_ATOM_EDGE, 2 * V.NO_ATOM_SIZE, 1.6
         self.live.add_text("frame_title", f.title, "text")
         leg = f.legend[0]
         self.live.add_text("frame_unassigned", self._item_unassigned, "label", legend=leg)
@@ -250,7 +254,8 @@ class FrameView:
 
     def _layers_now(self) -> None:
         on = set(self.w_layers.value)
-        for rs, layer in (((self.r_trails,), 0), ((self.r_r1, self.r_r2), 1), ((self.r_unassigned,), 2),
+        for rs, layer in (((self.r_trails,), 0), ((self.r_r1, self.r_r2), 1),
+                          ((self.r_unassigned,), 2),
                           ((self.r_errors,), 3), ((self.r_changed,), 4)):
             for r in rs:  # the renderer and its legend entry's stand-in (live.py)
                 r.visible = self.live.stand_in(r).visible = LAYERS[layer] in on
