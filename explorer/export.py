@@ -165,10 +165,14 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
     ax.set_yticks(range(n), factors)
     bar = fig.colorbar(im, ax=ax, shrink=0.8)
     if margins:
+        from matplotlib.patches import Rectangle
+
         where, labels = V.margin_ticks(top)
         bar.set_ticks(where, labels=labels)
-        ax.set_title("Joint merge margins (nats; > 0: joined)\nfN→Mk: fine model N joined motion k",
-                     fontsize=10)
+        for k in np.flatnonzero(V.close_calls(cells)):  # outlined, as in card 3
+            ax.add_patch(Rectangle((k % n - 0.43, k // n - 0.43), 0.86, 0.86, fill=False, ec="k", lw=1.5))
+        ax.set_title("Joint merge margins (nats; > 0: joined; outlined: "
+                     f"< {V.CLOSE_CALL_NATS:g})\nfN→Mk: fine model N joined motion k", fontsize=10)
     else:
         ax.set_title("Affinity Z (fN→Mk: fine model N joined motion k)")
 

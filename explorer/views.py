@@ -39,7 +39,7 @@ __all__ = [
     "votes_fitted",
     "rv_sources", "rv_error_sources", "trace_errors",
     "rv_summary", "stage_numbers", "numbers_markdown", "labels_table", "hex_to_rgb",
-    "space_time", "cost_limit", "md_text", "CLOSE_CALL_NATS",
+    "space_time", "cost_limit", "md_text", "CLOSE_CALL_NATS", "close_calls",
 ]
 
 #: Colour-by choices (label shown in the widget -> key).
@@ -944,6 +944,16 @@ def margin_text(m: float) -> str:
     if a < 9950:
         return f"{sign}{a / 1000:.1f}k"
     return f"{sign}{a / 1000:.0f}k"
+
+
+def close_calls(cells: dict) -> np.ndarray:
+    """Which cells of :func:`z_sources` (``cells``, with the joint merge's margins ``m``) are
+    close calls: a pair of two fine models decided by less than :data:`CLOSE_CALL_NATS`
+    (bool, one per cell; none where ``m`` is NaN: Z shown, or nothing decided there)."""
+    m = np.asarray(cells["m"], dtype=float)
+    pair = np.asarray(cells["x"]) != np.asarray(cells["y"])
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(m) & (np.abs(m) < CLOSE_CALL_NATS) & pair
 
 
 def z_sources(result: laav.LaavResult, seq: laav.Sequence | None = None,

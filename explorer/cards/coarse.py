@@ -3,7 +3,6 @@ the epipolar check of a pair (:mod:`explorer.cards.epipolar`)."""
 
 from __future__ import annotations
 
-import numpy as np
 import panel as pn
 from bokeh.models import ColorBar, ColumnDataSource, FactorRange, FixedTicker, LinearColorMapper
 from bokeh.palettes import Blues256
@@ -79,8 +78,7 @@ class CoarseView:
         self._numbers(data["text"], len(factors))
         method = res.coarse.method
         margins = V.shows_margins(res)
-        m = np.asarray(data["m"], dtype=float)
-        close = margins & np.isfinite(m) & (np.abs(m) < V.CLOSE_CALL_NATS) & (data["x"] != data["y"])
+        close = V.close_calls(data) & margins
         set_data(self.src_close, {"x": data["x"][close], "y": data["y"][close]})
         self._scale(margins, data["z"])
         single = method == "joint" and not margins  # no partitions compared (see Coarse.shortlist)
