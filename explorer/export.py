@@ -105,8 +105,8 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
         ax.scatter(np.asarray(p["x"])[sel], np.asarray(p["y"])[sel], c=list(np.asarray(p["color"])[sel]),
                    marker=mk, s=16, edgecolors="#333333", linewidths=0.3, label=lab)
     u = fs["unassigned"]
-    # a white cross inside each point, as on the page (views.NO_ATOM); the legend's on a dark one
-    ax.scatter(u["x"], u["y"], marker="x", c=V.NO_ATOM, s=6, lw=0.7)
+    # a cross inside each point, white or dark by its fill, as on the page (views.cross_colors)
+    ax.scatter(u["x"], u["y"], marker="x", c=list(np.asarray(u["cross"])), s=6, lw=0.7)
     ax.scatter([], [], marker="x", c=V.NO_ATOM_EDGE, s=20, lw=1.2, label="in no atom")
     e = fs["errors"]
     if seq.labels is not None:  # (without ground truth nothing is marked, as on the page)

@@ -69,14 +69,14 @@ TOUR: tuple[TourStep, ...] = (
         "Each atom grows around a random seed feature: RANSAC keeps the neighbours within R2 that one "
         "affine motion carries through every frame (the paper checks one random frame pair). Features "
         "within R1 belong to that atom alone, the ring out to R2 may be shared, and features no atom "
-        "takes (grey crosses) wait for stage 4.",
+        "takes (crossed) wait for stage 4.",
         ("frame",), color="atoms", color_no_truth="atoms", error_rings=False,
         # the text when atoms are checked on one frame pair (atom_frames = "pair", the paper's)
         text_pair=(
             "Each atom grows around a random seed feature: RANSAC keeps the neighbours within R2 that "
             "one affine motion carries between one random frame pair, as the paper does. Features "
             "within R1 belong to that atom alone, the ring out to R2 may be shared, and features no "
-            "atom takes (grey crosses) wait for stage 4.")),
+            "atom takes (crossed) wait for stage 4.")),
     TourStep(
         "2 · Multicut: cutting the atom graph into fine models",
         "Atoms become the nodes of a graph, an edge blue when one atom's affine motion carries the "
@@ -202,15 +202,21 @@ def fine_tuning_facts(seq, voting, plain, searching: bool = False) -> str:
     if searching:
         text += (" The trials for a missed motion (ours) are still computing: their labels may "
                  "replace these.")
-    elif truth:  # the labels returned, when our last steps moved points (the status line's error)
+    elif truth:  # the labels returned (the status line's error), when they are not the trial's
         final = 100 * laav.misclassification_rate(seq.labels, voting.labels)
-        if _pct(final) != _pct(err[-1] if err.size else np.nan):
+        own = returned == "informed" and voting.voted is None  # the trial's error on all points
+        if not own:
+            text += f" The labels returned: {_pct(final)} wrong."
+        elif _pct(final) != _pct(err[-1] if err.size else np.nan):
             text += f" Returned after our last steps: {_pct(final)} wrong."
         if plain is not None:  # never a win the run contradicts: say when plain RV did better
             theirs = 100 * laav.misclassification_rate(seq.labels, plain.labels)
             if final > theirs + 0.5:
-                text += (f" Here plain RV did better ({_pct(theirs)} against {_pct(final)}): a "
-                         "start near a wrong answer settles there (step 3's coarse labels).")
+                text += f" Here plain RV did better ({_pct(theirs)} against {_pct(final)})"
+                # why, when the trial returned stayed near a start that was far off
+                stayed = own and err.size and err[0] > 5.0 and err[-1] > 0.5 * err[0]
+                text += (": a start near a wrong answer settles there (step 3's coarse labels)."
+                         if stayed else ".")
     return text
 
 

@@ -23,8 +23,8 @@ __all__ = [
     "COLOR_MODES", "TRUTH_MODES", "PLAIN_MODES", "COLOR_LABELS", "ERROR_STAGE", "stage_errors",
     "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "DIFFERS_MARK", "UNSEEN",
     "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at", "incomplete_note", "result_notes", "counted",
-    "NO_ATOM", "NO_ATOM_EDGE", "NO_ATOM_SIZE", "CHANGED_MARK", "DISAGREEMENT_WARN", "disagreement_line",
-    "disagreement_warning",
+    "NO_ATOM", "NO_ATOM_EDGE", "NO_ATOM_SIZE", "cross_colors", "CHANGED_MARK", "DISAGREEMENT_WARN",
+    "disagreement_line", "disagreement_warning",
     "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "plain_differs", "labelling_distance", "raw_style",
     "points_source", "frame_sources", "graph_sources", "TRAIL", "frame_specs", "frame_templates",
@@ -93,14 +93,29 @@ UNSEEN_LABEL = "unlabelled: seen too briefly"
 #: for deuteranopes; black stays apart from every motion colour, ΔE >= 56 simulated).
 ERROR_MARK = "#000000"
 CORRECT = "#BBBBBB"
-#: Features in no atom: a white cross inside the point it marks (:data:`NO_ATOM_SIZE` against
-#: the points' 7 px), so that the point's colour shows round it and the cross shows on every
-#: motion's colour but the light ones (a dark grey cross vanished inside navy points; one
-#: wide enough to show round them hid the colours of the demo's 127 points in no atom). The
-#: legend draws it on a dark cross (:data:`NO_ATOM_EDGE`): white alone is not seen there.
+#: Features in no atom: a cross inside the point it marks (:data:`NO_ATOM_SIZE` against the
+#: points' 7 px), white on a dark fill and dark grey (:data:`NO_ATOM_EDGE`) on a light one
+#: (:func:`cross_colors`: the grey of the atoms, fine and coarse colourings, the pale error
+#: colourings, the yellow and sky-blue motions), so that it shows on every fill and the
+#: point's colour shows round it. A dark grey cross alone vanished inside navy points; one
+#: wide enough to show round them hid the colours of the demo's 127 points in no atom. The
+#: legend draws it dark.
 NO_ATOM = "#FFFFFF"
 NO_ATOM_EDGE = "#222222"
 NO_ATOM_SIZE = 5
+#: A fill this light (0-255, ITU-R 601 luma) or lighter takes the dark cross.
+CROSS_DARK_FROM = 140.0
+
+
+def cross_colors(fill) -> np.ndarray:
+    """The cross of each point in no atom (:data:`NO_ATOM`) for its fill colours ``fill``
+    (``#rrggbb``, (n,)): white on a dark fill, :data:`NO_ATOM_EDGE` on a light one."""
+    fill = np.asarray(fill)
+    if fill.size == 0:
+        return np.zeros(0, "U7")
+    rgb = hex_to_rgb(fill.astype(str)).astype(float)
+    luma = rgb @ np.array([0.299, 0.587, 0.114])
+    return np.where(luma >= CROSS_DARK_FROM, NO_ATOM_EDGE, NO_ATOM)
 #: Points whose final motion changed with the last recompute: a large reddish-purple ring
 #: (Okabe-Ito; no motion uses it).
 CHANGED_MARK = "#CC79A7"
@@ -638,7 +653,7 @@ def frame_templates(seq: laav.Sequence, result: laav.LaavResult, style: dict, mo
                   "r2": np.full(seeds.size, float(atoms.r2)),
                   "color": color[seeds] if seeds.size else np.zeros(0, "U7"),
                   "atom": np.arange(seeds.size)},
-        "unassigned": {"_a": un.astype(np.int32)},
+        "unassigned": {"_a": un.astype(np.int32), "cross": cross_colors(color[un])},
         "errors": {"_a": np.flatnonzero(style["misclassified"]).astype(np.int32)},
         "changed": {"_a": mv.astype(np.int32)},
     }
@@ -653,7 +668,7 @@ def frame_sources(seq: laav.Sequence, result: laav.LaavResult, frame: int, style
 
     Keys: ``points`` (x, y, color, label, index), ``trails`` (x0, y0, x1, y1, color,
     alpha: the last ``trail`` frames, fading), ``atoms`` (x, y at the seeds, r1, r2,
-    color, atom), ``unassigned`` (x, y), ``errors`` (x, y: misclassified points).
+    color, atom), ``unassigned`` (x, y, cross: :func:`cross_colors`), ``errors`` (x, y: misclassified points).
 
     On incomplete data everything is drawn only where it is seen: points, marks and atom
     seeds visible in ``frame``, trail steps between two consecutive frames both visible

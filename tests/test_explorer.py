@@ -1395,6 +1395,7 @@ def test_hidden_cards_come_later_and_at_once_when_asked_for(ex, monkeypatch):
     assert ex.compare.fig_a.title.text == f"A (pinned) · frame {ex.frame} · final"
     assert ex.compare.fig_b.title.text == f"B (live) · frame {ex.frame} · final"
     assert list(ex.compare.src["A"].data["color"]) == final_colors
+    assert [st["mode"] for st in ex.compare._styles] == ["final", "final"]  # (here final = truth)
     ex.w_color.value = "errors: coarse"  # any other colouring is the sidebar's
     assert ex.compare.fig_a.title.text == f"A (pinned) · frame {ex.frame} · errors: coarse"
 
@@ -1425,6 +1426,18 @@ def test_r2_moves_along_when_r1_passes_it_and_values_stay_round(ex):
     ex.w_params["r2"].value = 14.0
     ex.w_params["r1"].value = 6.0
     assert ex.wait(120) and ex.w_params["r2"].value == 14.0
+    # R2 pushes R1 down, and lets it back up to its own value
+    ex.w_params["r2"].value = 4.0
+    assert ex.wait(120) and ex.w_params["r1"].value == 3.0
+    ex.w_params["r2"].value = 30.0
+    assert ex.wait(120) and ex.w_params["r1"].value == 6.0
+    # a reset in between makes the defaults the radii's own values: nothing stale comes back
+    ex.w_params["r1"].value = 35.0
+    assert ex.wait(120) and ex.w_params["r2"].value == 36.0
+    ex.controls._on_reset()
+    assert ex.wait(120) and (ex.w_params["r1"].value, ex.w_params["r2"].value) == (20.0, 40.0)
+    ex.w_params["r1"].value = 25.0
+    assert ex.wait(120) and ex.w_params["r2"].value == 40.0
     ex.w_params["lam"].value = 0.1 + 67 * 0.1
     assert ex.wait(120) and ex.result.params.lam == 6.8 and ex.query()["lam"] == "6.8"
     ex.w_reset.clicks += 1

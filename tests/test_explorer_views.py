@@ -753,3 +753,23 @@ def test_the_epipolar_caption_says_what_the_joint_merge_decided():
     bare = dataclasses.replace(res, coarse=dataclasses.replace(res.coarse, shortlist=None))
     text = epipolar_caption(V.epipolar_sources(seq, bare, 0, 1, fit_votes=False), bare, 0, 1)
     assert "compared no partitions" in text and "least coding length decided" in text
+
+
+def test_the_cross_of_a_point_in_no_atom_shows_on_its_fill():
+    """A point in no atom carries a cross inside it: white on the dark motion colours, dark
+    on the light fills (the grey of the atoms / fine / coarse colourings, the pale error
+    colourings, the yellow and sky-blue motions), where a white one is not seen (contrast
+    below 2:1)."""
+    dark, light = V.MOTION_COLORS[:3], (V.UNLABELLED, "#EEEEEE", V.MOTION_COLORS[3], V.MOTION_COLORS[4])
+    assert list(V.cross_colors(dark)) == [V.NO_ATOM] * 3
+    assert list(V.cross_colors(light)) == [V.NO_ATOM_EDGE] * 4
+    assert V.cross_colors([]).size == 0
+    seq = laav.synthetic.make_sequence(n_objects=2, n_frames=10, n_points=150, rng=0)
+    res = laav.segment(seq, 3, seed=0)
+    un = np.asarray(res.atoms.unassigned)
+    assert un.size  # (points in no atom to mark)
+    for mode, want in (("gt", V.NO_ATOM), ("atoms", V.NO_ATOM_EDGE)):
+        style = V.point_style(seq, res, mode)
+        t = V.frame_templates(seq, res, style)["unassigned"]
+        assert list(t["cross"]) == list(V.cross_colors(style["color"][un]))
+        assert want in set(t["cross"]), mode

@@ -32,8 +32,9 @@ class Controls:
     def __init__(self, host: Host, state, seq, defaults) -> None:
         self.host, self.state, self.defaults = host, state, defaults
         self.switching = False  # a new sequence is being read or computed (see lock_motions)
-        #: (radius slider, the value it had) when the other radius pushed it along (R1 < R2):
-        #: it returns towards that value when the pushing one goes back (:meth:`_order_radii`)
+        #: (radius slider, the value it had, the value it was pushed to) when the other radius
+        #: pushed it along (R1 < R2): it returns towards its own value when the pushing one
+        #: goes back (:meth:`_order_radii`)
         self._pushed = None
         st = state.target
         p = st.params
@@ -175,27 +176,28 @@ class Controls:
         the other radius, that one moves along, within its slider, instead of a refusal that
         held every later change back. The value it had is remembered: when ``moved`` goes
         back, the pushed radius follows it back to that value and stops there (R1 20 -> 60
-        -> 20 leaves R2 at 40, not at 61). Setting the pushed radius by hand forgets it."""
+        -> 20 leaves R2 at 40, not at 61). Anything else that sets the pushed radius (by
+        hand, a reset, a URL, another sequence's settings) makes that its own value."""
         r1, r2 = self.w_params["r1"], self.w_params["r2"]
         other = r2 if moved is r1 else r1
-        if self._pushed is not None and self._pushed[0] is moved:
-            self._pushed = None  # set by hand: its own value now
+        if self._pushed is not None and (self._pushed[0] is moved
+                                         or self._pushed[0].value != self._pushed[2]):
+            self._pushed = None  # set since: its own value now
         with self.host.quiet():
             if r1.value >= r2.value:
-                if self._pushed is None:
-                    self._pushed = (other, other.value)
+                own = other.value if self._pushed is None else self._pushed[1]
                 if moved is r1:
                     r2.end = max(r2.end, r1.value + r2.step)
                     r2.value = r1.value + r2.step
                 else:
                     r1.value = max(r1.start, r2.value - r1.step)
+                self._pushed = (other, own, other.value)
             elif self._pushed is not None and self._pushed[0] is other:
                 own = self._pushed[1]  # back towards it, as near as R1 < R2 allows
                 near = (max(own, r1.value + r2.step) if other is r2
                         else min(own, r2.value - r1.step))
                 other.value = near
-                if near == own:
-                    self._pushed = None
+                self._pushed = None if near == own else (other, own, near)
 
     def _on_reset(self, event=None) -> None:
         """Every parameter (with or without a control here), and the seed, to its default."""

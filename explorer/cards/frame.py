@@ -45,7 +45,7 @@ class FrameView:
         self.src_points = ColumnDataSource(dict(EMPTY_POINTS))
         self.src_trails = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": [], "alpha": []})
         self.src_atoms = ColumnDataSource({"x": [], "y": [], "r1": [], "r2": [], "color": [], "atom": []})
-        self.src_unassigned = ColumnDataSource({"x": [], "y": []})
+        self.src_unassigned = ColumnDataSource({"x": [], "y": [], "cross": []})
         self.src_errors = ColumnDataSource({"x": [], "y": []})
         self.src_changed = ColumnDataSource({"x": [], "y": []})
         self.src_background = ColumnDataSource(dict(EMPTY_IMAGE))
@@ -71,9 +71,10 @@ class FrameView:
         self.r_points = f.scatter("x", "y", source=self.src_points, size=7, fill_color="color",
                                   marker="marker", line_color="#333333", line_width=0.4,
                                   legend_field="label")
-        # a white cross inside each point (views.NO_ATOM; its legend entry dark, below)
+        # a cross inside each point, white or dark by its fill (views.cross_colors; the legend's
+        # dark, below)
         self.r_unassigned = f.scatter("x", "y", source=self.src_unassigned, marker="x", size=V.NO_ATOM_SIZE,
-                                      line_color=V.NO_ATOM, line_width=1.3, legend_label="in no atom")
+                                      line_color="cross", line_width=1.3, legend_label="in no atom")
         self.r_changed = f.scatter("x", "y", source=self.src_changed, marker="circle", size=21,
                                    fill_alpha=0, line_color=V.CHANGED_MARK, line_width=2.5,
                                    legend_label="changed motion")
@@ -93,9 +94,10 @@ class FrameView:
         for name in self.specs:
             self.live.add("frame_" + name, getattr(self, "src_" + name), self.specs[name])
         self.live.detach_legend(f)
-        # the legend's cross dark (its stand-in, drawn only there): white is not seen on it
-        key = self.live.stand_in(self.r_unassigned).glyph
-        key.line_color, key.size, key.line_width = V.NO_ATOM_EDGE, 2 * V.NO_ATOM_SIZE, 1.6
+        # the legend's cross dark and larger (its stand-in, drawn only there)
+        key = self.live.stand_in(self.r_unassigned)
+        assert key is not self.r_unassigned, "the unassigned view has no legend stand-in"
+        key.glyph.update(line_color=V.NO_ATOM_EDGE, size=2 * V.NO_ATOM_SIZE, line_width=1.6)
         self.live.add_text("frame_title", f.title, "text")
         leg = f.legend[0]
         self.live.add_text("frame_unassigned", self._item_unassigned, "label", legend=leg)
