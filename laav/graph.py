@@ -116,35 +116,43 @@ def forward_backward_error(points: np.ndarray, atoms: Atoms, edges: np.ndarray) 
     fwd = H[:, right] @ Hinv[:, left]  # (N, K, 3, 3): l -> r
     bwd = np.linalg.inv(fwd)  # r -> l
     sizes = np.array([m.size for m in atoms.members])
-    mmax = int(sizes.max())
-    pad = np.zeros((atoms.n_atoms, mmax), dtype=np.int64)
-    mask = np.zeros((atoms.n_atoms, mmax), dtype=bool)
+    # every atom's members padded to the power of two at or above its size, at least 8 (not
+    # to the largest atom's: on 5,000 tracks sizes range over 5-587, median 20, and the
+    # padding was most of the work)
+    width = 1 << np.ceil(np.log2(np.maximum(sizes, 8))).astype(np.int64)
+    pad = np.zeros((atoms.n_atoms, int(width.max())), dtype=np.int64)
+    mask = np.zeros(pad.shape, dtype=bool)
     for i, m in enumerate(atoms.members):
         pad[i, : m.size] = m
         mask[i, : m.size] = True
 
     pl, pr = points[left], points[right]  # (K, P, 2)
 
-    def directed(a, b):
-        idx = pad[b]  # (E, m)
-        xl = pl[:, idx]  # (K, E, m, 2)
+    def directed(a, b, w):
+        """Mean transfer error of b's members under a's maps; b's atoms all of width w."""
+        idx = pad[b, :w]  # (E, w)
+        xl = pl[:, idx]  # (K, E, w, 2)
         xr = pr[:, idx]
         Tf = np.transpose(fwd[a], (1, 0, 2, 3))  # (K, E, 3, 3)
         Tb = np.transpose(bwd[a], (1, 0, 2, 3))
         e = 0.5 * (_transfer_error(Tf, xl, xr) + _transfer_error(Tb, xr, xl))
-        e = e.mean(axis=0)  # (E, m)
-        mk = mask[b]
+        e = e.mean(axis=0)  # (E, w)
+        mk = mask[b, :w]
         return (e * mk).sum(1) / mk.sum(1)
 
-    out = np.empty(E)
-    # edges per batch: the batch's arrays hold K x chunk x mmax points (each edge's result
-    # does not depend on the batch it is in)
-    chunk = int(np.clip(2**17 // max(left.size * mmax, 1), 16, 256))
-    for s in range(0, E, chunk):
-        a = edges[s : s + chunk, 0]
-        b = edges[s : s + chunk, 1]
-        out[s : s + chunk] = np.maximum(directed(a, b), directed(b, a))
-    return out
+    def one_way(src, dst):
+        # edges per batch: the batch's arrays hold K x chunk x w points (each edge's result
+        # does not depend on the batch it is in)
+        out = np.empty(E)
+        for w in np.unique(width[dst]):
+            sel = np.flatnonzero(width[dst] == w)
+            chunk = int(np.clip(2**17 // (left.size * w), 16, 256))
+            for s in range(0, sel.size, chunk):
+                e = sel[s : s + chunk]
+                out[e] = directed(src[e], dst[e], int(w))
+        return out
+
+    return np.maximum(one_way(edges[:, 0], edges[:, 1]), one_way(edges[:, 1], edges[:, 0]))
 
 
 def forward_backward_error_masked(points: np.ndarray, visible: np.ndarray, atoms: Atoms,

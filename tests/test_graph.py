@@ -44,3 +44,44 @@ def test_forward_backward_errors_equal_the_translation_difference(seed):
     assert graph.errors[~cross].max() < 1e-6
     np.testing.assert_allclose(graph.costs[cross],
                                2 * np.log(p.edge_scale / expected) - p.cut_prior, rtol=1e-6)
+
+
+def test_forward_backward_errors_equal_a_loop_over_edges():
+    """Every edge's error against a plain loop (one edge, one direction, one frame pair at a
+    time) on atoms of sizes 3 to ~100: the batches, grouped by the members' padded width
+    (powers of two, not the largest atom's size), give each edge its own numbers."""
+    from laav import synthetic
+    from laav.graph import _GRAPH_PAIRS, forward_backward_error
+
+    seq = synthetic.make_sequence(n_objects=2, n_frames=15, n_points=600, rng=3)
+    p = LaavParams(r1=12.0, r2=60.0)
+    atoms = build_atoms(seq, p, np.random.default_rng(0))
+    sizes = np.array([m.size for m in atoms.members])
+    assert sizes.min() < 8 and sizes.max() > 32  # several widths
+    graph = atom_graph(seq, atoms, p)
+    pts, F = seq.points, seq.n_frames
+    gap = max(1, F // 3)
+    left = np.unique(np.round(np.linspace(0, F - 1 - gap, min(_GRAPH_PAIRS, F - gap))).astype(int))
+
+    def maps(i, l, r):
+        H = np.zeros((F, 3, 3))
+        H[:, :2] = atoms.affines[i]
+        H[:, 2, 2] = 1.0
+        fwd = H[r] @ np.linalg.inv(H[l])
+        return fwd, np.linalg.inv(fwd)
+
+    def one_way(a, b):
+        errs = []
+        for l in left:
+            r = l + gap
+            fwd, bwd = maps(a, l, r)
+            x = np.c_[pts[l, atoms.members[b]], np.ones(atoms.members[b].size)]
+            y = np.c_[pts[r, atoms.members[b]], np.ones(atoms.members[b].size)]
+            ef = np.linalg.norm((x @ fwd.T)[:, :2] - y[:, :2], axis=1)
+            eb = np.linalg.norm((y @ bwd.T)[:, :2] - x[:, :2], axis=1)
+            errs.append(0.5 * (ef + eb))
+        return np.mean(errs, axis=0).mean()
+
+    want = np.array([max(one_way(a, b), one_way(b, a)) for a, b in graph.edges])
+    np.testing.assert_allclose(forward_backward_error(pts, atoms, graph.edges), want, rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(graph.errors, forward_backward_error(pts, atoms, graph.edges))
