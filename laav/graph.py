@@ -123,29 +123,11 @@ def forward_backward_error(points: np.ndarray, atoms: Atoms, edges: np.ndarray) 
 
     def directed(a, b, w):
         """Mean transfer error of b's members under a's maps; b's atoms all of width w."""
-        idx = pad[b, :w]  # (E, w)
-        xl = pl[:, idx]  # (K, E, w, 2)
-        xr = pr[:, idx]
-        Tf = np.transpose(fwd[a], (1, 0, 2, 3))  # (K, E, 3, 3)
-        Tb = np.transpose(bwd[a], (1, 0, 2, 3))
-        e = 0.5 * (_transfer_error(Tf, xl, xr) + _transfer_error(Tb, xr, xl))
-        e = e.mean(axis=0)  # (E, w)
+        e = _fb_errors(fwd, bwd, pl, pr, a, pad[b, :w]).mean(axis=0)  # (E, w)
         mk = mask[b, :w]
         return (e * mk).sum(1) / mk.sum(1)
 
-    def one_way(src, dst):
-        # edges per batch: the batch's arrays hold K x chunk x w points (each edge's result
-        # does not depend on the batch it is in)
-        out = np.empty(E)
-        for w in np.unique(width[dst]):
-            sel = np.flatnonzero(width[dst] == w)
-            chunk = int(np.clip(2**17 // (left.size * w), 16, 256))
-            for s in range(0, sel.size, chunk):
-                e = sel[s : s + chunk]
-                out[e] = directed(src[e], dst[e], int(w))
-        return out
-
-    return np.maximum(one_way(edges[:, 0], edges[:, 1]), one_way(edges[:, 1], edges[:, 0]))
+    return _both_ways(edges, width, left.size, directed)
 
 
 def forward_backward_error_masked(points: np.ndarray, visible: np.ndarray, atoms: Atoms,
@@ -199,28 +181,45 @@ def forward_backward_error_masked(points: np.ndarray, visible: np.ndarray, atoms
     def directed(a, b, w):
         """Mean transfer error of b's members under a's maps; b's atoms all of width w."""
         idx = pad[b, :w]  # (E, w)
-        xl = pl[:, idx]  # (K, E, w, 2)
-        xr = pr[:, idx]
-        Tf = np.transpose(fwd[a], (1, 0, 2, 3))  # (K, E, 3, 3)
-        Tb = np.transpose(bwd[a], (1, 0, 2, 3))
-        e = 0.5 * (_transfer_error(Tf, xl, xr) + _transfer_error(Tb, xr, xl))  # (K, E, w)
+        e = _fb_errors(fwd, bwd, pl, pr, a, idx)  # (K, E, w)
         ok = (vlr[:, idx] & mask[b, :w][None]
               & (both_seen[a] & both_seen[b]).T[:, :, None])  # (K, E, w)
         n = ok.sum(axis=(0, 2))
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(n > 0, np.where(ok, e, 0.0).sum(axis=(0, 2)) / n, np.nan)
 
+    # NaN when either direction has no entry
+    return _both_ways(edges, width, left.size, directed)
+
+
+def _fb_errors(fwd, bwd, pl, pr, a, idx) -> np.ndarray:
+    """Forward-backward transfer errors (K, E, w) of the points ``idx`` (E, w) under the maps
+    of the atoms ``a`` (E,): ``fwd``, ``bwd`` (N, K, 3, 3) their maps l -> r and back, ``pl``,
+    ``pr`` (K, P, 2) the points in every pair's two frames."""
+    xl = pl[:, idx]  # (K, E, w, 2)
+    xr = pr[:, idx]
+    Tf = np.transpose(fwd[a], (1, 0, 2, 3))  # (K, E, 3, 3)
+    Tb = np.transpose(bwd[a], (1, 0, 2, 3))
+    return 0.5 * (_transfer_error(Tf, xl, xr) + _transfer_error(Tb, xr, xl))
+
+
+def _both_ways(edges: np.ndarray, width: np.ndarray, n_pairs: int, directed) -> np.ndarray:
+    """The larger of ``directed(a, b, w)`` and ``directed(b, a, w')`` for every edge (a, b)
+    (E,), the edges batched by the width ``width`` (:func:`_padded_members`) of the atom
+    whose members move (each edge's result does not depend on the batch it is in; a batch
+    holds ``n_pairs`` x chunk x w points)."""
+    E = edges.shape[0]
+
     def one_way(src, dst):
         out = np.empty(E)
         for w in np.unique(width[dst]):
             sel = np.flatnonzero(width[dst] == w)
-            chunk = int(np.clip(2**17 // (left.size * w), 16, 256))
+            chunk = int(np.clip(2**17 // (n_pairs * w), 16, 256))
             for s in range(0, sel.size, chunk):
                 e = sel[s : s + chunk]
                 out[e] = directed(src[e], dst[e], int(w))
         return out
 
-    # NaN when either direction has no entry
     return np.maximum(one_way(edges[:, 0], edges[:, 1]), one_way(edges[:, 1], edges[:, 0]))
 
 
