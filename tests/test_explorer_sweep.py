@@ -445,7 +445,7 @@ def test_tour_steps_show_one_stage_and_restore_the_page(explorer):
     assert tour.step == 1
     tour.go(3)  # step 4 ends with what this run did
     step4 = TOUR[3].text_for(ex.result.params, 2)
-    assert tour.texts[1].startswith(step4 + " This run: LAAV's trial started ")
+    assert tour.texts[1].startswith(step4 + '\n\n<span class="facts">This run: LAAV\'s trial started ')
     tour.go(1)
     _press(tour, *["next"] * len(TOUR))
     assert tour.step == len(TOUR) - 1 and tour.active  # → stops at the last step

@@ -38,6 +38,8 @@ TOUR_SIDEBAR_WIDTH = "clamp(300px, 35vw - 60px, 440px)"
 #: page's other text is 14 px).
 TITLE_SIZE = "clamp(22px, 2.1vw, 30px)"
 TEXT_SIZE = "clamp(16px, 1.5vw, 22px)"
+#: What this run did (step 4's facts), under the step's text and smaller than it.
+_FACTS_CSS = ":host .facts { font-size: 0.85em; line-height: 1.3; color: #333; }"
 
 # Runs in the browser when the server writes a command into the hidden ``w_js`` box:
 # ``on:RUN:N`` / ``off:N`` (arrow keys step the tour or not; the sidebar shown and widened for
@@ -156,7 +158,8 @@ class TourView:
         self.title_md = Markdown("", margin=(6, 10, 0, 10), sizing_mode="stretch_width", stylesheets=_TIGHT,
                                  styles={"font-size": TITLE_SIZE, "font-weight": "bold",
                                          "line-height": "1.2", "color": "#2c4a66"})
-        self.text_md = Markdown("", margin=(4, 10), sizing_mode="stretch_width", stylesheets=_TIGHT,
+        self.text_md = Markdown("", margin=(4, 10), sizing_mode="stretch_width",
+                                stylesheets=[*_TIGHT, _FACTS_CSS],
                                 styles={"font-size": TEXT_SIZE, "line-height": "1.35"})
         self.hint_md = Markdown("Keyboard: ← →  (Esc ends the tour)", margin=(6, 10),
                                 styles={"font-size": "14px", "color": "#555"}, stylesheets=_TIGHT)
@@ -263,7 +266,9 @@ class TourView:
             searching = bool(getattr(self.host, "previewing", False)) and V.own_chain_preview(res)
             facts = fine_tuning_facts(self.host.sequence, res.voting,
                                       None if rv_view is None else rv_view.plain, searching)
-            text += (" " + facts) if facts else ""
+            # (its own paragraph, smaller: on a failing run the facts run to five sentences,
+            # and the step's two sentences stay the lesson)
+            text += f'\n\n<span class="facts">{facts}</span>' if facts else ""
         return text
 
     def refresh(self) -> None:
