@@ -107,7 +107,7 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
     u = fs["unassigned"]
     # a cross inside each point, white or dark by its fill, as on the page (views.cross_colors)
     ax.scatter(u["x"], u["y"], marker="x", c=list(np.asarray(u["cross"])), s=6, lw=0.7)
-    ax.scatter([], [], marker="x", c=V.NO_ATOM_EDGE, s=20, lw=1.2, label="in no atom")
+    ax.scatter([], [], marker="x", c=V.NO_ATOM_DARK, s=20, lw=1.2, label="in no atom")
     e = fs["errors"]
     if seq.labels is not None:  # (without ground truth nothing is marked, as on the page)
         ax.scatter(e["x"], e["y"], facecolors="none", edgecolors=V.ERROR_MARK, s=80, lw=1.8,

@@ -157,13 +157,14 @@ def worst_seed(rows: Sequence[SeedRow]) -> int | None:
     same, or without ground truth (:func:`segmentation_groups` then)."""
     if not rows or rows[0].error_final is None:
         return None
-
-    def key(r):
-        return (r.error_final, r.error_coarse or 0.0, r.error_fine or 0.0)
-
-    if len({key(r) for r in rows}) == 1:
+    if len({_errors(r) for r in rows}) == 1:
         return None  # every seed scores the same: none is worse
-    return max(rows, key=lambda r: (*key(r), r.all_iterations)).seed
+    return max(rows, key=lambda r: (*_errors(r), r.all_iterations)).seed
+
+
+def _errors(r: SeedRow) -> tuple[float, float, float]:
+    """A row's final, coarse and fine errors: what :func:`worst_seed` ranks by, in order."""
+    return (r.error_final, r.error_coarse or 0.0, r.error_fine or 0.0)
 
 
 def worst_stage(rows: Sequence[SeedRow]) -> str | None:
@@ -172,10 +173,8 @@ def worst_stage(rows: Sequence[SeedRow]) -> str | None:
     wrong: the worst is only the worst start); None when there is no worst seed."""
     if worst_seed(rows) is None:
         return None
-    for stage, get in (("final", lambda r: r.error_final), ("coarse", lambda r: r.error_coarse or 0.0)):
-        if len({get(r) for r in rows}) > 1:
-            return stage
-    return "fine"
+    return next(stage for i, stage in enumerate(("final", "coarse", "fine"))
+                if len({_errors(r)[i] for r in rows}) > 1)
 
 
 def worst_note(rows: Sequence[SeedRow]) -> str:

@@ -23,7 +23,7 @@ __all__ = [
     "COLOR_MODES", "TRUTH_MODES", "PLAIN_MODES", "COLOR_LABELS", "ERROR_STAGE", "stage_errors",
     "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "DIFFERS_MARK", "UNSEEN",
     "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at", "incomplete_note", "result_notes", "counted",
-    "NO_ATOM", "NO_ATOM_EDGE", "NO_ATOM_SIZE", "cross_colors", "CHANGED_MARK", "DISAGREEMENT_WARN",
+    "NO_ATOM", "NO_ATOM_DARK", "NO_ATOM_SIZE", "cross_colors", "CHANGED_MARK", "DISAGREEMENT_WARN",
     "disagreement_line", "disagreement_warning",
     "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "plain_differs", "labelling_distance", "raw_style",
@@ -94,14 +94,14 @@ UNSEEN_LABEL = "unlabelled: seen too briefly"
 ERROR_MARK = "#000000"
 CORRECT = "#BBBBBB"
 #: Features in no atom: a cross inside the point it marks (:data:`NO_ATOM_SIZE` against the
-#: points' 7 px), white on a dark fill and dark grey (:data:`NO_ATOM_EDGE`) on a light one
+#: points' 7 px), white on a dark fill and dark grey (:data:`NO_ATOM_DARK`) on a light one
 #: (:func:`cross_colors`: the grey of the atoms, fine and coarse colourings, the pale error
 #: colourings, the yellow and sky-blue motions), so that it shows on every fill and the
 #: point's colour shows round it. A dark grey cross alone vanished inside navy points; one
 #: wide enough to show round them hid the colours of the demo's 127 points in no atom. The
 #: legend draws it dark.
 NO_ATOM = "#FFFFFF"
-NO_ATOM_EDGE = "#222222"
+NO_ATOM_DARK = "#222222"
 NO_ATOM_SIZE = 5
 #: A fill this light (0-255, ITU-R 601 luma) or lighter takes the dark cross.
 CROSS_DARK_FROM = 140.0
@@ -109,13 +109,13 @@ CROSS_DARK_FROM = 140.0
 
 def cross_colors(fill) -> np.ndarray:
     """The cross of each point in no atom (:data:`NO_ATOM`) for its fill colours ``fill``
-    (``#rrggbb``, (n,)): white on a dark fill, :data:`NO_ATOM_EDGE` on a light one."""
+    (``#rrggbb``, (n,)): white on a dark fill, :data:`NO_ATOM_DARK` on a light one."""
     fill = np.asarray(fill)
     if fill.size == 0:
         return np.zeros(0, "U7")
     rgb = hex_to_rgb(fill.astype(str)).astype(float)
     luma = rgb @ np.array([0.299, 0.587, 0.114])
-    return np.where(luma >= CROSS_DARK_FROM, NO_ATOM_EDGE, NO_ATOM)
+    return np.where(luma >= CROSS_DARK_FROM, NO_ATOM_DARK, NO_ATOM)
 #: Points whose final motion changed with the last recompute: a large reddish-purple ring
 #: (Okabe-Ito; no motion uses it).
 CHANGED_MARK = "#CC79A7"

@@ -117,7 +117,7 @@ def forward_backward_error(points: np.ndarray, atoms: Atoms, edges: np.ndarray) 
     bwd = np.linalg.inv(fwd)  # r -> l
     # (not padded to the largest atom's size: on 5,000 tracks sizes range over 5-587, median
     # 20, and the padding was most of the work)
-    width, pad, mask = _padded_members(atoms, 8)
+    width, pad, mask = _padded_members(atoms)
 
     pl, pr = points[left], points[right]  # (K, P, 2)
 
@@ -172,9 +172,7 @@ def forward_backward_error_masked(points: np.ndarray, visible: np.ndarray, atoms
     fwd = H[:, right] @ Hinv[:, left]  # (N, K, 3, 3)
     bwd = np.linalg.inv(fwd)
     both_seen = atoms.seen[:, left] & atoms.seen[:, right]  # (N, K)
-    # (not padded to the largest atom's size: on incomplete data sizes range over 10-300,
-    # and the padding was most of the work)
-    width, pad, mask = _padded_members(atoms, 1)
+    width, pad, mask = _padded_members(atoms)
     pl, pr = pts[left], pts[right]  # (K, P, 2)
     vlr = visible[left] & visible[right]  # (K, P)
 
@@ -223,13 +221,13 @@ def _both_ways(edges: np.ndarray, width: np.ndarray, n_pairs: int, directed) -> 
     return np.maximum(one_way(edges[:, 0], edges[:, 1]), one_way(edges[:, 1], edges[:, 0]))
 
 
-def _padded_members(atoms: Atoms, least: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every atom's members padded to the power of two at or above its size (and ``least``):
+def _padded_members(atoms: Atoms) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every atom's members padded to the power of two at or above its size (at least 8):
     ``width`` (N,), ``pad`` (N, max width) member indices (0 beyond them), ``mask`` (N, max
     width) True on the members. Edges are batched by their atoms' width, so an edge's sums
     depend on its own atoms only, not on the batch or the largest atom."""
     sizes = np.array([m.size for m in atoms.members])
-    width = 1 << np.ceil(np.log2(np.maximum(sizes, least))).astype(np.int64)
+    width = 1 << np.ceil(np.log2(np.maximum(sizes, 8))).astype(np.int64)
     pad = np.zeros((atoms.n_atoms, int(width.max())), dtype=np.int64)
     mask = np.zeros(pad.shape, dtype=bool)
     for i, m in enumerate(atoms.members):

@@ -762,13 +762,13 @@ def test_the_cross_of_a_point_in_no_atom_shows_on_its_fill():
     below 2:1)."""
     dark, light = V.MOTION_COLORS[:3], (V.UNLABELLED, "#EEEEEE", V.MOTION_COLORS[3], V.MOTION_COLORS[4])
     assert list(V.cross_colors(dark)) == [V.NO_ATOM] * 3
-    assert list(V.cross_colors(light)) == [V.NO_ATOM_EDGE] * 4
+    assert list(V.cross_colors(light)) == [V.NO_ATOM_DARK] * 4
     assert V.cross_colors([]).size == 0
     seq = laav.synthetic.make_sequence(n_objects=2, n_frames=10, n_points=150, rng=0)
     res = laav.segment(seq, 3, seed=0)
     un = np.asarray(res.atoms.unassigned)
     assert un.size  # (points in no atom to mark)
-    for mode, want in (("gt", V.NO_ATOM), ("atoms", V.NO_ATOM_EDGE)):
+    for mode, want in (("gt", V.NO_ATOM), ("atoms", V.NO_ATOM_DARK)):
         style = V.point_style(seq, res, mode)
         t = V.frame_templates(seq, res, style)["unassigned"]
         assert list(t["cross"]) == list(V.cross_colors(style["color"][un]))

@@ -78,7 +78,7 @@ class CoarseView:
         self._numbers(data["text"], len(factors))
         method = res.coarse.method
         margins = V.shows_margins(res)
-        close = V.close_calls(data) & margins
+        close = V.close_calls(data)  # (none where Z is shown: no margins there)
         set_data(self.src_close, {"x": data["x"][close], "y": data["y"][close]})
         self._scale(margins, data["z"])
         single = method == "joint" and not margins  # no partitions compared (see Coarse.shortlist)

@@ -97,7 +97,7 @@ class FrameView:
         # the legend's cross dark and larger (its stand-in, drawn only there)
         key = self.live.stand_in(self.r_unassigned)
         assert key is not self.r_unassigned, "the unassigned view has no legend stand-in"
-        key.glyph.update(line_color=V.NO_ATOM_EDGE, size=2 * V.NO_ATOM_SIZE, line_width=1.6)
+        key.glyph.update(line_color=V.NO_ATOM_DARK, size=2 * V.NO_ATOM_SIZE, line_width=1.6)
         self.live.add_text("frame_title", f.title, "text")
         leg = f.legend[0]
         self.live.add_text("frame_unassigned", self._item_unassigned, "label", legend=leg)
@@ -256,8 +256,7 @@ class FrameView:
 
     def _layers_now(self) -> None:
         on = set(self.w_layers.value)
-        for rs, layer in (((self.r_trails,), 0), ((self.r_r1, self.r_r2), 1),
-                          ((self.r_unassigned,), 2),
+        for rs, layer in (((self.r_trails,), 0), ((self.r_r1, self.r_r2), 1), ((self.r_unassigned,), 2),
                           ((self.r_errors,), 3), ((self.r_changed,), 4)):
             for r in rs:  # the renderer and its legend entry's stand-in (live.py)
                 r.visible = self.live.stand_in(r).visible = LAYERS[layer] in on
