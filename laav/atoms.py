@@ -439,6 +439,31 @@ def _rms_rows(X, sol, Y, n_frames):
     return np.sqrt(np.add.reduce(r * r, axis=-1) / n_frames)
 
 
+def _hypothesis_residuals(src: np.ndarray, Y: np.ndarray, seed_pos: int, pairs: np.ndarray) -> np.ndarray:
+    """Residuals (B, n, 2F) of every candidate under each hypothesis: the affine map through
+    the seed ``src[seed_pos]`` and the candidates ``pairs`` (B, 2) (predicted minus actual,
+    coordinates interleaved as in ``Y`` (n, 2F)).
+
+    Written in the seed's frame: with ``u = src - src[seed]`` and ``dY = Y - Y[seed]`` a map
+    is ``dY ≈ u M``, ``M = E^-1 dY[pairs]`` with ``E`` (2, 2) the two other samples' ``u``
+    as rows, inverted in closed form (``det E`` is twice the triangle's signed area, which
+    the caller keeps away from 0). The same maps as solving the homogeneous 3 x 3 systems,
+    in a third of the time (no LAPACK call per hypothesis), and better conditioned: the
+    coordinates are relative to the seed, not the image corner.
+    """
+    u = src - src[seed_pos]  # (n, 2)
+    dY = Y - Y[seed_pos]  # (n, 2F)
+    e = u[pairs]  # (B, 2, 2): rows e1, e2
+    det = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]
+    inv = np.empty(e.shape)
+    inv[:, 0, 0] = e[:, 1, 1]
+    inv[:, 0, 1] = -e[:, 0, 1]
+    inv[:, 1, 0] = -e[:, 1, 0]
+    inv[:, 1, 1] = e[:, 0, 0]
+    inv /= det[:, None, None]
+    return u @ (inv @ dY[pairs]) - dY
+
+
 @functools.lru_cache(maxsize=64)
 def _all_pairs(m: int) -> np.ndarray:
     """(m (m - 1) / 2, 2): every pair ``i < j`` of ``range(m)``, in ``np.triu_indices``
@@ -491,8 +516,8 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     if not ok.any():
         return None, None
     samp = samp[ok]
-    sol = np.linalg.solve(X[samp], Y[samp])  # (B, 3, 2F)
-    res = _rms_rows(X, sol, Y, Fn)  # (B, n)
+    r = _hypothesis_residuals(src, Y, seed_pos, samp[:, 1:])  # (B, n, 2F)
+    res = np.sqrt(np.add.reduce(r * r, axis=-1) / Fn)  # (B, n)
     inl = res < params.affine_threshold
     # most inliers; among equals the smallest mean residual, in units of the threshold
     # (1e-6 px at the default 2 px: never worth one inlier, at any scale of the coordinates)
@@ -550,7 +575,6 @@ def _ransac_affine_masked(points, vis, cand, seed_pos, ref, params, rng, min_fra
     F = points.shape[0]
     dst = points[:, cand]  # (F, n, 2), 0 where hidden
     V = vis[:, cand]  # (F, n)
-    X = np.concatenate([src, np.ones((n, 1))], axis=1)
     Y = np.transpose(dst, (1, 0, 2)).reshape(n, 2 * F)
     others = np.arange(n - 1)
     others[seed_pos:] += 1
@@ -570,8 +594,8 @@ def _ransac_affine_masked(points, vis, cand, seed_pos, ref, params, rng, min_fra
     if not ok.any():
         return None
     samp = samp[ok]
-    sol = np.linalg.solve(X[samp], Y[samp])  # (B, 3, 2F)
-    r = X @ sol - Y  # (B, n, 2F)
+    # (frames the seed is hidden in are never judged: it is in every sample, see hyp)
+    r = _hypothesis_residuals(src, Y, seed_pos, samp[:, 1:])  # (B, n, 2F)
     e2f = r[..., 0::2] ** 2 + r[..., 1::2] ** 2  # (B, n, F)
     hyp = V.T[samp].all(axis=1)  # (B, F): frames all three sampled points are seen in
     judged = hyp[:, None, :] & V.T[None]  # (B, n, F)

@@ -225,7 +225,24 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return fit_affine_leverage(src, dst)[0]
 
 
-_DIAG3 = np.diag_indices(3)
+def _inverse_sym3(G: np.ndarray) -> np.ndarray:
+    """Inverse of the symmetric 3 x 3 ``G`` plus the ridge ``1e-12 (trace G + 1)`` on its
+    diagonal (which keeps collinear sets solvable), by cofactors in Python floats when it
+    is well conditioned: a numpy call for one 3 x 3 matrix costs more than the arithmetic
+    (a seed's RANSAC fits one to three of them)."""
+    (a, b, c), (_, d, e), (_, _, f) = G.tolist()
+    ridge = 1e-12 * (a + d + f + 1.0)
+    a, d, f = a + ridge, d + ridge, f + ridge
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    # det <= a d f (Hadamard); far below it (nearly collinear points) cofactors lose the
+    # digits that LU with pivoting keeps: LAPACK's way then
+    if not det > 1e-6 * a * d * f:
+        return np.linalg.inv(np.array([[a, b, c], [b, d, e], [c, e, f]]))
+    k = 1.0 / det
+    return np.array([[c00 * k, c01 * k, c02 * k], [c01 * k, c11 * k, c12 * k],
+                     [c02 * k, c12 * k, c22 * k]])
 
 
 def fit_affine_leverage(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -248,9 +265,7 @@ def fit_affine_leverage(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, n
     X = np.empty((n, 3))  # homogeneous, normalised
     X[:, :2] = dev * s
     X[:, 2] = 1.0
-    G = X.T @ X
-    G[_DIAG3] += 1e-12 * (np.trace(G) + 1.0)  # keeps collinear sets solvable
-    P = np.linalg.inv(G) @ X.T  # (3, n)
+    P = _inverse_sym3(X.T @ X) @ X.T  # (3, n)
     sol = np.einsum("kn,fnd->fdk", P, dst)  # (F, 2, 3), normalised src
     lin = sol[..., :2] * s
     out = np.empty_like(sol)

@@ -201,3 +201,27 @@ def test_paper_atoms_judge_features_on_one_frame_pair():
     joined = [any(0 in m for m in build_atoms(pts, p_pair, np.random.default_rng(s)).members)
               for s in range(10)]
     assert any(joined)  # on pairs without the jumping frame it fits the grid's affine map
+
+
+def test_hypothesis_residuals_equal_the_homogeneous_solve():
+    """RANSAC's residuals, written in the seed's frame with a closed-form 2 x 2 inverse, are
+    those of the affine map solved from the three samples' homogeneous 3 x 3 system (the
+    textbook way), for every hypothesis and candidate."""
+    from laav.atoms import _hypothesis_residuals
+
+    rng = np.random.default_rng(0)
+    n, F = 25, 7
+    src = rng.uniform(200, 400, (n, 2))  # image coordinates far from the origin
+    Y = rng.uniform(0, 640, (n, 2 * F))
+    seed = 4
+    pairs = np.array([[0, 1], [2, 9], [24, 3], [10, 11], [5, 17]])
+    got = _hypothesis_residuals(src, Y, seed, pairs)
+    X = np.column_stack([src, np.ones(n)])
+    samp = np.column_stack([np.full(len(pairs), seed), pairs])
+    sol = np.linalg.solve(X[samp], Y[samp])  # (B, 3, 2F)
+    expect = X @ sol - Y
+    assert got.shape == (len(pairs), n, 2 * F)
+    assert np.abs(got - expect).max() < 1e-8 * np.abs(Y).max()
+    # the map passes through its three samples
+    for b, (i, j) in enumerate(pairs):
+        assert np.abs(got[b, [seed, i, j]]).max() < 1e-9 * np.abs(Y).max()

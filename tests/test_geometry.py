@@ -200,3 +200,23 @@ def test_fit_affine_collinear_points_still_fit():
     assert np.all(np.isfinite(A))
     # the tiny ridge that keeps the collinear system solvable costs ~1e-5 px here
     assert np.abs(apply_affine(A, src[None]) - dst).max() < 1e-4
+
+
+def test_inverse_sym3_matches_lapack_with_the_ridge():
+    """The cofactor inverse of the affine fits' normal matrix equals LAPACK's inverse of the
+    same ridged matrix (to rounding) on well-spread point sets, and falls back to it on
+    nearly collinear ones (where cofactors would lose digits)."""
+    from laav.geometry import _inverse_sym3
+
+    rng = np.random.default_rng(3)
+    for spread in (1.0, 1e-2, 1e-5, 0.0):  # from well spread to exactly collinear
+        for _ in range(20):
+            n = int(rng.integers(3, 40))
+            t = rng.standard_normal(n)
+            x = np.column_stack([t, 0.5 * t + spread * rng.standard_normal(n), np.ones(n)])
+            G = x.T @ x
+            ridged = G + 1e-12 * (np.trace(G) + 1.0) * np.eye(3)
+            expect = np.linalg.inv(ridged)
+            got = _inverse_sym3(G)
+            assert np.abs(got - expect).max() <= 1e-9 * np.abs(expect).max()
+            assert np.allclose(got, got.T, rtol=0, atol=1e-9 * np.abs(got).max())
