@@ -76,6 +76,26 @@ def test_subspace_distances_tell_the_motions_apart():
         assert np.median(own) < 0.1 * np.median(other) and np.median(other) > 1.0
 
 
+def test_subspace_votes_fit_an_orthonormal_basis_of_the_sample_also_when_rank_deficient():
+    """The subspace votes' basis is orthonormal and spans the sample's leading 4 singular
+    directions (the distances then equal a direct SVD's), also for a sample spanning only 2
+    dimensions (two trajectories repeated: there it comes from QR, dividing by near-zero
+    singular values would not give unit vectors)."""
+    seq = synthetic.make_sequence(n_objects=1, n_frames=12, n_points=120, noise=0.5, rng=2)
+    sv = SubspaceVotes(seq.points, 1.0, 16)
+    F, W = seq.points.shape[0], sv.W
+    flat = np.r_[np.zeros(8, dtype=np.int64), np.ones(8, dtype=np.int64)]
+    X = np.moveaxis(W[:, np.stack([np.arange(16), flat])], 0, -2)  # (2, 2F, 16)
+    for U in (sv.basis(X), sv.basis(X[1:])):  # both samples together, the flat one alone
+        assert np.allclose(np.swapaxes(U, -1, -2) @ U, np.eye(4), atol=1e-9)
+    full = np.linalg.svd(W[:, :16], full_matrices=False)[0][:, :4]
+    U = sv.basis(X)[0]
+    assert np.allclose(U @ U.T, full @ full.T, atol=1e-9)
+    got = sv.distances(np.arange(16)[None])[0]
+    expect = ((W - full @ (full.T @ W)) ** 2).sum(axis=0) / F
+    assert np.allclose(got, expect, rtol=1e-9, atol=1e-9 * np.abs(W).max() ** 2)
+
+
 def small_motion_uncovered(seed):
     """A scene whose small motion (30 points) has no atom, and coarse labels that split the
     large motion in two by position (what stage 4 must do then), as on Hopkins155's
