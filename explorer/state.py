@@ -874,7 +874,8 @@ class ExplorerState:
                         else:
                             pipe = self._with_helper(Pipeline(
                                 seq, target.n_motions, target.params, target.seed,
-                                preview=self._previewer(gen, seq, target), helper=self.helper))
+                                preview=self._previewer(gen, seq, target), helper=self.helper,
+                                full_shortlist=True))
                             result = pipe.result
                     else:
                         entry = self._take_ahead(seq, target)
@@ -1167,7 +1168,7 @@ class ExplorerState:
                 with self._lock:
                     have = key in self._ahead
                 if not have:
-                    pipe = Pipeline(seq, target.n_motions, target.params, target.seed)
+                    pipe = Pipeline(seq, target.n_motions, target.params, target.seed, full_shortlist=True)
                     with self._lock:
                         if seq is self._target_seq:  # no other sequence asked for since
                             self._keep_ahead(key, pipe, AHEAD_IDLE)

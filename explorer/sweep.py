@@ -317,7 +317,7 @@ class SeedSweep:
                     raise Cancelled
                 t0 = time.perf_counter()
                 with interruptible(lambda: sid != self._id):  # raises Cancelled when stale
-                    pipe = laav.Pipeline(seq, C, params, seed)  # laav.segment's result
+                    pipe = laav.Pipeline(seq, C, params, seed, full_shortlist=True)  # laav.segment's labels
                 result = pipe.result
                 dt = time.perf_counter() - t0
                 if sid != self._id:

@@ -88,7 +88,8 @@ def _child(conn, other_end, parent: int, seq, n_motions, params, seed) -> None:
                 sent.append(True)
 
             try:
-                data = pipeline_state(laav.Pipeline(seq, n_motions, params, seed, preview=preview))
+                data = pipeline_state(laav.Pipeline(seq, n_motions, params, seed, preview=preview,
+                                                    full_shortlist=True))
             except BaseException:  # noqa: BLE001 - the parent then computes it itself
                 data = b""
             if not sent:

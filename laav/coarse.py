@@ -51,6 +51,10 @@ _JOINT_PAIRS = 8  # frame pairs of the joint merge's epipolar cost
 class Shortlist:
     """The partitions the joint merge (``coarse_merge="joint"``) compared.
 
+    The ``coarse_candidates`` partitions of least coding length, scored by increasing coding
+    length up to the last one that could still score below the best (by default; every one
+    with :func:`merge_models`' ``full_shortlist``): K of them.
+
     Attributes
     ----------
     assign : ndarray of shape (K, n_fine), int64
@@ -147,7 +151,9 @@ class Coarse:
         One typical sample of every pair's epipolar vote (what the explorer draws;
         ``pairwise.samples``).
     shortlist : Shortlist or None
-        ``method="joint"``: the partitions compared and their scores.
+        ``method="joint"``: the partitions compared and their scores (the first of the
+        ``coarse_candidates`` by coding length, up to the last that could still win; all of
+        them with :func:`merge_models`' ``full_shortlist``).
     pairwise_vote, coassociation : ndarray of shape (n_fine, n_fine) or None
         The two terms of the epipolar merge's Z, apart: the paper's pairwise vote (mean of
         ``exp(-lam d)`` over the samples, ``pairwise.vote``) and the co-association of the
@@ -458,7 +464,8 @@ def _pooled_voting_masked(points, visible, fine_labels, cov, n_models, n_motions
 def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n_motions: int,
                  params: LaavParams | None = None,
                  rng: np.random.Generator | None = None, *,
-                 visible: np.ndarray | None = None, memo: dict | None = None) -> Coarse:
+                 visible: np.ndarray | None = None, memo: dict | None = None,
+                 full_shortlist: bool = False) -> Coarse:
     """Merge the fine models of the multicut into ``n_motions`` motions.
 
     Parameters
@@ -494,6 +501,10 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         them as if drawn again), the coding statistics and merge gains, and the joint
         merge's coding-length shortlist and its motions' robust fits (at most
         :data:`_JOINT_ROWS_KEPT` distances). The result is the same, bit for bit.
+    full_shortlist : bool
+        The joint merge scores every partition of its shortlist (``Coarse.shortlist``), not
+        only those that could still win (the default): the same motions, more of the
+        comparison to show (the explorer's card 3 draws every pair's margin from it).
 
     Returns
     -------
@@ -606,7 +617,8 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
     listed = None
     if coding:  # the partition is searched only when it decides
         if method == "joint" and n > n_motions:
-            listed = _joint_shortlist(points, fine_pts, stats, n_motions, params, memo)
+            listed = _joint_shortlist(points, fine_pts, stats, n_motions, params, memo,
+                                      full_shortlist)
         if listed is not None:
             assign, length = listed.assign[listed.chosen], float(listed.coding_length[listed.chosen])
         else:  # the coding merge (also the joint one when no partition has 8 points a motion)
@@ -668,12 +680,16 @@ def _cached(memo: dict | None, key: tuple, compute):
     return value
 
 
-def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> Shortlist | None:
+def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None,
+                     full=False) -> Shortlist | None:
     """The joint merge: the ``coarse_candidates`` partitions of least coding length whose
     motions hold 8 points or more (what one fundamental matrix needs), each scored by its
     coding length plus ``coarse_epipolar_weight`` times its epipolar cost; None when no
-    partition gives every motion 8 points. ``memo``: see :func:`merge_models` (the
-    shortlist does not depend on ``lam``)."""
+    partition gives every motion 8 points. They are scored by increasing coding length,
+    and (unless ``full``) only until one's coding length alone exceeds the best score so
+    far: no later one can score lower (an epipolar cost is >= 0), so the partition chosen is
+    the same, and its fits are spared (most of the stage's time). ``memo``: see
+    :func:`merge_models` (the shortlist does not depend on ``lam``)."""
     assign, coding = _cached(
         memo, ("shortlist", n_motions, params.coding_eps, params.coarse_candidates),
         lambda: shortlist(stats, n_motions, params.coding_eps, params.coarse_candidates,
@@ -686,11 +702,18 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> S
     pairs = frame_pairs(points.shape[0], _JOINT_PAIRS)  # deterministic: no draw from rng
     x1, x2 = pts[pairs[:, 0]], pts[pairs[:, 1]]
     floor2 = TINY2 * _coordinate_unit2(pts)  # the fits' floor: in the coordinates' unit, not λ's
-    epi = np.empty(assign.shape[0])
+    w = params.coarse_epipolar_weight
+    epi = np.full(assign.shape[0], np.nan)
+    best = np.inf
     # a motion's per-pair distances, by its fine models: candidates share motions, and the
     # fits do not depend on λ (kept in the memo across λ moves for the present multicut)
     rows = _cached(memo, ("joint rows",), dict)  # (K, its members) per motion
     for i, a in enumerate(assign):
+        if not full and w >= 0 and coding[i] > best:
+            # the partitions come by increasing coding length and an epipolar cost is >= 0:
+            # this one and every later one score above the best so far
+            assign, coding, epi = assign[:i], coding[:i], epi[:i]
+            break
         lab = a[fine]
         own = np.empty(lab.size)
         for g in range(n_motions):
@@ -702,7 +725,8 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None) -> S
                 rows[key] = pair_distances(x1, x2, np.flatnonzero(mem), floor2)[:, mem]
             own[mem] = capped_mean(rows[key], unit2)
         epi[i] = np.log1p(own / unit2).sum()
-    score = coding + params.coarse_epipolar_weight * epi
+        best = min(best, coding[i] + w * epi[i])
+    score = coding + w * epi
     return Shortlist(assign, coding, epi, score, int(np.argmin(score)))
 
 

@@ -163,6 +163,10 @@ class Pipeline:
         Speed only: LAAV's own voting trials run half in the helper's process (the machine's
         second core); the labels are those without it. May be set or changed later
         (the ``helper`` attribute).
+    full_shortlist : bool
+        The joint merge scores every partition of its shortlist (``coarse.shortlist``), not
+        only those that could still win: the same labels, the whole comparison (what the
+        explorer's card 3 draws), at some of the coarse stage's time.
 
     Attributes
     ----------
@@ -193,7 +197,7 @@ class Pipeline:
     """
 
     def __init__(self, seq, n_motions: int, params: LaavParams | None = None, seed: int = 0, *,
-                 preview=None, helper=None):
+                 preview=None, helper=None, full_shortlist: bool = False):
         self.params = as_params(params)
         self.seq, self.n_motions = _check_inputs(seq, n_motions)
         self.params.n_fine(self.n_motions, self.seq.is_complete)
@@ -205,6 +209,10 @@ class Pipeline:
         #: the default merge leaves unfitted; ``Coarse.vote_samples``, what a viewer draws)
         #: are fitted in the helper while the voting runs (the explorer sets it)
         self.prefetch_votes = False
+        #: the joint merge scores every partition of its shortlist, not only those that could
+        #: still win (:func:`laav.coarse.merge_models`' ``full_shortlist``; the same labels):
+        #: for a viewer of the comparison (the explorer's card 3)
+        self.full_shortlist = bool(full_shortlist)
         self._lock = threading.Lock()
         self._distances = None
         self._noise: float | None = None  # the tracks' measured noise (noise_adaptive), px
@@ -273,7 +281,8 @@ class Pipeline:
                 self._coarse_memo = {}
             elif stage == "coarse":
                 st["coarse"] = merge_models(seq, st["atoms"], st["multicut"], C, p,
-                                            self._rng("coarse"), memo=self._coarse_memo)
+                                            self._rng("coarse"), memo=self._coarse_memo,
+                                            full_shortlist=self.full_shortlist)
             elif stage == "voting":
                 init = st["coarse"].point_labels
                 if C == 1 or not (init >= 0).any():

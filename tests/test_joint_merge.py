@@ -70,7 +70,8 @@ def test_epipolar_cost_separates_what_coding_length_alone_confuses():
     atoms, mc, members = atom_models(seq, [[15, 15, 15]] * seq.n_motions,
                                      np.random.default_rng(3))
     co = merge_models(seq, atoms, mc, seq.n_motions,
-                      JOINT.replace(coarse_candidates=50), np.random.default_rng(0))
+                      JOINT.replace(coarse_candidates=50), np.random.default_rng(0),
+                      full_shortlist=True)  # every partition's epipolar cost
     sl = co.shortlist
     truth = np.repeat(np.arange(seq.n_motions), 3)
     true_row = [i for i, a in enumerate(sl.assign) if np.array_equal(a, truth)]
@@ -117,3 +118,26 @@ def test_incomplete_data_falls_back_to_the_epipolar_merge_with_a_warning():
     assert co.method == "epipolar" and co.shortlist is None
     assert any(issubclass(w.category, LaavWarning) and "'joint'" in str(w.message)
                for w in caught)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_the_shortlist_stops_where_no_partition_can_win_and_chooses_the_same(seed):
+    """The joint merge scores its shortlist by increasing coding length and stops at the
+    first partition whose coding length alone exceeds the best score (an epipolar cost is
+    >= 0): its scores are the full comparison's first ones, bit for bit, it chooses the same
+    partition, and every partition it did not score has a coding length above that best
+    score. On these scenes it stops early (the point of it: fewer motion fits)."""
+    seq = scene(seed, n_objects=2)
+    atoms, mc, _ = atom_models(seq, [[15, 15, 15, 15]] * seq.n_motions, np.random.default_rng(seed))
+    p = JOINT.replace(coarse_candidates=20)
+    fast = merge_models(seq, atoms, mc, seq.n_motions, p, np.random.default_rng(0))
+    full = merge_models(seq, atoms, mc, seq.n_motions, p, np.random.default_rng(0),
+                        full_shortlist=True)
+    a, b = fast.shortlist, full.shortlist
+    k = a.score.size
+    assert b.score.size == p.coarse_candidates and 1 <= k < b.score.size
+    for f in ("assign", "coding_length", "epipolar_cost", "score"):
+        assert np.array_equal(getattr(a, f), getattr(b, f)[:k]), f
+    assert a.chosen == b.chosen and np.array_equal(fast.point_labels, full.point_labels)
+    assert np.all(b.coding_length[k:] > a.score.min())
+    assert np.all(b.score[k:] > a.score.min())
