@@ -162,7 +162,8 @@ def fine_tuning_facts(seq, voting, plain, searching: bool = False) -> str:
     ended = (f"settled after {n} iterations" if voting.informed_converged
              else f"was still changing at the {n}-iteration cap")
     if truth and err.size:  # settling is not being right: where it ended
-        ended += f", ending {_pct(err[-1])} wrong"
+        ended = (f"settled at {_pct(err[-1])} after {n} iterations" if voting.informed_converged
+                 else f"{ended} ({_pct(err[-1])} wrong)")
     text = f"This run: LAAV's trial {start}{ended}"
     if plain is None:
         text += "; plain RV: computing."
@@ -211,8 +212,8 @@ def fine_tuning_facts(seq, voting, plain, searching: bool = False) -> str:
             text += f" Returned after our last steps: {_pct(final)} wrong."
         if plain is not None:  # never a win the run contradicts: say when plain RV did better
             theirs = 100 * laav.misclassification_rate(seq.labels, plain.labels)
-            if final > theirs + 0.5:
-                text += f" Here plain RV did better ({_pct(theirs)} against {_pct(final)})"
+            if final > theirs + 0.5:  # (both errors are said above: plain RV's, the labels returned)
+                text += " Plain RV did better here"
                 # why, when the trial returned stayed near a start that was far off
                 stayed = own and err.size and err[0] > 5.0 and err[-1] > 0.5 * err[0]
                 text += (": a start near a wrong answer settles there (step 3's coarse labels)."

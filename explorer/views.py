@@ -28,8 +28,10 @@ __all__ = [
     "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "plain_differs", "labelling_distance", "raw_style",
     "points_source", "frame_sources", "graph_sources", "TRAIL", "frame_specs", "frame_templates",
-    "points_template", "graph_specs",
-    "graph_templates", "instantiate", "point_track", "atom_track", "fill_text",
+    "points_template", "legend_points", "graph_specs",
+    "graph_templates", "label_clashes", "id_layout", "pair_id_sides", "id_boxes", "ID_FONT_PX",
+    "PAIR_ID_FONT_PX", "ID_CLEAR",
+    "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
     "replay_caption", "fine_count", "fine_count_note", "z_sources", "joint_margins", "shows_margins",
     "signed_log", "margin_top", "margin_ticks", "margin_text", "cell_font_px", "MARGIN_PALETTE",
@@ -635,6 +637,22 @@ def points_source(seq: laav.Sequence, frame: int, style: dict) -> dict:
     return instantiate(points_template(style), frame_specs()["points"], *point_track(seq), frame)
 
 
+def legend_points(*styles: dict) -> dict:
+    """One legend for views drawn with several point styles (:func:`point_style`; the A/B
+    compare's two views): a row per legend label that any of them has, with that label's
+    colour and marker (its first point's, as a frame view's legend draws it), in the frame
+    view's order (:func:`points_template`: "motion 1, motion 2, ..."), at no position (NaN:
+    drawn only in a legend). Keys: x, y, color, marker, label."""
+    tpls = [points_template(s) for s in styles]
+    label = np.concatenate([np.asarray(t["label"]).astype(str) for t in tpls] or [np.zeros(0, "U1")])
+    color = np.concatenate([np.asarray(t["color"], dtype="U7") for t in tpls] or [np.zeros(0, "U7")])
+    marker = np.concatenate([np.asarray(t["marker"], dtype=object) for t in tpls]
+                            or [np.zeros(0, dtype=object)])
+    _, first = np.unique(label, return_index=True)  # (sorted by label: the frame view's order)
+    nan = np.full(first.size, np.nan)
+    return {"x": nan, "y": nan.copy(), "color": color[first], "marker": marker[first], "label": label[first]}
+
+
 def frame_templates(seq: laav.Sequence, result: laav.LaavResult, style: dict, moved=None) -> dict:
     """The frame view's templates (see :func:`frame_specs`): ``points``, ``trails`` (each
     point's steps, in its colour), ``atoms`` (at their seeds: r1, r2, color, atom),
@@ -767,9 +785,116 @@ def cost_limit(result: laav.LaavResult) -> float:
     return float(max(np.percentile(c, 95), 1e-6))
 
 
-def graph_templates(result: laav.LaavResult, step: int, colors=None) -> dict:
+#: The atom ids beside the graph's nodes: font sizes (px) of an id (7 pt) and of the ids of
+#: the pair joined at a replay step (8 pt, bold), the room between an id and its node's edge
+#: (px; the pair's: its ring's), the room left between two ids (px), and a digit's width (em;
+#: bokeh's text font, Helvetica or its metric twins; bold: 0.556 too).
+ID_FONT_PX = 7 * 96 / 72
+PAIR_ID_FONT_PX = 8 * 96 / 72
+ID_MARGIN_PX = 2.0
+ID_GAP_PX = 2.0
+#: The part of a node an id must leave clear, as a share of its radius: the square inside
+#: the circle (an id may graze a node's rim; over its middle, ids hid the nodes they named).
+ID_CLEAR = 0.5 ** 0.5
+_DIGIT_EM = 0.556
+
+
+def _id_width(ids, font_px: float) -> np.ndarray:
+    return np.array([len(str(i)) for i in np.asarray(ids).tolist()], dtype=float) * _DIGIT_EM * font_px
+
+
+def label_clashes(xy: np.ndarray, visible: np.ndarray | None, scale, atoms_a, boxes_a, atoms_b, boxes_b,
+                  gap: float = ID_GAP_PX) -> np.ndarray:
+    """Which labels of a plot come within ``gap`` px of which others, in any frame: (A, B) bool.
+
+    Label ``k`` of set A sits beside atom ``atoms_a[k]`` of the track ``xy`` (F, N, 2) (data
+    units; NaN where not drawn), seen where ``visible`` (F, N) (None: wherever finite), in the
+    box ``boxes_a[k]`` = (left, top, right, bottom) px from the atom's centre on the screen (y
+    down); set B likewise; ``scale`` = (sx, sy): the plot's pixels per data unit. Two labels
+    clash when both atoms are drawn in a frame and their boxes come that near there: every
+    frame counts, as the page draws each from the same labels without the server. Cost: F
+    (A, B) comparisons."""
+    a, b = np.asarray(atoms_a, dtype=np.int64), np.asarray(atoms_b, dtype=np.int64)
+    ba, bb = np.asarray(boxes_a, dtype=float).reshape(-1, 4), np.asarray(boxes_b, dtype=float).reshape(-1, 4)
+    clash = np.zeros((a.size, b.size), dtype=bool)
+    if a.size == 0 or b.size == 0:
+        return clash
+    sx, sy = (abs(float(v)) for v in scale)
+    for f in range(xy.shape[0]):
+        xa, ya, xb, yb = xy[f, a, 0] * sx, xy[f, a, 1] * sy, xy[f, b, 0] * sx, xy[f, b, 1] * sy
+        sa, sb = np.isfinite(xa) & np.isfinite(ya), np.isfinite(xb) & np.isfinite(yb)
+        if visible is not None:
+            sa &= np.asarray(visible[f], dtype=bool)[a]
+            sb &= np.asarray(visible[f], dtype=bool)[b]
+        if not sa.any() or not sb.any():
+            continue
+        clash |= ((xa + ba[:, 0])[:, None] < (xb + bb[:, 2] + gap)[None, :]) \
+            & ((xb + bb[:, 0])[None, :] < (xa + ba[:, 2] + gap)[:, None]) \
+            & ((ya + ba[:, 1])[:, None] < (yb + bb[:, 3] + gap)[None, :]) \
+            & ((yb + bb[:, 1])[None, :] < (ya + ba[:, 3] + gap)[:, None]) & sa[:, None] & sb[None, :]
+    return clash
+
+
+def id_layout(result: laav.LaavResult, scale) -> dict:
+    """Where the multicut graph's atom ids may be written at the plot's ``scale`` (px per data
+    unit, (sx, sy)): the part of :func:`graph_templates`'s placement that no replay step
+    changes (a card keeps it while the result and the plot's size stay).
+
+    Each atom's id has two places, right of its node and left of it (:func:`id_boxes`), taken
+    in this order: every atom's right place, the larger atoms first (then by id), then every
+    left one the same way. Returns ``atoms``, ``dx``, ``align``, ``boxes`` (per place),
+    ``blocked`` (a place that covers the middle of a node in some frame: the square inside
+    its circle, so an id may graze a node's rim but never hide it; :data:`ID_CLEAR`) and
+    ``clash`` (the places that overlap each other: :func:`label_clashes`)."""
+    xy, seen = atom_track(result)
+    n = result.graph.n_nodes
+    sizes = np.array([len(m) for m in result.atoms.members], dtype=float)
+    node_px = 7 + 2.0 * np.sqrt(sizes)
+    ids = np.arange(n)
+    order = ids[np.lexsort((ids, -sizes))] if n else ids
+    atoms = np.r_[order, order]
+    sides = np.r_[np.ones(n), -np.ones(n)]
+    dx, boxes = id_boxes(node_px[atoms], sides, atoms, ID_FONT_PX)
+    r = ID_CLEAR * node_px / 2
+    over_node = label_clashes(xy, seen, scale, atoms, boxes, ids, np.c_[-r, -r, r, r], gap=0.0)
+    return {"scale": tuple(scale), "atoms": atoms, "dx": dx, "align": np.where(sides > 0, "left", "right"),
+            "boxes": boxes, "blocked": over_node.any(axis=1),
+            "clash": label_clashes(xy, seen, scale, atoms, boxes, atoms, boxes)}
+
+
+def pair_id_sides(xy: np.ndarray, pair) -> np.ndarray:
+    """The side of its node each of a replay step's two atoms has its id on: -1 left, +1
+    right; the atom further left (on average over the frames where both are drawn) to the
+    left, so that the two ids point away from each other (the pair is mostly neighbours)."""
+    k, m = (int(i) for i in pair)
+    dx = xy[:, m, 0] - xy[:, k, 0]
+    dx = dx[np.isfinite(dx)]
+    right = dx.size == 0 or float(dx.mean()) >= 0  # (m right of k)
+    return np.array([-1.0, 1.0] if right else [1.0, -1.0])
+
+
+def id_boxes(sizes_px: np.ndarray, sides: np.ndarray, ids, font_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where the ids ``ids`` of nodes ``sizes_px`` across (px) are written: beside the node,
+    vertically centred, on its right (``sides`` +1) or left (-1), :data:`ID_MARGIN_PX` from
+    its edge. Returns the text's x offsets (px from the node's centre: its start on the right,
+    its end on the left) and the boxes (left, top, right, bottom; px from the centre, y down)
+    for :func:`label_clashes`."""
+    w = _id_width(ids, font_px)
+    dx = np.asarray(sides, dtype=float) * (np.asarray(sizes_px, dtype=float) / 2 + ID_MARGIN_PX)
+    left = np.where(dx > 0, dx, dx - w)
+    half = np.full(w.size, font_px / 2)
+    return dx, np.c_[left, -half, left + w, half]
+
+
+def graph_templates(result: laav.LaavResult, step: int, colors=None, scale=None, layout=None) -> dict:
     """The multicut graph view after ``step`` GAEC contractions as templates on the atoms'
-    track (:func:`graph_specs`, :func:`atom_track`); see :func:`graph_sources`."""
+    track (:func:`graph_specs`, :func:`atom_track`); see :func:`graph_sources`.
+
+    ``scale``: the plot's pixels per data unit (sx, sy): only the atom ids that overlap no
+    other id, and no node's middle, in any frame at that size are written, each right of its
+    node or else left of it (:func:`id_layout`; ``layout``: that, computed before for this
+    result and scale), after the ids of the pair joined at the step, which are always written;
+    None: every id, right of its node."""
     g = result.graph
     n = g.n_nodes
     lab = replay_labels(result, step)
@@ -780,9 +905,40 @@ def graph_templates(result: laav.LaavResult, step: int, colors=None) -> dict:
     owner = final if step > K else final[replay_roots(result, step)] if final.size else final
     node_color = pal[owner % pal.size] if owner.size else np.zeros(0, "U7")
     ids = np.arange(n, dtype=np.int32)
+    node_px = 7 + 2.0 * np.sqrt(sizes)
+    label = np.array([str(i) for i in range(n)], dtype=object)
+    pair = np.asarray(result.multicut.contractions[step - 1], dtype=np.int64) if 0 < step <= K else None
+    xy, seen = atom_track(result)
+    # each id right of its node (x offset: dx, the text's side: align), vertically centred on it
+    label_dx, _ = id_boxes(node_px, np.ones(n), ids, ID_FONT_PX)
+    label_align = np.full(n, "left", dtype=object)
+    if pair is not None:
+        # the pair's ids are written with it, on top, bold and on the sides facing away from
+        # each other (past its rings, 3 px wide: the nodes' own ids would be under them)
+        pair_px = node_px[pair] + 6
+        pair_dx, pair_boxes = id_boxes(pair_px + 3, pair_id_sides(xy, pair), pair, PAIR_ID_FONT_PX)
+        label[pair] = ""
+    if layout is None and scale is not None and n:
+        layout = id_layout(result, scale)
+    if layout is not None and n:
+        # greedy: each place in the layout's order is taken unless it would overlap a node's
+        # middle, the pair's ids or an id placed before, or its atom's id is placed already
+        at, clash = layout["atoms"], layout["clash"]
+        blocked = layout["blocked"].copy()
+        if pair is not None:
+            blocked |= np.isin(at, pair)
+            blocked |= label_clashes(xy, seen, layout["scale"], pair, pair_boxes, at,
+                                     layout["boxes"]).any(axis=0)
+        placed = np.zeros(n, dtype=bool)
+        for k in range(at.size):
+            if not blocked[k] and not placed[at[k]]:
+                placed[at[k]] = True
+                blocked |= clash[k]
+                label_dx[at[k]], label_align[at[k]] = layout["dx"][k], layout["align"][k]
+        label[~placed] = ""
     nodes = {"_a": ids, "color": node_color, "cluster": lab + 1, "atom": np.arange(n),
-             "members": sizes.astype(int), "size": 7 + 2.0 * np.sqrt(sizes),
-             "label": np.array([str(i) for i in range(n)], dtype=object)}
+             "members": sizes.astype(int), "size": node_px, "label": label, "dx": label_dx,
+             "align": label_align}
     E = np.asarray(g.edges, dtype=np.int64).reshape(-1, 2)
     cut = np.asarray(result.multicut.cut, bool) if step > K else (lab[E[:, 0]] != lab[E[:, 1]])
 
@@ -793,36 +949,43 @@ def graph_templates(result: laav.LaavResult, step: int, colors=None) -> dict:
                 "a": e[:, 0], "b": e[:, 1]}
 
     out = {"nodes": nodes, "joined": edges(~cut), "cut": edges(cut)}
-    if 0 < step <= K:
-        k, m = np.asarray(result.multicut.contractions[step - 1]).tolist()
+    if pair is not None:
+        k, m = pair.tolist()
         out["step_edge"] = {"_a": np.array([k], np.int32), "_b": np.array([m], np.int32)}
-        # the two atoms joined at this step, drawn again on top of the others, ringed
-        out["pair"] = {"_a": np.array([k, m], np.int32), "color": node_color[[k, m]],
-                       "size": 7 + 2.0 * np.sqrt(sizes[[k, m]]) + 6, "atom": np.array([k, m], dtype=int)}
+        # the two atoms joined at this step, drawn again on top of the others, ringed, with
+        # their ids beside the rings (text, dx: px from the centre, align: the text's side)
+        out["pair"] = {"_a": np.array([k, m], np.int32), "color": node_color[[k, m]], "size": pair_px,
+                       "atom": np.array([k, m], dtype=int), "text": np.array([str(k), str(m)], dtype=object),
+                       "dx": pair_dx, "align": np.where(pair_dx > 0, "left", "right").astype(object)}
     else:
         e = np.zeros(0, np.int32)
         out["step_edge"] = {"_a": e, "_b": e}
-        out["pair"] = {"_a": e, "color": np.zeros(0, "U7"), "size": np.zeros(0), "atom": np.zeros(0, int)}
+        none = np.zeros(0, dtype=object)
+        out["pair"] = {"_a": e, "color": np.zeros(0, "U7"), "size": np.zeros(0), "atom": np.zeros(0, int),
+                       "text": none, "dx": np.zeros(0), "align": none.copy()}
     return out
 
 
-def graph_sources(result: laav.LaavResult, frame: int, step: int, colors=None) -> dict:
+def graph_sources(result: laav.LaavResult, frame: int, step: int, colors=None, scale=None,
+                  layout=None) -> dict:
     """Data of the multicut graph view at ``frame`` after ``step`` GAEC contractions.
 
     ``colors``: colour of each final fine model (:func:`fine_colors`). An atom is drawn in
     the colour of its final fine model; a cluster during the replay in the colour of its
     root atom's (:func:`replay_roots`): a contraction recolours only the merged cluster.
 
-    Keys: ``nodes`` (x, y, color, cluster, atom, size, members, label: the atom id),
-    ``joined`` and ``cut`` edges (x0, y0, x1, y1, cost, error), ``step_edge`` (the
-    contraction of this step), ``pair`` (x, y, color, size, atom: its two atoms; empty at
-    step 0 and after the last contraction). On incomplete data only the atoms with a centre
-    in ``frame`` (a member seen there; ``AtomGraph.positions`` is NaN otherwise) and the
-    edges between two of them are drawn. (:func:`graph_templates` at ``frame``.)
+    Keys: ``nodes`` (x, y, color, cluster, atom, size, members, label: the atom id written
+    beside it, "" for none: the pair's, and with ``scale`` those that would overlap another,
+    see :func:`graph_templates`; dx, align: its x offset, px, and side), ``joined`` and ``cut`` edges (x0, y0,
+    x1, y1, cost, error), ``step_edge`` (the contraction of this step), ``pair`` (x, y, color,
+    size, atom: its two atoms, text, dx, align: their ids, beside their rings; empty at step 0
+    and after the last contraction). On incomplete data only the atoms with a centre in ``frame`` (a member
+    seen there; ``AtomGraph.positions`` is NaN otherwise) and the edges between two of them
+    are drawn. (:func:`graph_templates` at ``frame``.)
     """
     specs, track = graph_specs(), atom_track(result)
     return {k: instantiate(t, specs[k], *track, frame)
-            for k, t in graph_templates(result, step, colors).items()}
+            for k, t in graph_templates(result, step, colors, scale, layout).items()}
 
 
 # ---------------------------------------------------------------------- coarse merges

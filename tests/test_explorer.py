@@ -297,6 +297,43 @@ def test_frame_change_moves_points_without_recomputing(ex, seq):
     assert ex.result is res and ex.state.generation == gen  # no recomputation
 
 
+def test_the_compare_views_share_one_legend(ex):
+    """The A/B compare views have a legend, as every frame view: one, beside B, for both
+    (titled so), listing the motions of either side with their points' colours and markers
+    and the rings of the points whose final motion differs, counted in the frame shown; a
+    click on an entry hides it in both views."""
+    from explorer.cards.compare import LEGEND_TITLE, ring_label
+
+    cv = ex.compare
+    assert not cv.fig_a.legend and len(cv.fig_b.legend) == 1
+    legend = cv.fig_b.legend[0]
+    assert legend.title == LEGEND_TITLE and legend.click_policy == "hide"
+    assert cv.pin()
+    ex.w_seed.value = 3
+    assert ex.wait(120) and ex.result is not cv.pinned.result
+    assert cv.inner.visible
+    motions, ring = legend.items
+    assert motions.label.field == "label"
+    rows = cv.src_legend.data
+    labels = set(cv._styles[0]["label"]) | set(cv._styles[1]["label"])
+    assert list(rows["label"]) == sorted(labels)
+    for k in ("A", "B"):  # each motion's sample as its points are drawn, on either side
+        pts = cv.src[k].data
+        for lab, color, marker in zip(pts["label"], pts["color"], pts["marker"]):
+            i = list(rows["label"]).index(lab)
+            assert (rows["color"][i], rows["marker"][i]) == (color, marker), (k, lab)
+    n = len(cv.src_changed["B"].data["x"])
+    assert n == cv.comparison.changed.size  # (complete tracks: every ring in every frame)
+    assert ring.label.value == ring_label(n)
+    # a click hides both views' points (or rings): the legend's callback pairs each entry's
+    # renderer with both views' own
+    (cb,) = legend.js_event_callbacks["legend_item_click"]
+    pairs = cb.args["pairs"]
+    assert [p for p, _ in pairs] == [motions.renderers[0], ring.renderers[0]]
+    assert [{r.data_source for r in rs} for _, rs in pairs] == [{cv.src["A"], cv.src["B"]},
+                                                               {cv.src_changed["A"], cv.src_changed["B"]}]
+
+
 def test_colour_by_and_gaec_step(ex):
     ex.w_color.value = "atoms"
     c_atoms = list(ex.src_points.data["color"])
@@ -1738,3 +1775,28 @@ def test_card_titles_stay_bold_when_they_change():
     assert c.title == "Seed sweep: <does it change?>"
     assert c.header.object == "<h3>Seed sweep: &lt;does it change?&gt;</h3>"
     assert TITLE_CSS in c.header.stylesheets
+
+
+def test_card_3_gets_the_joint_merges_whole_comparison():
+    """A library run scores the joint merge's shortlist only until no partition can win
+    (laav.Pipeline's default); the explorer's pipelines score all of it, since card 3 draws
+    every pair's margin from it. On this scene the library stops after 2 of 10."""
+    from explorer.state import ExplorerState
+    from laav import synthetic
+
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=1)
+    lib = laav.Pipeline(seq, 3).result.coarse.shortlist
+    full = laav.Pipeline(seq, 3, full_shortlist=True).result.coarse.shortlist
+    assert lib.score.size < full.score.size
+    st = ExplorerState(seq, autostart=True)
+    try:
+        assert st.wait(60)
+        for _ in range(2):  # the first result, then a recomputed one
+            got = st.result.coarse.shortlist
+            assert np.array_equal(got.score, full.score) and got.chosen == full.chosen
+            st.request(params={"lam": 1.5})
+            assert st.wait(60)
+            full = laav.Pipeline(seq, 3, laav.LaavParams(lam=1.5),
+                                 full_shortlist=True).result.coarse.shortlist
+    finally:
+        st.close()

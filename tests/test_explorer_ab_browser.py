@@ -34,6 +34,36 @@ JS_COMPARE = """() => {
   return out;
 }"""
 
+#: The compare card's plots (left, top, right, bottom; px in the window: one box per plot,
+#: bokeh draws a plot on several canvases of one size) and its legend's title and entries.
+JS_COMPARE_PLOTS = """() => {
+  let card = null;
+  const walk = root => { for (const el of root.querySelectorAll('*')) {
+    const titled = el.classList && el.classList.contains('card-title');
+    const h = titled && (el.shadowRoot || el).querySelector('h3');
+    if (!card && h && h.textContent.trim().startsWith('A/B compare')) {
+      let c = el;
+      while (c && !(c.classList && c.classList.contains('card')))
+        c = c.parentNode instanceof ShadowRoot ? c.parentNode.host : c.parentNode;
+      card = c;
+    }
+    if (el.shadowRoot) walk(el.shadowRoot); } };
+  walk(document);
+  const plots = [];
+  const inCard = root => { for (const el of root.querySelectorAll('*')) {
+    if (el.tagName === 'CANVAS' && el.getBoundingClientRect().width > 50) {
+      const r = el.getBoundingClientRect(), b = [r.left, r.top, r.right, r.bottom].map(Math.round);
+      if (!plots.some(p => p.join() === b.join())) plots.push(b);
+    }
+    if (el.shadowRoot) inCard(el.shadowRoot); } };
+  if (card) { inCard(card); if (card.shadowRoot) inCard(card.shadowRoot); }
+  let legend = null;
+  for (const m of Bokeh.documents[0].all_models)
+    if (m.type === 'Legend' && m.title === 'A and B')
+      legend = m.items.map(it => it.label.value !== undefined ? it.label.value : 'field:' + it.label.field);
+  return {plots: plots, legend: legend};
+}"""
+
 JS_SLIDER_VALUE = """(prefix) => { for (const m of Bokeh.documents[0].all_models)
   if (m.type === 'Slider' && String(m.title).startsWith(prefix)) return m.value; }"""
 
@@ -160,6 +190,12 @@ def test_advanced_fields_and_a_b_compare_in_the_page(tmp_path):
     assert not errors, errors[:5]
 
 
+def _compare_drawn(page):
+    """:data:`JS_COMPARE_PLOTS` once both plots and the legend are on the page, else None."""
+    c = page.evaluate(JS_COMPARE_PLOTS)
+    return c if len(c["plots"]) >= 2 and c["legend"] else None
+
+
 def _bokeh_path_sends(monkeypatch) -> list[str]:
     """Record every model change the explorer's own code sends through bokeh's own path
     (``ServerConnection.send_patch_document``: serialised when made, written later) instead
@@ -203,6 +239,15 @@ def test_advanced_and_compare_fit_a_projector(tmp_path, monkeypatch):
             page.locator(".card-header", has_text="A/B compare").first.wait_for(timeout=20000)
             m = _settled(page, JS_OVERFLOW)
             page.screenshot(path=str(shots / f"layout_ab_{w}x{h}.png"))
+            # A and B side by side at 1280 with their legend beside B (at 1024: B below A);
+            # the legend lists the motions and the rings
+            c = _wait_for(lambda page=page: _compare_drawn(page), 20, "the compare views", page=page)
+            (ax0, ay0, ax1, _), (bx0, by0, _, _) = c["plots"][:2]
+            if w == 1280:
+                assert ay0 == by0 and bx0 >= ax1, c
+            else:
+                assert by0 > ay0, c
+            assert c["legend"][0] == "field:label" and c["legend"][1].startswith("final motion differs: "), c
             assert m["width"] == w
             assert m["n_over"] == 0 and m["right"] <= w, f"{w}x{h}: cut off at the right: {m}"
             assert m["scrollWidth"] <= w, f"{w}x{h}: the page scrolls sideways: {m}"

@@ -422,6 +422,23 @@ def _settled(page, js: str, timeout: float = 30.0):
     raise AssertionError("the page layout kept changing")
 
 
+#: The heights (px) of the card titles starting with the given text against their line
+#: height: how many lines each takes.
+JS_TITLE_LINES = """(start) => {
+  const out = [];
+  const walk = (root) => {
+    for (const el of root.querySelectorAll('h3')) {
+      const r = el.getBoundingClientRect();
+      if (el.textContent.trim().startsWith(start) && r.height > 0)
+        out.push(r.height / parseFloat(getComputedStyle(el).lineHeight));
+    }
+    for (const el of root.querySelectorAll('*')) if (el.shadowRoot) walk(el.shadowRoot);
+  };
+  walk(document);
+  return out;
+}"""
+
+
 def test_layout_fits_a_projector(tmp_path):
     """At 1280x800 and 1024x768 nothing reaches past the right edge and nothing scrolls
     sideways; the cards run in stage order; the 3-D card and the sidebar fold away."""
@@ -456,6 +473,9 @@ def test_layout_fits_a_projector(tmp_path):
                 "3 · Fine-to-coarse", "4 · Fine-tuning (Random Voting)",
                 "5 · Final labels and numbers"]
             assert any(t.startswith("3-D") for t in titles)
+            # the 3-D card's title on one line (at 1024 it wrapped onto two)
+            lines = page.evaluate(JS_TITLE_LINES, "3-D space-time view")
+            assert lines and all(n < 1.5 for n in lines), (w, lines)
             if i == 1:
                 # the 3-D card folds away (and back)
                 iframe = page.locator(f"iframe[src*=':{viser.port}/']")

@@ -206,3 +206,33 @@ def test_without_truth_b_is_coloured_like_a(seq, results):
     # with ground truth the reference is not used
     s = V.point_style(seq, rn, "final", ref=1 - ref)
     assert np.array_equal(s["color"], V.point_style(seq, rn, "final")["color"])
+
+
+def test_one_legend_lists_the_motions_of_both_sides(seq, results):
+    """The compare views' legend (beside B, for both): every label of A's and of B's points
+    once, in the frame view's order, with the colour and marker its points are drawn with,
+    at no position (drawn only in the legend), a label only one side has included."""
+    (ra, _), (rb, _) = results
+    for mode in ("final", "fine", "errors", "atoms"):
+        sa, sb = V.point_style(seq, ra, mode), V.point_style(seq, rb, mode)
+        rows = V.legend_points(sa, sb)
+        labels = set(sa["label"]) | set(sb["label"])
+        assert list(rows["label"]) == sorted(labels), mode
+        assert np.isnan(rows["x"]).all() and np.isnan(rows["y"]).all()
+        drawn = V.points_source(seq, 0, sa)  # (a label's sample: as the frame view's legend draws it)
+        for lab, color, marker in zip(rows["label"], rows["color"], rows["marker"]):
+            side = sa if lab in set(sa["label"]) else sb
+            i = np.flatnonzero(side["label"] == lab)
+            assert color in set(side["color"][i]) and marker in set(side["marker"][i]), (mode, lab)
+        if mode == "final":
+            assert list(rows["color"]) == [drawn["color"][list(drawn["label"]).index(lab)]
+                                           for lab in rows["label"]]
+    # a motion only B has (A all motion 1): listed too, with B's colour and marker
+    only_a = dict(V.point_style(seq, ra, "final"))
+    only_a.update(label=np.full(seq.n_points, "motion 1"), color=np.full(seq.n_points, V.motion_color(0)),
+                  marker=np.full(seq.n_points, V.motion_marker(0), dtype=object))
+    rows = V.legend_points(only_a, V.point_style(seq, rb, "final"))
+    assert list(rows["label"]) == ["motion 1", "motion 2"]
+    assert list(rows["color"]) == [V.motion_color(0), V.motion_color(1)]
+    assert list(rows["marker"]) == [V.motion_marker(0), V.motion_marker(1)]
+    assert V.legend_points()["label"].size == 0

@@ -107,7 +107,8 @@ def test_a_frame_move_is_drawn_by_the_page_while_the_server_is_blocked():
         assert ex.frame == 0 and not _page_differs_from_server(page, ex)
         fv, gv = ex.frame_view, ex.graph_view
         want = V.frame_sources(seq, ex.result, f, ex.style, moved=ex.moved)
-        want_graph = V.graph_sources(ex.result, f, int(gv.w_step.value), ex.fine_colors)
+        want_graph = V.graph_sources(ex.result, f, int(gv.w_step.value), ex.fine_colors,
+                                     layout=gv.id_layout(ex.result))
         assert len(want["trails"]["x0"]) > 0 and len(want["atoms"]["x"]) > 0
 
         # the session's event loop stops here: the server handles nothing until released

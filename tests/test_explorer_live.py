@@ -153,6 +153,11 @@ def test_atom_ids_are_written_up_to_a_limit(seq, monkeypatch):
         assert 0 < n <= graph.MAX_ATOM_IDS
         assert gv.r_ids.visible and "Atom ids are written" not in gv.caption.object
         assert list(gv.src_nodes.data["label"])  # the ids are in the nodes' source
+        # placed at the plot's size: those that would overlap are left out, and the caption
+        # says how many (views.id_layout)
+        left_out = sum(1 for t in gv.src_nodes.data["label"] if not t) - len(gv.src_pair.data["text"])
+        assert (f"{left_out} atom id" in gv.caption.object) == (left_out > 0)
+        assert gv.id_layout(ex.result) is gv.id_layout(ex.result)  # (kept across steps)
         monkeypatch.setattr(graph, "MAX_ATOM_IDS", n - 1)
         gv.draw(ex.result, ex.frame, ex.fine_colors)
         assert not gv.r_ids.visible

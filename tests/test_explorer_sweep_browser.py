@@ -26,6 +26,10 @@ from test_explorer_browser import (  # noqa: E402
 )
 
 from explorer.sweep import SEEDS  # noqa: E402
+from explorer.tour import TOUR  # noqa: E402
+
+#: Step 3's title, on the page before a key press moves to step 4.
+TOUR_TITLE_3 = TOUR[2].title
 
 # every value the page's Markdown texts take about the sweep's progress (each change, as the
 # browser applies it)
@@ -338,3 +342,40 @@ def test_the_tour_fits_a_projector(tmp_path):
             _wait_for(lambda ex=ex: not ex.tour.active, 10, "the tour to end", page=page)
             page.close()
             assert not errors, errors[:5]
+
+
+@pytest.mark.hopkins
+def test_step_4_of_a_failing_run_fits_a_projector(hopkins_root, tmp_path):
+    """On Hopkins155 cars2B at seed 5 (38.5 % wrong: step 4's facts are a failing run's, its
+    longest), step 4's whole panel is on screen at 1280x800 and 1024x768 without scrolling,
+    reached from step 3 with the keys and opened by a link (?tour=4), plain RV's run in
+    (the facts say it did better). Before, its facts ran past the screen's bottom: their
+    smaller lines took the step's text's line height, and a link to step 4 also showed the
+    keys' line under them."""
+    seq = laav.load_sequence(hopkins_root / "cars2B" / "cars2B_truth.mat")
+    with _served(seq, viser=False) as (port, browser, created):
+        i = 0
+        for w, h in ((1280, 800), (1024, 768)):
+            for query in ("?seed=5&tour=3", "?seed=5&tour=4"):
+                page = browser.new_page(viewport={"width": w, "height": h})
+                errors: list[str] = []
+                page.on("pageerror", lambda e, errors=errors: errors.append(str(e)))
+                page.goto(f"http://127.0.0.1:{port}/{query}", wait_until="domcontentloaded")
+                ex = _wait_for(lambda i=i: created[i] if len(created) > i else None, 30, "the explorer")
+                i += 1
+                assert ex.wait(120)
+                page.wait_for_function("(" + JS_SOURCES + ")().points > 0", timeout=60000)
+                if query.endswith("3"):
+                    page.get_by_text(TOUR_TITLE_3).first.wait_for(timeout=20000)
+                    page.keyboard.press("ArrowRight")
+                _wait_for(lambda ex=ex: ex.tour.step == 3, 20, "step 4", page=page)
+                page.get_by_text("Plain RV did better here").first.wait_for(timeout=60000)
+                page.wait_for_function(JS_SIDEBAR_WIDE, timeout=10000)
+                page.wait_for_timeout(400)  # (the page scrolls its areas to their tops at 150 ms)
+                m = page.evaluate(JS_TOUR_BOXES)
+                page.screenshot(path=str(_shots(tmp_path) / f"tour_cars2B_s5_{w}x{h}_{query[-1]}.png"))
+                where = f"{w}x{h} {query}: {m}"
+                assert m["panel"] and m["sideScroll"] == 0, where
+                assert m["panel"][3] <= h, where  # the whole text and its buttons on screen
+                assert not errors, errors[:5]
+                page.close()

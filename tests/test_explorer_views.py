@@ -335,11 +335,91 @@ def test_gaec_replay_keeps_colours_and_rings_the_joined_pair(demo):
         assert g["pair"]["atom"].tolist() == [kept, merged]
         assert np.allclose(g["pair"]["x"], g["nodes"]["x"][[kept, merged]])
         assert (g["pair"]["size"] > g["nodes"]["size"][[kept, merged]]).all()  # ring around the node
+        # the pair's ids are written with it (beside its rings), not under them
+        assert g["pair"]["text"].tolist() == [str(kept), str(merged)]
+        assert g["nodes"]["label"][kept] == g["nodes"]["label"][merged] == ""
         prev = g
-    assert g["nodes"]["label"].tolist() == [str(i) for i in range(res.graph.n_nodes)]
+    # without a plot scale every other id is written, right of its node
+    assert [t for i, t in enumerate(g["nodes"]["label"]) if i not in (kept, merged)] == [
+        str(i) for i in range(res.graph.n_nodes) if i not in (kept, merged)]
+    assert (g["nodes"]["dx"] > 0).all() and set(g["nodes"]["align"]) == {"left"}
     final = V.graph_sources(res, 0, K + 1, fc)
     assert len(final["pair"]["x"]) == 0
     assert np.array_equal(final["nodes"]["color"], fc[np.asarray(res.multicut.atom_labels)])
+
+
+def _id_boxes_drawn(g: dict, scale) -> tuple[list, list]:
+    """The boxes (px; left, top, right, bottom) of the ids a graph view writes at a frame
+    (its nodes' and its pair's), as the page draws them: a text's start at its x offset
+    (``align`` left) or its end (right), vertically centred; and the nodes' middles."""
+    sx, sy = scale
+    boxes = []
+    for src, font in ((g["nodes"], V.ID_FONT_PX), (g["pair"], V.PAIR_ID_FONT_PX)):
+        text = src["label"] if "label" in src else src["text"]
+        for t, x, y, dx, al in zip(text, src["x"], src["y"], src["dx"], src["align"]):
+            if not t:
+                continue
+            w = len(t) * 0.556 * font
+            x0 = x * sx + dx - (w if al == "right" else 0)
+            boxes.append((x0, y * sy - font / 2, x0 + w, y * sy + font / 2))
+    n = g["nodes"]
+    r = V.ID_CLEAR * np.asarray(n["size"]) / 2
+    middles = [(x * sx - q, y * sy - q, x * sx + q, y * sy + q) for x, y, q in zip(n["x"], n["y"], r)]
+    return boxes, middles
+
+
+def _overlap(a, b) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+
+
+def test_atom_ids_are_written_only_where_they_overlap_nothing(demo):
+    """Card 2's atom ids at a plot's size (px per data unit): in every frame no two written
+    ids overlap and none covers a node's middle (cars2B's dense clusters overprinted them
+    into blots), each on its node's right or else its left; the ids of the pair joined at a
+    replay step are always written, beside its rings, on the sides facing away from each
+    other; the larger atoms' ids come first; a layout kept across steps gives the same."""
+    seq, res = demo
+    n, K = res.graph.n_nodes, len(res.multicut.contractions)
+    x0, x1, _, _ = V.view_extent(seq.extent())
+    for px in (390, 200):  # the card's plot, and one half as wide (denser)
+        scale = (px / (x1 - x0),) * 2
+        layout = V.id_layout(res, scale)
+        for step in (K + 1, 1, K // 2):
+            tpl = V.graph_templates(res, step, None, scale)
+            assert V.graph_templates(res, step, None, layout=layout)["nodes"]["label"].tolist() == \
+                tpl["nodes"]["label"].tolist()
+            written = [t for t in tpl["nodes"]["label"] if t]
+            assert 0 < len(written) < n - (2 if step <= K else 0), (px, step)  # (the test can fail)
+            if step <= K:
+                kept, merged = np.asarray(res.multicut.contractions[step - 1]).tolist()
+                assert tpl["pair"]["text"].tolist() == [str(kept), str(merged)]
+                sides = np.sign(tpl["pair"]["dx"])
+                assert sides[0] != sides[1]
+            for f in (0, seq.n_frames // 2, seq.n_frames - 1):
+                g = V.graph_sources(res, f, step, None, scale)
+                ids, middles = _id_boxes_drawn(g, scale)
+                for i, j in itertools.combinations(range(len(ids)), 2):
+                    assert not _overlap(ids[i], ids[j]), (px, step, f, i, j)
+                for b in ids[:len(ids) - len(g["pair"]["text"])]:  # (the pair's: whatever they cover)
+                    assert not any(_overlap(b, m) for m in middles), (px, step, f, b)
+        # the larger atoms first: the largest atom's id is written at the final step
+        tpl = V.graph_templates(res, K + 1, None, scale)
+        sizes = [len(m) for m in res.atoms.members]
+        assert tpl["nodes"]["label"][int(np.argmax(sizes))] != ""
+    # a place on the left is taken where the right one is not free
+    wide = V.graph_templates(res, K + 1, None, (390 / (x1 - x0),) * 2)
+    assert "right" in set(wide["nodes"]["align"][wide["nodes"]["label"] != ""])
+    # two labels clash only where both atoms are drawn and their boxes meet
+    # (boxes 8 px wide, 2 px of gap: 1 is 9 px right of 0 in frame 0, and not drawn in frame 1,
+    # where 2 comes 5 px right of 0; 11 px apart, 1 and 0 would not clash)
+    xy = np.array([[[0.0, 0.0], [9.0, 0.0], [100.0, 0.0]], [[0.0, 0.0], [np.nan, np.nan], [5.0, 0.0]]])
+    box = [[0, -5, 8, 5]] * 3
+    clash = V.label_clashes(xy, None, (1.0, 1.0), [0, 1, 2], box, [0, 1, 2], box)
+    assert clash[0, 1] and clash[0, 2] and not clash[1, 2]
+    assert not V.label_clashes(xy + [[[0, 0], [2, 0], [0, 0]]], None, (1.0, 1.0), [0], box[:1], [1],
+                               box[:1]).any()
+    seen = np.array([[True, True, True], [True, True, False]])
+    assert not V.label_clashes(xy, seen, (1.0, 1.0), [0], box[:1], [2], box[:1]).any()
 
 
 def test_rv_summary_reads_only_public_fields_and_any_selected_name(demo):

@@ -4,8 +4,10 @@ The sidebar's **Pin as A** keeps the result shown (:func:`explorer.compare.pin`)
 on the card, above card 1, shows A's and B's points in the same frame with the same
 colouring (the sidebar's frame and colour-by, except that ground truth, the same on both
 sides, becomes each side's final motions; without ground truth B's motions take A's
-colours), the points whose final motion differs ringed thinly in both, a table of every stage's
-error in A and B with the difference, and the settings that differ as ``name: A → B``.
+colours), the points whose final motion differs ringed thinly in both, one legend beside B for
+both views (the motions of either side: :func:`explorer.views.legend_points`; the rings), a
+table of every stage's error in A and B with the difference, and the settings that differ as
+``name: A → B``.
 A stays pinned while parameters change; **Unpin** clears it, and so does opening another
 sequence (with a message). The card is hidden while nothing is pinned.
 """
@@ -14,16 +16,24 @@ from __future__ import annotations
 
 import numpy as np
 import panel as pn
-from bokeh.models import ColumnDataSource
+from bokeh.core.properties import value
+from bokeh.models import ColumnDataSource, CustomJS
 
 from .. import compare as C
 from .. import views as V
 from ..fields import fmt_value
-from .base import SIDE_W, Host, Markdown, card, fit_image_figure, flex, image_figure, set_data
+from .base import SIDE_W, Host, Markdown, card, fit_image_figure, flex, image_figure, move_legend, set_data
 from .frame import EMPTY_POINTS
 
 #: Frame width of each of the two views: side by side from about 1150 px, stacked below.
 FRAME_W = 300
+#: The title of the legend beside B: it explains A's view too.
+LEGEND_TITLE = "A and B"
+
+
+def ring_label(n: int) -> str:
+    """The legend's entry for the rings, ``n`` of them in the frame shown."""
+    return f"final motion differs: {int(n)}"
 
 
 def compare_mode(mode: str) -> str:
@@ -55,19 +65,41 @@ class CompareView:
         self.src = {}
         self.src_changed = {}
         self.figs = {}
+        points, rings = {}, {}
         for k in ("A", "B"):
             self.src[k] = ColumnDataSource(dict(EMPTY_POINTS))
             self.src_changed[k] = ColumnDataSource({"x": [], "y": []})
-            f = self.figs[k] = image_figure(k, FRAME_W, extent, tools="pan,wheel_zoom,box_zoom,reset")
+            # (toolbar below, as the frame view's: beside the plot it took the width the legend needs)
+            f = self.figs[k] = image_figure(k, FRAME_W, extent, tools="pan,wheel_zoom,box_zoom,reset",
+                                            toolbar_location="below")
             if k == "B":  # one zoom and pan for both
                 f.x_range, f.y_range = self.figs["A"].x_range, self.figs["A"].y_range
-            f.scatter("x", "y", source=self.src[k], size=6, fill_color="color", marker="marker",
-                      line_color="#333333", line_width=0.4)
+            points[k] = f.scatter("x", "y", source=self.src[k], size=6, fill_color="color", marker="marker",
+                                  line_color="#333333", line_width=0.4)
             # thin rings a little wider than a point: where hundreds changed, the points
             # inside stay visible (thick ones merged into one pink blob)
-            f.scatter("x", "y", source=self.src_changed[k], marker="circle", size=12, fill_alpha=0,
-                      line_color=V.CHANGED_MARK, line_width=1.3)
+            rings[k] = f.scatter("x", "y", source=self.src_changed[k], marker="circle", size=12, fill_alpha=0,
+                                 line_color=V.CHANGED_MARK, line_width=1.3)
         self.fig_a, self.fig_b = self.figs["A"], self.figs["B"]
+        # one legend for both views, beside B (the outer side when they are side by side; below
+        # A when stacked): the motions of either side (views.legend_points: drawn nowhere in the
+        # plot) and the rings; a click on an entry hides it in both views
+        self.src_legend = ColumnDataSource({"x": [], "y": [], "color": [], "marker": [], "label": []})
+        key = self.fig_b.scatter("x", "y", source=self.src_legend, size=6, fill_color="color",
+                                 marker="marker", line_color="#333333", line_width=0.4, legend_field="label")
+        # the ring's entry from a ring drawn nowhere (NaN): its sample is there with no ring in
+        # the frame too (an entry with an empty source has none)
+        ring_key = self.fig_b.scatter([np.nan], [np.nan], marker="circle", size=12, fill_alpha=0,
+                                      line_color=V.CHANGED_MARK, line_width=1.3, legend_label=ring_label(0))
+        move_legend(self.fig_b)
+        legend = self.fig_b.legend[0]
+        legend.title = LEGEND_TITLE
+        legend.title_text_font_size = "9pt"
+        self._item_ring = legend.items[-1]
+        legend.js_on_event("legend_item_click", CustomJS(
+            args={"pairs": [[key, [points["A"], points["B"]]], [ring_key, [rings["A"], rings["B"]]]]},
+            code="Promise.resolve().then(() => { for (const [p, rs] of pairs) for (const r of rs) "
+                 "r.visible = p.visible; });"))
         self.table = Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.w_unpin_card = pn.widgets.Button(label="Unpin A", width=100, margin=(6, 10))
         self.w_unpin_card.on_click(lambda e: self.unpin())
@@ -136,6 +168,9 @@ class CompareView:
             self._styles = (V.point_style(seq, a.result, mode, a.plain),
                             V.point_style(seq, res, mode, plain_b, ref=ref))
             self._key = key
+            legend_rows = V.legend_points(*self._styles)
+        else:
+            legend_rows = None
         comp = self.comparison
         f = int(np.clip(self.host.frame, 0, seq.n_frames - 1))
         xy = seq.points[f]
@@ -147,6 +182,11 @@ class CompareView:
             for k, style in zip(("A", "B"), self._styles):
                 set_data(self.src[k], V.points_source(seq, f, style))
                 set_data(self.src_changed[k], ring)
+            if legend_rows is not None:
+                set_data(self.src_legend, legend_rows)
+            label = ring_label(changed.size)  # (the rings of this frame, as the frame view counts)
+            if self._item_ring.label.value != label:
+                self._item_ring.label = value(label)
             self.fig_a.title.text = f"A (pinned) · frame {f} · {what}"
             self.fig_b.title.text = f"B (live) · frame {f} · {what}"
             table = C.comparison_markdown(comp)

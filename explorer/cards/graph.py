@@ -14,10 +14,13 @@ from .base import Host, Markdown, card, fit_image_figure, image_figure, move_leg
 from .live import LiveFrames
 
 #: Atom ids are written beside the nodes up to this many atoms (every Hopkins155 sequence:
-#: at most 146 with the defaults). Above it (563 atoms at 5,000 tracks) they overlap into a
-#: blot that hides the nodes; a node's hover still gives its id. (The page's frame moves at
-#: 5,000 tracks: 142-145 ms median without them, 145-153 ms with, interleaved: within the
-#: spread; a JavaScript profile had put the ids' measuring at about 20 ms a move.)
+#: at most 146 with the defaults), and only those that overlap no other id in any frame at the
+#: plot's size, or the middle of a node (:func:`explorer.views.id_layout`; before, all of
+#: them, overprinting each other in cars2B's dense clusters). Above it
+#: (563 atoms at 5,000 tracks) they overlap into a blot that hides the nodes, and the pass
+#: grows as the square of the atoms; a node's hover still gives its id. (The page's frame
+#: moves at 5,000 tracks: 142-145 ms median without them, 145-153 ms with, interleaved:
+#: within the spread; a JavaScript profile had put the ids' measuring at about 20 ms a move.)
 MAX_ATOM_IDS = 200
 
 #: The legend samples of the kept and cut edges.
@@ -35,6 +38,8 @@ class GraphView:
         self.live = live if live is not None else LiveFrames()
         self.specs = V.graph_specs()
         self._tpl_key = None  # (result, step, colours) of the templates kept
+        self._tpl_layout = None  # and where their atom ids were placed (views.id_layout)
+        self._layout: tuple | None = None  # (result, scale, views.id_layout) kept across steps
         self._tpls: dict = {}
         # a player, not a slider: its range input takes Home/End to the first/last step (the
         # slider's noUiSlider keeps its first range for the End key: it went to step 1), and
@@ -58,8 +63,10 @@ class GraphView:
         self.src_cut = ColumnDataSource(dict(empty_e))
         self.src_step = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": []})
         self.src_nodes = ColumnDataSource({"x": [], "y": [], "color": [], "cluster": [], "atom": [],
-                                           "members": [], "size": [], "label": []})
-        self.src_pair = ColumnDataSource({"x": [], "y": [], "color": [], "size": [], "atom": []})
+                                           "members": [], "size": [], "label": [], "dx": [],
+                                           "align": []})
+        self.src_pair = ColumnDataSource({"x": [], "y": [], "color": [], "size": [], "atom": [], "text": [],
+                                          "dx": [], "align": []})
         g.segment("x0", "y0", "x1", "y1", source=self.src_step, line_color="#222222", line_alpha=0.35,
                   line_width=10, legend_label="contracted at this step")
         by_cost = {"field": "cost", "transform": self.cost_mapper}
@@ -69,11 +76,18 @@ class GraphView:
                           line_color=by_cost, legend_label="cut by the multicut (dashed)")
         r_nodes = g.scatter("x", "y", source=self.src_nodes, size="size", fill_color="color",
                             line_color="black", line_width=0.8, legend_label="atom (colour = cluster)")
-        # atom ids beside the nodes; the pair joined at this step on top of everything, ringed
-        self.r_ids = g.text("x", "y", text="label", source=self.src_nodes, x_offset=6, y_offset=-4,
-                            text_font_size="7pt", text_color="#333333")
+        # atom ids beside the nodes (only those that overlap no other: views.graph_templates);
+        # the pair joined at this step on top of everything, ringed, its ids beside the rings
+        # (on a light box: an id stays readable where it crosses an edge; bokeh's text outline
+        # is stroked over the digits and hid them)
+        halo = {"background_fill_color": "white", "background_fill_alpha": 0.75}
+        self.r_ids = g.text("x", "y", text="label", source=self.src_nodes, x_offset="dx", text_align="align",
+                            text_baseline="middle", text_font_size="7pt", text_color="#333333", **halo)
         g.scatter("x", "y", source=self.src_pair, size="size", fill_color="color", line_color="#111111",
                   line_width=3, legend_label="joined at this step (ringed)")
+        g.text("x", "y", text="text", source=self.src_pair, x_offset="dx", text_align="align",
+               text_baseline="middle", text_font_size="8pt", text_font_style="bold", text_color="#111111",
+               **halo)
         g.add_tools(HoverTool(renderers=[r_nodes], tooltips=[("atom", "@atom"), ("cluster", "@cluster"),
                                                              ("features", "@members")]))
         g.add_layout(ColorBar(color_mapper=self.bar_mapper, title="edge cost: + join (blue), − cut (red)",
@@ -105,6 +119,25 @@ class GraphView:
     def fit(self, seq) -> None:
         fit_image_figure(self.fig, seq.extent())
 
+    def id_scale(self) -> tuple[float, float]:
+        """The plot's pixels per data unit (x, y), as its ranges stand (a zoom the page sent
+        included): where the atom ids are placed so as not to overlap."""
+        f = self.fig
+        return (f.frame_width / max(abs(f.x_range.end - f.x_range.start), 1e-9),
+                f.frame_height / max(abs(f.y_range.end - f.y_range.start), 1e-9))
+
+    def id_layout(self, res):
+        """Where ``res``'s atom ids may go at the plot's size (:func:`explorer.views.id_layout`),
+        kept while the result and the size stay (a replay step only places them); None above
+        :data:`MAX_ATOM_IDS` atoms (no ids)."""
+        if res.graph.n_nodes > MAX_ATOM_IDS:
+            return None
+        scale = self.id_scale()
+        kept = self._layout
+        if kept is None or kept[0] is not res or kept[1] != scale:
+            kept = self._layout = (res, scale, V.id_layout(res, scale))
+        return kept[2]
+
     def to_final_step(self, res) -> None:
         """A new result starts the replay at its final step (a step of another result would
         show contractions that no longer exist)."""
@@ -118,9 +151,11 @@ class GraphView:
             return
         step = int(self.w_step.value)
         key = (res, step, fine_colors)
-        if self._tpl_key is None or any(a is not b for a, b in zip(key, self._tpl_key)):
-            self._tpls = V.graph_templates(res, step, fine_colors)
-            self._tpl_key = key
+        layout = self.id_layout(res)
+        if (self._tpl_key is None or any(a is not b for a, b in zip(key, self._tpl_key))
+                or layout is not self._tpl_layout):
+            self._tpls = V.graph_templates(res, step, fine_colors, layout=layout)
+            self._tpl_key, self._tpl_layout = key, layout
         track = V.atom_track(res)
         f = int(np.clip(int(frame), 0, max(track[0].shape[0] - 1, 0)))
         d = {k: V.instantiate(t, self.specs[k], *track, f) for k, t in self._tpls.items()}
@@ -145,9 +180,15 @@ class GraphView:
             "graph_title", f"{res.graph.n_nodes} atoms, {res.graph.n_edges} edges · frame {{f}} · "
             "{k:graph_nodes.cluster} clusters", f, {"graph_" + k: v for k, v in d.items()})
         seq = self.host.sequence
-        self.caption.object = V.replay_caption(res, step, seq is None or seq.is_complete) + (
-            "" if self.r_ids.visible else f" Atom ids are written up to {MAX_ATOM_IDS} atoms (here "
-            f"{res.graph.n_nodes}: they would overlap); hover a node for its id.")
+        if not self.r_ids.visible:
+            ids = (f" Atom ids are written up to {MAX_ATOM_IDS} atoms (here {res.graph.n_nodes}: they "
+                   "would overlap); hover a node for its id.")
+        else:  # (the pair's ids are written with it, not with the nodes)
+            left_out = sum(1 for t in self._tpls["nodes"]["label"] if not t) - len(self._tpls["pair"]["text"])
+            verb = "is" if left_out == 1 else "are"
+            ids = (f" {V.counted(left_out, 'atom id')} that would overlap another id or a node at this size "
+                   f"{verb} left out: hover a node for its id." if left_out else "")
+        self.caption.object = V.replay_caption(res, step, seq is None or seq.is_complete) + ids
         live.commit(f)
 
     # ------------------------------------------------------------------ callbacks

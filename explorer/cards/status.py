@@ -43,8 +43,10 @@ TIGHT_LINE = ":host p { margin: 0.2em 0; }"
 #: 1280 px for a preview's longer line ("LAAV's informed trial after N ms; the trials for a
 #: missed motion (ours) still computing…"), and every card below moved down by a line (17 px)
 #: when it did, and back up when the result's shorter line came. A line of three (a long
-#: list of settings at 1024 px) still moves them.
-STATUS_ROOM = ":host p { min-height: 2lh; }"
+#: list of settings at 1024 px) still moves them. Without the paragraph's own margins (a line
+#: of type above and below, as :data:`TIGHT_LINE`): with them and the two lines kept, the
+#: first page had a blank band of 70 px between its one line of status and card 1.
+STATUS_ROOM = ":host p { min-height: 2lh; margin: 0.2em 0; }"
 
 
 def header_text(seq: laav.Sequence) -> str:

@@ -38,8 +38,11 @@ TOUR_SIDEBAR_WIDTH = "clamp(300px, 35vw - 60px, 440px)"
 #: page's other text is 14 px).
 TITLE_SIZE = "clamp(22px, 2.1vw, 30px)"
 TEXT_SIZE = "clamp(16px, 1.5vw, 22px)"
-#: What this run did (step 4's facts), under the step's text and smaller than it.
-_FACTS_CSS = ":host .facts { font-size: 0.85em; line-height: 1.3; color: #333; }"
+#: What this run did (step 4's facts), under the step's text and smaller than it, in lines of
+#: its own size: a block (inline in its paragraph, its lines took the paragraph's line height,
+#: the step's text's, and its line height did nothing: a failing run's facts ran 42 px longer
+#: at 1280x800, past the screen's bottom).
+_FACTS_CSS = ":host .facts { display: block; font-size: 0.85em; line-height: 1.3; color: #333; }"
 
 # Runs in the browser when the server writes a command into the hidden ``w_js`` box:
 # ``on:RUN:N`` / ``off:N`` (arrow keys step the tour or not; the sidebar shown and widened for
@@ -141,7 +144,7 @@ class TourView:
         self._keys_done = 0  # the page's key presses applied (the w_key box's count)
         self._run = ""  # the running tour's token (the page names its presses by it)
         self._errors_before = None  # the misclassified rings before the tour (None: no frame view)
-        self._hint_step = 0
+        self._hint_step: int | None = None  # the step the keys are said at (None: not yet)
         self.w_start = pn.widgets.Button(label="▶ Guided tour (for a class)", color="success",
                                          width=265, margin=(8, 10))
         self.w_start.on_click(lambda e: self.start())
@@ -189,7 +192,7 @@ class TourView:
             self._saved["__color"] = self.controls.color_mode
             view = getattr(self.host, "frame_view", None)  # its misclassified rings before the tour
             self._errors_before = None if view is None else view.error_rings
-            self._hint_step = step  # the keys are said at the step a tour (or a link) opens on
+            self._hint_step = None  # the keys are said at the first step shown (go)
             self.active = True
             self.panel.visible = True
             self._run, self._keys_done = secrets.token_hex(4), 0  # the page counts from 1 again
@@ -220,7 +223,12 @@ class TourView:
             self.text_md.object = self._text(s)
             self.w_back.disabled = self.step == 0
             self.w_next.label = "Next ▶" if self.step < len(TOUR) - 1 else "Finish"
-            self.hint_md.visible = self.step == self._hint_step  # (once: the others keep the height)
+            # the keys are said once, at the step a tour (or a link) opens on, unless that step
+            # has this run's facts (step 4: a failing run's fill a projector's height): then at
+            # the next step shown (the others keep the height)
+            if self._hint_step is None and not s.facts:
+                self._hint_step = self.step
+            self.hint_md.visible = self.step == self._hint_step
             self._rename(s)
         if color is not None and self.controls.color_mode != color:
             self.controls.set_color_mode(color)

@@ -30,6 +30,10 @@ PLACEHOLDER = ('<div style="width:100%;height:440px;border:1px solid #ccc;border
 #: The card's pane while its server starts (unfolded for the first time).
 STARTING = PLACEHOLDER.replace("opens with the first result", "is starting")
 
+#: The card's title: one line at 1024 px (the main area's 682 px). With "(viser)" after "view"
+#: it wrapped onto a second line there; the iframe's own title still names viser.
+TITLE = "3-D space-time view: trajectories along the frame axis, atoms and their graph"
+
 
 class View3D:
     """The 3-D card and its viser server (``viser``: None until started, or when off).
@@ -61,8 +65,7 @@ class View3D:
         else:
             self.pane = Markdown(f"*{V.md_text('the 3-D view is switched off')}*",
                                  sizing_mode="stretch_width", height=60)
-        self.card = pn.Card(self.pane, title="3-D space-time view (viser): trajectories along the "
-                            "frame axis, atoms and their graph", collapsible=True, collapsed=True,
+        self.card = pn.Card(self.pane, title=TITLE, collapsible=True, collapsed=True,
                             margin=(6, 6), sizing_mode="stretch_width", stylesheets=[FOLD_ARROW])
         self.card.param.watch(self._on_fold, "collapsed")
 
