@@ -867,8 +867,14 @@ class ExplorerState:
                         if warm is not None:  # computed elsewhere: only what differs is rerun
                             pipe, before = self._with_helper(warm), warm.result
                             t0 = time.perf_counter()  # (the wait is not this computation's)
-                            result = pipe.update(**target.update_kwargs(),
-                                                 preview=self._previewer(gen, seq, target))
+                            # (a caller's pipeline may score only part of the joint merge's
+                            # shortlist: card 3 draws the whole comparison)
+                            try:
+                                result = pipe.update(**target.update_kwargs(), full_shortlist=True,
+                                                     preview=self._previewer(gen, seq, target))
+                            except Superseded:  # (rolled back:) the next job starts from it
+                                self._warm = (seq, warm)
+                                raise
                             if result is before:  # as computed elsewhere: its own stage times
                                 t0 -= sum(result.timings.values())
                         else:

@@ -10,7 +10,8 @@ share of points on which the seed agrees with the first seed's final labels and 
 segmentation it gives (seeds grouped by their final labels, :func:`segmentation_groups`),
 and how Random Voting converged.
 
-Each seed's :class:`laav.Pipeline` (whose result equals :func:`laav.segment`'s) can be
+Each seed's :class:`laav.Pipeline` (whose labels equal :func:`laav.segment`'s; it scores
+the joint merge's whole shortlist, as every explorer pipeline does, for card 3) can be
 handed on (``on_pipeline``): the explorer keeps it, so that a click on the seed's row
 shows it at once instead of computing it again.
 
@@ -84,7 +85,8 @@ class SeedRow:
     all_iterations : int
         Random Voting iterations of the run, every trial's (``Voting.n_iterations``).
     seconds : float
-        Time of this seed's :func:`laav.segment`.
+        Time of this seed's pipeline (:func:`laav.segment`'s labels; the joint merge's whole
+        shortlist scored, a few ms more than the library's default).
     labels : numpy.ndarray
         The final labels.
     """

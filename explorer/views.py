@@ -800,6 +800,7 @@ _DIGIT_EM = 0.556
 
 
 def _id_width(ids, font_px: float) -> np.ndarray:
+    """Width (px) of each id ``ids`` (n,) written at ``font_px``: its digits, (n,)."""
     return np.array([len(str(i)) for i in np.asarray(ids).tolist()], dtype=float) * _DIGIT_EM * font_px
 
 
@@ -874,11 +875,11 @@ def pair_id_sides(xy: np.ndarray, pair) -> np.ndarray:
 
 
 def id_boxes(sizes_px: np.ndarray, sides: np.ndarray, ids, font_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """Where the ids ``ids`` of nodes ``sizes_px`` across (px) are written: beside the node,
-    vertically centred, on its right (``sides`` +1) or left (-1), :data:`ID_MARGIN_PX` from
-    its edge. Returns the text's x offsets (px from the node's centre: its start on the right,
-    its end on the left) and the boxes (left, top, right, bottom; px from the centre, y down)
-    for :func:`label_clashes`."""
+    """Where the ids ``ids`` (n,) of nodes ``sizes_px`` (n,) across (px) are written: beside
+    the node, vertically centred, on its right (``sides`` (n,) +1) or left (-1),
+    :data:`ID_MARGIN_PX` from its edge. Returns the text's x offsets (n,) (px from the node's
+    centre: its start on the right, its end on the left) and the boxes (n, 4) (left, top,
+    right, bottom; px from the centre, y down) for :func:`label_clashes`."""
     w = _id_width(ids, font_px)
     dx = np.asarray(sides, dtype=float) * (np.asarray(sizes_px, dtype=float) / 2 + ID_MARGIN_PX)
     left = np.where(dx > 0, dx, dx - w)

@@ -45,7 +45,7 @@ def pipeline_from_state(data: bytes, seq: laav.Sequence) -> laav.Pipeline:
     pipe.seq = seq
     pipe._lock = threading.Lock()
     pipe.helper = None
-    missing = {"params", "n_motions", "seed", "result", "_stages"} - set(vars(pipe))
+    missing = {"params", "n_motions", "seed", "result", "_stages", "full_shortlist"} - set(vars(pipe))
     if missing:  # laav.Pipeline changed its attributes: not usable, compute in-process
         raise ValueError(f"pipeline state without {sorted(missing)}")
     return pipe

@@ -485,9 +485,10 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     pairs when few, random otherwise; near-collinear triples rejected), scored by its
     inlier count. The best is refitted by least squares on its consensus, with
     leave-one-out residuals for the fitted points, until the consensus stops changing.
-    Predictions are matrix products of the homogeneous candidates ``X`` (n, 3) with the
-    maps stacked over frames (3, 2F): a few numpy calls per seed, which is what this
-    Python loop over seeds costs.
+    The hypotheses' residuals come from :func:`_hypothesis_residuals` (in the seed's frame);
+    the refits' predictions are matrix products of the homogeneous candidates ``X`` (n, 3)
+    with the maps stacked over frames (3, 2F): a few numpy calls per seed, which is what
+    this Python loop over seeds costs.
 
     Returns ``(None, None)`` when every hypothesis is degenerate.
     """

@@ -68,6 +68,9 @@ class Shortlist:
         ``coding_length + coarse_epipolar_weight * epipolar_cost``.
     chosen : int
         Index of the partition of least score.
+    complete : bool
+        Whether every partition of the shortlist was scored (``full_shortlist``, or none
+        could be left out); False: the first K only, the rest could not win.
     """
 
     assign: np.ndarray
@@ -75,6 +78,7 @@ class Shortlist:
     epipolar_cost: np.ndarray
     score: np.ndarray
     chosen: int
+    complete: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -500,7 +504,8 @@ def merge_models(seq: Sequence | np.ndarray, atoms: Atoms, multicut: Multicut, n
         (keyed on the generator's state before they are drawn, which is restored after
         them as if drawn again), the coding statistics and merge gains, and the joint
         merge's coding-length shortlist and its motions' robust fits (at most
-        :data:`_JOINT_ROWS_KEPT` distances). The result is the same, bit for bit.
+        :data:`_JOINT_ROWS_KEPT` distances; a λ move may score partitions the first run
+        did not, whose motions are then fitted). The result is the same, bit for bit.
     full_shortlist : bool
         The joint merge scores every partition of its shortlist (``Coarse.shortlist``), not
         only those that could still win (the default): the same motions, more of the
@@ -708,11 +713,13 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None,
     # a motion's per-pair distances, by its fine models: candidates share motions, and the
     # fits do not depend on λ (kept in the memo across λ moves for the present multicut)
     rows = _cached(memo, ("joint rows",), dict)  # (K, its members) per motion
+    complete = True
     for i, a in enumerate(assign):
         if not full and w >= 0 and coding[i] > best:
             # the partitions come by increasing coding length and an epipolar cost is >= 0:
             # this one and every later one score above the best so far
             assign, coding, epi = assign[:i], coding[:i], epi[:i]
+            complete = False
             break
         lab = a[fine]
         own = np.empty(lab.size)
@@ -725,9 +732,13 @@ def _joint_shortlist(points, fine_pts, stats, n_motions, params, memo=None,
                 rows[key] = pair_distances(x1, x2, np.flatnonzero(mem), floor2)[:, mem]
             own[mem] = capped_mean(rows[key], unit2)
         epi[i] = np.log1p(own / unit2).sum()
-        best = min(best, coding[i] + w * epi[i])
+        s_i = coding[i] + w * epi[i]
+        best = min(best, s_i)
+        # (a NaN score, which NaN distances would make, ends the pruning: np.argmin below
+        # then chooses among all of them, as when every partition is scored)
+        full = full or bool(np.isnan(s_i))
     score = coding + w * epi
-    return Shortlist(assign, coding, epi, score, int(np.argmin(score)))
+    return Shortlist(assign, coding, epi, score, int(np.argmin(score)), complete)
 
 
 #: Most distances (floats) the joint merge keeps for λ moves (:func:`_joint_shortlist`): 32 MB.

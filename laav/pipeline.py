@@ -166,7 +166,8 @@ class Pipeline:
     full_shortlist : bool
         The joint merge scores every partition of its shortlist (``coarse.shortlist``), not
         only those that could still win: the same labels, the whole comparison (what the
-        explorer's card 3 draws), at some of the coarse stage's time.
+        explorer's card 3 draws), at some of the coarse stage's time. :meth:`update` can
+        change it (the coarse stage then reruns).
 
     Attributes
     ----------
@@ -182,7 +183,8 @@ class Pipeline:
     result is identical to a recomputation: the stage's generator depends only on the seed.
     The coarse stage keeps what does not depend on λ for the present multicut (its pairwise
     samples and their fits, the coding statistics and shortlist, the joint merge's robust
-    fits: ``merge_models(memo=...)``), so a λ move reruns little.
+    fits: ``merge_models(memo=...)``), so a λ move reruns little (without ``full_shortlist``
+    it may score partitions the first run did not, whose motions are then fitted).
     With plain Random Voting beside LAAV's trial (:meth:`LaavParams.with_plain_rv`, and on
     incomplete tracks) a rerun of the fine-tuning reruns LAAV's informed trial only: plain
     RV's runs (and their polished candidates) do not depend on the coarse labels and are
@@ -394,8 +396,8 @@ class Pipeline:
         return hook
 
     def update(self, *, preview=None, **changed) -> LaavResult:
-        """Change parameters (any :class:`LaavParams` field, ``seed`` or ``n_motions``)
-        and recompute only the stages downstream of the change.
+        """Change parameters (any :class:`LaavParams` field, ``seed``, ``n_motions`` or
+        ``full_shortlist``) and recompute only the stages downstream of the change.
 
         ``preview``: a callable that, when the fine-tuning must run plain Random Voting
         afresh (a new seed, C or ``rv_*`` setting; complete tracks of at most
@@ -423,6 +425,7 @@ class Pipeline:
             For invalid values; the pipeline then keeps its previous state and result.
         """
         with self._lock:
+            full = bool(changed.pop("full_shortlist", self.full_shortlist))
             seed = check_seed(changed.pop("seed", self.seed))
             C = changed.pop("n_motions", self.n_motions)
             new_params = self.params.replace(**changed) if changed else self.params
@@ -439,10 +442,13 @@ class Pipeline:
                 starts.append("multicut")
             if seed != self.seed:
                 starts.append("atoms")
+            if full != self.full_shortlist:  # (the same labels: the comparison shown)
+                starts.append("coarse")
             starts = [s for s in starts if s is not None]
             start = min(starts, key=STAGES.index) if starts else None
-            old = (self.params, self.n_motions, self.seed, dict(self._stages), self._coarse_memo)
-            self.params, self.n_motions, self.seed = new_params, C, seed
+            old = (self.params, self.n_motions, self.seed, dict(self._stages), self._coarse_memo,
+                   self.full_shortlist)
+            self.params, self.n_motions, self.seed, self.full_shortlist = new_params, C, seed, full
             if start is None:
                 return self.result
             try:
@@ -452,7 +458,7 @@ class Pipeline:
                 # KeyboardInterrupt is no Exception, and the next update must not find the
                 # new settings beside the old result)
                 (self.params, self.n_motions, self.seed, self._stages,
-                 self._coarse_memo) = old  # the memo of the multicut kept
+                 self._coarse_memo, self.full_shortlist) = old  # the memo of the multicut kept
                 raise
             return self.result
 

@@ -1786,8 +1786,8 @@ def test_card_3_gets_the_joint_merges_whole_comparison():
 
     seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=1)
     lib = laav.Pipeline(seq, 3).result.coarse.shortlist
-    full = laav.Pipeline(seq, 3, full_shortlist=True).result.coarse.shortlist
-    assert lib.score.size < full.score.size
+    full0 = full = laav.Pipeline(seq, 3, full_shortlist=True).result.coarse.shortlist
+    assert lib.score.size < full.score.size and not lib.complete and full.complete
     st = ExplorerState(seq, autostart=True)
     try:
         assert st.wait(60)
@@ -1798,5 +1798,17 @@ def test_card_3_gets_the_joint_merges_whole_comparison():
             assert st.wait(60)
             full = laav.Pipeline(seq, 3, laav.LaavParams(lam=1.5),
                                  full_shortlist=True).result.coarse.shortlist
+    finally:
+        st.close()
+    # a caller's pipeline (ExplorerState(pipeline=...)) scoring part of it is made to score all
+    lib_pipe = laav.Pipeline(seq, 3)
+    lib_labels = lib_pipe.result.labels
+    assert not lib_pipe.result.coarse.shortlist.complete
+    st = ExplorerState(seq, 3, pipeline=lib_pipe, autostart=True)
+    try:
+        assert st.wait(60)
+        got = st.result.coarse.shortlist
+        assert got.complete and np.array_equal(got.score, full0.score)
+        assert np.array_equal(st.result.labels, lib_labels)
     finally:
         st.close()

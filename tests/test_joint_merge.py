@@ -141,3 +141,22 @@ def test_the_shortlist_stops_where_no_partition_can_win_and_chooses_the_same(see
     assert a.chosen == b.chosen and np.array_equal(fast.point_labels, full.point_labels)
     assert np.all(b.coding_length[k:] > a.score.min())
     assert np.all(b.score[k:] > a.score.min())
+
+
+def test_a_pipeline_can_be_asked_for_the_whole_comparison_later():
+    """``Pipeline.update(full_shortlist=True)`` reruns the coarse stage to score every
+    partition (``Shortlist.complete``), the labels as before; back to False, the first
+    partitions only again."""
+    from laav import Pipeline
+
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=1)
+    pipe = Pipeline(seq, 3)
+    part = pipe.result
+    assert not part.coarse.shortlist.complete
+    whole = pipe.update(full_shortlist=True)
+    assert pipe.full_shortlist and whole.coarse.shortlist.complete
+    assert whole.coarse.shortlist.score.size > part.coarse.shortlist.score.size
+    assert whole.atoms is part.atoms and whole.multicut is part.multicut  # (coarse on only)
+    assert np.array_equal(whole.labels, part.labels)
+    again = pipe.update(full_shortlist=False)
+    assert np.array_equal(again.coarse.shortlist.score, part.coarse.shortlist.score)

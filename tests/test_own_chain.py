@@ -86,7 +86,11 @@ def test_subspace_votes_fit_an_orthonormal_basis_of_the_sample_also_when_rank_de
     F, W = seq.points.shape[0], sv.W
     flat = np.r_[np.zeros(8, dtype=np.int64), np.ones(8, dtype=np.int64)]
     X = np.moveaxis(W[:, np.stack([np.arange(16), flat])], 0, -2)  # (2, 2F, 16)
-    for U in (sv.basis(X), sv.basis(X[1:])):  # both samples together, the flat one alone
+    # the full-rank sample alone (divided by its singular values), with the flat one and the
+    # flat one alone (both by QR: one sample spanning fewer than 4 dimensions is enough)
+    lam = np.linalg.eigvalsh(np.swapaxes(X, -1, -2) @ X)[:, -4:]
+    assert lam[0, 0] > 1e-8 * lam[0, -1] and lam[1, 0] < 1e-8 * lam[1, -1]
+    for U in (sv.basis(X[:1]), sv.basis(X), sv.basis(X[1:])):
         assert np.allclose(np.swapaxes(U, -1, -2) @ U, np.eye(4), atol=1e-9)
     full = np.linalg.svd(W[:, :16], full_matrices=False)[0][:, :4]
     U = sv.basis(X)[0]

@@ -83,7 +83,8 @@ class CompareView:
         self.fig_a, self.fig_b = self.figs["A"], self.figs["B"]
         # one legend for both views, beside B (the outer side when they are side by side; below
         # A when stacked): the motions of either side (views.legend_points: drawn nowhere in the
-        # plot) and the rings; a click on an entry hides it in both views
+        # plot) and the rings; a click on a motion hides or shows the points of both views (all
+        # of them: one renderer, as in the frame view), one on the rings' entry both views' rings
         self.src_legend = ColumnDataSource({"x": [], "y": [], "color": [], "marker": [], "label": []})
         key = self.fig_b.scatter("x", "y", source=self.src_legend, size=6, fill_color="color",
                                  marker="marker", line_color="#333333", line_width=0.4, legend_field="label")
