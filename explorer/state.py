@@ -50,7 +50,8 @@ from .views import COLOR_MODES, TRUTH_MODES, align_labels, stage_numbers
 
 __all__ = ["ExplorerState", "Superseded", "Cancelled", "Settings", "RV_FIELDS", "Change", "describe_change",
            "non_defaults", "PARAM_NAMES", "URL_KEYS", "VIEW_COLORS", "parse_settings", "query_of",
-           "settings_from_json", "parse_value", "Origin", "params_file_note", "check_motions"]
+           "settings_from_json", "parse_value", "Origin", "params_file_note", "check_motions",
+           "explorer_pipeline"]
 
 _helper_lock = threading.Lock()
 _helper: list = []  # the server's one VotingHelper, once started (empty: not yet)
@@ -124,6 +125,14 @@ def _await(fut: Future):
         except Exception:  # computed elsewhere and failed: the caller computes it itself
             traceback.print_exc()
             return None
+
+
+def explorer_pipeline(seq: Sequence, n_motions: int, params: LaavParams | None = None, seed: int = 0,
+                      **kw) -> Pipeline:
+    """A :class:`laav.Pipeline` as the explorer makes them (``kw``: ``preview``, ``helper``):
+    :func:`laav.segment`'s labels, the joint merge's whole shortlist scored
+    (``full_shortlist``), since card 3 draws every pair's margin from it."""
+    return Pipeline(seq, n_motions, params, seed, full_shortlist=True, **kw)
 
 
 def plain_rv_of(seq: Sequence, settings: Settings) -> laav.Voting:
@@ -878,10 +887,9 @@ class ExplorerState:
                             if result is before:  # as computed elsewhere: its own stage times
                                 t0 -= sum(result.timings.values())
                         else:
-                            pipe = self._with_helper(Pipeline(
+                            pipe = self._with_helper(explorer_pipeline(
                                 seq, target.n_motions, target.params, target.seed,
-                                preview=self._previewer(gen, seq, target), helper=self.helper,
-                                full_shortlist=True))
+                                preview=self._previewer(gen, seq, target), helper=self.helper))
                             result = pipe.result
                     else:
                         entry = self._take_ahead(seq, target)
@@ -1174,7 +1182,7 @@ class ExplorerState:
                 with self._lock:
                     have = key in self._ahead
                 if not have:
-                    pipe = Pipeline(seq, target.n_motions, target.params, target.seed, full_shortlist=True)
+                    pipe = explorer_pipeline(seq, target.n_motions, target.params, target.seed)
                     with self._lock:
                         if seq is self._target_seq:  # no other sequence asked for since
                             self._keep_ahead(key, pipe, AHEAD_IDLE)

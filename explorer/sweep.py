@@ -35,7 +35,7 @@ import laav
 from laav import LaavParams
 from laav._interrupt import interruptible
 
-from .state import Cancelled
+from .state import Cancelled, explorer_pipeline
 from .views import labelling_distance, stage_numbers
 
 __all__ = ["SEEDS", "SeedRow", "SweepKey", "SeedSweep", "seed_row", "worst_seed", "worst_stage",
@@ -319,7 +319,7 @@ class SeedSweep:
                     raise Cancelled
                 t0 = time.perf_counter()
                 with interruptible(lambda: sid != self._id):  # raises Cancelled when stale
-                    pipe = laav.Pipeline(seq, C, params, seed, full_shortlist=True)  # laav.segment's labels
+                    pipe = explorer_pipeline(seq, C, params, seed)  # laav.segment's labels
                 result = pipe.result
                 dt = time.perf_counter() - t0
                 if sid != self._id:

@@ -29,7 +29,7 @@ __all__ = [
     "align_labels", "shown_labels", "point_style", "plain_differs", "labelling_distance", "raw_style",
     "points_source", "frame_sources", "graph_sources", "TRAIL", "frame_specs", "frame_templates",
     "points_template", "legend_points", "graph_specs",
-    "graph_templates", "label_clashes", "id_layout", "pair_id_sides", "id_boxes", "ID_FONT_PX",
+    "graph_templates", "atom_sizes", "label_clashes", "id_layout", "pair_id_sides", "id_boxes", "ID_FONT_PX",
     "PAIR_ID_FONT_PX", "ID_CLEAR",
     "instantiate", "point_track", "atom_track", "fill_text",
     "replay_labels",
@@ -799,6 +799,13 @@ ID_CLEAR = 0.5 ** 0.5
 _DIGIT_EM = 0.556
 
 
+def atom_sizes(result: laav.LaavResult) -> tuple[np.ndarray, np.ndarray]:
+    """Each atom's member count (N,) and its node's size across in the graph view (px, (N,)):
+    what the nodes are drawn with and what the ids are placed around."""
+    sizes = np.array([len(m) for m in result.atoms.members], dtype=float)
+    return sizes, 7 + 2.0 * np.sqrt(sizes)
+
+
 def _id_width(ids, font_px: float) -> np.ndarray:
     """Width (px) of each id ``ids`` (n,) written at ``font_px``: its digits, (n,)."""
     return np.array([len(str(i)) for i in np.asarray(ids).tolist()], dtype=float) * _DIGIT_EM * font_px
@@ -849,8 +856,7 @@ def id_layout(result: laav.LaavResult, scale) -> dict:
     ``clash`` (the places that overlap each other: :func:`label_clashes`)."""
     xy, seen = atom_track(result)
     n = result.graph.n_nodes
-    sizes = np.array([len(m) for m in result.atoms.members], dtype=float)
-    node_px = 7 + 2.0 * np.sqrt(sizes)
+    sizes, node_px = atom_sizes(result)
     ids = np.arange(n)
     order = ids[np.lexsort((ids, -sizes))] if n else ids
     atoms = np.r_[order, order]
@@ -899,14 +905,13 @@ def graph_templates(result: laav.LaavResult, step: int, colors=None, scale=None,
     g = result.graph
     n = g.n_nodes
     lab = replay_labels(result, step)
-    sizes = np.array([len(m) for m in result.atoms.members], dtype=float)
+    sizes, node_px = atom_sizes(result)
     final = np.asarray(result.multicut.atom_labels, dtype=np.int64)
     pal = np.asarray(colors if colors is not None and len(colors) else ATOM_COLORS, dtype="U7")
     K = len(result.multicut.contractions)
     owner = final if step > K else final[replay_roots(result, step)] if final.size else final
     node_color = pal[owner % pal.size] if owner.size else np.zeros(0, "U7")
     ids = np.arange(n, dtype=np.int32)
-    node_px = 7 + 2.0 * np.sqrt(sizes)
     label = np.array([str(i) for i in range(n)], dtype=object)
     pair = np.asarray(result.multicut.contractions[step - 1], dtype=np.int64) if 0 < step <= K else None
     xy, seen = atom_track(result)

@@ -66,7 +66,7 @@ class Warm(NamedTuple):
 def _child(conn, other_end, parent: int, seq, n_motions, params, seed) -> None:
     from laav._interrupt import interruptible
 
-    from .state import Settings, plain_rv_of
+    from .state import Settings, explorer_pipeline, plain_rv_of
 
     # only the parent reads: with this end open here too, a send to a parent that has gone
     # would wait for ever (a state is larger than the pipe's buffer)
@@ -88,8 +88,7 @@ def _child(conn, other_end, parent: int, seq, n_motions, params, seed) -> None:
                 sent.append(True)
 
             try:
-                data = pipeline_state(laav.Pipeline(seq, n_motions, params, seed, preview=preview,
-                                                    full_shortlist=True))
+                data = pipeline_state(explorer_pipeline(seq, n_motions, params, seed, preview=preview))
             except BaseException:  # noqa: BLE001 - the parent then computes it itself
                 data = b""
             if not sent:

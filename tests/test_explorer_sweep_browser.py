@@ -175,14 +175,16 @@ def test_seed_sweep_in_the_page(tmp_path, monkeypatch):
         # a gate until the change has reached the server: on a fast machine ten small runs
         # could otherwise end before the page's change arrives (a race, not the behaviour)
         gate = threading.Event()
-        pipeline = laav.Pipeline  # what the sweep computes each seed with
+        import explorer.sweep as sweep_module
+
+        pipeline = sweep_module.explorer_pipeline  # what the sweep computes each seed with
 
         def gated(*args, **kw):
             if threading.current_thread() is not threading.main_thread():
                 gate.wait(60)
             return pipeline(*args, **kw)
 
-        monkeypatch.setattr(laav, "Pipeline", gated)
+        monkeypatch.setattr(sweep_module, "explorer_pipeline", gated)
         run.click()
         _wait_for(lambda: ex.sweep_view.sweep.running, 30, "a second sweep", page=page)
         # from the page, as a person does (a change made on the server from this test's
