@@ -37,6 +37,7 @@ import numpy as np
 
 from ._sequence import MIN_POINTS, LaavWarning, Sequence, check_degenerate
 from ._threads import single_threaded
+from .refine import top_eigenvectors
 
 __all__ = ["MotionCount", "MotionProfile", "motion_profile", "estimate_motions", "complete_window", "decide",
            "profile_levels"]
@@ -116,7 +117,7 @@ def _group_residuals(W, norm2, labels, n_groups, rank, rounds=3, min_size=MIN_PO
         X, xn2 = W[:, mem], norm2[mem]
         Xw = X
         for k in range(rounds):
-            U = np.linalg.eigh(Xw @ X.T)[1][:, -rank:]
+            U = top_eigenvectors(Xw @ X.T, rank)
             if k + 1 < rounds:
                 proj = U.T @ X
                 r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0))

@@ -391,6 +391,21 @@ def _finite_median(x: np.ndarray) -> float:
     return float(np.median(x)) if x.size else np.inf
 
 
+def top_eigenvectors(M: np.ndarray, k: int) -> np.ndarray:
+    """The eigenvectors (D, k) of the ``k`` largest eigenvalues of the symmetric ``M``
+    (D, D), in increasing order of their eigenvalue (``np.linalg.eigh(M)[1][:, -k:]``, to
+    rounding and signs): LAPACK's relatively robust representations for those ``k`` alone,
+    about 1.5x faster than every eigenvector at D = 60."""
+    from scipy.linalg import lapack  # lazy: off `import laav`
+
+    D = M.shape[0]
+    lo = max(1, D - k + 1)
+    w, z, found, _, info = lapack.dsyevr(M, compute_v=1, range="I", il=lo, iu=D)
+    if info != 0 or found != D - lo + 1:
+        return np.linalg.eigh(M)[1][:, -k:]
+    return z[:, :found]
+
+
 def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
                        rank: int = REASSIGN_RANK, rounds: int = 5,
                        unit2: float = 1.0, *,
@@ -459,7 +474,7 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
         X, xn2 = W[:, mem], norm2[mem]
         Xw = X  # the points, scaled by the squared IRLS weights from the second round on
         for k in range(rounds):
-            U = np.linalg.eigh(Xw @ X.T)[1][:, -rank:]  # principal subspace, weighted
+            U = top_eigenvectors(Xw @ X.T, rank)  # principal subspace, weighted
             if k + 1 < rounds:
                 proj = U.T @ X
                 r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F)

@@ -152,9 +152,9 @@ def test_a_fit_memo_gives_the_same_numbers_and_fits_each_motion_once(three_motio
     real = R.pair_distances
     monkeypatch.setattr(R, "pair_distances", lambda *a: calls.append(1) or real(*a))
     fits = R.fit_memo(pts)
-    eighs = []
-    real_eigh = np.linalg.eigh
-    monkeypatch.setattr(np.linalg, "eigh", lambda a: eighs.append(1) or real_eigh(a))
+    eighs = []  # the subspace fits' eigenvector calls
+    real_top = R.top_eigenvectors
+    monkeypatch.setattr(R, "top_eigenvectors", lambda *a: eighs.append(1) or real_top(*a))
     for labels in (lab, other):
         fresh = R.motion_distances(pts, labels, 3, pairs)
         n = len(calls)
@@ -232,3 +232,24 @@ def test_masked_scores_compare_motions_on_shared_evidence():
     D2 = np.full_like(D, 2.0)  # every motion has a distance: the joint rule
     both = _masked_scores(R, D2, 1e-4, 0.5, informative=np.array([True, True]))
     np.testing.assert_allclose(both, np.log(R + 1e-4) + 0.5 * np.log(D2 + 1e-4))
+
+
+def test_top_eigenvectors_span_what_every_eigenvector_gives():
+    """:func:`laav.refine.top_eigenvectors`: the eigenvectors of the k largest eigenvalues,
+    in increasing order, as ``np.linalg.eigh``'s last k columns (to rounding and signs):
+    the same projector, orthonormal columns; k above the size gives them all."""
+    from laav.refine import top_eigenvectors
+
+    rng = np.random.default_rng(3)
+    for D, k in ((60, 4), (9, 4), (4, 4), (3, 4), (30, 1)):
+        X = rng.normal(size=(D, 5)) @ rng.normal(size=(5, 200)) * 30 + rng.normal(size=(D, 200))
+        M = X @ X.T
+        U = top_eigenvectors(M, k)
+        want = np.linalg.eigh(M)[1][:, -k:]
+        assert U.shape == want.shape == (D, min(k, D))
+        np.testing.assert_allclose(U.T @ U, np.eye(U.shape[1]), atol=1e-12)
+        np.testing.assert_allclose(U @ U.T, want @ want.T, atol=1e-10)
+        # each column an eigenvector of its eigenvalue, in increasing order
+        lam = np.einsum("ij,ij->j", U, M @ U)
+        assert np.all(np.diff(lam) >= 0)
+        np.testing.assert_allclose(M @ U, U * lam, atol=1e-8 * lam.max())
