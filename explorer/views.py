@@ -618,11 +618,32 @@ def fill_text(fmt: str, frame: int, sources: dict) -> str:
     return _FIELD.sub(sub, fmt)
 
 
+def label_order(labels) -> np.ndarray:
+    """Indices (P,) that sort legend labels (P,) with their numbers read as numbers, so that
+    a legend lists "fine model 2" before "fine model 10"; stable (equal labels keep their
+    order)."""
+    labels = np.asarray(labels).astype(str)
+    uniq, inv = np.unique(labels, return_inverse=True)
+    rank = np.empty(uniq.size, dtype=np.int64)
+    rank[sorted(range(uniq.size), key=lambda i: _natural_key(uniq[i]))] = np.arange(uniq.size)
+    return np.argsort(rank[inv.reshape(-1)], kind="stable")
+
+
+def _natural_key(text: str) -> list:
+    """``text`` split into its runs of digits (as ints) and the text between (as str):
+    "fine model 10 → motion 2" -> ["fine model ", 10, " → motion ", 2, ""]."""
+    return [int(t) if i % 2 else t for i, t in enumerate(_DIGITS.split(text))]
+
+
+_DIGITS = re.compile(r"(\d+)")
+
+
 def points_template(style: dict) -> dict:
     """The frame view's points (x, y, color, marker, label, index) as a template: in label
-    order so that the legend lists "motion 1, motion 2, ..." in order."""
+    order (:func:`label_order`) so that the legend lists "motion 1, motion 2, ..., motion
+    10" in order."""
     color = style["color"]
-    order = np.argsort(style["label"], kind="stable")
+    order = label_order(style["label"])
     marker = style.get("marker")
     marker = np.full(color.shape, "circle", dtype=object) if marker is None else marker
     return {"_a": order.astype(np.int32), "color": color[order], "marker": marker[order],
@@ -648,7 +669,8 @@ def legend_points(*styles: dict) -> dict:
     color = np.concatenate([np.asarray(t["color"], dtype="U7") for t in tpls] or [np.zeros(0, "U7")])
     marker = np.concatenate([np.asarray(t["marker"], dtype=object) for t in tpls]
                             or [np.zeros(0, dtype=object)])
-    _, first = np.unique(label, return_index=True)  # (sorted by label: the frame view's order)
+    _, first = np.unique(label, return_index=True)
+    first = first[label_order(label[first])]  # the frame view's order (:func:`label_order`)
     nan = np.full(first.size, np.nan)
     return {"x": nan, "y": nan.copy(), "color": color[first], "marker": marker[first], "label": label[first]}
 
@@ -1038,7 +1060,14 @@ def joint_margins(result: laav.LaavResult) -> tuple[np.ndarray, np.ndarray, np.n
     motions minus the least of one that puts them in one: > 0, joining them won (the chosen
     partition joins them), < 0, splitting them won. Its parts are the two partitions'
     differences in coding length and in weighted epipolar cost. NaN on the diagonal and where
-    every partition compared agrees on the pair (nothing was decided there)."""
+    every partition compared agrees on the pair (nothing was decided there).
+
+    "Compared": the partitions the shortlist scored, all of them in the explorer (its
+    pipelines score the whole shortlist, :func:`explorer.state.explorer_pipeline`). A
+    shortlist cut short (``Shortlist.complete`` False, e.g. ``laav.segment``'s) leaves out
+    partitions whose coding length alone exceeds the best score: the signs stay right, a
+    margin may be larger than over the whole shortlist, and a pair only those partitions
+    decide reads as undecided."""
     if not shows_margins(result):
         return None
     sl = result.coarse.shortlist

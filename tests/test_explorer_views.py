@@ -853,3 +853,24 @@ def test_the_cross_of_a_point_in_no_atom_shows_on_its_fill():
         t = V.frame_templates(seq, res, style)["unassigned"]
         assert list(t["cross"]) == list(V.cross_colors(style["color"][un]))
         assert want in set(t["cross"]), mode
+
+
+def test_legends_read_numbers_as_numbers():
+    """The frame view's legend (and the compare views' shared one) lists "fine model 2"
+    before "fine model 10" and "motion 9" before "motion 10" (a plain string sort put 10
+    first); equal labels keep their points' order."""
+    labels = np.array(["fine model 10 → motion 2", "fine model 2 → motion 1", "no fine model",
+                       "fine model 1 → motion 1", "fine model 10 → motion 2", "fine model 2 → motion 10",
+                       "fine model 2 → motion 9"], dtype=object)
+    order = V.label_order(labels)
+    assert order.tolist() == [3, 1, 6, 5, 0, 4, 2]
+    style = {"color": np.full(labels.size, "#000000", dtype="U7"), "label": labels,
+             "marker": np.full(labels.size, "circle", dtype=object)}
+    tpl = V.points_template(style)
+    assert tpl["index"].tolist() == order.tolist()
+    rows = V.legend_points(style)
+    assert list(rows["label"]) == ["fine model 1 → motion 1", "fine model 2 → motion 1",
+                                   "fine model 2 → motion 9", "fine model 2 → motion 10",
+                                   "fine model 10 → motion 2", "no fine model"]
+    motions = np.array([f"motion {k}" for k in (10, 2, 1, 9)])
+    assert motions[V.label_order(motions)].tolist() == ["motion 1", "motion 2", "motion 9", "motion 10"]
