@@ -10,6 +10,7 @@ import pytest
 from explorer import views as V
 from explorer.app import Explorer
 from explorer.cards.live import LIVE_MAX_ENTRIES, LiveFrames, legend_rows, packed_colors, unpacked_colors
+from explorer.demo import demo_sequence
 
 
 @pytest.fixture(scope="module")
@@ -180,3 +181,45 @@ def test_packed_colours_round_trip_and_leave_other_columns():
                   np.array(["#FFFFFF80"]), np.zeros(0, "U7"), np.array([3, 4], dtype=np.int32)):
         assert packed_colors(other) is other or np.array_equal(packed_colors(other), other)
         assert packed_colors(other).dtype == other.dtype
+
+
+def test_a_zoom_places_the_atom_ids_again(monkeypatch):
+    """Card 2's ids are placed at the plot's scale: zooming in (the page's RangesUpdate)
+    writes the ids that overlapped before, zooming back out leaves them out again, and a
+    pan or a small zoom places nothing again."""
+    from bokeh.events import RangesUpdate
+
+    from explorer.cards import graph
+
+    ex = Explorer(demo_sequence(), viser=False)
+    try:
+        assert ex.wait(120)
+        gv, f = ex.graph_view, ex.graph_view.fig
+        shown = lambda: sum(1 for t in gv.src_nodes.data["label"] if t)  # noqa: E731
+        n, before = ex.result.graph.n_nodes, shown()
+        assert 0 < before < n, "every id fits at the first size: the test would check nothing"
+        assert "left out: zoom in" in gv.caption.object
+        home = (f.x_range.start, f.x_range.end, f.y_range.start, f.y_range.end)
+        layouts = []
+        real = V.id_layout
+        monkeypatch.setattr(V, "id_layout", lambda *a: layouts.append(1) or real(*a))
+
+        def view(zoom, shift=0.0):
+            x0, x1, y0, y1 = home
+            cx, cy, hx, hy = (x0 + x1) / 2 + shift, (y0 + y1) / 2, (x1 - x0) / 2 / zoom, (y1 - y0) / 2 / zoom
+            r = dict(x0=cx - hx, x1=cx + hx, y0=cy - hy, y1=cy + hy)
+            f.x_range.start, f.x_range.end = r["x0"], r["x1"]
+            f.y_range.start, f.y_range.end = r["y0"], r["y1"]
+            gv._on_zoom(RangesUpdate(f, **r))
+
+        view(1.0, shift=40.0)  # a pan: the same scale
+        view(1.1)  # under RELAYOUT_ZOOM
+        assert not layouts and shown() == before
+        view(4.0)
+        assert layouts and shown() > before
+        assert shown() == n and "left out" not in gv.caption.object
+        view(1.0)
+        assert shown() == before
+        assert graph.RELAYOUT_ZOOM > 1.1
+    finally:
+        ex.close()

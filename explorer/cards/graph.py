@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import panel as pn
+from bokeh.events import RangesUpdate
 from bokeh.models import ColorBar, ColumnDataSource, HoverTool, LinearColorMapper
 
 from .. import views as V
@@ -22,6 +23,10 @@ from .live import LiveFrames
 #: moves at 5,000 tracks: 142-145 ms median without them, 145-153 ms with, interleaved:
 #: within the spread; a JavaScript profile had put the ids' measuring at about 20 ms a move.)
 MAX_ATOM_IDS = 200
+
+#: A zoom that changes the plot's scale by more than this factor places the atom ids again
+#: (zoomed in, ids that overlapped at the old scale may fit; zoomed out, some no longer do).
+RELAYOUT_ZOOM = 1.15
 
 #: The legend samples of the kept and cut edges.
 LEGEND_EDGE = "#555555"
@@ -94,6 +99,8 @@ class GraphView:
                               orientation="horizontal", height=8, title_text_font_size="9pt",
                               padding=4), "below")
         move_legend(g)
+        # a zoom (wheel, box, reset) places the ids again at the new scale
+        g.on_event(RangesUpdate, self._on_zoom)
 
         # the views the page makes at each frame (explorer/cards/live.py)
         live_srcs = (self.src_nodes, self.src_joined, self.src_cut, self.src_step, self.src_pair)
@@ -137,6 +144,15 @@ class GraphView:
         if kept is None or kept[0] is not res or kept[1] != scale:
             kept = self._layout = (res, scale, V.id_layout(res, scale))
         return kept[2]
+
+    def zoomed(self, scale) -> bool:
+        """Whether the plot's scale ``scale`` (px per data unit, (sx, sy)) is far enough from
+        the one the shown ids were placed at (:data:`RELAYOUT_ZOOM`) to place them again."""
+        kept = self._layout
+        if kept is None:
+            return False
+        ratios = [a / b for a, b in zip(scale, kept[1]) if a > 0 and b > 0]
+        return any(max(r, 1.0 / r) > RELAYOUT_ZOOM for r in ratios)
 
     def to_final_step(self, res) -> None:
         """A new result starts the replay at its final step (a step of another result would
@@ -186,12 +202,24 @@ class GraphView:
         else:  # (the pair's ids are written with it, not with the nodes)
             left_out = sum(1 for t in self._tpls["nodes"]["label"] if not t) - len(self._tpls["pair"]["text"])
             verb = "is" if left_out == 1 else "are"
-            ids = (f" {V.counted(left_out, 'atom id')} that would overlap another id or a node at this size "
-                   f"{verb} left out: hover a node for its id." if left_out else "")
+            ids = (f" {V.counted(left_out, 'atom id')} that would overlap another id or a node at this zoom "
+                   f"{verb} left out: zoom in, or hover a node for its id." if left_out else "")
         self.caption.object = V.replay_caption(res, step, seq is None or seq.is_complete) + ids
         live.commit(f)
 
     # ------------------------------------------------------------------ callbacks
+    def _on_zoom(self, event) -> None:
+        """The page's ranges moved: place the ids again when the scale changed (a pan
+        does not), at the ranges the event reports."""
+        f = self.fig
+        try:
+            scale = (f.frame_width / max(abs(event.x1 - event.x0), 1e-9),
+                     f.frame_height / max(abs(event.y1 - event.y0), 1e-9))
+        except (AttributeError, TypeError):  # (an event without its ranges)
+            return
+        if self.zoomed(scale):
+            self.host.schedule(self._step_now, now_if_on_doc_thread=True)
+
     def _on_step(self, event=None) -> None:
         self.host.touch()
         self.host.schedule(self._step_now, now_if_on_doc_thread=True)
