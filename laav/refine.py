@@ -558,7 +558,7 @@ def _fit_subspace_masked(X, M, rank, rounds, tiny, tol=_ALS_TOL, max_sweeps=_ALS
     swept to the same test, warm-started. Returns the basis (D, rank), orthonormal."""
     D, n = X.shape
     X0 = _impute_by_translation(X, M)
-    U = np.linalg.eigh(X0 @ X0.T)[1][:, -rank:]
+    U = top_eigenvectors(X0 @ X0.T, rank)
     cnt = np.maximum(M.sum(axis=0) / 2.0, 1.0)  # frames seen per column
     w = np.ones(n)
     eye = np.eye(rank)
