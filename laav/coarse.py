@@ -791,8 +791,11 @@ def _pairwise_draws(model_atoms, K, S, rng, jj, kk) -> list:
         sel = slice(lo, min(lo + per, jj.size))
         pick = np.empty((sel.stop - lo, K, S, 4), dtype=np.int32)
         for p, (j, k) in enumerate(zip(jj[sel], kk[sel])):
-            pick[p, :, :, :2] = rng.choice(model_atoms[j], size=(K, S, 2))
-            pick[p, :, :, 2:] = rng.choice(model_atoms[k], size=(K, S, 2))
+            # rng.choice(atoms, size) draw for draw (Generator.choice with replacement indexes
+            # by the same integers), without its call overhead
+            aj, ak = model_atoms[j], model_atoms[k]
+            pick[p, :, :, :2] = aj[rng.integers(0, aj.size, size=(K, S, 2))]
+            pick[p, :, :, 2:] = ak[rng.integers(0, ak.size, size=(K, S, 2))]
         batches.append(pick)
     return batches
 

@@ -165,7 +165,8 @@ def coding_lengths(count, total, scatter, dim: int, eps: float) -> np.ndarray:
 
     def scaled_covariance():
         # a cov = a (scatter / n - mu mu^T), in place (the groups' K x K arrays are large)
-        S = scatter * (a / n)[:, None, None]
+        # (C order whatever the scatter's: _log_det_1p adds the identity through a flat view)
+        S = np.multiply(scatter, (a / n)[:, None, None], order="C")
         outer = np.multiply(mu[:, :, None], mu[:, None, :])
         outer *= a
         S -= outer

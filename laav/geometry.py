@@ -159,7 +159,9 @@ class FundamentalFitter:
         # for bit; dividing by the norm itself would round differently at every scale
         # (noise-free data, whose degenerate 8-point samples make the fit ill-posed, turn
         # that into other labels).
-        _, e = np.frexp(np.linalg.norm(F, axis=(-2, -1), keepdims=True))
+        # (the Frobenius norm as np.linalg.norm computes it, bit for bit, without its call
+        # overhead: this runs at every voting iteration and every robust fit)
+        _, e = np.frexp(np.sqrt(np.add.reduce(F * F, axis=(-2, -1), keepdims=True)))
         return np.ldexp(F, -e)
 
 

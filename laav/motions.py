@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._median import median
 from ._sequence import MIN_POINTS, LaavWarning, Sequence, check_degenerate
 from ._threads import single_threaded
 from .refine import top_eigenvectors
@@ -121,7 +122,7 @@ def _group_residuals(W, norm2, labels, n_groups, rank, rounds=3, min_size=MIN_PO
             if k + 1 < rounds:
                 proj = U.T @ X
                 r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0))
-                Xw = X * (1.0 / (1.0 + (r / (2.0 * np.median(r) + tiny)) ** 2)) ** 2
+                Xw = X * (1.0 / (1.0 + (r / (2.0 * median(r) + tiny)) ** 2)) ** 2
         proj = U.T @ W
         R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / (F2 / 2)
     return R

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._median import median
 from .geometry import FundamentalFitter, sampson_distance
 
 __all__ = ["labelling_cost", "subspace_cost", "motion_distances", "refine_labels",
@@ -303,7 +304,7 @@ def pair_distances(x1: np.ndarray, x2: np.ndarray, members: np.ndarray,
     Fm = fitter.fit()  # (K, 3, 3)
     for _ in range(2):
         dm = sampson_distance(Fm, m1, m2)  # (K, n)
-        w = 1.0 / (1.0 + dm / (np.median(dm, axis=1, keepdims=True) * 4.0 + floor2))
+        w = 1.0 / (1.0 + dm / (median(dm, axis=1, keepdims=True) * 4.0 + floor2))
         Fm = fitter.fit(w)
     return sampson_distance(Fm, x1, x2)
 
@@ -366,7 +367,7 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
     for _ in range(rounds):
         D = motion_distances(points, cur, n_motions, pairs, unit2, visible, fits=fits)
         if visible is None:
-            scale = np.array([np.median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
+            scale = np.array([median(D[g, cur == g]) if np.isfinite(D[g]).all() else np.inf
                               for g in range(n_motions)]) + TINY2 * unit2
         else:
             scale = np.array([_finite_median(D[g, cur == g])
@@ -388,7 +389,7 @@ def refine_labels(points: np.ndarray, labels: np.ndarray, n_motions: int,
 def _finite_median(x: np.ndarray) -> float:
     """Median of the finite entries of ``x``; inf when there is none."""
     x = x[np.isfinite(x)]
-    return float(np.median(x)) if x.size else np.inf
+    return float(median(x)) if x.size else np.inf
 
 
 def top_eigenvectors(M: np.ndarray, k: int) -> np.ndarray:
@@ -399,8 +400,11 @@ def top_eigenvectors(M: np.ndarray, k: int) -> np.ndarray:
     from scipy.linalg import lapack  # lazy: off `import laav`
 
     D = M.shape[0]
+    if k < 1 or D < 1:
+        raise ValueError(f"top_eigenvectors: k = {k} of a {D} x {D} matrix (k and D must be >= 1)")
     lo = max(1, D - k + 1)
-    w, z, found, _, info = lapack.dsyevr(M, compute_v=1, range="I", il=lo, iu=D)
+    # the lower triangle, as np.linalg.eigh reads it (M is symmetric only to rounding)
+    w, z, found, _, info = lapack.dsyevr(M, compute_v=1, range="I", il=lo, iu=D, lower=1)
     if info != 0 or found != D - lo + 1:
         return np.linalg.eigh(M)[1][:, -k:]
     return z[:, :found]
@@ -478,7 +482,7 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
             if k + 1 < rounds:
                 proj = U.T @ X
                 r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F)
-                Xw = X * (1.0 / (1.0 + (r / (2.0 * np.median(r) + tiny)) ** 2)) ** 2
+                Xw = X * (1.0 / (1.0 + (r / (2.0 * median(r) + tiny)) ** 2)) ** 2
         proj = U.T @ W
         R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F
         if key is not None:
@@ -581,7 +585,7 @@ def _fit_subspace_masked(X, M, rank, rounds, tiny, tol=_ALS_TOL, max_sweeps=_ALS
         if k + 1 < rounds:
             _, r2 = _project_masked(U, MX, M)
             r = np.sqrt(r2 / cnt)
-            w = (1.0 / (1.0 + (r / (2.0 * np.median(r) + tiny)) ** 2)) ** 2
+            w = (1.0 / (1.0 + (r / (2.0 * median(r) + tiny)) ** 2)) ** 2
     return U
 
 

@@ -193,3 +193,26 @@ def test_n_least_is_the_stable_sorts_first_n_with_ties_and_nan():
             v[rng.integers(0, v.size)] = np.nan
         n = int(rng.integers(1, 12))
         np.testing.assert_array_equal(_n_least(v, n), np.argsort(v, kind="stable")[:n])
+
+
+def test_coding_lengths_do_not_depend_on_the_scatters_memory_layout(monkeypatch):
+    """The same lengths for a C-ordered, a Fortran-ordered and a transposed-view scatter (a
+    non-contiguous product once lost the identity added to it, and factored log det S); and
+    when the Cholesky factorisation fails, the eigenvalue route gets the covariance without
+    the identity (``_log_det_1p``'s ``remake``), with the scatter left as it was."""
+    rng = np.random.default_rng(4)
+    X = rng.normal(size=(5, 600)) * 20.0
+    st = coding.stats_of(X, rng.integers(0, 3, 600), 3, 40)
+    want = coding.coding_lengths(st.count, st.total, st.scatter, st.dim, 2.0)
+    for scatter in (np.asfortranarray(st.scatter), st.scatter.transpose(0, 2, 1)):
+        np.testing.assert_allclose(coding.coding_lengths(st.count, st.total, scatter, st.dim, 2.0), want,
+                                   rtol=1e-12)
+    kept = st.scatter.copy()
+
+    def fail(_):
+        raise np.linalg.LinAlgError("forced")
+
+    monkeypatch.setattr(coding.np.linalg, "cholesky", fail)
+    np.testing.assert_allclose(coding.coding_lengths(st.count, st.total, st.scatter, st.dim, 2.0), want,
+                               rtol=1e-10)
+    np.testing.assert_array_equal(st.scatter, kept)

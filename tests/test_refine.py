@@ -253,3 +253,20 @@ def test_top_eigenvectors_span_what_every_eigenvector_gives():
         lam = np.einsum("ij,ij->j", U, M @ U)
         assert np.all(np.diff(lam) >= 0)
         np.testing.assert_allclose(M @ U, U * lam, atol=1e-8 * lam.max())
+
+
+def test_top_eigenvectors_refuses_k_0_and_falls_back_to_every_eigenvector(monkeypatch):
+    """k < 1 is an error (np.linalg.eigh(M)[1][:, -0:] gave every column); should LAPACK's
+    call fail (info != 0), every eigenvector is computed instead: the same subspace."""
+    from scipy.linalg import lapack
+
+    from laav.refine import top_eigenvectors
+
+    M = np.diag([1.0, 5.0, 2.0, 9.0])
+    with pytest.raises(ValueError, match="k = 0"):
+        top_eigenvectors(M, 0)
+    want = top_eigenvectors(M, 2)
+    np.testing.assert_allclose(np.abs(want), np.eye(4)[:, [1, 3]], atol=1e-12)
+    real = lapack.dsyevr
+    monkeypatch.setattr(lapack, "dsyevr", lambda *a, **k: (*real(*a, **k)[:4], 1))
+    np.testing.assert_allclose(np.abs(top_eigenvectors(M, 2)), np.abs(want), atol=1e-12)
