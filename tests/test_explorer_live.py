@@ -210,7 +210,7 @@ def test_a_zoom_places_the_atom_ids_again(monkeypatch):
             r = dict(x0=cx - hx, x1=cx + hx, y0=cy - hy, y1=cy + hy)
             f.x_range.start, f.x_range.end = r["x0"], r["x1"]
             f.y_range.start, f.y_range.end = r["y0"], r["y1"]
-            gv._on_zoom(RangesUpdate(f, **r))
+            f._trigger_event(RangesUpdate(f, **r))  # as bokeh's server dispatches the page's event
 
         view(1.0, shift=40.0)  # a pan: the same scale
         view(1.1)  # under RELAYOUT_ZOOM
@@ -221,5 +221,11 @@ def test_a_zoom_places_the_atom_ids_again(monkeypatch):
         view(1.0)
         assert shown() == before
         assert graph.RELAYOUT_ZOOM > 1.1
+        # a new sequence's extent is the reset tool's view too
+        from explorer.cards.base import fit_image_figure
+
+        fit_image_figure(f, (0.0, 100.0, 0.0, 50.0))
+        assert (f.x_range.reset_start, f.x_range.reset_end) == (f.x_range.start, f.x_range.end)
+        assert (f.y_range.reset_start, f.y_range.reset_end) == (f.y_range.start, f.y_range.end)
     finally:
         ex.close()

@@ -223,6 +223,9 @@ def fit_image_figure(fig, extent) -> None:
     x0, x1, y0, y1 = V.view_extent(extent)
     fig.x_range.start, fig.x_range.end = x0, x1
     fig.y_range.start, fig.y_range.end = y1, y0
+    # the reset tool's view too (bokeh keeps the first ranges a plot was drawn with otherwise)
+    fig.x_range.reset_start, fig.x_range.reset_end = x0, x1
+    fig.y_range.reset_start, fig.y_range.reset_end = y1, y0
     fw = fig.frame_width
     fig.frame_height = max(int(round(fw * (y1 - y0) / max(x1 - x0, 1e-9))), 80)
 

@@ -136,8 +136,10 @@ class GraphView:
     def id_layout(self, res):
         """Where ``res``'s atom ids may go at the plot's size (:func:`explorer.views.id_layout`),
         kept while the result and the size stay (a replay step only places them); None above
-        :data:`MAX_ATOM_IDS` atoms (no ids)."""
+        :data:`MAX_ATOM_IDS` atoms (no ids). A draw at another scale places them again (a frame
+        move after a zoom too small for :meth:`_on_zoom`: the exact scale then)."""
         if res.graph.n_nodes > MAX_ATOM_IDS:
+            self._layout = None  # (no ids: a zoom has nothing to place again)
             return None
         scale = self.id_scale()
         kept = self._layout
@@ -218,6 +220,7 @@ class GraphView:
         except (AttributeError, TypeError):  # (an event without its ranges)
             return
         if self.zoomed(scale):
+            self.host.touch()
             self.host.schedule(self._step_now, now_if_on_doc_thread=True)
 
     def _on_step(self, event=None) -> None:
