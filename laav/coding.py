@@ -291,7 +291,8 @@ def _every_partition(stats: ModelStats, C: int, eps: float, min_count: int = 1) 
     """Every partition of the models into ``C`` groups (:func:`_assignments`, (A, n)), its
     total coding length (A,) and whether each of its groups holds at least ``min_count``
     points (A,) bool: the 2^n - 1 groups' lengths are evaluated once, and a partition sums
-    its groups' (left to right, as ``lengths[groups].sum(1)`` does: the same bits)."""
+    its groups' (left to right, as ``lengths[groups].sum(1)`` does for the C < 8 groups
+    this branch enumerates: the same bits)."""
     n = stats.n_models
     bits = (np.arange(1, 2 ** n)[:, None] >> np.arange(n)) & 1  # every non-empty subset
     # in chunks: the subsets' K x K scatters are 13 MB at 12 models, several times over

@@ -35,10 +35,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._median import median
 from ._sequence import MIN_POINTS, LaavWarning, Sequence, check_degenerate
 from ._threads import single_threaded
-from .refine import top_eigenvectors
+from .refine import robust_subspace
 
 __all__ = ["MotionCount", "MotionProfile", "motion_profile", "estimate_motions", "complete_window", "decide",
            "profile_levels"]
@@ -115,14 +114,7 @@ def _group_residuals(W, norm2, labels, n_groups, rank, rounds=3, min_size=MIN_PO
         mem = labels == g
         if mem.sum() < max(min_size, rank + 1):
             continue
-        X, xn2 = W[:, mem], norm2[mem]
-        Xw = X
-        for k in range(rounds):
-            U = top_eigenvectors(Xw @ X.T, rank)
-            if k + 1 < rounds:
-                proj = U.T @ X
-                r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0))
-                Xw = X * (1.0 / (1.0 + (r / (2.0 * median(r) + tiny)) ** 2)) ** 2
+        U = robust_subspace(W[:, mem], norm2[mem], rank, rounds, tiny)  # (residuals: not per frame)
         proj = U.T @ W
         R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / (F2 / 2)
     return R

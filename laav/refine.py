@@ -410,6 +410,24 @@ def top_eigenvectors(M: np.ndarray, k: int) -> np.ndarray:
     return z[:, :found]
 
 
+def robust_subspace(X: np.ndarray, xn2: np.ndarray, rank: int, rounds: int, tiny: float,
+                    n_frames: int = 1) -> np.ndarray:
+    """The robust rank-``rank`` linear subspace (D, rank) of the columns ``X`` (D, n), their
+    squared norms ``xn2`` (n,): ``rounds`` weighted principal-subspace fits
+    (:func:`top_eigenvectors` of ``X diag(w^2) X^T``), the weights ``1 / (1 + (r / 2 median
+    r)^2)`` from the residuals ``r`` of the previous fit (RMS over ``n_frames``; ``tiny``
+    in r's unit added to the median). :func:`subspace_residuals`' fit, and the motion-count
+    profile's (:mod:`laav.motions`, ``n_frames`` 1)."""
+    Xw = X  # the points, scaled by the squared IRLS weights from the second round on
+    for k in range(rounds):
+        U = top_eigenvectors(Xw @ X.T, rank)  # principal subspace, weighted
+        if k + 1 < rounds:
+            proj = U.T @ X
+            r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0) / n_frames)
+            Xw = X * (1.0 / (1.0 + (r / (2.0 * median(r) + tiny)) ** 2)) ** 2
+    return U
+
+
 def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
                        rank: int = REASSIGN_RANK, rounds: int = 5,
                        unit2: float = 1.0, *,
@@ -475,14 +493,7 @@ def subspace_residuals(points: np.ndarray, labels: np.ndarray, n_motions: int,
         if key is not None and key in _memo(fits, points):
             R[g] = fits[key]
             continue
-        X, xn2 = W[:, mem], norm2[mem]
-        Xw = X  # the points, scaled by the squared IRLS weights from the second round on
-        for k in range(rounds):
-            U = top_eigenvectors(Xw @ X.T, rank)  # principal subspace, weighted
-            if k + 1 < rounds:
-                proj = U.T @ X
-                r = np.sqrt(np.maximum(xn2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F)
-                Xw = X * (1.0 / (1.0 + (r / (2.0 * median(r) + tiny)) ** 2)) ** 2
+        U = robust_subspace(W[:, mem], norm2[mem], rank, rounds, tiny, F)
         proj = U.T @ W
         R[g] = np.maximum(norm2 - np.einsum("ij,ij->j", proj, proj), 0.0) / F
         if key is not None:

@@ -130,8 +130,12 @@ class GraphView:
         """The plot's pixels per data unit (x, y), as its ranges stand (a zoom the page sent
         included): where the atom ids are placed so as not to overlap."""
         f = self.fig
-        return (f.frame_width / max(abs(f.x_range.end - f.x_range.start), 1e-9),
-                f.frame_height / max(abs(f.y_range.end - f.y_range.start), 1e-9))
+        return self._scale(f.x_range.start, f.x_range.end, f.y_range.start, f.y_range.end)
+
+    def _scale(self, x0, x1, y0, y1) -> tuple[float, float]:
+        """Pixels per data unit (x, y) of the plot showing ``[x0, x1] x [y0, y1]``."""
+        f = self.fig
+        return (f.frame_width / max(abs(x1 - x0), 1e-9), f.frame_height / max(abs(y1 - y0), 1e-9))
 
     def id_layout(self, res):
         """Where ``res``'s atom ids may go at the plot's size (:func:`explorer.views.id_layout`),
@@ -211,12 +215,10 @@ class GraphView:
 
     # ------------------------------------------------------------------ callbacks
     def _on_zoom(self, event) -> None:
-        """The page's ranges moved: place the ids again when the scale changed (a pan
-        does not), at the ranges the event reports."""
-        f = self.fig
+        """The page's ranges moved: place the ids again when the event's ranges changed the
+        scale (a pan does not); the redraw reads the ranges the page sent before its event."""
         try:
-            scale = (f.frame_width / max(abs(event.x1 - event.x0), 1e-9),
-                     f.frame_height / max(abs(event.y1 - event.y0), 1e-9))
+            scale = self._scale(event.x0, event.x1, event.y0, event.y1)
         except (AttributeError, TypeError):  # (an event without its ranges)
             return
         if self.zoomed(scale):
