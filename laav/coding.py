@@ -108,12 +108,23 @@ def principal_trajectories(points: np.ndarray, columns=None,
 
 def stats_of(X: np.ndarray, labels: np.ndarray, n_models: int, dim: int) -> ModelStats:
     """:class:`ModelStats` of the groups ``labels`` (n,) in ``0 .. n_models-1`` of the
-    projected trajectories ``X`` (K, n) (:func:`principal_trajectories`); ``dim`` = 2F."""
+    projected trajectories ``X`` (K, n) (:func:`principal_trajectories`); ``dim`` = 2F.
+
+    Each group's scatter is summed over its own columns only, not as one product with a
+    one-hot matrix over every column (``einsum("mp,ip,jp->mij", onehot, X, X)``, the way
+    before 2026-12-05: 5x the arithmetic, a third of a descent's sweep). The terms a
+    non-member added there were exact zeros; numpy sums the members' in the same order, so
+    on Hopkins155 every label came out the same (``benchmarks/label_identity.py`` and the
+    465-run check of every stage)."""
     onehot = np.zeros((n_models, labels.size))
     onehot[labels, np.arange(labels.size)] = 1.0
     count = onehot.sum(1)
     total = onehot @ X.T
-    scatter = np.einsum("mp,ip,jp->mij", onehot, X, X)
+    K = X.shape[0]
+    scatter = np.zeros((n_models, K, K))
+    for m in range(n_models):
+        Xm = X[:, labels == m]
+        np.einsum("ip,jp->ij", Xm, Xm, out=scatter[m])
     return ModelStats(count, total, scatter, dim)
 
 
@@ -224,7 +235,8 @@ def coding_lengths_one_moved(count: float, total: np.ndarray, scatter: np.ndarra
 
 
 def labelling_coding_length(points: np.ndarray, labels: np.ndarray, n_groups: int,
-                            eps: float, projected: np.ndarray | None = None) -> float:
+                            eps: float, projected: np.ndarray | None = None,
+                            stats: ModelStats | None = None) -> float:
     """Lossy coding length (nats) of the trajectories grouped by ``labels``: the sum of
     :func:`coding_lengths` over the groups (distortion ``eps`` px), without a membership
     term, in the principal directions of all trajectories (:func:`model_stats`).
@@ -232,10 +244,14 @@ def labelling_coding_length(points: np.ndarray, labels: np.ndarray, n_groups: in
     ``points`` (F, P, 2), ``labels`` (P,) in ``0 .. n_groups-1``. LAAV's own chain scores
     whole labellings with it (:func:`laav.voting.joint_score`), the motion count its
     candidates (per point, :mod:`laav.motions`). ``projected``: the points'
-    :func:`principal_trajectories` (K, P), when the caller scores many labellings of them."""
+    :func:`principal_trajectories` (K, P), when the caller scores many labellings of them;
+    ``stats``: their :func:`stats_of` for ``labels``, when already computed."""
     labels = np.asarray(labels)
-    st = (model_stats(points, labels, n_groups) if projected is None
-          else stats_of(projected, labels, n_groups, 2 * points.shape[0]))
+    if stats is not None:
+        st = stats
+    else:
+        st = (model_stats(points, labels, n_groups) if projected is None
+              else stats_of(projected, labels, n_groups, 2 * points.shape[0]))
     # summed in sorted order: the same partition numbered otherwise gets the same length,
     # bit for bit (LAAV's own chain keeps the first of equal scores)
     return float(np.sort(coding_lengths(st.count, st.total, st.scatter, st.dim, eps)).sum())

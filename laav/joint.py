@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from .params import LaavParams
-from .refine import frame_pairs, motion_distances
+from .refine import _memo, frame_pairs, motion_distances
 
 __all__ = ["joint_score", "joint_descent", "unit2", "JOINT_PAIRS", "DESCENT_SWEEPS"]
 
@@ -100,26 +100,53 @@ def _score_and_distances(points, labels, n_motions, params, projected=None,
     if np.bincount(labels, minlength=n_motions).min() < MIN_MOTION_POINTS:
         return float("inf"), None
     u2 = unit2(params)
-    coding = labelling_coding_length(points, labels, n_motions, params.coding_eps, projected)
+    key = None if fits is None else ("joint", labels.tobytes(), int(n_motions), _score_fields(params))
+    if key is not None and key in _memo(fits, points):  # scored before: the same numbers
+        return fits[key]
+    st = None if projected is None else _stats(projected, labels, n_motions, 2 * points.shape[0], fits)
+    coding = labelling_coding_length(points, labels, n_motions, params.coding_eps, projected, st)
     D = motion_distances(points, labels, n_motions, frame_pairs(points.shape[0], JOINT_PAIRS), u2,
                          fits=fits)
     own = D[labels, np.arange(labels.size)]
     if not np.isfinite(own).all():
-        return float("inf"), D
-    return coding + params.coarse_epipolar_weight * float(np.log1p(own / u2).sum()), D
+        out = float("inf"), D
+    else:
+        out = coding + params.coarse_epipolar_weight * float(np.log1p(own / u2).sum()), D
+    if key is not None:
+        D.flags.writeable = False  # (read back by later calls: nobody may change it)
+        fits[key] = out
+    return out
+
+
+def _stats(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, fits: dict | None):
+    """:func:`laav.coding.stats_of` of ``labels``, kept in the memo ``fits`` when given: a
+    descent's sweep reads the stats its accepted trial's score computed."""
+    from .coding import stats_of
+
+    if fits is None:
+        return stats_of(projected, labels, C, dim)
+    key = ("stats", labels.tobytes(), int(C), int(dim))
+    if key not in fits:
+        fits[key] = stats_of(projected, labels, C, dim)
+    return fits[key]
+
+
+def _score_fields(params: LaavParams) -> tuple:
+    """What :func:`joint_score` reads of ``params``: part of its memo keys."""
+    return (float(params.coding_eps), float(params.coarse_epipolar_weight), float(params.rv_lambda))
 
 
 def _move_gains(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, eps: float,
-                epi: np.ndarray, weight: float) -> np.ndarray:
+                epi: np.ndarray, weight: float, fits: dict | None = None) -> np.ndarray:
     """(P, C): the joint score's change when each point alone moves to each motion (``inf``
     for its own motion and for points of a motion at the 8-point floor). ``projected``
     (K, P): the trajectories in the coding length's principal directions
     (:func:`laav.coding.principal_trajectories`); ``epi`` (C, P): each point's
-    ``log(1 + d)`` under each motion's matrices."""
-    from .coding import coding_lengths, coding_lengths_one_moved, stats_of
+    ``log(1 + d)`` under each motion's matrices; ``fits``: the memo :func:`_stats` reads."""
+    from .coding import coding_lengths, coding_lengths_one_moved
 
     P = labels.size
-    st = stats_of(projected, labels, C, dim)
+    st = _stats(projected, labels, C, dim, fits)
     count, total, scatter = st.count, st.total, st.scatter
     now = coding_lengths(count, total, scatter, dim, eps)  # (C,)
     X = projected.T  # (P, K)
@@ -182,8 +209,6 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
     score : float
         With ``return_score``: :func:`joint_score` of ``labels`` (the same number).
     """
-    from .coding import principal_trajectories
-
     start = np.asarray(labels, dtype=np.int64)
     C = int(n_motions)
 
@@ -193,17 +218,33 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
 
     if C < 2:
         return out(start.copy(), joint_score(points, start, C, params) if return_score else None)
+    key = None if fits is None else ("descent", start.tobytes(), C, _score_fields(params),
+                                     int(max_sweeps), None if max_moves is None else int(max_moves))
+    if key is not None and key in _memo(fits, points):  # the same descent ran before: its result
+        L, best = fits[key]
+        return out(L.copy(), best)
+    L, best = _descend(points, start, C, params, max_sweeps, max_moves, projected, fits)
+    if key is not None:
+        fits[key] = (L.copy(), best)
+    return out(L, best)
+
+
+def _descend(points, start, C, params, max_sweeps, max_moves, projected, fits) -> tuple:
+    """:func:`joint_descent`'s sweeps from ``start`` (int64, C >= 2): (labels, score)."""
+    from .coding import principal_trajectories
+
     # (K, P): one projection for every score below
     proj = principal_trajectories(points) if projected is None else projected
     best, D = _score_and_distances(points, start, C, params, proj, fits)
     if not np.isfinite(best):
-        return out(start.copy(), best)
+        return start.copy(), best
     F = points.shape[0]
     u2 = unit2(params)
     L = start.copy()
     for _ in range(max_sweeps):
         epi = np.log1p(D / u2)  # (C, P): the matrices of L's motions, as its score took them
-        gain = _move_gains(proj, L, C, 2 * F, params.coding_eps, epi, params.coarse_epipolar_weight)
+        gain = _move_gains(proj, L, C, 2 * F, params.coding_eps, epi, params.coarse_epipolar_weight,
+                           fits)
         gain = np.nan_to_num(gain, nan=np.inf, posinf=np.inf)  # a NaN is no move
         to = np.argmin(gain, axis=1)
         g = gain[np.arange(L.size), to]
@@ -224,4 +265,4 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
                 break
         else:
             break  # not even the best single move lowers the exact score
-    return out(L, best)
+    return L, best

@@ -278,3 +278,39 @@ def test_the_unpolished_descent_is_the_kept_candidates_own_and_loses_where_it_sc
     off = segment(seq, C, p.replace(rv_descent_from_trial=False), seed=1)
     assert not r1.voting.unpolished and r1.voting.refined + r1.voting.reassigned > 0
     np.testing.assert_array_equal(r1.labels, off.labels)
+
+
+def test_a_memo_gives_the_same_descent_and_score_and_runs_each_once(monkeypatch):
+    """With a ``fit_memo``, :func:`joint_descent` and :func:`joint_score` return what they
+    return without one, a repeated descent or score is read back (no motion is fitted
+    again, no coding length recomputed), and what a caller does to the labels it got back
+    does not change a later answer."""
+    import laav.coding
+    import laav.refine
+    from laav.refine import fit_memo
+
+    seq = scene(3)
+    C, p = 3, LaavParams()
+    start = swapped(seq.labels, 0.05, C, seed=3)
+    plain, plain_moved, plain_score = joint_descent(seq.points, start, C, p, return_score=True)
+    fits = fit_memo(seq.points)
+    proj = principal_trajectories(seq.points)
+    first = joint_descent(seq.points, start, C, p, projected=proj, fits=fits, return_score=True)
+    assert np.array_equal(first[0], plain) and first[1:] == (plain_moved, plain_score)
+    assert joint_score(seq.points, start, C, p, fits=fits, projected=proj) == joint_score(
+        seq.points, start, C, p)
+    first[0][:] = 0  # the caller's copy, not the memo's
+    fitted, stats = [], []
+    monkeypatch.setattr(laav.refine, "pair_distances",
+                        lambda *a, **k: fitted.append(1) or pytest.fail("fitted again"))
+    monkeypatch.setattr(laav.coding, "stats_of",
+                        lambda *a, **k: stats.append(1) or pytest.fail("stats again"))
+    again = joint_descent(seq.points, start, C, p, projected=proj, fits=fits, return_score=True)
+    assert np.array_equal(again[0], plain) and again[1:] == (plain_moved, plain_score)
+    assert joint_score(seq.points, start, C, p, fits=fits, projected=proj) == joint_score(
+        seq.points, start, C, p, fits=fits, projected=proj)
+    assert not fitted and not stats
+    # another cap is another descent: it runs (and fits what it has not seen)
+    monkeypatch.undo()
+    capped = joint_descent(seq.points, start, C, p, max_moves=1, projected=proj, fits=fits)
+    assert capped[1] == 1
