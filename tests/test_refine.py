@@ -270,3 +270,24 @@ def test_top_eigenvectors_refuses_k_0_and_falls_back_to_every_eigenvector(monkey
     real = lapack.dsyevr
     monkeypatch.setattr(lapack, "dsyevr", lambda *a, **k: (*real(*a, **k)[:4], 1))
     np.testing.assert_allclose(np.abs(top_eigenvectors(M, 2)), np.abs(want), atol=1e-12)
+
+
+def test_trajectory_matrix_is_the_tracks_from_their_bounding_boxs_corner():
+    """Columns are trajectories (rows x_0, y_0, x_1, ...) less the smallest x and the
+    smallest y over every frame; on incomplete tracks the corner of the visible entries,
+    hidden entries 0."""
+    from laav.refine import _trajectory_matrix_masked, trajectory_matrix
+
+    rng = np.random.default_rng(4)
+    pts = rng.uniform(-50.0, 700.0, (7, 40, 2))
+    W = trajectory_matrix(pts)
+    corner = pts.min(axis=(0, 1))
+    assert W.shape == (14, 40)
+    np.testing.assert_array_equal(W[0::2], pts[..., 0] - corner[0])
+    np.testing.assert_array_equal(W[1::2], pts[..., 1] - corner[1])
+    vis = rng.random((7, 40)) < 0.6
+    pts_hidden = np.where(vis[..., None], pts, 1e6)  # hidden entries are never read
+    Wm = _trajectory_matrix_masked(pts_hidden, vis)
+    seen = np.where(vis[..., None], pts, np.inf).min(axis=(0, 1))
+    np.testing.assert_array_equal(Wm[0::2], np.where(vis, pts[..., 0] - seen[0], 0.0))
+    np.testing.assert_array_equal(Wm[1::2], np.where(vis, pts[..., 1] - seen[1], 0.0))
