@@ -473,6 +473,31 @@ def _all_pairs(m: int) -> np.ndarray:
     return pairs
 
 
+def _hypothesis_samples(src: np.ndarray, seed_pos: int, params: LaavParams, rng) -> np.ndarray | None:
+    """RANSAC's minimal samples (B, 3) among the candidates ``src`` (n, 2): the seed
+    ``seed_pos`` and two others each, every pair of others when there are at most
+    ``ransac_hypotheses`` of them, else that many drawn from ``rng``; samples whose triangle
+    is (nearly) flat, twice its area under ``0.05 r2^2``, are left out. None when every one
+    is."""
+    n = src.shape[0]
+    others = np.arange(n - 1)
+    others[seed_pos:] += 1
+    B = params.ransac_hypotheses
+    if others.size * (others.size - 1) // 2 <= B:
+        pairs = others[_all_pairs(others.size)]
+    else:
+        a = rng.integers(0, others.size, size=(B, 2))
+        a[:, 1] = (a[:, 0] + 1 + rng.integers(0, others.size - 1, size=B)) % others.size
+        pairs = others[a]
+    samp = np.concatenate([np.full((pairs.shape[0], 1), seed_pos), pairs], axis=1)  # (B, 3)
+    S = src[samp]
+    e1 = S[:, 1] - S[:, 0]
+    e2 = S[:, 2] - S[:, 0]
+    area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])  # twice the triangle's area
+    ok = area2 > 0.05 * params.r2 ** 2  # reject (near-)collinear samples
+    return samp[ok] if ok.any() else None
+
+
 def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     """Inliers (bool over cand) of the best affine consensus containing cand[seed_pos], and
     their least-squares maps (Fn, 2, 3) when the last refit confirmed them (else None).
@@ -498,25 +523,9 @@ def _ransac_affine(points, cand, seed_pos, params, rng, skip_first=False):
     Fn = tgt.shape[0]
     X = np.concatenate([src, np.ones((n, 1))], axis=1)  # (n, 3) homogeneous
     Y = np.transpose(tgt[:, cand], (1, 0, 2)).reshape(n, 2 * Fn)  # (n, 2F): x0 y0 x1 y1 ...
-    others = np.arange(n - 1)
-    others[seed_pos:] += 1
-    B = params.ransac_hypotheses
-    # pairs of other candidates (all pairs when few, random otherwise)
-    if others.size * (others.size - 1) // 2 <= B:
-        pairs = others[_all_pairs(others.size)]
-    else:
-        a = rng.integers(0, others.size, size=(B, 2))
-        a[:, 1] = (a[:, 0] + 1 + rng.integers(0, others.size - 1, size=B)) % others.size
-        pairs = others[a]
-    samp = np.concatenate([np.full((pairs.shape[0], 1), seed_pos), pairs], axis=1)  # (B, 3)
-    S = src[samp]
-    e1 = S[:, 1] - S[:, 0]
-    e2 = S[:, 2] - S[:, 0]
-    area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])  # twice the triangle's area
-    ok = area2 > 0.05 * params.r2 ** 2  # reject (near-)collinear samples
-    if not ok.any():
+    samp = _hypothesis_samples(src, seed_pos, params, rng)
+    if samp is None:
         return None, None
-    samp = samp[ok]
     r = _hypothesis_residuals(src, Y, seed_pos, samp[:, 1:])  # (B, n, 2F)
     res = np.sqrt(np.add.reduce(r * r, axis=-1) / Fn)  # (B, n)
     inl = res < params.affine_threshold
@@ -577,24 +586,9 @@ def _ransac_affine_masked(points, vis, cand, seed_pos, ref, params, rng, min_fra
     dst = points[:, cand]  # (F, n, 2), 0 where hidden
     V = vis[:, cand]  # (F, n)
     Y = np.transpose(dst, (1, 0, 2)).reshape(n, 2 * F)
-    others = np.arange(n - 1)
-    others[seed_pos:] += 1
-    B = params.ransac_hypotheses
-    if others.size * (others.size - 1) // 2 <= B:
-        pairs = others[_all_pairs(others.size)]
-    else:
-        a = rng.integers(0, others.size, size=(B, 2))
-        a[:, 1] = (a[:, 0] + 1 + rng.integers(0, others.size - 1, size=B)) % others.size
-        pairs = others[a]
-    samp = np.concatenate([np.full((pairs.shape[0], 1), seed_pos), pairs], axis=1)  # (B, 3)
-    S = src[samp]
-    e1 = S[:, 1] - S[:, 0]
-    e2 = S[:, 2] - S[:, 0]
-    area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    ok = area2 > 0.05 * params.r2 ** 2
-    if not ok.any():
+    samp = _hypothesis_samples(src, seed_pos, params, rng)
+    if samp is None:
         return None
-    samp = samp[ok]
     # (frames the seed is hidden in are never judged: it is in every sample, see hyp)
     r = _hypothesis_residuals(src, Y, seed_pos, samp[:, 1:])  # (B, n, 2F)
     e2f = r[..., 0::2] ** 2 + r[..., 1::2] ** 2  # (B, n, F)
