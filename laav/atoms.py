@@ -473,12 +473,13 @@ def _all_pairs(m: int) -> np.ndarray:
     return pairs
 
 
-def _hypothesis_samples(src: np.ndarray, seed_pos: int, params: LaavParams, rng) -> np.ndarray | None:
-    """RANSAC's minimal samples (B, 3) among the candidates ``src`` (n, 2): the seed
-    ``seed_pos`` and two others each, every pair of others when there are at most
-    ``ransac_hypotheses`` of them, else that many drawn from ``rng``; samples whose triangle
-    is (nearly) flat, twice its area under ``0.05 r2^2``, are left out. None when every one
-    is."""
+def _hypothesis_samples(src: np.ndarray, seed_pos: int, params: LaavParams,
+                        rng: np.random.Generator) -> np.ndarray | None:
+    """RANSAC's minimal samples, (B', 3) indices into the candidates ``src`` (n, 2): the seed
+    ``seed_pos`` and two others each; every pair of others when there are at most
+    B = ``ransac_hypotheses`` pairs, else B pairs drawn from ``rng``; samples whose triangle
+    is (nearly) flat, twice its area under ``0.05 r2^2``, are left out (so B' <= B). None
+    when every one is."""
     n = src.shape[0]
     others = np.arange(n - 1)
     others[seed_pos:] += 1

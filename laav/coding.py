@@ -113,9 +113,10 @@ def stats_of(X: np.ndarray, labels: np.ndarray, n_models: int, dim: int) -> Mode
     Each group's scatter is summed over its own columns only, not as one product with a
     one-hot matrix over every column (``einsum("mp,ip,jp->mij", onehot, X, X)``, the way
     before 2026-12-05: 5x the arithmetic, a third of a descent's sweep). The terms a
-    non-member added there were exact zeros; numpy sums the members' in the same order, so
-    on Hopkins155 every label came out the same (``benchmarks/label_identity.py`` and the
-    465-run check of every stage)."""
+    non-member added there were exact zeros, and with numpy 2.4 the members' terms are
+    summed in the same order for K >= 2 and up to 8,192 columns (every Hopkins155 call
+    checked: the same bits); beyond 8,192 columns the one-hot product summed in buffered
+    chunks, and the two differ by about 1e-15 relative."""
     onehot = np.zeros((n_models, labels.size))
     onehot[labels, np.arange(labels.size)] = 1.0
     count = onehot.sum(1)

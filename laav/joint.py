@@ -80,10 +80,12 @@ def joint_score(points: np.ndarray, labels: np.ndarray, n_motions: int,
     params : LaavParams
         Uses ``coding_eps``, ``coarse_epipolar_weight`` and ``rv_lambda``.
     fits : dict, optional
-        :func:`laav.refine.fit_memo` of ``points``: motions fitted before are read back.
+        :func:`laav.refine.fit_memo` of ``points``: motions fitted before, and whole
+        labellings scored before (with these ``params`` fields), are read back.
     projected : ndarray of shape (K, P), optional
         The points' :func:`laav.coding.principal_trajectories`, when already computed (the
-        same numbers as computing it here).
+        same numbers as computing it here). With ``fits`` it must be exactly that (as
+        ``laav.own_chain.projection`` keeps it): the memo's keys do not hold it.
     """
     return _score_and_distances(points, labels, n_motions, params, projected, fits)[0]
 
@@ -93,7 +95,8 @@ def _score_and_distances(points, labels, n_motions, params, projected=None,
     """:func:`joint_score` and the distances (C, P) of every point to every motion's
     matrices it computed (None when a motion has fewer than 8 points). ``projected``: the
     points' :func:`laav.coding.principal_trajectories`, when already computed; ``fits``:
-    :func:`laav.refine.fit_memo`."""
+    :func:`laav.refine.fit_memo`, where the pair is kept (the distances then read-only) and
+    read back for the same labels, ``n_motions`` and :func:`_score_fields`."""
     from .coding import labelling_coding_length
 
     labels = np.asarray(labels, dtype=np.int64)
@@ -119,8 +122,9 @@ def _score_and_distances(points, labels, n_motions, params, projected=None,
 
 
 def _stats(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, fits: dict | None):
-    """:func:`laav.coding.stats_of` of ``labels``, kept in the memo ``fits`` when given: a
-    descent's sweep reads the stats its accepted trial's score computed."""
+    """:func:`laav.coding.stats_of` (a ``ModelStats``) of ``labels`` (P,) int64 over the
+    projected trajectories ``projected`` (K, P), ``dim`` = 2F, kept in the memo ``fits`` when
+    given: a descent's sweep reads the stats its accepted trial's score computed."""
     from .coding import stats_of
 
     if fits is None:
@@ -197,7 +201,10 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
     fits : dict, optional
         :func:`laav.refine.fit_memo`: motions whose fundamental matrices were fitted
         before (by another descent on the same points, or earlier in this one) are not
-        fitted again; the same numbers.
+        fitted again, labellings scored before are not scored again, and a descent from the
+        same start with the same ``max_sweeps``, ``max_moves`` and ``params`` fields returns
+        the first one's result (a copy); the same numbers. With ``projected``, see
+        :func:`joint_score`.
 
     Returns
     -------
@@ -230,7 +237,8 @@ def joint_descent(points: np.ndarray, labels: np.ndarray, n_motions: int,
 
 
 def _descend(points, start, C, params, max_sweeps, max_moves, projected, fits) -> tuple:
-    """:func:`joint_descent`'s sweeps from ``start`` (int64, C >= 2): (labels, score)."""
+    """:func:`joint_descent`'s sweeps from ``start`` (P,) int64, ``points`` (F, P, 2),
+    C >= 2 motions (the other arguments as there): ``(labels (P,) int64, joint score)``."""
     from .coding import principal_trajectories
 
     # (K, P): one projection for every score below

@@ -220,8 +220,9 @@ def test_coding_lengths_do_not_depend_on_the_scatters_memory_layout(monkeypatch)
 
 def test_stats_are_the_one_hot_sums_over_each_groups_columns():
     """:func:`coding.stats_of`: counts, totals and scatters of each group, against the
-    one-hot products over every column it summed before (the same numbers: a non-member's
-    term was an exact zero), on groups of many sizes, an empty one included."""
+    one-hot products over every column it summed before (the same bits for K >= 2 and up to
+    8,192 columns: a non-member's term was an exact zero), on groups of many sizes, an empty
+    one included."""
     rng = np.random.default_rng(5)
     for K, n, C in ((2, 7, 3), (9, 300, 4), (40, 1000, 12), (1, 50, 2)):
         X = rng.standard_normal((K, n)) * 50.0
@@ -231,6 +232,8 @@ def test_stats_are_the_one_hot_sums_over_each_groups_columns():
         onehot[labels, np.arange(n)] = 1.0
         np.testing.assert_array_equal(st.count, onehot.sum(1))
         np.testing.assert_array_equal(st.total, onehot @ X.T)
-        np.testing.assert_allclose(st.scatter, np.einsum("mp,ip,jp->mij", onehot, X, X),
-                                   rtol=1e-13, atol=1e-9)
+        old = np.einsum("mp,ip,jp->mij", onehot, X, X)
+        if K >= 2:  # (numpy 2.4: the same sums, up to 8,192 columns; see stats_of)
+            np.testing.assert_array_equal(st.scatter, old)
+        np.testing.assert_allclose(st.scatter, old, rtol=1e-13, atol=1e-9)
         assert not st.scatter[C - 1].any() and st.scatter.flags.c_contiguous

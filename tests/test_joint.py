@@ -282,35 +282,44 @@ def test_the_unpolished_descent_is_the_kept_candidates_own_and_loses_where_it_sc
 
 def test_a_memo_gives_the_same_descent_and_score_and_runs_each_once(monkeypatch):
     """With a ``fit_memo``, :func:`joint_descent` and :func:`joint_score` return what they
-    return without one, a repeated descent or score is read back (no motion is fitted
-    again, no coding length recomputed), and what a caller does to the labels it got back
-    does not change a later answer."""
+    return without one; a repeated descent is read back whole (no sweep runs) and a repeated
+    score too (no coding length computed); a descent or score with another ``max_sweeps``,
+    ``max_moves`` or score field is computed anew, and gives what a fresh call without a
+    memo gives; what a caller does to the labels it got back changes no later answer."""
     import laav.coding
-    import laav.refine
+    import laav.joint
     from laav.refine import fit_memo
 
     seq = scene(3)
     C, p = 3, LaavParams()
     start = swapped(seq.labels, 0.05, C, seed=3)
     plain, plain_moved, plain_score = joint_descent(seq.points, start, C, p, return_score=True)
+    plain_start = joint_score(seq.points, start, C, p)
     fits = fit_memo(seq.points)
     proj = principal_trajectories(seq.points)
     first = joint_descent(seq.points, start, C, p, projected=proj, fits=fits, return_score=True)
     assert np.array_equal(first[0], plain) and first[1:] == (plain_moved, plain_score)
-    assert joint_score(seq.points, start, C, p, fits=fits, projected=proj) == joint_score(
-        seq.points, start, C, p)
+    assert joint_score(seq.points, start, C, p, fits=fits, projected=proj) == plain_start
     first[0][:] = 0  # the caller's copy, not the memo's
-    fitted, stats = [], []
-    monkeypatch.setattr(laav.refine, "pair_distances",
-                        lambda *a, **k: fitted.append(1) or pytest.fail("fitted again"))
-    monkeypatch.setattr(laav.coding, "stats_of",
-                        lambda *a, **k: stats.append(1) or pytest.fail("stats again"))
-    again = joint_descent(seq.points, start, C, p, projected=proj, fits=fits, return_score=True)
-    assert np.array_equal(again[0], plain) and again[1:] == (plain_moved, plain_score)
-    assert joint_score(seq.points, start, C, p, fits=fits, projected=proj) == joint_score(
-        seq.points, start, C, p, fits=fits, projected=proj)
-    assert not fitted and not stats
-    # another cap is another descent: it runs (and fits what it has not seen)
-    monkeypatch.undo()
-    capped = joint_descent(seq.points, start, C, p, max_moves=1, projected=proj, fits=fits)
-    assert capped[1] == 1
+    with monkeypatch.context() as m:
+        m.setattr(laav.joint, "_descend", lambda *a, **k: pytest.fail("descended again"))
+        m.setattr(laav.coding, "labelling_coding_length",
+                  lambda *a, **k: pytest.fail("scored again"))
+        for _ in range(2):
+            again = joint_descent(seq.points, start, C, p, projected=proj, fits=fits,
+                                  return_score=True)
+            assert np.array_equal(again[0], plain) and again[1:] == (plain_moved, plain_score)
+            again[0][:] = 1
+            assert joint_score(seq.points, start, C, p, fits=fits, projected=proj) == plain_start
+    # each input in the keys: another value is another result, the one a fresh call gives
+    for kwargs, q in (({"max_sweeps": 0}, p), ({"max_moves": 1}, p),
+                      ({}, p.replace(coding_eps=2 * p.coding_eps)),
+                      ({}, p.replace(coarse_epipolar_weight=0.5 * p.coarse_epipolar_weight)),
+                      ({}, p.replace(rv_lambda=0.5 * p.rv_lambda))):
+        fresh = joint_descent(seq.points, start, C, q, return_score=True, **kwargs)
+        assert fresh[1:] != (plain_moved, plain_score)  # (each is a real change)
+        memo = joint_descent(seq.points, start, C, q, projected=proj, fits=fits,
+                             return_score=True, **kwargs)
+        assert np.array_equal(memo[0], fresh[0]) and memo[1:] == fresh[1:]
+        assert joint_score(seq.points, start, C, q, fits=fits, projected=proj) == joint_score(
+            seq.points, start, C, q)
