@@ -12,10 +12,15 @@ bit for bit. This script runs 103 fixed runs and prints one md5 per run of the l
 - ``laav.synthetic.make_family`` scenes 0-2 of ``small_motion`` and ``same_direction`` (6);
 - a 2,500-track synthetic scene (1).
 
+With ``--all``, also every Hopkins155 sequence (all 155) with the default preset at seeds 0-1
+and with 20 % and 40 % of the tracks' samples missing at seed 0 (620 more runs; 723 in
+all take about 5 minutes): what a change to a stage every sequence passes through should be checked on.
+
 Usage::
 
     python benchmarks/label_identity.py --out /tmp/before.json        # on the old commit
     python benchmarks/label_identity.py --compare /tmp/before.json    # on the new one
+    python benchmarks/label_identity.py --all --out /tmp/before.json  # (and --all --compare)
 
 ``--compare`` prints every run whose fingerprint differs and exits 1 if any does. When
 comparing two commits in worktrees, set ``PYTHONPATH`` to the tree being measured (see
@@ -28,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import itertools
 import json
 import os
 import sys
@@ -69,6 +75,21 @@ def fingerprint(result) -> str:
     return ":".join(parts)
 
 
+def every_sequence(root: Path):
+    """(name, sequence, C, params, seed) of ``--all``'s runs: every Hopkins155 sequence
+    (``speed.truth_files``: without ``dancing``), the default preset at seeds 0-1, then with
+    20 % and 40 % of its samples hidden (``occlude``, rng 0) at seed 0."""
+    from speed import truth_files  # this folder
+
+    for path in truth_files(root, []):
+        seq = laav.load_sequence(path)
+        for seed in (0, 1):
+            yield f"all/{seq.name}/seed{seed}", seq, seq.n_motions, laav.LaavParams(), seed
+        for level in (20, 40):
+            yield (f"all/{seq.name}/missing{level}", occlude(seq, level / 100, rng=0), seq.n_motions,
+                   laav.LaavParams(), 0)
+
+
 def runs(root: Path):
     """(name, sequence, C, params, seed) of every run, in a fixed order."""
     found = []
@@ -97,12 +118,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="write the fingerprints here (JSON)")
     ap.add_argument("--compare", type=Path, help="compare with fingerprints written by --out")
+    ap.add_argument("--all", action="store_true",
+                    help="also every Hopkins155 sequence, clean at seeds 0-1 and 20 / 40 %% missing")
     args = ap.parse_args(argv)
     env = os.environ.get("HOPKINS155")
     root = Path(env).expanduser() if env else REPO.parent / "shared" / "data" / "hopkins155"
     prints = {}
     t0 = time.perf_counter()
-    for name, seq, c, params, seed in runs(root):
+    every = every_sequence(root) if args.all else ()
+    for name, seq, c, params, seed in itertools.chain(runs(root), every):
         prints[name] = fingerprint(laav.segment(seq, c, params, seed=seed))
     total = hashlib.md5(json.dumps(prints, sort_keys=True).encode()).hexdigest()
     report = {"commit": git_commit(), "machine": cpu_model(), "laav": laav.__file__,

@@ -575,3 +575,30 @@ def test_cli_rejects_bad_missing_shares(data_dir, tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("laav bench: error: ") and what in err[0], err
         assert not out.exists()
+
+
+def test_label_identity_all_covers_every_sequence_clean_and_occluded(hopkins_root):
+    """``benchmarks/label_identity.py --all``: every Hopkins155 sequence the benchmarks use
+    (``speed.truth_files``), each at seeds 0-1 with the default preset and at 20 % and 40 %
+    missing (seeded occlusion), in that order; nothing run here, only the list checked."""
+    import importlib.util
+    import itertools
+    import sys
+
+    folder = Path(__file__).resolve().parent.parent / "benchmarks"
+    if str(folder) not in sys.path:
+        sys.path.insert(0, str(folder))
+    spec = importlib.util.spec_from_file_location("_bench_label_identity", folder / "label_identity.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    from speed import truth_files
+
+    first = truth_files(hopkins_root, [])[0].parent.name
+    head = list(itertools.islice(mod.every_sequence(hopkins_root), 4))
+    assert [r[0] for r in head] == [f"all/{first}/seed0", f"all/{first}/seed1",
+                                    f"all/{first}/missing20", f"all/{first}/missing40"]
+    assert [r[4] for r in head] == [0, 1, 0, 0]
+    clean, _, m20, m40 = (r[1] for r in head)
+    assert clean.is_complete and not m20.is_complete and not m40.is_complete
+    assert abs((1 - m20.visible.mean()) - 0.2) < 0.05 and abs((1 - m40.visible.mean()) - 0.4) < 0.05
+    assert all(r[2] == clean.n_motions and r[3] == mod.laav.LaavParams() for r in head)
