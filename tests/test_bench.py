@@ -430,15 +430,15 @@ def test_discover_max_points(data_dir):
 # --------------------------------------------------------------------------- missing data
 
 
-def _load_missing_script():
-    """benchmarks/missing.py as a module (its folder on sys.path, as when run as a script)."""
+def _load_bench_script(name: str):
+    """``benchmarks/<name>.py`` as a module (its folder on sys.path, as when run as a script)."""
     import importlib.util
     import sys
 
     folder = Path(__file__).resolve().parent.parent / "benchmarks"
     if str(folder) not in sys.path:
         sys.path.insert(0, str(folder))
-    spec = importlib.util.spec_from_file_location("_bench_missing_script", folder / "missing.py")
+    spec = importlib.util.spec_from_file_location(f"_bench_{name}_script", folder / f"{name}.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -513,7 +513,7 @@ def test_occlusion_is_seeded_and_the_same_as_benchmarks_missing_py(data_dir):
 
     from laav.synthetic import BENCH_SPREAD, occlude, occlusion_rng
 
-    script = _load_missing_script()
+    script = _load_bench_script("missing")
     assert script.occlusion_rng is occlusion_rng and script.SPREAD == BENCH_SPREAD == 0.5
     seq = make_sequence(n_objects=1, n_frames=12, n_points=80, rng=5, name="occl")
     a = bench.hide_entries(seq, 0.4, seed=3)
@@ -581,17 +581,10 @@ def test_label_identity_all_covers_every_sequence_clean_and_occluded(hopkins_roo
     """``benchmarks/label_identity.py --all``: every Hopkins155 sequence the benchmarks use
     (``speed.truth_files``), each at seeds 0-1 with the default preset and at 20 % and 40 %
     missing (seeded occlusion), in that order; nothing run here, only the list checked."""
-    import importlib.util
     import itertools
-    import sys
 
-    folder = Path(__file__).resolve().parent.parent / "benchmarks"
-    if str(folder) not in sys.path:
-        sys.path.insert(0, str(folder))
-    spec = importlib.util.spec_from_file_location("_bench_label_identity", folder / "label_identity.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    from speed import truth_files
+    mod = _load_bench_script("label_identity")
+    from speed import truth_files  # (the benchmarks' folder is on sys.path now)
 
     first = truth_files(hopkins_root, [])[0].parent.name
     head = list(itertools.islice(mod.every_sequence(hopkins_root), 4))
