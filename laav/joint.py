@@ -131,7 +131,9 @@ def _stats(projected: np.ndarray, labels: np.ndarray, C: int, dim: int, fits: di
         return stats_of(projected, labels, C, dim)
     key = ("stats", labels.tobytes(), int(C), int(dim))
     if key not in fits:
-        fits[key] = stats_of(projected, labels, C, dim)
+        st = fits[key] = stats_of(projected, labels, C, dim)
+        for a in (st.count, st.total, st.scatter):  # (read back by later calls, as the distances)
+            a.flags.writeable = False
     return fits[key]
 
 
