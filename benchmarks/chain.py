@@ -146,11 +146,21 @@ def summarise(rows: list[dict]) -> list[str]:
         ce = np.array([float(r["coarse"]) for r in rs if r["coarse"] not in ("", "nan")])
         coarse = f"{(ce <= 1).sum()} / {(ce > 10).sum()} of {ce.size}" if ce.size else "-"
         conv = np.mean([int(r["converged"]) for r in rs])
-        it = np.median([int(r["iterations"]) for r in rs])
-        it_rv = np.median([int(rv[(r["sequence"], str(r["seed"]))]["iterations"]) for r in rs])
-        ratios = []
+        # the ratios to plain RV over the runs it has rows for (none: --no-plain-rv with an
+        # --out that holds none of them; the columns then say so)
+        paired = [r for r in rs if (r["sequence"], str(r["seed"])) in rv]
+        iters, ratios = "- (no plain-RV rows)", []
+        if paired:
+            it_p = np.median([int(r["iterations"]) for r in paired])
+            it_rv = np.median([int(rv[(r["sequence"], str(r["seed"]))]["iterations"]) for r in paired])
+            iters = f"{it_p:.0f} / {it_rv:.0f} = {it_p / max(it_rv, 1):.2f}"
+            if len(paired) < len(rs):
+                iters += f" (of {len(paired)} runs)"
         for c in (2, 3):
-            sub = [r for r in rs if int(r["motions"]) == c]
+            sub = [r for r in paired if int(r["motions"]) == c]
+            if not sub:
+                ratios.append("-")
+                continue
             t = np.median([float(r["seconds"]) for r in sub])
             t_rv = np.median([float(rv[(r["sequence"], str(r["seed"]))]["seconds"]) for r in sub])
             ratios.append(f"{t / t_rv:.2f} ({1e3 * t:.0f} / {1e3 * t_rv:.0f} ms)")
@@ -162,7 +172,7 @@ def summarise(rows: list[dict]) -> list[str]:
         lines.append(
             f"| {name} | {e[m == 2].mean():.2f} / {e[m == 3].mean():.2f} / {e.mean():.2f} | "
             f"{e.max():.1f} | {max(per_seed) - min(per_seed):.2f} | {coarse} | {100 * conv:.0f} % | "
-            f"{it:.0f} / {it_rv:.0f} = {it / max(it_rv, 1):.2f} | {' ; '.join(ratios)} | {trial} |")
+            f"{iters} | {' ; '.join(ratios)} | {trial} |")
     return lines
 
 

@@ -595,3 +595,28 @@ def test_label_identity_all_covers_every_sequence_clean_and_occluded(hopkins_roo
     assert clean.is_complete and not m20.is_complete and not m40.is_complete
     assert abs((1 - m20.visible.mean()) - 0.2) < 0.05 and abs((1 - m40.visible.mean()) - 0.4) < 0.05
     assert all(r[2] == clean.n_motions and r[3] == mod.laav.LaavParams() for r in head)
+
+
+def _chain_row(config, seq, seed, error, iterations, seconds, motions=2):
+    return {"config": config, "sequence": seq, "motions": str(motions), "seed": str(seed),
+            "error": f"{error:.4f}", "coarse": "0.0000", "coverage": "1.0", "converged": "1",
+            "iterations": str(iterations), "trials": "1", "selected": "informed",
+            "seconds": f"{seconds:.5f}", "informed_converged": "1",
+            "informed_iterations": str(iterations)}
+
+
+def test_chain_summary_without_plain_rv_rows():
+    """``chain.py --no-plain-rv`` on an --out without plain RV's rows: the ratio columns say
+    there are none (it raised KeyError), and with the rows the ratios are over the pairs."""
+    chain = _load_bench_script("chain")
+    own = [_chain_row("default", "a", 0, 1.0, 20, 0.05), _chain_row("default", "b", 0, 3.0, 40, 0.07, 3)]
+    row = chain.summarise(own)[2]
+    assert row.startswith("| default | 1.00 / 3.00 / 2.00 |")
+    assert "- (no plain-RV rows) | - ; - |" in row
+    plain = [_chain_row("plain-rv", "a", 0, 2.0, 200, 0.025),
+             _chain_row("plain-rv", "b", 0, 2.0, 400, 0.7, 3)]
+    rows = chain.summarise(plain + own)
+    assert "| 30 / 300 = 0.10 | 2.00 (50 / 25 ms) ; 0.10 (70 / 700 ms) |" in rows[3]
+    # a plain-RV row for one run only: the ratios over that run, and the table says so
+    rows = chain.summarise(plain[:1] + own)
+    assert "| 20 / 200 = 0.10 (of 1 runs) | 2.00 (50 / 25 ms) ; - |" in rows[3]
