@@ -392,8 +392,17 @@ def test_empty_upload_says_so_and_a_bad_c_is_refused(ex, seq):
         assert ex.wait(60) and ex.result is res
         assert ex.alert.visible and msg in _shown(ex.alert)
         assert (fm.value, fm.end) == (fine, fine_end)  # a refused C does not move the fine models
+    # a valid C after a refused one: the fine models follow it from the C shown (the
+    # refused value was taken as the old C, and the fine models became a fixed number)
+    k = fine // int(C)
+    ex.w_motions.value = 0
+    assert ex.wait(60) and ex.result is res
+    ex.w_motions.value = C + 1
+    assert ex.wait(60) and ex.result.n_motions == C + 1
+    assert fm.value == k * (C + 1) and ex.result.params.fine_models is None
     ex.w_motions.value = C  # back: the fine models still follow C (auto), as before
     assert ex.wait(60) and ex.result.params.fine_models is None
+    assert fm.value == fine
 
 
 def test_bad_upload_shows_a_message_and_keeps_the_result(ex):

@@ -154,14 +154,15 @@ class Controls:
             self._order_radii(event.obj)
         if event is not None and event.obj is self.w_motions:
             fm = self.w_params["fine_models"]
-            old, new = _whole(event.old), _whole(event.new)
+            # from the C the state holds, not the box's previous value: that may be one the
+            # state refused (a typed 0), and the fine models never followed it
+            old, new = self.state.target.n_motions, _whole(event.new)
             # the fine models follow only a C the state can take (it refuses the others,
             # saying why; they must not move the slider meanwhile)
             try:
                 check_motions(self.state.target_sequence, new)
             except ValueError:
                 old = None
-            old = old if isinstance(old, int) else None
             # the fine models follow C (k C by default)
             k = self.state.target.params.replace(fine_models=None).n_fine(1, self._complete())
             if old is not None and fm.value == k * old:
