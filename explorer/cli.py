@@ -447,7 +447,7 @@ def _main(argv: list[str] | None) -> int:
 
             from laav.cli import track_options
 
-            from .video import VideoError, open_video
+            from .video import SEQUENCE_SUFFIXES, VideoError, open_video
 
             # FFmpeg's own log lines (e.g. "moov atom not found") would add to the one-line error
             os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
@@ -456,6 +456,10 @@ def _main(argv: list[str] | None) -> int:
                                    progress=None, max_points=args.max_points, log=_say,
                                    complete_only=args.complete_only)
             except VideoError as exc:
+                suffix = os.path.splitext(str(args.file))[1].lower()
+                if suffix in SEQUENCE_SUFFIXES:  # named as a sequence: say so first
+                    return _fail(None, f"{args.file}: not a readable {suffix} file (binary content "
+                                       "of no sequence format), nor a video OpenCV can track")
                 return _fail(None, str(exc))
             _say(video.frames.describe() + " (drawn behind the points)")
     try:
@@ -465,6 +469,9 @@ def _main(argv: list[str] | None) -> int:
             from .demo import demo_sequence
             seq = demo_sequence()
         else:
+            if _is_params_file(args.file):  # (the page's upload box takes one; here it is --params)
+                return _fail(None, f"{args.file}: a params file (JSON), not a sequence: give the "
+                                   f"sequence as FILE and this with --params {args.file}")
             seq = laav.load_sequence(args.file, isolated=True, max_points=args.max_points)
             hint = laav.io.layout_warning(seq)
             if hint:
@@ -556,6 +563,16 @@ def _main(argv: list[str] | None) -> int:
         return _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origin, built)
     finally:
         startup_gc.end()  # (at once if nothing did it before: the server has stopped)
+
+
+def _is_params_file(path) -> bool:
+    """Whether ``path`` holds a params.json (its first non-blank byte is ``{``, as the upload
+    box tells one: no sequence format starts so)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(4096).lstrip()[:1] == b"{"
+    except OSError:  # (load_sequence says what is wrong with the path)
+        return False
 
 
 def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origin=None,

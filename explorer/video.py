@@ -45,6 +45,10 @@ MAX_BYTES = 48_000_000
 POINTS_PER_MOTION = 8
 
 _ZIP, _MAT, _HDF5 = b"PK\x03\x04", b"MATLAB", b"\x89HDF\r\n\x1a\n"
+#: The sequence files' names: binary content of no sequence format under one of them is
+#: read as a video (content, not name, decides: :func:`is_video`), but when it is none, the
+#: messages say first that the file is not a readable sequence of its kind.
+SEQUENCE_SUFFIXES = (".mat", ".npz", ".csv")
 
 
 class VideoError(ValueError):

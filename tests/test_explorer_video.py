@@ -381,3 +381,32 @@ def test_cli_undecodable_video_in_a_process_is_one_line(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.splitlines() == [f"laav-explore: error: {bad}: cannot open this video "
                                         "(not a format OpenCV reads)"]
+
+
+def test_cli_damaged_sequence_file_and_params_file_are_named_as_such(tmp_path):
+    """Binary content of no sequence format named .npz is a damaged .npz (not only "cannot
+    open this video"); a params.json given as FILE says to pass it with --params."""
+    from explorer.cards.files import _refusal
+
+    bad = tmp_path / "tracks.npz"
+    bad.write_bytes(b"xx\0" + np.random.default_rng(1).bytes(4000))
+    proc = subprocess.run([sys.executable, "-m", "explorer.cli", str(bad), "--no-browser"], cwd=REPO,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines()[-1] == (f"laav-explore: error: {bad}: not a readable .npz file "
+                                            "(binary content of no sequence format), nor a video "
+                                            "OpenCV can track")
+    params = tmp_path / "p.json"
+    params.write_text('  {"r1": 25}')
+    proc = subprocess.run([sys.executable, "-m", "explorer.cli", str(params), "--no-browser"], cwd=REPO,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines() == [f"laav-explore: error: {params}: a params file (JSON), not a "
+                                        f"sequence: give the sequence as FILE and this with --params "
+                                        f"{params}"]
+    # the page's message for the same upload
+    msg = _refusal("unused", "tracks.npz", bad)
+    assert msg.startswith("tracks.npz is not a readable .npz file") and "video" not in msg
+    junk = tmp_path / "clip.mp4"
+    junk.write_bytes(bad.read_bytes())
+    assert "if it is a video" in _refusal("unused", "clip.mp4", junk)

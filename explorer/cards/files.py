@@ -111,12 +111,16 @@ def _refusal(message: str, name: str, path: Path) -> str:
     video is never handed to FFmpeg in the server), and how to open one."""
     from laav.track import IMAGE_EXTENSIONS
 
-    from ..video import is_video
+    from ..video import SEQUENCE_SUFFIXES, is_video
 
     if Path(name).suffix.lower() in IMAGE_EXTENSIONS:
         return (f"{name} is an image, not a sequence file (.mat, .npz or tracks .csv): a folder of a "
                 f"video's frames opens on the command line, laav-explore FOLDER (it tracks, then "
                 "segments) — still showing the last valid result")
+    suffix = Path(name).suffix.lower()
+    if is_video(path) and suffix in SEQUENCE_SUFFIXES:  # named as a sequence: a damaged one
+        return (f"{name} is not a readable {suffix} file: its content is binary and none of the "
+                "sequence formats (MAT, NumPy .npz, tracks CSV) — still showing the last valid result")
     if is_video(path):
         return (f"{name} is not a sequence file (.mat, .npz or tracks .csv): if it is a video, the page "
                 f"does not track uploaded videos — open it with laav-explore {name} on the command line "
