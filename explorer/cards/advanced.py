@@ -70,7 +70,10 @@ class AdvancedPanel:
         p = state.target.params
         self._params = p  # the parameters shown (what the fields hold when they are built)
         self._widgets: dict | None = None  # built when first opened or read (:attr:`widgets`)
-        self.message = Alert("", alert_type="danger", visible=False, width=FIELD_W, margin=(4, 5))
+        # (stretched up to FIELD_W, not FIELD_W wide: with a fixed width the text took the whole
+        # width inside the box's padding and ran past its right edge)
+        self.message = Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
+                             max_width=FIELD_W, margin=(4, 5))
         self.summary = Markdown("", width=FIELD_W, margin=(0, 5), styles={"font-size": "0.9em"})
         self.w_reset = pn.widgets.Button(label="Reset every field to its default", color="warning",
                                          width=FIELD_W, margin=(8, 5))
