@@ -295,6 +295,13 @@ def test_loading_another_sequence_unpins_with_a_message(ex, tmp_path):
     # and pins on the new one
     assert cmp.pin()
     assert ex.wait(60) and cmp.inner.visible and cmp.pinned.sequence is ex.sequence
+    # another file of the same name: the message does not name one sequence twice
+    same = two_motion_sequence(3, P=100, F=9, name="<b>other</b>")
+    path = laav.save_sequence(same, tmp_path / "same.npz")
+    assert ex.load_bytes(path.read_bytes(), "same.npz")
+    assert ex.wait(120) and cmp.pinned is None
+    assert "A was unpinned: it belonged to the sequence shown before this" in _shown(ex.note)
+    assert _shown(ex.note).count("other") == 1
 
 
 def test_the_tour_hides_the_compare_card_and_brings_it_back(ex):

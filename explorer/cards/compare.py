@@ -141,8 +141,11 @@ class CompareView:
         self.fit(seq)
         if self.pinned is None or self.pinned.sequence is seq:
             return None
-        msg = (f"A was unpinned: it belonged to {V.md_text(self.pinned.sequence.name)}, and "
-               f"{V.md_text(seq.name)} is shown now.")
+        old, new = self.pinned.sequence.name, seq.name
+        if old == new:  # (two files of one name, e.g. two synthetic ones: no names to tell apart)
+            msg = f"A was unpinned: it belonged to the sequence shown before this {V.md_text(new)}."
+        else:
+            msg = f"A was unpinned: it belonged to {V.md_text(old)}, and {V.md_text(new)} is shown now."
         self.unpin(msg)
         return msg
 
