@@ -158,12 +158,14 @@ def summarise(rows: list[dict]) -> list[str]:
                 iters += f" (of {len(paired)} runs)"
         for c in (2, 3):
             sub = [r for r in paired if int(r["motions"]) == c]
+            every = sum(int(r["motions"]) == c for r in rs)
             if not sub:
-                ratios.append("-")
+                ratios.append("- (no plain-RV rows)" if every else "- (no runs)")
                 continue
             t = np.median([float(r["seconds"]) for r in sub])
             t_rv = np.median([float(rv[(r["sequence"], str(r["seed"]))]["seconds"]) for r in sub])
-            ratios.append(f"{t / t_rv:.2f} ({1e3 * t:.0f} / {1e3 * t_rv:.0f} ms)")
+            ratios.append(f"{t / t_rv:.2f} ({1e3 * t:.0f} / {1e3 * t_rv:.0f} ms"
+                          + (f", of {len(sub)} runs)" if len(sub) < every else ")"))
         own = [r for r in rs if r.get("informed_iterations") not in (None, "")]
         trial = (f"{100 * np.mean([int(r['informed_converged']) for r in own]):.0f} %, "
                  f"{np.median([int(r['informed_iterations']) for r in own]):.0f}" if own else "-")

@@ -440,14 +440,18 @@ def _main(argv: list[str] | None) -> int:
     video = None
     kept = note = estimate = None  # how the sequence came from the file (state.Origin)
     if args.file is not None:
-        from .video import is_video
+        from .video import damaged_sequence, is_video
 
+        damaged = damaged_sequence(args.file)
+        if damaged:  # (a real video named .csv is still tracked: content decides)
+            return _fail(None, f"{args.file}: not a readable {damaged} file (binary content of no "
+                               "sequence format, and no video's either)")
         if is_video(args.file):
             import os
 
             from laav.cli import track_options
 
-            from .video import SEQUENCE_SUFFIXES, VideoError, open_video
+            from .video import VideoError, open_video
 
             # FFmpeg's own log lines (e.g. "moov atom not found") would add to the one-line error
             os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
@@ -456,10 +460,6 @@ def _main(argv: list[str] | None) -> int:
                                    progress=None, max_points=args.max_points, log=_say,
                                    complete_only=args.complete_only)
             except VideoError as exc:
-                suffix = os.path.splitext(str(args.file))[1].lower()
-                if suffix in SEQUENCE_SUFFIXES:  # named as a sequence: say so first
-                    return _fail(None, f"{args.file}: not a readable {suffix} file (binary content "
-                                       "of no sequence format), nor a video OpenCV can track")
                 return _fail(None, str(exc))
             _say(video.frames.describe() + " (drawn behind the points)")
     try:

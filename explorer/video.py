@@ -45,10 +45,27 @@ MAX_BYTES = 48_000_000
 POINTS_PER_MOTION = 8
 
 _ZIP, _MAT, _HDF5 = b"PK\x03\x04", b"MATLAB", b"\x89HDF\r\n\x1a\n"
-#: The sequence files' names: binary content of no sequence format under one of them is
-#: read as a video (content, not name, decides: :func:`is_video`), but when it is none, the
-#: messages say first that the file is not a readable sequence of its kind.
+#: The sequence files' names (:func:`damaged_sequence`).
 SEQUENCE_SUFFIXES = (".mat", ".npz", ".csv")
+
+
+def damaged_sequence(path, name=None) -> str | None:
+    """The suffix (``".npz"``, ...) when ``path`` is named as a sequence file (``name``, else
+    its own name) but its content is binary of no sequence format (:func:`is_video`) and no
+    common video container's either (:func:`laav.io.looks_like_video`): a damaged file, which
+    the messages call so instead of "cannot open this video". A real video under such a name
+    is still a video (content decides). None otherwise."""
+    from laav.io import looks_like_video
+
+    suffix = Path(name if name is not None else path).suffix.lower()
+    if suffix not in SEQUENCE_SUFFIXES or not is_video(path):
+        return None
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(16)
+    except OSError:
+        return None
+    return None if looks_like_video(head) else suffix
 
 
 class VideoError(ValueError):

@@ -30,7 +30,8 @@ import numpy as np
 from ._sequence import Sequence, SequenceError
 
 __all__ = ["load_sequence", "load_sequence_isolated", "save_sequence", "find_truth_files",
-           "safe_name", "FORMATS", "point_numbers", "csv_track_ids", "layout_warning"]
+           "safe_name", "FORMATS", "point_numbers", "csv_track_ids", "layout_warning",
+           "looks_like_video"]
 
 #: The formats :func:`save_sequence` writes (``format=``); :func:`load_sequence` reads them all.
 FORMATS = ("hopkins", "kt3d", "npz", "csv")
@@ -165,7 +166,7 @@ def load_sequence(path: str | os.PathLike, *, isolated: bool = False,
     csv_head = _csv_header(p)
     if csv_head is not None:
         return _load_csv(p, csv_head, lim)
-    video = _looks_like_video(head)
+    video = looks_like_video(head)
     raise SequenceError(
         f"{p}: not a MATLAB v5 .mat, NumPy .npz or tracks CSV file (unrecognised content)"
         + ("; a video is tracked first: laav track VIDEO (laav-explore opens one directly)"
@@ -395,9 +396,11 @@ def _csv_header(p: Path) -> tuple[str, dict] | None:
     return None
 
 
-def _looks_like_video(head: bytes) -> bool:
-    """Whether a file's first bytes are a common video container's (MP4 / MOV, AVI,
-    Matroska / WebM, Ogg, FLV, MPEG program stream): its error then says to track it."""
+def looks_like_video(head: bytes) -> bool:
+    """Whether a file's first bytes ``head`` (12 or more) are a common video container's
+    (MP4 / MOV, AVI, Matroska / WebM, Ogg, FLV, MPEG program stream): :func:`load_sequence`'s
+    error then says to track it, and ``laav-explore`` tells a video named ``.csv`` from a
+    damaged sequence file by it."""
     return (head[4:8] in (b"ftyp", b"moov", b"mdat", b"wide", b"free")
             or (head[:4] == b"RIFF" and head[8:12] == b"AVI ")
             or head[:4] in (b"\x1a\x45\xdf\xa3", b"OggS", b"\x00\x00\x01\xba")

@@ -612,11 +612,14 @@ def test_chain_summary_without_plain_rv_rows():
     own = [_chain_row("default", "a", 0, 1.0, 20, 0.05), _chain_row("default", "b", 0, 3.0, 40, 0.07, 3)]
     row = chain.summarise(own)[2]
     assert row.startswith("| default | 1.00 / 3.00 / 2.00 |")
-    assert "- (no plain-RV rows) | - ; - |" in row
+    assert "- (no plain-RV rows) | - (no plain-RV rows) ; - (no plain-RV rows) |" in row
     plain = [_chain_row("plain-rv", "a", 0, 2.0, 200, 0.025),
              _chain_row("plain-rv", "b", 0, 2.0, 400, 0.7, 3)]
     rows = chain.summarise(plain + own)
     assert "| 30 / 300 = 0.10 | 2.00 (50 / 25 ms) ; 0.10 (70 / 700 ms) |" in rows[3]
     # a plain-RV row for one run only: the ratios over that run, and the table says so
     rows = chain.summarise(plain[:1] + own)
-    assert "| 20 / 200 = 0.10 (of 1 runs) | 2.00 (50 / 25 ms) ; - |" in rows[3]
+    assert "| 20 / 200 = 0.10 (of 1 runs) | 2.00 (50 / 25 ms) ; - (no plain-RV rows) |" in rows[3]
+    # two two-motion runs, one with plain RV's row: the time ratio says of how many
+    rows = chain.summarise(plain[:1] + own + [_chain_row("default", "c", 0, 0.0, 10, 0.03)])
+    assert "2.00 (50 / 25 ms, of 1 runs) ; - (no plain-RV rows) |" in rows[3]

@@ -405,6 +405,28 @@ def test_empty_upload_says_so_and_a_bad_c_is_refused(ex, seq):
     assert fm.value == fine
 
 
+def test_c_typed_while_another_sequence_is_read_lets_the_fine_models_follow(tmp_path):
+    """A C that arrives while another sequence is being read (its settings already the
+    state's target, the slider still the shown one's): the new sequence keeps its own C (a
+    C typed meanwhile is not asked for) and the fine models stay automatic, following that
+    C (a review found them fixed at the number the slider showed)."""
+    first = _two_motion_sequence(n_points=100, seed=4)
+    e = Explorer(first, n_motions=3, viser=False)
+    try:
+        assert e.wait(120)
+        fm = e.w_params["fine_models"]
+        assert e.result.params.fine_models is None and fm.value == 4 * 3
+        other = _two_motion_sequence(n_points=100, seed=5)
+        path = laav.save_sequence(other, tmp_path / "o.npz")
+        assert e.load_bytes(path.read_bytes(), "o.npz")
+        e.w_motions.value = 4
+        assert e.wait(120)
+        assert e.sequence is not first and e.result.n_motions == other.n_motions == 2
+        assert e.result.params.fine_models is None and fm.value == 4 * 2
+    finally:
+        e.close()
+
+
 def test_bad_upload_shows_a_message_and_keeps_the_result(ex):
     res = ex.result
     _upload(ex, "broken_truth.mat", b"this is not a MATLAB file")

@@ -387,15 +387,16 @@ def test_cli_damaged_sequence_file_and_params_file_are_named_as_such(tmp_path):
     """Binary content of no sequence format named .npz is a damaged .npz (not only "cannot
     open this video"); a params.json given as FILE says to pass it with --params."""
     from explorer.cards.files import _refusal
+    from explorer.video import damaged_sequence
 
     bad = tmp_path / "tracks.npz"
     bad.write_bytes(b"xx\0" + np.random.default_rng(1).bytes(4000))
     proc = subprocess.run([sys.executable, "-m", "explorer.cli", str(bad), "--no-browser"], cwd=REPO,
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
-    assert proc.stderr.splitlines()[-1] == (f"laav-explore: error: {bad}: not a readable .npz file "
-                                            "(binary content of no sequence format), nor a video "
-                                            "OpenCV can track")
+    assert proc.stderr.splitlines() == [f"laav-explore: error: {bad}: not a readable .npz file "
+                                        "(binary content of no sequence format, and no video's "
+                                        "either)"]
     params = tmp_path / "p.json"
     params.write_text('  {"r1": 25}')
     proc = subprocess.run([sys.executable, "-m", "explorer.cli", str(params), "--no-browser"], cwd=REPO,
@@ -410,3 +411,8 @@ def test_cli_damaged_sequence_file_and_params_file_are_named_as_such(tmp_path):
     junk = tmp_path / "clip.mp4"
     junk.write_bytes(bad.read_bytes())
     assert "if it is a video" in _refusal("unused", "clip.mp4", junk)
+    # a real video under a sequence's name is a video still: tracked on the command line,
+    # and the page says how to open it (content decides, not the name)
+    avi = _write_video(tmp_path / "clip.avi", render_clip(0).frames[:3]).rename(tmp_path / "clip.csv")
+    assert damaged_sequence(avi) is None and damaged_sequence(bad) == ".npz"
+    assert "laav-explore clip.csv on the command line" in _refusal("unused", "clip.csv", avi)

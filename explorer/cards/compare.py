@@ -14,6 +14,8 @@ sequence (with a message). The card is hidden while nothing is pinned.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import panel as pn
 from bokeh.core.properties import value
@@ -41,6 +43,15 @@ def compare_mode(mode: str) -> str:
     :data:`explorer.views.COLOR_MODES` key): the same, except that ground truth, which is the
     same on both sides whatever changed, becomes each side's final motions."""
     return "final" if mode == "gt" else mode
+
+
+def _file_named(seq) -> str:
+    """``seq``'s name and the file it came from, ``"synthetic (o.npz)"``; its name alone when it
+    came from no file (a sequence made in memory: ``source`` empty or ``<...>``)."""
+    src = str(getattr(seq, "source", "") or "")
+    if not src or src.startswith("<"):
+        return seq.name
+    return f"{seq.name} ({Path(src).name})"
 
 
 class CompareView:
@@ -142,10 +153,9 @@ class CompareView:
         if self.pinned is None or self.pinned.sequence is seq:
             return None
         old, new = self.pinned.sequence.name, seq.name
-        if old == new:  # (two files of one name, e.g. two synthetic ones: no names to tell apart)
-            msg = f"A was unpinned: it belonged to the sequence shown before this {V.md_text(new)}."
-        else:
-            msg = f"A was unpinned: it belonged to {V.md_text(old)}, and {V.md_text(new)} is shown now."
+        if old == new:  # (two files of one name, e.g. two synthetic ones): their files tell them apart
+            old, new = _file_named(self.pinned.sequence), _file_named(seq)
+        msg = f"A was unpinned: it belonged to {V.md_text(old)}, and {V.md_text(new)} is shown now."
         self.unpin(msg)
         return msg
 

@@ -43,8 +43,10 @@ class Controls:
                                          show_loop_controls=False, value_align="start",
                                          scale_buttons=0.8)
         # panel waits 50 ms after a browser change before handling it (to gather a drag's
-        # values); a frame move costs the server ~3 ms, so the wait was most of its share of
-        # the latency (docs/bench/explorer_browser_latency.md). Changes arriving while one
+        # values); a frame move costs the server a few ms (the explorer's callbacks 3-12 ms,
+        # its whole handling 11-23 ms in live traces: docs/bench/
+        # explorer_browser_latency_2026-12-05h.md), so the wait was most of its share of the
+        # latency (docs/bench/explorer_browser_latency.md). Changes arriving while one
         # is handled are still gathered into one. The parameter sliders go without it too:
         # a value that comes during a computation supersedes it (ExplorerState), so there is
         # nothing to gather, and the wait was 50 ms of every parameter change's latency.
@@ -154,9 +156,12 @@ class Controls:
             self._order_radii(event.obj)
         if event is not None and event.obj is self.w_motions:
             fm = self.w_params["fine_models"]
-            # from the C the state holds, not the box's previous value: that may be one the
-            # state refused (a typed 0), and the fine models never followed it
-            old, new = self.state.target.n_motions, _whole(event.new)
+            # from the C the slider was set for, not the box's previous value: that may be
+            # one the state refused (a typed 0), which the fine models never followed. It is
+            # the C asked for last, or while another sequence is being read (whose settings
+            # the state already holds) the C shown
+            held = self.state.settings if self.switching else self.state.target
+            old, new = held.n_motions, _whole(event.new)
             # the fine models follow only a C the state can take (it refuses the others,
             # saying why; they must not move the slider meanwhile)
             try:

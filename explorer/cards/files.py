@@ -111,16 +111,17 @@ def _refusal(message: str, name: str, path: Path) -> str:
     video is never handed to FFmpeg in the server), and how to open one."""
     from laav.track import IMAGE_EXTENSIONS
 
-    from ..video import SEQUENCE_SUFFIXES, is_video
+    from ..video import damaged_sequence, is_video
 
     if Path(name).suffix.lower() in IMAGE_EXTENSIONS:
         return (f"{name} is an image, not a sequence file (.mat, .npz or tracks .csv): a folder of a "
                 f"video's frames opens on the command line, laav-explore FOLDER (it tracks, then "
                 "segments) — still showing the last valid result")
-    suffix = Path(name).suffix.lower()
-    if is_video(path) and suffix in SEQUENCE_SUFFIXES:  # named as a sequence: a damaged one
-        return (f"{name} is not a readable {suffix} file: its content is binary and none of the "
-                "sequence formats (MAT, NumPy .npz, tracks CSV) — still showing the last valid result")
+    damaged = damaged_sequence(path, name)
+    if damaged:  # named as a sequence, and no video either: a damaged one
+        return (f"{name} is not a readable {damaged} file: its content is binary and of none of "
+                "the sequence formats (MAT, NumPy .npz, tracks CSV) — still showing the last "
+                "valid result")
     if is_video(path):
         return (f"{name} is not a sequence file (.mat, .npz or tracks .csv): if it is a video, the page "
                 f"does not track uploaded videos — open it with laav-explore {name} on the command line "
@@ -342,7 +343,8 @@ class Files:
         """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure.
         ``token``: the upload's (see :meth:`cancel`); a cancelled read's sequence is dropped."""
         base = Path(filename).name or "upload"
-        C = int(self.controls.w_motions.value or 1)  # read before locking: the C for a file without labels
+        # the C for a file without labels: the state's (the box may show a value it refused)
+        C = self.state.target.n_motions
         self.controls.switching = True
         if not self._load_bytes(data, base, C, token):
             if token is None or self._end_reading(token):
