@@ -1134,6 +1134,12 @@ def test_query_and_params_json_set_the_state(seq, tmp_path):
         assert ex.alert.visible and "bad.json" in _shown(ex.alert) and "r1 must be in (0" in _shown(ex.alert)
         _upload(ex, "deep.json", ('{"a":' + "[" * 5000 + "]" * 5000 + "}").encode())
         assert ex.wait(120) and ex.result is res and "nested too deeply" in _shown(ex.alert)
+        # a value far beyond a slider's range widens it while shown; its own range comes back
+        lam = ex.w_params["lam"]
+        own = (lam.start, lam.end)
+        assert ex.apply_query({"lam": ["1e9"]}) == [] and lam.end == 1e9 and lam.value == 1e9
+        assert ex.apply_query({"lam": ["3"]}) == [] and (lam.start, lam.end) == own
+        assert ex.wait(120) and ex.result.params.lam == 3.0
         # the URL carries seeds up to laav's bound, as the command line does; the slider's
         # end stays below 2**53 (the page's numbers are doubles)
         for big in (2**40, 2**63 - 1):

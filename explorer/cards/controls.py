@@ -55,6 +55,9 @@ class Controls:
                                          value="ground truth" if seq.labels is not None
                                          else "final (after Random Voting)", width=SIDE_W)
         self.w_params: dict = {}
+        #: each slider's own range: a value from elsewhere (a URL, a params.json, the Advanced
+        #: card) beyond it widens the slider while it is shown, and the range comes back after
+        self._ranges: dict = {}
         for name, (label, typ, lo, hi, step) in PARAM_SLIDERS.items():
             default = getattr(defaults, name)
             if name == "fine_models":
@@ -72,6 +75,7 @@ class Controls:
             w.param.watch(self._on_param, "value")
             w._debounce = 0  # as the frame player's (above): a newer value supersedes at once
             self.w_params[name] = w
+            self._ranges[name] = (w.start, w.end)
         # (a seed beyond 99, e.g. from the page address, widens the slider: its handle shows it)
         self.w_seed = pn.widgets.IntSlider(label="seed (random stages)", start=0,
                                            end=max(99, min(st.seed, 2**53 - 1)),
@@ -226,8 +230,10 @@ class Controls:
             fm.end = max(fm.end, 4 * C, n_fine)
             for name, w in self.w_params.items():
                 v = n_fine if name == "fine_models" else getattr(settings.params, name)
-                if name != "fine_models":
-                    w.start, w.end = min(w.start, v), max(w.end, v)
+                if name != "fine_models":  # (its own range again for a value within it: a
+                    # URL's λ = 1e9 left the slider 1e9 long, useless in steps of 0.1, for good)
+                    lo, hi = self._ranges[name]
+                    w.start, w.end = min(lo, v), max(hi, v)
                 w.value = v
             # the page's numbers are doubles: the slider's end stays below 2**53 (a larger
             # seed is kept by the state and the URL, the slider shows its end)
