@@ -392,6 +392,14 @@ def test_empty_upload_says_so_and_a_bad_c_is_refused(ex, seq):
         assert ex.wait(60) and ex.result is res
         assert ex.alert.visible and msg in _shown(ex.alert)
         assert (fm.value, fm.end) == (fine, fine_end)  # a refused C does not move the fine models
+        assert ex.w_motions.value == C  # the box shows the C in use again, the message stays
+    # another control after a refused C is not refused with it (the box held the 0, and every
+    # later request carried it)
+    ex.w_motions.value = 0
+    assert ex.wait(60) and ex.result is res and "got 0" in _shown(ex.alert)
+    ex.w_params["lam"].value = 3.0
+    assert ex.wait(60) and ex.result.params.lam == 3.0 and ex.result.n_motions == C
+    res = ex.result
     # a valid C after a refused one: the fine models follow it from the C shown (the
     # refused value was taken as the old C, and the fine models became a fixed number)
     k = fine // int(C)

@@ -204,7 +204,11 @@ def test_explorer_in_chromium(tmp_path):
         box.fill("2.5")
         box.press("Enter")
         page.get_by_text("must be a positive integer, got 2.5").first.wait_for(timeout=20000)
-        assert ex.result is res and ex.controls.w_motions.value == 2.5
+        assert ex.result is res and ex.controls.w_motions.value == res.n_motions
+        # the box shows the C in use again (so that the next change of another control is
+        # not refused with it)
+        _wait_for(lambda: box.input_value() in (str(res.n_motions), f"{res.n_motions}.0"), 20,
+                  "the C box back at the C in use", page=page)
 
         # the 3-D view is served by this process on 127.0.0.1, started and connected once
         # its card is unfolded (it starts folded)

@@ -168,10 +168,11 @@ class Controls:
             old, new = held.n_motions, _whole(event.new)
             # the fine models follow only a C the state can take (it refuses the others,
             # saying why; they must not move the slider meanwhile)
+            refused = False
             try:
                 check_motions(self.state.target_sequence, new)
             except ValueError:
-                old = None
+                old, refused = None, True
             # the fine models follow C (k C by default)
             k = self.state.target.params.replace(fine_models=None).n_fine(1, self._complete())
             if old is not None and fm.value == k * old:
@@ -180,6 +181,12 @@ class Controls:
                     fm.value = k * int(event.new or 1)
         self.state.request(params=self.widget_params(), seed=int(self.w_seed.value),
                            n_motions=self._motions())
+        if event is not None and event.obj is self.w_motions and refused and not self.switching:
+            # the box shows the C in use again (the refusal's message stays): a refused value
+            # left in it made every later change of any control a request with it, refused
+            # too, until C was typed again
+            with self.host.quiet():
+                self.w_motions.value = self.state.target.n_motions
 
     def _order_radii(self, moved) -> None:
         """R1 < R2 always (atoms need a ring): when ``moved`` (the R1 or R2 slider) passes
