@@ -566,11 +566,13 @@ def _main(argv: list[str] | None) -> int:
 
 
 def _is_params_file(path) -> bool:
-    """Whether ``path`` holds a params.json (its first non-blank byte is ``{``, as the upload
-    box tells one: no sequence format starts so)."""
+    """Whether ``path`` holds a params.json (:func:`explorer.state.is_params_json`, as the
+    upload box tells one)."""
+    from .state import is_params_json
+
     try:
         with open(path, "rb") as fh:
-            return fh.read(4096).lstrip()[:1] == b"{"
+            return is_params_json(fh.read(4096))
     except OSError:  # (load_sequence says what is wrong with the path)
         return False
 

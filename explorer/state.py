@@ -492,6 +492,14 @@ def query_of(settings: Settings, default_motions: int | None, frame: int = 0,
     return q
 
 
+def is_params_json(head: bytes) -> bool:
+    """Whether a file starting with ``head`` is a params.json (:func:`settings_from_json`):
+    its first non-blank byte, after a UTF-8 byte-order mark, is ``{``. No sequence format
+    starts so (a tracks CSV starts with its header). The upload box and ``laav-explore
+    FILE`` tell one by it."""
+    return head.removeprefix(b"\xef\xbb\xbf").lstrip()[:1] == b"{"
+
+
 def settings_from_json(text: str | bytes, seq: Sequence, base: Settings,
                        defaults: LaavParams | None = None) -> Settings:
     """Settings from a params.json the explorer exported (``{"params": {...}, "seed": ...,

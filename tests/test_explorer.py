@@ -1142,6 +1142,11 @@ def test_query_and_params_json_set_the_state(seq, tmp_path):
         assert ex.alert.visible and "bad.json" in _shown(ex.alert) and "r1 must be in (0" in _shown(ex.alert)
         _upload(ex, "deep.json", ('{"a":' + "[" * 5000 + "]" * 5000 + "}").encode())
         assert ex.wait(120) and ex.result is res and "nested too deeply" in _shown(ex.alert)
+        # one saved with a UTF-8 byte-order mark is a params.json too (it was read as a
+        # sequence file, and refused as a CSV without the tracks header)
+        _upload(ex, "bom.json", b"\xef\xbb\xbf" + json.dumps({"r1": 27}).encode())
+        assert ex.wait(120) and ex.result.params.r1 == 27.0
+        res = ex.result
         # a value far beyond a slider's range widens it while shown; its own range comes back
         lam = ex.w_params["lam"]
         own = (lam.start, lam.end)

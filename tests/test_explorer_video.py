@@ -398,7 +398,7 @@ def test_cli_damaged_sequence_file_and_params_file_are_named_as_such(tmp_path):
                                         "(binary content of no sequence format, and no video's "
                                         "either)"]
     params = tmp_path / "p.json"
-    params.write_text('  {"r1": 25}')
+    params.write_bytes(b'\xef\xbb\xbf  {"r1": 25}')  # (a byte-order mark, as some editors save)
     proc = subprocess.run([sys.executable, "-m", "explorer.cli", str(params), "--no-browser"], cwd=REPO,
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2

@@ -31,7 +31,7 @@ import laav
 from .. import export
 from .. import views as V
 from ..sizes import DEFAULT_MAX_UPLOAD, UPLOAD_CHUNK, fmt_size, parse_size  # noqa: F401 (re-exported)
-from ..state import Origin
+from ..state import Origin, is_params_json
 from .base import SIDE_W, Markdown, page_box, shown_style
 
 #: Work shorter than this shows no progress line (a slider move on a small sequence).
@@ -321,7 +321,7 @@ class Files:
         if len(data) > self.max_upload:
             self._refuse_big(Path(name).name, len(data))
             return
-        if data.lstrip()[:1] == b"{":  # a params.json (a sequence file never starts so)
+        if is_params_json(data[:4096]):
             if not self.host.load_params(data, name):
                 self.clear_box(Path(name).name)
             return
