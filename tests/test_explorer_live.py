@@ -229,3 +229,23 @@ def test_a_zoom_places_the_atom_ids_again(monkeypatch):
         assert (f.y_range.reset_start, f.y_range.reset_end) == (f.y_range.start, f.y_range.end)
     finally:
         ex.close()
+
+
+def test_a_mark_with_no_rows_keeps_its_legend_swatch():
+    """No point changed motion (the first result) and none misclassified: their legend
+    entries still draw their ring (one row at no position), as their glyphs' look is all
+    constants; a view whose glyph reads a column of its rows (the atoms' colour) gets none."""
+    seq = demo_sequence()
+    ex = Explorer(seq, viser=False)
+    try:
+        assert ex.wait(120)
+        fv, live = ex.frame_view, ex.live
+        assert len(fv.src_changed.data["x"]) == 0  # nothing changed yet
+        rows = live.stand_in(fv.r_changed).data_source.data
+        assert len(rows["x"]) == 1 and np.isnan(rows["x"]).all()
+        tpl = {"_a": np.zeros(0, np.int32), "r1": np.zeros(0), "r2": np.zeros(0),
+               "color": np.zeros(0, "U7"), "atom": np.zeros(0, np.int64)}
+        live.template("frame_atoms", tpl)
+        assert all(len(v) == 0 for v in live.stand_in(fv.r_r1).data_source.data.values())
+    finally:
+        ex.close()

@@ -98,6 +98,9 @@ class FrameView:
         key = self.live.stand_in(self.r_unassigned)
         assert key is not self.r_unassigned, "the unassigned view has no legend stand-in"
         key.glyph.update(line_color=V.NO_ATOM_DARK, size=2 * V.NO_ATOM_SIZE, line_width=1.6)
+        # the R2 circle's swatch as dark as R1's (drawn at 0.35, as in the plot, it was barely
+        # visible in the legend)
+        self.live.stand_in(self.r_r2).glyph.update(line_alpha=0.8)
         self.live.add_text("frame_title", f.title, "text")
         leg = f.legend[0]
         self.live.add_text("frame_unassigned", self._item_unassigned, "label", legend=leg)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
+from bokeh.core.property.vectorization import Field
 from bokeh.models import ColumnDataSource, CustomJS, GlyphRenderer
 
 from .. import views as V
@@ -225,6 +226,19 @@ def legend_rows(tpl: dict, spec: dict, by: str | None = None) -> dict:
     return out
 
 
+def _swatch_needs_no_row(proxy, spec: dict) -> bool:
+    """Whether legend stand-in ``proxy`` draws the same swatch whatever its row holds: its
+    glyph reads no column but the view's coordinates (``spec``'s)."""
+    used = set()
+    for name in proxy.glyph.dataspecs():
+        spec_value = proxy.glyph.lookup(name).get_value(proxy.glyph)  # a Field or a Value
+        if isinstance(spec_value, Field):
+            used.add(spec_value.field)
+        elif isinstance(spec_value, dict) and "field" in spec_value:
+            used.add(spec_value["field"])
+    return not (used - set(spec["coords"]))
+
+
 def _field_of(spec) -> str | None:
     """The column a glyph property reads (a name, a field spec), or None."""
     if isinstance(spec, str):
@@ -398,7 +412,12 @@ class LiveFrames:
         _, tsrc, spec = self.views[name]
         for proxy, by in self._proxies.get(name, ()):
             rows = legend_rows(tpl, spec, by)
-            set_data(proxy.data_source, {c: rows[c] for c in proxy.data_source.data if c in rows})
+            cols = {c: rows[c] for c in proxy.data_source.data if c in rows}
+            if not any(len(v) for v in cols.values()) and _swatch_needs_no_row(proxy, spec):
+                # no row (no point misclassified, none changed): the entry keeps its swatch,
+                # drawn from one row at no position, as its glyph's look is all constants
+                cols = {c: np.full(1, np.nan) for c in cols}
+            set_data(proxy.data_source, cols)
         if not self.enabled:
             return
         if set_data(tsrc, {("@" + k[1:]) if k in ("_a", "_b") else "=" + k: packed_colors(v)

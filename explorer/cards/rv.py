@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import panel as pn
 from bokeh.core.properties import value
-from bokeh.models import ColumnDataSource, LogAxis
+from bokeh.models import ColumnDataSource, Legend, LogAxis
 from bokeh.plotting import figure
 
 from .. import views as V
@@ -26,6 +26,22 @@ ERROR_TITLES = {True: "Error per iteration (vs ground truth)",
 #: The error plot's y axis when not every point voted: ``{k}`` of ``{p}`` points (in the
 #: title, beside the toolbar, "(the K of P points that voted)" was cut off).
 VOTED_AXIS = "% of the {k} voted (of {p})"
+
+
+def legend_above(fig) -> None:
+    """``fig``'s legend in one row between its title and the plot: inside the plot, in any
+    corner, it covered part of a curve (plain RV's error runs at 20-60 % across the whole
+    width of the chart while LAAV's is near 0)."""
+    leg = fig.legend[0]
+    fig.center = [c for c in fig.center if not isinstance(c, Legend)]
+    leg.orientation = "horizontal"
+    leg.location = "top_left"
+    leg.label_text_font_size = "8pt"
+    leg.padding = leg.margin = 2
+    leg.spacing = 12
+    leg.glyph_width = 18
+    leg.border_line_alpha = 0
+    fig.add_layout(leg, "above")
 
 
 class RVView:
@@ -49,10 +65,6 @@ class RVView:
                             color="#8C8C8C", line_dash="dashed", legend_label="plain RV (random start)")
         self.fig_error.xaxis.axis_label = "Random Voting iteration (0 = the start)"
         self.fig_error.yaxis.axis_label = "% of points"
-        self.fig_error.legend.location = "top_right"
-        self.fig_error.legend.label_text_font_size = "8pt"  # (small: it covers the curves less)
-        self.fig_error.legend.padding = self.fig_error.legend.spacing = 2
-        self.fig_error.legend.background_fill_alpha = 0.7
         self.fig_error.title.text_font_size = "11pt"
         self.fig_changed = figure(title="Labels changed per iteration", width=RV_FIG_WIDTH, height=235,
                                   y_axis_type="log", tools=RV_TOOLS, toolbar_location="above")
@@ -69,13 +81,9 @@ class RVView:
                      line_dash="dashed", legend_label="plain RV (random start)")
             fig.xaxis.axis_label = "Random Voting iteration"
             fig.yaxis.axis_label = ylab
-            # top right in both: the counts fall and the margins settle low after the start
-            # (bottom right, the margins' legend covered plain RV's curve)
-            fig.legend.location = "top_right"
-            fig.legend.label_text_font_size = "8pt"
-            fig.legend.padding = fig.legend.spacing = 2
-            fig.legend.background_fill_alpha = 0.7
             fig.title.text_font_size = "11pt"
+        for fig in (self.fig_error, self.fig_changed, self.fig_margin):
+            legend_above(fig)
         assert isinstance(self.fig_changed.yaxis[0], LogAxis)
         self.rv_md = Markdown("", sizing_mode="stretch_width", max_width=820, margin=(0, 10))
         self.card = card("4 · Fine-tuning (Random Voting): LAAV's start vs plain RV",
