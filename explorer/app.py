@@ -35,7 +35,7 @@ from .cards.advanced import AdvancedPanel
 from .cards.base import SIDE_W, Markdown
 from .cards.coarse import CoarseView
 from .cards.compare import CompareView
-from .cards.controls import PARAM_SLIDERS, Controls
+from .cards.controls import FINE_PER_MOTION_END, PARAM_SLIDERS, Controls
 from .cards.files import DEFAULT_MAX_UPLOAD, Files
 from .cards.frame import FrameView
 from .cards.graph import GraphView
@@ -821,7 +821,7 @@ class Explorer:
         c.w_motions.value = settings.n_motions
         self.lock_for_upload(False)
         fm = c.w_params["fine_models"]
-        fm.end = max(fm.end, 4 * settings.n_motions)
+        fm.end = max(fm.end, FINE_PER_MOTION_END * settings.n_motions)
         self.files.show_sequence(seq)
         self.status_bar.show_sequence(seq)
         self.sweep_view.show_sequence(seq)

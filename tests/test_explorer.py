@@ -424,6 +424,7 @@ def test_c_typed_while_another_sequence_is_read_lets_the_fine_models_follow(tmp_
         assert e.wait(120)
         fm = e.w_params["fine_models"]
         assert e.result.params.fine_models is None and fm.value == 4 * 3
+        assert fm.end >= 6 * 3  # the default inside the slider's range, not at its end
         other = _two_motion_sequence(n_points=100, seed=5)
         path = laav.save_sequence(other, tmp_path / "o.npz")
         assert e.load_bytes(path.read_bytes(), "o.npz")

@@ -233,9 +233,11 @@ def test_the_summary_counts_bad_seeds_per_stage(explorer):
 def test_card_runs_loads_a_seed_and_is_cancelled_by_a_parameter_change(explorer):
     ex = explorer
     card = ex.sweep_view
+    assert not card.w_stop.visible  # Stop is offered only while a sweep runs
     card.w_run.clicks += 1  # the button
     assert card.sweep.wait(120)
     assert card.data["seed"] == list(S.SEEDS)
+    assert not card.w_stop.visible and card.w_stop.disabled
     assert all(b.visible for b in card.row_buttons) and card.header.visible
     assert card.progress_md.object.startswith("10 seeds in")
     assert "Worst: seed" in card.caption.object or "Every seed gives the same" in card.caption.object
@@ -251,8 +253,9 @@ def test_card_runs_loads_a_seed_and_is_cancelled_by_a_parameter_change(explorer)
     deadline = time.monotonic() + 60
     while not card.sweep.rows and time.monotonic() < deadline:
         time.sleep(0.005)
+    assert card.sweep.running and card.w_stop.visible and not card.w_stop.disabled
     ex.w_params["lam"].value = 3.5
-    assert not card.sweep.running
+    assert not card.sweep.running and not card.w_stop.visible
     assert card.progress_md.object.startswith("Cancelled: the settings changed")
     assert card.data["seed"] == [] and not any(b.visible for b in card.row_buttons)
     assert "Rows appear" not in card.caption.object and "rows were cleared" in card.caption.object

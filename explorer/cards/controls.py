@@ -18,12 +18,15 @@ from .base import SIDE_W, Host
 PARAM_SLIDERS = {
     "r1": ("R1 — inner atom radius (px)", float, 2.0, 100.0, 1.0),
     "r2": ("R2 — outer atom radius (px)", float, 4.0, 160.0, 1.0),
-    "fine_models": ("fine models of the multicut (paper: 2C)", int, 1, 12, 1),
+    "fine_models": ("fine models of the multicut (paper: 2C)", int, 1, 18, 1),
     "lam": ("λ — epipolar voting strength (1/px²)", float, 0.1, 10.0, 0.1),
     "coding_eps": ("ε — coding merge distortion (px)", float, 1.0, 40.0, 0.5),
     "rv_alpha": ("RV α — forgetting factor", float, 0.5, 1.0, 0.01),
     "rv_max_iter": ("RV iteration cap", int, 10, 500, 10),
 }
+#: The fine-models slider reaches at least this many per motion: the default (4 C, or 2 C
+#: for the paper preset) then sits inside its range, with room to try more, not at its end.
+FINE_PER_MOTION_END = 6
 
 
 class Controls:
@@ -177,7 +180,7 @@ class Controls:
             k = self.state.target.params.replace(fine_models=None).n_fine(1, self._complete())
             if old is not None and fm.value == k * old:
                 with self.host.quiet():
-                    fm.end = max(fm.end, 4 * int(event.new or 1))
+                    fm.end = max(fm.end, FINE_PER_MOTION_END * int(event.new or 1))
                     fm.value = k * int(event.new or 1)
         self.state.request(params=self.widget_params(), seed=int(self.w_seed.value),
                            n_motions=self._motions())
@@ -234,7 +237,7 @@ class Controls:
             C = settings.n_motions
             fm = self.w_params["fine_models"]
             n_fine = settings.params.n_fine(C, self._complete())
-            fm.end = max(fm.end, 4 * C, n_fine)
+            fm.end = max(fm.end, FINE_PER_MOTION_END * C, n_fine)
             for name, w in self.w_params.items():
                 v = n_fine if name == "fine_models" else getattr(settings.params, name)
                 if name != "fine_models":  # (its own range again for a value within it: a

@@ -55,8 +55,9 @@ class SweepView:
         self.w_run = pn.widgets.Button(label=f"Run seeds {SEEDS[0]}-{SEEDS[-1]}", color="primary",
                                        width=150, margin=(6, 10))
         self.w_run.on_click(self._on_run)
+        # (shown only while a sweep runs: disabled, panel draws it as bright as an active one)
         self.w_stop = pn.widgets.Button(label="Stop", color="warning", width=80, margin=(6, 6),
-                                        disabled=True)
+                                        disabled=True, visible=False)
         self.w_stop.on_click(self._on_stop)
         self.progress_bar = pn.indicators.Progress(value=0, max=len(SEEDS), width=180, height=14,
                                                    margin=(14, 6), bar_color="primary", visible=False)
@@ -131,7 +132,7 @@ class SweepView:
             self._show_table(table_columns(rows) if rows else dict(_EMPTY))
             self.progress_bar.value = len(rows)
             self.progress_bar.visible = True
-            self.w_stop.disabled = False
+            self._stop_offered(True)
             self.progress_md.object = f"Seed sweep of {V.md_text(seq.name)}: running seed {SEEDS[0]}…"
             self.caption.object = "Rows appear as their seeds finish; click one to load that seed."
 
@@ -152,14 +153,18 @@ class SweepView:
         rows = list(self.sweep.rows)
         with self.host.hold():
             self.progress_bar.visible = False
-            self.w_stop.disabled = True
+            self._stop_offered(False)
             self.progress_md.object = (f"{len(rows)} seeds in {time.monotonic() - self._t0:.1f} s.")
             self.caption.object = self._summary(rows)
+
+    def _stop_offered(self, on: bool) -> None:
+        self.w_stop.disabled = not on
+        self.w_stop.visible = on
 
     def _show_stopped(self, why: str | None) -> None:
         with self.host.hold():
             self.progress_bar.visible = False
-            self.w_stop.disabled = True
+            self._stop_offered(False)
             if why is None:  # finished rows of other settings
                 self._show_table(dict(_EMPTY))
                 self.progress_md.object = ""
