@@ -177,11 +177,12 @@ def views_figure(seq: laav.Sequence, result: laav.LaavResult, frame: int, mode: 
         ax.set_title("Affinity Z (fN→Mk: fine model N joined motion k)")
 
     ax = axs[1, 1]
-    for vt, name, ls in ((result.voting, "LAAV fine-tuning", "-"), (plain, "plain RV", "--")):
+    runs = ((result.voting, V.own_trial_name(result.voting), "-"), (plain, V.RV_PLAIN_NAME, "--"))
+    for vt, name, ls in runs:  # (named as in card 4)
         r = V.rv_sources(vt)
         if len(r["iteration"]):
             ax.semilogy(r["iteration"], r["changed_plot"], ls, color="#222222" if ls == "-" else "#8C8C8C",
-                        label=f"{name}: labels changed")
+                        label=name)
     ax.set(xlabel="iteration", ylabel="labels changed (0 drawn at 0.5)",
            title="Random Voting convergence")
     ax.legend(fontsize=8)

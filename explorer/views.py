@@ -1402,6 +1402,18 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
 
 
 # ---------------------------------------------------------------------- RV convergence
+#: The names of Random Voting's two runs in card 4 and the PNG export: LAAV's own trial (by
+#: whether it voted with our subspace term: the two curves then differ in their votes, not
+#: only in their start) and plain RV.
+RV_OWN_NAMES = {False: "LAAV's informed trial", True: "LAAV's trial + subspace votes (ours)"}
+RV_PLAIN_NAME = "plain RV (random start)"
+
+
+def own_trial_name(voting) -> str:
+    """:data:`RV_OWN_NAMES` for LAAV's fine-tuning ``voting`` (a ``laav.Voting`` or None)."""
+    return RV_OWN_NAMES[voting is not None and (voting.informed_subspace_weight or 0) > 0]
+
+
 def rv_sources(voting: laav.Voting | None) -> dict:
     """Per-iteration label changes and vote margin of a :class:`laav.Voting`: for LAAV's
     fine-tuning its own informed trial's (``informed_*``), whichever candidate it returned."""

@@ -949,6 +949,7 @@ def test_rv_summary_names_the_points_each_polishing_step_moved():
 def test_rv_card_legend_names_the_subspace_votes_of_ours():
     """Card 4's curves differ in their votes too when LAAV's trial used our subspace term
     (the default): its legend says so; with the paper's votes (the paper preset) it does not."""
+    from explorer import export
     from explorer.cards.rv import OWN_LEGEND, RVView
 
     seq = _two_motion_sequence()
@@ -959,6 +960,11 @@ def test_rv_card_legend_names_the_subspace_votes_of_ours():
         view.draw(seq, res.voting, None)
         for fig in (view.fig_error, view.fig_changed, view.fig_margin):
             assert fig.legend.items[0].label.value == OWN_LEGEND[ours]
+        # the PNG export names the runs as the card does
+        png = export.views_figure(seq, res, 0, "final", plain=res.voting)
+        ax = next(a for a in png.axes if a.get_title() == "Random Voting convergence")
+        names = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert names == [OWN_LEGEND[ours], "plain RV (random start)"], names
     assert "subspace votes (ours)" in OWN_LEGEND[True]
 
 

@@ -17,7 +17,7 @@ RV_FIG_WIDTH = 400
 #: The legend's name of LAAV's informed trial, by whether it voted with our subspace term
 #: (the default) or with the RV paper's votes alone (the paper preset): the two curves then
 #: differ in their votes too, not only in their start.
-OWN_LEGEND = {False: "LAAV's informed trial", True: "LAAV's trial + subspace votes (ours)"}
+OWN_LEGEND = V.RV_OWN_NAMES
 
 
 #: The error chart's title with and without ground truth.
@@ -62,7 +62,7 @@ class RVView:
         self.fig_error.line("iteration", "error", source=self.src_err_laav, line_width=2.5,
                             color="#222222", legend_label="LAAV's informed trial")
         self.fig_error.line("iteration", "error", source=self.src_err_plain, line_width=2,
-                            color="#8C8C8C", line_dash="dashed", legend_label="plain RV (random start)")
+                            color="#8C8C8C", line_dash="dashed", legend_label=V.RV_PLAIN_NAME)
         self.fig_error.xaxis.axis_label = "Random Voting iteration (0 = the start)"
         self.fig_error.yaxis.axis_label = "% of points"
         self.fig_error.title.text_font_size = "11pt"
@@ -78,7 +78,7 @@ class RVView:
             fig.line("iteration", col, source=self.src_rv_laav, line_width=2.5, color="#222222",
                      legend_label="LAAV's informed trial")
             fig.line("iteration", col, source=self.src_rv_plain, line_width=2, color="#8C8C8C",
-                     line_dash="dashed", legend_label="plain RV (random start)")
+                     line_dash="dashed", legend_label=V.RV_PLAIN_NAME)
             fig.xaxis.axis_label = "Random Voting iteration"
             fig.yaxis.axis_label = ylab
             fig.title.text_font_size = "11pt"
@@ -117,8 +117,8 @@ class RVView:
         self.plain = plain
         self.rv_md.object = V.rv_summary(laav_voting, plain, pending=pending, truth=seq.labels,
                                          own=own_chain)
-        ours = laav_voting is not None and (laav_voting.informed_subspace_weight or 0) > 0
+        own = V.own_trial_name(laav_voting)
         for fig in (self.fig_error, self.fig_changed, self.fig_margin):
             item = fig.legend.items[0]
-            if getattr(item.label, "value", None) != OWN_LEGEND[ours]:
-                item.label = value(OWN_LEGEND[ours])
+            if getattr(item.label, "value", None) != own:
+                item.label = value(own)
