@@ -40,7 +40,7 @@ from contextlib import contextmanager
 import numpy as np
 
 import laav
-from laav import LaavParams, LaavResult, Pipeline, Sequence
+from laav import MIN_POINTS, LaavParams, LaavResult, Pipeline, Sequence
 from laav._interrupt import Interrupted, interruptible
 from laav._interrupt import check as check_interrupt
 from laav.params import _BOUNDS
@@ -549,6 +549,12 @@ def check_motions(seq: Sequence, C) -> None:
         raise ValueError(f"the number of motions C must be a positive integer, got {C!r}")
     if C > seq.n_points:
         raise ValueError(f"C = {C} motions is more than the {seq.n_points} points of the sequence")
+    if C > 1 and seq.n_points < MIN_POINTS * C:
+        # (laav only warns, "the labels are probably meaningless", and a C of 99 on the demo's
+        # 350 points took 35 s to say so: a shared link could ask for it)
+        raise ValueError(f"C = {C} motions need at least {MIN_POINTS} points each (the 8-point "
+                         f"algorithm fits each motion's epipolar geometry): the {seq.n_points} "
+                         f"points of the sequence allow at most {max(1, seq.n_points // MIN_POINTS)}")
 
 
 def check_settings(seq: Sequence, settings: Settings) -> None:

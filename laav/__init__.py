@@ -10,7 +10,14 @@ the ``test`` extra); the browser explorer lives in the separate ``explorer`` pac
 uses only the public API exported here.
 """
 
-from ._sequence import IncompleteSequenceError, LaavWarning, Sequence, SequenceError, require_complete
+from ._sequence import (
+    MIN_POINTS,
+    IncompleteSequenceError,
+    LaavWarning,
+    Sequence,
+    SequenceError,
+    require_complete,
+)
 from ._visibility import UNLABELLED_REASONS
 from .io import find_truth_files, load_sequence, load_sequence_isolated, safe_name, save_sequence
 from .metrics import best_label_map, confusion_matrix, labelling_distance, misclassification_rate
@@ -22,6 +29,7 @@ __all__ = [
     "SequenceError",
     "IncompleteSequenceError",
     "require_complete",
+    "MIN_POINTS",
     "UNLABELLED_REASONS",
     "LaavWarning",
     "load_sequence",

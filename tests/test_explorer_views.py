@@ -262,6 +262,12 @@ def test_url_query_round_trip_and_validation(demo):
                  "color must be one of", "'<b>x</b>'", "unknown setting 'nonsense'",
                  "rv_max_iter must be a whole number, got '1.5'"):
         assert part in text, (part, problems)
+    # a C the points cannot hold, 8 points a motion (the 8-point algorithm): refused at once
+    # (C = 99 on the demo's 350 points took 35 s, to a labelling laav calls meaningless)
+    s, _, problems = parse_settings({"motions": "99"}, seq, base)
+    assert s.n_motions == 3 and len(problems) == 1 and "allow at most 43" in problems[0], problems
+    s, _, problems = parse_settings({"motions": "43"}, seq, base)
+    assert s.n_motions == 43 and problems == []
 
 
 def test_params_json_loads_back(demo):
