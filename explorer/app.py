@@ -50,6 +50,7 @@ from .cards.view3d import View3D
 from .state import (
     ExplorerState,
     Origin,
+    Settings,
     non_defaults,
     params_file_note,
     parse_settings,
@@ -292,6 +293,11 @@ class Explorer:
         # (views.point_style), the fine models' colours, the points whose motion changed
         self.result: laav.LaavResult | None = None
         self.sequence: laav.Sequence = seq
+        self._first_sequence = seq  # the one a new page starts with (the address says when another is shown)
+        #: after a link with unusable values, whose warning stays until the page moves on:
+        #: the settings it asked for, then the query the page wrote for their result (the
+        #: warning goes when the address differs from it); None: no such warning
+        self._url_problems_at: Settings | dict | None = None
         self.settings = self.state.target  # (of the result shown, once there is one)
         self.style = None
         self.fine_colors = None
@@ -993,21 +999,38 @@ class Explorer:
             else:
                 self.tour.start(step)
         self.status_bar.show_url_problems(problems)
+        self._url_problems_at = new if problems else None  # (see _sync_url)
         return problems
 
     def query(self) -> dict[str, str]:
         """The URL query of what the page shows now (only what differs from the defaults)."""
+        seq = self.sequence
         return query_of(self.state.settings, self.state.default_motions(), self.frame,
                         self.controls.color_mode, self._default_color(),
-                        self.tour.step if self.tour.active else None)
+                        self.tour.step if self.tour.active else None,
+                        None if seq is self._first_sequence else seq.name)
 
     def _sync_url(self) -> None:
         """(Document thread.) The page address carries the shown state (no reload; the page
         writes it once the views are redrawn: :attr:`StatusBar.address`)."""
-        if self._session_doc is None or self.result is None:
+        if self.result is None:
             return
         q = self.query()
-        self.status_bar.address.value = "?" + urllib.parse.urlencode(q) if q else ""
+        self._forget_url_problems(q)
+        if self._session_doc is not None:
+            self.status_bar.address.value = "?" + urllib.parse.urlencode(q) if q else ""
+
+    def _forget_url_problems(self, q: dict) -> None:
+        """The warning about a link's unusable values stays until the page moves on from
+        that link: hidden once the address (query ``q``) differs from the one written for
+        the result of the link's settings (it stayed for good, beside a page long changed)."""
+        at = self._url_problems_at
+        if isinstance(at, Settings):  # the link's settings: wait for their result
+            if self.state.settings == at:
+                self._url_problems_at = q  # the link as the page shows it (cleaned)
+        elif at is not None and q != at:
+            self._url_problems_at = None
+            self.status_bar.show_url_problems([])
 
     def load_params(self, data: bytes | str, filename: str = "params.json") -> bool:
         """Apply a params.json (as exported here). False, and a message, when it is not valid."""

@@ -344,7 +344,7 @@ _KINDS = {name: kind for name, kind, _, _ in _BOUNDS}
 VIEW_COLORS = tuple(COLOR_MODES.values())
 #: Keys of the page URL's query: every LaavParams field, then the seed, C, frame, colour
 #: and the guided tour's step (1-based; absent when the tour is not running).
-URL_KEYS = tuple(_FIELDS) + ("seed", "motions", "frame", "color", "tour")
+URL_KEYS = tuple(_FIELDS) + ("seed", "motions", "frame", "color", "tour", "sequence")
 _TRUE, _FALSE = ("1", "true", "on", "yes"), ("0", "false", "off", "no")
 
 
@@ -406,6 +406,12 @@ def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings
     values: dict = {}
     view: dict = {}
     seed, C = base.seed, base.n_motions
+    made_on = pairs.get("sequence")
+    if isinstance(made_on, (list, tuple)):
+        made_on = made_on[-1] if made_on else None
+    if isinstance(made_on, bytes):
+        made_on = made_on.decode("utf-8", "replace")
+    other = made_on is not None and str(made_on) != seq.name
     for key, raw in pairs.items():
         if isinstance(raw, (list, tuple)):
             raw = raw[-1] if raw else ""
@@ -417,7 +423,17 @@ def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings
             elif key == "seed":
                 seed = _whole("seed", raw, 0, SEED_MAX)
             elif key == "motions":
+                if other:  # another sequence's C, as a params.json's (settings_from_json)
+                    raise ValueError(f"motions={str(raw)[:12]} was {str(made_on)[:80]!r}'s C: "
+                                     f"C stays {base.n_motions}")
                 C = _whole("motions (C)", raw, 1, seq.n_points)
+            elif key == "sequence":
+                if other:
+                    raise ValueError(
+                        f"this address was made on the sequence {str(made_on)[:80]!r}, opened in "
+                        f"that page (an address does not carry the data); this page shows "
+                        f"{seq.name!r}, to which its other settings are applied. Open "
+                        f"{str(made_on)[:80]!r} here (the upload box) to see it")
             elif key == "frame":
                 view["frame"] = _whole("frame", raw, 0, seq.n_frames - 1)
             elif key == "tour":
@@ -469,11 +485,15 @@ def _short_float(v: float) -> str:
 
 def query_of(settings: Settings, default_motions: int | None, frame: int = 0,
              color: str | None = None, default_color: str | None = None,
-             tour: int | None = None) -> dict[str, str]:
+             tour: int | None = None, sequence: str | None = None) -> dict[str, str]:
     """The URL query for these settings and view: only what differs from the defaults
     (``parse_settings(query_of(s, ...), ...)`` gives ``s`` back); ``tour``: the guided
-    tour's step shown (0-based; None when the tour is not running), written 1-based."""
+    tour's step shown (0-based; None when the tour is not running), written 1-based;
+    ``sequence``: the name of the sequence shown when it is not the one a new page starts
+    with (opened in this page: a page opened at this address says so, not showing it)."""
     q: dict[str, str] = {}
+    if sequence is not None:
+        q["sequence"] = str(sequence)
     for name in _FIELDS:
         v = getattr(settings.params, name)
         if v != getattr(_DEFAULTS, name):

@@ -432,6 +432,9 @@ def test_c_typed_while_another_sequence_is_read_lets_the_fine_models_follow(tmp_
         assert e.wait(120)
         assert e.sequence is not first and e.result.n_motions == other.n_motions == 2
         assert e.result.params.fine_models is None and fm.value == 4 * 2
+        # the address names a sequence opened in the page (a new page would start with
+        # the first one, and says so)
+        assert e.query()["sequence"] == e.sequence.name
     finally:
         e.close()
 
@@ -1126,10 +1129,12 @@ def test_query_and_params_json_set_the_state(seq, tmp_path):
         assert ex.url_alert.visible and re.search(r"(?<!\\)<", ex.url_alert.object) is None
         assert "<img src=x onerror=alert(1)>" in _shown(ex.url_alert)
         assert ex.query() == {"r1": "25", "seed": "3", "frame": "4", "color": "final"}
-        # a control moves the state the URL would carry
+        # a control moves the state the URL would carry; the page has moved on from the
+        # link, whose warning goes
         ex.w_params["lam"].value = 3.0
         assert ex.wait(120)
         assert ex.query()["lam"] == "3"
+        assert not ex.url_alert.visible
         # the exported params.json loads back (as an upload): state restored, also fields
         # without a control here
         text = export.params_json(ex.sequence, ex.result)

@@ -224,7 +224,7 @@ def test_url_query_round_trip_and_validation(demo):
     seq, _ = demo
     base = Settings(laav.LaavParams(), 0, 3)
     assert set(URL_KEYS) == {f.name for f in __import__("dataclasses").fields(laav.LaavParams)} | {
-        "seed", "motions", "frame", "color", "tour"}
+        "seed", "motions", "frame", "color", "tour", "sequence"}
     s, view, problems = parse_settings({"r1": "25", "seed": ["3"], "frame": "4", "color": "final",
                                         "rv_refine": "off", "fine_models": "8", "lam": b"3.5"}, seq, base)
     assert problems == []
@@ -268,6 +268,15 @@ def test_url_query_round_trip_and_validation(demo):
     assert s.n_motions == 3 and len(problems) == 1 and "allow at most 43" in problems[0], problems
     s, _, problems = parse_settings({"motions": "43"}, seq, base)
     assert s.n_motions == 43 and problems == []
+    # an address made on another sequence (opened in that page): its other settings apply
+    # here, its C does not (as a params.json's), and the page says which sequence it was
+    assert query_of(base, 3, sequence="up") == {"sequence": "up"}
+    s, _, problems = parse_settings({"sequence": "up", "motions": "2", "r1": "25"}, seq, base)
+    assert (s.params.r1, s.n_motions) == (25.0, 3) and len(problems) == 2, problems
+    text = " | ".join(problems)
+    assert "made on the sequence 'up'" in text and "the upload box" in text and "C stays 3" in text
+    s, _, problems = parse_settings({"sequence": seq.name, "motions": "2"}, seq, base)
+    assert s.n_motions == 2 and problems == []
 
 
 def test_params_json_loads_back(demo):
