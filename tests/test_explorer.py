@@ -348,6 +348,9 @@ def test_colour_by_and_gaec_step(ex):
     ex.w_step.value = 0
     assert len(ex.src_cut.data["x0"]) == ex.result.graph.n_edges  # nothing contracted yet
     assert "step 0" in ex.graph_caption.object
+    assert not any(it.visible for it in items)  # before any contraction: nothing to mark
+    ex.w_step.value = 1
+    assert len(ex.src_pair.data["x"]) == 2
     assert all(it.visible for it in items)  # a replay step: its entries shown
     ex.w_step.value = ex.w_step.end
     assert "Final fine models" in ex.graph_caption.object

@@ -30,7 +30,8 @@ RELAYOUT_ZOOM = 1.15
 
 #: The legend samples of the kept and cut edges.
 LEGEND_EDGE = "#555555"
-#: The legend entries of a replay step (hidden at the final step, where they mark nothing).
+#: The legend entries of a replay step (hidden at step 0 and the final step, where they mark
+#: nothing).
 STEP_ENTRIES = ("contracted at this step", "joined at this step (ringed)")
 
 
@@ -184,7 +185,8 @@ class GraphView:
         live = self.live
         live.set_atoms(res)
         self.r_ids.visible = res.graph.n_nodes <= MAX_ATOM_IDS
-        replaying = step <= len(res.multicut.contractions)
+        # (step 0, before any contraction, marks nothing either: empty swatches there)
+        replaying = 1 <= step <= len(res.multicut.contractions)
         for item in self._step_items:
             if item.visible != replaying:
                 item.visible = replaying
