@@ -204,6 +204,9 @@ def test_guided_tour_in_the_page(tmp_path):
     with _served(seq, viser=False) as (port, browser, created):
         page, ex, errors = _open(browser, port, created)
         page.wait_for_function(f"({JS_CARD_TITLES})().length >= 7", timeout=30000)  # every card
+        # the main area scrolled down to card 3 first: the tour gives it back at its end
+        page.wait_for_function("document.getElementById('main').scrollHeight > 2500", timeout=30000)
+        page.evaluate("document.getElementById('main').scrollTop = 1500")
         page.locator("button", has_text="Guided tour").first.click()
         title = page.get_by_text(TOUR[0].title)
         title.first.wait_for(timeout=20000)
@@ -254,6 +257,9 @@ def test_guided_tour_in_the_page(tmp_path):
         page.locator("#sidebar-toggle").wait_for(state="visible", timeout=10000)
         # and no outline is left on any card in the page (the server's styles are not enough)
         page.wait_for_function(f"({JS_OUTLINED})() === 0", timeout=10000)
+        # scrolled back where it was (the tour had put it at the top)
+        page.wait_for_function("Math.abs(document.getElementById('main').scrollTop - 1500) <= 1",
+                               timeout=10000)
     assert not errors, errors[:5]
 
 

@@ -46,7 +46,8 @@ _FACTS_CSS = ":host .facts { display: block; font-size: 0.85em; line-height: 1.3
 
 # Runs in the browser when the server writes a command into the hidden ``w_js`` box:
 # ``on:RUN:N`` / ``off:N`` (arrow keys step the tour or not; the sidebar shown and widened for
-# it, and back as it was), ``scroll:N`` (the sidebar and the main area to their tops).
+# it, and back as it was, and the sidebar and main area scrolled back to where they were),
+# ``scroll:N`` (the sidebar and the main area to their tops).
 # Keys go back through the hidden ``w_key`` box as ``RUN.N:k1,k2,...``: the tour's token
 # (sent with ``on:RUN``, new for every tour, so that another tour's or another explorer's
 # presses in the same window are not replayed), the count of presses and the last 32 of them
@@ -85,6 +86,12 @@ if (cmd.startsWith('on:')) {
   t.run = cmd.split(':')[1]; t.n = 0; t.keys = [];
   if (!t.on) {
     t.on = true;
+    // where the sidebar and the main area were scrolled: back there when the tour ends
+    t.scroll = {};
+    for (const id of ['sidebar', 'main']) {
+      const el = document.getElementById(id);
+      if (el) t.scroll[id] = el.scrollTop;
+    }
     // the panel is in the sidebar: shown (unfolded if folded) and widened, back afterwards
     // (a notebook has no such sidebar: nothing to widen there)
     if (toggle && !shown()) { toggle.click(); t.unfolded = true; }
@@ -106,6 +113,18 @@ if (cmd.startsWith('off:')) {
   if (toggle) toggle.style.visibility = '';
   if (toggle && t.unfolded && shown()) toggle.click();
   t.unfolded = false;
+  // back where the page was scrolled before the tour (it ended at the top), once the cards
+  // the tour hid are laid out again (the later try: the page may still be growing)
+  const back = t.scroll || {};
+  t.scroll = {};
+  const restore = () => {
+    for (const [id, top] of Object.entries(back)) {
+      const el = document.getElementById(id);
+      if (el && Math.abs(el.scrollTop - top) > 1) el.scrollTop = top;
+    }
+  };
+  setTimeout(restore, 200);
+  setTimeout(restore, 700);
 }
 if (cmd.startsWith('scroll:')) {
   // the step's text and card from their tops (after the server's layout changes are in)
