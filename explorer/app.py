@@ -50,7 +50,6 @@ from .cards.view3d import View3D
 from .state import (
     ExplorerState,
     Origin,
-    Settings,
     non_defaults,
     params_file_note,
     parse_settings,
@@ -295,9 +294,9 @@ class Explorer:
         self.sequence: laav.Sequence = seq
         self._first_sequence = seq  # the one a new page starts with (the address says when another is shown)
         #: after a link with unusable values, whose warning stays until the page moves on:
-        #: the settings it asked for, then the query the page wrote for their result (the
-        #: warning goes when the address differs from it); None: no such warning
-        self._url_problems_at: Settings | dict | None = None
+        #: the query of the state the link asked for (:meth:`_forget_url_problems`); None: no
+        #: such warning (or a link to a tour step: its warning stays)
+        self._url_problems_at: dict | None = None
         self.settings = self.state.target  # (of the result shown, once there is one)
         self.style = None
         self.fine_colors = None
@@ -999,13 +998,20 @@ class Explorer:
             else:
                 self.tour.start(step)
         self.status_bar.show_url_problems(problems)
-        self._url_problems_at = new if problems else None  # (see _sync_url)
+        # the link's state, as the page asks for it (see _forget_url_problems); a link to a
+        # tour step: the step sets its own colouring, so the link's state is the tour's
+        self._url_problems_at = None
+        if problems and "tour" not in view:
+            self._url_problems_at = self.query(asked=True)
         return problems
 
-    def query(self) -> dict[str, str]:
-        """The URL query of what the page shows now (only what differs from the defaults)."""
+    def query(self, asked: bool = False) -> dict[str, str]:
+        """The URL query of what the page shows now (only what differs from the defaults);
+        ``asked``: with the settings asked for last (the state's target) instead of those
+        of the result shown."""
         seq = self.sequence
-        return query_of(self.state.settings, self.state.default_motions(), self.frame,
+        return query_of(self.state.target if asked else self.state.settings,
+                        self.state.default_motions(), self.frame,
                         self.controls.color_mode, self._default_color(),
                         self.tour.step if self.tour.active else None,
                         None if seq is self._first_sequence else seq.name)
@@ -1016,19 +1022,16 @@ class Explorer:
         if self.result is None:
             return
         q = self.query()
-        self._forget_url_problems(q)
+        self._forget_url_problems()
         if self._session_doc is not None:
             self.status_bar.address.value = "?" + urllib.parse.urlencode(q) if q else ""
 
-    def _forget_url_problems(self, q: dict) -> None:
+    def _forget_url_problems(self) -> None:
         """The warning about a link's unusable values stays until the page moves on from
-        that link: hidden once the address (query ``q``) differs from the one written for
-        the result of the link's settings (it stayed for good, beside a page long changed)."""
+        that link: hidden once the state asked for (settings, frame, colouring, sequence)
+        differs from the link's (it stayed for good, beside a page long changed)."""
         at = self._url_problems_at
-        if isinstance(at, Settings):  # the link's settings: wait for their result
-            if self.state.settings == at:
-                self._url_problems_at = q  # the link as the page shows it (cleaned)
-        elif at is not None and q != at:
+        if at is not None and self.query(asked=True) != at:
             self._url_problems_at = None
             self.status_bar.show_url_problems([])
 

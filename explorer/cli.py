@@ -509,9 +509,15 @@ def _main(argv: list[str] | None) -> int:
         _say(f"C = {C} estimated ({count.explain()})")
     else:
         C = args.motions if args.motions is not None else seq.n_motions
-    if C > seq.n_points:
-        return _fail(parser, f"--motions {C} exceeds the {seq.n_points} points of {seq.name}")
-    from .state import Settings, parse_settings, settings_from_json
+    from .state import Settings, check_motions, parse_settings, settings_from_json
+
+    try:  # (before --param and --params: a C the points cannot hold is this argument's fault)
+        check_motions(seq, C)
+    except ValueError as exc:
+        given = args.motions not in (None, "auto")
+        whose = ("--motions" if given else "the estimated C" if estimate is not None
+                 else f"{seq.name}'s ground truth")
+        return _fail(parser, f"{whose}: {exc}" + ("" if given else "; give a smaller C with --motions"))
 
     start = laav.params.PRESETS[args.preset]()
     from .state import SEED_MAX
@@ -536,8 +542,10 @@ def _main(argv: list[str] | None) -> int:
             name, sep, val = item.partition("=")
             if not sep or not name.strip():
                 return _fail(parser, f"--param takes NAME=VALUE, got {item!r}")
-            if name.strip() in ("seed", "motions", "frame", "color"):
-                return _fail(parser, f"--param sets LaavParams fields; use --seed / --motions for {name!r}")
+            if name.strip() in ("seed", "motions", "frame", "color", "tour", "sequence"):
+                return _fail(parser, f"--param sets LaavParams fields; use --seed / --motions for {name!r}"
+                             if name.strip() in ("seed", "motions") else
+                             f"--param sets LaavParams fields; {name.strip()!r} is the page address's")
             pairs[name.strip()] = val
         settings, _, problems = parse_settings(pairs, seq, settings)
         if problems:

@@ -342,8 +342,9 @@ _DEFAULTS = LaavParams()
 _KINDS = {name: kind for name, kind, _, _ in _BOUNDS}
 #: Colour-by keys in the URL (``color=final``) -> the views' colour modes.
 VIEW_COLORS = tuple(COLOR_MODES.values())
-#: Keys of the page URL's query: every LaavParams field, then the seed, C, frame, colour
-#: and the guided tour's step (1-based; absent when the tour is not running).
+#: Keys of the page URL's query: every LaavParams field, then the seed, C, frame, colour,
+#: the guided tour's step (1-based; absent when the tour is not running) and the name of a
+#: sequence opened in the page (absent for the one a new page starts with: ``query_of``).
 URL_KEYS = tuple(_FIELDS) + ("seed", "motions", "frame", "color", "tour", "sequence")
 _TRUE, _FALSE = ("1", "true", "on", "yes"), ("0", "false", "off", "no")
 
@@ -401,6 +402,9 @@ def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings
     are checked against ``seq``. Returns ``(settings, view, problems)``: the settings from
     ``base`` with every valid value applied, ``view`` with ``frame`` / ``color`` when given
     and valid, and one readable message per key that was not used (never raises).
+    A ``sequence`` naming another sequence than ``seq`` (an address made where that one was
+    opened) is one such message, and the address's C is then not used (another sequence's C,
+    as for a params.json); its other values are.
     """
     problems: list[str] = []
     values: dict = {}
@@ -487,7 +491,8 @@ def query_of(settings: Settings, default_motions: int | None, frame: int = 0,
              color: str | None = None, default_color: str | None = None,
              tour: int | None = None, sequence: str | None = None) -> dict[str, str]:
     """The URL query for these settings and view: only what differs from the defaults
-    (``parse_settings(query_of(s, ...), ...)`` gives ``s`` back); ``tour``: the guided
+    (``parse_settings(query_of(s, ...), seq, ...)`` gives ``s`` back, on the sequence named
+    ``sequence``); ``tour``: the guided
     tour's step shown (0-based; None when the tour is not running), written 1-based;
     ``sequence``: the name of the sequence shown when it is not the one a new page starts
     with (opened in this page: a page opened at this address says so, not showing it)."""

@@ -42,7 +42,7 @@ MAX_WIDTH = 410
 MAX_BYTES = 48_000_000
 #: Tracks LAAV needs per motion (the 8-point algorithm fits each motion's fundamental
 #: matrices; ``laav.estimate_motions`` asks for two motions' worth of complete tracks).
-POINTS_PER_MOTION = 8
+POINTS_PER_MOTION = laav.MIN_POINTS
 
 _ZIP, _MAT, _HDF5 = b"PK\x03\x04", b"MATLAB", b"\x89HDF\r\n\x1a\n"
 #: The sequence files' names (:func:`damaged_sequence`).

@@ -1138,6 +1138,19 @@ def test_query_and_params_json_set_the_state(seq, tmp_path):
         assert ex.wait(120)
         assert ex.query()["lam"] == "3"
         assert not ex.url_alert.visible
+        # a link that asks for no new result: its warning goes with the first change after it
+        assert ex.apply_query({"nonsense": ["1"]}) and ex.url_alert.visible
+        ex.w_frame.value = 2
+        assert ex.wait(120) and not ex.url_alert.visible
+        # a link whose result is superseded by a newer change before it is shown: the page
+        # moved on, the warning goes with the newer result
+        assert ex.apply_query({"nonsense": ["1"], "lam": ["2.5"]}) and ex.url_alert.visible
+        ex.w_params["r1"].value = 22.0
+        assert ex.wait(120) and ex.result.params.r1 == 22.0 and not ex.url_alert.visible
+        ex.w_params["r1"].value = 25.0
+        ex.w_params["lam"].value = 3.0
+        ex.w_frame.value = 4
+        assert ex.wait(120)
         # the exported params.json loads back (as an upload): state restored, also fields
         # without a control here
         text = export.params_json(ex.sequence, ex.result)
@@ -1214,7 +1227,11 @@ def test_cli_loads_params_json_and_param(monkeypatch, tmp_path, capsys):
                       (["--param", "zz=1"], "unknown setting 'zz'"),
                       (["--params", str(tmp_path / "missing.json")], "No such file"),
                       (["--params", str(f)], "not a JSON file"),
-                      (["--preset", "ours"], "invalid choice")):
+                      (["--preset", "ours"], "invalid choice"),
+                      (["--param", "sequence=x"], "'sequence' is the page address's"),
+                      # a C the points cannot hold is --motions' fault, not --param's
+                      (["--motions", str(s.n_points // 8 + 1), "--param", "lam=3"],
+                       f"--motions: C = {s.n_points // 8 + 1} motions need at least 8 points")):
         assert main([str(f), "--no-browser", "--port", "0", *args]) == 2
         err = capsys.readouterr().err
         assert msg in err and "Traceback" not in err, (args, err)

@@ -65,7 +65,7 @@ class Controls:
             default = getattr(defaults, name)
             if name == "fine_models":
                 value = p.n_fine(st.n_motions, seq.is_complete)
-                hi = max(hi, 4 * st.n_motions)
+                hi = max(hi, FINE_PER_MOTION_END * st.n_motions)
                 w = pn.widgets.IntSlider(label=label, start=lo, end=hi, step=step, value=value,
                                          width=SIDE_W)
             elif typ is int:

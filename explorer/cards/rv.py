@@ -60,7 +60,7 @@ class RVView:
         self.fig_error = figure(title=ERROR_TITLES[True], width=RV_FIG_WIDTH, height=235, tools=RV_TOOLS,
                                 toolbar_location="above")
         self.fig_error.line("iteration", "error", source=self.src_err_laav, line_width=2.5,
-                            color="#222222", legend_label="LAAV's informed trial")
+                            color="#222222", legend_label=V.RV_OWN_NAMES[False])
         self.fig_error.line("iteration", "error", source=self.src_err_plain, line_width=2,
                             color="#8C8C8C", line_dash="dashed", legend_label=V.RV_PLAIN_NAME)
         self.fig_error.xaxis.axis_label = "Random Voting iteration (0 = the start)"
@@ -76,7 +76,7 @@ class RVView:
                                (self.fig_margin, "margin", "(best − 2nd best) / sum of votes")):
             # neutral greys: colours mean motions on this page
             fig.line("iteration", col, source=self.src_rv_laav, line_width=2.5, color="#222222",
-                     legend_label="LAAV's informed trial")
+                     legend_label=V.RV_OWN_NAMES[False])
             fig.line("iteration", col, source=self.src_rv_plain, line_width=2, color="#8C8C8C",
                      line_dash="dashed", legend_label=V.RV_PLAIN_NAME)
             fig.xaxis.axis_label = "Random Voting iteration"

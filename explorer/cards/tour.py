@@ -118,6 +118,7 @@ if (cmd.startsWith('off:')) {
   const back = t.scroll || {};
   t.scroll = {};
   const restore = () => {
+    if (t.on) return;  // a new tour started meanwhile: its own scroll stands
     for (const [id, top] of Object.entries(back)) {
       const el = document.getElementById(id);
       if (el && Math.abs(el.scrollTop - top) > 1) el.scrollTop = top;
