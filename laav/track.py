@@ -292,7 +292,9 @@ def track(
         progress = sys.stderr.isatty()
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        # (a text bar everywhere: tqdm.auto's notebook bar warns "IProgress not found" in a
+        # kernel without ipywidgets, and the text bar shows in a notebook's cell too)
+        from tqdm import tqdm
 
         bar = tqdm(total=count, unit="frame", desc="tracking", file=sys.stderr, leave=False)
 
