@@ -31,7 +31,7 @@ __all__ = [
     "points_template", "legend_points", "graph_specs",
     "graph_templates", "atom_sizes", "label_clashes", "id_layout", "pair_id_sides", "id_boxes", "ID_FONT_PX",
     "PAIR_ID_FONT_PX", "ID_CLEAR",
-    "instantiate", "point_track", "atom_track", "fill_text",
+    "instantiate", "point_track", "atom_track", "fill_text", "lam_label",
     "replay_labels",
     "replay_caption", "fine_count", "fine_count_note", "z_sources", "joint_margins", "shows_margins",
     "signed_log", "margin_top", "margin_ticks", "margin_text", "cell_font_px", "MARGIN_PALETTE",
@@ -1762,6 +1762,14 @@ def stage_numbers(seq: laav.Sequence, result: laav.LaavResult, plain: laav.Votin
             own = rv_error_sources(seq, plain)["error"]
             out["error_plain_trial"] = float(own[-1]) / 100 if own.size else None
     return out
+
+
+def lam_label(result: laav.LaavResult) -> str:
+    """``λ = ...`` as the stages ran it: with ``noise_adaptive`` on noisy tracks the λ set is
+    scaled for the measured noise (:attr:`laav.LaavResult.run_params`), and card 3's merge
+    used the scaled one: ``λ = 0.755 (noise-scaled)`` (the numbers card names the λ set)."""
+    ran = result.run_params.lam
+    return f"λ = {ran:.3g}" + ("" if ran == result.params.lam else " (noise-scaled)")
 
 
 def _noise_numbers(result: laav.LaavResult) -> dict:

@@ -889,3 +889,15 @@ def test_legends_read_numbers_as_numbers():
                                    "fine model 10 → motion 2", "no fine model"]
     motions = np.array([f"motion {k}" for k in (10, 2, 1, 9)])
     assert motions[V.label_order(motions)].tolist() == ["motion 1", "motion 2", "motion 9", "motion 10"]
+
+
+def test_card_3_names_the_lambda_the_merge_used():
+    """On noisy tracks ``noise_adaptive`` scales λ (``LaavResult.run_params``); card 3's
+    title named the λ set, which the merge did not use (a QA pass: 2 shown, 0.755 used)."""
+    from types import SimpleNamespace
+
+    def result(set_, ran):
+        return SimpleNamespace(params=SimpleNamespace(lam=set_), run_params=SimpleNamespace(lam=ran))
+
+    assert V.lam_label(result(2.0, 2.0)) == "λ = 2"
+    assert V.lam_label(result(2.0, 0.7551)) == "λ = 0.755 (noise-scaled)"

@@ -84,7 +84,7 @@ class CoarseView:
         single = method == "joint" and not margins  # no partitions compared (see Coarse.shortlist)
         if margins:
             # (the model count is on the axes: with it the title overran the plot's width)
-            self.fig_z.title.text = f"Joint merge margins (nats), λ = {res.params.lam:g}"
+            self.fig_z.title.text = f"Joint merge margins (nats), {V.lam_label(res)}"
             w = res.params.coarse_epipolar_weight
             how = (f"ours: of the partitions of least coding length (ε = {res.params.coding_eps:g} px), "
                    "the one of least coding length "
@@ -103,7 +103,7 @@ class CoarseView:
             how = (f"ours: {decided}; the map shows exp(−ΔL), ΔL the nats per point that merging a "
                    "pair adds; the paper's epipolar vote is the paper preset")
         else:
-            self.fig_z.title.text = f"Affinity Z (λ = {res.params.lam:g}): {len(factors)} fine models"
+            self.fig_z.title.text = f"Affinity Z ({V.lam_label(res)}): {len(factors)} fine models"
             how = "spectral clustering of Z (the paper's epipolar votes)"
         listed = V.shortlist_table(seq, res)  # "" but for the joint merge
         self.merge_md.object = (f"**Which fine model joined which motion** ({how}):\n\n"
