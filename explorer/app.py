@@ -794,7 +794,7 @@ class Explorer:
                 # a preview's time: its own stages' (what this change reran, or the warm child)
                 s.show_result(seq, num["error_final"], sum(result.timings.values()) if preview
                               else self.state.compute_seconds,
-                              non_defaults(settings, self.state.default_motions(seq), seq.is_complete),
+                              non_defaults(settings, self._usual_motions(seq), seq.is_complete),
                               self.change, ahead=self.state.computed_ahead(result), preview=preview,
                               own=own)
                 self.view3d.show_first()
@@ -968,6 +968,12 @@ class Explorer:
         self.view3d.set_colors(self.style["color"])
 
     # ------------------------------------------------------------------ shared state (URL, params.json)
+    def _usual_motions(self, seq: laav.Sequence) -> int | None:
+        """The C the status line counts as the default for ``seq``: its ground truth's, else
+        the estimated one (a file without ground truth); None when C was given (no default)."""
+        C = self.state.default_motions(seq)
+        return C if C is not None else self.origin_of(seq).motions_estimate
+
     def _default_color(self, seq=None) -> str:
         seq = self.sequence if seq is None else seq
         return "gt" if seq.labels is not None else "final"

@@ -472,6 +472,14 @@ def test_good_upload_replaces_the_sequence(ex, seq):
     assert ex.result.n_motions == C and ex.w_motions.value == C
     assert ex.note.visible and "no ground truth" in ex.note.object
     assert V.md_text(f"C = {C} was estimated: ") in ex.note.object
+    assert "All settings at their defaults" in ex.status.object
+    # another C than the estimate is a setting off its default (the status line said "All
+    # settings at their defaults" beside "What changed: C 3 → 2")
+    ex.w_motions.value = C + 1
+    assert ex.wait(60) and ex.result.n_motions == C + 1
+    assert f"C = {C + 1}" in _shown(ex.status), ex.status.object
+    ex.w_motions.value = C
+    assert ex.wait(60) and "All settings at their defaults" in ex.status.object
     # the frame view's caption does not count errors it cannot score
     assert "no ground truth, so no point is marked misclassified" in ex.frame_view.caption.object
     # ... nor is its misclassified layer offered (it would mark nothing)
