@@ -247,7 +247,11 @@ class Video:
             n_full = int(np.count_nonzero(seq.visible.all(axis=0)))
             kept = (f"all {seq.n_points} kept, {100 * seq.visible_share:.1f} % of the track x frame entries "
                     f"visible ({n_full} tracks seen in every frame; a point is drawn only where it is seen)")
-        return f"{head}{kept}; {why}."
+        if self.motion_count is None:
+            return f"{head}{kept}; {why}."
+        from .state import ESTIMATE_NOTE  # (how far an estimate goes, as for a tracks file)
+
+        return f"{head}{kept}; {why}. {ESTIMATE_NOTE}"
 
 
 def open_video(path, n_motions: int | None = None, *, track_options: dict | None = None,

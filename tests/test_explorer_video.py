@@ -182,13 +182,17 @@ def test_open_video_keeps_every_track_and_estimates_c(video):
             f"{100 * seq.visible_share:.1f} % of the track x frame entries visible ({n_full} tracks seen "
             "in every frame") in text
     assert "C = 3 estimated" in text
+    # how far an estimate goes, as the page says for a tracks file (not for a C given)
+    from explorer.state import ESTIMATE_NOTE
+
+    assert text.endswith(ESTIMATE_NOTE)
     full = open_video(CLIP, 3, progress=False, complete_only=True)
     assert full.sequence.is_complete and full.sequence.n_points == n_full == full.kept.size
     summary = full.summary()
     assert f"kept {n_full} of the {full.n_tracks}, those seen in every frame (--complete-only" in summary
     given = open_video(CLIP, 2, progress=False, track_options={"stride": 2})
     assert given.n_motions == 2 and given.motion_count is None and given.sequence.n_frames == 12
-    assert "C = 2 as given" in given.summary()
+    assert "C = 2 as given" in given.summary() and ESTIMATE_NOTE not in given.summary()
 
 
 @pytest.mark.parametrize("case, needle", [
