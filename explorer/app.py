@@ -166,6 +166,11 @@ window.cancelAnimationFrame = (id) => {
 """
 
 
+#: Markers of :attr:`Explorer._url_problems_at` for a link to a tour step: its tour not yet
+#: seen running, and running.
+_TOUR_LINK, _TOUR_RUNNING = object(), object()
+
+
 class _Template(pn.template.BootstrapTemplate):
     """The page's template, its document built with bokeh's model index frozen.
 
@@ -294,9 +299,9 @@ class Explorer:
         self.sequence: laav.Sequence = seq
         self._first_sequence = seq  # the one a new page starts with (the address says when another is shown)
         #: after a link with unusable values, whose warning stays until the page moves on:
-        #: the query of the state the link asked for (:meth:`_forget_url_problems`); None: no
-        #: such warning (or a link to a tour step: its warning stays)
-        self._url_problems_at: dict | None = None
+        #: the query of the state the link asked for (:meth:`_forget_url_problems`; for a link
+        #: to a tour step, _TOUR_LINK / _TOUR_RUNNING until its tour ends); None: no warning
+        self._url_problems_at: dict | object | None = None
         self.settings = self.state.target  # (of the result shown, once there is one)
         self.style = None
         self.fine_colors = None
@@ -777,8 +782,8 @@ class Explorer:
                 s.alert.visible = self.state.error is not None
                 data_notes = []  # about the data: kept when the colour mode changes
                 if self.video is not None and seq is self.video.sequence:
-                    data_notes.append(V.md_text(self.video.summary()) + " No ground truth: errors cannot be "
-                                      "scored.")
+                    data_notes.append(V.md_text(self.video.summary(settings.n_motions))
+                                      + " No ground truth: errors cannot be scored.")
                 elif seq.labels is None:
                     data_notes.append(f"{V.md_text(seq.name)} has no ground truth: errors cannot be scored; "
                                       + V.md_text(self.origin_of(seq).motions_note(settings.n_motions)))
@@ -972,6 +977,9 @@ class Explorer:
         """The C the status line counts as the default for ``seq``: its ground truth's, else
         the estimated one (a file without ground truth); None when C was given (no default)."""
         C = self.state.default_motions(seq)
+        if C is None and self.video is not None and seq is self.video.sequence \
+                and self.video.motion_count is not None:  # a tracked video's estimate
+            return self.video.n_motions
         return C if C is not None else self.origin_of(seq).motions_estimate
 
     def _default_color(self, seq=None) -> str:
@@ -1005,10 +1013,10 @@ class Explorer:
                 self.tour.start(step)
         self.status_bar.show_url_problems(problems)
         # the link's state, as the page asks for it (see _forget_url_problems); a link to a
-        # tour step: the step sets its own colouring, so the link's state is the tour's
+        # tour step: the state once its tour has ended (the steps set their own colourings)
         self._url_problems_at = None
-        if problems and "tour" not in view:
-            self._url_problems_at = self.query(asked=True)
+        if problems:
+            self._url_problems_at = _TOUR_LINK if "tour" in view else self.query(asked=True)
         return problems
 
     def query(self, asked: bool = False) -> dict[str, str]:
@@ -1037,6 +1045,12 @@ class Explorer:
         that link: hidden once the state asked for (settings, frame, colouring, sequence)
         differs from the link's (it stayed for good, beside a page long changed)."""
         at = self._url_problems_at
+        if at is _TOUR_LINK or at is _TOUR_RUNNING:  # a link to a tour step
+            if self.tour.active:
+                self._url_problems_at = _TOUR_RUNNING
+            elif at is _TOUR_RUNNING:  # its tour ended: the page as the tour left it
+                self._url_problems_at = self.query(asked=True)
+            return
         if at is not None and self.query(asked=True) != at:
             self._url_problems_at = None
             self.status_bar.show_url_problems([])

@@ -13,7 +13,8 @@ where it is seen. A video that cannot be used (unreadable, no features, too few 
 with code 2 and one line on stderr.
 
 The page address carries its state: ``/?r1=25&seed=3`` opens with R1 = 25 and seed 3 (keys:
-every :class:`laav.LaavParams` field, ``seed``, ``motions``, ``frame``, ``color``), and moving
+every :class:`laav.LaavParams` field, ``seed``, ``motions``, ``frame``, ``color``, ``tour``,
+``sequence``), and moving
 a control updates it, so a copied address shows the same view. ``--params`` loads a
 ``params.json`` exported by the page; ``--param`` sets one parameter (repeatable, applied last);
 ``--preset paper`` (or ``with-plain-rv``) starts from :meth:`laav.LaavParams.paper` (or
@@ -511,13 +512,16 @@ def _main(argv: list[str] | None) -> int:
         C = args.motions if args.motions is not None else seq.n_motions
     from .state import Settings, check_motions, parse_settings, settings_from_json
 
-    try:  # (before --param and --params: a C the points cannot hold is this argument's fault)
-        check_motions(seq, C)
+    given = args.motions not in (None, "auto")
+    try:  # (before --param: a C the points cannot hold is this argument's or the file's fault;
+        # a --params file may set another C, and the last check below judges that)
+        if given or args.params is None:
+            check_motions(seq, C)
     except ValueError as exc:
-        given = args.motions not in (None, "auto")
-        whose = ("--motions" if given else "the estimated C" if estimate is not None
-                 else f"{seq.name}'s ground truth")
-        return _fail(parser, f"{whose}: {exc}" + ("" if given else "; give a smaller C with --motions"))
+        if given:
+            return _fail(parser, f"--motions: {exc}")
+        whose = "the estimated C" if estimate is not None else f"{seq.name}'s ground truth"
+        return _fail(None, f"{whose}: {exc}; give a smaller C with --motions")
 
     start = laav.params.PRESETS[args.preset]()
     from .state import SEED_MAX

@@ -228,8 +228,9 @@ class Video:
     options: dict = field(default_factory=dict)
     complete_only: bool = False
 
-    def summary(self) -> str:
-        """What was done, in plain text (the page shows it as text)."""
+    def summary(self, n_motions: int | None = None) -> str:
+        """What was done, in plain text (the page shows it as text); ``n_motions``: the C in
+        use, when the C box changed it from the one estimated or given here."""
         seq = self.sequence
         if self.motion_count is not None:
             why = f"C = {self.n_motions} estimated by laav.estimate_motions ({self.motion_count.explain()})"
@@ -247,6 +248,8 @@ class Video:
             n_full = int(np.count_nonzero(seq.visible.all(axis=0)))
             kept = (f"all {seq.n_points} kept, {100 * seq.visible_share:.1f} % of the track x frame entries "
                     f"visible ({n_full} tracks seen in every frame; a point is drawn only where it is seen)")
+        if n_motions is not None and n_motions != self.n_motions:
+            return f"{head}{kept}; {why}; C = {n_motions} is taken from the C box."
         if self.motion_count is None:
             return f"{head}{kept}; {why}."
         from .state import ESTIMATE_NOTE  # (how far an estimate goes, as for a tracks file)

@@ -1373,7 +1373,8 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
                sample_left={"x": pts[fl, u, 0], "y": pts[fl, u, 1]},
                sample_right={"x": pts[fr, u, 0], "y": pts[fr, u, 1]},
                distance=term(co.epipolar_distance), sample_distance=float(vs.distance[j, k]),
-               sample_vote=float(np.exp(-result.params.lam * vs.distance[j, k])),
+               # (the λ the merge used: scaled for the noise on noisy tracks, lam_label)
+               sample_vote=float(np.exp(-result.run_params.lam * vs.distance[j, k])),
                pairwise=term(co.pairwise_vote), coassociation=term(co.coassociation),
                affinity=term(co.affinity),
                n_samples=n_samples)
@@ -1769,7 +1770,7 @@ def lam_label(result: laav.LaavResult) -> str:
     scaled for the measured noise (:attr:`laav.LaavResult.run_params`), and card 3's merge
     used the scaled one: ``λ = 0.755 (noise-scaled)`` (the numbers card names the λ set)."""
     ran = result.run_params.lam
-    return f"λ = {ran:.3g}" + ("" if ran == result.params.lam else " (noise-scaled)")
+    return f"λ = {ran:g}" if ran == result.params.lam else f"λ = {ran:.3g} (noise-scaled)"
 
 
 def _noise_numbers(result: laav.LaavResult) -> dict:

@@ -102,7 +102,7 @@ def test_views_are_pure_functions_of_the_result(seq):
     assert not V.epipolar_sources(seq, res, 0, 0)["ok"]
     e = V.epipolar_sources(seq, res, 0, 1)
     assert e["ok"] and list(e["frames"]) in res.coarse.frame_pairs.tolist()
-    assert e["sample_vote"] == pytest.approx(np.exp(-res.params.lam * e["sample_distance"]))
+    assert e["sample_vote"] == pytest.approx(np.exp(-res.run_params.lam * e["sample_distance"]))
     assert e["pairwise"] == pytest.approx(res.coarse.pairwise_vote[0, 1])
     assert len(e["sample_left"]["x"]) == np.unique(res.coarse.vote_samples.points[0, 1]).size
     num = V.stage_numbers(seq, res)
@@ -830,7 +830,9 @@ def test_cli_argument_errors_exit_2_with_a_message(tmp_path, capsys):
     assert main(["--port", "70000"]) == 2
     assert main(["--bogus"]) == 2
     assert main([str(unlabelled), "--motions", "1000"]) == 2
-    assert "exceeds" in capsys.readouterr().err
+    assert "--motions: C = 1000 motions is more than the 120 points" in capsys.readouterr().err
+    assert main([str(unlabelled), "--motions", "16"]) == 2  # fewer than 8 points a motion
+    assert "--motions: C = 16 motions need at least 8 points each" in capsys.readouterr().err
     # a seed laav refuses is a bad argument (the page waited forever on it)
     assert main(["--seed", "-1", "--no-browser"]) == 2
     assert "--seed must be a whole number between 0 and" in capsys.readouterr().err
@@ -1165,6 +1167,18 @@ def test_query_and_params_json_set_the_state(seq, tmp_path):
         assert ex.wait(120) and ex.result.params.r1 == 22.0 and not ex.url_alert.visible
         ex.w_params["r1"].value = 25.0
         ex.w_params["lam"].value = 3.0
+        ex.w_frame.value = 4
+        assert ex.wait(120)
+        # a link to a tour step: its warning stays through the tour (whose steps set their
+        # own colourings) and goes with the first change after it
+        assert ex.apply_query({"nonsense": ["1"], "tour": ["2"]}) and ex.tour.active
+        assert ex.wait(120)
+        ex.tour.go(2)
+        assert ex.url_alert.visible
+        ex.tour.end()
+        assert ex.url_alert.visible
+        ex.w_frame.value = 5
+        assert ex.wait(120) and not ex.url_alert.visible
         ex.w_frame.value = 4
         assert ex.wait(120)
         # the exported params.json loads back (as an upload): state restored, also fields

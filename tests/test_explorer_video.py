@@ -186,6 +186,9 @@ def test_open_video_keeps_every_track_and_estimates_c(video):
     from explorer.state import ESTIMATE_NOTE
 
     assert text.endswith(ESTIMATE_NOTE)
+    # another C from the C box: said, the caveat about the estimate no longer
+    other = video.summary(4)
+    assert other.endswith("C = 4 is taken from the C box.") and ESTIMATE_NOTE not in other
     full = open_video(CLIP, 3, progress=False, complete_only=True)
     assert full.sequence.is_complete and full.sequence.n_points == n_full == full.kept.size
     summary = full.summary()

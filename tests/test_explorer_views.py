@@ -900,4 +900,5 @@ def test_card_3_names_the_lambda_the_merge_used():
         return SimpleNamespace(params=SimpleNamespace(lam=set_), run_params=SimpleNamespace(lam=ran))
 
     assert V.lam_label(result(2.0, 2.0)) == "λ = 2"
+    assert V.lam_label(result(2.345, 2.345)) == "λ = 2.345"  # a λ set is shown as set
     assert V.lam_label(result(2.0, 0.7551)) == "λ = 0.755 (noise-scaled)"
