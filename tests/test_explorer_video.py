@@ -251,6 +251,14 @@ def test_explorer_from_file_tracks_a_video_and_draws_its_frames(tmp_path):
         assert fv.src_background.data["image"][0] is frames.get(7)
         fv.w_background.value = True
         assert fv.r_background.visible and fv.src_background.data["image"][0] is frames.get(9)
+        # another C than the estimate: off its default in the status line, said in the note
+        assert "All settings at their defaults" in ex.status.object
+        ex.w_motions.value = 4
+        assert ex.wait(120) and ex.result.n_motions == 4
+        assert "C = 4" in re.sub(r"\\(.)", r"\1", ex.status.object), ex.status.object
+        assert "C = 4 is taken from the C box" in re.sub(r"\\(.)", r"\1", ex.note.object)
+        ex.w_motions.value = 3
+        assert ex.wait(120) and "All settings at their defaults" in ex.status.object
         # another sequence (an upload) has no video behind it
         other = laav.save_sequence(laav.Sequence(ex.sequence.complete()[0].points[:, :40], name="plain"),
                                    tmp_path / "plain.npz")
