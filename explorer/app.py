@@ -14,6 +14,7 @@ notebooks) results are applied directly, under a lock.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 import urllib.parse
@@ -268,6 +269,9 @@ class Explorer:
         #: weak keys: a replaced upload's sequence is freed
         self._origins = weakref.WeakKeyDictionary()
         self._origin_lock = threading.Lock()  # (uploads add from their own thread)
+        if video is not None and video.motion_count is not None:  # a video's C was estimated
+            origin = dataclasses.replace(origin or Origin(), motions_estimate=video.n_motions,
+                                         motions_reason=video.motion_count.explain())
         if origin is not None:
             self.add_origin(seq, origin)
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False,
@@ -977,9 +981,6 @@ class Explorer:
         """The C the status line counts as the default for ``seq``: its ground truth's, else
         the estimated one (a file without ground truth); None when C was given (no default)."""
         C = self.state.default_motions(seq)
-        if C is None and self.video is not None and seq is self.video.sequence \
-                and self.video.motion_count is not None:  # a tracked video's estimate
-            return self.video.n_motions
         return C if C is not None else self.origin_of(seq).motions_estimate
 
     def _default_color(self, seq=None) -> str:
@@ -1035,9 +1036,9 @@ class Explorer:
         writes it once the views are redrawn: :attr:`StatusBar.address`)."""
         if self.result is None:
             return
-        q = self.query()
         self._forget_url_problems()
         if self._session_doc is not None:
+            q = self.query()
             self.status_bar.address.value = "?" + urllib.parse.urlencode(q) if q else ""
 
     def _forget_url_problems(self) -> None:

@@ -546,10 +546,11 @@ def _main(argv: list[str] | None) -> int:
             name, sep, val = item.partition("=")
             if not sep or not name.strip():
                 return _fail(parser, f"--param takes NAME=VALUE, got {item!r}")
-            if name.strip() in ("seed", "motions", "frame", "color", "tour", "sequence"):
-                return _fail(parser, f"--param sets LaavParams fields; use --seed / --motions for {name!r}"
-                             if name.strip() in ("seed", "motions") else
-                             f"--param sets LaavParams fields; {name.strip()!r} is the page address's")
+            if name.strip() in ("seed", "motions"):
+                return _fail(parser, f"--param sets LaavParams fields; use --seed / --motions for {name!r}")
+            if name.strip() in ("frame", "color", "tour", "sequence"):
+                return _fail(parser, f"--param sets LaavParams fields; {name.strip()!r} is the page "
+                                     "address's")
             pairs[name.strip()] = val
         settings, _, problems = parse_settings(pairs, seq, settings)
         if problems:

@@ -410,17 +410,10 @@ def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings
     values: dict = {}
     view: dict = {}
     seed, C = base.seed, base.n_motions
-    made_on = pairs.get("sequence")
-    if isinstance(made_on, (list, tuple)):
-        made_on = made_on[-1] if made_on else None
-    if isinstance(made_on, bytes):
-        made_on = made_on.decode("utf-8", "replace")
-    other = made_on is not None and str(made_on) != seq.name
+    made_on = _query_text(pairs["sequence"]) if "sequence" in pairs else None
+    other = made_on is not None and made_on != seq.name
     for key, raw in pairs.items():
-        if isinstance(raw, (list, tuple)):
-            raw = raw[-1] if raw else ""
-        if isinstance(raw, bytes):
-            raw = raw.decode("utf-8", "replace")
+        raw = _query_text(raw)
         try:
             if key in _FIELDS:
                 values[key] = parse_value(key, raw)
@@ -481,6 +474,13 @@ def parse_settings(pairs: dict, seq: Sequence, base: Settings) -> tuple[Settings
     return new, view, problems
 
 
+def _query_text(raw) -> str:
+    """A query value as text: of a repeated key the last (bokeh hands lists), bytes decoded."""
+    if isinstance(raw, (list, tuple)):
+        raw = raw[-1] if raw else ""
+    return raw.decode("utf-8", "replace") if isinstance(raw, bytes) else raw
+
+
 def _short_float(v: float) -> str:
     """``25.0`` -> ``"25"``; as many digits as it takes to read back the same float."""
     g = format(v, "g")
@@ -492,8 +492,8 @@ def query_of(settings: Settings, default_motions: int | None, frame: int = 0,
              tour: int | None = None, sequence: str | None = None) -> dict[str, str]:
     """The URL query for these settings and view: only what differs from the defaults
     (``parse_settings(query_of(s, ...), seq, ...)`` gives ``s`` back, on the sequence named
-    ``sequence``); ``tour``: the guided
-    tour's step shown (0-based; None when the tour is not running), written 1-based;
+    ``sequence``); ``tour``: the guided tour's step shown (0-based; None when the tour is not
+    running), written 1-based;
     ``sequence``: the name of the sequence shown when it is not the one a new page starts
     with (opened in this page: a page opened at this address says so, not showing it)."""
     q: dict[str, str] = {}

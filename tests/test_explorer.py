@@ -974,7 +974,8 @@ def test_rv_card_legend_names_the_subspace_votes_of_ours():
     """Card 4's curves differ in their votes too when LAAV's trial used our subspace term
     (the default): its legend says so; with the paper's votes (the paper preset) it does not."""
     from explorer import export
-    from explorer.cards.rv import OWN_LEGEND, RVView
+    from explorer.cards.rv import RVView
+    from explorer.views import RV_OWN_NAMES as OWN_LEGEND
 
     seq = _two_motion_sequence()
     view = RVView()

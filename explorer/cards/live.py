@@ -229,23 +229,19 @@ def legend_rows(tpl: dict, spec: dict, by: str | None = None) -> dict:
 def _swatch_needs_no_row(proxy, spec: dict) -> bool:
     """Whether legend stand-in ``proxy`` draws the same swatch whatever its row holds: its
     glyph reads no column but the view's coordinates (``spec``'s)."""
+    return not (_columns_read(proxy.glyph) - set(spec["coords"]))
+
+
+def _columns_read(glyph) -> set:
+    """The data columns ``glyph``'s properties read (its fields; a constant is none)."""
     used = set()
-    for name in proxy.glyph.dataspecs():
-        spec_value = proxy.glyph.lookup(name).get_value(proxy.glyph)  # a Field or a Value
-        if isinstance(spec_value, Field):
-            used.add(spec_value.field)
-        elif isinstance(spec_value, dict) and "field" in spec_value:
-            used.add(spec_value["field"])
-    return not (used - set(spec["coords"]))
-
-
-def _field_of(spec) -> str | None:
-    """The column a glyph property reads (a name, a field spec), or None."""
-    if isinstance(spec, str):
-        return spec
-    if isinstance(spec, dict):
-        return spec.get("field")
-    return getattr(spec, "field", None)
+    for name in glyph.dataspecs():
+        spec = glyph.lookup(name).get_value(glyph)  # a Field or a Value
+        if isinstance(spec, Field):
+            used.add(spec.field)
+        elif isinstance(spec, dict) and "field" in spec:
+            used.add(spec["field"])
+    return used
 
 
 class LiveFrames:
@@ -340,7 +336,7 @@ class LiveFrames:
                 # only the columns its glyph reads (and the legend's field): the page's other
                 # readers of the views (tests, benchmarks) do not take it for one
                 by_name = by if isinstance(by, str) else None
-                used = {_field_of(getattr(r.glyph, spec, None)) for spec in r.glyph.dataspecs()}
+                used = _columns_read(r.glyph)
                 cols = {c: [] for c in r.data_source.data if c in used or c == by_name}
                 proxy = GlyphRenderer(data_source=ColumnDataSource(cols), glyph=r.glyph.clone(),
                                       visible=r.visible)

@@ -14,12 +14,6 @@ from .base import Markdown, card, flex, set_data
 RV_TOOLS = "pan,wheel_zoom,reset"
 #: The charts' width (px): two fit side by side beside the guided tour's panel at 1280 px.
 RV_FIG_WIDTH = 400
-#: The legend's name of LAAV's informed trial, by whether it voted with our subspace term
-#: (the default) or with the RV paper's votes alone (the paper preset): the two curves then
-#: differ in their votes too, not only in their start.
-OWN_LEGEND = V.RV_OWN_NAMES
-
-
 #: The error chart's title with and without ground truth.
 ERROR_TITLES = {True: "Error per iteration (vs ground truth)",
                 False: "Points off the trial's last labels"}
