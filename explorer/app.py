@@ -78,6 +78,14 @@ REST_GAP_S = 0.4
 #: moves whose computation took 5 ms (a λ move on the demo).
 BUSY_SHOW_AFTER_S = 0.25
 
+#: Seconds the frame rests before the page address takes it (``frame=``). The address is a
+#: document change the server sends after every frame move and the page applies; the page
+#: draws a frame move itself (``cards/live.py``), and that message landed among the next
+#: animation frames of a scrub or of the player (1R2RCT_A, headless Chromium, 16 moves 300 ms
+#: apart, four interleaved pairs of runs: median frame move 2.3-6.2 ms lower with the address
+#: sent once the frame rests, in each pair; docs/bench/explorer_browser_latency_2026-12-06b.md).
+FRAME_ADDRESS_REST_S = 0.25
+
 #: The cards' widgets, sources and panes that tests, benchmarks and notebooks reach on the
 #: explorer itself (the same objects): name -> where it lives.
 SHORTCUTS = {
@@ -306,6 +314,7 @@ class Explorer:
         #: the query of the state the link asked for (:meth:`_forget_url_problems`; for a link
         #: to a tour step, _TOUR_LINK / _TOUR_RUNNING until its tour ends); None: no warning
         self._url_problems_at: dict | object | None = None
+        self._frame_address_timer = None  # the pending address after a frame move
         self.settings = self.state.target  # (of the result shown, once there is one)
         self.style = None
         self.fine_colors = None
@@ -520,18 +529,22 @@ class Explorer:
     def _add_rest_after(self, seconds: float) -> None:
         """(Document thread.) :meth:`_add_rest` in ``seconds`` (now without a server),
         replacing a timer set before (the 3 s one must not fire just after a result)."""
+        self._rest_timer = self._after(self._rest_timer, self._add_rest, seconds)
+
+    def _after(self, old, fn, seconds: float):
+        """(Document thread.) ``fn()`` (under the lock) in ``seconds``, replacing the timer
+        ``old`` (a handle this returned, or None); returns the new handle. Without a server
+        ``fn()`` runs now (and None is returned)."""
         doc = self._doc()
-        if doc is not None and doc.session_context is not None:
-            old, self._rest_timer = self._rest_timer, None
-            if old is not None:
-                try:
-                    doc.remove_timeout_callback(old)
-                except ValueError:  # it has run already
-                    pass
-            self._rest_timer = doc.add_timeout_callback(lambda: self._locked(self._add_rest),
-                                                        int(1000 * seconds))
-        else:
-            self._add_rest()
+        if doc is None or doc.session_context is None:
+            fn()
+            return None
+        if old is not None:
+            try:
+                doc.remove_timeout_callback(old)
+            except ValueError:  # it has run already
+                pass
+        return doc.add_timeout_callback(lambda: self._locked(fn), int(1000 * seconds))
 
     def _add_rest(self) -> None:
         """(Document thread.) The later stages' cards onto the page, once (see :meth:`template`);
@@ -957,8 +970,15 @@ class Explorer:
             self._draw_frame()
             self.graph_view.draw(self.result, self.frame, self.fine_colors)
             self.compare.redraw()
-            self._sync_url()
+        # the address once the frame rests (FRAME_ADDRESS_REST_S): nothing else is sent
+        self._frame_address_timer = self._after(self._frame_address_timer, self._frame_rested,
+                                                FRAME_ADDRESS_REST_S)
         self.view3d.set_frame(self.frame)
+
+    def _frame_rested(self) -> None:
+        self._frame_address_timer = None
+        with self.hold():
+            self._sync_url()
 
     def _on_color(self, event=None) -> None:
         self.touch()

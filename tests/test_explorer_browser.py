@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 from conftest import two_motion_sequence  # noqa: E402
 
 import laav  # noqa: E402
+from explorer import app as app_module  # noqa: E402
 from explorer import views as V  # noqa: E402
 from explorer.cards.status import PREVIEW_STATUS  # noqa: E402
 from explorer.cli import app_factory, serve_options  # noqa: E402
@@ -58,7 +59,8 @@ JS_SOURCES = """() => {
 
 JS_SET_SLIDER = """([prefix, value]) => {
   for (const m of Bokeh.documents[0].all_models) {
-    if (m.type === 'Slider' && typeof m.title === 'string' && m.title.startsWith(prefix)) {
+    if ((m.type === 'Slider' || m.type.endsWith('Player')) && typeof m.title === 'string'
+        && m.title.startsWith(prefix)) {
       m.value = value; m.value_throttled = value; return m.title;
     }
   }
@@ -498,7 +500,7 @@ def test_layout_fits_a_projector(tmp_path):
             page.close()
 
 
-def test_url_carries_the_state(tmp_path):
+def test_url_carries_the_state(tmp_path, monkeypatch):
     """``/?r1=25&seed=3&frame=4&color=final`` opens that state; moving a control updates the
     address; bad values are named as text on the page (no script runs); params.json uploads."""
     import json
@@ -536,6 +538,19 @@ def test_url_carries_the_state(tmp_path):
         q = dict(x.split("=") for x in page.evaluate("location.search")[1:].split("&"))
         assert q == {"r1": "25", "lam": "3.5", "seed": "3", "frame": "4", "color": "final"}
         assert len(created) == 1
+        # frame moves (drawn by the page) send the address only once the frame rests: two
+        # moves in a row, then the last frame's address (a long rest here: a loaded machine
+        # must not take it for a send)
+        monkeypatch.setattr(app_module, "FRAME_ADDRESS_REST_S", 4.0)
+        for f in (6, 7):
+            assert page.evaluate(JS_SET_SLIDER, ["frame", f]) is not None
+            page.wait_for_function(f"""[...Bokeh.documents[0].all_models].some(
+                m => m.type === 'Title' && String(m.text).startsWith('frame {f} of'))""", timeout=30000)
+        _wait_for(lambda: ex.w_frame.value == 7, 30, "the server to learn the frame")
+        assert "frame=4" in page.evaluate("location.search")  # not sent yet
+        assert "frame=4" in ex.status_bar.address.value
+        page.wait_for_function("location.search.includes('frame=7')", timeout=30000)
+        monkeypatch.undo()
         # a params.json upload (as exported) loads back
         d = json.loads(ex.files.export_json().getvalue())
         d["params"]["r1"], d["seed"] = 30.0, 1
