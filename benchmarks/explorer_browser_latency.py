@@ -48,7 +48,10 @@ writes it, with date, machine and commit, to ``--out`` (default
 ``bench-out/explorer_browser_latency.md``). Usage::
 
     python benchmarks/explorer_browser_latency.py [--repeats 3] [--out REPORT.md] [--only frame,...]
-        [--settle 0.3] [FILE] [-- COMMAND OPTIONS]
+        [--settle 0.3] [--view3d] [FILE] [-- COMMAND OPTIONS]
+
+``--view3d`` unfolds the 3-D card first (``view3d_host``: the host its iframe addresses). The
+moves are still timed on the 2-D views; the 3-D view follows them on its own.
 
 ``FILE`` may be a video or a folder of frames (``laav-explore`` tracks it first; its frames
 are then drawn behind the points, which a frame move sends along). ``--only`` measures some
@@ -275,7 +278,7 @@ def wait_listening(port: int, proc, deadline: float) -> None:
 
 
 def measure(file: str | None, repeats: int, only: list[str] | None = None,
-            extra: list[str] | None = None, settle: float = 0.3) -> dict:
+            extra: list[str] | None = None, settle: float = 0.3, view3d: bool = False) -> dict:
     from playwright import sync_api
 
     port = _free_port("127.0.0.1")
@@ -284,7 +287,8 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
     controls = [c for c in CONTROLS if only is None or c[0] in only]
     seq = _sequence_of(file)
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    out: dict = {"file": file or "bundled demo", **({"options": " ".join(extra)} if extra else {})}
+    out: dict = {"file": file or "bundled demo", **({"options": " ".join(extra)} if extra else {}),
+                 **({"view3d": "open"} if view3d else {})}
     with sync_api.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
         proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL,
@@ -308,6 +312,11 @@ def measure(file: str | None, repeats: int, only: list[str] | None = None,
             out["first_result_s"] = round(time.monotonic() - t_cmd, 2)
             out["first_result_kb"] = round(received[0] / 1024, 1)
             page.wait_for_timeout(1000)  # the lazily added cards arrive after the first result
+            if view3d:  # the 3-D card unfolded, its scene drawn, before the moves
+                page.locator(".card-header", has_text="3-D space-time view").first.click()
+                page.frame_locator("iframe").locator("canvas").first.wait_for(timeout=120000)
+                out["view3d_host"] = page.locator("iframe").first.get_attribute("src").split("/")[2]
+                page.wait_for_timeout(3000)
             runs: dict = {}
             sent: dict = {}  # bytes received per move, until 300 ms after the redraw
             server: dict = {}  # the compute time the status line reports, per move
@@ -366,11 +375,13 @@ def main(argv=None) -> int:
     ap.add_argument("--only", default=None, help="comma-separated controls: lambda,radius,seed,frame")
     ap.add_argument("--settle", type=float, default=0.3,
                     help="seconds between a move's redraw and the next move (a person looking)")
+    ap.add_argument("--view3d", action="store_true",
+                    help="unfold the 3-D card (its viser scene in an iframe) before the moves")
     argv = sys.argv[1:] if argv is None else list(argv)
     extra = argv[argv.index("--") + 1:] if "--" in argv else []
     args = ap.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
     only = args.only.split(",") if args.only else None
-    result = measure(args.file, args.repeats, only, extra, args.settle)
+    result = measure(args.file, args.repeats, only, extra, args.settle, args.view3d)
     result["settle_s"] = args.settle
     write_json_report(args.out, "Explorer latency in Chromium, control release to views redrawn",
                       f"{result['file']}, {args.repeats} moves of each control between two values, "

@@ -466,6 +466,14 @@ def test_layout_fits_a_projector(tmp_path):
             page.locator(".card-header", has_text="3-D space-time view").first.click()
             viser = _wait_for(lambda ex=ex: ex.viser, 60, "the 3-D view's server")
             page.frame_locator("iframe").locator("body").wait_for(timeout=60000)
+            # the iframe at the loopback's other name (the page is at 127.0.0.1): another site,
+            # which Chromium renders in a process of its own (an out-of-process frame target)
+            src = page.locator("iframe").first.get_attribute("src")
+            assert src.startswith(f"http://localhost:{viser.port}/"), src
+            cdp = page.context.new_cdp_session(page)
+            targets = cdp.send("Target.getTargets")["targetInfos"]
+            assert any(t["type"] == "iframe" and t["url"].startswith(src) for t in targets), targets
+            cdp.detach()
             m = _settled(page, JS_OVERFLOW)
             page.screenshot(path=str(shots / f"layout_{w}x{h}.png"))
             assert m["width"] == w

@@ -94,3 +94,22 @@ def test_which_hosts_are_this_machine_only(host, loopback):
     from explorer.cli import _is_loopback
 
     assert _is_loopback(host) is loopback
+
+
+@pytest.mark.parametrize("page, configured, bind, expect", [
+    ("127.0.0.1", "127.0.0.1", "127.0.0.1", "localhost"),  # laav-explore's default
+    ("localhost", "127.0.0.1", "127.0.0.1", "127.0.0.1"),
+    ("127.0.0.1", None, "0.0.0.0", "localhost"),  # a wildcard bind, reached on the loopback
+    ("localhost", "localhost", "localhost", "localhost"),  # "localhost" may be IPv6 alone
+    ("192.0.2.7", None, "0.0.0.0", "192.0.2.7"),  # reached from another machine
+    ("[::1]", "::1", "::1", "::1"),
+    (None, "127.0.0.1", "127.0.0.1", "127.0.0.1"),  # a notebook: the page's name unknown
+    (None, None, "127.0.0.1", "127.0.0.1"),
+])
+def test_the_3d_iframe_is_another_site_than_a_loopback_page(page, configured, bind, expect):
+    """A page at one loopback name has the 3-D iframe at the other, where the 3-D server is
+    reachable by it (a browser isolating sites renders it in its own process); else as
+    configured, or the page's own name."""
+    from explorer.cards.view3d import iframe_host
+
+    assert iframe_host(page, configured, bind) == expect

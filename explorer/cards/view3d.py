@@ -7,9 +7,11 @@ started a moment after it, on the first slider move), and a session that never o
 3-D view does not pay it. The card starts folded, and the
 iframe is on the page only while the card is unfolded (and a result is shown): a 3-D client
 redraws its WebGL scene at least once a second, and in a software-rendered browser every
-redraw holds the page's main thread for hundreds of milliseconds (the 2-D views then wait;
+redraw holds its renderer's main thread for hundreds of milliseconds (the 2-D views then wait;
 docs/bench/explorer_browser_latency.md). While folded, the scene is not updated either;
-unfolding sends it the result, colours and frame shown.
+unfolding sends it the result, colours and frame shown. Open, the iframe is addressed by the
+loopback's other name (:func:`iframe_host`), so that browsers that isolate sites render it in
+a process of its own, beside the page's.
 """
 
 from __future__ import annotations
@@ -29,6 +31,38 @@ PLACEHOLDER = ('<div style="width:100%;height:440px;border:1px solid #ccc;border
 
 #: The card's pane while its server starts (unfolded for the first time).
 STARTING = PLACEHOLDER.replace("opens with the first result", "is starting")
+
+#: The other name of this machine's loopback interface, by the name a page was reached at.
+LOOPBACK_ALIAS = {"127.0.0.1": "localhost", "localhost": "127.0.0.1"}
+
+#: The 3-D server's binds at which each alias reaches it: "localhost" tries both address
+#: families in a browser, "127.0.0.1" only IPv4 (a "localhost" bind may be IPv6 alone).
+ALIAS_REACHES = {"localhost": ("127.0.0.1", "localhost", "0.0.0.0", ""),
+                 "127.0.0.1": ("127.0.0.1", "0.0.0.0", "")}
+
+
+def iframe_host(page_host: str | None, configured: str | None, viser_host: str) -> str:
+    """The host name the 3-D view's iframe addresses its server by.
+
+    ``page_host``: the name the browser reached the page at (its request's ``Host``, without
+    the port; None when unknown, e.g. in a notebook); ``configured``: the name the server was
+    given for the iframe (None: the page's); ``viser_host``: the 3-D server's bind.
+
+    A page at one loopback name gets the iframe at the other (127.0.0.1 <-> localhost), where
+    the 3-D server is reachable by it: browsers count the two as different *sites*, and those
+    that isolate sites (Chromium, Firefox) then render the iframe in a process of its own. In
+    the page's process, viser's software-rendered WebGL redraws (every one read back on the
+    main thread) held the page's: with the 3-D view open, frame moves took 344-475 ms and λ
+    moves 409-680 ms, against 85-149 and 155-163 ms with the iframe in a process of its own
+    (1R2RCT_A, headless Chromium without GPU, two interleaved pairs of runs;
+    docs/bench/explorer_browser_latency_2026-12-06b.md). Otherwise the configured name, else
+    the page's, else 127.0.0.1 (as before).
+    """
+    other = LOOPBACK_ALIAS.get(page_host or "")
+    if other is not None and viser_host in ALIAS_REACHES[other]:
+        return other
+    return configured or page_host or "127.0.0.1"
+
 
 #: The card's title: one line at 1024 px (the main area's 682 px). With "(viser)" after "view"
 #: it wrapped onto a second line there; the iframe's own title still names viser.
@@ -174,10 +208,8 @@ class View3D:
             self.pane.object = self.iframe_html()
 
     def iframe_html(self) -> str:
-        host = self._iframe_host
-        if host is None:
-            hdr = (pn.state.headers or {}).get("Host", "") if pn.state.curdoc else ""
-            host = hdr.rsplit(":", 1)[0] if hdr else "127.0.0.1"
+        hdr = (pn.state.headers or {}).get("Host", "") if pn.state.curdoc else ""
+        host = iframe_host(hdr.rsplit(":", 1)[0] if hdr else None, self._iframe_host, self._viser_host)
         # the tab's secret path: the 3-D server answers nothing else (see viser_view)
         return (f'<iframe src="{html.escape(self.viser.url(host))}" title="LAAV 3-D view (viser)" '
                 'style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
