@@ -25,6 +25,14 @@ _JOIN = np.array([33, 102, 172], np.uint8)  # blue: positive cost (join)
 _CUT = np.array([214, 39, 40], np.uint8)  # red: negative cost (cut)
 _SERVE_LOCK = threading.Lock()
 
+#: Seconds after a 3-D client connects at which viser's own notice "Software WebGL rendering
+#: detected" (shown by its client, never closing on its own, over the scene's lower left) is
+#: taken away: read once, it covered part of the view for good on a machine without GPU,
+#: such as a classroom's (docs/explorer.md says what software rendering costs).
+SOFTWARE_NOTICE_S = 10.0
+#: The id viser's client (1.1) gives that notice (``BrowserWarning.tsx``).
+SOFTWARE_NOTICE_ID = "webgl-software-rendering"
+
 
 @contextmanager
 def _origin_checked(hosts: Iterable[str], token: str):
@@ -96,6 +104,23 @@ def _for_webgl(rgb: np.ndarray) -> np.ndarray:
     return np.clip(np.round(lin * 255.0), 0, 255).astype(np.uint8)
 
 
+def _close_software_notice(client) -> None:
+    """Take viser's software-WebGL notice (:data:`SOFTWARE_NOTICE_ID`) off ``client``'s page,
+    if it shows (else nothing happens). viser's public API removes only notices its server
+    made, so this sends the removal message its client handles for any notice; with another
+    viser, or a client gone, it does nothing."""
+    from viser import _messages
+
+    remove = getattr(_messages, "RemoveNotificationMessage", None)
+    conn = getattr(client, "_websock_connection", None)
+    if remove is None or conn is None:
+        return
+    try:
+        conn.queue_message(remove(SOFTWARE_NOTICE_ID))
+    except Exception:  # the client has gone, the server has stopped
+        pass
+
+
 class ViserView:
     """A viser server showing one sequence and result.
 
@@ -141,6 +166,12 @@ class ViserView:
         self._plane = None
         self._frame_box = self.server.gui.add_number("frame", initial_value=0, min=0, max=1, step=1)
         self._frame_box.on_update(self._frame_from_viser)
+        self.server.on_client_connect(self._on_client)
+
+    def _on_client(self, client) -> None:
+        timer = threading.Timer(SOFTWARE_NOTICE_S, _close_software_notice, (client,))
+        timer.daemon = True
+        timer.start()
 
     @property
     def port(self) -> int:
