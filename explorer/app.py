@@ -78,12 +78,13 @@ REST_GAP_S = 0.4
 #: moves whose computation took 5 ms (a λ move on the demo).
 BUSY_SHOW_AFTER_S = 0.25
 
-#: Seconds the frame rests before the page address takes it (``frame=``). The address is a
-#: document change the server sends after every frame move and the page applies; the page
-#: draws a frame move itself (``cards/live.py``), and that message landed among the next
-#: animation frames of a scrub or of the player (1R2RCT_A, headless Chromium, 16 moves 300 ms
-#: apart, four interleaved pairs of runs: median frame move 2.3-6.2 ms lower with the address
-#: sent once the frame rests, in each pair; docs/bench/explorer_browser_latency_2026-12-06b.md).
+#: Seconds the frame rests before the page address takes it (``frame=``; while the player
+#: plays, once it pauses). The address is a document change the server sends after every frame
+#: move and the page applies; the page draws a frame move itself (``cards/live.py``), and that
+#: message landed among the next animation frames of a scrub or of the player (1R2RCT_A,
+#: headless Chromium, 16 moves 300 ms apart, four interleaved pairs of runs: median frame move
+#: 2.3-6.2 ms lower with the address sent once the frame rests, in each pair; the address then
+#: came 250 ms later; docs/bench/explorer_browser_latency_2026-12-06b.md).
 FRAME_ADDRESS_REST_S = 0.25
 
 #: The cards' widgets, sources and panes that tests, benchmarks and notebooks reach on the
@@ -233,7 +234,9 @@ class Explorer:
         Interface the viser server binds.
     iframe_host : str, optional
         Host name the browser uses to reach the viser server (default: ``viser_host``,
-        or the page's own host when built inside a server session).
+        or the page's own host when built inside a server session); a page at a loopback
+        name gets the other loopback name where it reaches the server (a process of its own
+        for the 3-D view: :func:`explorer.cards.view3d.iframe_host`).
     page_hosts : list of str, optional
         Every host name the browser may use for the page; the 3-D view's websocket accepts
         only these origins (default: 127.0.0.1, localhost and ``viser_host``).
@@ -531,12 +534,17 @@ class Explorer:
         replacing a timer set before (the 3 s one must not fire just after a result)."""
         self._rest_timer = self._after(self._rest_timer, self._add_rest, seconds)
 
+    def _served_doc(self):
+        """The page's document when a server serves it (timers run there), else None."""
+        doc = self._doc()
+        return doc if doc is not None and doc.session_context is not None else None
+
     def _after(self, old, fn, seconds: float):
         """(Document thread.) ``fn()`` (under the lock) in ``seconds``, replacing the timer
         ``old`` (a handle this returned, or None); returns the new handle. Without a server
         ``fn()`` runs now (and None is returned)."""
-        doc = self._doc()
-        if doc is None or doc.session_context is None:
+        doc = self._served_doc()
+        if doc is None:
             fn()
             return None
         if old is not None:
@@ -977,6 +985,10 @@ class Explorer:
 
     def _frame_rested(self) -> None:
         self._frame_address_timer = None
+        if self.controls.w_frame.direction and self._served_doc() is not None:
+            # the player plays: the address once it pauses
+            self._frame_address_timer = self._after(None, self._frame_rested, FRAME_ADDRESS_REST_S)
+            return
         with self.hold():
             self._sync_url()
 

@@ -75,7 +75,7 @@ def _origin_checked(hosts: Iterable[str], token: str):
             ok_token = hmac.compare_digest(f"/{head}".encode(), prefix.encode())
             if request.headers.get("Upgrade", "").lower() == "websocket":
                 port = connection.local_address[1]
-                if request.headers.get("Origin") not in {f"http://{h}:{port}" for h in hosts}:
+                if request.headers.get("Origin") not in {f"http://{netloc(h, port)}" for h in hosts}:
                     return refuse(http.HTTPStatus.FORBIDDEN, "cross-origin websocket refused\n")
                 if not ok_token or rest:
                     return refuse(http.HTTPStatus.FORBIDDEN, "websocket refused: not this view's address\n")
@@ -102,6 +102,36 @@ def _for_webgl(rgb: np.ndarray) -> np.ndarray:
     c = np.asarray(rgb, dtype=np.float64) / 255.0
     lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
     return np.clip(np.round(lin * 255.0), 0, 255).astype(np.uint8)
+
+
+def netloc(host: str, port: int) -> str:
+    """``host:port`` as in an address, an IPv6 literal in brackets (``[::1]:8080``)."""
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+
+def _hold_ipv6_loopback(port: int):
+    """``(socket, safe)``: ``[::1]:port`` bound by this process, not listening.
+
+    A browser resolves ``localhost`` to ``::1`` first and tries ``127.0.0.1`` only when that
+    fails. A server listening on ``127.0.0.1`` alone leaves ``[::1]`` at its port free for any
+    program on the machine to listen on and receive the 3-D view's secret address; held
+    here, nothing else can bind it (no ``SO_REUSEADDR``/``SO_REUSEPORT``), and a browser's
+    connection there is refused at once, so it goes on to ``127.0.0.1``. ``safe`` is True when
+    held, or when this machine has no IPv6 loopback (no program can listen there either);
+    False (and no socket) when something holds it already or the bind fails otherwise."""
+    import errno
+    import socket
+
+    try:
+        sock = socket.socket(socket.AF_INET6, socket.SOCK_STREAM)
+    except OSError:
+        return None, True  # no IPv6 in this system
+    try:
+        sock.bind(("::1", port))
+    except OSError as exc:
+        sock.close()
+        return None, exc.errno in (errno.EADDRNOTAVAIL, errno.EAFNOSUPPORT)
+    return sock, True
 
 
 def _close_software_notice(client) -> None:
@@ -158,6 +188,17 @@ class ViserView:
         self.server.gui.configure_theme(show_share_button=False, control_layout="floating",
                                         control_width="small", show_logo=False)
         self.server.scene.set_up_direction("+y")
+        #: the loopback names a browser can reach this server by, and whose origin its
+        #: websocket accepts (``localhost`` only with [::1] at its port held: _hold_ipv6_loopback)
+        self._v6_guard = None
+        names = set()
+        if host in ("127.0.0.1", "0.0.0.0", ""):
+            names.add("127.0.0.1")
+            self._v6_guard, safe = _hold_ipv6_loopback(self.port)
+            if safe:
+                names.add("localhost")
+        self.loopback_names = frozenset(names & hosts)
+        self._timers: list[threading.Timer] = []
         self._on_frame = on_frame
         self._frame = 0
         self._seq: laav.Sequence | None = None
@@ -171,6 +212,7 @@ class ViserView:
     def _on_client(self, client) -> None:
         timer = threading.Timer(SOFTWARE_NOTICE_S, _close_software_notice, (client,))
         timer.daemon = True
+        self._timers = [t for t in self._timers if t.is_alive()] + [timer]
         timer.start()
 
     @property
@@ -184,7 +226,7 @@ class ViserView:
 
     def url(self, host: str = "127.0.0.1") -> str:
         """The 3-D page's address for a browser reaching this machine as ``host``."""
-        return f"http://{host}:{self.port}{self.path}"
+        return f"http://{netloc(host, self.port)}{self.path}"
 
     def _frame_from_viser(self, event) -> None:
         f = int(self._frame_box.value)
@@ -273,6 +315,11 @@ class ViserView:
         import contextlib
         import io
 
+        for timer in self._timers:
+            timer.cancel()
+        if self._v6_guard is not None:
+            self._v6_guard.close()
+            self._v6_guard = None
         try:
             with contextlib.redirect_stdout(io.StringIO()):  # viser prints "Server stopped"
                 self.server.stop()

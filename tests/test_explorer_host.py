@@ -96,20 +96,63 @@ def test_which_hosts_are_this_machine_only(host, loopback):
     assert _is_loopback(host) is loopback
 
 
-@pytest.mark.parametrize("page, configured, bind, expect", [
-    ("127.0.0.1", "127.0.0.1", "127.0.0.1", "localhost"),  # laav-explore's default
-    ("localhost", "127.0.0.1", "127.0.0.1", "127.0.0.1"),
-    ("127.0.0.1", None, "0.0.0.0", "localhost"),  # a wildcard bind, reached on the loopback
-    ("localhost", "localhost", "localhost", "localhost"),  # "localhost" may be IPv6 alone
-    ("192.0.2.7", None, "0.0.0.0", "192.0.2.7"),  # reached from another machine
-    ("[::1]", "::1", "::1", "::1"),
-    (None, "127.0.0.1", "127.0.0.1", "127.0.0.1"),  # a notebook: the page's name unknown
-    (None, None, "127.0.0.1", "127.0.0.1"),
+LOOP = frozenset({"127.0.0.1", "localhost"})
+
+
+@pytest.mark.parametrize("page, configured, names, expect", [
+    ("127.0.0.1", "127.0.0.1", LOOP, "localhost"),  # laav-explore's default
+    ("localhost", "127.0.0.1", LOOP, "127.0.0.1"),
+    ("127.0.0.1", None, LOOP, "localhost"),  # a wildcard bind, reached on the loopback
+    ("127.0.0.1", "127.0.0.1", frozenset({"127.0.0.1"}), "127.0.0.1"),  # [::1] not held
+    ("localhost", "localhost", frozenset(), "localhost"),  # bound to "localhost": as given
+    ("192.0.2.7", None, frozenset(), "192.0.2.7"),  # reached from another machine
+    ("::1", "::1", frozenset(), "::1"),
+    (None, "127.0.0.1", LOOP, "127.0.0.1"),  # a notebook: the page's name unknown
+    (None, None, LOOP, "127.0.0.1"),
 ])
-def test_the_3d_iframe_is_another_site_than_a_loopback_page(page, configured, bind, expect):
+def test_the_3d_iframe_is_another_site_than_a_loopback_page(page, configured, names, expect):
     """A page at one loopback name has the 3-D iframe at the other, where the 3-D server is
-    reachable by it (a browser isolating sites renders it in its own process); else as
+    safely reachable by it (a browser isolating sites renders it in its own process); else as
     configured, or the page's own name."""
     from explorer.cards.view3d import iframe_host
 
-    assert iframe_host(page, configured, bind) == expect
+    assert iframe_host(page, configured, names) == expect
+
+
+def _ipv6_loopback() -> bool:
+    try:
+        with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as s:
+            s.bind(("::1", 0))
+        return True
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not _ipv6_loopback(), reason="no IPv6 loopback here")
+def test_the_3d_server_holds_its_port_on_the_ipv6_loopback():
+    """A browser tries ``localhost`` at ::1 first: a 3-D server on 127.0.0.1 holds [::1] at
+    its port (no other program can listen there for its secret address) and names
+    ``localhost`` only then; an address taken already keeps it off."""
+    import errno
+
+    pytest.importorskip("viser")
+    from explorer.viser_view import ViserView, _hold_ipv6_loopback, netloc
+
+    view = ViserView(host="127.0.0.1")
+    try:
+        assert view.loopback_names == {"127.0.0.1", "localhost"}
+        with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as other:
+            with pytest.raises(OSError) as exc:
+                other.bind(("::1", view.port))
+            assert exc.value.errno == errno.EADDRINUSE
+        with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as probe:  # refused at once
+            assert probe.connect_ex(("::1", view.port)) == errno.ECONNREFUSED
+    finally:
+        view.close()
+    with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as s:  # released on close
+        s.bind(("::1", view.port))
+    with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as taken:
+        taken.bind(("::1", 0))
+        taken.listen()
+        assert _hold_ipv6_loopback(taken.getsockname()[1]) == (None, False)
+    assert netloc("::1", 80) == "[::1]:80" and netloc("localhost", 80) == "localhost:80"

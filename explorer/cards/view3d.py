@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import html
 import threading
+import urllib.parse
 
 import panel as pn
 
@@ -35,21 +36,18 @@ STARTING = PLACEHOLDER.replace("opens with the first result", "is starting")
 #: The other name of this machine's loopback interface, by the name a page was reached at.
 LOOPBACK_ALIAS = {"127.0.0.1": "localhost", "localhost": "127.0.0.1"}
 
-#: The 3-D server's binds at which each alias reaches it: "localhost" tries both address
-#: families in a browser, "127.0.0.1" only IPv4 (a "localhost" bind may be IPv6 alone).
-ALIAS_REACHES = {"localhost": ("127.0.0.1", "localhost", "0.0.0.0", ""),
-                 "127.0.0.1": ("127.0.0.1", "0.0.0.0", "")}
 
-
-def iframe_host(page_host: str | None, configured: str | None, viser_host: str) -> str:
+def iframe_host(page_host: str | None, configured: str | None, names=frozenset()) -> str:
     """The host name the 3-D view's iframe addresses its server by.
 
     ``page_host``: the name the browser reached the page at (its request's ``Host``, without
     the port; None when unknown, e.g. in a notebook); ``configured``: the name the server was
-    given for the iframe (None: the page's); ``viser_host``: the 3-D server's bind.
+    given for the iframe (None: the page's); ``names``: the loopback names the 3-D server is
+    safely reachable by and whose origin its websocket accepts
+    (:attr:`explorer.viser_view.ViserView.loopback_names`).
 
-    A page at one loopback name gets the iframe at the other (127.0.0.1 <-> localhost), where
-    the 3-D server is reachable by it: browsers count the two as different *sites*, and those
+    A page at one loopback name gets the iframe at the other (127.0.0.1 <-> localhost) when
+    that name is in ``names``: browsers count the two as different *sites*, and those
     that isolate sites (Chromium, Firefox) then render the iframe in a process of its own. In
     the page's process, viser's software-rendered WebGL redraws (every one read back on the
     main thread) held the page's: with the 3-D view open, frame moves took 344-475 ms and λ
@@ -59,7 +57,7 @@ def iframe_host(page_host: str | None, configured: str | None, viser_host: str) 
     the page's, else 127.0.0.1 (as before).
     """
     other = LOOPBACK_ALIAS.get(page_host or "")
-    if other is not None and viser_host in ALIAS_REACHES[other]:
+    if other is not None and other in names:
         return other
     return configured or page_host or "127.0.0.1"
 
@@ -73,7 +71,8 @@ class View3D:
     """The 3-D card and its viser server (``viser``: None until started, or when off).
 
     ``iframe_host``: the host name the browser uses to reach the server (None: the page's
-    own host); ``page_hosts``: the page origins its websocket accepts; ``on_frame``: called
+    own host), except that a page at a loopback name gets the other one where it reaches the
+    server (:func:`iframe_host`); ``page_hosts``: the page origins its websocket accepts; ``on_frame``: called
     with a frame picked in the 3-D view (from viser's thread)."""
 
     def __init__(self, host: Host, want: bool, viser_host: str, page_hosts, iframe_host, on_frame) -> None:
@@ -209,7 +208,8 @@ class View3D:
 
     def iframe_html(self) -> str:
         hdr = (pn.state.headers or {}).get("Host", "") if pn.state.curdoc else ""
-        host = iframe_host(hdr.rsplit(":", 1)[0] if hdr else None, self._iframe_host, self._viser_host)
+        page = urllib.parse.urlsplit("//" + hdr).hostname if hdr else None  # ([::1]:80 -> ::1)
+        host = iframe_host(page, self._iframe_host, self.viser.loopback_names)
         # the tab's secret path: the 3-D server answers nothing else (see viser_view)
         return (f'<iframe src="{html.escape(self.viser.url(host))}" title="LAAV 3-D view (viser)" '
                 'style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
