@@ -595,10 +595,12 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origi
     """:func:`main`'s server: serve until stopped (Ctrl-C)."""
     import panel as pn
 
+    from .viser_view import netloc
+
     startup_gc.imported()
     no_session_validation()
     hosts = page_hosts(args.host)
-    origins = [f"{h}:{port}" for h in hosts]  # the page's websocket: its own origin only
+    origins = [netloc(h, port) for h in hosts]  # the page's websocket: its own origin only
     try:
         factory = app_factory(seq, C, settings.seed, args.host, prebuild=True, hosts=hosts,
                               announce_viser=not _is_loopback(args.host), params=settings.params,
@@ -611,7 +613,7 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origi
     except OSError as exc:
         return _fail(parser, f"cannot listen on {args.host}:{port}: {exc}")
     local = _is_loopback(args.host)
-    url = f"http://{args.host if local else _reachable_name(args.host)}:{port}/"
+    url = f"http://{netloc(args.host if local else _reachable_name(args.host), port)}/"
     print(f"laav-explore: {seq.name} ({seq.n_points} points, {seq.n_frames} frames, C = {C}) at {url}",
           flush=True)
     if not local:

@@ -127,6 +127,8 @@ def _hold_ipv6_loopback(port: int):
     except OSError:
         return None, True  # no IPv6 in this system
     try:
+        if hasattr(socket, "SO_EXCLUSIVEADDRUSE"):  # Windows: no other bind, even with SO_REUSEADDR
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_EXCLUSIVEADDRUSE, 1)
         sock.bind(("::1", port))
     except OSError as exc:
         sock.close()
@@ -179,6 +181,7 @@ class ViserView:
 
         import viser
 
+        host = "0.0.0.0" if host == "" else host  # (viser binds "" as [::] and 0.0.0.0 on two ports)
         hosts = {"127.0.0.1", "localhost", host} if page_hosts is None else set(page_hosts)
         self.token = secrets.token_urlsafe(24)
         # viser binds its server before the constructor returns: the check is in place from the
@@ -191,23 +194,27 @@ class ViserView:
         #: the loopback names a browser can reach this server by, and whose origin its
         #: websocket accepts (``localhost`` only with [::1] at its port held: _hold_ipv6_loopback)
         self._v6_guard = None
-        names = set()
-        if host in ("127.0.0.1", "0.0.0.0", ""):
-            names.add("127.0.0.1")
-            self._v6_guard, safe = _hold_ipv6_loopback(self.port)
-            if safe:
-                names.add("localhost")
-        self.loopback_names = frozenset(names & hosts)
         self._timers: list[threading.Timer] = []
-        self._on_frame = on_frame
-        self._frame = 0
-        self._seq: laav.Sequence | None = None
-        self._result: laav.LaavResult | None = None
-        self._map = None
-        self._plane = None
-        self._frame_box = self.server.gui.add_number("frame", initial_value=0, min=0, max=1, step=1)
-        self._frame_box.on_update(self._frame_from_viser)
-        self.server.on_client_connect(self._on_client)
+        try:
+            names = set()
+            if host in ("127.0.0.1", "0.0.0.0"):
+                names.add("127.0.0.1")
+                self._v6_guard, safe = _hold_ipv6_loopback(self.port)
+                if safe:
+                    names.add("localhost")
+            self.loopback_names = frozenset(names & hosts)
+            self._on_frame = on_frame
+            self._frame = 0
+            self._seq: laav.Sequence | None = None
+            self._result: laav.LaavResult | None = None
+            self._map = None
+            self._plane = None
+            self._frame_box = self.server.gui.add_number("frame", initial_value=0, min=0, max=1, step=1)
+            self._frame_box.on_update(self._frame_from_viser)
+            self.server.on_client_connect(self._on_client)
+        except BaseException:
+            self.close()
+            raise
 
     def _on_client(self, client) -> None:
         timer = threading.Timer(SOFTWARE_NOTICE_S, _close_software_notice, (client,))
@@ -317,11 +324,11 @@ class ViserView:
 
         for timer in self._timers:
             timer.cancel()
-        if self._v6_guard is not None:
-            self._v6_guard.close()
-            self._v6_guard = None
         try:
             with contextlib.redirect_stdout(io.StringIO()):  # viser prints "Server stopped"
                 self.server.stop()
         except Exception:
             pass
+        if self._v6_guard is not None:  # (after the server: its clients reconnect meanwhile)
+            self._v6_guard.close()
+            self._v6_guard = None

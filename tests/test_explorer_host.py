@@ -141,10 +141,16 @@ def test_the_3d_server_holds_its_port_on_the_ipv6_loopback():
     view = ViserView(host="127.0.0.1")
     try:
         assert view.loopback_names == {"127.0.0.1", "localhost"}
-        with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as other:
-            with pytest.raises(OSError) as exc:
-                other.bind(("::1", view.port))
-            assert exc.value.errno == errno.EADDRINUSE
+        # no other program can listen there, however it asks
+        for opts in ((), (socket.SO_REUSEADDR,), (getattr(socket, "SO_REUSEPORT", None),)):
+            with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as other:
+                for opt in opts:
+                    if opt is not None:
+                        other.setsockopt(socket.SOL_SOCKET, opt, 1)
+                with pytest.raises(OSError) as exc:
+                    other.bind(("::1", view.port))
+                    other.listen()
+                assert exc.value.errno == errno.EADDRINUSE, opts
         with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as probe:  # refused at once
             assert probe.connect_ex(("::1", view.port)) == errno.ECONNREFUSED
     finally:
@@ -156,3 +162,11 @@ def test_the_3d_server_holds_its_port_on_the_ipv6_loopback():
         taken.listen()
         assert _hold_ipv6_loopback(taken.getsockname()[1]) == (None, False)
     assert netloc("::1", 80) == "[::1]:80" and netloc("localhost", 80) == "localhost:80"
+    # a wildcard bind "" is 0.0.0.0's: one port, reachable at 127.0.0.1 as the iframe says
+    view = ViserView(host="")
+    try:
+        assert view.loopback_names == {"127.0.0.1", "localhost"}
+        with socket.create_connection(("127.0.0.1", view.port), timeout=5):
+            pass
+    finally:
+        view.close()

@@ -208,7 +208,10 @@ class View3D:
 
     def iframe_html(self) -> str:
         hdr = (pn.state.headers or {}).get("Host", "") if pn.state.curdoc else ""
-        page = urllib.parse.urlsplit("//" + hdr).hostname if hdr else None  # ([::1]:80 -> ::1)
+        try:
+            page = urllib.parse.urlsplit("//" + hdr).hostname if hdr else None  # ([::1]:80 -> ::1)
+        except ValueError:  # a malformed Host: as if unknown
+            page = None
         host = iframe_host(page, self._iframe_host, self.viser.loopback_names)
         # the tab's secret path: the 3-D server answers nothing else (see viser_view)
         return (f'<iframe src="{html.escape(self.viser.url(host))}" title="LAAV 3-D view (viser)" '
