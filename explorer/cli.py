@@ -595,7 +595,7 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origi
     """:func:`main`'s server: serve until stopped (Ctrl-C)."""
     import panel as pn
 
-    from .viser_view import netloc
+    from .loopback import hold_ipv6_loopback, netloc
 
     startup_gc.imported()
     no_session_validation()
@@ -622,6 +622,9 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origi
               f"another free port of {args.host}, printed when the tab opens); use 127.0.0.1 for this "
               f"machine only", flush=True)
     print("laav-explore: press Ctrl-C to stop", flush=True)
+    # a browser tries http://localhost:PORT at [::1] first: held, no other program can listen
+    # there (the page's server is on IPv4 only), as for the 3-D view (loopback)
+    guard = hold_ipv6_loopback(port)[0] if args.host in ("127.0.0.1", "0.0.0.0") else None
     server.start()
     if not args.no_browser:
         server.io_loop.add_callback(lambda: webbrowser.open(url))
@@ -632,6 +635,8 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origi
     finally:
         server.stop()
         factory.close_unclaimed()
+        if guard is not None:
+            guard.close()
     return 0
 
 

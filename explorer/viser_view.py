@@ -18,6 +18,7 @@ import numpy as np
 import laav
 
 from . import views as V
+from .loopback import hold_ipv6_loopback, netloc
 
 __all__ = ["ViserView"]
 
@@ -104,38 +105,6 @@ def _for_webgl(rgb: np.ndarray) -> np.ndarray:
     return np.clip(np.round(lin * 255.0), 0, 255).astype(np.uint8)
 
 
-def netloc(host: str, port: int) -> str:
-    """``host:port`` as in an address, an IPv6 literal in brackets (``[::1]:8080``)."""
-    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
-
-
-def _hold_ipv6_loopback(port: int):
-    """``(socket, safe)``: ``[::1]:port`` bound by this process, not listening.
-
-    A browser resolves ``localhost`` to ``::1`` first and tries ``127.0.0.1`` only when that
-    fails. A server listening on ``127.0.0.1`` alone leaves ``[::1]`` at its port free for any
-    program on the machine to listen on and receive the 3-D view's secret address; held
-    here, nothing else can bind it (no ``SO_REUSEADDR``/``SO_REUSEPORT``), and a browser's
-    connection there is refused at once, so it goes on to ``127.0.0.1``. ``safe`` is True when
-    held, or when this machine has no IPv6 loopback (no program can listen there either);
-    False (and no socket) when something holds it already or the bind fails otherwise."""
-    import errno
-    import socket
-
-    try:
-        sock = socket.socket(socket.AF_INET6, socket.SOCK_STREAM)
-    except OSError:
-        return None, True  # no IPv6 in this system
-    try:
-        if hasattr(socket, "SO_EXCLUSIVEADDRUSE"):  # Windows: no other bind, even with SO_REUSEADDR
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_EXCLUSIVEADDRUSE, 1)
-        sock.bind(("::1", port))
-    except OSError as exc:
-        sock.close()
-        return None, exc.errno in (errno.EADDRNOTAVAIL, errno.EAFNOSUPPORT)
-    return sock, True
-
-
 def _close_software_notice(client) -> None:
     """Take viser's software-WebGL notice (:data:`SOFTWARE_NOTICE_ID`) off ``client``'s page,
     if it shows (else nothing happens). viser's public API removes only notices its server
@@ -192,14 +161,14 @@ class ViserView:
                                         control_width="small", show_logo=False)
         self.server.scene.set_up_direction("+y")
         #: the loopback names a browser can reach this server by, and whose origin its
-        #: websocket accepts (``localhost`` only with [::1] at its port held: _hold_ipv6_loopback)
+        #: websocket accepts (``localhost`` only with [::1] at its port held: hold_ipv6_loopback)
         self._v6_guard = None
         self._timers: list[threading.Timer] = []
         try:
             names = set()
             if host in ("127.0.0.1", "0.0.0.0"):
                 names.add("127.0.0.1")
-                self._v6_guard, safe = _hold_ipv6_loopback(self.port)
+                self._v6_guard, safe = hold_ipv6_loopback(self.port)
                 if safe:
                     names.add("localhost")
             self.loopback_names = frozenset(names & hosts)

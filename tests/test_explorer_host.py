@@ -78,12 +78,19 @@ def test_host_all_interfaces_prints_a_reachable_url_and_a_warning(tmp_path):
 
 
 def test_default_host_prints_the_loopback_url_without_a_warning(tmp_path):
+    import errno
+
     port = _free_port()
     proc, log = _serve(tmp_path, "--port", str(port))
     try:
         _page(proc, log, port)
         out = log.read_text()
         assert f"at http://127.0.0.1:{port}/" in out and "warning" not in out
+        if _ipv6_loopback():  # [::1] at the page's port held (a browser tries localhost there)
+            with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as other:
+                with pytest.raises(OSError) as exc:
+                    other.bind(("::1", port))
+                assert exc.value.errno == errno.EADDRINUSE
     finally:
         stop_process(proc)
 
@@ -136,7 +143,8 @@ def test_the_3d_server_holds_its_port_on_the_ipv6_loopback():
     import errno
 
     pytest.importorskip("viser")
-    from explorer.viser_view import ViserView, _hold_ipv6_loopback, netloc
+    from explorer.loopback import hold_ipv6_loopback, netloc
+    from explorer.viser_view import ViserView
 
     view = ViserView(host="127.0.0.1")
     try:
@@ -160,7 +168,7 @@ def test_the_3d_server_holds_its_port_on_the_ipv6_loopback():
     with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as taken:
         taken.bind(("::1", 0))
         taken.listen()
-        assert _hold_ipv6_loopback(taken.getsockname()[1]) == (None, False)
+        assert hold_ipv6_loopback(taken.getsockname()[1]) == (None, False)
     assert netloc("::1", 80) == "[::1]:80" and netloc("localhost", 80) == "localhost:80"
     # a wildcard bind "" is 0.0.0.0's: one port, reachable at 127.0.0.1 as the iframe says
     view = ViserView(host="")
