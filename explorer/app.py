@@ -617,10 +617,9 @@ class Explorer:
 
     def schedule(self, fn, *args, now_if_on_doc_thread: bool = False) -> None:
         """Run ``fn(*args)`` on the document's thread (or now, under a lock, without a server)."""
-        doc = self._doc()
+        doc = self._served_doc()
         on_doc_thread = self._session_doc is not None and threading.get_ident() == self._doc_thread
-        if doc is not None and doc.session_context is not None and not (now_if_on_doc_thread
-                                                                         and on_doc_thread):
+        if doc is not None and not (now_if_on_doc_thread and on_doc_thread):
             try:
                 doc.add_next_tick_callback(partial(self._locked, fn, *args))
                 return

@@ -595,7 +595,7 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origi
     """:func:`main`'s server: serve until stopped (Ctrl-C)."""
     import panel as pn
 
-    from .loopback import hold_ipv6_loopback, netloc
+    from .loopback import IPV4_BINDS, hold_ipv6_loopback, netloc
 
     startup_gc.imported()
     no_session_validation()
@@ -624,7 +624,7 @@ def _serve(args, seq, C, settings, port, video, first, startup_gc, parser, origi
     print("laav-explore: press Ctrl-C to stop", flush=True)
     # a browser tries http://localhost:PORT at [::1] first: held, no other program can listen
     # there (the page's server is on IPv4 only), as for the 3-D view (loopback)
-    guard = hold_ipv6_loopback(port)[0] if args.host in ("127.0.0.1", "0.0.0.0") else None
+    guard = hold_ipv6_loopback(port)[0] if args.host in IPV4_BINDS else None
     server.start()
     if not args.no_browser:
         server.io_loop.add_callback(lambda: webbrowser.open(url))

@@ -4,7 +4,13 @@ port an IPv4 server listens on (no GUI imports; the command and the 3-D view use
 
 from __future__ import annotations
 
-__all__ = ["netloc", "hold_ipv6_loopback"]
+__all__ = ["netloc", "hold_ipv6_loopback", "IPV4_BINDS", "LOOPBACK_ALIAS"]
+
+#: Binds that listen on IPv4 alone: ``[::1]`` at their port is left to anyone unless held
+#: (:func:`hold_ipv6_loopback`), and both loopback names reach them once it is.
+IPV4_BINDS = ("127.0.0.1", "0.0.0.0")
+#: The other name of this machine's loopback interface, by the name a page was reached at.
+LOOPBACK_ALIAS = {"127.0.0.1": "localhost", "localhost": "127.0.0.1"}
 
 
 def netloc(host: str, port: int) -> str:
@@ -20,9 +26,9 @@ def hold_ipv6_loopback(port: int):
     on the machine to listen on and receive what the browser sends (the page's session, the
     3-D view's secret address); held here, nothing else can bind it (no ``SO_REUSEADDR`` or
     ``SO_REUSEPORT``; ``SO_EXCLUSIVEADDRUSE`` on Windows), and a browser's connection there
-    is refused at once, so it goes on to ``127.0.0.1``. ``safe`` is True when
-    held, or when this machine has no IPv6 loopback (no program can listen there either);
-    False (and no socket) when something holds it already or the bind fails otherwise."""
+    is refused at once, so it goes on to ``127.0.0.1``. ``safe`` is True when held, or when
+    this machine has no IPv6 loopback (no program can listen there either); False (and no
+    socket) when something holds it already or the bind fails otherwise."""
     import errno
     import socket
 

@@ -18,7 +18,7 @@ import numpy as np
 import laav
 
 from . import views as V
-from .loopback import hold_ipv6_loopback, netloc
+from .loopback import IPV4_BINDS, hold_ipv6_loopback, netloc
 
 __all__ = ["ViserView"]
 
@@ -166,7 +166,7 @@ class ViserView:
         self._timers: list[threading.Timer] = []
         try:
             names = set()
-            if host in ("127.0.0.1", "0.0.0.0"):
+            if host in IPV4_BINDS:
                 names.add("127.0.0.1")
                 self._v6_guard, safe = hold_ipv6_loopback(self.port)
                 if safe:

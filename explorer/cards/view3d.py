@@ -23,6 +23,7 @@ import urllib.parse
 import panel as pn
 
 from .. import views as V
+from ..loopback import LOOPBACK_ALIAS
 from .base import FOLD_ARROW, HTML, Host, Markdown
 
 PLACEHOLDER = ('<div style="width:100%;height:440px;border:1px solid #ccc;border-radius:4px;'
@@ -32,10 +33,6 @@ PLACEHOLDER = ('<div style="width:100%;height:440px;border:1px solid #ccc;border
 
 #: The card's pane while its server starts (unfolded for the first time).
 STARTING = PLACEHOLDER.replace("opens with the first result", "is starting")
-
-#: The other name of this machine's loopback interface, by the name a page was reached at.
-LOOPBACK_ALIAS = {"127.0.0.1": "localhost", "localhost": "127.0.0.1"}
-
 
 def iframe_host(page_host: str | None, configured: str | None, names=frozenset()) -> str:
     """The host name the 3-D view's iframe addresses its server by.
@@ -72,8 +69,8 @@ class View3D:
 
     ``iframe_host``: the host name the browser uses to reach the server (None: the page's
     own host), except that a page at a loopback name gets the other one where it reaches the
-    server (:func:`iframe_host`); ``page_hosts``: the page origins its websocket accepts; ``on_frame``: called
-    with a frame picked in the 3-D view (from viser's thread)."""
+    server (:func:`iframe_host`); ``page_hosts``: the page origins its websocket accepts;
+    ``on_frame``: called with a frame picked in the 3-D view (from viser's thread)."""
 
     def __init__(self, host: Host, want: bool, viser_host: str, page_hosts, iframe_host, on_frame) -> None:
         self.host = host
