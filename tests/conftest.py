@@ -166,3 +166,26 @@ def fake_serving(monkeypatch) -> dict:
     monkeypatch.setattr(cli, "app_factory", fake_factory)
     monkeypatch.setattr(pn, "serve", lambda panels, **kw: FakeServer())
     return seen
+
+
+def hold_computation(monkeypatch, name: str, seconds: float = 120.0) -> None:
+    """Every pipeline run on a sequence called ``name`` waits in its atoms stage, checking
+    for a stop request (:mod:`laav._interrupt`) every 50 ms, for up to ``seconds``: a "long
+    computation" that lasts until it is cancelled, whatever the machine's speed (a real
+    big sequence took ~12 s once and ~2 s now, and a test that raced it failed in CI)."""
+    import time
+
+    import laav.pipeline as LP
+    from laav._interrupt import check
+
+    real = LP.build_atoms
+
+    def held(seq, *args, **kwargs):
+        if seq.name == name:
+            deadline = time.monotonic() + seconds
+            while time.monotonic() < deadline:
+                check()
+                time.sleep(0.05)
+        return real(seq, *args, **kwargs)
+
+    monkeypatch.setattr(LP, "build_atoms", held)

@@ -27,7 +27,7 @@ sync_api = pytest.importorskip("playwright.sync_api")
 pn = pytest.importorskip("panel")
 
 import numpy as np  # noqa: E402
-from conftest import two_motion_sequence  # noqa: E402
+from conftest import hold_computation, two_motion_sequence  # noqa: E402
 
 import laav  # noqa: E402
 from explorer import app as app_module  # noqa: E402
@@ -693,7 +693,8 @@ def _npz_bytes(seq, pad: int = 0) -> bytes:
 
 
 def _big_sequence(P: int = 3000, F: int = 30) -> laav.Sequence:
-    """3,000 points each moving its own way: a first computation of ~12 s on one core."""
+    """3,000 points each moving its own way (a first computation of ~2 s on one core;
+    :func:`conftest.hold_computation` makes it last until cancelled)."""
     import numpy as np
 
     rng = np.random.default_rng(0)
@@ -701,13 +702,14 @@ def _big_sequence(P: int = 3000, F: int = 30) -> laav.Sequence:
     return laav.Sequence(pts, np.r_[np.zeros(P // 2, int), np.ones(P - P // 2, int)], name="big_one")
 
 
-def test_uploads_past_the_limit_and_long_work(tmp_path):
+def test_uploads_past_the_limit_and_long_work(tmp_path, monkeypatch):
     """``--max-upload 24MB``: a 25 MB file is refused in the browser (never sent) with a
     message naming it, its size and the limit, and the page keeps working; an empty file
     says so; a valid 22 MB file (past the old ~15 MB death and bokeh's 20 MB message limit)
     loads; a long first computation shows progress and Cancel keeps the last result."""
     shots = Path(os.environ.get("LAAV_EXPLORER_SHOTS", tmp_path))
     shots.mkdir(parents=True, exist_ok=True)
+    hold_computation(monkeypatch, "big_one")  # long until cancelled, on any machine
     seq = _sequence()
     js_errors: list[str] = []
     with _served(seq, viser=False, max_upload=24_000_000) as (port, browser, created):
