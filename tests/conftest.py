@@ -168,24 +168,32 @@ def fake_serving(monkeypatch) -> dict:
     return seen
 
 
-def hold_computation(monkeypatch, name: str, seconds: float = 120.0) -> None:
-    """Every pipeline run on a sequence called ``name`` waits in its atoms stage, checking
-    for a stop request (:mod:`laav._interrupt`) every 50 ms, for up to ``seconds``: a "long
-    computation" that lasts until it is cancelled, whatever the machine's speed (a real
-    big sequence took ~12 s once and ~2 s now, and a test that raced it failed in CI)."""
+def wait_for_stop(seconds: float = 120.0) -> None:
+    """Wait, checking for a stop request (:mod:`laav._interrupt`) every 50 ms, for up to
+    ``seconds``: inside a computation, work that lasts until it is stopped, whatever the
+    machine's speed (a test that raced real work failed in CI once the work got faster)."""
     import time
 
-    import laav.pipeline as LP
     from laav._interrupt import check
+
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        check()
+        time.sleep(0.05)
+
+
+def hold_computation(monkeypatch, name: str, seconds: float = 120.0) -> None:
+    """Every pipeline run on a sequence called ``name`` waits in its atoms stage until it is
+    stopped (:func:`wait_for_stop`, up to ``seconds``): a "long computation" that lasts until
+    it is cancelled, on any machine (a real big sequence took ~12 s once and ~2 s now, and
+    the test that raced it failed in CI)."""
+    import laav.pipeline as LP
 
     real = LP.build_atoms
 
     def held(seq, *args, **kwargs):
         if seq.name == name:
-            deadline = time.monotonic() + seconds
-            while time.monotonic() < deadline:
-                check()
-                time.sleep(0.05)
+            wait_for_stop(seconds)
         return real(seq, *args, **kwargs)
 
     monkeypatch.setattr(LP, "build_atoms", held)

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import two_motion_sequence
+from conftest import two_motion_sequence, wait_for_stop
 
 import laav
 from explorer import sweep as S
@@ -78,11 +78,25 @@ def test_sweep_rows_equal_direct_segment_runs():
         sw.close()
 
 
-def test_sweep_cancel_stops_at_once_and_a_new_sweep_supersedes():
+def _hold_seeds_after_the_first(monkeypatch) -> None:
+    """The sweep's seeds after its first wait until they are cancelled: the sweep is still
+    running when the test cancels it, on any machine (ten small runs take ~0.3 s here)."""
+    real = S.explorer_pipeline
+
+    def held(seq, C, params, seed):
+        if seed != 0:
+            wait_for_stop()
+        return real(seq, C, params, seed)
+
+    monkeypatch.setattr(S, "explorer_pipeline", held)
+
+
+def test_sweep_cancel_stops_at_once_and_a_new_sweep_supersedes(monkeypatch):
     seq = _sequence()
     rec = _Recorder()
     sw = S.SeedSweep(rec.on_row, rec.on_end)
     try:
+        _hold_seeds_after_the_first(monkeypatch)
         sid = sw.start(seq, 2, laav.LaavParams(), seeds=range(10))
         deadline = time.monotonic() + 60
         while not rec.rows and time.monotonic() < deadline:
@@ -96,6 +110,7 @@ def test_sweep_cancel_stops_at_once_and_a_new_sweep_supersedes():
         n_rows = len(rec.rows)
         time.sleep(0.3)
         assert len(rec.rows) == n_rows  # no seed reported after the cancel
+        monkeypatch.undo()  # the seeds no longer wait
 
         # a new sweep cancels the one running; only its rows are kept
         rec2 = _Recorder()
@@ -230,7 +245,7 @@ def test_the_summary_counts_bad_seeds_per_stage(explorer):
     assert "Iterations: the returned trial's, and in brackets every trial's" in text
 
 
-def test_card_runs_loads_a_seed_and_is_cancelled_by_a_parameter_change(explorer):
+def test_card_runs_loads_a_seed_and_is_cancelled_by_a_parameter_change(explorer, monkeypatch):
     ex = explorer
     card = ex.sweep_view
     assert not card.w_stop.visible  # Stop is offered only while a sweep runs
@@ -249,6 +264,7 @@ def test_card_runs_loads_a_seed_and_is_cancelled_by_a_parameter_change(explorer)
     assert card.data["seed"] == list(S.SEEDS)  # a seed change keeps the rows
 
     # a parameter change cancels a running sweep and clears its rows
+    _hold_seeds_after_the_first(monkeypatch)  # (still running when the change comes)
     card.run()
     deadline = time.monotonic() + 60
     while not card.sweep.rows and time.monotonic() < deadline:
@@ -259,7 +275,8 @@ def test_card_runs_loads_a_seed_and_is_cancelled_by_a_parameter_change(explorer)
     assert card.progress_md.object.startswith("Cancelled: the settings changed")
     assert card.data["seed"] == [] and not any(b.visible for b in card.row_buttons)
     assert "Rows appear" not in card.caption.object and "rows were cleared" in card.caption.object
-    assert ex.wait(60)
+    assert ex.wait(60) and card.sweep.wait(60)
+    monkeypatch.undo()
     # finished rows of other settings are cleared too
     card.run()
     assert card.sweep.wait(120) and len(card.data["seed"]) == 10

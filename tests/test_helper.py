@@ -1,5 +1,6 @@
 """The voting helper (laav.helper): a second process for LAAV's own trials changes no label."""
 
+import functools
 import os
 import signal
 import time
@@ -28,6 +29,11 @@ ALL = laav.LaavParams(rv_missing_gate=0.0)
 
 def _scene(seed):
     return synthetic.make_sequence(n_objects=2, n_frames=20, n_points=300, rng=seed)
+
+
+@functools.cache
+def _slow_scene():
+    return synthetic.make_sequence(n_objects=2, n_frames=20, n_points=_SLOW_POINTS, rng=0)
 
 
 def _same(a, b):
@@ -151,12 +157,7 @@ def test_a_stopped_computation_stops_the_helpers_half(helper):
 
 
 def test_stop_ends_a_running_job(helper):
-    seq = _scene(0)
-    P = seq.points.shape[1]
-    rng = np.random.default_rng(0)
-    params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)  # runs ~10,000 iterations
-    start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(1))
-    handle = helper.submit((seq.points, 3, params, [start], None, [False]))
+    handle = helper.submit(_long_job(seed=0))
     time.sleep(0.5)
     assert not handle[1].done()
     t = time.perf_counter()
@@ -199,8 +200,16 @@ def test_the_helper_ends_with_its_parent(tmp_path):
         proc.kill()
 
 
-def _long_job(seq, seed=1):
-    """Arguments of a helper job of about 10,000 voting iterations (seconds)."""
+#: A scene whose voting iterations are slow (~5 ms each on 20,000 points): a job of 10,000 of
+#: them lasts about a minute, far beyond the 0.2-1 s the tests wait before they stop or kill
+#: it (on 300 points it took 2.5-3 s, and a 3-4x faster machine would have finished it).
+_SLOW_POINTS = 20_000
+
+
+def _long_job(seed=1):
+    """Arguments of a helper job of 10,000 voting iterations on ``_SLOW_POINTS`` points
+    (about a minute: it is stopped or killed long before)."""
+    seq = _slow_scene()
     P = seq.points.shape[1]
     rng = np.random.default_rng(seed)
     params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)
@@ -217,7 +226,7 @@ def test_stopping_a_queued_job_leaves_the_running_one(helper):
     rng = np.random.default_rng(3)
     start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(4))
     first = helper.submit((seq.points, 3, params, [start], None, [False]))
-    second = helper.submit(_long_job(seq))
+    second = helper.submit(_long_job())
     time.sleep(0.2)
     helper.stop(second)
     value = helper.result(first, lambda: None)
@@ -229,7 +238,7 @@ def test_a_helper_that_dies_mid_job_leaves_the_job_to_the_caller():
     seq = _scene(0)
     with VotingHelper() as h:
         assert h.wait_ready()
-        handle = h.submit(_long_job(seq))
+        handle = h.submit(_long_job())
         time.sleep(1.0)
         for pid in list(h._pool._processes):
             os.kill(pid, signal.SIGKILL)
@@ -247,13 +256,13 @@ def test_a_helper_whose_process_keeps_dying_closes_itself():
         with pytest.warns(RuntimeWarning, match="died 3 times"):
             for _ in range(3):
                 assert h.wait_ready()
-                handle = h.submit(_long_job(seq))
+                handle = h.submit(_long_job())
                 assert handle is not None
                 time.sleep(0.5)
                 for pid in list(h._pool._processes):
                     os.kill(pid, signal.SIGKILL)
                 assert h.result(handle, lambda: None) is None
-        assert h.submit(_long_job(seq)) is None
+        assert h.submit(_long_job()) is None
         _same(laav.Pipeline(seq, 3, ALL).result, laav.Pipeline(seq, 3, ALL, helper=h).result)
 
 
@@ -282,7 +291,7 @@ def test_a_process_that_dies_at_start_leaves_the_work_here(monkeypatch):
         h = VotingHelper()
         assert not h.ready
         for _ in range(4):
-            assert h.submit(_long_job(seq)) is None
+            assert h.submit(_long_job()) is None
     assert len(made) == 3  # then closed: no new process per call
     assert not h.wait_ready(timeout=1)
     _same(laav.Pipeline(seq, 3, ALL).result, laav.Pipeline(seq, 3, ALL, helper=h).result)
@@ -325,10 +334,9 @@ def test_close_stops_a_running_job():
     the job stops at its next check."""
     h = VotingHelper()
     assert h.wait_ready()
-    seq = _scene(0)
-    handle = h.submit(_long_job(seq))
+    handle = h.submit(_long_job())
     time.sleep(0.5)
-    assert not handle[1].done()  # running: about 10,000 iterations, tens of seconds
+    assert not handle[1].done()  # running: 10,000 slow iterations, about a minute
     t = time.perf_counter()
     h.close()
     assert time.perf_counter() - t < 5
@@ -346,10 +354,10 @@ from laav import synthetic
 if __name__ == "__main__":
     h = VotingHelper()
     assert h.wait_ready()
-    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=1200, rng=0)
+    seq = synthetic.make_sequence(n_objects=2, n_frames=20, n_points=20_000, rng=0)
     P = seq.points.shape[1]
     rng = np.random.default_rng(1)
-    params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)  # seconds
+    params = laav.LaavParams(rv_max_iter=10_000, rv_patience=10_000)  # about a minute
     start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(2))
     handle = h.submit((seq.points, 3, params, [start], None, [False]))
     time.sleep(0.5)
