@@ -511,6 +511,9 @@ def test_layout_fits_a_projector(tmp_path, monkeypatch):
             # the 3-D card's title on one line (at 1024 it wrapped onto two)
             lines = page.evaluate(JS_TITLE_LINES, "3-D space-time view")
             assert lines and all(n < 1.5 for n in lines), (w, lines)
+            # the 3-D view spans its card (it stopped ~40 px short at 1280 px: a max width)
+            span = page.evaluate(JS_IFRAME_IN_CARD)
+            assert span is not None and span["card"] - span["iframe"] <= 24, (w, span)
             if i == 1:
                 # the 3-D card folds away (and back)
                 iframe = page.locator(f"iframe[src*=':{viser.port}/']")
@@ -768,6 +771,21 @@ def test_uploads_past_the_limit_and_long_work(tmp_path, monkeypatch):
         _wait_for(lambda: ex.result.params.lam == 2.5 and ex.wait(1), 60, "a result after cancelling")
         assert ex.sequence.name == "padded_22MB"
     assert not js_errors, js_errors[:5]
+
+
+#: The width of the page's iframe (the 3-D view) and of the card holding it, in px; null
+#: when either is not found. Searches open shadow roots.
+JS_IFRAME_IN_CARD = """() => {
+  const all = [];
+  const walk = (root) => { for (const el of root.querySelectorAll('*')) {
+    all.push(el); if (el.shadowRoot) walk(el.shadowRoot); } };
+  walk(document);
+  const frame = all.find(el => el.tagName === 'IFRAME');
+  let card = frame;
+  while (card && !(card.classList && card.classList.contains('card'))) card = card.parentNode || card.host;
+  if (!frame || !card) return null;
+  return {iframe: frame.getBoundingClientRect().width, card: card.getBoundingClientRect().width};
+}"""
 
 
 #: How many files the page's upload box lists (its FilePond), -1 before it is up.

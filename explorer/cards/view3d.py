@@ -90,8 +90,7 @@ class View3D:
         #: page's address is printed then: ``laav-explore --host``)
         self.eager = False
         if self.want:
-            self.pane = HTML(PLACEHOLDER, height=440, margin=0, sizing_mode="stretch_width",
-                             max_width=900)
+            self.pane = HTML(PLACEHOLDER, height=440, margin=0, sizing_mode="stretch_width")
         else:
             self.pane = Markdown(f"*{V.md_text('the 3-D view is switched off')}*",
                                  sizing_mode="stretch_width", height=60)
