@@ -178,6 +178,11 @@ class ViserView:
             self._result: laav.LaavResult | None = None
             self._map = None
             self._plane = None
+            self._plane_z = None
+            #: per scene node, the arrays last sent (:meth:`_put`): a node whose data did not
+            #: change is not sent again (each message makes the 3-D page draw its scene anew,
+            #: which software WebGL pays for on the machine's other core)
+            self._sent: dict[str, tuple] = {}
             self._frame_box = self.server.gui.add_number("frame", initial_value=0, min=0, max=1, step=1)
             self._frame_box.on_update(self._frame_from_viser)
             self.server.on_client_connect(self._on_client)
@@ -225,6 +230,7 @@ class ViserView:
             self._plane = scene.add_mesh_simple("/frame_plane", verts, faces, color=(120, 120, 120),
                                                 opacity=0.25, side="double", cast_shadow=False,
                                                 receive_shadow=False)
+            self._plane_z = None  # (a new plane: its position is sent below)
             self._frame_box.max = max(seq.n_frames - 1, 1)
             depth = m.dz * (seq.n_frames - 1)
             self.server.initial_camera.position = (2.6, 2.0, -2.6)
@@ -263,29 +269,52 @@ class ViserView:
             self._frame_box.value = self._frame
         self._draw_frame_items()
 
+    def _put(self, name: str, add: Callable, *arrays, **kwargs) -> None:
+        """``add(name, *arrays, **kwargs)`` (a ``scene.add_*``) unless the node ``name`` was
+        last sent with these very arrays (and the same ``kwargs``)."""
+        key = (tuple(np.array(a) for a in arrays), kwargs)
+        old = self._sent.get(name)
+        if old is not None and old[1] == kwargs and len(old[0]) == len(key[0]) and all(
+                a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b)
+                for a, b in zip(old[0], key[0])):
+            return
+        self._sent[name] = key
+        add(name, *arrays, **kwargs)
+
+    def _remove(self, name: str) -> None:
+        if self._sent.pop(name, None) is not None:
+            self.server.scene.remove_by_name(name)
+
     def _draw_frame_items(self) -> None:
         seq, res, m, f = self._seq, self._result, self._map, self._frame
         scene = self.server.scene
-        self._plane.position = (0.0, 0.0, float(f * m.dz))
+        z = float(f * m.dz)
+        if z != self._plane_z:
+            self._plane.position = (0.0, 0.0, z)
+            self._plane_z = z
         vis = V.visible_at(seq, f)  # only the points seen in this frame
-        scene.add_point_cloud("/points", m(seq.points[f, vis], f), self._colors[vis], point_size=0.05,
-                              point_shape="circle", precision="float32")
+        self._put("/points", scene.add_point_cloud, m(seq.points[f, vis], f).astype(np.float32),
+                  self._colors[vis], point_size=0.05, point_shape="circle", precision="float32")
         pos = np.asarray(res.graph.positions)
         if pos.size:
             centers = m(pos[f], f)
             shown = np.isfinite(centers).all(axis=1)  # an atom with no member seen here: not drawn
-            scene.add_point_cloud("/atoms", centers[shown], np.full((int(shown.sum()), 3), 30, np.uint8),
-                                  point_size=0.09, point_shape="circle", precision="float32")
+            self._put("/atoms", scene.add_point_cloud, centers[shown].astype(np.float32),
+                      np.full((int(shown.sum()), 3), 30, np.uint8),
+                      point_size=0.09, point_shape="circle", precision="float32")
             E = np.asarray(res.graph.edges, dtype=np.int64).reshape(-1, 2)
             keep = shown[E[:, 0]] & shown[E[:, 1]] if E.size else np.zeros(0, bool)
             E = E[keep]
             if E.size:
                 segs = np.stack([centers[E[:, 0]], centers[E[:, 1]]], axis=1).astype(np.float32)
                 col = _for_webgl(np.where((np.asarray(res.graph.costs)[keep] >= 0)[:, None], _JOIN, _CUT))
-                scene.add_line_segments("/graph_edges", segs, np.repeat(col[:, None], 2, axis=1),
-                                        thickness=2.0, thickness_units="screen")
+                self._put("/graph_edges", scene.add_line_segments, segs,
+                          np.repeat(col[:, None], 2, axis=1), thickness=2.0, thickness_units="screen")
             elif not seq.is_complete:  # no edge with both atoms seen here: none drawn
-                scene.remove_by_name("/graph_edges")
+                self._remove("/graph_edges")
+        else:  # no atom at all (a result of another sequence's may be on show)
+            self._remove("/atoms")
+            self._remove("/graph_edges")
 
     def close(self) -> None:
         import contextlib

@@ -742,6 +742,57 @@ def test_viser_view_follows_the_frame(seq):
         ex.close()
 
 
+def test_viser_view_sends_only_what_changed(seq):
+    """Each scene message makes the 3-D page draw anew (software WebGL: the other core), so a
+    change that leaves a node's data as it was sends nothing for it: a λ change keeping the
+    labels sends nothing at all; a frame move sends the frame's points, atoms and edges; a
+    result without atoms takes the atoms away."""
+    pytest.importorskip("viser")
+    from explorer.viser_view import ViserView
+
+    view = ViserView()
+    try:
+        sent: list[str] = []
+        scene = view.server.scene
+        for method in ("add_point_cloud", "add_line_segments", "remove_by_name"):
+            real = getattr(scene, method)
+
+            def record(name, *a, _real=real, **k):
+                sent.append(name)
+                return _real(name, *a, **k)
+
+            setattr(scene, method, record)
+        res = laav.Pipeline(seq, 2).result
+        colors = V.point_style(seq, res, "gt", None)["color"]
+        view.set_result(seq, res, colors, 0)
+        assert sorted(sent) == ["/atoms", "/graph_edges", "/points", "/trajectories"]
+        sent.clear()
+        same = laav.Pipeline(seq, 2, laav.LaavParams(lam=res.params.lam * 1.01)).result
+        assert np.array_equal(same.labels, res.labels)
+        view.set_result(seq, same, colors, 0)  # (what a λ move gives the view)
+        view.set_colors(colors)
+        view.set_frame(0)
+        assert sent == []
+        view.set_frame(3)
+        assert sorted(sent) == ["/atoms", "/graph_edges", "/points"]
+        assert abs(view._plane.position[2] - 3 * view._map.dz) < 1e-5
+        sent.clear()
+        view.set_frame(3)
+        assert sent == []
+        recoloured = np.array(colors, dtype=object)
+        recoloured[0] = "#000000"
+        view.set_colors(recoloured)
+        assert sorted(sent) == ["/points", "/trajectories"]
+        sent.clear()
+        none = dataclasses.replace(res, graph=dataclasses.replace(
+            res.graph, positions=np.zeros((0, seq.n_frames, 2)), edges=np.zeros((0, 2), int),
+            costs=np.zeros(0)))
+        view.set_result(seq, none, recoloured, 3)
+        assert sorted(sent) == ["/atoms", "/graph_edges"]  # removed
+    finally:
+        view.close()
+
+
 def test_a_3d_view_that_cannot_start_says_so(seq, monkeypatch):
     """The first unfold starts the 3-D view's server; one that fails to start shows why (the
     card never stays on "is starting")."""
