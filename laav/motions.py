@@ -40,14 +40,26 @@ from ._threads import single_threaded
 from .refine import robust_subspace
 
 __all__ = ["MotionCount", "MotionProfile", "motion_profile", "estimate_motions", "complete_window", "decide",
-           "profile_levels"]
+           "profile_levels", "noise_corrected", "noise_floors"]
 
 RANK = 4  # an affine camera's rigid motion spans a 4-dimensional trajectory subspace
-#: Fitted by benchmarks/motions.py on all 155 Hopkins155 sequences (seed 0 profiles);
-#: weights of the log gains (subspace, epipolar) at a step and at the next step, and of the
-#: coding length per point saved by the step (:func:`step_features`).
-STEP_WEIGHTS = (0.3933, 2.8168, 1.2566, 3.249, 0.6245)
-STEP_BIAS = -4.3065
+#: Fitted by benchmarks/motions.py on all 155 Hopkins155 sequences, seed-0 profiles at pixel
+#: noise σ = 0, 0.5 and 1 px (since 2026-12-06; before: σ = 0 only, which called nearly
+#: every noisy three-motion sequence two); weights of the noise-corrected log gains
+#: (subspace, epipolar) at a step and at the next step, and of the coding length per point
+#: saved by the step (:func:`step_features`, :func:`noise_corrected`).
+STEP_WEIGHTS = (-0.5946, 2.4186, -0.1674, 0.7111, 0.8341)
+STEP_BIAS = -1.6548
+#: The levels' noise floors, in units of the tracks' noise variance σ̂²
+#: (:func:`laav.noise.estimate_noise`): with N(0, σ²) noise on every coordinate a point's
+#: squared distance (per frame) to its motion's rank-4 trajectory subspace is about 2σ²
+#: (2F - 4 of 2F dimensions, over F frames), and its Sampson distance to its motion's
+#: fundamental matrix about σ² (first order). Set a priori, not fitted.
+NOISE_FLOORS = (2.0, 1.0)
+#: What is left of a floor (:func:`noise_corrected`): a level at or under its floor counts as
+#: this share of it, so that gains among labellings all within the noise stay small. Chosen
+#: with the weights by cross-validation (benchmarks/motions.py; None = no correction).
+FLOOR_SHARE = 0.3
 #: One motion when its epipolar level <= this x the atoms' noise level (px^2).
 ONE_MOTION_RATIO = 0.05
 #: A step C -> C + 1 (C >= 2) whose score is within this of 0 is a *close call*
@@ -101,6 +113,7 @@ class MotionProfile:
     coding: np.ndarray          # (K,) coding length of each labelling, nats per point (NaN: none)
     noise2: float               # px^2: median squared affine residual of the atoms' members
     n_atoms: int
+    sigma: float = 0.0          # px: the tracks' noise, laav.noise.estimate_noise
 
 
 def _group_residuals(W, norm2, labels, n_groups, rank, rounds=3, min_size=MIN_POINTS, unit2=1.0):
@@ -153,7 +166,7 @@ def motion_profile(seq, max_motions: int = 5, params=None, seed: int = 0,
         got = _evaluate(ctx, int(C))
         if got is not None:
             L[i], R[i], E[i], B[i] = got
-    return MotionProfile(cands, R, E, L, B, ctx.noise2, ctx.n_atoms)
+    return MotionProfile(cands, R, E, L, B, ctx.noise2, ctx.n_atoms, ctx.sigma)
 
 
 @dataclass(eq=False)
@@ -167,6 +180,7 @@ class _Context:
     pairs: np.ndarray
     unit2: float
     eps: float  # the coding length's distortion (px): LAAV's coding_eps
+    sigma: float  # px: the tracks' noise (laav.noise.estimate_noise)
     results: dict = field(default_factory=dict)  # C -> the LaavResult behind candidate C
 
     @property
@@ -176,6 +190,7 @@ class _Context:
 
 def _prepare(seq, max_motions, params, seed, rank) -> _Context:
     """LAAV at C = 2 (its atoms and graph serve every C) and the trajectory matrix."""
+    from .noise import estimate_noise
     from .pipeline import Pipeline
     from .refine import frame_pairs, trajectory_matrix
     from .voting import unit2
@@ -200,7 +215,8 @@ def _prepare(seq, max_motions, params, seed, rank) -> _Context:
     W = trajectory_matrix(seq.points)  # origin at the points' corner: translation-free
     norm2 = np.einsum("ij,ij->j", W, W)
     return _Context(pipe, W, norm2, noise2, atoms.n_atoms, rank, frame_pairs(seq.n_frames, 12),
-                    unit2(pipe.params), float(pipe.params.coding_eps))
+                    unit2(pipe.params), float(pipe.params.coding_eps),
+                    float(estimate_noise(seq.points)))
 
 
 def _evaluate(ctx: _Context, C: int):
@@ -276,8 +292,40 @@ def step_features(levels, C: int) -> np.ndarray:
     return np.array([g[0], g[1], g1[0], g1[1], g[2]])
 
 
+def noise_floors(sigma: float) -> tuple[float, float]:
+    """(subspace, epipolar) noise floors (px^2) of the levels for tracks of noise ``sigma`` px:
+    :data:`NOISE_FLOORS` x ``sigma``^2."""
+    return NOISE_FLOORS[0] * sigma ** 2, NOISE_FLOORS[1] * sigma ** 2
+
+
+def noise_corrected(levels, floors=(0.0, 0.0), share=None):
+    """``levels`` ((3, K) of :func:`profile_levels`, or a function of C giving its column)
+    with the noise taken out of its two residual levels: each level ``l = log(m)`` becomes
+    ``log(max(m - f, 0) + share f)``, ``f`` its floor (``floors``, px^2, e.g.
+    :func:`noise_floors`). Under pixel noise every candidate's level sits near the floor,
+    so the log gains between labellings shrink towards 0 whatever they explain; measured
+    above the floor they keep their size. ``share``: :data:`FLOOR_SHARE` when None.
+    Unchanged where a floor is 0; NaN stays NaN."""
+    share = FLOOR_SHARE if share is None else share
+    if not any(f > 0 for f in floors):
+        return levels
+    col = _column(levels)
+
+    def corrected(c):
+        v = np.array(col(c), dtype=float)
+        for i, f in enumerate(floors):
+            if f > 0 and np.isfinite(v[i]):
+                v[i] = np.log(max(np.exp(v[i]) - f, 0.0) + share * f)
+        return v
+    if callable(levels):
+        return corrected
+    K = np.asarray(levels).shape[1]
+    return np.stack([corrected(c) for c in range(1, K + 1)], axis=1)
+
+
 def decide(levels, noise2: float, max_motions: int, weights=None, bias=None,
-           one_motion_ratio=None, unit2: float = 1.0) -> tuple[int, np.ndarray, str]:
+           one_motion_ratio=None, unit2: float = 1.0, sigma: float = 0.0,
+           floor_share=None) -> tuple[int, np.ndarray, str]:
     """The sequential test: (C, score of each step C -> C + 1, why).
 
     ``levels``: (3, K) array of :func:`profile_levels` (K >= ``max_motions`` + 1), or a
@@ -285,9 +333,12 @@ def decide(levels, noise2: float, max_motions: int, weights=None, bias=None,
     and C + 2). Step scores are > 0 where the test adds a motion: for 1 -> 2 the log of one
     motion's epipolar level over ``one_motion_ratio`` x ``noise2``, for later steps the
     linear score; NaN for steps not reached. ``unit2`` scales the 1e-12 px^2 floors of
-    the first step's logs (:mod:`laav.refine`).
+    the first step's logs (:mod:`laav.refine`). ``sigma`` (px, the tracks' noise): the later
+    steps read the levels :func:`noise_corrected` for it (``floor_share``: its ``share``,
+    :data:`FLOOR_SHARE` when None); the one-motion step reads them as they are.
     """
     col = _column(levels)
+    steps = _column(noise_corrected(col, noise_floors(sigma), floor_share))
     w = np.asarray(STEP_WEIGHTS if weights is None else weights, dtype=float)
     b = STEP_BIAS if bias is None else bias
     k1 = ONE_MOTION_RATIO if one_motion_ratio is None else one_motion_ratio
@@ -304,12 +355,13 @@ def decide(levels, noise2: float, max_motions: int, weights=None, bias=None,
     while C < max_motions:
         if not np.isfinite(col(C + 1)).all():
             return C, scores, f"no labelling with {C + 1} motions of >= {MIN_POINTS} points each"
-        g = step_features(col, C)
+        g = step_features(steps, C)
         scores[C - 1] = float(w @ g + b)
         if scores[C - 1] <= 0:
-            return C, scores, (f"going to {C + 1} motions gains too little (log gains subspace "
-                               f"{g[0]:.2f}, epipolar {g[1]:.2f}, coding length {g[4]:.2f} nats per "
-                               f"point; step score {scores[C - 1]:.2f} <= 0)")
+            above = f" above the noise (σ̂ = {sigma:.2g} px)" if sigma >= 0.1 else ""
+            return C, scores, (f"going to {C + 1} motions gains too little (log gains{above} "
+                               f"subspace {g[0]:.2f}, epipolar {g[1]:.2f}, coding length {g[4]:.2f} "
+                               f"nats per point; step score {scores[C - 1]:.2f} <= 0)")
         C += 1
     return C, scores, f"every step up to max_motions = {max_motions} gained enough"
 
@@ -342,6 +394,9 @@ class MotionCount:
         Why the test stopped at ``n_motions``.
     seed : int
     seconds : float
+    sigma : float
+        The tracks' pixel noise (px, :func:`laav.noise.estimate_noise`) the later steps
+        took out of the levels (:func:`noise_corrected`).
     """
 
     n_motions: int
@@ -354,6 +409,7 @@ class MotionCount:
     reason: str
     seed: int = 0
     seconds: float = 0.0
+    sigma: float = 0.0
 
     @property
     def deciding_step(self) -> tuple[int, float] | None:
@@ -513,14 +569,14 @@ def _estimate_motions(seq_or_points, max_motions, random_state, params):
                          f"of motions (needs at least {2 * MIN_POINTS}: {MIN_POINTS} per motion of two)")
     max_motions = min(max_motions, P // MIN_POINTS)
     t = time.perf_counter()
-    C, scores, levels, noise2, why, results = _estimate(seq_or_points, max_motions, params, seed)
+    C, scores, levels, noise2, sigma, why, results = _estimate(seq_or_points, max_motions, params, seed)
     count = MotionCount(
         n_motions=int(C), candidates=tuple(range(1, max_motions + 2)),
         subspace_level=tuple(float(v) for v in np.exp(levels[0])),
         epipolar_level=tuple(float(v) for v in np.exp(levels[1])),
         coding_length=tuple(float(v) for v in levels[2]),
         step_scores=tuple(float(v) for v in scores), noise=noise2, reason=why + basis,
-        seed=seed, seconds=time.perf_counter() - t)
+        seed=seed, seconds=time.perf_counter() - t, sigma=sigma)
     # LAAV's result at the estimate, when it was computed on the caller's whole sequence with
     # the caller's settings: not with profile_params(), for a caller who gave none, nor when
     # the profile turned off what its constants were not fitted with (NOT_FITTED), which the
@@ -548,5 +604,5 @@ def _estimate(seq, max_motions, params, seed):
                                                   coding=[got[3]])[:, 0]
         return levels[:, c - 1]
 
-    C, scores, why = decide(col, ctx.noise2, max_motions, unit2=ctx.unit2)
-    return C, scores, levels, float(ctx.noise2), why, ctx.results
+    C, scores, why = decide(col, ctx.noise2, max_motions, unit2=ctx.unit2, sigma=ctx.sigma)
+    return C, scores, levels, float(ctx.noise2), float(ctx.sigma), why, ctx.results
