@@ -53,7 +53,7 @@ NOISE = (0.0, 0.5, 1.0)
 MAX_MOTIONS = 5
 REG_GRID = (0.1, 1.0, 10.0)  # inverse L2 strength of the logistic step model
 ONE_GRID = (0.05, 0.1, 0.2, 0.5)  # ONE_MOTION_RATIO candidates
-#: FLOOR_SHARE candidates (None: the levels as they are, no noise correction)
+#: FLOOR_SHARE candidates (here None means the levels as they are, no noise correction)
 SHARE_GRID = (None, 0.1, 0.3, 1.0, 3.0)
 
 
@@ -78,13 +78,15 @@ def _profile(args):
 
 
 def profiles(items, cache: Path, jobs: int = 1) -> dict:
-    """Profiles of every sequence for every seed (:data:`SEEDS`) and pixel noise
-    (:data:`NOISE`), cached in ``CACHE/profiles.npz``; ``jobs`` processes."""
+    """Profiles of every sequence for every seed (:data:`SEEDS`) without added noise, and for
+    the first seed at every pixel noise of :data:`NOISE`, cached in ``CACHE/profiles.npz``;
+    ``jobs`` processes."""
     from concurrent.futures import ProcessPoolExecutor
 
     path = cache / "profiles.npz"
     z = dict(np.load(path)) if path.exists() else {}
-    todo = [(it.path, _key(it.name, s, sg), s, sg) for sg in NOISE for s in SEEDS for it in items
+    todo = [(it.path, _key(it.name, s, sg), s, sg) for sg in NOISE
+            for s in (SEEDS if sg == 0 else SEEDS[:1]) for it in items  # (noise: seed 0 only)
             if f"{_key(it.name, s, sg)}|meta" not in z or z[f"{_key(it.name, s, sg)}|meta"].size < 5]
     if not todo:
         return z

@@ -310,7 +310,7 @@ class ViserView:
                 col = _for_webgl(np.where((np.asarray(res.graph.costs)[keep] >= 0)[:, None], _JOIN, _CUT))
                 self._put("/graph_edges", scene.add_line_segments, segs,
                           np.repeat(col[:, None], 2, axis=1), thickness=2.0, thickness_units="screen")
-            elif not seq.is_complete:  # no edge with both atoms seen here: none drawn
+            else:  # no edge (with both atoms seen here): none drawn, the last result's gone
                 self._remove("/graph_edges")
         else:  # no atom at all (a result of another sequence's may be on show)
             self._remove("/atoms")

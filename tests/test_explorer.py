@@ -784,6 +784,14 @@ def test_viser_view_sends_only_what_changed(seq):
         view.set_colors(recoloured)
         assert sorted(sent) == ["/points", "/trajectories"]
         sent.clear()
+        lonely = dataclasses.replace(res, graph=dataclasses.replace(  # atoms, no edge
+            res.graph, edges=np.zeros((0, 2), int), costs=np.zeros(0)))
+        view.set_result(seq, lonely, recoloured, 3)
+        assert sent == ["/graph_edges"]  # the last result's edges removed, the atoms as they were
+        sent.clear()
+        view.set_result(seq, res, recoloured, 3)
+        assert sent == ["/graph_edges"]  # back
+        sent.clear()
         none = dataclasses.replace(res, graph=dataclasses.replace(
             res.graph, positions=np.zeros((0, seq.n_frames, 2)), edges=np.zeros((0, 2), int),
             costs=np.zeros(0)))

@@ -219,7 +219,7 @@ def test_the_spinner_shows_only_for_a_computation_that_lasts(monkeypatch):
 
         ex._on_busy(True)  # a short computation: over before its time
         ex._on_busy(False)
-        time.sleep(1.3)
+        time.sleep(2.0)
         assert changes == [] and bar.status.object == line
 
         ex._on_busy(True)  # a long one: shown once its time has passed, not before

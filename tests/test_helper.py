@@ -220,17 +220,18 @@ def _long_job(seed=1):
 def test_stopping_a_queued_job_leaves_the_running_one(helper):
     """The pool hands its process a job or two beyond the one running, marked running: a
     stop of such a queued job must not stop the running job of another caller."""
-    seq = _scene(0)
+    seq = _slow_scene()
     P = seq.points.shape[1]
-    params = laav.LaavParams(rv_max_iter=1500, rv_patience=1500)  # about a second
+    params = laav.LaavParams(rv_max_iter=300, rv_patience=300)  # about 1.5 s on 20,000 points
     rng = np.random.default_rng(3)
     start = (rng.integers(0, 3, P), np.zeros((P, 3)), np.random.default_rng(4))
     first = helper.submit((seq.points, 3, params, [start], None, [False]))
     second = helper.submit(_long_job())
     time.sleep(0.2)
+    assert not first[1].done()  # (the first still runs: the second is queued behind it)
     helper.stop(second)
     value = helper.result(first, lambda: None)
-    assert value is not None and value[0][0][4] == 1500  # ran all its iterations
+    assert value is not None and value[0][0][4] == 300  # ran all its iterations
     assert helper.result(second, lambda: None) is None  # stopped (or never started)
 
 
