@@ -97,9 +97,12 @@ def _origin_checked(hosts: Iterable[str], token: str):
 
 
 def _for_webgl(rgb: np.ndarray) -> np.ndarray:
-    """sRGB colours (uint8) as the linear values three.js expects in vertex colour buffers:
-    it converts them to sRGB for the screen, so without this every colour of the 3-D view
-    came out lighter than the same colour in the 2-D views (blue looked cyan)."""
+    """sRGB colours (uint8) as the linear values three.js expects in a line's vertex colour
+    buffer: it converts them to sRGB for the screen, so without this every line of the 3-D
+    view came out lighter than the same colour in the 2-D views (blue looked cyan). Not for
+    point clouds: viser's point shader writes its colours to the screen as they are (given
+    linear values, Okabe-Ito orange #E69F00 showed as a red-brown #C75000; measured in
+    Chromium, ``tests/test_explorer_browser.py``)."""
     c = np.asarray(rgb, dtype=np.float64) / 255.0
     lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
     return np.clip(np.round(lin * 255.0), 0, 255).astype(np.uint8)
@@ -242,7 +245,9 @@ class ViserView:
         seq, m = self._seq, self._map
         if seq is None:
             return
-        rgb = _for_webgl(V.hex_to_rgb(colors))
+        srgb = V.hex_to_rgb(colors)
+        rgb = _for_webgl(srgb)
+        self._colors = srgb  # (the points: as they are, see _for_webgl)
         if getattr(self, "_traj_key", None) is not None and self._traj_key[0] is seq \
                 and np.array_equal(self._traj_key[1], rgb):
             self._draw_frame_items()  # same trajectories and colours: only atoms/edges may change
@@ -255,7 +260,6 @@ class ViserView:
         if not seq.is_complete:  # only the steps between two consecutive frames both seen
             both = (seq.visible[:-1] & seq.visible[1:]).ravel()
             segs, cols = segs[both], cols[both]
-        self._colors = rgb
         self.server.scene.add_line_segments("/trajectories", segs.astype(np.float32), cols,
                                             thickness=1.5, thickness_units="screen")
         self._draw_frame_items()

@@ -1125,3 +1125,40 @@ def test_card_3_keeps_its_size_while_its_votes_are_fitted(monkeypatch):
         assert all(h > 0 for h in legends), sizes
         text = ex.coarse_view.epipolar.caption.object
         assert "The vote for f1" in text and "Fitting" not in text
+
+
+def test_3d_points_show_the_2d_colours(tmp_path):
+    """The 3-D view's points are drawn in the very colours of the 2-D views: viser's point
+    shader writes colours to the screen as given, so they go as sRGB (lines, which three.js
+    converts, go linear). Given linear values, as they were, orange #E69F00 showed as a
+    red-brown (199, 80, 0)."""
+    pytest.importorskip("viser")
+    from PIL import Image
+
+    from explorer.viser_view import ViserView
+
+    seq = two_motion_sequence()
+    res = laav.Pipeline(seq, 2).result
+    colors = V.point_style(seq, res, "gt", None)["color"]
+    view = ViserView()
+    try:
+        view.set_result(seq, res, colors, 0)
+        for name in ("/trajectories", "/atoms", "/graph_edges", "/frame_plane"):
+            view.server.scene.remove_by_name(name)  # the points alone
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
+            try:
+                page = browser.new_page(viewport={"width": 900, "height": 500})
+                page.goto(view.url())
+                page.locator("canvas").first.wait_for(timeout=60000)
+                page.wait_for_timeout(3000)
+                page.screenshot(path=str(tmp_path / "points.png"))
+            finally:
+                browser.close()
+    finally:
+        view.close()
+    px = np.asarray(Image.open(tmp_path / "points.png").convert("RGB")).reshape(-1, 3).astype(int)
+    for hex_colour in sorted(set(colors)):
+        want = V.hex_to_rgb([hex_colour])[0].astype(int)
+        near = (np.abs(px - want).max(axis=1) <= 8).sum()
+        assert near >= 50, (hex_colour, near)  # (a point is several pixels across)
