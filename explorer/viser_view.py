@@ -96,6 +96,21 @@ def _origin_checked(hosts: Iterable[str], token: str):
             ws_server.serve = real
 
 
+#: Most trail samples the 3-D view draws (points x frames): beyond, the trails show every
+#: k-th frame. Software WebGL (no GPU: headless Chromium, a VM) redraws 10,000 samples as
+#: points at no cost measured beside the rest of the scene, 31,000 at 0.3 s of CPU per
+#: redraw; the 10,000 steps as screen-space lines cost as much (viser redraws about once a
+#: second even when idle).
+TRAIL_SAMPLES = 12_000
+
+
+def trail_frames(n_frames: int, n_points: int, budget: int = TRAIL_SAMPLES) -> np.ndarray:
+    """The frames the 3-D view's trails show: every frame when ``n_frames x n_points`` is
+    within ``budget``, else every k-th (the smallest k that fits) and the last."""
+    k = max(1, -(-n_frames * n_points // max(budget, 1)))
+    return np.unique(np.r_[np.arange(0, n_frames, k), n_frames - 1])
+
+
 def _for_webgl(rgb: np.ndarray) -> np.ndarray:
     """sRGB colours (uint8) as the linear values three.js expects in a line's vertex colour
     buffer: it converts them to sRGB for the screen, so without this every line of the 3-D
@@ -245,23 +260,20 @@ class ViserView:
         seq, m = self._seq, self._map
         if seq is None:
             return
-        srgb = V.hex_to_rgb(colors)
-        rgb = _for_webgl(srgb)
-        self._colors = srgb  # (the points: as they are, see _for_webgl)
+        srgb = V.hex_to_rgb(colors)  # (points take sRGB as it is: see _for_webgl)
+        self._colors = srgb
         if getattr(self, "_traj_key", None) is not None and self._traj_key[0] is seq \
-                and np.array_equal(self._traj_key[1], rgb):
+                and np.array_equal(self._traj_key[1], srgb):
             self._draw_frame_items()  # same trajectories and colours: only atoms/edges may change
             return
-        self._traj_key = (seq, rgb)
-        F = seq.n_frames
-        xyz = m(seq.points, np.arange(F)[:, None])  # (F, P, 3)
-        segs = np.stack([xyz[:-1], xyz[1:]], axis=2).reshape(-1, 2, 3)  # ((F-1)*P, 2, 3)
-        cols = np.broadcast_to(np.tile(rgb, (F - 1, 1))[:, None, :], segs.shape).astype(np.uint8)
-        if not seq.is_complete:  # only the steps between two consecutive frames both seen
-            both = (seq.visible[:-1] & seq.visible[1:]).ravel()
-            segs, cols = segs[both], cols[both]
-        self.server.scene.add_line_segments("/trajectories", segs.astype(np.float32), cols,
-                                            thickness=1.5, thickness_units="screen")
+        self._traj_key = (seq, srgb)
+        frames = trail_frames(seq.n_frames, seq.n_points)
+        xyz = m(seq.points[frames], frames[:, None])  # (F', P, 3): the tracked samples
+        cols = np.broadcast_to(srgb, xyz.shape).astype(np.uint8)
+        seen = seq.visible[frames] if not seq.is_complete else np.ones(xyz.shape[:2], bool)
+        self._put("/trajectories", self.server.scene.add_point_cloud,
+                  xyz[seen].astype(np.float32), cols[seen], point_size=0.016, point_shape="circle",
+                  precision="float32")
         self._draw_frame_items()
 
     def set_frame(self, frame: int) -> None:

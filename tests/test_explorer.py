@@ -742,6 +742,20 @@ def test_viser_view_follows_the_frame(seq):
         ex.close()
 
 
+def test_3d_trails_are_the_tracked_samples_within_a_budget():
+    """The 3-D view's trails are its points at every frame (a point cloud: software WebGL
+    redraws 10,000 screen-space line segments at ~0.3 s of CPU, as many points at no cost
+    measured); beyond TRAIL_SAMPLES samples, every k-th frame and the last."""
+    pytest.importorskip("viser")
+    from explorer.viser_view import TRAIL_SAMPLES, trail_frames
+
+    np.testing.assert_array_equal(trail_frames(25, 421), np.arange(25))  # 1R2RCT_A: all
+    f = trail_frames(100, 1000)
+    assert f[0] == 0 and f[-1] == 99 and f.size * 1000 <= TRAIL_SAMPLES + 1000
+    assert np.all(np.diff(f)[:-1] == 9)  # the smallest step that fits (ceil(100,000 / 12,000))
+    np.testing.assert_array_equal(trail_frames(2, 10 ** 6), [0, 1])  # two frames at least
+
+
 def test_viser_view_sends_only_what_changed(seq):
     """Each scene message makes the 3-D page draw anew (software WebGL: the other core), so a
     change that leaves a node's data as it was sends nothing for it: a λ change keeping the
@@ -753,12 +767,14 @@ def test_viser_view_sends_only_what_changed(seq):
     view = ViserView()
     try:
         sent: list[str] = []
+        kinds: dict[str, str] = {}
         scene = view.server.scene
         for method in ("add_point_cloud", "add_line_segments", "remove_by_name"):
             real = getattr(scene, method)
 
-            def record(name, *a, _real=real, **k):
+            def record(name, *a, _real=real, _method=method, **k):
                 sent.append(name)
+                kinds[name] = _method
                 return _real(name, *a, **k)
 
             setattr(scene, method, record)
@@ -766,6 +782,7 @@ def test_viser_view_sends_only_what_changed(seq):
         colors = V.point_style(seq, res, "gt", None)["color"]
         view.set_result(seq, res, colors, 0)
         assert sorted(sent) == ["/atoms", "/graph_edges", "/points", "/trajectories"]
+        assert kinds["/trajectories"] == "add_point_cloud"  # the tracked samples, as points
         sent.clear()
         same = laav.Pipeline(seq, 2, laav.LaavParams(lam=res.params.lam * 1.01)).result
         assert np.array_equal(same.labels, res.labels)
