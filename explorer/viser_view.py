@@ -96,19 +96,38 @@ def _origin_checked(hosts: Iterable[str], token: str):
             ws_server.serve = real
 
 
-#: Most trail samples the 3-D view draws (points x frames): beyond, the trails show every
-#: k-th frame. Software WebGL (no GPU: headless Chromium, a VM) redraws 10,000 samples as
-#: points at no cost measured beside the rest of the scene, 31,000 at 0.3 s of CPU per
-#: redraw; the 10,000 steps as screen-space lines cost as much (viser redraws about once a
-#: second even when idle).
+#: Most trail samples the 3-D view draws (seen points x frames; more only when a sequence has
+#: over half as many tracks: each keeps its first and last sample): beyond it each track shows
+#: every k-th of its samples, its first and its last. Software WebGL (no GPU: headless
+#: Chromium, a VM) redraws 10,000 samples as points at no cost measured beside the rest of
+#: the scene, 31,000 at 0.3 s of CPU per redraw; the 10,000 steps as screen-space lines cost
+#: as much (viser redraws about once a second even when idle).
 TRAIL_SAMPLES = 12_000
 
 
-def trail_frames(n_frames: int, n_points: int, budget: int = TRAIL_SAMPLES) -> np.ndarray:
-    """The frames the 3-D view's trails show: every frame when ``n_frames x n_points`` is
-    within ``budget``, else every k-th (the smallest k that fits) and the last."""
-    k = max(1, -(-n_frames * n_points // max(budget, 1)))
-    return np.unique(np.r_[np.arange(0, n_frames, k), n_frames - 1])
+def trail_samples(visible: np.ndarray, budget: int | None = None) -> np.ndarray:
+    """(F, P) bool: the samples the 3-D view's trails show. ``visible`` (F, P): where each
+    track is seen. Every seen sample when they are within ``budget``; else, for the smallest
+    k that fits, each track's every k-th seen sample, its first and its last (so no track
+    loses its trail, however short; ``max(budget, 2 P)`` samples at most). ``budget``:
+    :data:`TRAIL_SAMPLES` when None."""
+    budget = TRAIL_SAMPLES if budget is None else int(budget)
+    vis = np.asarray(visible, dtype=bool)
+    total = int(vis.sum())
+    if total <= budget:
+        return vis.copy()
+    rank = np.cumsum(vis, axis=0) - 1  # each seen sample's place in its track
+    last = vis.sum(axis=0) - 1  # (P,)
+
+    def keep(k):
+        return vis & ((rank % k == 0) | (rank == last[None, :]))
+
+    k = max(2, -(-total // max(budget, 1)))
+    while True:
+        mask = keep(k)
+        if mask.sum() <= budget or k >= vis.shape[0]:
+            return mask
+        k += 1
 
 
 def _for_webgl(rgb: np.ndarray) -> np.ndarray:
@@ -267,13 +286,9 @@ class ViserView:
             self._draw_frame_items()  # same trajectories and colours: only atoms/edges may change
             return
         self._traj_key = (seq, srgb)
-        frames = trail_frames(seq.n_frames, seq.n_points)
-        xyz = m(seq.points[frames], frames[:, None])  # (F', P, 3): the tracked samples
-        cols = np.broadcast_to(srgb, xyz.shape).astype(np.uint8)
-        seen = seq.visible[frames] if not seq.is_complete else np.ones(xyz.shape[:2], bool)
-        self._put("/trajectories", self.server.scene.add_point_cloud,
-                  xyz[seen].astype(np.float32), cols[seen], point_size=0.016, point_shape="circle",
-                  precision="float32")
+        f, p = np.nonzero(trail_samples(seq.visible))  # the tracked samples shown
+        self._put("/trajectories", self.server.scene.add_point_cloud, m(seq.points[f, p], f),
+                  srgb[p], point_size=0.016, point_shape="circle", precision="float32")
         self._draw_frame_items()
 
     def set_frame(self, frame: int) -> None:

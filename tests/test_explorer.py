@@ -742,18 +742,54 @@ def test_viser_view_follows_the_frame(seq):
         ex.close()
 
 
-def test_3d_trails_are_the_tracked_samples_within_a_budget():
-    """The 3-D view's trails are its points at every frame (a point cloud: software WebGL
-    redraws 10,000 screen-space line segments at ~0.3 s of CPU, as many points at no cost
-    measured); beyond TRAIL_SAMPLES samples, every k-th frame and the last."""
+def test_3d_trails_are_the_tracked_samples_within_a_budget(monkeypatch):
+    """The 3-D view's trails are the tracked samples as a point cloud (software WebGL redraws
+    10,000 screen-space line segments at ~0.3 s of CPU, as many points at no cost measured);
+    beyond TRAIL_SAMPLES, each track's every k-th sample, its first and its last: no track,
+    however short, loses its trail, and no hidden sample is drawn."""
     pytest.importorskip("viser")
-    from explorer.viser_view import TRAIL_SAMPLES, trail_frames
+    import explorer.viser_view as VV
 
-    np.testing.assert_array_equal(trail_frames(25, 421), np.arange(25))  # 1R2RCT_A: all
-    f = trail_frames(100, 1000)
-    assert f[0] == 0 and f[-1] == 99 and f.size * 1000 <= TRAIL_SAMPLES + 1000
-    assert np.all(np.diff(f)[:-1] == 9)  # the smallest step that fits (ceil(100,000 / 12,000))
-    np.testing.assert_array_equal(trail_frames(2, 10 ** 6), [0, 1])  # two frames at least
+    vis = np.ones((25, 421), bool)
+    np.testing.assert_array_equal(VV.trail_samples(vis), vis)  # 1R2RCT_A: every sample
+    big = VV.trail_samples(np.ones((100, 1000), bool))
+    assert big.sum() <= VV.TRAIL_SAMPLES and big[0].all() and big[-1].all()
+    assert np.array_equal(np.flatnonzero(big[:, 0])[:-1], np.arange(0, 99, 9))  # k = 9
+    # short tracks (as a tracked video gives): 2,000 tracks each seen in 30 of 300 frames
+    short = np.zeros((300, 2000), bool)
+    for p in range(2000):
+        a = (p * 7) % 270
+        short[a:a + 30, p] = True
+    got = VV.trail_samples(short)
+    assert got.sum() <= VV.TRAIL_SAMPLES and not (got & ~short).any()
+    for p in range(0, 2000, 97):  # each track keeps its first and last sample
+        seen = np.flatnonzero(short[:, p])
+        assert got[seen[0], p] and got[seen[-1], p]
+    # what the view sends: an incomplete sequence over a (small) budget
+    from laav.synthetic import occlude
+
+    seq = occlude(_two_motion_sequence(n_frames=20, n_points=200), 0.3, rng=2)
+    res = laav.Pipeline(seq, 2).result
+    monkeypatch.setattr(VV, "TRAIL_SAMPLES", 900)
+    view = VV.ViserView()
+    try:
+        sent = {}
+        real = view.server.scene.add_point_cloud
+
+        def record(name, points, colors, **k):
+            sent[name] = (np.asarray(points), np.asarray(colors))
+            return real(name, points, colors, **k)
+
+        view.server.scene.add_point_cloud = record
+        view.set_result(seq, res, V.point_style(seq, res, "gt", None)["color"], 0)
+        pts, cols = sent["/trajectories"]
+        want = VV.trail_samples(seq.visible, 900)
+        assert seq.visible.sum() > 900 and pts.shape == (want.sum(), 3) == cols.shape
+        assert np.isfinite(pts).all()
+        f, _ = np.nonzero(want)
+        np.testing.assert_allclose(np.sort(pts[:, 2]), np.sort(f * view._map.dz), atol=1e-5)
+    finally:
+        view.close()
 
 
 def test_viser_view_sends_only_what_changed(seq):
