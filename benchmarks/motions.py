@@ -446,7 +446,7 @@ def main(argv=None) -> int:
     lt = np.array([r["laav_true_C_ms"] for r in rows])
     L = [f"# Number of motions on Hopkins155 ({time.strftime('%Y-%m-%d %H:%M %Z')})", "",
          f"- Machine: {cpu_model()}, {os.cpu_count()} logical cores (shared with other jobs; "
-         f"run with nice, one process), {platform.system()} {platform.release()}",
+         f"timings in one process; profiles in --jobs processes), {platform.system()} {platform.release()}",
          f"- Software: Python {platform.python_version()}, numpy {np.__version__}, laav "
          f"{laav_version()} (git {git_commit()})",
          f"- Data: {len(items)} sequences of {args.data} (120 with 2 motions, 35 with 3)",
