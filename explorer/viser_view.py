@@ -281,11 +281,7 @@ class ViserView:
             return
         srgb = V.hex_to_rgb(colors)  # (points take sRGB as it is: see _for_webgl)
         self._colors = srgb
-        if getattr(self, "_traj_key", None) is not None and self._traj_key[0] is seq \
-                and np.array_equal(self._traj_key[1], srgb):
-            self._draw_frame_items()  # same trajectories and colours: only atoms/edges may change
-            return
-        self._traj_key = (seq, srgb)
+        # (sent again only when the samples or their colours changed: _put)
         f, p = np.nonzero(trail_samples(seq.visible))  # the tracked samples shown
         self._put("/trajectories", self.server.scene.add_point_cloud, m(seq.points[f, p], f),
                   srgb[p], point_size=0.016, point_shape="circle", precision="float32")
