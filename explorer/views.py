@@ -1538,6 +1538,13 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
         returned = (f"; **returned {md_text(voting.selected)}, not LAAV's informed trial**: the model "
                     f"selection (ours, not in the paper) preferred it; {voting.n_iterations} voting "
                     f"iterations in all, LAAV's informed trial {per[0] if per else 0}")
+    if voting.vetoed:  # ours: a missing-motion candidate that won only through outlier tracks
+        name, n, own_cost, its_cost = voting.vetoed
+        returned += (f"; **kept LAAV's informed trial, not the {md_text(name)} candidate**: that "
+                     f"one scored lower over all points but higher over the {n} points both "
+                     f"explain ({its_cost:,.0f} against {own_cost:,.0f}), so the points neither "
+                     "explains, outlier tracks, would have bought it a motion (ours, "
+                     "`rv_missing_veto`)")
     return (f"**{what}:** {n_it} iterations, {conv}{_votes(voting)}{trials}{extra}{returned}"
             f"{_selection(voting)}.")
 

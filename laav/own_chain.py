@@ -13,8 +13,11 @@ descends on that score (``rv_descent``, :func:`laav.joint.joint_descent`: single
 while the score decreases), from its polished labels and from its trial's own, the lower
 kept (``rv_descent_from_trial``). With ``rv_missing_gate`` (the default) the informed trial
 runs and is selected alone first, and a start's trials run only where that result leaves its
-new motion unexplained (:func:`unexplained`). With a :class:`laav.helper.VotingHelper`, half
-of the trials run in its process (:func:`candidates`; the same labels).
+new motion unexplained (:func:`unexplained`). With ``rv_missing_veto`` (the default) a
+missing-motion candidate is returned only if it also scores lower on the points both it and
+the informed trial explain (:func:`veto`): outlier tracks must not buy a motion. With a
+:class:`laav.helper.VotingHelper`, half of the trials run in its process (:func:`candidates`;
+the same labels).
 """
 
 from __future__ import annotations
@@ -32,7 +35,8 @@ from .refine import _memo, fit_memo
 from .subspace_votes import SubspaceVotes, votes_with_subspace
 from .voting_result import Voting
 
-__all__ = ["own_candidates", "missing_motion_start", "candidate_part", "MISSING_MOTION_QUANTILE"]
+__all__ = ["own_candidates", "missing_motion_start", "candidate_part", "veto", "outlier_points",
+           "MISSING_MOTION_QUANTILE", "VETO_OUTLIER_FACTOR"]
 
 
 #: A missing-motion start (``rv_select="laav"``) takes the points in no atom whose best
@@ -170,6 +174,65 @@ def unexplained(points, labels, n_motions, params, fits=None) -> np.ndarray | No
     return own > threshold
 
 
+#: ``rv_missing_veto``: a point is an outlier of a labelling when its squared distance to its
+#: own motion's robust rank-4 trajectory subspace exceeds this many times the labelling's
+#: median point's (the refinement's outlier factor, ``laav.refine.refine_labels``: set a
+#: priori, not tuned), and :data:`UNEXPLAINED_PX2`.
+VETO_OUTLIER_FACTOR = 6.0
+
+
+def outlier_points(points, labels, n_motions, params, fits=None) -> np.ndarray:
+    """(P,) bool: the points of ``labels`` (P,) farther from their own motion's robust rank-4
+    trajectory subspace than :data:`VETO_OUTLIER_FACTOR` times the median point and than
+    :data:`UNEXPLAINED_PX2` (in ``noise_adaptive``'s scaled unit; none when a motion is too
+    small to fit). The median moves the threshold with pixel noise; the floor keeps a point
+    its motion explains within a pixel, where noise-free tracks put the median far below
+    what perspective leaves."""
+    own = _own_distances(points, labels, n_motions, params, fits)
+    if own is None:
+        return np.zeros(labels.size, dtype=bool)
+    return own > max(VETO_OUTLIER_FACTOR * np.median(own), UNEXPLAINED_PX2 * unit2(params))
+
+
+def veto(points, C, params, informed, other, fits=None) -> tuple | None:
+    """Ours (``rv_missing_veto``): LAAV's informed labelling and a missing-motion candidate
+    ``other`` (both (P,)) compared on the points both explain.
+
+    A point is left out when it is an outlier (:func:`outlier_points`) of both labellings,
+    and so are the points of a motion that keeps fewer than 8 of the rest in either (a
+    fundamental matrix needs 8). Each labelling is then scored there as the selection
+    scores it over all points (:func:`cleaned_costs`: the joint score after its best moves
+    of at most ``rv_select_descent`` of them), its motions numbered anew. Tracks that no
+    motion explains, a group of tracking failures, code cheaper as a motion of their own
+    than inside the motions they corrupt, so over every point the joint score could prefer
+    a start that joins two real motions to give them one; on the points both explain, the
+    join must pay for itself. A missing motion both explain (a rigid object the atoms
+    missed) stays in the comparison.
+
+    Returns ``(points compared, informed's cost, other's cost)``, or None when nothing is
+    left out (the comparison over all points stands) or fewer than 16 points remain.
+    """
+    keep = ~(outlier_points(points, informed, C, params, fits)
+             & outlier_points(points, other, C, params, fits))
+    for labels in (informed, other):  # the points of motions too small to fit after that
+        count = np.bincount(labels[keep], minlength=C)
+        keep &= count[labels] >= 8
+    idx = np.flatnonzero(keep)
+    if idx.size == labels.size or idx.size < 16:
+        return None
+    sub = np.ascontiguousarray(points[:, idx])
+    most = int(np.ceil(params.rv_select_descent * idx.size)) if params.rv_select_descent > 0 else None
+    costs = []
+    for labels in (informed, other):
+        present, lab = np.unique(labels[idx], return_inverse=True)
+        if most is None:
+            costs.append(joint_score(sub, lab, present.size, params))
+        else:
+            costs.append(joint_descent(sub, lab, present.size, params, max_moves=most,
+                                       return_score=True)[2])
+    return int(idx.size), float(costs[0]), float(costs[1])
+
+
 def _select(points, C, params, starts, part, extra, uses) -> Voting:
     """The selection among ``starts``' candidates (:func:`own_candidates`), from their
     :func:`candidates` ``part`` (results, polished, cleaned costs, memo of fits)."""
@@ -193,10 +256,20 @@ def _select(points, C, params, starts, part, extra, uses) -> Voting:
                for (name, *_), res in zip(starts, results)]
     scores = np.array([e[3] for e in entries])
     k = int(np.argmin(scores))  # the first of equal scores: the coarse start
+    vetoed = ()
+    if k > 0 and params.rv_missing_veto and entries[0][0] == "informed":
+        # ours: a missing-motion candidate must also win where outlier tracks do not count
+        check = veto(points, C, params, finals[entries[0][1][0].tobytes()],
+                     finals[entries[k][1][0].tobytes()], fits)
+        if check is not None and check[1] < check[2]:
+            vetoed = (entries[k][0], *check)
+            k = 0
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
     out = selection.finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
                   score="joint-cleaned" if clean else "joint-sum")
+    if vetoed:
+        out = dataclasses.replace(out, vetoed=vetoed)
     if params.rv_descent:  # ours: the kept labelling descends on the same score
         trial = np.asarray(res[0], dtype=np.int64)
         # ours: the trial's own labels descend too, unless the polish left them as they were

@@ -111,6 +111,11 @@ class Voting:
         Ours, ``rv_missing_gate`` > 0: the missing-motion starts whose trials did not run,
         the informed trial's result explaining their new motion (names as in
         :attr:`costs`, without a trial number).
+    vetoed : tuple
+        Ours, ``rv_missing_veto``: ``(name, points, informed cost, its cost)`` when the
+        candidate ``name`` (a missing-motion start's trial) scored lowest over all points
+        but higher than LAAV's informed trial over the ``points`` (a count) both labellings
+        explain (:func:`laav.own_chain.veto`), and so was not returned; empty otherwise.
     """
 
     labels: np.ndarray
@@ -138,3 +143,4 @@ class Voting:
     informed_label_trace: np.ndarray | None = field(default=None, repr=False)
     voted: np.ndarray | None = field(default=None, repr=False)
     skipped_starts: tuple = ()
+    vetoed: tuple = ()

@@ -1781,6 +1781,25 @@ def test_rv_card_names_the_missing_motion_start_and_trial_returned():
     assert f"returned the trial 2 (of `rv_missing_trials`) from the {start} start" in text
 
 
+def test_rv_card_says_when_the_veto_kept_laavs_informed_trial():
+    """``Voting.vetoed`` (``rv_missing_veto``, ours): on a scene with outlier tracks the RV
+    card says which missing-motion candidate won over all points, that LAAV's informed
+    trial was kept, and the two costs over the points both explain; nothing without it."""
+    from test_own_chain import outlier_scene
+
+    from explorer.views import md_text, rv_summary
+
+    seq, _ = outlier_scene()
+    res = laav.segment(seq, 3, seed=0).voting
+    name, n, own_cost, its_cost = res.vetoed
+    text = rv_summary(res, None)
+    assert f"kept LAAV's informed trial, not the {md_text(name)} candidate" in text
+    assert f"higher over the {n} points both explain ({its_cost:,.0f} against {own_cost:,.0f})" in text
+    assert "`rv_missing_veto`" in text and "**returned the" not in text  # the informed trial's labels
+    off = laav.segment(seq, 3, laav.LaavParams(rv_missing_veto=False), seed=0).voting
+    assert off.vetoed == () and "rv_missing_veto" not in rv_summary(off, None)
+
+
 def test_rv_card_says_when_the_refinement_and_reassignment_were_dropped():
     """``Voting.unpolished`` (``rv_descent_from_trial``, ours): the card says the trial's own
     labels descended and the polish was dropped, in the order the steps ran (above

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from laav import LaavParams, Sequence, misclassification_rate, random_voting
+from laav import LaavParams, Sequence, misclassification_rate, random_voting, segment
+from laav.own_chain import outlier_points, veto
 from laav.subspace_votes import SubspaceVotes
 from laav.voting import joint_score, missing_motion_start
 
@@ -131,6 +132,7 @@ def test_missing_motion_start_finds_the_motion_without_atoms(seed):
     assert res.selected == "missing motion (0+1)"
     assert set(res.costs) == {"informed", res.selected, res.selected + ", trial 2"}
     assert res.costs[res.selected] < res.costs["informed"]
+    assert res.vetoed == ()  # the missing motion is one both labellings explain: no veto
     assert misclassification_rate(seq.labels, res.labels) < 0.01
     paper = random_voting(seq, 2, LaavParams.paper(), seed=0, init_labels=init)
     assert misclassification_rate(seq.labels, paper.labels) > 0.3
@@ -480,3 +482,55 @@ def test_the_previews_own_time_is_not_the_voting_stages(monkeypatch):
     assert sum(res.timings.values()) < wall - 0.9, (res.timings, wall)
     # the preview's own timings stop where it was handed over
     assert slept[0].timings["voting"] < res.timings["voting"]
+
+
+def outlier_scene():
+    """Three motions with 10 % of the tracks replaced by random walks (laav.synthetic's
+    outliers, which keep the label of the track they replaced), and which tracks those are
+    (the same scene drawn without them differs there only)."""
+    seq = synthetic.make_sequence(n_objects=2, outlier_fraction=0.1, rng=6)
+    clean = synthetic.make_sequence(n_objects=2, rng=6)
+    return seq, (seq.points != clean.points).any(axis=(0, 2))
+
+
+def test_outlier_tracks_do_not_buy_a_motion():
+    """Tracks that no motion explains code cheaper as a motion of their own than inside the
+    motions they corrupt: without the veto the selection returns a missing-motion
+    candidate that joins two real motions to give the outliers one (over 10 % of the other
+    tracks wrong); with it (the default) LAAV's informed trial, the other tracks right, the
+    vetoed candidate named with the costs that decided."""
+    seq, out = outlier_scene()
+    assert out.sum() == 30
+    before = segment(seq, 3, LaavParams(rv_missing_veto=False), seed=0)
+    assert before.voting.selected.startswith("missing motion")
+    assert misclassification_rate(seq.labels[~out], before.labels[~out]) > 0.1
+    res = segment(seq, 3, seed=0)
+    assert res.voting.selected == "informed"
+    assert misclassification_rate(seq.labels[~out], res.labels[~out]) < 0.01
+    name, n, informed_cost, its_cost = res.voting.vetoed
+    assert name == before.voting.selected and informed_cost < its_cost
+    assert 0.8 * seq.n_points < n < seq.n_points  # the outliers left out, not much else
+    # the candidate vetoed did win over all points
+    assert res.voting.costs[name] < res.voting.costs["informed"]
+
+
+def test_the_veto_compares_the_points_both_labellings_explain():
+    """Unit: the random walks are outliers of the true labelling (farther than 6 times the
+    median and 1 px^2 from their motion's subspace: 20-41 px^2 here), few other tracks are
+    (this scene's perspective leaves 8 % of them over 1 px^2, none over 6); two real motions joined
+    to give the outliers a motion scores higher than the truth on the points both explain;
+    one labelling against itself ties; with no motion of 8 points, None."""
+    seq, out = outlier_scene()
+    p = LaavParams()
+    truth = seq.labels.astype(np.int64)
+    flagged = outlier_points(seq.points, truth, 3, p)
+    assert flagged[out].all() and flagged[~out].mean() < 0.1
+    bought = np.where(truth == 2, 1, truth)
+    bought[out] = 2
+    n, truth_cost, bought_cost = veto(seq.points, 3, p, truth, bought)
+    assert truth_cost < bought_cost
+    assert joint_score(seq.points, bought, 3, p) < joint_score(seq.points, truth, 3, p)  # over all
+    same = veto(seq.points, 3, p, truth, truth.copy())  # one labelling twice: a tie, no veto
+    assert same[1] == same[2]
+    six = np.repeat(np.arange(3), 6)  # motions of 6 points: none can be scored
+    assert veto(seq.points[:, :18], 3, p, six, six.copy()) is None
