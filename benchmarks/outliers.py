@@ -8,12 +8,13 @@ and frame). The draw is seeded by the sequence's name, the share and the step, s
 method and every run sees the same outliers. Each method gets the true number of motions;
 its error is the misclassification on the *other* tracks (an outlier has no true motion).
 
-Methods: LAAV's default (``LaavParams()``), the default without the veto of the
-missing-motion candidates (``rv_missing_veto=False``, what the default was before
-2026-12-06) and plain Random Voting, each at the LAAV seeds ``--seeds``. The report (one
+Methods: LAAV's default (``LaavParams()``), the default without the veto on the joint
+score's choices (``rv_outlier_veto=False``, what the default was before 2026-12-06) and
+plain Random Voting, each at the LAAV seeds ``--seeds``. The report (one
 Markdown table, ``--out``) gives, per outlier setting and method, the mean error on two /
 three / all motions, the worst run, the runs over 10 %, and for the default the runs where
-the veto kept LAAV's informed trial (``Voting.vetoed``); with machine, date and commit.
+the veto kept a labelling the joint score would have replaced (``Voting.vetoed``); with
+machine, date and commit.
 
     python benchmarks/outliers.py [--data DIR] [--seeds 0,1] [--fractions 0.05,0.1]
                                   [--steps 1,3] [--jobs 2] [--out bench-out/outliers.md]
@@ -70,7 +71,7 @@ def _one(job) -> list[dict]:
             if method == "plain RV":
                 labels = laav.random_voting(noisy, C, seed=seed).labels
             else:
-                params = laav.LaavParams(rv_missing_veto=method == "LAAV (default)")
+                params = laav.LaavParams(rv_outlier_veto=method == "LAAV (default)")
                 res = laav.segment(noisy, C, params, seed=seed)
                 labels, vetoed = res.labels, bool(res.voting.vetoed)
             err = 100.0 * laav.misclassification_rate(seq.labels[~out], labels[~out])

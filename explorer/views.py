@@ -1538,13 +1538,17 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
         returned = (f"; **returned {md_text(voting.selected)}, not LAAV's informed trial**: the model "
                     f"selection (ours, not in the paper) preferred it; {voting.n_iterations} voting "
                     f"iterations in all, LAAV's informed trial {per[0] if per else 0}")
-    if voting.vetoed:  # ours: a missing-motion candidate that won only through outlier tracks
-        name, n, own_cost, its_cost = voting.vetoed
-        returned += (f"; **kept LAAV's informed trial, not the {md_text(name)} candidate**: that "
-                     f"one scored lower over all points but higher over the {n} points both "
-                     f"explain ({its_cost:,.0f} against {own_cost:,.0f}), so the points neither "
-                     "explains, outlier tracks, would have bought it a motion (ours, "
-                     "`rv_missing_veto`)")
+    for kind, n, kept_cost, its_cost in voting.vetoed:  # ours: choices outlier tracks made
+        if kind.startswith("missing motion"):
+            kept, lost = "LAAV's informed trial", f"the {md_text(kind)} candidate"
+        elif kind == "the descent":
+            kept, lost = "the labels before the descent", "its result"
+        else:
+            kept, lost = "the polished labels", md_text(kind)
+        returned += (f"; **kept {kept}, not {lost}**: that one scored lower over all points but "
+                     f"higher over the {n} points both explain ({its_cost:,.0f} against "
+                     f"{kept_cost:,.0f}), so the points neither explains, outlier tracks, would "
+                     "have bought it a motion (ours, `rv_outlier_veto`)")
     return (f"**{what}:** {n_it} iterations, {conv}{_votes(voting)}{trials}{extra}{returned}"
             f"{_selection(voting)}.")
 

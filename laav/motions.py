@@ -86,9 +86,9 @@ MAX_ESTIMATE_POINTS = 1000
 #: ``rv_select_descent``, 2026-12-02), a second trial per missing-motion start and the
 #: unpolished descent (``rv_missing_trials``, ``rv_descent_from_trial``, 2026-12-03) and the
 #: gate for the missing-motion starts (``rv_missing_gate``, 2026-12-05) and its veto
-#: (``rv_missing_veto``, 2026-12-06), added after its constants were fitted.
+#: (``rv_outlier_veto``, 2026-12-06), added after its constants were fitted.
 NOT_FITTED = {"rv_descent": False, "rv_select_descent": 0.0, "rv_missing_trials": 1,
-              "rv_descent_from_trial": False, "rv_missing_gate": 0.0, "rv_missing_veto": False}
+              "rv_descent_from_trial": False, "rv_missing_gate": 0.0, "rv_outlier_veto": False}
 
 
 def profile_params():

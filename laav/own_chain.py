@@ -13,9 +13,10 @@ descends on that score (``rv_descent``, :func:`laav.joint.joint_descent`: single
 while the score decreases), from its polished labels and from its trial's own, the lower
 kept (``rv_descent_from_trial``). With ``rv_missing_gate`` (the default) the informed trial
 runs and is selected alone first, and a start's trials run only where that result leaves its
-new motion unexplained (:func:`unexplained`). With ``rv_missing_veto`` (the default) a
-missing-motion candidate is returned only if it also scores lower on the points both it and
-the informed trial explain (:func:`veto`): outlier tracks must not buy a motion. With a
+new motion unexplained (:func:`unexplained`). With ``rv_outlier_veto`` (the default) a
+missing-motion candidate, the descent's result and the unpolished labels replace the labels
+they compete with only if they also score lower on the points both explain (:func:`veto`):
+outlier tracks must not buy a motion. With a
 :class:`laav.helper.VotingHelper`, half of the trials run in its process (:func:`candidates`;
 the same labels).
 """
@@ -174,7 +175,7 @@ def unexplained(points, labels, n_motions, params, fits=None) -> np.ndarray | No
     return own > threshold
 
 
-#: ``rv_missing_veto``: a point is an outlier of a labelling when its squared distance to its
+#: ``rv_outlier_veto``: a point is an outlier of a labelling when its squared distance to its
 #: own motion's robust rank-4 trajectory subspace exceeds this many times the labelling's
 #: median point's (the refinement's outlier factor, ``laav.refine.refine_labels``: set a
 #: priori, not tuned), and :data:`UNEXPLAINED_PX2`.
@@ -194,9 +195,11 @@ def outlier_points(points, labels, n_motions, params, fits=None) -> np.ndarray:
     return own > max(VETO_OUTLIER_FACTOR * np.median(own), UNEXPLAINED_PX2 * unit2(params))
 
 
-def veto(points, C, params, informed, other, fits=None) -> tuple | None:
-    """Ours (``rv_missing_veto``): LAAV's informed labelling and a missing-motion candidate
-    ``other`` (both (P,)) compared on the points both explain.
+def veto(points, C, params, kept, other, fits=None) -> tuple | None:
+    """Ours (``rv_outlier_veto``): two labellings (P,) compared on the points both explain:
+    ``kept`` (LAAV's informed trial's, or the labels before a descent) and ``other`` (a
+    missing-motion candidate, or the descent's result), which the joint score prefers over
+    all points.
 
     A point is left out when it is an outlier (:func:`outlier_points`) of both labellings,
     and so are the points of a motion that keeps fewer than 8 of the rest in either (a
@@ -205,16 +208,17 @@ def veto(points, C, params, informed, other, fits=None) -> tuple | None:
     of at most ``rv_select_descent`` of them), its motions numbered anew. Tracks that no
     motion explains, a group of tracking failures, code cheaper as a motion of their own
     than inside the motions they corrupt, so over every point the joint score could prefer
-    a start that joins two real motions to give them one; on the points both explain, the
-    join must pay for itself. A missing motion both explain (a rigid object the atoms
-    missed) stays in the comparison.
+    a labelling that joins two real motions to give them one (a missing-motion start, or
+    the descent moving a hundred points); on the points both explain, the join must pay for
+    itself. A missing motion one of them explains (a rigid object the atoms missed) stays
+    in the comparison.
 
-    Returns ``(points compared, informed's cost, other's cost)``, or None when nothing is
-    left out (the comparison over all points stands) or fewer than 16 points remain.
+    Returns ``(points compared, kept's cost, other's cost)``, or None when nothing is left
+    out (the comparison over all points stands) or fewer than 16 points remain.
     """
-    keep = ~(outlier_points(points, informed, C, params, fits)
+    keep = ~(outlier_points(points, kept, C, params, fits)
              & outlier_points(points, other, C, params, fits))
-    for labels in (informed, other):  # the points of motions too small to fit after that
+    for labels in (kept, other):  # the points of motions too small to fit after that
         count = np.bincount(labels[keep], minlength=C)
         keep &= count[labels] >= 8
     idx = np.flatnonzero(keep)
@@ -223,7 +227,7 @@ def veto(points, C, params, informed, other, fits=None) -> tuple | None:
     sub = np.ascontiguousarray(points[:, idx])
     most = int(np.ceil(params.rv_select_descent * idx.size)) if params.rv_select_descent > 0 else None
     costs = []
-    for labels in (informed, other):
+    for labels in (kept, other):
         present, lab = np.unique(labels[idx], return_inverse=True)
         if most is None:
             costs.append(joint_score(sub, lab, present.size, params))
@@ -256,34 +260,63 @@ def _select(points, C, params, starts, part, extra, uses) -> Voting:
                for (name, *_), res in zip(starts, results)]
     scores = np.array([e[3] for e in entries])
     k = int(np.argmin(scores))  # the first of equal scores: the coarse start
-    vetoed = ()
-    if k > 0 and params.rv_missing_veto and entries[0][0] == "informed":
-        # ours: a missing-motion candidate must also win where outlier tracks do not count
-        check = veto(points, C, params, finals[entries[0][1][0].tobytes()],
-                     finals[entries[k][1][0].tobytes()], fits)
-        if check is not None and check[1] < check[2]:
-            vetoed = (entries[k][0], *check)
+    vetoed = []  # ours (rv_outlier_veto): choices of the joint score that outliers made
+    if k > 0 and entries[0][0] == "informed":  # a missing-motion candidate won
+        no = _vetoed(points, C, params, finals[entries[0][1][0].tobytes()],
+                     finals[entries[k][1][0].tobytes()], fits, entries[k][0], always=True)
+        if no is not None:
+            vetoed.append(no)
             k = 0
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
     out = selection.finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
                   score="joint-cleaned" if clean else "joint-sum")
-    if vetoed:
-        out = dataclasses.replace(out, vetoed=vetoed)
     if params.rv_descent:  # ours: the kept labelling descends on the same score
         trial = np.asarray(res[0], dtype=np.int64)
         # ours: the trial's own labels descend too, unless the polish left them as they were
         both = params.rv_descent_from_trial and not np.array_equal(trial, out.labels)
-        labels, moved, score = joint_descent(points, out.labels, C, params, projected=proj,
+        kept = out.labels
+        labels, moved, score = joint_descent(points, kept, C, params, projected=proj,
                                              fits=fits, return_score=True)
+        no = _vetoed(points, C, params, kept, labels, fits, "the descent")
+        if no is not None:  # it re-labelled so that outlier tracks code cheaper: not kept
+            vetoed.append(no)
+            labels, moved = kept, 0
+            score = joint_score(points, kept, C, params, fits=fits, projected=proj)
         if both:
             raw, raw_moved, raw_score = joint_descent(points, trial, C, params, projected=proj,
                                                       fits=fits, return_score=True)
-            if raw_score < score:  # the refinement and reassignment are not kept
+            no = (_vetoed(points, C, params, labels, raw, fits, "the trial's own labels, descended")
+                  if raw_score < score else None)
+            if no is not None:
+                vetoed.append(no)
+            elif raw_score < score:  # the refinement and reassignment are not kept
                 out = dataclasses.replace(out, refined=0, reassigned=0, unpolished=True)
                 labels, moved = raw, raw_moved
         out = dataclasses.replace(out, labels=labels, descended=moved)
+    if vetoed:
+        out = dataclasses.replace(out, vetoed=tuple(vetoed))
     return selection.with_informed(out, first, first_extra)
+
+
+def _vetoed(points, C, params, kept, new, fits, what: str, always: bool = False) -> tuple | None:
+    """Ours (``rv_outlier_veto``): the veto entry ``(what, points compared, kept's cost, new's
+    cost)`` when ``new`` (P,), which the joint score prefers over all points to ``kept``
+    (P,), scores higher on the points both explain (:func:`veto`); None when ``new`` may
+    replace ``kept``. Checked when ``always`` (a missing-motion candidate over the informed
+    trial) or when the two differ on more points than the selection's cleaning moves
+    (``rv_select_descent``, and at least the 8 a motion needs): fewer cannot buy outliers a
+    motion."""
+    if not params.rv_outlier_veto:
+        return None
+    if not always:
+        most = max(8, int(np.ceil(params.rv_select_descent * kept.size)))
+        if np.count_nonzero(kept != new) <= most:
+            return None
+    check = veto(points, C, params, kept, new, fits)
+    if check is not None and check[1] < check[2]:
+        return (what, *check)
+    return None
 
 
 def informed_side_by_side(points, params, starts, extra, uses) -> list:

@@ -153,16 +153,20 @@ class LaavParams:
         out 0.19-0.24 % over three fold shuffles; σ = 1 px the same errors), the
         three-motion median time 0.51 -> 0.33 x plain RV's
         (``benchmarks/TUNING.md``, "A gate for the missing-motion starts").
-    rv_missing_veto : bool
-        Ours, with ``rv_select="laav"``: a missing-motion start's candidate that scores
-        lowest is returned only if it also scores lower than LAAV's informed trial on the
-        points both labellings explain (:func:`laav.own_chain.veto`): tracks that no motion
-        of either explains (tracking failures, drifting tracks) code cheaper as a motion of
-        their own than inside the motions they corrupt, so over every point the joint score
-        preferred joining two real motions to give them one. Since 2026-12-06; no constant
-        was tuned (an outlier is a point farther than 6 times the labelling's median from its
-        motion's rank-4 subspace, the refinement's factor), and no Hopkins155 label moves at
-        σ = 0 (``benchmarks/TUNING.md``, "Outlier tracks").
+    rv_outlier_veto : bool
+        Ours, with ``rv_select="laav"``: a labelling the joint score prefers over all points
+        replaces the one it competes with only if it also scores lower on the points both
+        explain (:func:`laav.own_chain.veto`): a missing-motion start's candidate against
+        LAAV's informed trial, and, when they differ on more than ``rv_select_descent`` of
+        the points, the descent's result against its start and the trial's own labels
+        descended against the polished ones. Tracks that no motion explains (tracking
+        failures, drifting tracks) code cheaper as a motion of their own than inside the
+        motions they corrupt, so over every point the joint score preferred joining two real
+        motions to give them one. Since 2026-12-06; no constant was tuned (an outlier is a
+        point farther than 6 times the labelling's median and 1 px^2 from its motion's
+        rank-4 subspace, the refinement's factor and the gate's unit), and no Hopkins155
+        label moves at σ = 0 (``benchmarks/TUNING.md``, "Outlier tracks"). The choices not
+        made are in ``Voting.vetoed``.
     rv_batch : int
         Voting trials run side by side in one batched numpy call (plain RV's random
         starts, and LAAV's informed trial beside them in ``with_plain_rv()`` and on
@@ -336,7 +340,7 @@ class LaavParams:
     rv_label_weight: float = 5.0
     rv_missing_trials: int = 2
     rv_missing_gate: float = 0.5
-    rv_missing_veto: bool = True
+    rv_outlier_veto: bool = True
     rv_batch: int = 2
     rv_refine: bool = True
     rv_reassign: bool = True
@@ -411,16 +415,16 @@ class LaavParams:
         trials from each missing-motion start (``rv_missing_trials``, since 2026-12-03), the
         kept one's unpolished labels descending too (``rv_descent_from_trial``, since
         2026-12-03), the missing-motion starts only where the informed trial's result leaves
-        their points unexplained (``rv_missing_gate``, since 2026-12-05), a missing-motion
-        candidate returned only if it also wins on the points both it and the informed trial
-        explain (``rv_missing_veto``, since 2026-12-06). Spelled out, so
+        their points unexplained (``rv_missing_gate``, since 2026-12-05), the joint score's
+        choices held to the points both labellings explain (``rv_outlier_veto``, since
+        2026-12-06). Spelled out, so
         that it stays this chain (and :func:`laav.motions.profile_params`, fitted on it,
         with it) if the default changes.
         ``changes`` override fields as in :meth:`replace`."""
         return cls(coarse_merge="auto", rv_subspace_weight=1.0,
                    rv_select="laav", rv_descent=True, rv_select_descent=0.03,
                    rv_missing_trials=2, rv_descent_from_trial=True,
-                   rv_missing_gate=0.5, rv_missing_veto=True).replace(**changes)
+                   rv_missing_gate=0.5, rv_outlier_veto=True).replace(**changes)
 
     def scaled(self, s: float) -> LaavParams:
         """The parameters for coordinates ``s`` times larger: lengths (:data:`PIXEL_PARAMS`)
@@ -600,7 +604,7 @@ _BOUNDS = (
     ("rv_label_weight", "float", 0, _BIG),
     ("rv_missing_trials", "int", 1, 100),
     ("rv_missing_gate", "float", 0, 1),
-    ("rv_missing_veto", "bool", None, None),
+    ("rv_outlier_veto", "bool", None, None),
     ("rv_batch", "int", 1, 32),
     ("rv_refine", "bool", None, None),
     ("rv_reassign", "bool", None, None),

@@ -51,7 +51,7 @@ SELECTION_FIELDS = ("coarse_epipolar_weight", "coding_eps")
 #: ``rv_*`` fields that plain Random Voting's runs and their polished candidates do not read
 #: (LAAV's fine-tuning does): a cache of plain RV may leave them out of its key.
 NOT_PLAIN_FIELDS = ("rv_coarse_candidate", "rv_descent", "rv_select_descent", "rv_missing_trials",
-                    "rv_descent_from_trial", "rv_missing_gate", "rv_missing_veto")
+                    "rv_descent_from_trial", "rv_missing_gate", "rv_outlier_veto")
 
 
 #: In LAAV's fine-tuning with model selection, when the informed trial and plain RV's

@@ -111,11 +111,13 @@ class Voting:
         Ours, ``rv_missing_gate`` > 0: the missing-motion starts whose trials did not run,
         the informed trial's result explaining their new motion (names as in
         :attr:`costs`, without a trial number).
-    vetoed : tuple
-        Ours, ``rv_missing_veto``: ``(name, points, informed cost, its cost)`` when the
-        candidate ``name`` (a missing-motion start's trial) scored lowest over all points
-        but higher than LAAV's informed trial over the ``points`` (a count) both labellings
-        explain (:func:`laav.own_chain.veto`), and so was not returned; empty otherwise.
+    vetoed : tuple of tuple
+        Ours, ``rv_outlier_veto``: one ``(what, points, kept's cost, its cost)`` per choice of
+        the joint score that was not made because, over the ``points`` (a count) both
+        labellings explain, the labels it would have replaced score lower
+        (:func:`laav.own_chain.veto`): ``what`` names a missing-motion start's trial (LAAV's
+        informed trial kept), ``"the descent"`` (the labels before it kept) or ``"the trial's
+        own labels, descended"`` (the polished ones kept); empty when none was.
     """
 
     labels: np.ndarray

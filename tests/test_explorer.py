@@ -1782,22 +1782,31 @@ def test_rv_card_names_the_missing_motion_start_and_trial_returned():
 
 
 def test_rv_card_says_when_the_veto_kept_laavs_informed_trial():
-    """``Voting.vetoed`` (``rv_missing_veto``, ours): on a scene with outlier tracks the RV
+    """``Voting.vetoed`` (``rv_outlier_veto``, ours): on a scene with outlier tracks the RV
     card says which missing-motion candidate won over all points, that LAAV's informed
-    trial was kept, and the two costs over the points both explain; nothing without it."""
+    trial was kept, and the two costs over the points both explain; the other kinds of veto
+    in their own words; nothing without it."""
+    import dataclasses
+
     from test_own_chain import outlier_scene
 
     from explorer.views import md_text, rv_summary
 
     seq, _ = outlier_scene()
     res = laav.segment(seq, 3, seed=0).voting
-    name, n, own_cost, its_cost = res.vetoed
+    (name, n, own_cost, its_cost), = res.vetoed
     text = rv_summary(res, None)
     assert f"kept LAAV's informed trial, not the {md_text(name)} candidate" in text
     assert f"higher over the {n} points both explain ({its_cost:,.0f} against {own_cost:,.0f})" in text
-    assert "`rv_missing_veto`" in text and "**returned the" not in text  # the informed trial's labels
-    off = laav.segment(seq, 3, laav.LaavParams(rv_missing_veto=False), seed=0).voting
-    assert off.vetoed == () and "rv_missing_veto" not in rv_summary(off, None)
+    assert "`rv_outlier_veto`" in text and "**returned the" not in text  # the informed trial's labels
+    more = dataclasses.replace(res, vetoed=(("the descent", 280, 10.0, 12.0),
+                                            ("the trial's own labels, descended", 270, 9.0, 11.0)))
+    text = rv_summary(more, None)
+    assert "kept the labels before the descent, not its result" in text
+    own = md_text("the trial's own labels, descended")
+    assert f"kept the polished labels, not {own}" in text
+    off = laav.segment(seq, 3, laav.LaavParams(rv_outlier_veto=False), seed=0).voting
+    assert off.vetoed == () and "rv_outlier_veto" not in rv_summary(off, None)
 
 
 def test_rv_card_says_when_the_refinement_and_reassignment_were_dropped():

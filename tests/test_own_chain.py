@@ -501,13 +501,13 @@ def test_outlier_tracks_do_not_buy_a_motion():
     vetoed candidate named with the costs that decided."""
     seq, out = outlier_scene()
     assert out.sum() == 30
-    before = segment(seq, 3, LaavParams(rv_missing_veto=False), seed=0)
+    before = segment(seq, 3, LaavParams(rv_outlier_veto=False), seed=0)
     assert before.voting.selected.startswith("missing motion")
     assert misclassification_rate(seq.labels[~out], before.labels[~out]) > 0.1
     res = segment(seq, 3, seed=0)
     assert res.voting.selected == "informed"
     assert misclassification_rate(seq.labels[~out], res.labels[~out]) < 0.01
-    name, n, informed_cost, its_cost = res.voting.vetoed
+    (name, n, informed_cost, its_cost), = res.voting.vetoed
     assert name == before.voting.selected and informed_cost < its_cost
     assert 0.8 * seq.n_points < n < seq.n_points  # the outliers left out, not much else
     # the candidate vetoed did win over all points
