@@ -1538,19 +1538,33 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
         returned = (f"; **returned {md_text(voting.selected)}, not LAAV's informed trial**: the model "
                     f"selection (ours, not in the paper) preferred it; {voting.n_iterations} voting "
                     f"iterations in all, LAAV's informed trial {per[0] if per else 0}")
-    for kind, n, kept_cost, its_cost in voting.vetoed:  # ours: choices outlier tracks made
-        if kind.startswith("missing motion"):
-            kept, lost = "LAAV's informed trial", f"the {md_text(kind)} candidate"
-        elif kind == "the descent":
-            kept, lost = "the labels before the descent", "its result"
-        else:
-            kept, lost = "the polished labels", md_text(kind)
-        returned += (f"; **kept {kept}, not {lost}**: that one scored lower over all points but "
-                     f"higher over the {n} points both explain ({its_cost:,.0f} against "
-                     f"{kept_cost:,.0f}), so the points neither explains, outlier tracks, would "
-                     "have bought it a motion (ours, `rv_outlier_veto`)")
+    returned += _vetoed_words(voting.vetoed)
     return (f"**{what}:** {n_it} iterations, {conv}{_votes(voting)}{trials}{extra}{returned}"
             f"{_selection(voting)}.")
+
+
+def _vetoed_words(vetoed: tuple) -> str:
+    """``Voting.vetoed`` (ours, ``rv_outlier_veto``) for the RV card: the missing-motion
+    candidates passed over (each with its cost and the informed trial's over the points both
+    explain), then a descent not kept; "" when nothing was vetoed."""
+    why = ("so the points neither explains, outlier tracks, would have bought a motion (ours, "
+           "`rv_outlier_veto`)")
+    out = ""
+    starts = [v for v in vetoed if v[0].startswith("missing motion")]
+    if starts:
+        each = "; ".join(f"{md_text(kind)}: {its:,.0f} against {kept:,.0f} over {n} points"
+                         for kind, n, kept, its in starts)
+        out += (f"; **passed over {len(starts)} missing-motion candidate"
+                f"{'s' if len(starts) > 1 else ''}** that scored lower than LAAV's informed "
+                f"trial over all points but higher over the points both explain ({each}), {why}")
+    for kind, n, kept, its in vetoed:
+        if kind.startswith("missing motion"):
+            continue
+        before, lost = (("the labels before the descent", "its result") if kind == "the descent"
+                        else ("the polished labels", md_text(kind)))
+        out += (f"; **kept {before}, not {lost}**: that one scored lower over all points but "
+                f"higher over the {n} points both explain ({its:,.0f} against {kept:,.0f}), {why}")
+    return out
 
 
 def other_trial_counts(voting: laav.Voting) -> tuple[int, int]:

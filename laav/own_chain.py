@@ -192,7 +192,7 @@ def outlier_points(points, labels, n_motions, params, fits=None) -> np.ndarray:
     own = _own_distances(points, labels, n_motions, params, fits)
     if own is None:
         return np.zeros(labels.size, dtype=bool)
-    return own > max(VETO_OUTLIER_FACTOR * np.median(own), UNEXPLAINED_PX2 * unit2(params))
+    return own > max(VETO_OUTLIER_FACTOR * np.nanmedian(own), UNEXPLAINED_PX2 * unit2(params))
 
 
 def veto(points, C, params, kept, other, fits=None) -> tuple | None:
@@ -216,13 +216,18 @@ def veto(points, C, params, kept, other, fits=None) -> tuple | None:
     Returns ``(points compared, kept's cost, other's cost)``, or None when nothing is left
     out (the comparison over all points stands) or fewer than 16 points remain.
     """
+    P = points.shape[1]
     keep = ~(outlier_points(points, kept, C, params, fits)
              & outlier_points(points, other, C, params, fits))
-    for labels in (kept, other):  # the points of motions too small to fit after that
-        count = np.bincount(labels[keep], minlength=C)
-        keep &= count[labels] >= 8
+    while True:  # the points of motions too small to fit, until none is left in either
+        small = np.zeros(P, dtype=bool)
+        for labels in (kept, other):
+            small |= keep & (np.bincount(labels[keep], minlength=C)[labels] < 8)
+        if not small.any():
+            break
+        keep &= ~small
     idx = np.flatnonzero(keep)
-    if idx.size == labels.size or idx.size < 16:
+    if idx.size == P or idx.size < 16:
         return None
     sub = np.ascontiguousarray(points[:, idx])
     most = int(np.ceil(params.rv_select_descent * idx.size)) if params.rv_select_descent > 0 else None
@@ -262,11 +267,19 @@ def _select(points, C, params, starts, part, extra, uses) -> Voting:
     k = int(np.argmin(scores))  # the first of equal scores: the coarse start
     vetoed = []  # ours (rv_outlier_veto): choices of the joint score that outliers made
     if k > 0 and entries[0][0] == "informed":  # a missing-motion candidate won
-        no = _vetoed(points, C, params, finals[entries[0][1][0].tobytes()],
-                     finals[entries[k][1][0].tobytes()], fits, entries[k][0], always=True)
-        if no is not None:
+        informed = finals[entries[0][1][0].tobytes()]
+        # the candidates below the informed trial, best first (stable: equal scores in
+        # start order): the first the veto lets through is kept, else the informed trial
+        for j in np.argsort(scores, kind="stable"):
+            if j == 0 or scores[j] >= scores[0]:
+                k = 0
+                break
+            no = _vetoed(points, C, params, informed, finals[entries[j][1][0].tobytes()], fits,
+                         entries[j][0], always=True)
+            if no is None:
+                k = int(j)
+                break
             vetoed.append(no)
-            k = 0
     name, res, pol, _ = entries[k]
     costs = {e[0]: float(e[3]) for e in entries}
     out = selection.finish(points, C, params, res, trials, True, name, polished=pol, costs=costs,
@@ -293,6 +306,8 @@ def _select(points, C, params, starts, part, extra, uses) -> Voting:
             elif raw_score < score:  # the refinement and reassignment are not kept
                 out = dataclasses.replace(out, refined=0, reassigned=0, unpolished=True)
                 labels, moved = raw, raw_moved
+                # (a veto of the polished labels' descent no longer says what was returned)
+                vetoed = [v for v in vetoed if v[0] != "the descent"]
         out = dataclasses.replace(out, labels=labels, descended=moved)
     if vetoed:
         out = dataclasses.replace(out, vetoed=tuple(vetoed))

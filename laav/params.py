@@ -157,7 +157,8 @@ class LaavParams:
         Ours, with ``rv_select="laav"``: a labelling the joint score prefers over all points
         replaces the one it competes with only if it also scores lower on the points both
         explain (:func:`laav.own_chain.veto`): a missing-motion start's candidate against
-        LAAV's informed trial, and, when they differ on more than ``rv_select_descent`` of
+        LAAV's informed trial (the best-scoring one that passes is kept, else the informed
+        trial), and, when they differ on more than ``rv_select_descent`` of
         the points, the descent's result against its start and the trial's own labels
         descended against the polished ones. Tracks that no motion explains (tracking
         failures, drifting tracks) code cheaper as a motion of their own than inside the

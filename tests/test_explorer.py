@@ -1781,11 +1781,11 @@ def test_rv_card_names_the_missing_motion_start_and_trial_returned():
     assert f"returned the trial 2 (of `rv_missing_trials`) from the {start} start" in text
 
 
-def test_rv_card_says_when_the_veto_kept_laavs_informed_trial():
+def test_rv_card_says_what_the_outlier_veto_passed_over():
     """``Voting.vetoed`` (``rv_outlier_veto``, ours): on a scene with outlier tracks the RV
-    card says which missing-motion candidate won over all points, that LAAV's informed
-    trial was kept, and the two costs over the points both explain; the other kinds of veto
-    in their own words; nothing without it."""
+    card names the missing-motion candidates passed over, each with its cost and LAAV's
+    informed trial's over the points both explain, and a descent not kept in its own
+    words; nothing without the veto."""
     import dataclasses
 
     from test_own_chain import outlier_scene
@@ -1794,17 +1794,21 @@ def test_rv_card_says_when_the_veto_kept_laavs_informed_trial():
 
     seq, _ = outlier_scene()
     res = laav.segment(seq, 3, seed=0).voting
-    (name, n, own_cost, its_cost), = res.vetoed
+    starts = [v for v in res.vetoed if v[0].startswith("missing motion")]
     text = rv_summary(res, None)
-    assert f"kept LAAV's informed trial, not the {md_text(name)} candidate" in text
-    assert f"higher over the {n} points both explain ({its_cost:,.0f} against {own_cost:,.0f})" in text
-    assert "`rv_outlier_veto`" in text and "**returned the" not in text  # the informed trial's labels
-    more = dataclasses.replace(res, vetoed=(("the descent", 280, 10.0, 12.0),
-                                            ("the trial's own labels, descended", 270, 9.0, 11.0)))
-    text = rv_summary(more, None)
+    assert f"**passed over {len(starts)} missing-motion candidates**" in text
+    for name, n, own_cost, its_cost in starts:
+        assert f"{md_text(name)}: {its_cost:,.0f} against {own_cost:,.0f} over {n} points" in text
+    assert "`rv_outlier_veto`" in text
+    one = dataclasses.replace(res, vetoed=(("missing motion (0+1)", 251, 7030.2, 7456.0),
+                                           ("the descent", 280, 10.0, 12.0)))
+    text = rv_summary(one, None)
+    assert "**passed over 1 missing-motion candidate**" in text
+    assert f"({md_text('missing motion (0+1)')}: 7,456 against 7,030 over 251 points)" in text
     assert "kept the labels before the descent, not its result" in text
     own = md_text("the trial's own labels, descended")
-    assert f"kept the polished labels, not {own}" in text
+    mine = dataclasses.replace(res, vetoed=(("the trial's own labels, descended", 270, 9.0, 11.0),))
+    assert f"kept the polished labels, not {own}" in rv_summary(mine, None)
     off = laav.segment(seq, 3, laav.LaavParams(rv_outlier_veto=False), seed=0).voting
     assert off.vetoed == () and "rv_outlier_veto" not in rv_summary(off, None)
 
