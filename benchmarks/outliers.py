@@ -17,7 +17,7 @@ the veto kept a labelling the joint score would have replaced (``Voting.vetoed``
 machine, date and commit.
 
     python benchmarks/outliers.py [--data DIR] [--seeds 0,1] [--fractions 0.05,0.1]
-                                  [--steps 1,3] [--jobs 2] [--out bench-out/outliers.md]
+                                  [--steps 1,3] [--jobs 1] [--out bench-out/outliers.md]
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def _one(job) -> list[dict]:
     return rows
 
 
-def report(rows: list[dict], seeds, seconds: float) -> str:
+def report(rows: list[dict], seeds, seconds: float, jobs: int = 1) -> str:
     lines = [
         f"# Hopkins155 with outlier tracks ({time.strftime('%Y-%m-%d %H:%M %Z')})",
         "",
@@ -88,8 +88,9 @@ def report(rows: list[dict], seeds, seconds: float) -> str:
         f"{platform.system()} {platform.release()}",
         f"- Software: Python {platform.python_version()}, numpy {np.__version__}, "
         f"laav {laav.__version__}, git {git_commit()}",
-        f"- `benchmarks/outliers.py`, LAAV seeds {', '.join(map(str, seeds))}, "
-        f"{len({r['sequence'] for r in rows})} sequences, {seconds:.0f} s",
+        f"- `benchmarks/outliers.py`, LAAV seeds {', '.join(map(str, seeds))}; "
+        f"{len({r['sequence'] for r in rows})} sequences, {seconds:.0f} s in {jobs} process"
+        f"{'es' if jobs > 1 else ''}",
         "- Error: misclassified tracks among those not replaced, %, mean over runs; the "
         "outliers are random walks from each replaced track's frame-0 position",
         "",
@@ -133,7 +134,7 @@ def main(argv=None) -> int:
             rows.extend(part)
             if k % 50 == 0:
                 print(f"{k}/{len(jobs)}", file=sys.stderr, flush=True)
-    text = report(rows, seeds, time.perf_counter() - t0)
+    text = report(rows, seeds, time.perf_counter() - t0, max(1, args.jobs))
     print(text)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
