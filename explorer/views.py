@@ -1545,26 +1545,27 @@ def _rv_line(voting: laav.Voting | None, what: str) -> str:
 
 def _vetoed_words(vetoed: tuple) -> str:
     """``Voting.vetoed`` (ours, ``rv_outlier_veto``) for the RV card: the missing-motion
-    candidates passed over (each with its cost and the informed trial's over the points both
-    explain), then a descent not kept; "" when nothing was vetoed."""
-    why = ("so the points neither explains, outlier tracks, would have bought a motion (ours, "
-           "`rv_outlier_veto`)")
-    out = ""
+    candidates passed over and the descents not kept, each with its cost and that of what it
+    would have replaced over the points both explain, and the reason once; "" when nothing
+    was vetoed."""
+    parts = []
     starts = [v for v in vetoed if v[0].startswith("missing motion")]
     if starts:
         each = "; ".join(f"{md_text(kind)}: {its:,.0f} against {kept:,.0f} over {n} points"
                          for kind, n, kept, its in starts)
-        out += (f"; **passed over {len(starts)} missing-motion candidate"
-                f"{'s' if len(starts) > 1 else ''}** that scored lower than LAAV's informed "
-                f"trial over all points but higher over the points both explain ({each}), {why}")
+        parts.append(f"**passed over {len(starts)} missing-motion candidate"
+                     f"{'s' if len(starts) > 1 else ''}** ({each}; LAAV's informed trial's cost second)")
     for kind, n, kept, its in vetoed:
-        if kind.startswith("missing motion"):
-            continue
-        before, lost = (("the labels before the descent", "its result") if kind == "the descent"
-                        else ("the polished labels", md_text(kind)))
-        out += (f"; **kept {before}, not {lost}**: that one scored lower over all points but "
-                f"higher over the {n} points both explain ({its:,.0f} against {kept:,.0f}), {why}")
-    return out
+        if not kind.startswith("missing motion"):
+            before, lost = (("the labels before the descent", "its result") if kind == "the descent"
+                            else ("the polished labels", md_text(kind)))
+            parts.append(f"**kept {before}, not {lost}** ({its:,.0f} against {kept:,.0f} over "
+                         f"{n} points)")
+    if not parts:
+        return ""
+    return ("; " + "; ".join(parts) + ": each scored lower over all points than what it would have "
+            "replaced but higher over the points both explain, so the points neither explains, "
+            "outlier tracks, would have bought a motion (ours, `rv_outlier_veto`)")
 
 
 def other_trial_counts(voting: laav.Voting) -> tuple[int, int]:

@@ -1804,8 +1804,9 @@ def test_rv_card_says_what_the_outlier_veto_passed_over():
                                            ("the descent", 280, 10.0, 12.0)))
     text = rv_summary(one, None)
     assert "**passed over 1 missing-motion candidate**" in text
-    assert f"({md_text('missing motion (0+1)')}: 7,456 against 7,030 over 251 points)" in text
-    assert "kept the labels before the descent, not its result" in text
+    assert f"({md_text('missing motion (0+1)')}: 7,456 against 7,030 over 251 points;" in text
+    assert "**kept the labels before the descent, not its result** (12 against 10 over 280 points)" in text
+    assert text.count("`rv_outlier_veto`") == 1  # the reason once
     own = md_text("the trial's own labels, descended")
     mine = dataclasses.replace(res, vetoed=(("the trial's own labels, descended", 270, 9.0, 11.0),))
     assert f"kept the polished labels, not {own}" in rv_summary(mine, None)
