@@ -115,9 +115,11 @@ class Voting:
         Ours, ``rv_outlier_veto``: one ``(what, points, kept's cost, its cost)`` per choice of
         the joint score that was not made because, over the ``points`` (a count) both
         labellings explain, the labels it would have replaced score lower
-        (:func:`laav.own_chain.veto`): ``what`` names a missing-motion start's trial (LAAV's
-        informed trial kept), ``"the descent"`` (the labels before it kept) or ``"the trial's
-        own labels, descended"`` (the polished ones kept); empty when none was.
+        (:func:`laav.own_chain.veto`): ``what`` names a missing-motion start's trial
+        (compared with LAAV's informed trial, whose cost is the kept one; the next candidate
+        the veto lets through is returned, else the informed trial), ``"the descent"`` (the
+        labels before it kept) or ``"the trial's own labels, descended"`` (the polished ones
+        kept); empty when none was.
     """
 
     labels: np.ndarray
