@@ -230,15 +230,12 @@ def veto(points, C, params, kept, other, fits=None) -> tuple | None:
     if idx.size == P or idx.size < 16:
         return None
     sub = np.ascontiguousarray(points[:, idx])
-    most = int(np.ceil(params.rv_select_descent * idx.size)) if params.rv_select_descent > 0 else None
+    most = int(np.ceil(params.rv_select_descent * idx.size))  # 0: the joint score itself
     costs = []
-    for labels in (kept, other):
+    for labels in (kept, other):  # (cleaned_costs, but each with its own motion count)
         present, lab = np.unique(labels[idx], return_inverse=True)
-        if most is None:
-            costs.append(joint_score(sub, lab, present.size, params))
-        else:
-            costs.append(joint_descent(sub, lab, present.size, params, max_moves=most,
-                                       return_score=True)[2])
+        costs.append(joint_descent(sub, lab, present.size, params, max_moves=most,
+                                   return_score=True)[2])
     return int(idx.size), float(costs[0]), float(costs[1])
 
 
