@@ -42,7 +42,8 @@ from ._threads import single_threaded
 from .refine import robust_subspace
 
 __all__ = ["MotionCount", "MotionProfile", "motion_profile", "estimate_motions", "complete_window", "decide",
-           "profile_levels", "noise_corrected", "noise_floors"]
+           "profile_levels", "noise_corrected", "noise_floors", "one_motion_check",
+           "one_motion_features"]
 
 RANK = 4  # an affine camera's rigid motion spans a 4-dimensional trajectory subspace
 #: Fitted by benchmarks/motions.py on all 155 Hopkins155 sequences, seed-0 profiles at pixel
@@ -67,6 +68,15 @@ NOISE_FLOORS = (2.0, 1.0)
 FLOOR_SHARE = 0.3
 #: One motion when its epipolar level <= this x the atoms' noise level (px^2).
 ONE_MOTION_RATIO = 0.05
+#: The one-motion check (:func:`one_motion_check`, since 2026-12-06): weights of the step
+#: 1 -> 2's :func:`step_features` on noise-corrected levels and of log(e1 / noise), the first
+#: step's own statistic; a logistic model of "more than one motion" fitted by
+#: benchmarks/motions_one.py on Hopkins155's 155 sequences (more than one motion) and each of
+#: their motions alone (one motion: 129 motions of the 50 full sequences), at pixel noise
+#: σ = 0, 0.5 and 1 px. It does not decide C (Hopkins155 would lose sequences: the report);
+#: an estimate of two motions that it calls one is flagged (:attr:`MotionCount.close_call`).
+ONE_CHECK_WEIGHTS = (0.4694, 0.8802, -0.1691, 0.2537, 0.2845, 0.1919)
+ONE_CHECK_BIAS = -0.1926
 #: A step C -> C + 1 (C >= 2) whose score is within this of 0 is a *close call*
 #: (:attr:`MotionCount.close_call`): the logistic criterion puts the added motion's chance
 #: between 27 and 73 %. A logit of 1, the score's natural unit, not fitted; but the counts
@@ -328,6 +338,39 @@ def noise_corrected(levels, floors=(0.0, 0.0), share=None):
     return np.stack([corrected(c) for c in range(1, K + 1)], axis=1)
 
 
+def one_motion_check(levels, noise2: float, sigma: float = 0.0, unit2: float = 1.0,
+                     weights=None, bias=None) -> float:
+    """Logit that the tracks hold more than one motion, from the step 1 -> 2 as a whole: the
+    five :func:`step_features` of the step on the levels :func:`noise_corrected` for the
+    tracks' noise ``sigma`` (px), and the one-motion test's own statistic, log of one motion's
+    epipolar level over ``noise2`` (px^2; :func:`decide`). ``levels``: (3, K) of
+    :func:`profile_levels` or a function of C giving its column (C = 1, 2 and 3 are read).
+    Weights :data:`ONE_CHECK_WEIGHTS`, :data:`ONE_CHECK_BIAS` unless given. NaN when C = 1 or
+    2 has no labelling.
+
+    Unlike :func:`decide`'s first step, whose ratio holds on noise-free tracks only (it calls
+    4 of Hopkins155's 129 single motions one motion, none at 0.5 px of noise), this was fitted
+    on real single motions, noisy ones included; see :data:`ONE_CHECK_WEIGHTS`.
+    """
+    x = one_motion_features(levels, noise2, sigma, unit2)
+    if not np.isfinite(x).all():
+        return float("nan")
+    w = np.asarray(ONE_CHECK_WEIGHTS if weights is None else weights, dtype=float)
+    return float(w @ x + (ONE_CHECK_BIAS if bias is None else bias))
+
+
+def one_motion_features(levels, noise2: float, sigma: float = 0.0, unit2: float = 1.0) -> np.ndarray:
+    """(6,) what :func:`one_motion_check` weighs (its arguments): the step 1 -> 2's
+    :func:`step_features` on the noise-corrected levels, then log(e1 / ``noise2``); NaN
+    when C = 1 or 2 has no labelling."""
+    col = _column(levels)
+    if not (np.isfinite(col(1)).all() and np.isfinite(col(2)).all()):
+        return np.full(6, np.nan)
+    steps = _column(noise_corrected(col, noise_floors(sigma)))
+    tiny = 1e-12 * unit2
+    return np.r_[step_features(steps, 1), np.log(float(np.exp(col(1)[1])) + tiny) - np.log(noise2 + tiny)]
+
+
 def decide(levels, noise2: float, max_motions: int, weights=None, bias=None,
            one_motion_ratio=None, unit2: float = 1.0, sigma: float = 0.0,
            floor_share=None) -> tuple[int, np.ndarray, str]:
@@ -402,6 +445,10 @@ class MotionCount:
     sigma : float
         The tracks' pixel noise (px, :func:`laav.noise.estimate_noise`) the later steps
         took out of the levels (:func:`noise_corrected`).
+    one_motion_score : float
+        For an estimate of two motions, the one-motion check's logit that there is more
+        than one (:func:`one_motion_check`); NaN otherwise. At or below 0 the estimate is
+        flagged (:attr:`close_call`: compare C = 1).
     """
 
     n_motions: int
@@ -415,6 +462,7 @@ class MotionCount:
     seed: int = 0
     seconds: float = 0.0
     sigma: float = 0.0
+    one_motion_score: float = float("nan")
 
     @property
     def deciding_step(self) -> tuple[int, float] | None:
@@ -429,15 +477,23 @@ class MotionCount:
     @property
     def close_call(self) -> str:
         """A sentence when the estimate was a close call (:data:`CLOSE_CALL_LOGIT`): which C
-        to compare, with the criterion's chance for the motion in question; "" otherwise."""
+        to compare, with the criterion's chance for the motion in question; and one when an
+        estimate of two motions is one the one-motion check calls one
+        (:attr:`one_motion_score` <= 0): compare C = 1. "" otherwise."""
+        said = []
         step = self.deciding_step
-        if step is None or abs(step[1]) >= CLOSE_CALL_LOGIT:
-            return ""
-        c, score = step
-        chance = 100.0 / (1.0 + np.exp(-score))
-        other = c + 1 if c == self.n_motions else c
-        return (f"a close call: the test gave motion {c + 1} a {chance:.0f} % chance "
-                f"(step score {score:+.2f}); compare C = {other}")
+        if step is not None and abs(step[1]) < CLOSE_CALL_LOGIT:
+            c, score = step
+            chance = 100.0 / (1.0 + np.exp(-score))
+            other = c + 1 if c == self.n_motions else c
+            said.append(f"a close call: the test gave motion {c + 1} a {chance:.0f} % chance "
+                        f"(step score {score:+.2f}); compare C = {other}")
+        one = self.one_motion_score
+        if self.n_motions == 2 and np.isfinite(one) and one <= 0:
+            chance = 100.0 / (1.0 + np.exp(-one))
+            said.append(f"one motion may explain the tracks: the one-motion check gave a second "
+                        f"motion a {chance:.0f} % chance (score {one:+.2f}); compare C = 1")
+        return "; ".join(said)
 
     def explain(self) -> str:
         """:attr:`reason`, and :attr:`close_call` when it is one."""
@@ -574,14 +630,14 @@ def _estimate_motions(seq_or_points, max_motions, random_state, params):
                          f"of motions (needs at least {2 * MIN_POINTS}: {MIN_POINTS} per motion of two)")
     max_motions = min(max_motions, P // MIN_POINTS)
     t = time.perf_counter()
-    C, scores, levels, noise2, sigma, why, results = _estimate(seq_or_points, max_motions, params, seed)
+    C, scores, levels, noise2, sigma, why, results, one = _estimate(seq_or_points, max_motions, params, seed)
     count = MotionCount(
         n_motions=int(C), candidates=tuple(range(1, max_motions + 2)),
         subspace_level=tuple(float(v) for v in np.exp(levels[0])),
         epipolar_level=tuple(float(v) for v in np.exp(levels[1])),
         coding_length=tuple(float(v) for v in levels[2]),
         step_scores=tuple(float(v) for v in scores), noise=noise2, reason=why + basis,
-        seed=seed, seconds=time.perf_counter() - t, sigma=sigma)
+        seed=seed, seconds=time.perf_counter() - t, sigma=sigma, one_motion_score=one)
     # LAAV's result at the estimate, when it was computed on the caller's whole sequence with
     # the caller's settings: not with profile_params(), for a caller who gave none, nor when
     # the profile turned off what its constants were not fitted with (NOT_FITTED), which the
@@ -610,4 +666,6 @@ def _estimate(seq, max_motions, params, seed):
         return levels[:, c - 1]
 
     C, scores, why = decide(col, ctx.noise2, max_motions, unit2=ctx.unit2, sigma=ctx.sigma)
-    return C, scores, levels, float(ctx.noise2), float(ctx.sigma), why, ctx.results
+    # (two motions: the check reads C = 1-3, which the test has evaluated unless max_motions is 2)
+    one = one_motion_check(col, ctx.noise2, ctx.sigma, ctx.unit2) if C == 2 else float("nan")
+    return C, scores, levels, float(ctx.noise2), float(ctx.sigma), why, ctx.results, one

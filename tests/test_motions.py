@@ -10,8 +10,16 @@ import pytest
 
 import laav
 from laav.cli import main
-from laav.motions import MotionCount, decide, estimate_motions, profile_levels, step_features
-from laav.synthetic import make_sequence
+from laav.motions import (
+    MotionCount,
+    decide,
+    estimate_motions,
+    one_motion_check,
+    one_motion_features,
+    profile_levels,
+    step_features,
+)
+from laav.synthetic import add_noise, make_sequence
 
 SMALL = ["--param", "rv_max_iter=30", "--param", "rv_trials=2"]
 
@@ -56,6 +64,39 @@ def test_noisy_three_motion_scenes_are_counted_three():
         count = estimate_motions(seq, random_state=0)
         assert count.n_motions == 3, (seed, count.reason)
         assert 0.8 < count.sigma < 1.2  # the tracks' noise, measured
+
+
+def test_a_noisy_single_motion_is_flagged_compare_c_1():
+    """The first step's ratio holds on noise-free tracks only: under pixel noise a single
+    rigid motion's epipolar level is the noise's, and the test calls it two. The one-motion
+    check (fitted on Hopkins155's motions alone, noisy ones too) flags such an estimate,
+    naming C = 1 to compare, and leaves a noisy two-motion scene unflagged. Without the check
+    neither scene is flagged."""
+    for seed in (0, 1):
+        one = make_sequence(1, n_frames=30, n_points=600, noise=0.0, rng=seed)
+        keep = one.labels == 0
+        one = add_noise(laav.Sequence(one.points[:, keep], np.zeros(int(keep.sum()), np.int64)), 1.0, rng=0)
+        count = estimate_motions(one, random_state=0)
+        assert count.n_motions == 2  # (the decision is unchanged: the check only flags)
+        assert count.one_motion_score <= 0 and count.close_call.endswith("compare C = 1"), count.explain()
+        assert "one motion may explain the tracks" in count.explain()
+        two = make_sequence(1, n_frames=30, n_points=300, noise=1.0, rng=seed)
+        count = estimate_motions(two, random_state=0)
+        assert count.n_motions == 2 and count.one_motion_score > 0, count.explain()
+        assert "compare C = 1" not in count.close_call
+
+
+def test_one_motion_check_reads_the_first_step():
+    """:func:`one_motion_check` weighs :func:`one_motion_features` (the step 1 -> 2's gains on
+    noise-corrected levels and log(e1 / noise)); NaN without a two-motion labelling."""
+    lv = np.log(np.array([[4.0, 1.0, 0.9], [2.0, 0.5, 0.5], [np.e, 1.0, 1.0]]))
+    lv[2] = [3.0, 2.0, 2.0]  # coding lengths per point (nats)
+    x = one_motion_features(lv, noise2=1.0)
+    np.testing.assert_allclose(x, [np.log(4.0), np.log(4.0), np.log(1 / 0.9), 0.0, 1.0, np.log(2.0)])
+    w = np.arange(1.0, 7.0)
+    assert one_motion_check(lv, 1.0, weights=w, bias=-1.0) == pytest.approx(w @ x - 1.0)
+    lv[:, 1] = np.nan
+    assert np.isnan(one_motion_check(lv, 1.0))
 
 
 def test_noise_corrected_levels():
@@ -219,6 +260,16 @@ def test_close_call_names_the_step_nearest_zero_and_the_c_to_compare():
         assert c.close_call == "" and c.explain() == "why"
     assert _count(2, (6.0, -1.0, nan, nan)).deciding_step == (2, -1.0)
     assert _count(2, (2.5, nan, nan, nan)).deciding_step is None
+    # the one-motion check: an estimate of two it calls one is flagged, compare C = 1
+    flagged = dataclasses.replace(_count(2, (6.0, -3.0, nan, nan)), one_motion_score=-0.85)
+    assert flagged.close_call == ("one motion may explain the tracks: the one-motion check gave a "
+                                  "second motion a 30 % chance (score -0.85); compare C = 1")
+    both = dataclasses.replace(_count(2, (6.0, -0.5, nan, nan)), one_motion_score=-0.85)
+    assert both.close_call.startswith("a close call: the test gave motion 3")
+    assert both.close_call.endswith("compare C = 1")
+    for c in (dataclasses.replace(_count(2, (6.0, -3.0, nan, nan)), one_motion_score=0.4),
+              dataclasses.replace(_count(3, (6.0, 3.0, -3.0, nan)), one_motion_score=-2.0)):
+        assert c.close_call == ""
 
 
 def test_cli_says_when_the_estimate_was_a_close_call(tmp_path, capsys, monkeypatch):
