@@ -173,9 +173,10 @@ RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams)
 #: How far an estimated C can be trusted: laav.estimate_motions on Hopkins155, held out by
 #: cross-validation grouped by video (docs/bench/motions.md, 2026-12-01: 143 of 155 right;
 #: 8 of its 9 misses on three motions said 2).
-ESTIMATE_NOTE = ("The estimate is right on 92 % of Hopkins155's sequences but 74 % of its "
+ESTIMATE_NOTE = ("The estimate is right on 92 % of Hopkins155's sequences but 77 % of its "
                  "three-motion ones, where it mostly says 2: if the seed sweep finds several "
-                 "segmentations, try C + 1.")
+                 "segmentations, try C + 1. It calls a single motion 2; when it says "
+                 "\"compare C = 1\", try C = 1.")
 
 
 @dataclasses.dataclass(frozen=True)
