@@ -787,7 +787,8 @@ class Explorer:
                 self.change = self.state.change_of(result) if not new_seq else None
                 self.moved = None if self.change is None else self.change.moved
                 plain = self.state.plain_rv(seq, settings)  # (a preview's: not computed yet)
-                self.style = V.point_style(seq, result, self.controls.color_mode, plain)
+                self.style = V.point_style(seq, result, self.controls.color_mode, plain,
+                                           fine_rows=self.frame_view.fine_rows())
                 self.fine_colors = V.fine_colors(seq, result)
                 self.graph_view.to_final_step(result)
                 self.coarse_view.epipolar.set_models(result)
@@ -999,7 +1000,8 @@ class Explorer:
         if self.result is None:
             return
         self.style = V.point_style(self.sequence, self.result, self.controls.color_mode,
-                                   self.state.plain_rv(self.sequence, self.settings))
+                                   self.state.plain_rv(self.sequence, self.settings),
+                                   fine_rows=self.frame_view.fine_rows())
         with self.hold(live="draw"):
             self._draw_frame()
             self.compare.redraw()

@@ -24,6 +24,7 @@ __all__ = [
     "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "DIFFERS_MARK", "UNSEEN",
     "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at", "incomplete_note", "result_notes", "counted",
     "NO_ATOM", "NO_ATOM_DARK", "NO_ATOM_SIZE", "cross_colors", "CHANGED_MARK", "DISAGREEMENT_WARN",
+    "LEGEND_ROW_PX", "LEGEND_OTHER_ROWS", "fine_legend_rows",
     "disagreement_line", "disagreement_warning",
     "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "plain_differs", "labelling_distance", "raw_style",
@@ -383,8 +384,25 @@ def stage_errors(seq: laav.Sequence, result: laav.LaavResult, stage: str,
     raise ValueError(f"unknown stage {stage!r}")
 
 
+#: px a legend row takes beside a frame view (9 pt labels, spacing 0: bokeh's 20 px glyphs).
+LEGEND_ROW_PX = 20
+#: A frame view's legend rows that are not the fine models' (atom R2, atom R1, no fine model,
+#: in no atom, changed motion, misclassified).
+LEGEND_OTHER_ROWS = 6
+
+
+def fine_legend_rows(frame_height: int, views: int = 1) -> int:
+    """How many fine models a frame view's legend can list one by one (:func:`point_style`'s
+    ``fine_rows``): the rows that fit beside a frame ``frame_height`` px tall (the legend, to
+    the plot's right, may reach the toolbar's bottom, about 60 px below the frame) less the
+    other rows; ``views``: how many views' models share the legend (the A/B compare: 2)."""
+    rows = (int(frame_height) + 60) // LEGEND_ROW_PX - LEGEND_OTHER_ROWS
+    return max(rows // max(int(views), 1), 0)
+
+
 def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
-                plain: laav.Voting | None = None, ref=None) -> dict:
+                plain: laav.Voting | None = None, ref=None, fine_rows: int | None = None,
+                fine_counts: bool = True) -> dict:
     """Colour, marker and legend label of every point for a colour-by ``mode`` (see COLOR_MODES).
 
     Motions have one colour and marker shape each (:data:`MOTION_COLORS`,
@@ -399,12 +417,19 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
     (that stage), ``note`` (str, empty unless the mode cannot be shown as asked), ``mode``
     (the mode drawn: ``"final"`` when ground truth is asked for and missing).
     ``ref``: without ground truth, the labels the motions are matched to (their colours;
-    see :func:`shown_labels`).
+    see :func:`shown_labels`). ``detail`` (P,): each point's own text for a hover, the
+    label but where the legend groups: with more fine models than ``fine_rows`` (the rows
+    the legend has for them, :func:`fine_legend_rows`) the "fine" mode's legend has a row
+    per motion ("motion 2: 6 fine models") instead of one per fine model, which then
+    overflowed the plot, and ``detail`` keeps "fine model 5 → motion 2". Without
+    ``fine_counts`` such a row says "motion 2: its fine models" (the A/B compare's legend,
+    shared by two results whose counts differ).
     """
     P = seq.n_points
     al = _aligned(seq, result, ref)
     gt = al["gt"]
     note = ""
+    detail = None  # (the label, unless the legend groups: see above)
     marker = np.full(P, "circle", dtype=object)
     if mode in PLAIN_MODES and plain is None:
         note = "plain RV is still computing: showing the final labels until it is ready"
@@ -439,6 +464,14 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
         _, marker = _motion_palette(joined)
         label = np.array([f"fine model {f + 1} → motion {m + 1}" if f >= 0 else "no fine model"
                           for f, m in zip(lab.tolist(), joined.tolist())], dtype=object)
+        models = np.unique(lab[ok])
+        if fine_rows is not None and models.size > fine_rows:  # a legend row per motion
+            detail = label
+            per = {int(m): np.unique(lab[ok & (joined == m)]).size for m in np.unique(joined[ok])}
+            label = np.array([(f"motion {m + 1}: {per[m]} fine model{'' if per[m] == 1 else 's'}"
+                               if fine_counts else f"motion {m + 1}: its fine models")
+                              if f >= 0 else "no fine model"
+                              for f, m in zip(lab.tolist(), joined.tolist())], dtype=object)
     elif mode in ("coarse", "final", "plain"):
         lab = al[mode] if mode != "plain" else align_labels(plain.labels, gt if gt is not None
                                                              else al["final"])
@@ -467,9 +500,10 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
             label = np.where(un, f"{UNSEEN_LABEL} (an error)", label)
     else:
         raise ValueError(f"unknown colour mode {mode!r}")
+    label = np.asarray(label).astype(str)
     return {"color": np.asarray(color, dtype="U7"), "marker": np.asarray(marker, dtype=object),
-            "label": np.asarray(label).astype(str), "misclassified": wrong, "stage": stage,
-            "note": note, "mode": mode}
+            "label": label, "detail": label if detail is None else np.asarray(detail).astype(str),
+            "misclassified": wrong, "stage": stage, "note": note, "mode": mode}
 
 
 def plain_differs(final: np.ndarray, plain: np.ndarray) -> np.ndarray:
@@ -639,15 +673,17 @@ _DIGITS = re.compile(r"(\d+)")
 
 
 def points_template(style: dict) -> dict:
-    """The frame view's points (x, y, color, marker, label, index) as a template: in label
+    """The frame view's points (x, y, color, marker, label, detail, index) as a template: in label
     order (:func:`label_order`) so that the legend lists "motion 1, motion 2, ..., motion
     10" in order."""
     color = style["color"]
     order = label_order(style["label"])
     marker = style.get("marker")
     marker = np.full(color.shape, "circle", dtype=object) if marker is None else marker
+    detail = style.get("detail")
+    detail = style["label"] if detail is None else detail
     return {"_a": order.astype(np.int32), "color": color[order], "marker": marker[order],
-            "label": style["label"][order], "index": order}
+            "label": style["label"][order], "detail": np.asarray(detail)[order], "index": order}
 
 
 def points_source(seq: laav.Sequence, frame: int, style: dict) -> dict:
@@ -1305,10 +1341,14 @@ def _pair_points(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int, fl
     cj, ck = fc[j], fc[k]
     cols = np.where(fine[idx] == j, cj, ck).astype("U7")
     model = np.where(fine[idx] == j, f"fine model f{j + 1}", f"fine model f{k + 1}").astype(object)
+    # each model with the marker of the motion it joined, as card 1 draws it
+    f2c = np.asarray(result.coarse.fine_to_coarse)
+    mj, mk = (motion_marker(f2c[m]) if 0 <= m < f2c.size else MOTION_MARKERS[0] for m in (j, k))
+    marker = np.where(fine[idx] == j, mj, mk).astype(object)
     pts = seq.points
     return (fine, idx, both, (cj, ck),
-            {"x": pts[fl, idx, 0], "y": pts[fl, idx, 1], "color": cols, "model": model},
-            {"x": pts[fr, idx, 0], "y": pts[fr, idx, 1], "color": cols, "model": model})
+            {"x": pts[fl, idx, 0], "y": pts[fl, idx, 1], "color": cols, "model": model, "marker": marker},
+            {"x": pts[fr, idx, 0], "y": pts[fr, idx, 1], "color": cols, "model": model, "marker": marker})
 
 
 def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int,
@@ -1316,8 +1356,9 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     """Epipolar check of fine models ``j`` and ``k`` with a fundamental matrix the merge
     itself used: the pair's sample of median distance (``Coarse.vote_samples``).
 
-    Keys: ``left`` and ``right`` (x, y, color, model: the two models' points in the
-    sample's frame l and frame r), ``sample_left`` / ``sample_right`` (x, y: the features
+    Keys: ``left`` and ``right`` (x, y, color, model, marker: the two models' points in the
+    sample's frame l and frame r, each with the marker of the motion it joined),
+    ``sample_left`` / ``sample_right`` (x, y: the features
     the F was fitted on), ``lines`` (x0, y0, x1, y1, color: epipolar lines in frame r of
     the sample's features and of up to ``max_lines`` other points of the two models; on
     incomplete data only points seen in both frames l and r),
@@ -1334,7 +1375,8 @@ def epipolar_sources(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int
     co = result.coarse
     n = np.asarray(co.fine_to_coarse).size
     e = np.zeros(0)
-    empty = {"x": e, "y": e, "color": np.zeros(0, "U7"), "model": np.zeros(0, object)}
+    empty = {"x": e, "y": e, "color": np.zeros(0, "U7"), "model": np.zeros(0, object),
+             "marker": np.zeros(0, object)}
     nan = float("nan")
     blank = {"left": empty, "right": empty, "sample_left": {"x": e, "y": e},
              "sample_right": {"x": e, "y": e},

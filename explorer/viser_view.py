@@ -36,6 +36,34 @@ SOFTWARE_NOTICE_ID = "webgl-software-rendering"
 
 
 @contextmanager
+def _quiet_viser():
+    """viser's messages (its start banner, "Server stopped") kept off the user's output.
+
+    viser prints them with ``rich.print``, to rich's global console: in a terminal that is
+    standard output, but in Jupyter rich displays them as cell output, past any redirect of
+    ``sys.stdout`` (the banner, with the server's address, showed in a notebook's output).
+    Inside, both go to a buffer; rich's global console is put back after (a message another
+    thread prints with rich meanwhile is dropped too)."""
+    import contextlib
+    import io
+
+    try:
+        import rich
+        from rich.console import Console
+    except ImportError:  # (viser needs rich; without it nothing of it prints there)
+        rich = None
+    old = getattr(rich, "_console", None) if rich is not None else None
+    if rich is not None:
+        rich._console = Console(file=io.StringIO())
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            yield
+    finally:
+        if rich is not None:
+            rich._console = old
+
+
+@contextmanager
 def _origin_checked(hosts: Iterable[str], token: str):
     """Servers viser starts inside serve their page and websocket only to the page's own
     origin and only under the tab's secret path ``/TOKEN/``.
@@ -181,8 +209,6 @@ class ViserView:
     def __init__(self, host: str = "127.0.0.1", port: int = 0,
                  on_frame: Callable[[int], None] | None = None,
                  page_hosts: Iterable[str] | None = None):
-        import contextlib
-        import io
         import secrets
 
         import viser
@@ -192,7 +218,7 @@ class ViserView:
         self.token = secrets.token_urlsafe(24)
         # viser binds its server before the constructor returns: the check is in place from the
         # start (and it prints a banner even when quiet)
-        with contextlib.redirect_stdout(io.StringIO()), _origin_checked(hosts, self.token):
+        with _quiet_viser(), _origin_checked(hosts, self.token):
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.server.gui.configure_theme(show_share_button=False, control_layout="floating",
                                         control_width="small", show_logo=False)
@@ -344,13 +370,11 @@ class ViserView:
             self._remove("/graph_edges")
 
     def close(self) -> None:
-        import contextlib
-        import io
 
         for timer in self._timers:
             timer.cancel()
         try:
-            with contextlib.redirect_stdout(io.StringIO()):  # viser prints "Server stopped"
+            with _quiet_viser():  # viser prints "Server stopped"
                 self.server.stop()
         except Exception:
             pass

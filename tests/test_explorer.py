@@ -105,9 +105,58 @@ def test_views_are_pure_functions_of_the_result(seq):
     assert e["sample_vote"] == pytest.approx(np.exp(-res.run_params.lam * e["sample_distance"]))
     assert e["pairwise"] == pytest.approx(res.coarse.pairwise_vote[0, 1])
     assert len(e["sample_left"]["x"]) == np.unique(res.coarse.vote_samples.points[0, 1]).size
+    # each model drawn with the marker of the motion it joined (card 1's)
+    f2c = np.asarray(res.coarse.fine_to_coarse)
+    fine = np.asarray(res.coarse.fine_point_labels)
+    want = {f"fine model f{m + 1}": V.motion_marker(f2c[m]) for m in (0, 1)}
+    assert len(e["left"]["marker"]) == int(np.isin(fine, [0, 1]).sum())
+    assert [want[m] for m in e["left"]["model"]] == list(e["left"]["marker"])
     num = V.stage_numbers(seq, res)
     assert 0 <= num["error_final"] <= 1 and num["n_atoms"] == res.atoms.n_atoms
     assert "Random Voting" in V.numbers_markdown(num)
+
+
+def test_fine_legend_groups_by_motion_when_it_would_overflow(seq):
+    """With more fine models than the legend has rows for beside the plot, the "fine"
+    colouring's legend has a row per motion (it ran past the plot over the caption at 16-18
+    fine models); each point's hover text keeps its own model."""
+    res = laav.Pipeline(seq, 2, laav.LaavParams(fine_models=10)).result
+    lab = np.asarray(res.coarse.fine_point_labels)
+    n = np.unique(lab[lab >= 0]).size
+    assert n >= 6
+    each = V.point_style(seq, res, "fine", fine_rows=n)  # they fit: a row per fine model
+    mot = V.fine_motions(seq, res)  # (the motion each model joined, as the views number it)
+    assert {t for t in each["label"] if t != "no fine model"} == {
+        f"fine model {f + 1} → motion {mot[f] + 1}" for f in np.unique(lab[lab >= 0])}
+    assert list(each["detail"]) == list(each["label"])
+    grouped = V.point_style(seq, res, "fine", fine_rows=n - 1)
+    rows = sorted({t for t in grouped["label"] if t != "no fine model"})
+    assert len(rows) == 2 and all(re.fullmatch(r"motion \d: \d+ fine models?", t) for t in rows)
+    assert sum(int(t.split(": ")[1].split()[0]) for t in rows) == n
+    assert list(grouped["detail"]) == list(each["label"])  # the hover's text
+    np.testing.assert_array_equal(grouped["color"], each["color"])
+    t = V.points_template(grouped)  # (in legend order: "index" is each row's point)
+    assert list(t["detail"]) == list(each["label"][t["index"]])
+    shared = V.point_style(seq, res, "fine", fine_rows=n - 1, fine_counts=False)  # A/B legend
+    assert {t for t in shared["label"] if t != "no fine model"} == {"motion 1: its fine models",
+                                                                     "motion 2: its fine models"}
+    # rows beside a 640 x 480 sequence's frame view (310 px): 18, six of them not fine models'
+    assert V.fine_legend_rows(310) == 12 and V.fine_legend_rows(310, views=2) == 6
+
+
+def test_epipolar_check_never_offers_a_model_against_itself(ex):
+    """Card 3's pair: k is offered every fine model but j; picking j = k's model moves k."""
+    panel = ex.coarse_view.epipolar
+    n = int(np.asarray(ex.result.coarse.fine_to_coarse).size)
+    assert n >= 3 and list(panel.w_pair_j.options) == [f"f{m + 1}" for m in range(n)]
+    assert (panel.w_pair_j.value, panel.w_pair_k.value) == ("f1", "f2")
+    assert "f1" not in panel.w_pair_k.options and len(panel.w_pair_k.options) == n - 1
+    panel.w_pair_j.value = "f2"  # k's model: k moves to another
+    j, k = panel.pair()
+    assert j == 1 and k != j and "f2" not in panel.w_pair_k.options and "f1" in panel.w_pair_k.options
+    panel.w_pair_k.value = "f3"
+    assert panel.pair() == (1, 2)
+    assert "Pick two different" not in panel.caption.object
 
 
 def test_disagreement_with_plain_rv_warns_only_without_ground_truth(seq):
@@ -790,6 +839,32 @@ def test_3d_trails_are_the_tracked_samples_within_a_budget(monkeypatch):
         np.testing.assert_allclose(np.sort(pts[:, 2]), np.sort(f * view._map.dz), atol=1e-5)
     finally:
         view.close()
+
+
+def test_viser_prints_nothing_to_the_users_output(capsys):
+    """viser prints its banner (with the server's address) and "Server stopped" through
+    rich's global console, which in Jupyter writes to the cell's output past any redirect of
+    sys.stdout: the 3-D view keeps both off it (the console is put back after)."""
+    pytest.importorskip("viser")
+    import io
+
+    import rich
+    from rich.console import Console
+
+    from explorer.viser_view import ViserView
+
+    out = io.StringIO()
+    old = rich._console
+    rich._console = mine = Console(file=out, force_terminal=False)  # as Jupyter's would receive
+    try:
+        view = ViserView()
+        view.close()
+        assert rich._console is mine
+        rich.print("after")  # the user's own rich output still reaches them
+    finally:
+        rich._console = old
+    assert out.getvalue() == "after\n"
+    assert "viser" not in capsys.readouterr().out
 
 
 def test_viser_view_sends_only_what_changed(seq):

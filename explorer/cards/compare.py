@@ -179,8 +179,10 @@ class CompareView:
             b = C.pin(seq, res, settings, plain_b)
             self.comparison = C.compare(a, b)
             ref = None if seq.labels is not None else V.shown_labels(seq, a.result)["final"]
-            self._styles = (V.point_style(seq, a.result, mode, a.plain),
-                            V.point_style(seq, res, mode, plain_b, ref=ref))
+            rows = V.fine_legend_rows(self.fig_b.frame_height, views=2)  # (one legend for both)
+            self._styles = (V.point_style(seq, a.result, mode, a.plain, fine_rows=rows, fine_counts=False),
+                            V.point_style(seq, res, mode, plain_b, ref=ref, fine_rows=rows,
+                                          fine_counts=False))
             self._key = key
             legend_rows = V.legend_points(*self._styles)
         else:

@@ -30,7 +30,7 @@ class EpipolarPanel:
         self.w_pair_j.param.watch(self._on_pair, "value")
         self.w_pair_k.param.watch(self._on_pair, "value")
 
-        empty_p = {"x": [], "y": [], "color": [], "model": []}
+        empty_p = {"x": [], "y": [], "color": [], "model": [], "marker": []}
         self.src_epi_l = ColumnDataSource(dict(empty_p))
         self.src_epi_r = ColumnDataSource(dict(empty_p))
         self.src_epi_lines = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "color": []})
@@ -42,8 +42,8 @@ class EpipolarPanel:
         self.fig_r.x_range = self.fig_l.x_range
         self.fig_r.y_range = self.fig_l.y_range
         for fig, src in ((self.fig_l, self.src_epi_l), (self.fig_r, self.src_epi_r)):
-            fig.scatter("x", "y", source=src, size=5, fill_color="color", line_color="color",
-                        legend_field="model")
+            fig.scatter("x", "y", source=src, size=6, marker="marker", fill_color="color",
+                        line_color="color", legend_field="model")
             leg = fig.legend[0]
             fig.center = [c for c in fig.center if not isinstance(c, Legend)]
             leg.orientation = "horizontal"
@@ -71,12 +71,21 @@ class EpipolarPanel:
         self.fig_r.frame_height = self.fig_l.frame_height
 
     def set_models(self, res) -> None:
-        """Offer ``res``'s fine models; a new set starts at the pair f1, f2."""
+        """Offer ``res``'s fine models; a new set starts at the pair f1, f2. k is offered
+        every model but j (a model is never voted against itself)."""
         n = int(np.asarray(res.coarse.fine_to_coarse).size)
         opts = [f"f{j + 1}" for j in range(max(n, 1))]
         if list(self.w_pair_j.options) != opts:
-            self.w_pair_j.options, self.w_pair_k.options = opts, opts
-            self.w_pair_j.value, self.w_pair_k.value = opts[0], opts[min(1, len(opts) - 1)]
+            self.w_pair_j.options = opts
+            self.w_pair_j.value = opts[0]
+            self._offer_k(opts[min(1, len(opts) - 1)])
+
+    def _offer_k(self, want: str) -> None:
+        """k's options: every model but j's; ``want`` if offered, else the first."""
+        opts = [o for o in self.w_pair_j.options if o != self.w_pair_j.value] or list(self.w_pair_j.options)
+        if list(self.w_pair_k.options) != opts:
+            self.w_pair_k.options = opts
+        self.w_pair_k.value = want if want in opts else opts[0]
 
     def pair(self) -> tuple[int, int]:
         def idx(w):
@@ -102,6 +111,8 @@ class EpipolarPanel:
 
     # ------------------------------------------------------------------ callbacks
     def _on_pair(self, event=None) -> None:
+        if event is not None and event.obj is self.w_pair_j:  # k never equals j
+            self._offer_k(self.w_pair_k.value)
         self.host.schedule(self._pair_now, now_if_on_doc_thread=True)
 
     def _pair_now(self) -> None:

@@ -18,7 +18,7 @@ from .. import views as V
 from .base import Host, Markdown, card, fit_image_figure, image_figure, move_legend, set_data
 from .live import LiveFrames
 
-EMPTY_POINTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "index": []}
+EMPTY_POINTS = {"x": [], "y": [], "color": [], "marker": [], "label": [], "detail": [], "index": []}
 #: The layers a checkbox shows or hides, in the sidebar's order.
 LAYERS = ["trails (last 5 frames)", "atom circles (R1 solid, R2 dashed)",
           "features in no atom (×)", "misclassified (black ring)", "changed motion (purple ring)"]
@@ -81,7 +81,7 @@ class FrameView:
         self.r_errors = f.scatter("x", "y", source=self.src_errors, marker="circle", size=15,
                                   fill_alpha=0, line_color=V.ERROR_MARK, line_width=2.5,
                                   legend_label="misclassified")
-        f.add_tools(HoverTool(renderers=[self.r_points], tooltips=[("point", "@index"), ("", "@label")]))
+        f.add_tools(HoverTool(renderers=[self.r_points], tooltips=[("point", "@index"), ("", "@detail")]))
         move_legend(f)
         items = {getattr(it.label, "value", None): it for it in f.legend[0].items}
         self._item_unassigned = items.get("in no atom")
@@ -111,6 +111,10 @@ class FrameView:
         self.caption = Markdown("", sizing_mode="stretch_width", max_width=900, margin=(0, 10))
         self.card = card("1 · Atoms: points, trails and atoms in one frame", pn.pane.Bokeh(self.fig),
                          self.caption)
+
+    def fine_rows(self) -> int:
+        """How many fine models the legend lists one by one (views.fine_legend_rows)."""
+        return V.fine_legend_rows(self.fig.frame_height)
 
     def fit(self, seq) -> None:
         fit_image_figure(self.fig, seq.extent())
