@@ -22,6 +22,11 @@ from .loopback import IPV4_BINDS, hold_ipv6_loopback, netloc
 
 __all__ = ["ViserView"]
 
+#: The frame shown's points (scene units; the box is 4 wide).
+POINT_SIZE = 0.05
+#: The atoms' centres in the frame shown: dark grey dots smaller than the points.
+ATOM_SIZE = 0.035
+ATOM_GREY = 40
 _JOIN = np.array([33, 102, 172], np.uint8)  # blue: positive cost (join)
 _CUT = np.array([214, 39, 40], np.uint8)  # red: negative cost (cut)
 _SERVE_LOCK = threading.Lock()
@@ -296,10 +301,27 @@ class ViserView:
             self._plane_z = None  # (a new plane: its position is sent below)
             self._frame_box.max = max(seq.n_frames - 1, 1)
             depth = m.dz * (seq.n_frames - 1)
+            self._draw_axes(seq, w, h, depth)
             self.server.initial_camera.position = (2.6, 2.0, -2.6)
             self.server.initial_camera.look_at = (0.0, 0.0, depth / 2)
         self.set_colors(colors)
         self.set_frame(frame)
+
+    def _draw_axes(self, seq: laav.Sequence, w: float, h: float, depth: float) -> None:
+        """Axes from the image's lower left corner at frame 0: x and y along the image's edges
+        (pixels, their ranges named) and the frame axis (frames 0 .. F-1) along the depth."""
+        scene = self.server.scene
+        o = (-w, -h, 0.0)
+        ends = ((w, -h, 0.0), (-w, h, 0.0), (-w, -h, depth))
+        segs = np.array([[o, e] for e in ends], np.float32)
+        scene.add_line_segments("/axes", segs, np.full((3, 2, 3), 90, np.uint8), thickness=1.5,
+                                thickness_units="screen")
+        x0, x1, y0, y1 = seq.extent()
+        F = seq.n_frames
+        for name, text, pos in (("x", f"x (px) {x0:.0f} → {x1:.0f}", (w, -h, 0.0)),
+                                ("y", f"y (px) {y1:.0f} → {y0:.0f}", (-w, h, 0.0)),
+                                ("frame", f"frame 0 → {F - 1}", (-w, -h, depth))):
+            scene.add_label(f"/axes/{name}", text, position=pos, font_screen_scale=0.8)
 
     def set_colors(self, colors: np.ndarray) -> None:
         seq, m = self._seq, self._map
@@ -347,14 +369,16 @@ class ViserView:
             self._plane_z = z
         vis = V.visible_at(seq, f)  # only the points seen in this frame
         self._put("/points", scene.add_point_cloud, m(seq.points[f, vis], f).astype(np.float32),
-                  self._colors[vis], point_size=0.05, point_shape="circle", precision="float32")
+                  self._colors[vis], point_size=POINT_SIZE, point_shape="circle", precision="float32")
         pos = np.asarray(res.graph.positions)
         if pos.size:
             centers = m(pos[f], f)
             shown = np.isfinite(centers).all(axis=1)  # an atom with no member seen here: not drawn
+            # (smaller than the points, which they covered at 0.09: a point beside an
+            # atom's centre still shows round it)
             self._put("/atoms", scene.add_point_cloud, centers[shown].astype(np.float32),
-                      np.full((int(shown.sum()), 3), 30, np.uint8),
-                      point_size=0.09, point_shape="circle", precision="float32")
+                      np.full((int(shown.sum()), 3), ATOM_GREY, np.uint8),
+                      point_size=ATOM_SIZE, point_shape="circle", precision="float32")
             E = np.asarray(res.graph.edges, dtype=np.int64).reshape(-1, 2)
             keep = shown[E[:, 0]] & shown[E[:, 1]] if E.size else np.zeros(0, bool)
             E = E[keep]

@@ -867,6 +867,36 @@ def test_viser_prints_nothing_to_the_users_output(capsys):
     assert "viser" not in capsys.readouterr().out
 
 
+def test_viser_view_has_axes_and_atoms_that_leave_points_visible(seq):
+    """The 3-D view names its axes (x and y in pixels with their ranges, the frames along
+    the depth), draws the atoms' centres smaller than the frame's points (at 0.09 they hid
+    the points round them), and its card says how to read it."""
+    pytest.importorskip("viser")
+    from explorer import viser_view as VV
+
+    view = VV.ViserView()
+    try:
+        labels = {}
+        real = view.server.scene.add_label
+
+        def record(name, text, **k):
+            labels[name] = text
+            return real(name, text, **k)
+
+        view.server.scene.add_label = record
+        res = laav.Pipeline(seq, 2).result
+        view.set_result(seq, res, V.point_style(seq, res, "gt", None)["color"], 0)
+        x0, x1, y0, y1 = seq.extent()
+        assert labels == {"/axes/x": f"x (px) {x0:.0f} → {x1:.0f}", "/axes/y": f"y (px) {y1:.0f} → {y0:.0f}",
+                          "/axes/frame": f"frame 0 → {seq.n_frames - 1}"}
+        assert VV.ATOM_SIZE < VV.POINT_SIZE
+    finally:
+        view.close()
+    from explorer.cards.view3d import CAPTION
+
+    assert "atoms' centres" in CAPTION and "the frames along the depth" in CAPTION
+
+
 def test_viser_view_sends_only_what_changed(seq):
     """Each scene message makes the 3-D page draw anew (software WebGL: the other core), so a
     change that leaves a node's data as it was sends nothing for it: a λ change keeping the
@@ -892,7 +922,8 @@ def test_viser_view_sends_only_what_changed(seq):
         res = laav.Pipeline(seq, 2).result
         colors = V.point_style(seq, res, "gt", None)["color"]
         view.set_result(seq, res, colors, 0)
-        assert sorted(sent) == ["/atoms", "/graph_edges", "/points", "/trajectories"]
+        # (a new sequence: its axes too, once)
+        assert sorted(sent) == ["/atoms", "/axes", "/graph_edges", "/points", "/trajectories"]
         assert kinds["/trajectories"] == "add_point_cloud"  # the tracked samples, as points
         sent.clear()
         same = laav.Pipeline(seq, 2, laav.LaavParams(lam=res.params.lam * 1.01)).result

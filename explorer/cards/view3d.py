@@ -64,6 +64,16 @@ def iframe_host(page_host: str | None, configured: str | None, names=frozenset()
 TITLE = "3-D space-time view: trajectories along the frame axis, atoms and their graph"
 
 
+#: How to read the 3-D view (below it): what each mark is, in the words of the 2-D cards.
+CAPTION = ("Image x and y across, the frames along the depth (the axes start at the image's "
+           "lower left corner in frame 0). Small dots: every tracked position of every point, "
+           "coloured as card 1's points; the grey plane: the frame shown, its points drawn "
+           "large; dark grey dots: the atoms' centres in that frame, joined by the graph's "
+           "edges (blue: positive cost, favouring a join; red: negative, a cut). Drag to turn, "
+           "scroll to zoom; the frame box at the top right moves the frame, as the frame "
+           "slider does.")
+
+
 class View3D:
     """The 3-D card and its viser server (``viser``: None until started, or when off).
 
@@ -94,7 +104,9 @@ class View3D:
         else:
             self.pane = Markdown(f"*{V.md_text('the 3-D view is switched off')}*",
                                  sizing_mode="stretch_width", height=60)
-        self.card = pn.Card(self.pane, title=TITLE, collapsible=True, collapsed=True,
+        self.caption = Markdown(CAPTION if self.want else "", sizing_mode="stretch_width",
+                                margin=(4, 10))
+        self.card = pn.Card(self.pane, self.caption, title=TITLE, collapsible=True, collapsed=True,
                             margin=(6, 6), sizing_mode="stretch_width", stylesheets=[FOLD_ARROW])
         self.card.param.watch(self._on_fold, "collapsed")
 
