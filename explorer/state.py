@@ -179,28 +179,6 @@ ESTIMATE_NOTE = ("The estimate is right on 92 % of Hopkins155's sequences but 77
                  "\"compare C = 1\", try C = 1.")
 
 
-#: How much lower than the app's own threads (and the browser, on the same machine) the
-#: background work runs: a Linux nice value, per thread (:func:`background_thread`).
-BACKGROUND_NICE = 10
-
-
-def background_thread() -> None:
-    """Run the calling thread at :data:`BACKGROUND_NICE` (Linux; elsewhere, or when refused,
-    nothing): plain RV for the RV card, the computations ahead of a request and the votes
-    card 3 draws take a core while the page draws a move; at a lower priority the browser
-    on the same machine gets it first (the labels do not depend on it)."""
-    import os
-    import sys
-
-    if not sys.platform.startswith("linux") or not hasattr(os, "setpriority"):
-        return
-    try:  # (on Linux a thread id is a process id for setpriority: this thread alone)
-        tid = threading.get_native_id()
-        os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + BACKGROUND_NICE)
-    except OSError:
-        pass
-
-
 @dataclasses.dataclass(frozen=True)
 class Origin:
     """How a sequence the explorer shows came from its file: what the page says about it
@@ -730,13 +708,9 @@ class ExplorerState:
         #: executor starts its thread within submit, so a thread is listed once it exists)
         self._thread_tag = f"laav-explore-state{next(_STATE_NUMBERS)}"
         self._worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-pipeline")
-        # (plain RV, the computations ahead and card 3's votes: work no control waits for,
-        # at a lower priority than the page's: background_thread)
-        self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-plain-rv",
-                                             initializer=background_thread)
+        self._rv_worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-plain-rv")
         #: the drawn votes' fits (fit_votes): beside plain RV, not queued behind it
-        self._votes_worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-votes",
-                                                initializer=background_thread)
+        self._votes_worker = ThreadPoolExecutor(1, thread_name_prefix=self._thread_tag + "-votes")
         # the pipeline's first-use imports (~1 s), ahead of the first job: they overlap the
         # page's loading, and stage timings shown to the user do not include them. With a
         # pipeline computed elsewhere the first job needs none of them: the app asks for

@@ -10,7 +10,6 @@ import dataclasses
 import io
 import json
 import re
-import sys
 import threading
 import time
 from pathlib import Path
@@ -143,25 +142,6 @@ def test_fine_legend_groups_by_motion_when_it_would_overflow(seq):
                                                                      "motion 2: its fine models"}
     # rows beside a 640 x 480 sequence's frame view (310 px): 18, six of them not fine models'
     assert V.fine_legend_rows(310) == 12 and V.fine_legend_rows(310, views=2) == 6
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread nice values are Linux's")
-def test_background_work_runs_below_the_apps_priority(ex):
-    """Plain RV for the RV card, the computations ahead and card 3's votes run niced
-    (BACKGROUND_NICE): on a machine shared with the browser the page's drawing comes first
-    (2026-12-06, 1R2RCT_A, seven interleaved pairs: frame moves after seed moves 43.4 against
-    45.2 ms, seed moves 285 against 295 ms, means of the medians)."""
-    import os
-
-    from explorer.state import BACKGROUND_NICE
-
-    def nice():
-        return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
-
-    mine = nice()
-    for worker in (ex.state._rv_worker, ex.state._votes_worker):
-        assert worker.submit(nice).result(30) == min(mine + BACKGROUND_NICE, 19)
-    assert ex.state._worker.submit(nice).result(30) == mine  # the request's own work: not
 
 
 def test_epipolar_check_never_offers_a_model_against_itself(ex):
