@@ -19,14 +19,10 @@ import threading
 import time
 import urllib.parse
 import weakref
-from contextlib import contextmanager
-from functools import partial
 from operator import attrgetter
 from pathlib import Path
 
 import panel as pn
-from panel.io.document import unlocked
-from panel.io.state import set_curdoc
 
 import laav
 from laav import LaavParams
@@ -48,6 +44,7 @@ from .cards.status import StatusBar
 from .cards.sweep import SweepView
 from .cards.tour import TourView
 from .cards.view3d import View3D
+from .session import DocumentSession
 from .state import (
     ExplorerState,
     Origin,
@@ -209,15 +206,6 @@ class _Template(pn.template.BootstrapTemplate):
         return doc
 
 
-def _is_data_event(event) -> bool:
-    from bokeh.document.events import ColumnDataChangedEvent, ModelChangedEvent
-    from bokeh.models import ColumnDataSource
-
-    return isinstance(event, ColumnDataChangedEvent) or (
-        isinstance(event, ModelChangedEvent) and isinstance(event.model, ColumnDataSource)
-        and event.attr == "data")
-
-
 class Explorer:
     """The LAAV explorer for one sequence (one per browser session).
 
@@ -288,12 +276,9 @@ class Explorer:
         self.state = ExplorerState(seq, n_motions, params, seed, pipeline=pipeline, autostart=False,
                                    plain_rv=plain_rv, seeds_ahead=seeds_ahead, preview=preview)
         self._seeds_ahead = seeds_ahead  # (held back while a lazy page is still being completed)
-        self._session_doc = None
-        self._doc_thread = threading.get_ident()
-        self._capture_session()
+        #: the page's document, its thread and the batching of changes (explorer.session)
+        self.session = DocumentSession(lambda: self.frame_view.fig.document, lambda: self.live)
         self._defaults = LaavParams()
-        self._suppress = 0
-        self._apply_lock = threading.RLock()
         #: the state's busy period (a token; None: idle), for BUSY_SHOW_AFTER_S
         self._busy_period: object | None = None
         self._busy_lock = threading.Lock()
@@ -391,18 +376,10 @@ class Explorer:
         """The 3-D view's :class:`~explorer.viser_view.ViserView` (None until it has started)."""
         return self.view3d.viser
 
-    def _capture_session(self) -> None:
-        # Built (or claimed) inside a server session: from now on results go through this
-        # document's event loop (the figures join the document while the page is being built,
-        # and a worker thread must never touch them during that).
-        cur = pn.state.curdoc
-        self._session_doc = cur if cur is not None and cur.session_context is not None else None
-        self._doc_thread = threading.get_ident()  # the session's event-loop thread
-
     def attach_session(self) -> None:
         """Adopt the current server session (for an explorer built ahead of time, outside it)."""
-        with self._apply_lock:  # an apply running now finishes first; later ones are scheduled
-            self._capture_session()
+        with self.session.apply_lock:  # an apply running now finishes first; later ones are scheduled
+            self.session.capture()
             self.view3d.reattach()
 
     # ------------------------------------------------------------------ constructors
@@ -488,7 +465,7 @@ class Explorer:
         """
         n_first = self.main.index(self.view3d.card) + 1  # status, alerts, note, atoms, 3-D
         if lazy is None:
-            lazy = self._session_doc is not None
+            lazy = self.session.on_server
         # the compare card is hidden until asked for: it comes with the later cards (or at
         # once when asked for first: :meth:`complete_page`)
         hidden = (id(self.compare.card),)
@@ -534,26 +511,6 @@ class Explorer:
         replacing a timer set before (the 3 s one must not fire just after a result)."""
         self._rest_timer = self._after(self._rest_timer, self._add_rest, seconds)
 
-    def _served_doc(self):
-        """The page's document when a server serves it (timers run there), else None."""
-        doc = self._doc()
-        return doc if doc is not None and doc.session_context is not None else None
-
-    def _after(self, old, fn, seconds: float):
-        """(Document thread.) ``fn()`` (under the lock) in ``seconds``, replacing the timer
-        ``old`` (a handle this returned, or None); returns the new handle. Without a server
-        ``fn()`` runs now (and None is returned)."""
-        doc = self._served_doc()
-        if doc is None:
-            fn()
-            return None
-        if old is not None:
-            try:
-                doc.remove_timeout_callback(old)
-            except ValueError:  # it has run already
-                pass
-        return doc.add_timeout_callback(lambda: self._locked(fn), int(1000 * seconds))
-
     def _add_rest(self) -> None:
         """(Document thread.) The later stages' cards onto the page, once (see :meth:`template`);
         then the pipeline's first-use imports, if still to do (:meth:`ExplorerState.preload`)."""
@@ -588,135 +545,43 @@ class Explorer:
         return self.template(title).servable()
 
     # ------------------------------------------------------------------ threading (the cards' host)
+    # (explorer.session.DocumentSession: what the cards' Host protocol names, delegated)
     @property
     def on_server(self) -> bool:
         """Built in (or adopted by) a server session."""
-        return self._session_doc is not None
+        return self.session.on_server
+
+    @property
+    def quieted(self) -> bool:
+        """The app is putting values on widgets (see :meth:`quiet`): callbacks do nothing."""
+        return self.session.quieted
+
+    def quiet(self):
+        """Widget changes made inside request and redraw nothing (a context manager)."""
+        return self.session.quiet()
+
+    def _doc(self):
+        return self.session.doc()
+
+    def _served_doc(self):
+        return self.session.served_doc()
+
+    def _after(self, old, fn, seconds: float):
+        return self.session.after(old, fn, seconds)
+
+    def schedule(self, fn, *args, now_if_on_doc_thread: bool = False) -> None:
+        """Run ``fn(*args)`` on the document's thread (or now, under a lock, without a server)."""
+        self.session.schedule(fn, *args, now_if_on_doc_thread=now_if_on_doc_thread)
+
+    def hold(self, freeze: bool = False, live: str | None = None):
+        """The model changes made inside go out as one batch (a context manager; see
+        :meth:`explorer.session.DocumentSession.hold`)."""
+        return self.session.hold(freeze, live)
 
     @property
     def frame(self) -> int:
         """The frame shown."""
         return int(self.controls.w_frame.value)
-
-    @property
-    def quieted(self) -> bool:
-        """The app is putting values on widgets (see :meth:`quiet`): callbacks do nothing."""
-        return self._suppress > 0
-
-    @contextmanager
-    def quiet(self):
-        """Widget changes made inside request and redraw nothing."""
-        self._suppress += 1
-        try:
-            yield
-        finally:
-            self._suppress -= 1
-
-    def _doc(self):
-        return self._session_doc or self.frame_view.fig.document
-
-    def schedule(self, fn, *args, now_if_on_doc_thread: bool = False) -> None:
-        """Run ``fn(*args)`` on the document's thread (or now, under a lock, without a server)."""
-        doc = self._served_doc()
-        on_doc_thread = self._session_doc is not None and threading.get_ident() == self._doc_thread
-        if doc is not None and not (now_if_on_doc_thread and on_doc_thread):
-            try:
-                doc.add_next_tick_callback(partial(self._locked, fn, *args))
-                return
-            except Exception:  # the session is gone
-                return
-        self._locked(fn, *args)
-
-    def _locked(self, fn, *args) -> None:
-        # panel applies pane changes at once only for the document it is processing
-        # (pn.state.curdoc); otherwise it defers them, and a deferred change could land
-        # outside our batch
-        with self._apply_lock, set_curdoc(self._session_doc):
-            try:
-                fn(*args)
-            except Exception:
-                import traceback
-                traceback.print_exc()
-
-    @contextmanager
-    def hold(self, freeze: bool = False, live: str | None = None):
-        """Send all model changes made inside as one batch (the callers run on the document's
-        thread, under its lock).
-
-        Once the page has loaded, the batch goes out as ONE websocket message (panel's
-        ``unlocked``): bokeh's own hold sends one message per changed property, and the
-        browser applies and redraws each in turn (a frame move was about 12 messages, a
-        result about 50; docs/bench/explorer_browser_latency.md). Every batch takes that one
-        path: panel writes its message at once, or queues it behind a message bokeh is still
-        writing, while bokeh's hold serialises its messages when the change is made and
-        writes them later, each after the one before. Mixing the two let a later message
-        overtake an earlier one that defined a model it names, and the page failed with
-        bokeh's "reference ... isn't known" (an intermittent failure of the browser tests
-        under load: pinning A sent through bokeh's hold while the Advanced card's fields went
-        through panel's queue; ``test_advanced_and_compare_fit_a_projector`` in
-        ``tests/test_explorer_ab_browser.py`` checks the one path). The
-        data sources' changes go last in the message, the page's frame views' ``meta`` the
-        very last (the page makes those views when it arrives: every template must be in):
-        a legend repainted while a glyph's new data was still being mapped read past its old
-        colours (bokeh's ``draw_legend_for_index`` threw ``Offset is outside the bounds of the
-        DataView`` when a result's legend labels came after its data).
-
-        With ``freeze`` the document's model graph is walked once at the end instead of after
-        every change of a model reference (bokeh walks every model of the page after each:
-        ~0.07 s). The walk at the end happens whether or not anything changed (0.08 s of a
-        0.10 s apply on the demo page), so results on the same sequence, which change no
-        reference (text panes keep their style sheets: ``cards.base._TextUpdate``; checked by
-        ``tests/test_explorer_styles.py``), are applied without it; a new sequence's are frozen.
-
-        ``live``: the batch draws views the page makes itself (:class:`~.cards.live.LiveFrames`):
-        ``"draw"`` (a result, colouring or step: their templates go, the made views' changes
-        are dropped) or ``"frame"`` (a frame move: the page has drawn it already; nothing of
-        those views is sent, the server's copies just follow)."""
-        doc = self._doc()
-        if doc is None or doc.session_context is None:
-            with self._frozen(doc if freeze else None):
-                yield
-            return
-        if doc.callbacks.hold_value is not None:  # inside another batch (panel's, ours)
-            with self._frozen(doc if freeze else None):
-                yield
-            self._tidy(doc.callbacks._held_events, live)
-            return
-        if (pn.state.curdoc is doc and pn.state.loaded
-                and threading.get_ident() == self._doc_thread and doc.session_context.session is not None):
-            with unlocked("combine"):
-                try:
-                    with self._frozen(doc if freeze else None):
-                        yield
-                finally:
-                    self._tidy(doc.callbacks._held_events, live)
-            return
-        doc.hold("combine")
-        try:
-            with self._frozen(doc if freeze else None):
-                yield
-        finally:
-            self._tidy(doc.callbacks._held_events, live)
-            doc.unhold()
-
-    def _tidy(self, held, live: str | None) -> None:
-        """The held events without those of the views the page makes (``live``, see
-        :meth:`hold`), data changes last, the page's ``meta`` the very last."""
-        if not held:
-            return
-        drop = {id(m) for m in self.live.models(frame_move=live == "frame")} if live else set()
-        meta = self.live.meta
-        kept = [e for e in held if id(getattr(e, "model", None)) not in drop]
-        held[:] = sorted(kept, key=lambda e: (_is_data_event(e), getattr(e, "model", None) is meta))
-
-    @staticmethod
-    @contextmanager
-    def _frozen(doc):
-        if doc is None:
-            yield
-            return
-        with doc.models.freeze():
-            yield
 
     # state hooks (worker threads)
     def _on_result(self, result, seq, settings, gen) -> None:
@@ -1041,7 +906,7 @@ class Explorer:
             self.controls.w_frame.value = view["frame"]
         if "tour" in view:  # on a served page once it is on screen (the tour's keys and
             step = view["tour"] - 1  # sidebar fold run in the page's own script)
-            if self._session_doc is not None:
+            if self.session.on_server:
                 pn.state.onload(lambda: self.tour.start(step))
             else:
                 self.tour.start(step)
@@ -1070,7 +935,7 @@ class Explorer:
         if self.result is None:
             return
         self._forget_url_problems()
-        if self._session_doc is not None:
+        if self.session.on_server:
             q = self.query()
             self.status_bar.address.value = "?" + urllib.parse.urlencode(q) if q else ""
 
