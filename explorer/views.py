@@ -24,7 +24,7 @@ __all__ = [
     "MOTION_COLORS", "MOTION_MARKERS", "ATOM_COLORS", "UNLABELLED", "ERROR_MARK", "DIFFERS_MARK", "UNSEEN",
     "UNSEEN_MARKER", "UNSEEN_LABEL", "visible_at", "incomplete_note", "result_notes", "counted",
     "NO_ATOM", "NO_ATOM_DARK", "NO_ATOM_SIZE", "cross_colors", "CHANGED_MARK", "DISAGREEMENT_WARN",
-    "LEGEND_ROW_PX", "LEGEND_OTHER_ROWS", "fine_legend_rows",
+    "LEGEND_ROW_PX", "LEGEND_OTHER_ROWS", "fine_legend_rows", "n_fine_models", "shared_fine_rows",
     "disagreement_line", "disagreement_warning",
     "motion_color", "motion_marker", "shade", "fine_motions", "fine_colors",
     "align_labels", "shown_labels", "point_style", "plain_differs", "labelling_distance", "raw_style",
@@ -400,6 +400,19 @@ def fine_legend_rows(frame_height: int, views: int = 1) -> int:
     return max(rows // max(int(views), 1), 0)
 
 
+def n_fine_models(result: laav.LaavResult) -> int:
+    """How many fine models label points (the rows the "fine" legend lists one by one)."""
+    lab = np.asarray(result.coarse.fine_point_labels)
+    return int(np.unique(lab[lab >= 0]).size)
+
+
+def shared_fine_rows(rows: int, *results: laav.LaavResult) -> int:
+    """:func:`point_style`'s ``fine_rows`` for views sharing one legend (the A/B compare):
+    ``rows`` when every result's fine models fit in them, else -1 (every side grouped, so the
+    legend never mixes a side's rows per model with another's per motion)."""
+    return rows if max((n_fine_models(r) for r in results), default=0) <= rows else -1
+
+
 def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
                 plain: laav.Voting | None = None, ref=None, fine_rows: int | None = None,
                 fine_counts: bool = True) -> dict:
@@ -417,10 +430,10 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
     (that stage), ``note`` (str, empty unless the mode cannot be shown as asked), ``mode``
     (the mode drawn: ``"final"`` when ground truth is asked for and missing).
     ``ref``: without ground truth, the labels the motions are matched to (their colours;
-    see :func:`shown_labels`). ``detail`` (P,): each point's own text for a hover, the
-    label but where the legend groups: with more fine models than ``fine_rows`` (the rows
-    the legend has for them, :func:`fine_legend_rows`) the "fine" mode's legend has a row
-    per motion ("motion 2: 6 fine models") instead of one per fine model, which then
+    see :func:`shown_labels`). ``detail`` (P,): a point's own text for a hover where the
+    legend groups, else "" (the label says it): with more fine models than ``fine_rows`` (the
+    rows the legend has for them, :func:`fine_legend_rows`) the "fine" mode's legend has a
+    row per motion ("motion 2: 6 fine models") instead of one per fine model, which then
     overflowed the plot, and ``detail`` keeps "fine model 5 → motion 2". Without
     ``fine_counts`` such a row says "motion 2: its fine models" (the A/B compare's legend,
     shared by two results whose counts differ).
@@ -501,9 +514,10 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
     else:
         raise ValueError(f"unknown colour mode {mode!r}")
     label = np.asarray(label).astype(str)
+    detail = np.full(P, "", dtype=object) if detail is None else np.asarray(detail).astype(object)
     return {"color": np.asarray(color, dtype="U7"), "marker": np.asarray(marker, dtype=object),
-            "label": label, "detail": label if detail is None else np.asarray(detail).astype(str),
-            "misclassified": wrong, "stage": stage, "note": note, "mode": mode}
+            "label": label, "detail": detail, "misclassified": wrong, "stage": stage,
+            "note": note, "mode": mode}
 
 
 def plain_differs(final: np.ndarray, plain: np.ndarray) -> np.ndarray:
@@ -681,9 +695,9 @@ def points_template(style: dict) -> dict:
     marker = style.get("marker")
     marker = np.full(color.shape, "circle", dtype=object) if marker is None else marker
     detail = style.get("detail")
-    detail = style["label"] if detail is None else detail
+    detail = np.full(color.shape, "", dtype=object) if detail is None else np.asarray(detail, dtype=object)
     return {"_a": order.astype(np.int32), "color": color[order], "marker": marker[order],
-            "label": style["label"][order], "detail": np.asarray(detail)[order], "index": order}
+            "label": style["label"][order], "detail": detail[order], "index": order}
 
 
 def points_source(seq: laav.Sequence, frame: int, style: dict) -> dict:
@@ -1341,9 +1355,9 @@ def _pair_points(seq: laav.Sequence, result: laav.LaavResult, j: int, k: int, fl
     cj, ck = fc[j], fc[k]
     cols = np.where(fine[idx] == j, cj, ck).astype("U7")
     model = np.where(fine[idx] == j, f"fine model f{j + 1}", f"fine model f{k + 1}").astype(object)
-    # each model with the marker of the motion it joined, as card 1 draws it
-    f2c = np.asarray(result.coarse.fine_to_coarse)
-    mj, mk = (motion_marker(f2c[m]) if 0 <= m < f2c.size else MOTION_MARKERS[0] for m in (j, k))
+    # each model with the marker of the motion it joined, numbered as card 1 numbers it
+    mot = fine_motions(seq, result)
+    mj, mk = (motion_marker(mot[m]) if 0 <= m < mot.size else MOTION_MARKERS[0] for m in (j, k))
     marker = np.where(fine[idx] == j, mj, mk).astype(object)
     pts = seq.points
     return (fine, idx, both, (cj, ck),

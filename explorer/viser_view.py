@@ -40,6 +40,13 @@ SOFTWARE_NOTICE_S = 10.0
 SOFTWARE_NOTICE_ID = "webgl-software-rendering"
 
 
+#: :func:`_quiet_viser`'s state: how many threads are inside, and rich's console to put back
+#: when the last leaves (one tab's 3-D view may start while another's stops)
+_QUIET_LOCK = threading.Lock()
+_quiet_depth = 0
+_quiet_saved = None
+
+
 @contextmanager
 def _quiet_viser():
     """viser's messages (its start banner, "Server stopped") kept off the user's output.
@@ -47,25 +54,33 @@ def _quiet_viser():
     viser prints them with ``rich.print``, to rich's global console: in a terminal that is
     standard output, but in Jupyter rich displays them as cell output, past any redirect of
     ``sys.stdout`` (the banner, with the server's address, showed in a notebook's output).
-    Inside, both go to a buffer; rich's global console is put back after (a message another
-    thread prints with rich meanwhile is dropped too)."""
+    Inside, rich's global console is a quiet one (not Jupyter's, which ignores ``file``);
+    it is put back when the last thread inside leaves (a message another thread prints with
+    rich meanwhile is dropped too)."""
     import contextlib
     import io
 
+    global _quiet_depth, _quiet_saved
     try:
         import rich
         from rich.console import Console
     except ImportError:  # (viser needs rich; without it nothing of it prints there)
         rich = None
-    old = getattr(rich, "_console", None) if rich is not None else None
     if rich is not None:
-        rich._console = Console(file=io.StringIO())
+        with _QUIET_LOCK:
+            if _quiet_depth == 0:
+                _quiet_saved = getattr(rich, "_console", None)
+                rich._console = Console(file=io.StringIO(), quiet=True, force_jupyter=False)
+            _quiet_depth += 1
     try:
         with contextlib.redirect_stdout(io.StringIO()):
             yield
     finally:
         if rich is not None:
-            rich._console = old
+            with _QUIET_LOCK:
+                _quiet_depth -= 1
+                if _quiet_depth == 0:
+                    rich._console, _quiet_saved = _quiet_saved, None
 
 
 @contextmanager
@@ -394,7 +409,6 @@ class ViserView:
             self._remove("/graph_edges")
 
     def close(self) -> None:
-
         for timer in self._timers:
             timer.cancel()
         try:

@@ -105,10 +105,10 @@ def test_views_are_pure_functions_of_the_result(seq):
     assert e["sample_vote"] == pytest.approx(np.exp(-res.run_params.lam * e["sample_distance"]))
     assert e["pairwise"] == pytest.approx(res.coarse.pairwise_vote[0, 1])
     assert len(e["sample_left"]["x"]) == np.unique(res.coarse.vote_samples.points[0, 1]).size
-    # each model drawn with the marker of the motion it joined (card 1's)
-    f2c = np.asarray(res.coarse.fine_to_coarse)
+    # each model drawn with the marker card 1 draws it with (its motion's, numbered as there)
     fine = np.asarray(res.coarse.fine_point_labels)
-    want = {f"fine model f{m + 1}": V.motion_marker(f2c[m]) for m in (0, 1)}
+    card1 = V.point_style(seq, res, "fine")["marker"]
+    want = {f"fine model f{m + 1}": card1[np.flatnonzero(fine == m)[0]] for m in (0, 1)}
     assert len(e["left"]["marker"]) == int(np.isin(fine, [0, 1]).sum())
     assert [want[m] for m in e["left"]["model"]] == list(e["left"]["marker"])
     num = V.stage_numbers(seq, res)
@@ -128,7 +128,7 @@ def test_fine_legend_groups_by_motion_when_it_would_overflow(seq):
     mot = V.fine_motions(seq, res)  # (the motion each model joined, as the views number it)
     assert {t for t in each["label"] if t != "no fine model"} == {
         f"fine model {f + 1} → motion {mot[f] + 1}" for f in np.unique(lab[lab >= 0])}
-    assert list(each["detail"]) == list(each["label"])
+    assert set(each["detail"]) == {""}  # (the hover shows the label)
     grouped = V.point_style(seq, res, "fine", fine_rows=n - 1)
     rows = sorted({t for t in grouped["label"] if t != "no fine model"})
     assert len(rows) == 2 and all(re.fullmatch(r"motion \d: \d+ fine models?", t) for t in rows)
@@ -142,6 +142,24 @@ def test_fine_legend_groups_by_motion_when_it_would_overflow(seq):
                                                                      "motion 2: its fine models"}
     # rows beside a 640 x 480 sequence's frame view (310 px): 18, six of them not fine models'
     assert V.fine_legend_rows(310) == 12 and V.fine_legend_rows(310, views=2) == 6
+
+
+def test_epipolar_panel_markers_are_card_1s():
+    """Card 3's panels draw each fine model with the marker card 1 gives it: its motion's as
+    the views number motions (matched to the ground truth), not the coarse stage's own
+    numbering (on this scene they differ: f1 was a square in card 1 and a circle in card 3)."""
+    from laav.synthetic import make_sequence
+
+    seq = make_sequence(1, rng=0)
+    res = laav.Pipeline(seq, 2).result
+    assert not np.array_equal(V.fine_motions(seq, res), np.asarray(res.coarse.fine_to_coarse))
+    fine = np.asarray(res.coarse.fine_point_labels)
+    card1 = V.point_style(seq, res, "fine")["marker"]
+    n = V.n_fine_models(res)
+    for j, k in ((0, 1), (0, n - 1)):
+        e = V.epipolar_sources(seq, res, j, k)
+        want = {f"fine model f{m + 1}": card1[np.flatnonzero(fine == m)[0]] for m in (j, k)}
+        assert [want[m] for m in e["left"]["model"]] == list(e["left"]["marker"])
 
 
 def test_epipolar_check_never_offers_a_model_against_itself(ex):
@@ -841,29 +859,40 @@ def test_3d_trails_are_the_tracked_samples_within_a_budget(monkeypatch):
         view.close()
 
 
-def test_viser_prints_nothing_to_the_users_output(capsys):
+def test_viser_prints_nothing_to_the_users_output(capsys, monkeypatch):
     """viser prints its banner (with the server's address) and "Server stopped" through
-    rich's global console, which in Jupyter writes to the cell's output past any redirect of
-    sys.stdout: the 3-D view keeps both off it (the console is put back after)."""
+    rich's global console, which in Jupyter displays them in the cell's output, ignoring any
+    redirect of sys.stdout and any ``file``: the 3-D view keeps both off it, in a notebook
+    as in a terminal, and puts the console back after (also when two views overlap)."""
     pytest.importorskip("viser")
-    import io
+    import builtins
 
     import rich
+    import rich.jupyter
     from rich.console import Console
 
     from explorer.viser_view import ViserView
 
-    out = io.StringIO()
+    class ZMQInteractiveShell:  # what rich takes for a Jupyter kernel
+        pass
+
+    shown = []
+    monkeypatch.setattr(builtins, "get_ipython", lambda: ZMQInteractiveShell(), raising=False)
+    monkeypatch.setattr(rich.jupyter, "display", lambda segments, text: shown.append(text))
     old = rich._console
-    rich._console = mine = Console(file=out, force_terminal=False)  # as Jupyter's would receive
+    rich._console = mine = Console()  # a notebook's console (it detects the kernel)
     try:
-        view = ViserView()
-        view.close()
+        assert mine.is_jupyter
+        first = ViserView()
+        second = ViserView()  # (overlapping: the first's stop comes after the second's start)
+        first.close()
+        second.close()
         assert rich._console is mine
-        rich.print("after")  # the user's own rich output still reaches them
+        assert shown == []  # nothing of viser's reached the cell
+        rich.print("after")  # the user's own rich output still does
     finally:
         rich._console = old
-    assert out.getvalue() == "after\n"
+    assert len(shown) == 1 and "after" in shown[0]
     assert "viser" not in capsys.readouterr().out
 
 

@@ -238,3 +238,24 @@ def test_one_legend_lists_the_motions_of_both_sides(seq, results):
     assert list(rows["color"]) == [V.motion_color(0), V.motion_color(1)]
     assert list(rows["marker"]) == [V.motion_marker(0), V.motion_marker(1)]
     assert V.legend_points()["label"].size == 0
+
+
+def test_a_shared_legend_groups_both_sides_or_neither(seq):
+    """Beside B, one legend for both views: when either side has more fine models than its
+    rows, both sides list theirs per motion ("motion 1: its fine models"), never a mix of
+    one side's rows per model and the other's per motion."""
+    few = laav.Pipeline(seq, 2, laav.LaavParams(fine_models=2), 0).result
+    many = laav.Pipeline(seq, 2, laav.LaavParams(fine_models=8), 0).result
+    nf, nm = V.n_fine_models(few), V.n_fine_models(many)
+    assert nf <= 3 < nm
+    assert V.shared_fine_rows(nm, few, many) == nm  # both fit
+    rows = V.shared_fine_rows(nf, few, many)
+    assert rows == -1
+    labels = set(V.legend_points(*(V.point_style(seq, r, "fine", fine_rows=rows, fine_counts=False)
+                                   for r in (few, many)))["label"])
+    assert labels <= {"motion 1: its fine models", "motion 2: its fine models", "no fine model"}
+    # deciding per side, as before, mixed them
+    mixed = set(V.legend_points(V.point_style(seq, few, "fine", fine_rows=nf, fine_counts=False),
+                                V.point_style(seq, many, "fine", fine_rows=nf, fine_counts=False))["label"])
+    assert any(t.startswith("fine model ") for t in mixed)
+    assert any(t.endswith("its fine models") for t in mixed)

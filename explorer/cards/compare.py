@@ -179,7 +179,9 @@ class CompareView:
             b = C.pin(seq, res, settings, plain_b)
             self.comparison = C.compare(a, b)
             ref = None if seq.labels is not None else V.shown_labels(seq, a.result)["final"]
-            rows = V.fine_legend_rows(self.fig_b.frame_height, views=2)  # (one legend for both)
+            # one legend for both: both sides grouped, or neither
+            rows = V.shared_fine_rows(V.fine_legend_rows(self.fig_b.frame_height, views=2),
+                                      a.result, res)
             self._styles = (V.point_style(seq, a.result, mode, a.plain, fine_rows=rows, fine_counts=False),
                             V.point_style(seq, res, mode, plain_b, ref=ref, fine_rows=rows,
                                           fine_counts=False))

@@ -81,7 +81,9 @@ class FrameView:
         self.r_errors = f.scatter("x", "y", source=self.src_errors, marker="circle", size=15,
                                   fill_alpha=0, line_color=V.ERROR_MARK, line_width=2.5,
                                   legend_label="misclassified")
-        f.add_tools(HoverTool(renderers=[self.r_points], tooltips=[("point", "@index"), ("", "@detail")]))
+        # (detail: a point's fine model where the legend lists them per motion, else "")
+        f.add_tools(HoverTool(renderers=[self.r_points],
+                              tooltips=[("point", "@index"), ("", "@label"), ("", "@detail")]))
         move_legend(f)
         items = {getattr(it.label, "value", None): it for it in f.legend[0].items}
         self._item_unassigned = items.get("in no atom")
