@@ -26,6 +26,8 @@ MARGINS = (0.5, 1.0, 1.5, 2.0, 3.0)
 
 
 def main(argv=None) -> int:
+    import numpy as np
+
     import laav
     from laav.motions import CLOSE_CALL_LOGIT
 
@@ -44,8 +46,12 @@ def main(argv=None) -> int:
         seq = laav.load_sequence(files[0])
         count = laav.estimate_motions(seq)
         step = count.deciding_step
+        # (a step's close call only: the one-motion check's flag, "compare C = 1", is
+        # counted apart, docs/bench/motions_one.md)
         rows.append((d.name, int(seq.n_motions), int(count.n_motions),
-                     None if step is None else abs(step[1]), bool(count.close_call)))
+                     None if step is None else abs(step[1]),
+                     step is not None and abs(step[1]) < CLOSE_CALL_LOGIT,
+                     bool(np.isfinite(count.one_motion_score) and count.one_motion_score <= 0)))
     wrong = [r for r in rows if r[1] != r[2]]
     by_margin = {}
     for m in MARGINS:
@@ -56,6 +62,8 @@ def main(argv=None) -> int:
         "sequences": len(rows), "wrong": len(wrong), "close_call_logit": CLOSE_CALL_LOGIT,
         "close_calls": sum(r[4] for r in rows), "close_calls_wrong": sum(r[4] and r[1] != r[2] for r in rows),
         "by_margin": by_margin,
+        "one_motion_flags": sum(r[5] for r in rows),
+        "one_motion_flags_wrong": sum(r[5] and r[1] != r[2] for r in rows),
         "wrong_sequences": {r[0]: {"true": r[1], "estimated": r[2], "margin": r[3]} for r in wrong},
         "seconds": round(time.perf_counter() - t0, 1),
     }

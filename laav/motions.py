@@ -72,11 +72,12 @@ ONE_MOTION_RATIO = 0.05
 #: 1 -> 2's :func:`step_features` on noise-corrected levels and of log(e1 / noise), the first
 #: step's own statistic; a logistic model of "more than one motion" fitted by
 #: benchmarks/motions_one.py on Hopkins155's 155 sequences (more than one motion) and each of
-#: their motions alone (one motion: 129 motions of the 50 full sequences), at pixel noise
-#: σ = 0, 0.5 and 1 px. It does not decide C (Hopkins155 would lose sequences: the report);
-#: an estimate of two motions that it calls one is flagged (:attr:`MotionCount.close_call`).
-ONE_CHECK_WEIGHTS = (0.4694, 0.8802, -0.1691, 0.2537, 0.2845, 0.1919)
-ONE_CHECK_BIAS = -0.1926
+#: their motions alone (one motion: the 134 motions of its 50 full sequences with at least 16
+#: points), at pixel noise σ = 0, 0.5 and 1 px. It does not decide C (Hopkins155 would lose
+#: 6-34 right estimates: docs/bench/motions_one.md); an estimate of two motions that it calls
+#: one is flagged (:attr:`MotionCount.close_call`).
+ONE_CHECK_WEIGHTS = (0.3714, 0.6502, -0.3222, 0.1352, 0.2785, 0.6391)
+ONE_CHECK_BIAS = 0.1368
 #: A step C -> C + 1 (C >= 2) whose score is within this of 0 is a *close call*
 #: (:attr:`MotionCount.close_call`): the logistic criterion puts the added motion's chance
 #: between 27 and 73 %. A logit of 1, the score's natural unit, not fitted; but the counts
@@ -348,9 +349,10 @@ def one_motion_check(levels, noise2: float, sigma: float = 0.0, unit2: float = 1
     Weights :data:`ONE_CHECK_WEIGHTS`, :data:`ONE_CHECK_BIAS` unless given. NaN when C = 1 or
     2 has no labelling.
 
-    Unlike :func:`decide`'s first step, whose ratio holds on noise-free tracks only (it calls
-    4 of Hopkins155's 129 single motions one motion, none at 0.5 px of noise), this was fitted
-    on real single motions, noisy ones included; see :data:`ONE_CHECK_WEIGHTS`.
+    Unlike :func:`decide`'s first step, whose ratio holds on noise-free synthetic tracks only
+    (it calls 4 of 130 of Hopkins155's motions taken alone one motion, none with 0.5 px of
+    noise added), this was fitted on real single motions, noisy ones included; see
+    :data:`ONE_CHECK_WEIGHTS`.
     """
     x = one_motion_features(levels, noise2, sigma, unit2)
     if not np.isfinite(x).all():
@@ -362,9 +364,11 @@ def one_motion_check(levels, noise2: float, sigma: float = 0.0, unit2: float = 1
 def one_motion_features(levels, noise2: float, sigma: float = 0.0, unit2: float = 1.0) -> np.ndarray:
     """(6,) what :func:`one_motion_check` weighs (its arguments): the step 1 -> 2's
     :func:`step_features` on the noise-corrected levels, then log(e1 / ``noise2``); NaN
-    when C = 1 or 2 has no labelling."""
+    when C = 1 or 2 has no labelling, or without an atoms' noise level (``noise2`` 0: atoms
+    with no residual, as on motions of 16-25 points; the log ratio was then ~29, worth
+    +5.5 to the logit)."""
     col = _column(levels)
-    if not (np.isfinite(col(1)).all() and np.isfinite(col(2)).all()):
+    if not (noise2 > 0 and np.isfinite(col(1)).all() and np.isfinite(col(2)).all()):
         return np.full(6, np.nan)
     steps = _column(noise_corrected(col, noise_floors(sigma)))
     tiny = 1e-12 * unit2
@@ -447,8 +451,10 @@ class MotionCount:
         took out of the levels (:func:`noise_corrected`).
     one_motion_score : float
         For an estimate of two motions, the one-motion check's logit that there is more
-        than one (:func:`one_motion_check`); NaN otherwise. At or below 0 the estimate is
-        flagged (:attr:`close_call`: compare C = 1).
+        than one (:func:`one_motion_check`); NaN otherwise, or when it cannot be formed. At
+        or below 0 the estimate is flagged (:attr:`close_call`: compare C = 1). The check
+        reads the candidates C = 1-3: with ``max_motions`` 2 their levels are evaluated for
+        it (LAAV at C = 3 once more) and shown.
     """
 
     n_motions: int

@@ -71,7 +71,7 @@ def test_a_noisy_single_motion_is_flagged_compare_c_1():
     rigid motion's epipolar level is the noise's, and the test calls it two. The one-motion
     check (fitted on Hopkins155's motions alone, noisy ones too) flags such an estimate,
     naming C = 1 to compare, and leaves a noisy two-motion scene unflagged. Without the check
-    neither scene is flagged."""
+    the noisy one-motion scene is not flagged (checked: the first step calls it two)."""
     for seed in (0, 1):
         one = make_sequence(1, n_frames=30, n_points=600, noise=0.0, rng=seed)
         keep = one.labels == 0
