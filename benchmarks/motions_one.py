@@ -215,7 +215,8 @@ def main(argv=None) -> int:
          + ", ".join(f"{v:g}" for v in NOISE) + " px",
          f"- `python benchmarks/motions_one.py --data DIR --cache {args.cache}`", "",
          "## Held out (5 folds grouped by source video)", "",
-         f"Not scored (no labelling of two motions, so no check): {len(unscored)}"
+         "Not scored (no two-motion labelling, or the atoms left no residual: the check says "
+         f"nothing): {len(unscored)}"
          + "".join(f"; {r['name']} at {r['sigma']:g} px" for r in unscored) + ".", "",
          f"L2 strength chosen per fold: {', '.join(f'{c:g}' for c in chosen)}. A sequence called one "
          "motion is a false flag; a single motion called one is found.", "",
