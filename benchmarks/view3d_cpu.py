@@ -11,14 +11,15 @@ the 3-D card, and measures:
   (as the frame slider moves: plane, current points, atoms and graph sent anew);
 - ``redraws_per_move``: WebGL clears of the view's canvas per move (one per redraw).
 
-``--scene plane`` sends nothing but the frame plane (no trails, points, atoms nor graph):
-what a redraw costs whatever the scene holds. ``--dpr 0.5`` renders at half resolution
+``--scene plane`` sends nothing but the frame plane and the axes (no trails, points, atoms
+nor graph): what a redraw costs whatever the scene holds. ``--dpr 0.5`` renders at half resolution
 (viser's ``fixedDpr``); ``--trail-samples N`` changes the trails' budget
 (``TRAIL_SAMPLES``).
 
     python benchmarks/view3d_cpu.py [FILE] [--scene full|plane] [--dpr X] [--out REPORT.md]
 
-Prints one JSON line; writes it with date, machine and commit to ``--out``. Compare runs
+Prints one JSON line; writes it with date, machine and commit to ``--out`` (default
+``bench-out/view3d_cpu.md``; docs/bench/view3d_cpu.md is the report of 2026-12-06). Compare runs
 made one after the other only (a shared 2-core VM).
 """
 
@@ -131,7 +132,7 @@ def main(argv=None) -> int:
     ap.add_argument("--trail-samples", type=int, default=None)
     ap.add_argument("--moves", type=int, default=20)
     ap.add_argument("--gap", type=float, default=0.3)
-    ap.add_argument("--out", default="docs/bench/view3d_cpu.md")
+    ap.add_argument("--out", default="bench-out/view3d_cpu.md")
     a = ap.parse_args(argv)
     out = measure(a.file, a.scene, a.dpr, a.trail_samples, a.moves, a.gap)
     write_json_report(a.out, "The 3-D view's cost to the browser per frame move",

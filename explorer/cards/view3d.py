@@ -171,6 +171,7 @@ class View3D:
             self.iframe_shown = True
             self.pane.object = self.iframe_html() if self.viser is not None else (
                 f"<p><i>{html.escape(self.error or 'the 3-D view did not start')}</i></p>")
+            self.caption.visible = self.viser is not None  # (nothing to read without it)
         if send and self.viser is not None and (self.stale or self.viser._result is not h.result):
             self.stale = False
             self.viser.set_result(h.sequence, h.result, h.style["color"], h.frame)
