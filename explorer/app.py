@@ -17,10 +17,8 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
-import urllib.parse
 import weakref
 from operator import attrgetter
-from pathlib import Path
 
 import panel as pn
 
@@ -28,6 +26,7 @@ import laav
 from laav import LaavParams
 
 from . import views as V
+from .address import PageAddress
 from .cards.advanced import AdvancedPanel
 from .cards.base import SIDE_W, Markdown
 from .cards.coarse import CoarseView
@@ -49,10 +48,6 @@ from .state import (
     ExplorerState,
     Origin,
     non_defaults,
-    params_file_note,
-    parse_settings,
-    query_of,
-    settings_from_json,
 )
 
 __all__ = ["Explorer", "PARAM_SLIDERS", "SIDE_W", "REST_AFTER_S"]
@@ -173,11 +168,6 @@ window.cancelAnimationFrame = (id) => {
 """
 
 
-#: Markers of :attr:`Explorer._url_problems_at` for a link to a tour step: its tour not yet
-#: seen running, and running.
-_TOUR_LINK, _TOUR_RUNNING = object(), object()
-
-
 class _Template(pn.template.BootstrapTemplate):
     """The page's template, its document built with bokeh's model index frozen.
 
@@ -291,17 +281,13 @@ class Explorer:
         #: card 3 draws them when they arrive), or None
         self.votes_pending = None
         self._unpinned_note = None  # the compare card's note when a sequence is opened
-        self._params_note = None  # (generation, text): about a params.json, with its result
         self._data_notes: list[str] = []  # the note's lines about the data shown (data_notes)
         # what the views show: the result, its sequence, the point colours
         # (views.point_style), the fine models' colours, the points whose motion changed
         self.result: laav.LaavResult | None = None
         self.sequence: laav.Sequence = seq
-        self._first_sequence = seq  # the one a new page starts with (the address says when another is shown)
-        #: after a link with unusable values, whose warning stays until the page moves on:
-        #: the query of the state the link asked for (:meth:`_forget_url_problems`; for a link
-        #: to a tour step, _TOUR_LINK / _TOUR_RUNNING until its tour ends); None: no warning
-        self._url_problems_at: dict | object | None = None
+        #: the page address and params.json (explorer.address)
+        self.address = PageAddress(self, seq)
         self._frame_address_timer = None  # the pending address after a frame move
         self.settings = self.state.target  # (of the result shown, once there is one)
         self.style = None
@@ -683,9 +669,7 @@ class Explorer:
                         self.video is not None and seq is self.video.sequence)))
                 data_notes += V.result_notes(result)
                 self._data_notes = [n for n in data_notes if n]
-                params_note = (V.md_text(self._params_note[1])
-                               if self._params_note and self._params_note[0] == gen else None)
-                self.show_notes(unpinned, params_note)
+                self.show_notes(unpinned, self.address.note_for(gen))
                 # a preview's time: its own stages' (what this change reran, or the warm child)
                 s.show_result(seq, num["error_final"], sum(result.timings.values()) if preview
                               else self.state.compute_seconds,
@@ -886,96 +870,19 @@ class Explorer:
         return "gt" if seq.labels is not None else "final"
 
     def apply_query(self, pairs: dict) -> list[str]:
-        """Take the settings and view a page URL's query carries (see :data:`state.URL_KEYS`).
-
-        Every value is validated (:func:`state.parse_settings`); what cannot be used is
-        listed in a warning on the page, as text, and the rest is applied. Before
-        :meth:`start` the first computation uses them; afterwards they are requested."""
-        pairs = {k: v for k, v in pairs.items() if not str(k).startswith("bokeh")}
-        if not pairs:
-            return []
-        new, view, problems = parse_settings(pairs, self.sequence, self.state.target)
-        if not self.state._started:
-            self.state.retarget(new)
-        else:
-            self.state.request(params=new.params.to_dict(), seed=new.seed, n_motions=new.n_motions)
-        self.controls.show_settings(new)
-        if "color" in view:
-            self.controls.set_color_mode(view["color"])
-        if "frame" in view:
-            self.controls.w_frame.value = view["frame"]
-        if "tour" in view:  # on a served page once it is on screen (the tour's keys and
-            step = view["tour"] - 1  # sidebar fold run in the page's own script)
-            if self.session.on_server:
-                pn.state.onload(lambda: self.tour.start(step))
-            else:
-                self.tour.start(step)
-        self.status_bar.show_url_problems(problems)
-        # the link's state, as the page asks for it (see _forget_url_problems); a link to a
-        # tour step: the state once its tour has ended (the steps set their own colourings)
-        self._url_problems_at = None
-        if problems:
-            self._url_problems_at = _TOUR_LINK if "tour" in view else self.query(asked=True)
-        return problems
+        """Take the settings and view a page URL's query carries (:class:`PageAddress`)."""
+        return self.address.apply_query(pairs)
 
     def query(self, asked: bool = False) -> dict[str, str]:
-        """The URL query of what the page shows now (only what differs from the defaults);
-        ``asked``: with the settings asked for last (the state's target) instead of those
-        of the result shown."""
-        seq = self.sequence
-        return query_of(self.state.target if asked else self.state.settings,
-                        self.state.default_motions(), self.frame,
-                        self.controls.color_mode, self._default_color(),
-                        self.tour.step if self.tour.active else None,
-                        None if seq is self._first_sequence else seq.name)
+        """The URL query of what the page shows now (:meth:`PageAddress.query`)."""
+        return self.address.query(asked)
 
     def _sync_url(self) -> None:
-        """(Document thread.) The page address carries the shown state (no reload; the page
-        writes it once the views are redrawn: :attr:`StatusBar.address`)."""
-        if self.result is None:
-            return
-        self._forget_url_problems()
-        if self.session.on_server:
-            q = self.query()
-            self.status_bar.address.value = "?" + urllib.parse.urlencode(q) if q else ""
-
-    def _forget_url_problems(self) -> None:
-        """The warning about a link's unusable values stays until the page moves on from
-        that link: hidden once the state asked for (settings, frame, colouring, sequence)
-        differs from the link's (it stayed for good, beside a page long changed)."""
-        at = self._url_problems_at
-        if at is _TOUR_LINK or at is _TOUR_RUNNING:  # a link to a tour step
-            if self.tour.active:
-                self._url_problems_at = _TOUR_RUNNING
-            elif at is _TOUR_RUNNING:  # its tour ended: the page as the tour left it
-                self._url_problems_at = self.query(asked=True)
-            return
-        if at is not None and self.query(asked=True) != at:
-            self._url_problems_at = None
-            self.status_bar.show_url_problems([])
+        self.address.sync()
 
     def load_params(self, data: bytes | str, filename: str = "params.json") -> bool:
         """Apply a params.json (as exported here). False, and a message, when it is not valid."""
-        name = Path(filename).name
-        try:
-            new = settings_from_json(data, self.sequence, self.state.target)
-        except ValueError as exc:
-            self.state.report(f"{name}: {exc} — nothing was changed")
-            return False
-        note = params_file_note(data, self.sequence, new, name)  # exported for another sequence
-        self.schedule(self.controls.show_settings, new)
-        gen = self.state.request(params=new.params.to_dict(), seed=new.seed, n_motions=new.n_motions)
-        if gen is not None and note:
-            self._params_note = (gen, note)  # shown with that request's result
-            if gen == self.applied_generation:  # nothing to recompute: shown now
-                self.schedule(self._show_params_note)
-        return gen is not None
-
-    def _show_params_note(self) -> None:
-        """(Document thread.) The params.json note, with the page's other notes, when its
-        settings needed no new result."""
-        if self._params_note and self._params_note[0] == self.applied_generation:
-            self.show_notes(V.md_text(self._params_note[1]))
+        return self.address.load_params(data, filename)
 
     def load_bytes(self, data: bytes, filename: str) -> bool:
         """Load an uploaded ``.mat`` / ``.npz`` (bytes). Returns False (and shows why) on failure."""
