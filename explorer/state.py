@@ -171,8 +171,9 @@ RV_FIELDS = tuple(f.name for f in dataclasses.fields(LaavParams)
 
 
 #: How far an estimated C can be trusted: laav.estimate_motions on Hopkins155, held out by
-#: cross-validation grouped by video (docs/bench/motions.md, 2026-12-01: 143 of 155 right;
-#: 8 of its 9 misses on three motions said 2).
+#: cross-validation grouped by video (docs/bench/motions.md, 2026-12-06: 91.6 % right, 77 %
+#: of the three-motion sequences, whose misses mostly said 2); a single motion alone is called
+#: 2, flagged by the one-motion check (docs/bench/motions_one.md).
 ESTIMATE_NOTE = ("The estimate is right on 92 % of Hopkins155's sequences but 77 % of its "
                  "three-motion ones, where it mostly says 2: if the seed sweep finds several "
                  "segmentations, try C + 1. It calls a single motion 2; when it says "

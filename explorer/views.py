@@ -477,8 +477,7 @@ def point_style(seq: laav.Sequence, result: laav.LaavResult, mode: str,
         _, marker = _motion_palette(joined)
         label = np.array([f"fine model {f + 1} → motion {m + 1}" if f >= 0 else "no fine model"
                           for f, m in zip(lab.tolist(), joined.tolist())], dtype=object)
-        models = np.unique(lab[ok])
-        if fine_rows is not None and models.size > fine_rows:  # a legend row per motion
+        if fine_rows is not None and n_fine_models(result) > fine_rows:  # a legend row per motion
             detail = label
             per = {int(m): np.unique(lab[ok & (joined == m)]).size for m in np.unique(joined[ok])}
             label = np.array([(f"motion {m + 1}: {per[m]} fine model{'' if per[m] == 1 else 's'}"

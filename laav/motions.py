@@ -339,8 +339,7 @@ def noise_corrected(levels, floors=(0.0, 0.0), share=None):
     return np.stack([corrected(c) for c in range(1, K + 1)], axis=1)
 
 
-def one_motion_check(levels, noise2: float, sigma: float = 0.0, unit2: float = 1.0,
-                     weights=None, bias=None) -> float:
+def one_motion_check(levels, noise2: float, sigma: float = 0.0, weights=None, bias=None) -> float:
     """Logit that the tracks hold more than one motion, from the step 1 -> 2 as a whole: the
     five :func:`step_features` of the step on the levels :func:`noise_corrected` for the
     tracks' noise ``sigma`` (px), and the one-motion test's own statistic, log of one motion's
@@ -354,14 +353,14 @@ def one_motion_check(levels, noise2: float, sigma: float = 0.0, unit2: float = 1
     noise added), this was fitted on real single motions, noisy ones included; see
     :data:`ONE_CHECK_WEIGHTS`.
     """
-    x = one_motion_features(levels, noise2, sigma, unit2)
+    x = one_motion_features(levels, noise2, sigma)
     if not np.isfinite(x).all():
         return float("nan")
     w = np.asarray(ONE_CHECK_WEIGHTS if weights is None else weights, dtype=float)
     return float(w @ x + (ONE_CHECK_BIAS if bias is None else bias))
 
 
-def one_motion_features(levels, noise2: float, sigma: float = 0.0, unit2: float = 1.0) -> np.ndarray:
+def one_motion_features(levels, noise2: float, sigma: float = 0.0) -> np.ndarray:
     """(6,) what :func:`one_motion_check` weighs (its arguments): the step 1 -> 2's
     :func:`step_features` on the noise-corrected levels, then log(e1 / ``noise2``); NaN
     when C = 1 or 2 has no labelling, or without an atoms' noise level (``noise2`` 0: atoms
@@ -371,8 +370,7 @@ def one_motion_features(levels, noise2: float, sigma: float = 0.0, unit2: float 
     if not (noise2 > 0 and np.isfinite(col(1)).all() and np.isfinite(col(2)).all()):
         return np.full(6, np.nan)
     steps = _column(noise_corrected(col, noise_floors(sigma)))
-    tiny = 1e-12 * unit2
-    return np.r_[step_features(steps, 1), np.log(float(np.exp(col(1)[1])) + tiny) - np.log(noise2 + tiny)]
+    return np.r_[step_features(steps, 1), col(1)[1] - np.log(noise2)]  # (the levels are logs)
 
 
 def decide(levels, noise2: float, max_motions: int, weights=None, bias=None,
@@ -673,5 +671,5 @@ def _estimate(seq, max_motions, params, seed):
 
     C, scores, why = decide(col, ctx.noise2, max_motions, unit2=ctx.unit2, sigma=ctx.sigma)
     # (two motions: the check reads C = 1-3, which the test has evaluated unless max_motions is 2)
-    one = one_motion_check(col, ctx.noise2, ctx.sigma, ctx.unit2) if C == 2 else float("nan")
+    one = one_motion_check(col, ctx.noise2, ctx.sigma) if C == 2 else float("nan")
     return C, scores, levels, float(ctx.noise2), float(ctx.sigma), why, ctx.results, one
